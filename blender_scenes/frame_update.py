@@ -1,0 +1,80 @@
+"""Apply one frozen FrameScene to the built Blender scene (bpy): transforms, lights, materials."""
+from __future__ import annotations
+
+import numpy as np
+from mathutils import Matrix
+
+from blender_scenes import materials as mats
+from blender_scenes.scene_builder import MM, SceneHandles
+from generator.geometry import blender_camera_intrinsics, blender_world_from_camera
+from generator.scene import FrameScene
+
+DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
+
+
+def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
+    m = np.array(d_from_x, dtype=float)
+    m[:3, 3] *= MM
+    if scale_xyz_mm is not None:
+        m[:3, :3] = m[:3, :3] @ np.diag(np.asarray(scale_xyz_mm) * MM)
+    return Matrix(m.tolist())
+
+
+def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
+    scene = h.scene
+    c = scene.cycles
+    c.samples = frame.samples
+    c.seed = frame.render_seed
+    c.max_bounces = frame.max_bounces
+    c.use_denoising = frame.denoise != "off"
+    if frame.denoise != "off":
+        c.denoising_quality = DENOISE_QUALITY[frame.denoise]
+
+    h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
+
+    cam = frame.camera
+    h.camera.matrix_world = Matrix(blender_world_from_camera(cam.cam_from_d_array(), MM).tolist())
+    intr = blender_camera_intrinsics(cam.focal_px, cam.principal_point, cam.width, cam.height)
+    h.camera.data.lens = intr["lens_mm"]
+    h.camera.data.sensor_width = intr["sensor_width_mm"]
+    h.camera.data.shift_x = intr["shift_x"]
+    h.camera.data.shift_y = intr["shift_y"]
+
+    lights = {light.name: light for light in frame.lights}
+    for name, obj in h.lights.items():
+        light = lights.get(name)
+        on = light is not None and light.power_w > 0
+        obj.hide_render = not on
+        if on:
+            obj.matrix_world = _blender_matrix(light.d_from_light)
+            obj.data.energy = light.power_w
+            obj.data.size = light.size_mm * MM
+            obj.data.color = light.color
+
+    a = frame.appearance
+    for mat, color in ((h.paint_a, a.section_color_a), (h.paint_b, a.section_color_b)):
+        mats.set_paint(mat, color, a.metallic, a.roughness, a.roughness_variation, a.grime,
+                       a.texture_scale, a.texture_offset)
+    mats.set_paint(h.floor, a.floor_color, 0.0, 0.8, 0.2, 0.5, a.texture_scale * 0.3, a.texture_offset)
+    mats.set_simple(h.marker_red, color=a.marker_red)
+    mats.set_simple(h.marker_blue, color=a.marker_blue)
+    mats.set_simple(h.ring, color=a.ring_color)
+    mats.set_simple(h.wall, color=a.wall_color)
+    mats.set_world(h.world, a.world_color, a.world_strength)
+
+    used = set()
+    for p in frame.props:
+        key = (p.kind, p.slot)
+        if key not in h.props:
+            raise ValueError(f"frame {frame.spec.frame_id}: no pooled object for {p.kind} slot {p.slot}")
+        used.add(key)
+        obj = h.props[key]
+        obj.matrix_world = _blender_matrix(p.d_from_prop, p.size_mm)
+        obj.hide_render = False
+        if p.kind == "lamp":
+            mats.set_emission(h.prop_materials[key], p.color, p.emission)
+        else:
+            mats.set_simple(h.prop_materials[key], color=p.color)
+    for key, obj in h.props.items():
+        if key not in used:
+            obj.hide_render = True

@@ -1,0 +1,103 @@
+"""Render worker process: ``python -m blender_scenes.worker``.
+
+Builds the Blender scene once, then renders frame after frame by updating it. Requests arrive as
+JSON lines on stdin; replies go as JSON lines to the original stdout, while everything Blender
+prints is sent to stderr (the job's log). Requests:
+  {"op": "init", "static": ..., "width": W, "height": H, "threads": T, "root": DIR,
+   "keep_exr": bool, "visible_threshold": x}
+  {"op": "render", "frame": <FrameScene dict>}
+  {"op": "quit"}
+Replies: {"ok": true, ...} or {"ok": false, "error": "..."}.
+Fault injection for tests: DOCKFACTORY_FAULT="crash:<frame_id>" or "hang:<frame_id>" acts once per
+frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+import traceback
+
+
+def _protocol_stream():
+    """Keep the real stdout for replies; route fd 1 (Blender's chatter) to stderr."""
+    out = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    return out
+
+
+def _inject_fault(frame_id: str) -> None:
+    spec = os.environ.get("DOCKFACTORY_FAULT", "")
+    if not spec or ":" not in spec:
+        return
+    kind, target = spec.split(":", 1)
+    if target != frame_id:
+        return
+    mark = os.path.join(os.environ.get("DOCKFACTORY_FAULT_DIR", tempfile.gettempdir()), f"fault-{kind}-{frame_id}")
+    if os.path.exists(mark):
+        return
+    open(mark, "w").close()
+    if kind == "crash":
+        os.kill(os.getpid(), 9)
+    if kind == "hang":
+        time.sleep(3600)
+
+
+def main() -> int:
+    proto = _protocol_stream()
+    scratch = tempfile.mkdtemp(prefix="dockfactory-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+    exr_path = os.path.join(scratch, "render.exr")
+    handles = static = init = None
+    try:
+        import bpy  # noqa: F401  (only ever imported in this process)
+
+        from blender_scenes.frame_update import apply_frame
+        from blender_scenes.scene_builder import build_scene
+        from generator.frame_output import finish_frame
+        from generator.scene import FrameScene, StaticScene, from_dict
+
+        for line in sys.stdin:
+            req = json.loads(line)
+            op = req.get("op")
+            if op == "quit":
+                break
+            try:
+                if op == "init":
+                    init = req
+                    static = from_dict(StaticScene, req["static"])
+                    t0 = time.perf_counter()
+                    handles = build_scene(static, req["width"], req["height"], req["threads"], exr_path)
+                    reply = {"ok": True, "op": "init", "build_s": time.perf_counter() - t0,
+                             "blender_version": bpy.app.version_string, "pid": os.getpid()}
+                elif op == "render":
+                    if handles is None:
+                        raise RuntimeError("render before init")
+                    frame = from_dict(FrameScene, req["frame"])
+                    _inject_fault(frame.spec.frame_id)
+                    t0 = time.perf_counter()
+                    apply_frame(handles, frame)
+                    t1 = time.perf_counter()
+                    bpy.ops.render.render(write_still=True)
+                    t2 = time.perf_counter()
+                    done = finish_frame(frame, static, exr_path, init["root"], init["keep_exr"],
+                                        init["visible_threshold"],
+                                        {"scene_update": t1 - t0, "cycles": t2 - t1})
+                    done["timings_s"]["total"] = time.perf_counter() - t0
+                    reply = {"ok": True, "op": "render", "frame_id": frame.spec.frame_id, **done}
+                else:
+                    raise ValueError(f"unknown op {op!r}")
+            except Exception as exc:  # reported to the job, which decides to retry or fail
+                reply = {"ok": False, "op": op, "error": f"{type(exc).__name__}: {exc}",
+                         "traceback": traceback.format_exc()}
+            proto.write(json.dumps(reply) + "\n")
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,355 @@
+"""Dataset configuration: frozen dataclasses loaded from TOML (data, never executed).
+
+Every key has a default, so an empty file is a valid config; unknown keys, wrong types and
+impossible values raise :class:`ConfigError` naming the file, the table and the key.
+Ranges are written ``[min, max]``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from generator import layout as layout_mod
+
+Range = tuple[float, float]
+CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
+CHALLENGING = ("low_light", "occlusion", "glare")
+
+
+class ConfigError(ValueError):
+    """A config that cannot be used; the message names file, table and key."""
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    name: str = "dockfactory"
+    seed: int = 0
+    frames: int = 50             # main frames (train + test); the repeatability subset is extra
+    train_fraction: float = 0.8  # split stratified by condition
+
+
+@dataclass(frozen=True)
+class ConditionsConfig:
+    """Relative weights of the frame conditions; counts are exact (largest remainder)."""
+    normal: float = 2.0
+    low_light: float = 1.0 / 3.0
+    occlusion: float = 1.0 / 3.0
+    glare: float = 1.0 / 3.0
+    ideal: float = 0.0
+
+
+@dataclass(frozen=True)
+class RepeatabilityConfig:
+    """Static poses captured several times with new lighting and noise (estimation precision)."""
+    poses: int = 0
+    captures: int = 10
+    condition: str = "normal"
+
+
+@dataclass(frozen=True)
+class ImageConfig:
+    width: int = 1280
+    height: int = 960
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    distance_mm: Range = (1000.0, 1800.0)  # camera centre to the look-at point on the seam
+    tilt_deg: float = 4.0                 # max |tilt| of the viewing direction about X and Y
+    roll_deg: float = 2.0                 # max |roll| about the optical axis
+    lateral_jitter_mm: float = 30.0       # max |offset| of the look-at point in X and Y
+    focal_px: Range = (1200.0, 3000.0)    # zoom range; capped per frame so markers fit
+    margin_px: float = 48.0               # markers keep this far from the image border
+
+
+@dataclass(frozen=True)
+class PoseConfig:
+    """Pose of B relative to A (``d_from_b``)."""
+    x_mm: Range = (5.0, 150.0)
+    y_mm: Range = (-15.0, 15.0)
+    z_mm: Range = (-15.0, 15.0)
+    alpha_deg: Range = (-1.5, 1.5)
+    beta_deg: Range = (-1.5, 1.5)
+    gamma_deg: Range = (-5.0, 5.0)
+
+
+@dataclass(frozen=True)
+class SectionsConfig:
+    radius_mm: float = 300.0
+    length_mm: float = 1200.0
+    flange_width_mm: float = 20.0   # flange at each docking face: axial width
+    flange_height_mm: float = 8.0   # and radial height
+
+
+@dataclass(frozen=True)
+class MarkersConfig:
+    diameter_mm: float = 20.0
+    raise_mm: float = 1.0
+    layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # (s_mm, phi_deg)
+    layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    samples: int = 2
+    denoise: str = "fast"           # off | fast | balanced | high (OpenImageDenoise quality)
+    max_bounces: int = 2
+    keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
+    frame_timeout_s: float = 300.0  # a frame over this is a hung worker
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Camera model applied to the linear render (see generator/sensor.py)."""
+    full_well_e: Range = (8000.0, 20000.0)  # electrons at linear 1.0 after auto exposure
+    read_noise_e: Range = (2.0, 6.0)
+    adc_bits: int = 12
+    exposure_ev: Range = (-0.4, 0.3)         # normal frames, around auto exposure
+    low_light_ev: Range = (-5.0, -3.0)       # several stops down
+    low_light_gain_ev: Range = (1.0, 3.0)    # digital gain that partly makes up for it
+    vignetting: Range = (0.0, 0.25)          # relative fall-off at the image corners
+
+
+@dataclass(frozen=True)
+class OcclusionConfig:
+    occluders: tuple[int, int] = (1, 3)
+    kinds: tuple[str, ...] = ("cable", "bar", "tool", "blob")
+    gap_mm: Range = (60.0, 400.0)   # distance of the occluder in front of the marker it covers
+
+
+@dataclass(frozen=True)
+class GlareConfig:
+    kinds: tuple[str, ...] = ("lamp_in_view", "specular")
+    bloom: Range = (0.02, 0.08)
+
+
+@dataclass(frozen=True)
+class LabelsConfig:
+    visible_threshold: float = 0.5  # visible fraction at or above which COCO visibility is 2
+
+
+@dataclass(frozen=True)
+class Config:
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
+    conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
+    repeatability: RepeatabilityConfig = field(default_factory=RepeatabilityConfig)
+    image: ImageConfig = field(default_factory=ImageConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    pose: PoseConfig = field(default_factory=PoseConfig)
+    sections: SectionsConfig = field(default_factory=SectionsConfig)
+    markers: MarkersConfig = field(default_factory=MarkersConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    occlusion: OcclusionConfig = field(default_factory=OcclusionConfig)
+    glare: GlareConfig = field(default_factory=GlareConfig)
+    labels: LabelsConfig = field(default_factory=LabelsConfig)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (tuples become lists)."""
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    def canonical_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+
+    def markers_layout(self):
+        return layout_mod.build_layout(self.markers.layout_a, self.markers.layout_b,
+                                       self.sections.radius_mm, self.markers.diameter_mm,
+                                       self.markers.raise_mm)
+
+
+# ----------------------------------------------------------------------------- loading
+
+def _convert(value, hint, where: str):
+    """Check ``value`` against the type ``hint`` and convert lists to tuples."""
+    origin = typing.get_origin(hint)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(hint)
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
+        return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+    raise TypeError(f"unsupported config type {hint!r} at {where}")  # programming error
+
+
+def _build(cls, data, source: str, table: str | None):
+    where = f"{source}: [{table}]" if table else f"{source}:"
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where} expected a table, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        what = "key" if table else "table"
+        raise ConfigError(f"{where} unknown {what} {unknown[0]!r} (known: {', '.join(names)})")
+    kwargs = {}
+    for name in names:
+        if name not in data:
+            continue
+        hint = hints[name]
+        if dataclasses.is_dataclass(hint):
+            kwargs[name] = _build(hint, data[name], source, name)
+        else:
+            kwargs[name] = _convert(data[name], hint, f"{where} {name}")
+    return cls(**kwargs)
+
+
+def config_from_dict(data: dict, source: str = "<config>") -> Config:
+    """Build and validate a :class:`Config`; errors name ``source``."""
+    cfg = _build(Config, data, source, None)
+    validate(cfg, source)
+    return cfg
+
+
+def load_config(path) -> Config:
+    """Read a TOML config file; raises ConfigError (file, key, value) on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+    return config_from_dict(data, str(path))
+
+
+# ----------------------------------------------------------------------------- validation
+
+def _err(source, table, key, msg):
+    return ConfigError(f"{source}: [{table}] {key}: {msg}")
+
+
+def _check_range(source, table, key, rng, lo=None, hi=None):
+    a, b = rng
+    if a > b:
+        raise _err(source, table, key, f"min {a} > max {b}")
+    if lo is not None and a < lo:
+        raise _err(source, table, key, f"{a} is below the smallest allowed value {lo}")
+    if hi is not None and b > hi:
+        raise _err(source, table, key, f"{b} is above the largest allowed value {hi}")
+
+
+def _check_positive(source, table, key, value, allow_zero=False):
+    if value < 0 or (value == 0 and not allow_zero):
+        raise _err(source, table, key, f"must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+
+
+def validate(cfg: Config, source: str = "<config>") -> None:
+    """Reject impossible configs before anything is rendered or written."""
+    d = cfg.dataset
+    _check_positive(source, "dataset", "frames", d.frames, allow_zero=True)
+    if not 0.0 <= d.train_fraction <= 1.0:
+        raise _err(source, "dataset", "train_fraction", f"must be in [0, 1], got {d.train_fraction}")
+    if not 0 <= d.seed < 2**63:
+        raise _err(source, "dataset", "seed", f"must be in [0, 2^63), got {d.seed}")
+    weights = dataclasses.asdict(cfg.conditions)
+    for k, w in weights.items():
+        _check_positive(source, "conditions", k, w, allow_zero=True)
+    if d.frames > 0 and sum(weights.values()) <= 0:
+        raise _err(source, "conditions", "*", "all weights are zero")
+    r = cfg.repeatability
+    _check_positive(source, "repeatability", "poses", r.poses, allow_zero=True)
+    _check_positive(source, "repeatability", "captures", r.captures)
+    if r.condition not in CONDITIONS:
+        raise _err(source, "repeatability", "condition", f"{r.condition!r} is not one of {CONDITIONS}")
+    if d.frames + r.poses * r.captures == 0:
+        raise _err(source, "dataset", "frames", "the dataset would have no frames")
+    im = cfg.image
+    for k in ("width", "height"):
+        v = getattr(im, k)
+        if not 16 <= v <= 16384:
+            raise _err(source, "image", k, f"must be in [16, 16384], got {v}")
+    c = cfg.camera
+    _check_range(source, "camera", "distance_mm", c.distance_mm, lo=1e-3)
+    _check_range(source, "camera", "focal_px", c.focal_px, lo=1e-3)
+    for k in ("tilt_deg", "roll_deg"):
+        if not 0 <= getattr(c, k) < 45:
+            raise _err(source, "camera", k, f"must be in [0, 45), got {getattr(c, k)}")
+    _check_positive(source, "camera", "lateral_jitter_mm", c.lateral_jitter_mm, allow_zero=True)
+    _check_positive(source, "camera", "margin_px", c.margin_px, allow_zero=True)
+    if 2 * c.margin_px >= min(im.width, im.height):
+        raise _err(source, "camera", "margin_px", f"{c.margin_px} leaves no room in a "
+                   f"{im.width}x{im.height} image")
+    for k in ("x_mm", "y_mm", "z_mm"):
+        _check_range(source, "pose", k, getattr(cfg.pose, k))
+    for k in ("alpha_deg", "beta_deg", "gamma_deg"):
+        _check_range(source, "pose", k, getattr(cfg.pose, k), lo=-30, hi=30)
+    s = cfg.sections
+    _check_positive(source, "sections", "radius_mm", s.radius_mm)
+    _check_positive(source, "sections", "length_mm", s.length_mm)
+    _check_positive(source, "sections", "flange_width_mm", s.flange_width_mm, allow_zero=True)
+    _check_positive(source, "sections", "flange_height_mm", s.flange_height_mm, allow_zero=True)
+    m = cfg.markers
+    _check_positive(source, "markers", "diameter_mm", m.diameter_mm)
+    _check_positive(source, "markers", "raise_mm", m.raise_mm)
+    for key, pattern in (("layout_a", m.layout_a), ("layout_b", m.layout_b)):
+        for i, (s_mm, phi) in enumerate(pattern):
+            reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM
+            if not s.flange_width_mm + reach + 2.0 <= s_mm <= s.length_mm - reach:
+                raise _err(source, "markers", f"{key}[{i}]",
+                           f"axial offset {s_mm} mm puts the marker on the flange or off the section "
+                           f"(allowed: {s.flange_width_mm + reach + 2.0:g} to {s.length_mm - reach:g} mm)")
+            if not -80 <= phi <= 80:
+                raise _err(source, "markers", f"{key}[{i}]", f"angle {phi} deg is not on the camera side")
+    problems = layout_mod.layout_problems(cfg.markers_layout())
+    if problems:
+        raise _err(source, "markers", "layout_a/layout_b", "; ".join(problems))
+    rc = cfg.render
+    _check_positive(source, "render", "samples", rc.samples)
+    if rc.denoise not in ("off", "fast", "balanced", "high"):
+        raise _err(source, "render", "denoise", f"{rc.denoise!r} is not one of off, fast, balanced, high")
+    _check_positive(source, "render", "max_bounces", rc.max_bounces, allow_zero=True)
+    _check_positive(source, "render", "frame_timeout_s", rc.frame_timeout_s)
+    se = cfg.sensor
+    _check_range(source, "sensor", "full_well_e", se.full_well_e, lo=1.0)
+    _check_range(source, "sensor", "read_noise_e", se.read_noise_e, lo=0.0)
+    if not 8 <= se.adc_bits <= 16:
+        raise _err(source, "sensor", "adc_bits", f"must be in [8, 16], got {se.adc_bits}")
+    _check_range(source, "sensor", "exposure_ev", se.exposure_ev, lo=-10, hi=10)
+    _check_range(source, "sensor", "low_light_ev", se.low_light_ev, lo=-12, hi=0)
+    _check_range(source, "sensor", "low_light_gain_ev", se.low_light_gain_ev, lo=0, hi=12)
+    _check_range(source, "sensor", "vignetting", se.vignetting, lo=0, hi=0.9)
+    o = cfg.occlusion
+    _check_range(source, "occlusion", "occluders", o.occluders, lo=1, hi=8)
+    _check_range(source, "occlusion", "gap_mm", o.gap_mm, lo=5)
+    for k in o.kinds:
+        if k not in ("cable", "bar", "tool", "blob"):
+            raise _err(source, "occlusion", "kinds", f"unknown occluder kind {k!r}")
+    if not o.kinds:
+        raise _err(source, "occlusion", "kinds", "is empty")
+    for k in cfg.glare.kinds:
+        if k not in ("lamp_in_view", "specular"):
+            raise _err(source, "glare", "kinds", f"unknown glare kind {k!r}")
+    if not cfg.glare.kinds:
+        raise _err(source, "glare", "kinds", "is empty")
+    _check_range(source, "glare", "bloom", cfg.glare.bloom, lo=0, hi=1)
+    if not 0 < cfg.labels.visible_threshold <= 1:
+        raise _err(source, "labels", "visible_threshold",
+                   f"must be in (0, 1], got {cfg.labels.visible_threshold}")
+    # geometric feasibility (the focal range must fit the markers) needs the sampler
+    from generator.sampler import check_focal_fits
+    check_focal_fits(cfg, source)

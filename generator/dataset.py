@@ -1,0 +1,178 @@
+"""Dataset directories: identity (version id), frame completeness, manifest.
+
+Layout of a dataset directory:
+  dataset.json       identity: version id, resolved config, software versions (written first)
+  config.toml        the config file as given
+  layout.json        the marker layout (ids, section, centre and normal in the section frame)
+  images/ labels/ meta/ [exr/]   per-frame files (see generator.frame_output)
+  logs/              worker logs and per-frame timings (not part of the dataset's content)
+  manifest.json      written once every planned frame is complete: counts and every file's
+                     size and sha256
+"""
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+from generator.config import Config
+from generator.frame_output import frame_paths
+from generator.io import sha256_file, write_json_atomic, write_text_atomic
+from generator.layout import CLASS_NAMES
+from generator.sampler import frame_plan, static_scene
+from generator.version import GENERATOR_VERSION, blender_version, dataset_version_id, package_version
+
+DATASET_FORMAT = "dockfactory.dataset/1"
+CONVENTIONS = {
+    "units": {"length": "mm", "angle": "deg", "image": "px", "focal": "px"},
+    "frames": "D = section A's frame: origin at the centre of A's docking face, +X along A's axis "
+              "toward B, +Y up, +Z toward the camera side; d_from_b is B in D; "
+              "R = Rz(alpha) @ Ry(beta) @ Rx(gamma); camera frame is OpenCV (x right, y down, z forward)",
+    "pixels": "OpenCV: (0, 0) is the centre of the top-left pixel; the image spans "
+              "[-0.5, W - 0.5] x [-0.5, H - 0.5]; principal point of an unshifted camera "
+              "((W - 1) / 2, (H - 1) / 2)",
+    "boxes": "[x0, y0, x1, y1] in the pixel frame above",
+    "classes": list(CLASS_NAMES),
+}
+
+
+class DatasetError(ValueError):
+    """A dataset directory that cannot be used as asked; the message says why."""
+
+
+def identity(cfg: Config) -> dict:
+    blender = blender_version()
+    return {
+        "format": DATASET_FORMAT,
+        "version_id": dataset_version_id(cfg.canonical_json(), blender),
+        "name": cfg.dataset.name,
+        "seed": cfg.dataset.seed,
+        "generator_version": GENERATOR_VERSION,
+        "blender_version": blender,
+        "config": cfg.to_dict(),
+    }
+
+
+def layout_record(cfg: Config) -> dict:
+    return {"markers": [{"id": m.id, "section": m.section, "class_id": m.class_id,
+                         "class_name": CLASS_NAMES[m.class_id], "index": m.index,
+                         "center_mm": list(m.center_mm), "normal": list(m.normal),
+                         "diameter_mm": m.diameter_mm, "pass_index": m.pass_index}
+                        for m in static_scene(cfg).markers],
+            "frame": "each marker's section frame (A: D; B: B's frame)"}
+
+
+def read_identity(root) -> dict | None:
+    path = Path(root) / "dataset.json"
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DatasetError(f"{path}: unreadable dataset identity ({exc})") from exc
+
+
+def prepare(root, cfg: Config, config_text: str) -> dict:
+    """Create the dataset directory or check that it holds this very config.
+
+    Refuses (DatasetError, nothing written) a directory that holds another dataset version or
+    files that are not a dockfactory dataset.
+    """
+    root = Path(root)
+    ident = identity(cfg)
+    existing = read_identity(root)
+    if existing is None:
+        if root.exists() and any(root.iterdir()):
+            raise DatasetError(f"{root}: directory is not empty and holds no dataset.json; "
+                               f"refusing to write a dataset into it")
+    elif existing.get("version_id") != ident["version_id"]:
+        diffs = config_differences(existing.get("config", {}), ident["config"])
+        what = "; ".join(diffs[:5]) or (
+            f"software versions differ (generator {existing.get('generator_version')} vs "
+            f"{ident['generator_version']}, Blender {existing.get('blender_version')} vs "
+            f"{ident['blender_version']})")
+        raise DatasetError(f"{root}: holds dataset version {existing.get('version_id')}, this config "
+                           f"is version {ident['version_id']} ({what}); versions never mix: "
+                           f"render into a new directory")
+    else:
+        return existing
+    root.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(root / "config.toml", config_text)
+    write_json_atomic(root / "layout.json", layout_record(cfg))
+    write_json_atomic(root / "dataset.json", ident)   # last: the directory is now this dataset
+    return ident
+
+
+def config_differences(a, b, prefix: str = "") -> list[str]:
+    """Readable differences between two resolved config dicts."""
+    out = []
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            key = f"{prefix}.{k}" if prefix else k
+            if k not in a:
+                out.append(f"{key}: added ({b[k]!r})")
+            elif k not in b:
+                out.append(f"{key}: removed (was {a[k]!r})")
+            else:
+                out += config_differences(a[k], b[k], key)
+    elif a != b:
+        out.append(f"{prefix}: {a!r} -> {b!r}")
+    return out
+
+
+def frame_done(root, frame_id: str, keep_exr: bool) -> bool:
+    """True when the frame's label (the commit point) and the files it vouches for exist."""
+    p = frame_paths(root, frame_id)
+    if not (p["label"].is_file() and p["image"].is_file() and p["meta"].is_file()):
+        return False
+    if keep_exr and not p["exr"].is_file():
+        return False
+    try:
+        meta = json.loads(p["meta"].read_text())
+        for rec in meta["files"].values():
+            if (Path(root) / rec["path"]).stat().st_size != rec["bytes"]:
+                return False
+        label = json.loads(p["label"].read_text())
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return label.get("frame_id") == frame_id
+
+
+def write_manifest(root, cfg: Config) -> dict:
+    """Write manifest.json for a complete dataset (every planned frame done)."""
+    root = Path(root)
+    ident = read_identity(root)
+    plan = frame_plan(cfg)
+    files, frames = [], []
+    for spec in plan:
+        meta = json.loads(frame_paths(root, spec.frame_id)["meta"].read_text())
+        frames.append({"frame_id": spec.frame_id, "split": spec.split, "condition": spec.condition})
+        files += [{"path": r["path"], "bytes": r["bytes"], "sha256": r["sha256"]}
+                  for r in meta["files"].values()]
+    for name in ("dataset.json", "config.toml", "layout.json"):
+        files.append({"path": name, "bytes": (root / name).stat().st_size, "sha256": sha256_file(root / name)})
+    counts = Counter((s.split, s.condition) for s in plan)
+    manifest = {
+        "format": DATASET_FORMAT,
+        "version_id": ident["version_id"],
+        "name": ident["name"],
+        "seed": ident["seed"],
+        "software": {"generator": ident["generator_version"], "blender": ident["blender_version"],
+                     "numpy": package_version("numpy"), "opencv": package_version("opencv-python-headless"),
+                     "openexr": package_version("OpenEXR")},
+        "conventions": CONVENTIONS,
+        "image_size": [cfg.image.width, cfg.image.height],
+        "config": ident["config"],
+        "counts": {
+            "frames": len(plan),
+            "by_split": dict(Counter(s.split for s in plan)),
+            "by_condition": dict(Counter(s.condition for s in plan)),
+            "by_split_condition": {f"{sp}/{c}": n for (sp, c), n in sorted(counts.items())},
+        },
+        "frames": frames,
+        "files": sorted(files, key=lambda f: f["path"]),
+    }
+    path = root / "manifest.json"
+    if not path.exists() or json.loads(path.read_text()) != manifest:   # a finished dataset stays untouched
+        write_json_atomic(path, manifest)
+    return manifest

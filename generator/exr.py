@@ -1,0 +1,87 @@
+"""Read the render's multilayer EXR and write the compact EXR kept with a dataset (no bpy).
+
+Blender 5 writes a multi-part file, one part per pass; ``OpenEXR.File.channels()`` only sees the
+first part, so every part is read. The kept EXR is one ZIP-compressed part with the channels
+``Combined.R/G/B`` (half, linear), ``Depth.Z`` (float, mm along the optical axis) and
+``IndexOB.X`` (uint, the marker index pass).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import OpenEXR
+
+from generator.io import atomic_path
+
+
+class ExrError(ValueError):
+    pass
+
+
+@dataclass
+class RenderPasses:
+    rgb: np.ndarray    # (H, W, 3) float32 linear
+    depth_mm: np.ndarray  # (H, W) float32, planar depth in mm (inf where nothing was hit)
+    index: np.ndarray  # (H, W) int32 object index (0 = not a marker)
+
+
+def _find(channels: dict, *suffixes) -> np.ndarray | None:
+    for name, ch in channels.items():
+        if any(name.endswith(s) for s in suffixes):
+            return ch.pixels
+    return None
+
+
+def read_passes(path, depth_scale_mm: float = 1000.0) -> RenderPasses:
+    """Passes of a Blender multilayer EXR or of a kept compact EXR.
+
+    ``depth_scale_mm``: mm per depth unit in the file (Blender renders in metres: 1000).
+    """
+    try:
+        f = OpenEXR.File(str(path), separate_channels=False)
+    except Exception as exc:  # OpenEXR raises plain RuntimeError/OSError
+        raise ExrError(f"{path}: cannot read EXR: {exc}") from exc
+    channels = {}
+    for part in f.parts:
+        channels.update(part.channels)
+    rgb = _find(channels, "Combined", "Combined.RGB", "Combined.RGBA")
+    if rgb is None:  # separate R, G, B channels
+        comps = [_find(channels, f"Combined.{c}") for c in "RGB"]
+        if any(c is None for c in comps):
+            raise ExrError(f"{path}: no Combined pass (channels: {sorted(channels)})")
+        rgb = np.stack(comps, axis=-1)
+    depth = _find(channels, "Depth.Z", ".Z")
+    index = _find(channels, "Object Index.X", "IndexOB.X", "IndexOB")
+    if depth is None or index is None:
+        raise ExrError(f"{path}: missing Depth or Object Index pass (channels: {sorted(channels)})")
+    rgb = np.ascontiguousarray(rgb[..., :3], dtype=np.float32)
+    return RenderPasses(rgb=rgb, depth_mm=depth.astype(np.float32) * np.float32(depth_scale_mm),
+                        index=np.rint(index).astype(np.int32))
+
+
+def write_compact(path, passes: RenderPasses) -> None:
+    """Atomically write the compact EXR kept beside a frame's PNG."""
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    ch = {
+        "Combined.R": passes.rgb[..., 0].astype(np.float16),
+        "Combined.G": passes.rgb[..., 1].astype(np.float16),
+        "Combined.B": passes.rgb[..., 2].astype(np.float16),
+        "Depth.Z": passes.depth_mm.astype(np.float32),
+        "IndexOB.X": passes.index.astype(np.uint32),
+    }
+    with atomic_path(path) as tmp:
+        OpenEXR.File(header, ch).write(str(tmp))
+
+
+def read_compact(path) -> RenderPasses:
+    """Read an EXR written by :func:`write_compact` (depth already in mm)."""
+    return read_passes(path, depth_scale_mm=1.0)
+
+
+def remove_quietly(path) -> None:
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass

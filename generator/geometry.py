@@ -1,0 +1,187 @@
+"""Pure rigid-body and camera geometry shared by every part of dockfactory.
+
+Conventions (see README, "Conventions"):
+- transforms are 4x4 float64 arrays named ``<to>_from_<from>``;
+- lengths in mm, angles in degrees at the API, radians inside;
+- R = Rz(alpha) @ Ry(beta) @ Rx(gamma) for the pose of B in D;
+- camera frame is OpenCV's (x right, y down, z forward); pixel (0, 0) is the centre of the
+  top-left pixel.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "rot_x", "rot_y", "rot_z", "rotation_from_euler_deg", "euler_deg_from_rotation",
+    "make_transform", "invert_transform", "transform_points", "pose_components",
+    "transform_from_pose_components", "intrinsics", "project_points",
+    "look_at_cam_from_world", "BLENDER_CAM_FROM_CV_CAM", "blender_world_from_camera",
+    "blender_camera_intrinsics", "check_array",
+]
+
+
+def check_array(name: str, value, shape: tuple) -> np.ndarray:
+    """Return ``value`` as a finite float64 array of ``shape`` (-1 = any length) or raise ValueError."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != len(shape) or any(s != -1 and s != n for s, n in zip(shape, arr.shape)):
+        want = "x".join("N" if s == -1 else str(s) for s in shape)
+        raise ValueError(f"{name}: expected shape ({want}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return arr
+
+
+def rot_x(angle_rad: float) -> np.ndarray:
+    """Rotation about +X by ``angle_rad``: (3, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle_rad: float) -> np.ndarray:
+    """Rotation about +Y by ``angle_rad``: (3, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle_rad: float) -> np.ndarray:
+    """Rotation about +Z by ``angle_rad``: (3, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_from_euler_deg(alpha_deg: float, beta_deg: float, gamma_deg: float) -> np.ndarray:
+    """R = Rz(alpha) @ Ry(beta) @ Rx(gamma), angles in degrees: (3, 3)."""
+    a, b, g = np.radians([alpha_deg, beta_deg, gamma_deg])
+    return rot_z(a) @ rot_y(b) @ rot_x(g)
+
+
+def euler_deg_from_rotation(rotation) -> tuple[float, float, float]:
+    """Inverse of :func:`rotation_from_euler_deg`: (alpha, beta, gamma) in degrees.
+
+    ``rotation``: (3, 3). beta is returned in [-90, 90]; at gimbal lock (|beta| = 90) gamma is 0.
+    """
+    r = check_array("rotation", rotation, (3, 3))
+    beta = np.arcsin(np.clip(-r[2, 0], -1.0, 1.0))
+    if abs(np.cos(beta)) > 1e-12:
+        alpha = np.arctan2(r[1, 0], r[0, 0])
+        gamma = np.arctan2(r[2, 1], r[2, 2])
+    else:  # gimbal lock: only alpha - gamma (or alpha + gamma) is defined
+        alpha = np.arctan2(-r[0, 1], r[1, 1])
+        gamma = 0.0
+    return float(np.degrees(alpha)), float(np.degrees(beta)), float(np.degrees(gamma))
+
+
+def make_transform(rotation, translation) -> np.ndarray:
+    """4x4 transform from rotation (3, 3) and translation (3,)."""
+    t = np.eye(4)
+    t[:3, :3] = check_array("rotation", rotation, (3, 3))
+    t[:3, 3] = check_array("translation", translation, (3,))
+    return t
+
+
+def invert_transform(transform) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform: (4, 4)."""
+    t = check_array("transform", transform, (4, 4))
+    r, p = t[:3, :3], t[:3, 3]
+    out = np.eye(4)
+    out[:3, :3] = r.T
+    out[:3, 3] = -r.T @ p
+    return out
+
+
+def transform_points(transform, points) -> np.ndarray:
+    """Apply a 4x4 transform to points (N, 3); returns (N, 3)."""
+    t = check_array("transform", transform, (4, 4))
+    p = check_array("points", points, (-1, 3))
+    return p @ t[:3, :3].T + t[:3, 3]
+
+
+def pose_components(d_from_b) -> dict[str, float]:
+    """X, Y, Z (mm) and alpha, beta, gamma (deg) of ``d_from_b`` (4, 4)."""
+    t = check_array("d_from_b", d_from_b, (4, 4))
+    alpha, beta, gamma = euler_deg_from_rotation(t[:3, :3])
+    return {"x_mm": float(t[0, 3]), "y_mm": float(t[1, 3]), "z_mm": float(t[2, 3]),
+            "alpha_deg": alpha, "beta_deg": beta, "gamma_deg": gamma}
+
+
+def transform_from_pose_components(x_mm, y_mm, z_mm, alpha_deg, beta_deg, gamma_deg) -> np.ndarray:
+    """Inverse of :func:`pose_components`: a 4x4 ``d_from_b``."""
+    return make_transform(rotation_from_euler_deg(alpha_deg, beta_deg, gamma_deg),
+                          [x_mm, y_mm, z_mm])
+
+
+def intrinsics(focal_px: float, principal_point) -> np.ndarray:
+    """Pinhole K (3, 3) with square pixels, no skew. ``principal_point``: (2,) px."""
+    if not np.isfinite(focal_px) or focal_px <= 0:
+        raise ValueError(f"focal_px must be positive and finite, got {focal_px}")
+    c = check_array("principal_point", principal_point, (2,))
+    return np.array([[focal_px, 0.0, c[0]], [0.0, focal_px, c[1]], [0.0, 0.0, 1.0]])
+
+
+def project_points(k, cam_from_x, points) -> tuple[np.ndarray, np.ndarray]:
+    """Project points (N, 3) of frame x through ``cam_from_x`` (4, 4) and K (3, 3).
+
+    Returns (uv (N, 2) px in the OpenCV pixel convention, depth (N,) mm along the optical axis).
+    Points at or behind the camera get NaN pixel coordinates.
+    """
+    k = check_array("K", k, (3, 3))
+    pc = transform_points(cam_from_x, points)
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (pc @ k.T)[:, :2] / z[:, None]
+    uv[z <= 0] = np.nan
+    return uv, z
+
+
+def look_at_cam_from_world(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """OpenCV camera at ``eye`` (3,) looking at ``target`` (3,), image up ~ ``up``: cam_from_world."""
+    eye = check_array("eye", eye, (3,))
+    z = check_array("target", target, (3,)) - eye
+    if np.linalg.norm(z) == 0:
+        raise ValueError("look_at: eye and target coincide")
+    z /= np.linalg.norm(z)
+    down = -check_array("up", up, (3,))
+    x = np.cross(down, z)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: viewing direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    r = np.stack([x, y, z])  # rows: camera axes expressed in world
+    return make_transform(r, -r @ eye)
+
+
+# Blender's camera looks down its -Z with +Y up; OpenCV's looks down +Z with +Y down.
+BLENDER_CAM_FROM_CV_CAM = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def blender_world_from_camera(cam_from_world, scale: float = 1.0) -> np.ndarray:
+    """Blender camera object matrix (world_from_blendercam, 4x4) for an OpenCV ``cam_from_world``.
+
+    ``scale`` converts the translation units (0.001 turns mm into Blender metres).
+    The one place where the OpenCV/Blender camera conversion lives.
+    """
+    world_from_cv = invert_transform(cam_from_world)
+    out = world_from_cv @ BLENDER_CAM_FROM_CV_CAM  # cv_from_blender == blender_from_cv (diagonal)
+    out[:3, 3] *= scale
+    return out
+
+
+def blender_camera_intrinsics(focal_px: float, principal_point, width: int, height: int,
+                              sensor_width_mm: float = 36.0) -> dict[str, float]:
+    """Blender camera settings that reproduce K for a ``width`` x ``height`` render.
+
+    Uses sensor_fit HORIZONTAL. Blender measures the image plane from the left/bottom edges with
+    pixel centres at +0.5, OpenCV puts the first pixel centre at 0: an OpenCV principal point
+    (cx, cy) sits at Blender's (cx + 0.5, H - (cy + 0.5)). Shifts are in units of the larger
+    image side. Returns lens_mm, sensor_width_mm, shift_x, shift_y.
+    """
+    if width <= 0 or height <= 0:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    c = check_array("principal_point", principal_point, (2,))
+    side = float(max(width, height))
+    return {
+        "lens_mm": float(focal_px) * sensor_width_mm / width,
+        "sensor_width_mm": sensor_width_mm,
+        "shift_x": (c[0] + 0.5 - width / 2.0) / side,
+        "shift_y": -(c[1] + 0.5 - height / 2.0) / side,
+    }

@@ -1,0 +1,144 @@
+"""Exact per-frame labels (pure numpy): projections, boxes, visibility from the index pass.
+
+Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image spans
+[-0.5, W - 0.5] x [-0.5, H - 0.5]. Boxes are [x0, y0, x1, y1] in that continuous frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from generator.geometry import pose_components, project_points, transform_points
+from generator.layout import Marker
+from generator.scene import FrameScene, StaticScene, to_dict
+
+LABEL_FORMAT = "dockfactory.label/1"
+OUTLINE_POINTS = 256
+
+
+def marker_outline(marker: Marker, n: int = OUTLINE_POINTS) -> np.ndarray:
+    """Edge of the coloured disc (n, 3) mm in the marker's section frame."""
+    normal = np.asarray(marker.normal)
+    x = np.cross([1.0, 0.0, 0.0], normal) if abs(normal[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], normal)
+    x /= np.linalg.norm(x)
+    y = np.cross(normal, x)
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    r = marker.diameter_mm / 2.0
+    return np.asarray(marker.center_mm) + r * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)
+
+
+def polygon_area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
+    """Signed-area-free area and centroid of a simple polygon (n, 2)."""
+    if len(poly) < 3:
+        return 0.0, np.full(2, np.nan)
+    x, y = poly[:, 0], poly[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    a = cross.sum() / 2.0
+    if abs(a) < 1e-12:
+        return 0.0, np.full(2, np.nan)
+    cx = ((x + xn) * cross).sum() / (6 * a)
+    cy = ((y + yn) * cross).sum() / (6 * a)
+    return abs(float(a)), np.array([cx, cy])
+
+
+def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
+    """Sutherland-Hodgman clip of polygon (n, 2) to the rectangle [x0, x1] x [y0, y1]."""
+    out = np.asarray(poly, dtype=np.float64)
+    for axis, bound, keep_greater in ((0, x0, True), (0, x1, False), (1, y0, True), (1, y1, False)):
+        if len(out) == 0:
+            break
+        inside = out[:, axis] >= bound if keep_greater else out[:, axis] <= bound
+        nxt = np.roll(out, -1, axis=0)
+        nxt_in = np.roll(inside, -1)
+        pts = []
+        for p, q, pin, qin in zip(out, nxt, inside, nxt_in):
+            if pin:
+                pts.append(p)
+            if pin != qin:
+                t = (bound - p[axis]) / (q[axis] - p[axis])
+                pts.append(p + t * (q - p))
+        out = np.array(pts).reshape(-1, 2)
+    return out
+
+
+def _bbox(points: np.ndarray) -> list[float]:
+    return [float(points[:, 0].min()), float(points[:, 1].min()),
+            float(points[:, 0].max()), float(points[:, 1].max())]
+
+
+def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
+                 visible_threshold: float, derived: dict | None = None) -> dict:
+    """The label record of one frame.
+
+    ``index``: (H, W) int object-index pass, or None before rendering (visibility then unknown).
+    ``derived``: values computed while rendering (e.g. the auto exposure scale).
+    """
+    cam = frame.camera
+    w, h = cam.width, cam.height
+    k = cam.k()
+    cam_from_d = cam.cam_from_d_array()
+    d_from_b = frame.d_from_b_array()
+    counts = None
+    if index is not None:
+        if index.shape != (h, w):
+            raise ValueError(f"index pass is {index.shape}, expected {(h, w)}")
+        counts = np.bincount(index.ravel().clip(0), minlength=256)
+    bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
+    markers = []
+    for m in static.markers:
+        d_from_s = d_from_b if m.section == "B" else np.eye(4)
+        centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
+        normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
+        uv, depth = project_points(k, cam_from_d, centre_d[None])
+        outline_uv, outline_z = project_points(k, cam_from_d, transform_points(d_from_s, marker_outline(m)))
+        centre = uv[0]
+        in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
+        full_area, outline_centroid = polygon_area_centroid(outline_uv) if np.all(outline_z > 0) else (0.0, np.full(2, np.nan))
+        clipped = clip_polygon(outline_uv, *bounds) if np.all(outline_z > 0) else np.zeros((0, 2))
+        area_in_frame, _ = polygon_area_centroid(clipped)
+        rec = {
+            "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
+            "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
+            "normal_d": normal_d.tolist(), "diameter_mm": m.diameter_mm,
+            "center_px": centre.tolist(), "depth_mm": float(depth[0]),
+            "outline_centroid_px": outline_centroid.tolist(),
+            "bbox_px": _bbox(clipped) if len(clipped) else None,
+            "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
+            "in_frame": in_frame, "area_px": full_area, "area_in_frame_px": area_in_frame,
+        }
+        if counts is not None:
+            visible = int(counts[m.pass_index]) if m.pass_index < len(counts) else 0
+            frac = min(1.0, visible / area_in_frame) if area_in_frame > 0 else 0.0
+            rec["visible_pixels"] = visible
+            rec["visible_fraction"] = frac
+            if visible:
+                ys, xs = np.nonzero(index == m.pass_index)
+                rec["bbox_visible_px"] = [float(xs.min()) - 0.5, float(ys.min()) - 0.5,
+                                          float(xs.max()) + 0.5, float(ys.max()) + 0.5]
+            else:
+                rec["bbox_visible_px"] = None
+            rec["visibility"] = 0 if not in_frame else (2 if frac >= visible_threshold else 1)
+        markers.append(rec)
+    return {
+        "format": LABEL_FORMAT,
+        "frame_id": frame.spec.frame_id,
+        "spec": to_dict(frame.spec),
+        "conditions": [frame.spec.condition] + ([frame.glare_kind] if frame.glare_kind != "none" else []),
+        "image": {"width": w, "height": h, "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel"},
+        "camera": {"K": k.tolist(), "focal_px": cam.focal_px, "principal_point": list(cam.principal_point),
+                   "cam_from_d": cam_from_d.tolist(),
+                   "look_at_mm": list(cam.look_at_mm), "distance_mm": cam.distance_mm},
+        "d_from_b": d_from_b.tolist(),
+        "pose_b_in_d": pose_components(d_from_b),
+        "markers": markers,
+        "sampled": {
+            "lights": [to_dict(light) for light in frame.lights],
+            "props": [to_dict(p) for p in frame.props],
+            "appearance": to_dict(frame.appearance),
+            "sensor": to_dict(frame.sensor),
+            "glare_kind": frame.glare_kind,
+            "render_seed": frame.render_seed,
+            "samples": frame.samples, "denoise": frame.denoise, "max_bounces": frame.max_bounces,
+        },
+        "derived": derived or {},
+    }

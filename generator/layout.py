@@ -1,0 +1,112 @@
+"""Marker layout: where the coloured markers sit on sections A and B (pure, no bpy).
+
+A marker is placed by (axial offset from the docking face, angle on the cylinder):
+- axial offset ``s_mm`` > 0 is the distance from the seam along the section's axis, so a marker
+  of A sits at x = -s and one of B at x = +s in its own section frame;
+- angle ``phi_deg`` is measured on the circumference from +Z (the camera side) toward +Y (up).
+The marker centre is the centre of the top face of its coloured disc, which is raised
+``raise_mm`` above the cylinder along the surface normal.
+
+The default layouts are irregular on purpose: every marker has a distinct set of distances to
+the others, so a solver can tell which marker is which from the image alone.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SECTIONS = ("A", "B")
+CLASS_NAMES = ("RedA", "BlueB")  # detector class ids 0 and 1
+
+# (s_mm, phi_deg): irregular patterns near the seam on the camera-facing side.
+DEFAULT_LAYOUT_A = ((50.0, -31.0), (100.0, -19.0), (62.0, -4.0), (130.0, 6.0),
+                    (47.0, 14.0), (88.0, 26.0), (150.0, -36.0))
+DEFAULT_LAYOUT_B = ((52.0, -25.0), (108.0, -11.0), (68.0, 2.0), (140.0, 17.0),
+                    (48.0, 24.0), (96.0, 35.0), (158.0, -33.0))
+RING_EXTRA_MM = 2.5  # the dark ring around each coloured disc
+
+
+@dataclass(frozen=True)
+class Marker:
+    """One marker. ``center_mm`` and ``normal`` are in its section's frame."""
+
+    id: str                      # stable id, e.g. "A3"
+    section: str                 # "A" or "B"
+    index: int                   # 0-based index within its section
+    center_mm: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    diameter_mm: float
+
+    @property
+    def class_id(self) -> int:
+        return SECTIONS.index(self.section)
+
+    @property
+    def pass_index(self) -> int:
+        """Object index written into the render's index pass (1-based, unique per marker)."""
+        return 1 + self.index + 100 * self.class_id
+
+
+def place_marker(section: str, index: int, s_mm: float, phi_deg: float, radius_mm: float,
+                 diameter_mm: float, raise_mm: float) -> Marker:
+    """Marker on a cylinder of ``radius_mm`` whose axis is X; see the module docstring."""
+    if section not in SECTIONS:
+        raise ValueError(f"section must be one of {SECTIONS}, got {section!r}")
+    phi = np.radians(phi_deg)
+    normal = np.array([0.0, np.sin(phi), np.cos(phi)])
+    x = -s_mm if section == "A" else s_mm
+    center = np.array([x, 0.0, 0.0]) + (radius_mm + raise_mm) * normal
+    return Marker(id=f"{section}{index}", section=section, index=index,
+                  center_mm=tuple(float(v) for v in center),
+                  normal=tuple(float(v) for v in normal), diameter_mm=float(diameter_mm))
+
+
+def build_layout(pattern_a, pattern_b, radius_mm: float, diameter_mm: float,
+                 raise_mm: float = 1.0) -> tuple[Marker, ...]:
+    """All markers of A then B from (s_mm, phi_deg) patterns."""
+    markers = []
+    for section, pattern in (("A", pattern_a), ("B", pattern_b)):
+        for i, (s, phi) in enumerate(pattern):
+            markers.append(place_marker(section, i, s, phi, radius_mm, diameter_mm, raise_mm))
+    return tuple(markers)
+
+
+def marker_points(markers, section: str | None = None) -> np.ndarray:
+    """Centres (N, 3) mm in each marker's section frame, optionally of one section only."""
+    return np.array([m.center_mm for m in markers if section is None or m.section == section],
+                    dtype=np.float64).reshape(-1, 3)
+
+
+def layout_problems(markers, min_spacing_factor: float = 1.5,
+                    signature_tol_mm: float = 2.0) -> list[str]:
+    """Reasons a layout is unusable (empty when fine).
+
+    Checks per section: at least 6 markers, discs do not overlap (centre spacing at least
+    ``min_spacing_factor`` diameters), markers are not all coplanar, and every marker's sorted
+    distances to the others differ from every other marker's by more than ``signature_tol_mm``
+    somewhere (no symmetry that would make two markers interchangeable).
+    """
+    problems = []
+    for section in SECTIONS:
+        ms = [m for m in markers if m.section == section]
+        if len(ms) < 6:
+            problems.append(f"section {section}: {len(ms)} markers, at least 6 needed")
+            continue
+        p = marker_points(ms)
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        diam = max(m.diameter_mm for m in ms)
+        close = np.argwhere(np.triu(d < min_spacing_factor * diam, 1))
+        for i, j in close:
+            problems.append(f"section {section}: markers {ms[i].id} and {ms[j].id} are "
+                            f"{d[i, j]:.1f} mm apart (< {min_spacing_factor} diameters)")
+        centred = p - p.mean(axis=0)
+        if np.linalg.svd(centred, compute_uv=False)[-1] < 1e-6 * max(1.0, np.abs(centred).max()):
+            problems.append(f"section {section}: markers are coplanar")
+        sig = np.sort(d, axis=1)
+        for i in range(len(ms)):
+            for j in range(i + 1, len(ms)):
+                if np.max(np.abs(sig[i] - sig[j])) <= signature_tol_mm:
+                    problems.append(f"section {section}: markers {ms[i].id} and {ms[j].id} have "
+                                    f"the same distance signature (symmetric layout)")
+    return problems

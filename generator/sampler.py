@@ -1,0 +1,379 @@
+"""Deterministic scene sampling: frame i of a dataset is a function of (config, seed, i) alone.
+
+Every random choice comes from a ``numpy.random.Generator`` seeded with
+``SeedSequence([seed, stream, ...])``: the plan (conditions, splits), a frame's geometry and a
+frame's look (light, noise, occluders) each draw from their own stream, so a frame is the same
+whatever the shard, worker count or render order, and the captures of a repeatability pose share
+their geometry while their lighting and noise differ.
+"""
+from __future__ import annotations
+
+import colorsys
+import dataclasses
+from functools import lru_cache
+
+import numpy as np
+
+from generator.config import CONDITIONS, Config, ConfigError
+from generator.geometry import (look_at_cam_from_world, make_transform, rot_x, rot_y, rot_z,
+                                transform_from_pose_components, transform_points)
+from generator.layout import marker_points
+from generator.scene import (CLUTTER_KINDS, Appearance, CameraModel, FrameScene, FrameSpec, Light, Prop,
+                             SensorParams, StaticScene, mat4, vec)
+
+STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
+CLUTTER_SLOTS = 8
+FLOOR_GAP_MM = 350.0  # floor sits this far below the sections' underside
+
+
+def rng_for(seed: int, *keys: int) -> np.random.Generator:
+    """The Generator of one named stream of a dataset."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def floor_y_mm(radius_mm: float) -> float:
+    return -(radius_mm + FLOOR_GAP_MM)
+
+
+# ----------------------------------------------------------------------------- plan
+
+def condition_counts(weights: dict[str, float], total: int) -> dict[str, int]:
+    """Exact counts per condition from weights (largest remainder, ties in CONDITIONS order)."""
+    wsum = sum(weights.values())
+    if total == 0 or wsum <= 0:
+        return {k: 0 for k in weights}
+    quotas = {k: total * w / wsum for k, w in weights.items()}
+    counts = {k: int(np.floor(q)) for k, q in quotas.items()}
+    rest = total - sum(counts.values())
+    order = sorted(weights, key=lambda k: (-(quotas[k] - counts[k]), CONDITIONS.index(k)))
+    for k in order[:rest]:
+        counts[k] += 1
+    return counts
+
+
+def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
+    """Every frame of the dataset: main frames (train/test) then the repeatability subset."""
+    seed, n = cfg.dataset.seed, cfg.dataset.frames
+    counts = condition_counts(dataclasses.asdict(cfg.conditions), n)
+    perm = rng_for(seed, STREAM_PLAN).permutation(n)
+    condition_of = np.empty(n, dtype=object)
+    split_of = np.empty(n, dtype=object)
+    start = 0
+    for ci, cond in enumerate(CONDITIONS):
+        members = np.sort(perm[start:start + counts[cond]])
+        start += counts[cond]
+        condition_of[members] = cond
+        n_train = int(np.floor(cfg.dataset.train_fraction * len(members) + 0.5))
+        order = rng_for(seed, STREAM_PLAN, 1 + ci).permutation(len(members))
+        split_of[members[order[:n_train]]] = "train"
+        split_of[members[order[n_train:]]] = "test"
+    specs = [FrameSpec(f"{i:06d}", i, "main", str(split_of[i]), str(condition_of[i]), -1, -1)
+             for i in range(n)]
+    r = cfg.repeatability
+    for p in range(r.poses):
+        for c in range(r.captures):
+            specs.append(FrameSpec(f"rep{p:03d}_{c:02d}", n + p * r.captures + c, "repeat",
+                                   "repeat", r.condition, p, c))
+    return tuple(specs)
+
+
+@lru_cache(maxsize=8)
+def static_scene(cfg: Config) -> StaticScene:
+    return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
+                       flange_width_mm=cfg.sections.flange_width_mm,
+                       flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(), max_occluders=cfg.occlusion.occluders[1],
+                       clutter_slots=CLUTTER_SLOTS)
+
+
+def _streams(cfg: Config, spec: FrameSpec) -> tuple[np.random.Generator, np.random.Generator]:
+    s = cfg.dataset.seed
+    if spec.kind == "repeat":
+        return (rng_for(s, STREAM_REPEAT_GEOMETRY, spec.pose_index),
+                rng_for(s, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture))
+    return rng_for(s, STREAM_GEOMETRY, spec.index), rng_for(s, STREAM_LOOK, spec.index)
+
+
+# ----------------------------------------------------------------------------- geometry
+
+def _u(rng, lo_hi) -> float:
+    return float(rng.uniform(lo_hi[0], lo_hi[1]))
+
+
+def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
+    """Marker centres (N, 3) in D, in layout order."""
+    pa = marker_points(static.markers)
+    is_b = np.array([m.section == "B" for m in static.markers])
+    out = pa.copy()
+    out[is_b] = transform_points(d_from_b, pa[is_b])
+    return out
+
+
+def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndarray) -> float:
+    """Largest focal (px) that keeps every marker disc ``margin_px`` inside the image."""
+    pc = transform_points(cam_from_d, points_d)
+    z = pc[:, 2]
+    if np.any(z <= 0):
+        return 0.0
+    r = cfg.markers.diameter_mm / 2.0
+    half_w = cfg.image.width / 2.0 - cfg.camera.margin_px
+    half_h = cfg.image.height / 2.0 - cfg.camera.margin_px
+    ext_x = (np.abs(pc[:, 0]) + r) / z
+    ext_y = (np.abs(pc[:, 1]) + r) / z
+    return float(min(half_w / ext_x.max(), half_h / ext_y.max()))
+
+
+def sample_geometry(cfg: Config, rng: np.random.Generator):
+    """d_from_b, cam_from_d and the focal cap for one frame (consumes ``rng`` in a fixed order)."""
+    p = cfg.pose
+    d_from_b = transform_from_pose_components(_u(rng, p.x_mm), _u(rng, p.y_mm), _u(rng, p.z_mm),
+                                              _u(rng, p.alpha_deg), _u(rng, p.beta_deg),
+                                              _u(rng, p.gamma_deg))
+    c = cfg.camera
+    jx, jy = rng.uniform(-c.lateral_jitter_mm, c.lateral_jitter_mm, size=2)
+    tx, ty = np.radians(rng.uniform(-c.tilt_deg, c.tilt_deg, size=2))
+    roll = np.radians(rng.uniform(-c.roll_deg, c.roll_deg))
+    distance = _u(rng, c.distance_mm)
+    target = np.array([d_from_b[0, 3] / 2.0 + jx, jy, cfg.sections.radius_mm])
+    eye = target + distance * (rot_y(ty) @ rot_x(tx) @ np.array([0.0, 0.0, 1.0]))
+    cam_from_d = make_transform(rot_z(roll), np.zeros(3)) @ look_at_cam_from_world(eye, target)
+    f_cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static_scene(cfg), d_from_b))
+    u_focal = float(rng.uniform())
+    return d_from_b, cam_from_d, f_cap, u_focal, eye, target
+
+
+def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
+    """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal."""
+    worst = np.inf
+    for spec in frame_plan(cfg):
+        geo_rng, _ = _streams(cfg, spec)
+        worst = min(worst, sample_geometry(cfg, geo_rng)[2])
+    f_min = cfg.camera.focal_px[0]
+    if worst < f_min:
+        raise ConfigError(
+            f"{source}: [camera] focal_px: min {f_min:g} px cannot fit all markers "
+            f"{cfg.camera.margin_px:g} px inside a {cfg.image.width}x{cfg.image.height} image "
+            f"for every frame (largest focal that fits the worst frame: {worst:.0f} px); lower "
+            f"focal_px, raise distance_mm or reduce margin_px")
+
+
+# ----------------------------------------------------------------------------- look
+
+def _kelvin_tint(rng) -> tuple[float, float, float]:
+    """A light colour between warm (3200 K-ish) and cool (6500 K-ish), unit luminance."""
+    t = rng.uniform()
+    warm, cool = np.array([1.0, 0.78, 0.56]), np.array([0.92, 0.97, 1.08])
+    c = warm * (1 - t) + cool * t
+    return vec(c / (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]))
+
+
+def _hsv_linear(h, s, v) -> tuple[float, float, float]:
+    srgb = np.array(colorsys.hsv_to_rgb(h % 1.0, s, v))
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    return vec(lin)
+
+
+PAINTS = ((0.55, 0.55, 0.55), (0.30, 0.31, 0.32), (0.70, 0.68, 0.62), (0.42, 0.50, 0.40),
+          (0.68, 0.56, 0.20), (0.38, 0.45, 0.55), (0.14, 0.15, 0.16), (0.60, 0.62, 0.66))
+PROP_COLORS = ((0.03, 0.03, 0.03), (0.12, 0.12, 0.12), (0.60, 0.25, 0.02), (0.65, 0.50, 0.03),
+               (0.05, 0.18, 0.06), (0.40, 0.40, 0.38), (0.50, 0.03, 0.02), (0.02, 0.06, 0.40))
+
+
+def _jitter_color(rng, base, amount=0.12):
+    return vec(np.clip(np.array(base) * rng.uniform(1 - amount, 1 + amount, size=3), 0, 1))
+
+
+def _area_light(name, rng, target, azimuth_deg, elevation_deg, dist_mm, size_mm, rel_power):
+    az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
+    direction = np.array([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)])
+    pos = target + dist_mm * direction
+    # Blender lights shine down their local -Z: build d_from_light with +Z pointing away from target
+    z = direction
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    y = np.cross(z, x)
+    d_from_light = make_transform(np.stack([x, y, z], axis=1), pos)
+    # irradiance ~ P / d^2: scale power with distance so rel_power sets the light level
+    power = rel_power * (dist_mm / 1000.0) ** 2 * 400.0
+    return Light(name, "AREA", mat4(d_from_light), float(power), float(size_mm), _kelvin_tint(rng))
+
+
+def sample_lights(rng, target, condition: str) -> tuple[Light, ...]:
+    if condition == "ideal":
+        key = _area_light("key", rng, target, 0.0, 25.0, 2500.0, 1800.0, 1.0)
+        fill = _area_light("fill", rng, target, 180.0 - 0.0, 60.0, 2500.0, 1800.0, 0.0)
+        white = (1.0, 1.0, 1.0)
+        return (dataclasses.replace(key, color=white), dataclasses.replace(fill, color=white))
+    key = _area_light("key", rng, target, rng.uniform(-70, 70), rng.uniform(15, 65),
+                      rng.uniform(1500, 3500), rng.uniform(300, 1500), rng.uniform(0.6, 1.6))
+    fill = _area_light("fill", rng, target, rng.uniform(-80, 80), rng.uniform(-10, 40),
+                       rng.uniform(1500, 3500), rng.uniform(500, 2000), rng.uniform(0.05, 0.4))
+    return key, fill
+
+
+def sample_appearance(rng, condition: str) -> Appearance:
+    ideal = condition == "ideal"
+    return Appearance(
+        section_color_a=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))]),
+        section_color_b=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))]),
+        metallic=float(rng.uniform(0.1, 0.6)),
+        roughness=float(rng.uniform(0.25, 0.55)),
+        roughness_variation=0.0 if ideal else float(rng.uniform(0.05, 0.25)),
+        grime=0.0 if ideal else float(rng.uniform(0.0, 0.2)),
+        texture_scale=float(rng.uniform(2.0, 12.0)),
+        texture_offset=vec(rng.uniform(-100, 100, size=3)),
+        marker_red=_hsv_linear(rng.uniform(-0.02, 0.02), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
+        marker_blue=_hsv_linear(rng.uniform(0.58, 0.66), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
+        ring_color=vec([rng.uniform(0.01, 0.05)] * 3),
+        floor_color=_jitter_color(rng, (0.25, 0.24, 0.22), 0.4),
+        wall_color=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))], 0.3),
+        world_color=_jitter_color(rng, (0.9, 0.92, 1.0), 0.08),
+        world_strength=float(rng.uniform(0.03, 0.25)),
+    )
+
+
+def sample_clutter(rng, radius_mm: float) -> tuple[Prop, ...]:
+    """Background boxes and drums on the floor behind and beside the sections."""
+    props = []
+    floor = floor_y_mm(radius_mm)
+    for slot in range(CLUTTER_SLOTS):
+        kind = CLUTTER_KINDS[slot % len(CLUTTER_KINDS)]
+        size = rng.uniform([150, 150, 150], [900, 1200, 900])
+        if kind == "drum":
+            size[2] = size[0]
+        pos = np.array([rng.uniform(-2500, 2500), floor + size[1] / 2, rng.uniform(-3500, -radius_mm - 400)])
+        if rng.uniform() < 0.25:  # some stand beside the sections, nearer the camera
+            pos[0] = rng.choice([-1, 1]) * rng.uniform(1400, 2500)
+            pos[2] = rng.uniform(-radius_mm, 600)
+        rot = make_transform(rot_y(rng.uniform(0, 2 * np.pi)) @ rot_x(-np.pi / 2 if kind == "drum" else 0.0), pos)
+        color = PROP_COLORS[rng.integers(len(PROP_COLORS))]
+        props.append(Prop(kind, slot // len(CLUTTER_KINDS), mat4(rot), vec(size), _jitter_color(rng, color)))
+    return tuple(props)
+
+
+def sample_occluders(cfg: Config, rng, static: StaticScene, points_d, eye) -> tuple[Prop, ...]:
+    n = int(rng.integers(cfg.occlusion.occluders[0], cfg.occlusion.occluders[1] + 1))
+    slots: dict[str, int] = {}
+    props = []
+    for _ in range(n):
+        kind = str(cfg.occlusion.kinds[rng.integers(len(cfg.occlusion.kinds))])
+        slot = slots.get(kind, 0)
+        slots[kind] = slot + 1
+        mi = int(rng.integers(len(static.markers)))
+        marker = points_d[mi]
+        ray = eye - marker
+        ray /= np.linalg.norm(ray)
+        # orthonormal basis: w along the ray, u/v across it
+        u = np.cross([0.0, 1.0, 0.0], ray)
+        u /= np.linalg.norm(u)
+        v = np.cross(ray, u)
+        theta = rng.uniform(0, np.pi)
+        axis = np.cos(theta) * u + np.sin(theta) * v     # long axis, across the line of sight
+        across = np.cross(ray, axis)
+        if kind == "cable":
+            d = rng.uniform(8, 24)
+            size = np.array([rng.uniform(600, 1500), d, d])
+        elif kind == "bar":
+            size = np.array([rng.uniform(300, 900), rng.uniform(15, 45), rng.uniform(15, 45)])
+        elif kind == "tool":
+            size = np.array([rng.uniform(160, 300), rng.uniform(30, 60), rng.uniform(15, 30)])
+        else:  # hand-sized blob
+            size = np.array([rng.uniform(80, 120), rng.uniform(60, 95), rng.uniform(30, 55)])
+        half_width = size[1] / 2 + cfg.markers.diameter_mm / 2
+        gap = _u(rng, cfg.occlusion.gap_mm)
+        shift_along = rng.uniform(-0.4, 0.4) * size[0] if kind in ("tool", "blob") else 0.0
+        centre = marker + gap * ray + rng.uniform(-1.2, 1.2) * half_width * across + shift_along * axis
+        rotation = np.stack([axis, across, np.cross(axis, across)], axis=1)
+        color = PROP_COLORS[rng.integers(len(PROP_COLORS))]
+        props.append(Prop(kind, slot, mat4(make_transform(rotation, centre)), vec(size),
+                          _jitter_color(rng, color), 0.0, static.markers[mi].id))
+    return tuple(props)
+
+
+def sample_glare(cfg: Config, rng, kind: str, static: StaticScene, cam: CameraModel, eye):
+    """Glare lamp prop and/or a specular light. Returns (props, lights, roughness override)."""
+    if kind == "lamp_in_view":
+        w, h = cam.width, cam.height
+        if rng.uniform() < 0.6:  # above the sections
+            px = np.array([rng.uniform(0.05, 0.95) * w, rng.uniform(0.02, 0.2) * h])
+        else:  # beside them
+            px = np.array([rng.choice([rng.uniform(0.02, 0.12), rng.uniform(0.88, 0.98)]) * w,
+                           rng.uniform(0.1, 0.9) * h])
+        k = cam.k()
+        ray_cam = np.linalg.solve(k, np.array([px[0], px[1], 1.0]))
+        d_from_cam = np.linalg.inv(cam.cam_from_d_array())
+        depth = rng.uniform(2500, 5000)
+        pos = d_from_cam[:3, :3] @ (ray_cam * depth) + d_from_cam[:3, 3]
+        radius = rng.uniform(25, 70)
+        lamp = Prop("lamp", 0, mat4(make_transform(np.eye(3), pos)), vec([2 * radius] * 3),
+                    (1.0, 0.95, 0.85), float(rng.uniform(200, 2000)))
+        return (lamp,), (), None
+    # specular: a strong small light at the mirror direction of a point on the cylinder
+    r = static.radius_mm
+    phi = np.radians(rng.uniform(-30, 30))
+    p = np.array([rng.uniform(-180, 180), r * np.sin(phi), r * np.cos(phi)])
+    n = np.array([0.0, np.sin(phi), np.cos(phi)])
+    view = (eye - p) / np.linalg.norm(eye - p)
+    mirror = 2 * np.dot(n, view) * n - view
+    dist = rng.uniform(900, 2200)
+    pos = p + dist * mirror
+    z = mirror
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    light = Light("glare", "AREA", mat4(make_transform(np.stack([x, np.cross(z, x), z], axis=1), pos)),
+                  float(rng.uniform(3000, 12000) * (dist / 1000) ** 2), float(rng.uniform(40, 150)),
+                  (1.0, 0.97, 0.92))
+    return (), (light,), float(rng.uniform(0.08, 0.2))
+
+
+def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParams:
+    s = cfg.sensor
+    seed = int(rng.integers(2**62))
+    if condition == "ideal":
+        return SensorParams(True, 0.0, 0.0, 1.0, 0.0, s.adc_bits, 0.0, 0.0, seed)
+    if condition == "low_light":
+        ev, gain = _u(rng, s.low_light_ev), _u(rng, s.low_light_gain_ev)
+    else:
+        ev, gain = _u(rng, s.exposure_ev), 0.0
+    return SensorParams(False, ev, gain, _u(rng, s.full_well_e), _u(rng, s.read_noise_e),
+                        s.adc_bits, _u(rng, s.vignetting), bloom, seed)
+
+
+# ----------------------------------------------------------------------------- frame
+
+def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
+    """The full scene of one planned frame (pure and deterministic)."""
+    static = static_scene(cfg)
+    geo_rng, look_rng = _streams(cfg, spec)
+    d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg, geo_rng)
+    f_lo, f_hi = cfg.camera.focal_px[0], min(cfg.camera.focal_px[1], f_cap)
+    if f_hi < f_lo:
+        raise ConfigError(f"[camera] focal_px: frame {spec.frame_id} cannot fit its markers at "
+                          f"{f_lo:g} px (largest that fits: {f_cap:.0f} px)")
+    camera = CameraModel(cfg.image.width, cfg.image.height, float(f_lo + u_focal * (f_hi - f_lo)),
+                         ((cfg.image.width - 1) / 2.0, (cfg.image.height - 1) / 2.0), mat4(cam_from_d),
+                         vec(target), float(np.linalg.norm(eye - target)))
+    appearance = sample_appearance(geo_rng, spec.condition)
+    clutter = sample_clutter(geo_rng, static.radius_mm)
+
+    cond = spec.condition
+    lights = sample_lights(look_rng, target, cond)
+    props = list(clutter)
+    glare_kind = "none"
+    bloom = 0.0
+    if cond == "occlusion":
+        props += sample_occluders(cfg, look_rng, static, markers_in_d(static, d_from_b), eye)
+    if cond == "glare":
+        glare_kind = str(cfg.glare.kinds[look_rng.integers(len(cfg.glare.kinds))])
+        glare_props, glare_lights, rough = sample_glare(cfg, look_rng, glare_kind, static, camera, eye)
+        props += glare_props
+        lights = lights + glare_lights
+        bloom = _u(look_rng, cfg.glare.bloom)
+        if rough is not None:
+            appearance = dataclasses.replace(appearance, roughness=rough,
+                                             roughness_variation=min(appearance.roughness_variation, 0.05))
+    sensor = sample_sensor(cfg, look_rng, cond, bloom)
+    return FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
+                      props=tuple(props), appearance=appearance, sensor=sensor,
+                      glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
+                      samples=cfg.render.samples, denoise=cfg.render.denoise,
+                      max_bounces=cfg.render.max_bounces)

@@ -1,0 +1,181 @@
+"""Frozen, bpy-free description of one frame; ``blender_scenes`` turns it into Blender objects.
+
+Lengths in mm, angles in degrees, colours linear RGB in [0, 1]. Transforms are 4x4 nested
+tuples named ``<to>_from_<from>``; ``.matrix()`` style helpers return numpy arrays.
+"""
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass
+
+import numpy as np
+
+from generator.geometry import intrinsics
+from generator.layout import Marker
+
+Mat4 = tuple[tuple[float, ...], ...]
+Vec3 = tuple[float, float, float]
+
+
+def mat4(array) -> Mat4:
+    """Freeze a (4, 4) array as nested tuples of Python floats."""
+    a = np.asarray(array, dtype=np.float64)
+    if a.shape != (4, 4):
+        raise ValueError(f"expected a (4, 4) transform, got {a.shape}")
+    return tuple(tuple(float(v) for v in row) for row in a)
+
+
+def vec(values) -> tuple[float, ...]:
+    return tuple(float(v) for v in np.asarray(values, dtype=np.float64).ravel())
+
+
+@dataclass(frozen=True)
+class FrameSpec:
+    """Where a frame sits in the dataset plan."""
+    frame_id: str
+    index: int        # main frames: 0..frames-1; repeatability frames continue after them
+    kind: str         # "main" | "repeat"
+    split: str        # "train" | "test" | "repeat"
+    condition: str    # one of generator.config.CONDITIONS
+    pose_index: int   # repeatability: static pose number (main frames: -1)
+    capture: int      # repeatability: capture number (main frames: -1)
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    width: int
+    height: int
+    focal_px: float
+    principal_point: tuple[float, float]
+    cam_from_d: Mat4
+    look_at_mm: Vec3       # the point on the seam the camera was aimed at (D)
+    distance_mm: float     # camera centre to look_at_mm
+
+    def k(self) -> np.ndarray:
+        return intrinsics(self.focal_px, self.principal_point)
+
+    def cam_from_d_array(self) -> np.ndarray:
+        return np.array(self.cam_from_d)
+
+
+@dataclass(frozen=True)
+class Light:
+    name: str            # "key" | "fill" | "glare"
+    kind: str            # Blender light type: "AREA" | "POINT" | "SPOT"
+    d_from_light: Mat4   # light looks down its local -Z (Blender convention), origin = position
+    power_w: float       # 0 = off
+    size_mm: float
+    color: Vec3
+
+
+@dataclass(frozen=True)
+class Prop:
+    """An object placed per frame: occluder, clutter or glare lamp. Local X is its long axis."""
+    kind: str            # "cable" | "bar" | "tool" | "blob" | "box" | "drum" | "lamp"
+    slot: int            # which pooled object of that kind
+    d_from_prop: Mat4
+    size_mm: Vec3        # extent along local X, Y, Z
+    color: Vec3
+    emission: float = 0.0  # emission strength (lamps)
+    target_marker: str = ""  # occluders: the marker it was aimed at
+
+
+@dataclass(frozen=True)
+class Appearance:
+    section_color_a: Vec3
+    section_color_b: Vec3
+    metallic: float
+    roughness: float
+    roughness_variation: float
+    grime: float
+    texture_scale: float        # noise texture scale (per metre)
+    texture_offset: Vec3        # shifts the noise so every frame's paint differs
+    marker_red: Vec3
+    marker_blue: Vec3
+    ring_color: Vec3
+    floor_color: Vec3
+    wall_color: Vec3
+    world_color: Vec3
+    world_strength: float
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """Inputs of generator.sensor.apply_sensor (see there)."""
+    ideal: bool
+    exposure_ev: float
+    gain_ev: float
+    full_well_e: float
+    read_noise_e: float
+    adc_bits: int
+    vignetting: float
+    bloom: float
+    noise_seed: int
+
+
+@dataclass(frozen=True)
+class StaticScene:
+    """What stays the same for a whole dataset (built once per render worker)."""
+    radius_mm: float
+    length_mm: float
+    flange_width_mm: float
+    flange_height_mm: float
+    markers: tuple[Marker, ...]
+    max_occluders: int
+    clutter_slots: int
+
+
+@dataclass(frozen=True)
+class FrameScene:
+    spec: FrameSpec
+    d_from_b: Mat4
+    camera: CameraModel
+    lights: tuple[Light, ...]
+    props: tuple[Prop, ...]          # occluders, clutter, glare lamp (absent slots are hidden)
+    appearance: Appearance
+    sensor: SensorParams
+    glare_kind: str                  # "none" | "lamp_in_view" | "specular"
+    render_seed: int
+    samples: int
+    denoise: str
+    max_bounces: int
+
+    def d_from_b_array(self) -> np.ndarray:
+        return np.array(self.d_from_b)
+
+    @property
+    def occluders(self) -> tuple[Prop, ...]:
+        return tuple(p for p in self.props if p.kind in OCCLUDER_KINDS)
+
+
+OCCLUDER_KINDS = ("cable", "bar", "tool", "blob")
+CLUTTER_KINDS = ("box", "drum")
+
+
+def to_dict(obj) -> dict:
+    """JSON-able dict of a scene dataclass (tuples become lists)."""
+    return dataclasses.asdict(obj)
+
+
+def from_dict(cls, data):
+    """Rebuild a scene dataclass from :func:`to_dict` output (nested tuples restored)."""
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name in data:
+            kwargs[f.name] = _restore(hints[f.name], data[f.name])
+    return cls(**kwargs)
+
+
+def _restore(hint, value):
+    if dataclasses.is_dataclass(hint):
+        return from_dict(hint, value)
+    if typing.get_origin(hint) is tuple:
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_restore(args[0], v) for v in value)
+        return tuple(_restore(a, v) for a, v in zip(args, value))
+    if hint is float:
+        return float(value)
+    return value

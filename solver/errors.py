@@ -1,0 +1,12 @@
+"""The one exception type of the solver package."""
+from __future__ import annotations
+
+__all__ = ["SolverError"]
+
+
+class SolverError(ValueError):
+    """Bad input or an unsolvable / ambiguous problem; the message says what is wrong.
+
+    A subclass of ``ValueError`` so that callers checking for bad input catch it too. The solver
+    never returns a silent garbage pose: whatever it cannot stand behind raises this.
+    """

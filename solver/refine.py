@@ -1,0 +1,262 @@
+"""Levenberg-Marquardt refinement of (R, t, f) on reprojection error, and its covariance.
+
+Parameters and their order (every covariance in the package uses it):
+- one section, 7 parameters: ``(w_x, w_y, w_z, t_x, t_y, t_z, f)``: ``w`` (rad) a left
+  perturbation of the rotation, ``R <- exp([w]x) R`` (camera frame), ``t`` (mm), ``f`` (px);
+- two sections in one image, 13 parameters: ``(w_A, t_A, w_B, t_B, f)`` with one shared focal.
+
+The covariance is ``sigma^2 (J^T J)^-1`` with J the Jacobian of the pixel residuals at the
+estimate; ``sigma`` (px) is the pixel noise if the caller knows it, else it is estimated from the
+residuals (``sum r^2 / (2N - p)``). The relative pose ``d_from_b = inv(cam_from_a) cam_from_b``
+and its components (X, Y, Z mm; alpha, beta, gamma deg, R = Rz(alpha) Ry(beta) Rx(gamma)) get
+their covariance by first-order propagation (:func:`d_from_b_jacobian`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from generator.geometry import euler_deg_from_rotation
+from solver.errors import SolverError
+from solver.lie import so3_exp
+
+__all__ = ["residuals_and_jacobian", "refine_pnpf", "refine_joint", "covariance_from_jacobian",
+           "d_from_b_jacobian", "relative_pose", "RefineResult", "JointRefineResult"]
+
+
+def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.ndarray,
+                           rotation: np.ndarray, translation: np.ndarray, focal: float,
+                           want_jacobian: bool = True):
+    """Residuals (2N,) = projected - observed (px), interleaved u, v, and J (2N, 7).
+
+    ``points_3d`` (N, 3) mm, ``points_2d`` (N, 2) px, ``pp`` (2,) px, ``rotation`` (3, 3),
+    ``translation`` (3,) mm, ``focal`` px. Returns (r, J, z) with z (N,) the depths; J is None
+    when ``want_jacobian`` is False.
+    """
+    a = points_3d @ rotation.T
+    pc = a + translation
+    z = pc[:, 2]
+    iz = 1.0 / z
+    xn = pc[:, 0] * iz
+    yn = pc[:, 1] * iz
+    n = points_3d.shape[0]
+    r = np.empty((n, 2))
+    r[:, 0] = focal * xn + (pp[0] - points_2d[:, 0])
+    r[:, 1] = focal * yn + (pp[1] - points_2d[:, 1])
+    if not want_jacobian:
+        return r.reshape(-1), None, z
+    fz = focal * iz
+    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+    j = np.empty((n, 2, 7))
+    # du/dpc = fz (1, 0, -xn), dv/dpc = fz (0, 1, -yn); du/dw = a x du/dpc
+    j[:, 0, 0] = -fz * ay * xn
+    j[:, 0, 1] = fz * (az + ax * xn)
+    j[:, 0, 2] = -fz * ay
+    j[:, 1, 0] = -fz * (ay * yn + az)
+    j[:, 1, 1] = fz * ax * yn
+    j[:, 1, 2] = fz * ax
+    j[:, 0, 3] = fz
+    j[:, 0, 4] = 0.0
+    j[:, 0, 5] = -fz * xn
+    j[:, 1, 3] = 0.0
+    j[:, 1, 4] = fz
+    j[:, 1, 5] = -fz * yn
+    j[:, 0, 6] = xn
+    j[:, 1, 6] = yn
+    return r.reshape(-1), j.reshape(2 * n, 7), z
+
+
+def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: float | None):
+    """(cov (p, p), sigma used) = sigma^2 (J^T J)^-1; sigma estimated from residuals if None."""
+    m, p = jac.shape
+    if sigma_px is None:
+        dof = m - p
+        sigma2 = float(residuals @ residuals) / dof if dof > 0 else float("inf")
+    else:
+        sigma2 = float(sigma_px) ** 2
+    jtj = jac.T @ jac
+    try:
+        inv = np.linalg.inv(jtj)
+    except np.linalg.LinAlgError:
+        inv = np.full((p, p), np.inf)
+    return sigma2 * inv, float(np.sqrt(sigma2))
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """One section: R (3, 3), t (3,) mm, f px, residuals (2N,) px, J (2N, 7), iterations."""
+    rotation: np.ndarray
+    translation: np.ndarray
+    focal_px: float
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    iterations: int
+    converged: bool
+
+    @property
+    def rmse_px(self) -> float:
+        r = self.residuals
+        return float(np.sqrt(2.0 * (r @ r) / r.size))
+
+
+def _lm(evaluate, update, state, max_iter: int):
+    """Generic Levenberg-Marquardt (Marquardt scaling) on a residual function.
+
+    ``evaluate(state) -> (res, jac, valid)``; ``update(state, step) -> state``. Stops when
+    a step changes no residual by more than ~1e-9 px along any parameter, when the cost
+    stagnates (relative decrease < 1e-12), or when no damped step decreases it.
+    Returns (state, res, jac, iterations, converged).
+    """
+    res, jac, valid = evaluate(state)
+    if not valid:
+        raise SolverError("refinement started from an invalid camera (points behind it)")
+    cost = float(res @ res)
+    lam = 1e-6
+    it = 0
+    converged = False
+    for it in range(1, max_iter + 1):
+        jtj = jac.T @ jac
+        g = jac.T @ res
+        d = jtj.diagonal().copy()
+        d[d <= 0.0] = 1.0
+        accepted = False
+        for _ in range(12):
+            a = jtj.copy()
+            a.flat[::a.shape[0] + 1] += lam * d
+            try:
+                step = np.linalg.solve(a, -g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            predicted = -float(g @ step) - 0.5 * float(step @ (jtj @ step))
+            if predicted <= 1e-12 * cost:
+                break                 # the model promises nothing: at a minimum to precision
+            new_state = update(state, step)
+            if new_state is not None:
+                res_n, jac_n, valid_n = evaluate(new_state)
+                cost_n = float(res_n @ res_n)
+                if valid_n and cost_n <= cost:
+                    accepted = True
+                    break
+            lam *= 10.0
+        if not accepted:
+            converged = True   # no damped step decreases the cost: a minimum to precision
+            break
+        tiny = float(np.max(np.abs(step) * np.sqrt(d))) < 1e-9
+        stagnant = cost - cost_n <= 1e-10 * cost
+        state, res, jac, cost = new_state, res_n, jac_n, cost_n
+        lam = max(lam * 0.1, 1e-12)
+        if tiny or stagnant or cost < 1e-28 * res.size:
+            converged = True
+            break
+    if not np.isfinite(cost):
+        raise SolverError("refinement diverged (non-finite cost)")
+    return state, res, jac, it, converged
+
+
+def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
+                max_iter: int = 60) -> RefineResult:
+    """Levenberg-Marquardt on reprojection error over (R, t, f) for one section.
+
+    Inputs as in :func:`residuals_and_jacobian` (already validated). Raises SolverError if the
+    estimate leaves the valid region (points behind the camera, f <= 0) and cannot come back.
+    """
+    def evaluate(st):
+        res, jac, z = residuals_and_jacobian(points_3d, points_2d, pp, st[0], st[1], st[2])
+        return res, jac, bool(z.min() > 0.0) and np.isfinite(res).all()
+
+    def update(st, step):
+        f_new = st[2] + step[6]
+        if not f_new > 0.0:
+            return None
+        return so3_exp(step[:3]) @ st[0], st[1] + step[3:6], f_new
+
+    state = (np.array(rotation, dtype=np.float64), np.array(translation, dtype=np.float64),
+             float(focal))
+    state, res, jac, it, conv = _lm(evaluate, update, state, max_iter)
+    return RefineResult(state[0], state[1], float(state[2]), res, jac, it, conv)
+
+
+@dataclass(frozen=True)
+class JointRefineResult:
+    """Two sections, shared focal: rotations/translations of cam_from_a and cam_from_b."""
+    rotation_a: np.ndarray
+    translation_a: np.ndarray
+    rotation_b: np.ndarray
+    translation_b: np.ndarray
+    focal_px: float
+    residuals_a: np.ndarray
+    residuals_b: np.ndarray
+    jacobian: np.ndarray          # (2Na + 2Nb, 13)
+    iterations: int
+    converged: bool
+
+
+def refine_joint(points_a, uv_a, points_b, uv_b, pp, rot_a, t_a, rot_b, t_b, focal,
+                 max_iter: int = 60) -> JointRefineResult:
+    """LM over (w_A, t_A, w_B, t_B, f): both sections in one image, one shared focal length.
+
+    ``points_a`` (Na, 3) mm in A's frame with pixels ``uv_a`` (Na, 2); same for B; the initial
+    cam_from_a = (rot_a, t_a), cam_from_b = (rot_b, t_b), ``focal`` px.
+    """
+    na = 2 * points_a.shape[0]
+
+    def evaluate(st):
+        ra_, ta_, rb_, tb_, f_ = st
+        res_a, ja, za = residuals_and_jacobian(points_a, uv_a, pp, ra_, ta_, f_)
+        res_b, jb, zb = residuals_and_jacobian(points_b, uv_b, pp, rb_, tb_, f_)
+        jac = np.zeros((na + res_b.size, 13))
+        jac[:na, :6] = ja[:, :6]
+        jac[:na, 12] = ja[:, 6]
+        jac[na:, 6:12] = jb[:, :6]
+        jac[na:, 12] = jb[:, 6]
+        res = np.concatenate([res_a, res_b])
+        return res, jac, bool(min(za.min(), zb.min()) > 0.0) and np.isfinite(res).all()
+
+    def update(st, step):
+        f_new = st[4] + step[12]
+        if not f_new > 0.0:
+            return None
+        return (so3_exp(step[0:3]) @ st[0], st[1] + step[3:6], so3_exp(step[6:9]) @ st[2],
+                st[3] + step[9:12], f_new)
+
+    state = (np.array(rot_a, dtype=np.float64), np.array(t_a, dtype=np.float64),
+             np.array(rot_b, dtype=np.float64), np.array(t_b, dtype=np.float64), float(focal))
+    state, res, jac, it, conv = _lm(evaluate, update, state, max_iter)
+    return JointRefineResult(state[0], state[1], state[2], state[3], float(state[4]),
+                             res[:na], res[na:], jac, it, conv)
+
+
+def relative_pose(rot_a, t_a, rot_b, t_b) -> np.ndarray:
+    """``d_from_b`` (4, 4) = inv(cam_from_a) @ cam_from_b."""
+    out = np.eye(4)
+    out[:3, :3] = rot_a.T @ rot_b
+    out[:3, 3] = rot_a.T @ (t_b - t_a)
+    return out
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def d_from_b_jacobian(rot_a, t_a, rot_b, t_b) -> np.ndarray:
+    """d(X, Y, Z [mm], alpha, beta, gamma [deg]) / d(w_A, t_A, w_B, t_B): (6, 12).
+
+    With left perturbations R <- exp([w]x) R of both camera-frame rotations:
+    T = R_A^T (t_B - t_A) gives dT/dw_A = R_A^T [t_B - t_A]x, dT/dt_A = -R_A^T, dT/dt_B = R_A^T;
+    R_rel = R_A^T R_B moves by the left rotation vector R_A^T (w_B - w_A), and for
+    R = Rz(a) Ry(b) Rx(g) that vector is E (da, db, dg) with E = [e_z, Rz(a) e_y, Rz(a) Ry(b) e_x].
+    """
+    ra_t = rot_a.T
+    jac = np.zeros((6, 12))
+    jac[:3, 0:3] = ra_t @ _skew(t_b - t_a)
+    jac[:3, 3:6] = -ra_t
+    jac[:3, 9:12] = ra_t
+    alpha, beta, _ = np.radians(euler_deg_from_rotation(ra_t @ rot_b))
+    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    e = np.array([[0.0, -sa, ca * cb], [0.0, ca, sa * cb], [1.0, 0.0, -sb]])
+    de = np.degrees(np.linalg.solve(e, ra_t))      # d(angles)/d(w_B) ; d/d(w_A) = -that
+    jac[3:, 6:9] = de
+    jac[3:, 0:3] = -de
+    return jac

@@ -1,0 +1,29 @@
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+
+@pytest.fixture(scope="session")
+def repo_root() -> Path:
+    return ROOT
+
+
+def write_config(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture
+def tmp_config(tmp_path):
+    def make(text: str, name: str = "cfg.toml") -> Path:
+        return write_config(tmp_path / name, text)
+    return make
+
+
+os.environ.setdefault("HYPOTHESIS_PROFILE", "ci")

@@ -1,0 +1,65 @@
+import subprocess
+import sys
+
+import pytest
+
+from generator.config import Config, ConfigError, config_from_dict, load_config
+
+
+def test_defaults_are_valid_and_match_the_brief():
+    cfg = config_from_dict({})
+    assert cfg.image.width == 1280 and cfg.image.height == 960
+    assert cfg.sections.radius_mm == 300 and cfg.sections.length_mm == 1200
+    assert cfg.markers.diameter_mm == 20
+    assert cfg.pose.x_mm == (5.0, 150.0) and cfg.pose.gamma_deg == (-5.0, 5.0)
+    assert cfg.camera.distance_mm == (1000.0, 1800.0)
+    assert isinstance(cfg, Config)
+
+
+def test_repo_configs_load(repo_root):
+    for path in sorted((repo_root / "configs").glob("*.toml")):
+        if path.name == "acceptance.toml":
+            continue
+        load_config(path)
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[camera]\nfocal_pxx = [1, 2]\n", "focal_pxx"),
+    ("[cameras]\nfocal_px = [1, 2]\n", "cameras"),
+    ("[dataset]\nframes = -3\n", "frames"),
+    ("[pose]\nx_mm = [150, 5]\n", "x_mm"),
+    ("[camera]\nfocal_px = [9000, 12000]\n", "focal_px"),
+    ("[dataset]\nframes = 'ten'\n", "frames"),
+    ("[render]\ndenoise = 'magic'\n", "denoise"),
+    ("[markers]\nlayout_a = [[50, 0], [52, 1], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout"),
+    ("[markers]\nlayout_a = [[5, 0], [60, 10], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout_a[0]"),
+    ("[dataset\nframes = 3\n", "TOML"),
+])
+def test_bad_configs_name_the_key(tmp_config, text, key):
+    path = tmp_config(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert key in str(err.value)
+    assert str(path) in str(err.value)
+
+
+def test_focal_that_cannot_fit_says_why(tmp_config):
+    with pytest.raises(ConfigError, match=r"\[camera\] focal_px: min 9000 px cannot fit"):
+        load_config(tmp_config("[camera]\nfocal_px = [9000, 12000]\n"))
+
+
+def test_bad_config_writes_nothing(tmp_path, tmp_config):
+    path = tmp_config("[dataset]\nframes = -1\n")
+    out = tmp_path / "never"
+    proc = subprocess.run([sys.executable, "-m", "generator.cli", "render", str(path), "--out", str(out)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "frames" in proc.stderr and str(path) in proc.stderr
+    assert not out.exists()
+
+
+def test_canonical_json_is_stable():
+    a = config_from_dict({"dataset": {"seed": 5}})
+    b = config_from_dict({"dataset": {"seed": 5}})
+    assert a.canonical_json() == b.canonical_json()
+    assert a.canonical_json() != config_from_dict({"dataset": {"seed": 6}}).canonical_json()

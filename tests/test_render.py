@@ -1,0 +1,141 @@
+"""End-to-end renders through Cycles (small frames; a few seconds each)."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from generator.config import load_config
+from generator.dataset import DatasetError
+from generator.exr import read_compact
+from generator.render_job import JobOptions, run_render
+
+pytestmark = pytest.mark.render
+
+LABEL_CHECK = """
+[dataset]
+name = "label-check"
+seed = 5
+frames = 3
+[conditions]
+normal = 1
+low_light = 0
+occlusion = 0
+glare = 0
+[image]
+width = 640
+height = 480
+[camera]
+focal_px = [600, 1500]
+margin_px = 24
+[render]
+samples = 1
+keep_exr = true
+"""
+
+
+@pytest.fixture(scope="module")
+def label_dataset(tmp_path_factory):
+    d = tmp_path_factory.mktemp("labels")
+    cfg_path = d / "cfg.toml"
+    cfg_path.write_text(LABEL_CHECK)
+    cfg = load_config(cfg_path)
+    summary = run_render(cfg, d / "ds", LABEL_CHECK, JobOptions(progress=False))
+    assert summary.ok and summary.complete, summary.text()
+    return cfg, d / "ds", cfg_path
+
+
+def test_labels_agree_with_the_index_pass(label_dataset):
+    """Pins the half-pixel convention and the K-to-Blender conversion (tolerance 0.25 px)."""
+    cfg, root, _ = label_dataset
+    errors = []
+    for label_path in sorted((root / "labels").glob("*.json")):
+        label = json.loads(label_path.read_text())
+        passes = read_compact(root / "exr" / f"{label['frame_id']}.exr")
+        assert passes.index.shape == (480, 640)
+        for m in label["markers"]:
+            if not m["in_frame"] or m["visible_fraction"] < 0.999:
+                continue
+            ys, xs = np.nonzero(passes.index == m["pass_index"])
+            assert len(xs) > 50
+            centroid = np.array([xs.mean(), ys.mean()])
+            errors.append(np.linalg.norm(centroid - np.array(m["center_px"])))
+            x0, y0, x1, y1 = m["bbox_px"]
+            # every marker pixel's square touches the label's box
+            assert np.all(xs + 0.5 >= x0) and np.all(xs - 0.5 <= x1), m["id"]
+            assert np.all(ys + 0.5 >= y0) and np.all(ys - 0.5 <= y1), m["id"]
+            # the depth pass agrees with the label's depth at the centre (mm)
+            u, v = np.rint(m["center_px"]).astype(int)
+            assert passes.depth_mm[v, u] == pytest.approx(m["depth_mm"], abs=2.0)
+    errors = np.array(errors)
+    assert len(errors) >= 20
+    assert np.all(np.isfinite(errors))
+    assert errors.max() < 0.25, f"median {np.median(errors):.3f} max {errors.max():.3f} px"
+
+
+def test_frame_alone_equals_frame_in_a_run(label_dataset, tmp_path):
+    cfg, root, _ = label_dataset
+    alone = tmp_path / "alone"
+    summary = run_render(cfg, alone, LABEL_CHECK, JobOptions(progress=False, frame_ids=("000001",)))
+    assert summary.rendered == 1 and not summary.complete
+    for sub in ("labels", "images"):
+        a = (root / sub / f"000001.{'json' if sub == 'labels' else 'png'}").read_bytes()
+        b = (alone / sub / f"000001.{'json' if sub == 'labels' else 'png'}").read_bytes()
+        assert a == b, sub
+
+
+def test_rerun_renders_nothing_and_changes_nothing(label_dataset):
+    cfg, root, _ = label_dataset
+    before = {p: p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file() and "logs" not in p.parts}
+    summary = run_render(cfg, root, LABEL_CHECK, JobOptions(progress=False))
+    assert summary.rendered == 0 and summary.skipped == 3 and summary.complete
+    after = {p: p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file() and "logs" not in p.parts}
+    assert before == after
+
+
+def test_other_config_is_refused_and_nothing_changes(label_dataset, tmp_path):
+    _, root, _ = label_dataset
+    other_text = LABEL_CHECK.replace("seed = 5", "seed = 6")
+    other_path = tmp_path / "other.toml"
+    other_path.write_text(other_text)
+    before = {p: p.read_bytes() for p in root.rglob("*") if p.is_file() and "logs" not in p.parts}
+    with pytest.raises(DatasetError, match="dataset.seed: 5 -> 6"):
+        run_render(load_config(other_path), root, other_text, JobOptions(progress=False))
+    after = {p: p.read_bytes() for p in root.rglob("*") if p.is_file() and "logs" not in p.parts}
+    assert before == after
+
+
+def test_crashed_worker_is_restarted_and_frame_retried(tmp_path):
+    import os
+    text = LABEL_CHECK.replace("frames = 3", "frames = 2").replace("width = 640", "width = 320") \
+        .replace("height = 480", "height = 240").replace("[600, 1500]", "[300, 750]").replace("margin_px = 24", "margin_px = 12")
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text(text)
+    env = dict(os.environ, DOCKFACTORY_FAULT="crash:000001", DOCKFACTORY_FAULT_DIR=str(tmp_path))
+    summary = run_render(load_config(cfg_path), tmp_path / "ds", text, JobOptions(progress=False, env=env))
+    assert summary.ok and summary.complete
+    assert summary.retried == 1 and summary.rendered == 2
+    assert (tmp_path / "fault-crash-000001").exists()
+
+
+def test_smoke_config_through_the_cli(repo_root, tmp_path):
+    out = tmp_path / "smoke"
+    proc = subprocess.run([sys.executable, "-m", "generator.cli", "render", str(repo_root / "configs/smoke.toml"),
+                           "--out", str(out)], capture_output=True, text=True, cwd=repo_root, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["counts"]["frames"] == 10
+    assert set(manifest["counts"]["by_condition"]) == {"normal", "low_light", "occlusion", "glare"}
+    assert "render [" in proc.stderr and "dataset complete" in proc.stderr
+    occluded = 0
+    for p in (out / "labels").glob("*.json"):
+        lab = json.loads(p.read_text())
+        if lab["spec"]["condition"] == "occlusion":
+            occluded += sum(m["visibility"] == 1 or m["visible_fraction"] < 0.99 for m in lab["markers"])
+        assert lab["image"]["width"] == 320
+    assert occluded >= 1  # occluders hide markers, and the labels say so
+    overlay = tmp_path / "ov.png"
+    proc = subprocess.run([sys.executable, "-m", "generator.cli", "show", str(out), "000000", "--out", str(overlay)],
+                          capture_output=True, text=True, cwd=repo_root)
+    assert proc.returncode == 0 and overlay.stat().st_size > 1000
