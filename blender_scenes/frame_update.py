@@ -56,10 +56,10 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
         mats.set_paint(mat, color, a.metallic, a.roughness, a.roughness_variation, a.grime,
                        a.texture_scale, a.texture_offset)
     mats.set_paint(h.floor, a.floor_color, 0.0, 0.8, 0.2, 0.5, a.texture_scale * 0.3, a.texture_offset)
-    mats.set_simple(h.marker_red, color=a.marker_red)
-    mats.set_simple(h.marker_blue, color=a.marker_blue)
-    mats.set_simple(h.ring, color=a.ring_color)
-    mats.set_simple(h.wall, color=a.wall_color)
+    mats.set_diffuse(h.marker_red, color=a.marker_red)
+    mats.set_diffuse(h.marker_blue, color=a.marker_blue)
+    mats.set_diffuse(h.ring, color=a.ring_color)
+    mats.set_diffuse(h.wall, color=a.wall_color)
     mats.set_world(h.world, a.world_color, a.world_strength)
 
     used = set()
@@ -74,7 +74,7 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
         if p.kind == "lamp":
             mats.set_emission(h.prop_materials[key], p.color, p.emission)
         else:
-            mats.set_simple(h.prop_materials[key], color=p.color)
+            mats.set_diffuse(h.prop_materials[key], color=p.color)
     for key, obj in h.props.items():
         if key not in used:
             obj.hide_render = True

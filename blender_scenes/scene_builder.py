@@ -9,7 +9,7 @@ import numpy as np
 
 from blender_scenes import materials as mats
 from blender_scenes import meshes
-from generator.layout import RING_EXTRA_MM
+from generator.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
 from generator.sampler import CLUTTER_SLOTS, FLOOR_GAP_MM, floor_y_mm
 from generator.scene import CLUTTER_KINDS, OCCLUDER_KINDS, StaticScene
 
@@ -98,11 +98,11 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
 
     r_m, l_m = static.radius_mm * MM, static.length_mm * MM
     paint_a, paint_b = mats.paint_material("paint_A"), mats.paint_material("paint_B")
-    red = mats.simple_material("marker_red", (0.6, 0.02, 0.02), roughness=0.85)
-    blue = mats.simple_material("marker_blue", (0.02, 0.05, 0.6), roughness=0.85)
-    ring = mats.simple_material("marker_ring", (0.02, 0.02, 0.02), roughness=0.7)
-    face = mats.simple_material("docking_face", (0.08, 0.08, 0.09), roughness=0.5, metallic=0.8)
-    support = mats.simple_material("cradle", (0.05, 0.12, 0.2), roughness=0.6)
+    red = mats.diffuse_material("marker_red", (0.6, 0.02, 0.02))
+    blue = mats.diffuse_material("marker_blue", (0.02, 0.05, 0.6))
+    ring = mats.diffuse_material("marker_ring", (0.02, 0.02, 0.02))
+    face = mats.diffuse_material("docking_face", (0.08, 0.08, 0.09), gloss=0.6, roughness=0.3)
+    support = mats.diffuse_material("cradle", (0.05, 0.12, 0.2))
 
     # section A in D: x in [-L, 0]; section B in its own frame: x in [0, L], parented to b_root
     b_root = bpy.data.objects.new("B_root", None)
@@ -117,6 +117,8 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
         band.data.materials.append(paint)
         flange.data.materials.append(face)
         objs = [body, flange, band]
+        for o in objs:
+            o.pass_index = SECTION_PASS_INDEX[sec]
         for x_mm in (sign * 0.25 * static.length_mm, sign * 0.8 * static.length_mm):
             cradle = meshes.unit_box(f"cradle_{sec}_{x_mm:.0f}")
             cradle.data.materials.append(support)
@@ -138,6 +140,7 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
         base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
                                  -(1.0 + 1.5) * MM, -0.05 * MM)  # top just below the disc
         base.data.materials.append(ring)
+        base.pass_index = SECTION_PASS_INDEX[m.section]
         base.matrix_basis = _matrix(rot, centre)
         if m.section == "B":
             disc.parent = b_root
@@ -150,7 +153,7 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     floor.data.materials.append(floor_mat)
     wall = meshes.mesh_object("wall", [(-20, floor_y, -5), (20, floor_y, -5), (20, 8, -5), (-20, 8, -5)],
                               [(0, 1, 2, 3)])
-    wall_mat = mats.simple_material("wall", roughness=0.8)
+    wall_mat = mats.diffuse_material("wall")
     wall.data.materials.append(wall_mat)
 
     handles = SceneHandles(scene=scene, camera=None, b_root=b_root, paint_a=paint_a, paint_b=paint_b,
@@ -164,7 +167,7 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     for kind, count in slots.items():
         for slot in range(count):
             obj = builders[kind](f"{kind}_{slot}")
-            mat = mats.simple_material(f"{kind}_{slot}_mat", roughness=0.6)
+            mat = mats.diffuse_material(f"{kind}_{slot}_mat", gloss=0.15, roughness=0.4)
             obj.data.materials.append(mat)
             obj.hide_render = True
             handles.props[(kind, slot)] = obj

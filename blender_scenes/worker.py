@@ -9,7 +9,7 @@ prints is sent to stderr (the job's log). Requests:
   {"op": "quit"}
 Replies: {"ok": true, ...} or {"ok": false, "error": "..."}.
 Fault injection for tests: DOCKFACTORY_FAULT="crash:<frame_id>" or "hang:<frame_id>" acts once per
-frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it).
+frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it); "crash-always:<frame_id>" every time.
 """
 from __future__ import annotations
 
@@ -37,6 +37,8 @@ def _inject_fault(frame_id: str) -> None:
     kind, target = spec.split(":", 1)
     if target != frame_id:
         return
+    if kind == "crash-always":
+        os.kill(os.getpid(), 9)
     mark = os.path.join(os.environ.get("DOCKFACTORY_FAULT_DIR", tempfile.gettempdir()), f"fault-{kind}-{frame_id}")
     if os.path.exists(mark):
         return
@@ -47,9 +49,24 @@ def _inject_fault(frame_id: str) -> None:
         time.sleep(3600)
 
 
+def _scratch_dir() -> str:
+    """A private scratch folder on tmpfs when there is one; stale ones of dead workers are removed."""
+    base = "/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()
+    for name in os.listdir(base):
+        parts = name.split("-")
+        if name.startswith("dockfactory-") and len(parts) >= 3 and parts[1].isdigit():
+            try:
+                os.kill(int(parts[1]), 0)
+            except ProcessLookupError:
+                shutil.rmtree(os.path.join(base, name), ignore_errors=True)
+            except PermissionError:
+                pass
+    return tempfile.mkdtemp(prefix=f"dockfactory-{os.getpid()}-", dir=base)
+
+
 def main() -> int:
     proto = _protocol_stream()
-    scratch = tempfile.mkdtemp(prefix="dockfactory-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+    scratch = _scratch_dir()
     exr_path = os.path.join(scratch, "render.exr")
     handles = static = init = None
     try:

@@ -29,13 +29,38 @@ def cmd_render(args) -> int:
     frame_ids = tuple(args.frames.split(",")) if args.frames else None
     opts = JobOptions(workers=args.workers, shard=args.shard, frame_ids=frame_ids,
                       retries=args.retries, recycle_after=args.recycle_after,
-                      progress=not args.quiet)
+                      progress=not args.quiet, executor=args.executor, ray_address=args.ray_address)
     summary = run_render(cfg, args.out, text, opts)
     print_summary(summary)
     if summary.complete:
         print(f"\nimages: {Path(args.out) / 'images'}  labels: {Path(args.out) / 'labels'}\n"
               f"look at one: dockfactory show {args.out} <frame_id> --out overlay.png", file=sys.stderr)
     return EXIT_OK if summary.ok else EXIT_FAILED
+
+
+def cmd_dataset(args) -> int:
+    import json
+
+    from generator import dataset_tools as dt
+    if args.action == "verify":
+        report = dt.verify(args.dirs[0])
+        print(report.text())
+        return EXIT_OK if report.ok else EXIT_FAILED
+    if args.action == "info":
+        d = dt.info(args.dirs[0])
+        print(json.dumps(d, indent=1) if args.json else dt.info_text(d))
+        return EXIT_OK
+    if args.action == "diff":
+        if len(args.dirs) != 2:
+            raise ValueError("dataset diff needs two directories: DIR_A DIR_B")
+        d = dt.diff(*args.dirs)
+        print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, *args.dirs))
+        return EXIT_OK
+    if args.action == "export":
+        for fmt in args.format.split(","):
+            print(dt.export(args.dirs[0], fmt.strip()))
+        return EXIT_OK
+    raise ValueError(f"unknown dataset action {args.action!r}")
 
 
 def cmd_check(args) -> int:
@@ -72,8 +97,19 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--frames", help="comma-separated frame ids to render (default: all)")
     r.add_argument("--retries", type=int, default=2, help="retries of a frame whose worker crashed")
     r.add_argument("--recycle-after", type=int, default=100, help="restart a worker after this many frames")
+    r.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="local worker processes, or actors on a Ray cluster")
+    r.add_argument("--ray-address", default=None,
+                   help="Ray cluster address (default: start a local Ray instance)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
     r.set_defaults(func=cmd_render)
+
+    d = sub.add_parser("dataset", help="verify, describe, compare or export datasets")
+    d.add_argument("action", choices=("verify", "info", "diff", "export"))
+    d.add_argument("dirs", nargs="+", metavar="DIR")
+    d.add_argument("--format", default="coco,yolo,bop", help="export: coco, yolo, bop (comma-separated)")
+    d.add_argument("--json", action="store_true", help="info/diff: print JSON")
+    d.set_defaults(func=cmd_dataset)
 
     c = sub.add_parser("check-config", help="validate a config and print its plan")
     c.add_argument("config")

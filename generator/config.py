@@ -133,6 +133,14 @@ class LabelsConfig:
 
 
 @dataclass(frozen=True)
+class ExportConfig:
+    formats: tuple[str, ...] = ("coco", "yolo")  # written when the dataset completes; also bop
+
+
+EXPORT_FORMATS = ("coco", "yolo", "bop")
+
+
+@dataclass(frozen=True)
 class Config:
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
@@ -147,6 +155,7 @@ class Config:
     occlusion: OcclusionConfig = field(default_factory=OcclusionConfig)
     glare: GlareConfig = field(default_factory=GlareConfig)
     labels: LabelsConfig = field(default_factory=LabelsConfig)
+    export: ExportConfig = field(default_factory=ExportConfig)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (tuples become lists)."""
@@ -350,6 +359,9 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     if not 0 < cfg.labels.visible_threshold <= 1:
         raise _err(source, "labels", "visible_threshold",
                    f"must be in (0, 1], got {cfg.labels.visible_threshold}")
+    for f in cfg.export.formats:
+        if f not in EXPORT_FORMATS:
+            raise _err(source, "export", "formats", f"unknown format {f!r} (known: {', '.join(EXPORT_FORMATS)})")
     # geometric feasibility (the focal range must fit the markers) needs the sampler
     from generator.sampler import check_focal_fits
     check_focal_fits(cfg, source)

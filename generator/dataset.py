@@ -149,6 +149,9 @@ def write_manifest(root, cfg: Config) -> dict:
         frames.append({"frame_id": spec.frame_id, "split": spec.split, "condition": spec.condition})
         files += [{"path": r["path"], "bytes": r["bytes"], "sha256": r["sha256"]}
                   for r in meta["files"].values()]
+        meta_path = frame_paths(root, spec.frame_id)["meta"]
+        files.append({"path": f"meta/{meta_path.name}", "bytes": meta_path.stat().st_size,
+                      "sha256": sha256_file(meta_path)})
     for name in ("dataset.json", "config.toml", "layout.json"):
         files.append({"path": name, "bytes": (root / name).stat().st_size, "sha256": sha256_file(root / name)})
     counts = Counter((s.split, s.condition) for s in plan)

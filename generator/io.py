@@ -5,7 +5,12 @@ import contextlib
 import hashlib
 import json
 import os
+import socket
+import time
 from pathlib import Path
+
+HOST = socket.gethostname().replace("-", "_")
+TMP_MARK = ".tmp-"
 
 
 @contextlib.contextmanager
@@ -13,7 +18,7 @@ def atomic_path(path):
     """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = path.with_name(f".{path.name}{TMP_MARK}{HOST}-{os.getpid()}")
     try:
         yield tmp
         with open(tmp, "rb") as fh:
@@ -49,3 +54,40 @@ def sha256_file(path, chunk: int = 1 << 20) -> str:
 
 def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def is_temp_name(name: str) -> bool:
+    return name.startswith(".") and TMP_MARK in name
+
+
+def stale_temp(path: Path, max_age_s: float) -> bool:
+    """A temporary file left by a killed writer: its process is gone (same host) or it is old."""
+    tag = path.name.rsplit(TMP_MARK, 1)[-1]
+    host, _, pid = tag.rpartition("-")
+    try:
+        if host == HOST and pid.isdigit() and not pid_alive(int(pid)):
+            return True
+        return time.time() - path.stat().st_mtime > max_age_s
+    except FileNotFoundError:
+        return False
+
+
+def remove_stale_temps(root, max_age_s: float) -> list[Path]:
+    """Delete stale temporary files under ``root``; returns what was removed."""
+    removed = []
+    for path in Path(root).rglob(f".*{TMP_MARK}*"):
+        if path.is_file() and stale_temp(path, max_age_s):
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+                removed.append(path)
+    return removed

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from generator.geometry import pose_components, project_points, transform_points
-from generator.layout import Marker
+from generator.layout import SECTION_PASS_INDEX, SECTIONS, Marker
 from generator.scene import FrameScene, StaticScene, to_dict
 
 LABEL_FORMAT = "dockfactory.label/1"
@@ -59,6 +59,37 @@ def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
                 pts.append(p + t * (q - p))
         out = np.array(pts).reshape(-1, 2)
     return out
+
+
+def section_silhouette(static: StaticScene, section: str, n: int = 128) -> np.ndarray:
+    """Points (M, 3) mm in the section frame whose convex hull is the section's body and flange.
+
+    The body and flange are convex solids of revolution, so the image of the section is the
+    convex hull of the images of its end circles.
+    """
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    sign = -1.0 if section == "A" else 1.0
+    rings = []
+    for x, r in ((0.0, static.radius_mm + static.flange_height_mm),
+                 (sign * static.flange_width_mm, static.radius_mm + static.flange_height_mm),
+                 (sign * static.length_mm, static.radius_mm)):
+        rings.append(np.stack([np.full(n, x), r * np.sin(a), r * np.cos(a)], axis=1))
+    return np.concatenate(rings)
+
+
+def _pixel_mask_of_hull(uv: np.ndarray, w: int, h: int) -> np.ndarray:
+    import cv2
+    hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillConvexPoly(mask, hull, 1, cv2.LINE_8, 4)
+    return mask.astype(bool)
+
+
+def _pixel_bbox(mask: np.ndarray) -> list[float] | None:
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return None
+    return [float(xs.min()) - 0.5, float(ys.min()) - 0.5, float(xs.max()) + 0.5, float(ys.max()) + 0.5]
 
 
 def _bbox(points: np.ndarray) -> list[float]:
@@ -119,6 +150,24 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
                 rec["bbox_visible_px"] = None
             rec["visibility"] = 0 if not in_frame else (2 if frac >= visible_threshold else 1)
         markers.append(rec)
+    sections = []
+    for sec in SECTIONS:
+        d_from_s = d_from_b if sec == "B" else np.eye(4)
+        pts = transform_points(cam_from_d @ d_from_s, section_silhouette(static, sec))
+        rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
+        if np.all(pts[:, 2] > 0):
+            uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
+            full = _pixel_mask_of_hull(uv, w, h)
+            rec["pixels_all"] = int(full.sum())
+            rec["bbox_obj_px"] = _pixel_bbox(full)
+        if index is not None:
+            ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
+            visible = np.isin(index, ids)
+            rec["pixels_visible"] = int(visible.sum())
+            rec["bbox_visible_px"] = _pixel_bbox(visible)
+            rec["visible_fraction"] = (min(1.0, rec["pixels_visible"] / rec["pixels_all"])
+                                       if rec.get("pixels_all") else 0.0)
+        sections.append(rec)
     return {
         "format": LABEL_FORMAT,
         "frame_id": frame.spec.frame_id,
@@ -131,6 +180,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         "d_from_b": d_from_b.tolist(),
         "pose_b_in_d": pose_components(d_from_b),
         "markers": markers,
+        "sections": sections,
         "sampled": {
             "lights": [to_dict(light) for light in frame.lights],
             "props": [to_dict(p) for p in frame.props],

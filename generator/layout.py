@@ -25,6 +25,7 @@ DEFAULT_LAYOUT_A = ((50.0, -31.0), (100.0, -19.0), (62.0, -4.0), (130.0, 6.0),
 DEFAULT_LAYOUT_B = ((52.0, -25.0), (108.0, -11.0), (68.0, 2.0), (140.0, 17.0),
                     (48.0, 24.0), (96.0, 35.0), (158.0, -33.0))
 RING_EXTRA_MM = 2.5  # the dark ring around each coloured disc
+SECTION_PASS_INDEX = {"A": 201, "B": 202}  # index pass value of each section's body and flange
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +19,8 @@ from generator.dataset import frame_done, prepare, write_manifest
 from generator.progress import Progress
 from generator.sampler import frame_plan, sample_frame, static_scene
 from generator.scene import FrameSpec, to_dict
-from generator.worker_pool import WorkerDied, WorkerProcess
+from generator.executors import LocalExecutor, RayExecutor
+from generator.io import remove_stale_temps
 
 
 @dataclass(frozen=True)
@@ -33,6 +32,8 @@ class JobOptions:
     recycle_after: int = 100
     threads: int = 0                           # per worker; 0 = cores // workers
     progress: bool = True
+    executor: str = "local"                    # local | ray
+    ray_address: str | None = None             # None: start a local Ray instance
     env: dict | None = None                    # worker environment (tests inject faults)
 
 
@@ -103,104 +104,61 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     scenes = {s.frame_id: sample_frame(cfg, s) for s in frames}
     ident = prepare(root, cfg, config_text)
     root = Path(root)
+    remove_stale_temps(root, max_age_s=cfg.render.frame_timeout_s + 60.0)  # left by a killed run
     summary = JobSummary(root=str(root), version_id=ident["version_id"], planned=len(frames))
     todo = [s for s in frames if not frame_done(root, s.frame_id, cfg.render.keep_exr)]
     summary.skipped = len(frames) - len(todo)
 
     if todo:
-        _render_local(cfg, root, todo, scenes, opts, summary)
+        _render(cfg, root, todo, scenes, opts, summary)
     summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
+        from generator.dataset_tools import export
+        for fmt in cfg.export.formats:
+            export(root, fmt)
     summary.seconds = time.monotonic() - t_start
     return summary
 
 
-def _render_local(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary) -> None:
+def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary) -> None:
     n_workers = min(opts.workers, len(todo))
     threads = opts.threads or max(1, cores() // n_workers)
     init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
             "height": cfg.image.height, "threads": threads, "root": str(root.resolve()),
             "keep_exr": cfg.render.keep_exr, "visible_threshold": cfg.labels.visible_threshold}
-    work: queue.Queue = queue.Queue()
-    for s in todo:
-        work.put(s)
-    events: queue.Queue = queue.Queue()
-    stop = threading.Event()
-    timeout = cfg.render.frame_timeout_s
-
-    def run_slot(slot: int) -> None:
-        worker = WorkerProcess(init, root / "logs" / f"worker-{slot}.log", opts.env)
-        try:
-            while not stop.is_set():
-                try:
-                    spec = work.get_nowait()
-                except queue.Empty:
-                    return
-                attempt = 0
-                while True:
-                    try:
-                        if worker.proc is None:
-                            worker.start(timeout)
-                        reply = worker.request({"op": "render", "frame": to_dict(scenes[spec.frame_id])}, timeout)
-                        if reply.get("ok"):
-                            events.put(("done", spec, reply))
-                            worker.frames_done += 1
-                            if worker.frames_done >= opts.recycle_after:
-                                worker.close()
-                            break
-                        reason = reply.get("error", "unknown error")
-                    except WorkerDied as exc:
-                        reason = f"worker crashed or hung: {exc}"
-                        worker.kill()
-                    except Exception as exc:  # worker failed to start, broken reply ...
-                        reason = f"{type(exc).__name__}: {exc}"
-                        worker.kill()
-                    attempt += 1
-                    if attempt > opts.retries:
-                        events.put(("failed", spec, reason))
-                        break
-                    events.put(("retry", spec, reason))
-        finally:
-            worker.close()
-
-    pool = [threading.Thread(target=run_slot, args=(i,), daemon=True) for i in range(n_workers)]
-    for t in pool:
-        t.start()
+    log_dir = root / "logs"
+    log_dir.mkdir(parents=True, exist_ok=True)
+    if opts.executor == "ray":
+        executor = RayExecutor(n_workers, threads, opts.ray_address, log_dir, opts.env)
+    elif opts.executor == "local":
+        executor = LocalExecutor(n_workers, log_dir, opts.env)
+    else:
+        raise ValueError(f"--executor must be local or ray, got {opts.executor!r}")
+    frames = [to_dict(scenes[s.frame_id]) for s in todo]
     progress = Progress(len(todo), "render", enabled=opts.progress)
-    timing_log = root / "logs" / "timings.jsonl"
-    timing_log.parent.mkdir(parents=True, exist_ok=True)
+    finished = 0
     try:
-        with open(timing_log, "a") as tlog:
-            finished = 0
-            while finished < len(todo):
-                try:
-                    kind, spec, info = events.get(timeout=0.5)
-                except queue.Empty:
-                    if not any(t.is_alive() for t in pool):
-                        break
+        with open(log_dir / "timings.jsonl", "a") as tlog:
+            for kind, fid, info in executor.run(frames, init, cfg.render.frame_timeout_s, opts.retries,
+                                                opts.recycle_after):
+                if kind == "tick":
                     progress.refresh()
                     continue
                 if kind == "done":
                     finished += 1
                     summary.rendered += 1
                     summary.timings.append(info["timings_s"])
-                    tlog.write(json.dumps({"frame_id": spec.frame_id, **info["timings_s"]}) + "\n")
+                    tlog.write(json.dumps({"frame_id": fid, **info["timings_s"]}) + "\n")
                     tlog.flush()
                 elif kind == "failed":
                     finished += 1
-                    summary.failed[spec.frame_id] = info
-                else:
+                    summary.failed[fid] = info
+                elif kind == "retry":
                     summary.retried += 1
-                    progress.note(f"retrying {spec.frame_id}: {info}")
+                    progress.note(f"retrying {fid}: {info}")
                 progress.update(finished, failed=len(summary.failed))
-    except KeyboardInterrupt:
-        stop.set()
-        raise
     finally:
-        stop.set()
-        for t in pool:
-            t.join(timeout=1.0)
         progress.close()
 
 

@@ -132,12 +132,22 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
         if not isinstance(rng, np.random.Generator):
             raise SolverError("robust=True needs rng, a numpy.random.Generator (explicit seed)")
         return ransac_pnpf(p3, p2, pp, rng, threshold_px=threshold_px, sigma_px=sigma_px)
-    ref, cov, sigma, cands = solve_checked(p3, p2, pp, sigma_px, all_candidates)
+    accept = None if sigma_px is None else 3.0 * sigma_px
+    ref, cov, sigma, cands = solve_checked(p3, p2, pp, sigma_px, all_candidates,
+                                           accept_rmse=accept)
     return make_result(ref, cov, sigma, tuple(cands), np.ones(p3.shape[0], dtype=bool))
 
 
-def solve_checked(p3, p2, pp, sigma_px=None, all_candidates=False, check_focal=True):
-    """Closed form + refinement on validated arrays: (RefineResult, cov, sigma, candidates)."""
+def solve_checked(p3, p2, pp, sigma_px=None, all_candidates=False, check_focal=True,
+                  accept_rmse=None, rescue_below=None):
+    """Closed form + refinement on validated arrays: (RefineResult, cov, sigma, candidates).
+
+    Fast path: the cheapest closed-form candidate, refined. Slow path (when that gives no valid
+    camera, does not converge, or ends above ``accept_rmse`` px): every closed-form candidate
+    plus the focal sweep, the best few refined, the lowest cost kept. With ``rescue_below``
+    the slow path runs only when the fast RMS is below it (a near miss worth rescuing; far
+    worse fits are wrong models, e.g. wrong marker assignments, not local minima).
+    """
     cands = [] if all_candidates else upnp(p3, p2, pp, checked=True, first_only=True)
     ref = None
     if cands:
@@ -145,17 +155,55 @@ def solve_checked(p3, p2, pp, sigma_px=None, all_candidates=False, check_focal=T
             ref, cov, sigma = refine_candidates(p3, p2, pp, cands, sigma_px, max_tries=1)
         except SolverError:
             ref = None
-    if ref is None or not ref.converged:
-        cands = upnp(p3, p2, pp, checked=True)
-        ref, cov, sigma = refine_candidates(p3, p2, pp, cands, sigma_px)
-        if not ref.converged or ref.rmse_px > 20.0 * max(cands[0].rmse_px, 1.0):
-            # refinement ended far from the noise level: add the focal sweep as a last resort
-            cands = upnp(p3, p2, pp, checked=True, sweep_above_px=0.0)
-            ref, cov, sigma = refine_candidates(p3, p2, pp, cands, sigma_px,
-                                                max_tries=len(cands))
+    near_miss = accept_rmse is not None and ref is not None and ref.rmse_px > accept_rmse and (
+        rescue_below is None or ref.rmse_px <= rescue_below)
+    if ref is None or not ref.converged or near_miss:
+        fast = ref
+        cands = upnp(p3, p2, pp, checked=True, sweep_above_px=0.0)
+        best = None
+        for cand in cands[:4]:
+            try:
+                r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px)
+            except SolverError:
+                continue
+            if best is None or r.rmse_px < best.rmse_px:
+                best = r
+        if fast is not None and (best is None or fast.rmse_px <= best.rmse_px):
+            best = fast
+        if best is None or (accept_rmse is not None and best.rmse_px > accept_rmse) \
+                or not best.converged:
+            prof = _profile_focal(p3, p2, pp)
+            if prof is not None and (best is None or prof.rmse_px < best.rmse_px):
+                best = prof
+        if best is None:
+            raise SolverError("refinement failed from every closed-form candidate")
+        ref = best
+        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
     if check_focal:
         _check_focal_observable(ref, cov)
     return ref, cov, sigma, cands
+
+
+def _profile_focal(p3, p2, pp):
+    """Profile likelihood over the focal length: calibrated refinement at each focal of a grid
+    (from the sweep's poses), then a full refinement from the best grid point. Robust to the
+    several basins a near-planar, few-point problem can have in f; slow, so a last resort."""
+    from solver.upnp import focal_sweep
+    best = None
+    for cand in focal_sweep(p3, p2, pp, num=9):
+        try:
+            r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px,
+                            max_iter=6, fix_focal=True)
+        except SolverError:
+            continue
+        if best is None or r.rmse_px < best.rmse_px:
+            best = r
+    if best is None:
+        return None
+    try:
+        return refine_pnpf(p3, p2, pp, best.rotation, best.translation, best.focal_px)
+    except SolverError:
+        return None
 
 
 def make_result(ref, cov, sigma, cands, inliers) -> PnPfResult:

@@ -156,17 +156,23 @@ def _lm(evaluate, update, state, max_iter: int):
 
 
 def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
-                max_iter: int = 60) -> RefineResult:
+                max_iter: int = 60, fix_focal: bool = False) -> RefineResult:
     """Levenberg-Marquardt on reprojection error over (R, t, f) for one section.
 
-    Inputs as in :func:`residuals_and_jacobian` (already validated). Raises SolverError if the
-    estimate leaves the valid region (points behind the camera, f <= 0) and cannot come back.
+    Inputs as in :func:`residuals_and_jacobian` (already validated). ``fix_focal`` keeps f
+    (calibrated refinement over (R, t); the returned Jacobian still has 7 columns).
+    Raises SolverError if the estimate leaves the valid region (points behind the camera,
+    f <= 0) and cannot come back.
     """
     def evaluate(st):
         res, jac, z = residuals_and_jacobian(points_3d, points_2d, pp, st[0], st[1], st[2])
+        if fix_focal:
+            jac = jac[:, :6]
         return res, jac, bool(z.min() > 0.0) and np.isfinite(res).all()
 
     def update(st, step):
+        if fix_focal:
+            return so3_exp(step[:3]) @ st[0], st[1] + step[3:6], st[2]
         f_new = st[2] + step[6]
         if not f_new > 0.0:
             return None
@@ -175,6 +181,8 @@ def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
     state = (np.array(rotation, dtype=np.float64), np.array(translation, dtype=np.float64),
              float(focal))
     state, res, jac, it, conv = _lm(evaluate, update, state, max_iter)
+    if fix_focal:
+        jac = residuals_and_jacobian(points_3d, points_2d, pp, *state)[1]
     return RefineResult(state[0], state[1], float(state[2]), res, jac, it, conv)
 
 

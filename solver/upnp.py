@@ -46,7 +46,7 @@ import numpy as np
 from solver.checks import check_correspondences, as_principal_point
 from solver.errors import SolverError
 
-__all__ = ["Candidate", "upnp", "PLANAR_TOL", "NEAR_PLANAR_TOL"]
+__all__ = ["Candidate", "upnp", "focal_sweep", "PLANAR_TOL", "NEAR_PLANAR_TOL"]
 
 # sqrt(lambda_3 / lambda_1) of the point scatter: below PLANAR_TOL the set counts as planar (only
 # the planar branch runs); below NEAR_PLANAR_TOL both branches run.
@@ -399,7 +399,7 @@ def _dlt4_branch(pr: _Problem) -> list:
     return [] if cand is None else [cand]
 
 
-def _focal_sweep(pr: _Problem, num: int = 13) -> list:
+def _focal_sweep(pr: _Problem, num: int = 13, every: bool = False) -> list:
     """Fallback when noise swamps the focal information: calibrated EPnP on a grid of focals.
 
     For each f on a geometric grid (normalised focal 0.25 .. 64, i.e. fields of view from very
@@ -407,25 +407,34 @@ def _focal_sweep(pr: _Problem, num: int = 13) -> list:
     point with the smallest reprojection error is returned as candidate "sweep". Refinement
     then slides along the (flat) focal valley.
     """
-    if pr.planarity < PLANAR_TOL:
+    setups = []
+    if pr.planarity < 0.3 or pr.n <= 5:
+        # with few points only the planar parametrisation (9 unknowns) has a 1-dim kernel
         alphas, xw, dist2 = _planar_setup(pr)
-        pairs = _PAIRS3
-    else:
+        setups.append((alphas, xw, dist2, _PAIRS3))
+    if pr.planarity >= PLANAR_TOL and pr.n >= 6:
         alphas, dist2 = _general_alphas(pr)
-        xw, pairs = pr.xn, _PAIRS4
+        setups.append((alphas, pr.xn, dist2, _PAIRS4))
     best = None
-    ncp = alphas.shape[1]
-    for fn in np.geomspace(0.25, 64.0, num):
-        # calibrated EPnP at this focal: unknowns (x, y, z) per control point
-        basis = pr.kernel(alphas, fn)
-        v = basis[:, 0].reshape(ncp, 3)
-        d = v[pairs[:, 0]] - v[pairs[:, 1]]
-        lhs = np.sum(d * d, axis=1)
-        b2 = float(lhs @ dist2) / float(lhs @ lhs)
-        scaled = basis[:, :1] / np.tile([1.0, 1.0, fn], ncp)[:, None]
-        cand = pr.candidate(alphas, xw, scaled, np.array([np.sqrt(b2)]), fn * fn, "sweep")
-        if cand is not None and (best is None or cand.rmse_px < best.rmse_px):
-            best = cand
+    per_focal = {}
+    for alphas, xw, dist2, pairs in setups:
+        ncp = alphas.shape[1]
+        for fn in np.geomspace(0.25, 64.0, num):
+            # calibrated EPnP at this focal: unknowns (x, y, z) per control point
+            basis = pr.kernel(alphas, fn)
+            v = basis[:, 0].reshape(ncp, 3)
+            d = v[pairs[:, 0]] - v[pairs[:, 1]]
+            lhs = np.sum(d * d, axis=1)
+            b2 = float(lhs @ dist2) / float(lhs @ lhs)
+            scaled = basis[:, :1] / np.tile([1.0, 1.0, fn], ncp)[:, None]
+            cand = pr.candidate(alphas, xw, scaled, np.array([np.sqrt(b2)]), fn * fn, "sweep")
+            if cand is not None and (best is None or cand.rmse_px < best.rmse_px):
+                best = cand
+            if cand is not None and (fn not in per_focal or
+                                     cand.rmse_px < per_focal[fn].rmse_px):
+                per_focal[fn] = cand
+    if every:
+        return [per_focal[k] for k in sorted(per_focal)]
     return [] if best is None else [best]
 
 
@@ -468,9 +477,9 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
             cands = _general_branch(pr, (2,) if pr.n == 5 else (1,))
         return cands
     if pr.n == 4:
-        cands += _planar_branch(pr) if planar else _dlt4_branch(pr)
-        if not planar and pr.planarity < NEAR_PLANAR_TOL:
-            cands += _planar_branch(pr)
+        cands += _planar_branch(pr)
+        if not planar:
+            cands += _dlt4_branch(pr)
     else:
         if not planar:
             dims = (2, 3) if pr.n == 5 else (1, 2, 3)
@@ -487,3 +496,12 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
                           "squared focal length)")
     cands.sort(key=lambda c: c.rmse_px)
     return cands
+
+
+def focal_sweep(points_3d, points_2d, principal_point, num: int = 13) -> list:
+    """Calibrated EPnP poses on a geometric grid of focal lengths (validated inputs).
+
+    One :class:`Candidate` per grid focal that gives a valid camera, in increasing focal order;
+    used by the refiner's profile search when the closed form lands in a wrong basin.
+    """
+    return _focal_sweep(_Problem(points_3d, points_2d, principal_point), num, every=True)

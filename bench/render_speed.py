@@ -1,0 +1,94 @@
+"""Render speed at 1280 x 960 per condition, and the overhead beyond bare Cycles time.
+
+    python bench/render_speed.py [--per-condition 4] [--samples 2] [--denoise fast] [--workers 1]
+
+Renders ``per-condition`` frames of each condition through the real job system (worker process,
+scene update, Cycles, EXR read, sensor model, labels, PNG/EXR/JSON writes, hashing) and prints
+per condition: seconds per image (wall time of the job divided by frames, and the worker's
+per-frame total), the Cycles part (bpy.ops.render.render, which includes writing the scratch
+EXR) and the overhead fraction = (per-frame total - Cycles) / Cycles. The first frame of each
+worker (scene build, kernel warm-up) is excluded from the per-frame figures.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from generator.config import config_from_dict  # noqa: E402
+from generator.render_job import JobOptions, run_render  # noqa: E402
+
+CONDITIONS = ("normal", "low_light", "occlusion", "glare")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--per-condition", type=int, default=4)
+    ap.add_argument("--samples", type=int, default=None, help="default: the config default")
+    ap.add_argument("--denoise", default=None)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--keep-exr", action="store_true")
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--height", type=int, default=960)
+    args = ap.parse_args()
+
+    render = {"keep_exr": args.keep_exr}
+    if args.samples is not None:
+        render["samples"] = args.samples
+    if args.denoise is not None:
+        render["denoise"] = args.denoise
+    n = args.per_condition * len(CONDITIONS)
+    data = {"dataset": {"name": "bench", "seed": 99, "frames": n},
+            "conditions": {c: 1.0 for c in CONDITIONS}, "render": render,
+            "image": {"width": args.width, "height": args.height}}
+    if args.width != 1280:
+        s = args.width / 1280
+        data["camera"] = {"focal_px": [1200 * s, 3000 * s], "margin_px": 48 * s}
+    cfg = config_from_dict(data, "<bench>")
+    with tempfile.TemporaryDirectory(prefix="render-speed-") as tmp:
+        t0 = time.monotonic()
+        summary = run_render(cfg, Path(tmp) / "ds", json.dumps(data), JobOptions(workers=args.workers, progress=False))
+        wall = time.monotonic() - t0
+        labels = {p.stem: json.loads(p.read_text())["spec"]["condition"] for p in (Path(tmp) / "ds" / "labels").glob("*.json")}
+        timings = [json.loads(line) for line in (Path(tmp) / "ds" / "logs" / "timings.jsonl").read_text().splitlines()]
+    if not summary.ok:
+        print(summary.text())
+        return 1
+    first = set()
+    rows = []
+    by_cond: dict[str, list] = {}
+    for i, t in enumerate(timings):
+        if i < args.workers:     # each worker's first frame pays for scene build and warm-up
+            first.add(t["frame_id"])
+            continue
+        by_cond.setdefault(labels[t["frame_id"]], []).append(t)
+    print(f"render speed: {args.width}x{args.height}, samples={cfg.render.samples}, denoise={cfg.render.denoise}, "
+          f"max_bounces={cfg.render.max_bounces}, keep_exr={cfg.render.keep_exr}, workers={args.workers}, "
+          f"frames={n} (first frame per worker excluded from per-frame figures)")
+    print(f"{'condition':10s} {'n':>3s} {'s/image':>8s} {'cycles s':>9s} {'update':>7s} {'read':>6s} "
+          f"{'sensor+lab':>10s} {'write':>6s} {'overhead':>9s}")
+    all_t = []
+    for cond in CONDITIONS + ("ALL",):
+        ts = all_t if cond == "ALL" else by_cond.get(cond, [])
+        if cond != "ALL":
+            all_t += ts
+        if not ts:
+            continue
+        med = lambda k: statistics.median(t[k] for t in ts)  # noqa: E731
+        tot, cyc = med("total"), med("cycles")
+        rows.append((cond, len(ts), tot, cyc))
+        print(f"{cond:10s} {len(ts):3d} {tot:8.2f} {cyc:9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} "
+              f"{med('sensor_labels'):10.3f} {med('encode_write'):6.3f} {100 * (tot - cyc) / cyc:8.1f}%")
+    print(f"job wall time {wall:.1f} s for {n} frames = {wall / n:.2f} s/image including worker start "
+          f"({3600 * n / wall:.0f} frames/hour)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
