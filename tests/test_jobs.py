@@ -167,7 +167,7 @@ def test_frame_that_keeps_failing_is_reported(tmp_path):
     env = dict(os.environ, DOCKFACTORY_FAULT="crash-always:000001")
     summary = run_render(load_config(path), tmp_path / "ds", text, JobOptions(progress=False, env=env, retries=1))
     assert not summary.ok and list(summary.failed) == ["000001"] and not summary.complete
-    assert summary.retried == 1 and summary.rendered == 1
+    assert summary.retried == 1 and summary.rendered == 3  # the other three frames
     assert "FAILED 000001: worker crashed or hung" in summary.text()
     assert not (tmp_path / "ds" / "labels" / "000001.json").exists()
 
