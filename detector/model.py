@@ -15,8 +15,9 @@ conversion from/to the OpenCV convention lives in ``detector.infer``).
 With ``p2=True`` a fourth output at stride 4 is added: the P3 output is reduced (1x1 Conv),
 upsampled, concatenated with the stride-4 backbone feature and passed through a C3.
 
-Parameter counts for 2 classes without attention: n 1,766,623 and s 7,015,519 (YOLOv5's
-published 1,872,157 and 7,225,885 for 80 classes minus the smaller Detect convs).
+Parameter counts for 2 classes without attention (BatchNorm not fused): n 1,766,623 and
+s 7,025,023, i.e. YOLOv5 v6's unfused 1,872,157 and 7,235,389 for 80 classes minus the smaller
+Detect convs ((sum of head channels + 3) x 234 fewer weights).
 """
 from __future__ import annotations
 

@@ -160,19 +160,24 @@ def diff_text(d: dict, a, b) -> str:
 
 
 def export(root, fmt: str) -> Path:
-    """Write one export of a complete dataset under DIR/exports/<fmt>/."""
+    """Write one export of a complete dataset as DIR/exports/<fmt>/ (built aside, then renamed)."""
+    import os
+    import shutil
+
+    from generator.export_bop import export_bop
+    from generator.export_coco import export_coco
+    from generator.export_yolo import export_yolo
+    writers = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
     root = Path(root)
+    if fmt not in writers:
+        raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(writers)})")
     if not (root / "manifest.json").exists():
         raise DatasetError(f"{root}: dataset is not complete (no manifest.json); finish rendering first")
-    if fmt == "coco":
-        from generator.export_coco import write_coco
-        for split in ("train", "test", "repeat"):
-            write_coco(root, split)
-        return root / "exports" / "coco"
-    if fmt == "yolo":
-        from generator.export_yolo import export_yolo
-        return export_yolo(root)
-    if fmt == "bop":
-        from generator.export_bop import export_bop
-        return export_bop(root)
-    raise DatasetError(f"unknown export format {fmt!r} (known: coco, yolo, bop)")
+    final = root / "exports" / fmt
+    tmp = root / "exports" / f".{fmt}.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    writers[fmt](root, tmp)
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(tmp, final)
+    return final

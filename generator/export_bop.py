@@ -68,11 +68,10 @@ def _xywh(box):
     return [int(round(x0 + 0.5)), int(round(y0 + 0.5)), int(round(x1 - x0)), int(round(y1 - y0))]
 
 
-def export_bop(root) -> Path:
-    root = Path(root)
+def export_bop(root, out) -> Path:
+    root, out = Path(root), Path(out)
     ident = json.loads((root / "dataset.json").read_text())
     cfg = ident["config"]
-    out = root / "exports" / "bop"
     sec = cfg["sections"]
     info = {}
     for s in SECTIONS:

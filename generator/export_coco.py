@@ -60,11 +60,16 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5) -> dict
             "images": images, "annotations": annotations, "categories": categories()}
 
 
-def write_coco(root, split: str, out_path=None) -> Path:
+def write_coco(root, split: str, out_path) -> Path:
     root = Path(root)
     ident = json.loads((root / "dataset.json").read_text())
     threshold = ident["config"]["labels"]["visible_threshold"]
     coco = coco_from_labels(load_labels(root, split), threshold)
-    out_path = Path(out_path) if out_path else root / "exports" / "coco" / f"{split}.json"
     write_json_atomic(out_path, coco, indent=None)
-    return out_path
+    return Path(out_path)
+
+
+def export_coco(root, out) -> Path:
+    for split in ("train", "test", "repeat"):
+        write_coco(root, split, Path(out) / f"{split}.json")
+    return Path(out)

@@ -38,11 +38,10 @@ def parse_yolo_line(line: str, w: int, h: int) -> tuple[int, list[float]]:
     return int(c), [cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2]
 
 
-def export_yolo(root) -> Path:
-    root = Path(root)
+def export_yolo(root, out) -> Path:
+    root, out = Path(root), Path(out)
     ident = json.loads((root / "dataset.json").read_text())
     threshold = ident["config"]["labels"]["visible_threshold"]
-    out = root / "exports" / "yolo"
     lists: dict[str, list[str]] = {}
     for label in load_labels(root):
         split, fid = label["spec"]["split"], label["frame_id"]
@@ -53,6 +52,6 @@ def export_yolo(root) -> Path:
         write_text_atomic(out / f"{split}.txt", "".join(i + "\n" for i in items))
     names = "".join(f"  {i}: {n}\n" for i, n in enumerate(CLASS_NAMES))
     write_text_atomic(out / "data.yaml",
-                      f"# dockfactory dataset {ident['version_id']}\npath: {out.resolve()}\n"
+                      f"# dockfactory dataset {ident['version_id']}\npath: {(root / 'exports' / 'yolo').resolve()}\n"
                       f"train: train.txt\nval: test.txt\ntest: test.txt\nnc: {len(CLASS_NAMES)}\nnames:\n{names}")
     return out

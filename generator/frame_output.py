@@ -21,7 +21,9 @@ from generator.labels import frame_labels
 from generator.scene import FrameScene, StaticScene
 from generator.sensor import apply_sensor
 
-PNG_COMPRESSION = 1  # fast; PNG level 9 is 5x slower for ~10 % smaller files
+# Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
+# zlib strategies (1280x960: 49 ms, 1.36 MB vs 64 ms, 1.70 MB for the default strategy at level 1)
+PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
 
 
 def frame_paths(root, frame_id: str) -> dict[str, Path]:
@@ -44,7 +46,7 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     image, derived = apply_sensor(passes.rgb, frame.sensor)
     label = frame_labels(frame, static, passes.index, visible_threshold, derived)
     t2 = time.perf_counter()
-    ok, png = cv2.imencode(".png", image[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    ok, png = cv2.imencode(".png", image[..., ::-1], PNG_PARAMS)
     if not ok:
         raise RuntimeError(f"frame {frame.spec.frame_id}: PNG encoding failed")
     png = png.tobytes()

@@ -77,24 +77,51 @@ def section_silhouette(static: StaticScene, section: str, n: int = 128) -> np.nd
     return np.concatenate(rings)
 
 
-def _pixel_mask_of_hull(uv: np.ndarray, w: int, h: int) -> np.ndarray:
+def hull_pixels(uv: np.ndarray, w: int, h: int) -> tuple[int, list[float] | None]:
+    """Pixel centres inside the convex hull of ``uv`` (N, 2) within a w x h image: count and box."""
     import cv2
     hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
     mask = np.zeros((h, w), np.uint8)
     cv2.fillConvexPoly(mask, hull, 1, cv2.LINE_8, 4)
-    return mask.astype(bool)
-
-
-def _pixel_bbox(mask: np.ndarray) -> list[float] | None:
-    ys, xs = np.nonzero(mask)
-    if len(xs) == 0:
-        return None
-    return [float(xs.min()) - 0.5, float(ys.min()) - 0.5, float(xs.max()) + 0.5, float(ys.max()) + 0.5]
+    count = int(cv2.countNonZero(mask))
+    x, y, bw, bh = cv2.boundingRect(mask)
+    return count, (None if count == 0 else [x - 0.5, y - 0.5, x + bw - 0.5, y + bh - 0.5])
 
 
 def _bbox(points: np.ndarray) -> list[float]:
     return [float(points[:, 0].min()), float(points[:, 1].min()),
             float(points[:, 0].max()), float(points[:, 1].max())]
+
+
+class IndexStats:
+    """Pixel counts and boxes per value of an object-index pass, computed in one pass.
+
+    ``index``: (H, W) int. Values 0..255 are counted; boxes are kept for the sparse values
+    (markers, below 200) and for the union of each section's values.
+    """
+
+    def __init__(self, index: np.ndarray):
+        self.shape = index.shape
+        small = np.clip(index, 0, 255).astype(np.uint8)
+        self.counts = np.bincount(small.ravel(), minlength=256)
+        marker_mask = (small > 0) & (small < 200)
+        ys, xs = np.nonzero(marker_mask)
+        vals = small[ys, xs]
+        self._pix = {int(v): (xs[vals == v], ys[vals == v]) for v in np.unique(vals)}
+        self.small = small
+
+    def box(self, value: int) -> list[float] | None:
+        if value not in self._pix:
+            return None
+        xs, ys = self._pix[value]
+        return [float(xs.min()) - 0.5, float(ys.min()) - 0.5, float(xs.max()) + 0.5, float(ys.max()) + 0.5]
+
+    def union_box(self, values) -> list[float] | None:
+        lut = np.zeros(256, np.uint8)
+        lut[list(values)] = 1
+        import cv2
+        x, y, w, h = cv2.boundingRect(lut[self.small])
+        return None if w == 0 else [x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5]
 
 
 def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
@@ -109,11 +136,11 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
     k = cam.k()
     cam_from_d = cam.cam_from_d_array()
     d_from_b = frame.d_from_b_array()
-    counts = None
+    stats = None
     if index is not None:
         if index.shape != (h, w):
             raise ValueError(f"index pass is {index.shape}, expected {(h, w)}")
-        counts = np.bincount(index.ravel().clip(0), minlength=256)
+        stats = IndexStats(index)
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
     markers = []
     for m in static.markers:
@@ -124,9 +151,14 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         outline_uv, outline_z = project_points(k, cam_from_d, transform_points(d_from_s, marker_outline(m)))
         centre = uv[0]
         in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
-        full_area, outline_centroid = polygon_area_centroid(outline_uv) if np.all(outline_z > 0) else (0.0, np.full(2, np.nan))
-        clipped = clip_polygon(outline_uv, *bounds) if np.all(outline_z > 0) else np.zeros((0, 2))
-        area_in_frame, _ = polygon_area_centroid(clipped)
+        if np.all(outline_z > 0):
+            full_area, outline_centroid = polygon_area_centroid(outline_uv)
+            inside = (outline_uv[:, 0].min() >= bounds[0] and outline_uv[:, 1].min() >= bounds[1]
+                      and outline_uv[:, 0].max() <= bounds[2] and outline_uv[:, 1].max() <= bounds[3])
+            clipped = outline_uv if inside else clip_polygon(outline_uv, *bounds)
+        else:
+            full_area, outline_centroid, clipped = 0.0, np.full(2, np.nan), np.zeros((0, 2))
+        area_in_frame = full_area if len(clipped) == len(outline_uv) and full_area > 0 else polygon_area_centroid(clipped)[0]
         rec = {
             "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
             "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
@@ -137,17 +169,12 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
             "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
             "in_frame": in_frame, "area_px": full_area, "area_in_frame_px": area_in_frame,
         }
-        if counts is not None:
-            visible = int(counts[m.pass_index]) if m.pass_index < len(counts) else 0
+        if stats is not None:
+            visible = int(stats.counts[m.pass_index])
             frac = min(1.0, visible / area_in_frame) if area_in_frame > 0 else 0.0
             rec["visible_pixels"] = visible
             rec["visible_fraction"] = frac
-            if visible:
-                ys, xs = np.nonzero(index == m.pass_index)
-                rec["bbox_visible_px"] = [float(xs.min()) - 0.5, float(ys.min()) - 0.5,
-                                          float(xs.max()) + 0.5, float(ys.max()) + 0.5]
-            else:
-                rec["bbox_visible_px"] = None
+            rec["bbox_visible_px"] = stats.box(m.pass_index)
             rec["visibility"] = 0 if not in_frame else (2 if frac >= visible_threshold else 1)
         markers.append(rec)
     sections = []
@@ -157,14 +184,11 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
         if np.all(pts[:, 2] > 0):
             uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
-            full = _pixel_mask_of_hull(uv, w, h)
-            rec["pixels_all"] = int(full.sum())
-            rec["bbox_obj_px"] = _pixel_bbox(full)
-        if index is not None:
+            rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, w, h)
+        if stats is not None:
             ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
-            visible = np.isin(index, ids)
-            rec["pixels_visible"] = int(visible.sum())
-            rec["bbox_visible_px"] = _pixel_bbox(visible)
+            rec["pixels_visible"] = int(stats.counts[ids].sum())
+            rec["bbox_visible_px"] = stats.union_box(ids)
             rec["visible_fraction"] = (min(1.0, rec["pixels_visible"] / rec["pixels_all"])
                                        if rec.get("pixels_all") else 0.0)
         sections.append(rec)

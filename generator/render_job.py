@@ -116,7 +116,8 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
         write_manifest(root, cfg)
         from generator.dataset_tools import export
         for fmt in cfg.export.formats:
-            export(root, fmt)
+            if not (root / "exports" / fmt).exists():   # written once, when the dataset completes
+                export(root, fmt)
     summary.seconds = time.monotonic() - t_start
     return summary
 

@@ -64,7 +64,7 @@ def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]
     """
     if linear.ndim != 3 or linear.shape[2] != 3:
         raise ValueError(f"linear image must be (H, W, 3), got {linear.shape}")
-    img = np.nan_to_num(linear.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    img = np.nan_to_num(np.array(linear, dtype=np.float32), copy=False, nan=0.0, posinf=0.0, neginf=0.0)
     scale = auto_exposure_scale(img)
     levels = 2 ** p.adc_bits
     lut = _srgb_lut(levels)
@@ -78,11 +78,13 @@ def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]
     if p.bloom > 0:
         img = veiling_glare(img, p.bloom)
     rng = np.random.default_rng(p.noise_seed)
-    electrons = np.clip(img, 0.0, 1.0) * np.float32(p.full_well_e)
-    noise = rng.standard_normal(electrons.shape, dtype=np.float32)
+    electrons = np.clip(img, 0.0, 1.0, out=img)
+    electrons *= np.float32(p.full_well_e)
     sigma = np.sqrt(electrons + np.float32(p.read_noise_e ** 2))
-    electrons += sigma * noise
-    dn = np.clip(np.rint(electrons * np.float32((levels - 1) / p.full_well_e)), 0, levels - 1)
+    sigma *= rng.standard_normal(electrons.shape, dtype=np.float32)
+    electrons += sigma
+    electrons *= np.float32((levels - 1) / p.full_well_e)
+    dn = np.clip(np.rint(electrons, out=electrons), 0, levels - 1, out=electrons)
     if p.gain_ev != 0:
         dn = np.minimum(np.rint(dn * np.float32(2.0 ** p.gain_ev)), levels - 1)
     idx = dn.astype(np.int32)
