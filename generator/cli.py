@@ -120,6 +120,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("frame_id")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_show)
+
+    from eval.cli import add_subcommands as add_eval
+    add_eval(sub)
+    import importlib.util
+    if importlib.util.find_spec("detector.cli") is not None:
+        from detector.cli import add_subcommands as add_detector
+        add_detector(sub)
     return p
 
 

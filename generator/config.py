@@ -203,7 +203,8 @@ def _convert(value, hint, where: str):
     raise TypeError(f"unsupported config type {hint!r} at {where}")  # programming error
 
 
-def _build(cls, data, source: str, table: str | None):
+def build_dataclass(cls, data, source: str, table: str | None = None):
+    """Build the frozen dataclass ``cls`` from TOML data, rejecting unknown keys and wrong types."""
     where = f"{source}: [{table}]" if table else f"{source}:"
     if not isinstance(data, dict):
         raise ConfigError(f"{where} expected a table, got {data!r}")
@@ -219,7 +220,7 @@ def _build(cls, data, source: str, table: str | None):
             continue
         hint = hints[name]
         if dataclasses.is_dataclass(hint):
-            kwargs[name] = _build(hint, data[name], source, name)
+            kwargs[name] = build_dataclass(hint, data[name], source, name)
         else:
             kwargs[name] = _convert(data[name], hint, f"{where} {name}")
     return cls(**kwargs)
@@ -227,7 +228,7 @@ def _build(cls, data, source: str, table: str | None):
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config`; errors name ``source``."""
-    cfg = _build(Config, data, source, None)
+    cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
     return cfg
 

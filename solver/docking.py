@@ -174,18 +174,19 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
         p3[s], p2[s] = check_correspondences(
             pts_layout[[index[ids[k]] for k in rows[s]]], uv[rows[s]], what=f"section {s}")
     inliers = used.copy()
+    init = None
     if robust and correspondences is not None:
-        from solver.ransac import ransac_pnpf
+        from solver.ransac import ransac_docking
         if not isinstance(rng, np.random.Generator):
             raise SolverError("robust=True needs rng, a numpy.random.Generator (explicit seed)")
-        for s in ("A", "B"):
-            res = ransac_pnpf(p3[s], p2[s], pp, rng, threshold_px=threshold_px, refine=False)
-            keep = res.inliers
+        keep_a, keep_b, init = ransac_docking(p3["A"], p2["A"], p3["B"], p2["B"], pp, rng,
+                                              threshold_px=threshold_px)
+        for s, keep in (("A", keep_a), ("B", keep_b)):
             for k, ok in zip(rows[s], keep):
                 inliers[k] = bool(ok)
             rows[s] = [k for k, ok in zip(rows[s], keep) if ok]
             p3[s], p2[s] = p3[s][keep], p2[s][keep]
-    out = solve_docking_arrays(p3["A"], p2["A"], p3["B"], p2["B"], pp, sigma_px)
+    out = solve_docking_arrays(p3["A"], p2["A"], p3["B"], p2["B"], pp, sigma_px, init=init)
     if robust and correspondences is not None:
         # final inlier check with the joint model over every correspondence
         out, inliers, rows = _recheck_inliers(out, ids, uv, index, sections, pts_layout, pp,

@@ -1,0 +1,120 @@
+"""Sub-pixel marker centre (and outline box) at full resolution inside a detected box.
+
+A marker is a red or blue disc inside a dark ring. Inside a window around the detector's box:
+
+1. the image is converted to linear light (8-bit sRGB -> linear), where partial pixel coverage
+   at the disc edge mixes linearly;
+2. a colour score per pixel: the class channel minus the larger of the other two (red for RedA,
+   blue for BlueB); near 0 on the dark ring and on grey/white surfaces, large on the disc;
+3. the score is normalised between the ring level (median over a thin annulus just outside the
+   box) and the disc level (lower quartile over the inner half of the box) into a soft coverage
+   w in [0, 1];
+4. w is restricted to the connected component (w > 0.5) holding the box centre, dilated by one
+   pixel so that the soft edge pixels count;
+5. centre = coverage-weighted centroid; second moments give the ellipse of the disc
+   (for a uniform ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of
+   the pixel footprint), hence a refined outline box.
+
+Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
+over the disc: noise and shading), and how well
+the segmented area matches the area of the ellipse that its own moments imply and the area of
+the detector's box (occluded or merged markers score low). Below ``min_quality`` the
+detector's box is kept and its centre returned.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+_SRGB_TO_LINEAR = np.where(np.arange(256) / 255.0 <= 0.04045, np.arange(256) / 255.0 / 12.92,
+                           ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4).astype(np.float32)
+CLASS_CHANNEL = {0: 0, 1: 2}  # RedA -> R, BlueB -> B (RGB order)
+
+
+@dataclass(frozen=True)
+class Refined:
+    """``center: (2,) float64 px`` and ``box: (4,) float64 px`` (OpenCV convention), quality in [0, 1],
+    ``refined``: False when the detector's box was kept."""
+    center: np.ndarray
+    box: np.ndarray
+    quality: float
+    refined: bool
+
+
+def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
+    """``rgb: (H, W, 3) uint8`` sRGB -> ``(H, W) float32`` linear class channel minus max(other two)."""
+    if class_id not in CLASS_CHANNEL:
+        raise ValueError(f"class_id must be 0 (RedA) or 1 (BlueB), got {class_id!r}")
+    lin = _SRGB_TO_LINEAR[rgb]
+    c = CLASS_CHANNEL[class_id]
+    others = [k for k in range(3) if k != c]
+    return lin[..., c] - np.maximum(lin[..., others[0]], lin[..., others[1]])
+
+
+def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3) -> Refined:
+    """Refine one detection. ``image: (H, W, 3) uint8`` RGB at full resolution,
+    ``box: (4,) [x0, y0, x1, y1]`` px (OpenCV convention)."""
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        raise ValueError(f"image must be (H, W, 3) uint8, got {image.shape} {image.dtype}")
+    box = np.asarray(box, dtype=np.float64).reshape(-1)
+    if box.shape != (4,) or not np.isfinite(box).all() or box[2] <= box[0] or box[3] <= box[1]:
+        raise ValueError(f"box must be finite [x0, y0, x1, y1] with x1 > x0 and y1 > y0, got {box}")
+    h_img, w_img = image.shape[:2]
+    fallback = Refined(center=np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2]), box=box.copy(),
+                       quality=0.0, refined=False)
+    cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+    hw, hh = max((box[2] - box[0]) / 2, 1.0), max((box[3] - box[1]) / 2, 1.0)
+    m = 1.45  # window half-size in box half-sizes
+    x0, x1 = int(np.floor(cx - m * hw - 2)), int(np.ceil(cx + m * hw + 2)) + 1
+    y0, y1 = int(np.floor(cy - m * hh - 2)), int(np.ceil(cy + m * hh + 2)) + 1
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w_img), min(y1, h_img)
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return fallback
+    s = colour_score(image[y0:y1, x0:x1], class_id)
+    ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+    rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
+    inner, ring = rho <= 0.5, (rho >= 1.08) & (rho <= 1.22)
+    if inner.sum() < 3 or ring.sum() < 4:
+        return fallback
+    fg, bg = float(np.percentile(s[inner], 25)), float(np.median(s[ring]))
+    noise = float(1.4826 * np.median(np.abs(s[inner] - np.median(s[inner])))) + 1e-4
+    if fg - bg <= 0:
+        return fallback
+    w = np.clip((s - bg) / (fg - bg), 0.0, 1.0).astype(np.float32)
+    w[rho > 1.3] = 0.0
+    n, lab = cv2.connectedComponents((w > 0.5).astype(np.uint8), connectivity=8)
+    if n < 2:
+        return fallback
+    ci, cj = int(round(cy)) - y0, int(round(cx)) - x0
+    k = lab[min(max(ci, 0), lab.shape[0] - 1), min(max(cj, 0), lab.shape[1] - 1)]
+    if k == 0:  # centre not on the disc: take the largest component
+        k = 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
+    region = cv2.dilate((lab == k).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    w = np.where(region, w, 0.0)
+    area = float(w.sum())
+    if area < 3:
+        return fallback
+    mx, my = float((w * xs).sum() / area), float((w * ys).sum() / area)
+    vxx = float((w * (xs - mx) ** 2).sum() / area) + 1 / 12
+    vyy = float((w * (ys - my) ** 2).sum() / area) + 1 / 12
+    vxy = float((w * (xs - mx) * (ys - my)).sum() / area)
+    det = vxx * vyy - vxy ** 2
+    if det <= 0:
+        return fallback
+    ellipse_area = 4 * np.pi * np.sqrt(det)
+    box_area = np.pi * hw * hh
+    shape_ok = min(area / ellipse_area, ellipse_area / area)      # 1 for an ellipse
+    box_ok = min(area / box_area, box_area / area)                # 1 when it fills the box's ellipse
+    contrast = (fg - bg) / noise
+    q_contrast = float(np.clip((contrast - 2) / 4, 0, 1))
+    q_shape = float(np.clip((shape_ok - 0.85) / 0.13, 0, 1))
+    q_box = float(np.clip((box_ok - 0.6) / 0.3, 0, 1))
+    quality = q_contrast * q_shape * q_box
+    if quality < min_quality:
+        return Refined(center=fallback.center, box=fallback.box, quality=quality, refined=False)
+    ex, ey = 2 * np.sqrt(vxx), 2 * np.sqrt(vyy)
+    rbox = np.array([mx - ex, my - ey, mx + ex, my + ey])
+    rbox = np.clip(rbox, -0.5, np.array([w_img, h_img, w_img, h_img]) - 0.5)
+    return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True)

@@ -1,0 +1,260 @@
+"""Training loop: YOLOv5's SGD parameter groups, warm-up, step schedule, EMA, checkpoints, resume.
+
+Hyper-parameters are the paper's: lr0 0.01 divided by 10 every 100 epochs, momentum 0.937
+(Nesterov), weight decay 5e-4 on conv/linear weights only, 3 warm-up epochs (bias lr from 0.1,
+momentum from 0.8), loss gains box 0.05, cls 0.5, obj 1.0, EMA of the weights (decay
+0.9999 x (1 - exp(-updates / 2000))). Gradients are accumulated to a nominal batch ``nbs``
+(YOLOv5: 64; default here 16 = the batch, so small CPU runs still take many steps) and clipped
+to norm 10.
+
+An epoch is ``crops_per_frame`` windows of every training frame (see ``detector.data``).
+After every epoch ``RUN/last.pt`` (full checkpoint) and ``RUN/history.json`` are written
+atomically; at the end ``RUN/weights.pt`` holds the EMA weights (fp32). ``resume=True``
+continues from ``RUN/last.pt``; the batches are functions of (seed, epoch, index), so an
+interrupted and resumed run equals an uninterrupted one.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from copy import deepcopy
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from detector.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_file, save_atomic, weights_from_checkpoint
+from detector.data import CropDataset, DataConfig, dataset_version, load_frames
+from detector.loss import LossGains, YoloLoss
+from detector.model import ModelConfig, build_model
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    model: ModelConfig = field(default_factory=ModelConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    epochs: int = 60
+    batch_size: int = 16
+    nbs: int = 16                 # nominal batch size (gradient accumulation target)
+    lr0: float = 0.01
+    lr_step_epochs: int = 100     # lr x lr_gamma every lr_step_epochs
+    lr_gamma: float = 0.1
+    momentum: float = 0.937
+    weight_decay: float = 5e-4
+    warmup_epochs: float = 3.0
+    warmup_momentum: float = 0.8
+    warmup_bias_lr: float = 0.1
+    gains: LossGains = field(default_factory=LossGains)
+    ema_decay: float = 0.9999
+    ema_tau: float = 2000.0
+    grad_clip: float = 10.0
+    fit_anchors: bool = True      # k-means anchors on the training boxes (else model.anchors)
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.epochs < 1:
+            raise ValueError(f"epochs must be >= 1, got {self.epochs}")
+        if self.batch_size < 1 or self.nbs < 1:
+            raise ValueError(f"batch_size and nbs must be >= 1, got {self.batch_size}, {self.nbs}")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["model"] = self.model.to_dict()
+        d["data"] = self.data.to_dict()
+        return json.loads(json.dumps(d))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        unknown = set(d) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown train config keys: {sorted(unknown)}")
+        d = dict(d)
+        d["model"] = ModelConfig.from_dict(d["model"])
+        d["data"] = DataConfig.from_dict(d["data"])
+        d["gains"] = LossGains(**d["gains"])
+        return cls(**d)
+
+
+class ModelEMA:
+    """Exponential moving average of a model's state (YOLOv5's ModelEMA)."""
+
+    def __init__(self, model: nn.Module, decay: float = 0.9999, tau: float = 2000.0, updates: int = 0):
+        self.ema = deepcopy(model).eval()
+        self.decay, self.tau, self.updates = decay, tau, updates
+        for p in self.ema.parameters():
+            p.requires_grad_(False)
+
+    def update(self, model: nn.Module) -> None:
+        self.updates += 1
+        d = self.decay * (1 - math.exp(-self.updates / self.tau))
+        msd = model.state_dict()
+        with torch.no_grad():
+            for k, v in self.ema.state_dict().items():
+                if v.dtype.is_floating_point:
+                    v.mul_(d).add_(msd[k].detach(), alpha=1 - d)
+                else:
+                    v.copy_(msd[k])
+
+
+def param_groups(model: nn.Module, weight_decay: float):
+    """YOLOv5's three groups: BatchNorm weights (no decay), other weights (decay), biases (no decay)."""
+    g_bn, g_w, g_b = [], [], []
+    for m in model.modules():
+        if isinstance(getattr(m, "bias", None), nn.Parameter):
+            g_b.append(m.bias)
+        if isinstance(m, nn.modules.batchnorm._BatchNorm):
+            g_bn.append(m.weight)
+        elif isinstance(getattr(m, "weight", None), nn.Parameter):
+            g_w.append(m.weight)
+    return [{"params": g_bn, "weight_decay": 0.0, "name": "bn"},
+            {"params": g_w, "weight_decay": weight_decay, "name": "weights"},
+            {"params": g_b, "weight_decay": 0.0, "name": "bias"}]
+
+
+class EpochBar:
+    """One progress line per epoch on stderr (redrawn in place on a terminal)."""
+
+    def __init__(self, epoch: int, epochs: int, total: int, enabled: bool, stream=None):
+        self.epoch, self.epochs, self.total, self.enabled = epoch, epochs, total, enabled
+        self.stream = stream or sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.start = time.monotonic()
+
+    def line(self, done: int, losses: np.ndarray, images: int, lr: float) -> str:
+        el = time.monotonic() - self.start
+        fill = int(20 * done / self.total)
+        return (f"epoch {self.epoch + 1:>3}/{self.epochs} [{'#' * fill}{'-' * (20 - fill)}] {done}/{self.total}"
+                f"  box {losses[0]:.4f} obj {losses[1]:.4f} cls {losses[2]:.4f}  lr {lr:.5f}"
+                f"  {images / max(el, 1e-9):.1f} img/s  {el:.0f}s")
+
+    def update(self, done, losses, images, lr):
+        if self.enabled and self.tty:
+            self.stream.write("\r" + self.line(done, losses, images, lr) + "\x1b[K")
+            self.stream.flush()
+
+    def close(self, done, losses, images, lr):
+        if self.enabled:
+            text = self.line(done, losses, images, lr)
+            self.stream.write("\r" + text + "\x1b[K\n" if self.tty else text + "\n")
+            self.stream.flush()
+
+
+def fit_anchor_config(cfg: TrainConfig, frames) -> tuple[ModelConfig, float]:
+    """(model config with k-means anchors for the training boxes at the network scale, BPR)."""
+    from detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
+    s = cfg.data.input_scale
+    wh = np.concatenate([(f.boxes[:, 2:] - f.boxes[:, :2])[f.visible >= cfg.data.min_visible_fraction]
+                         for f in frames]) * s
+    wh = wh[(wh > 1).all(1)]
+    levels = 4 if cfg.model.p2 else 3
+    anchors = kmeans_anchors(wh, 3 * levels, seed=cfg.seed)
+    bpr, _ = anchor_fitness(wh, anchors)
+    return ModelConfig(**{**asdict(cfg.model), "anchors": anchors_per_level(anchors, levels)}), bpr
+
+
+def train(dataset, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, progress: bool = True,
+          max_batches: int | None = None, log=print) -> dict:
+    """Train on the train split of ``dataset``; checkpoints in ``out``. Returns a summary dict.
+
+    ``max_batches`` limits the batches per epoch (tests). With ``resume`` the run continues from
+    ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the epoch count).
+    """
+    out = Path(out)
+    version = dataset_version(dataset)
+    frames = load_frames(dataset, "train")
+    last = out / "last.pt"
+    ckpt = None
+    if resume:
+        if not last.is_file():
+            raise CheckpointError(f"{last}: nothing to resume (no checkpoint)")
+        ckpt = load_file(last, (CHECKPOINT_FORMAT,))
+        if ckpt["dataset_version"] != version:
+            raise CheckpointError(f"{last}: trained on dataset version {ckpt['dataset_version']}, "
+                                  f"but {dataset} is version {version}")
+        saved = TrainConfig.from_dict(ckpt["config"])
+        cfg = TrainConfig(**{**{f: getattr(saved, f) for f in saved.__dataclass_fields__},
+                             "epochs": max(cfg.epochs, saved.epochs)})
+    elif cfg.fit_anchors:
+        mcfg, bpr = fit_anchor_config(cfg, frames)
+        cfg = TrainConfig(**{**{f: getattr(cfg, f) for f in cfg.__dataclass_fields__}, "model": mcfg})
+        log(f"anchors (k-means, best possible recall {bpr:.4f}): {mcfg.anchors}")
+
+    model = build_model(cfg.model, seed=cfg.seed)
+    model.train()
+    ds = CropDataset(frames, cfg.data, seed=cfg.seed)
+    nb = ds.batches_per_epoch(cfg.batch_size)
+    if max_batches is not None:
+        nb = min(nb, max_batches)
+    accumulate = max(round(cfg.nbs / cfg.batch_size), 1)
+    wd = cfg.weight_decay * cfg.batch_size * accumulate / cfg.nbs
+    optimizer = torch.optim.SGD(param_groups(model, wd), lr=cfg.lr0, momentum=cfg.momentum, nesterov=True)
+    for g in optimizer.param_groups:
+        g["initial_lr"] = cfg.lr0
+    ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
+    loss_fn = YoloLoss(model.detect.anchors, cfg.model.strides, cfg.model.num_classes, cfg.data.crop, cfg.gains)
+    start_epoch, history = 0, []
+    if ckpt is not None:
+        model.load_state_dict(ckpt["model"])
+        ema.ema.load_state_dict(ckpt["ema"])
+        ema.updates = int(ckpt["updates"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        start_epoch = int(ckpt["epoch"])
+        history = list(ckpt.get("history", []))
+        log(f"resuming {last} at epoch {start_epoch + 1}/{cfg.epochs}")
+    nw = max(round(cfg.warmup_epochs * nb), 1) if cfg.warmup_epochs > 0 else 0
+    t_start = time.monotonic()
+    for epoch in range(start_epoch, cfg.epochs):
+        lf = cfg.lr_gamma ** (epoch // cfg.lr_step_epochs)
+        mloss = np.zeros(3)
+        bar = EpochBar(epoch, cfg.epochs, nb, progress)
+        t0, images, pending = time.monotonic(), 0, 0
+        optimizer.zero_grad()
+        for i in range(nb):
+            ni = i + nb * epoch
+            for j, g in enumerate(optimizer.param_groups):
+                target = cfg.lr0 * lf
+                if ni < nw:
+                    g["lr"] = float(np.interp(ni, [0, nw], [cfg.warmup_bias_lr if g["name"] == "bias" else 0.0, target]))
+                    g["momentum"] = float(np.interp(ni, [0, nw], [cfg.warmup_momentum, cfg.momentum]))
+                else:
+                    g["lr"], g["momentum"] = target, cfg.momentum
+            imgs, targets = ds.batch(epoch, i, cfg.batch_size)
+            loss, parts = loss_fn(model(imgs), targets)
+            if not torch.isfinite(loss):
+                raise FloatingPointError(f"loss became {loss.item()} at epoch {epoch + 1}, batch {i + 1}")
+            loss.backward()
+            pending += 1
+            if pending >= accumulate or i == nb - 1:
+                nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+                optimizer.step()
+                optimizer.zero_grad()
+                ema.update(model)
+                pending = 0
+            images += imgs.shape[0]
+            mloss = (mloss * i + parts.numpy()) / (i + 1)
+            bar.update(i + 1, mloss, images, optimizer.param_groups[1]["lr"])
+        bar.close(nb, mloss, images, optimizer.param_groups[1]["lr"])
+        dt = time.monotonic() - t0
+        history.append({"epoch": epoch + 1, "box": float(mloss[0]), "obj": float(mloss[1]), "cls": float(mloss[2]),
+                        "lr": float(optimizer.param_groups[1]["lr"]), "images": images, "seconds": round(dt, 3),
+                        "images_per_s": round(images / max(dt, 1e-9), 3)})
+        ckpt = {"format": CHECKPOINT_FORMAT, "model": model.state_dict(), "ema": ema.ema.state_dict(),
+                "optimizer": optimizer.state_dict(), "epoch": epoch + 1, "updates": ema.updates,
+                "config": cfg.to_dict(), "dataset_version": version, "dataset_path": str(dataset),
+                "history": history}
+        save_atomic(ckpt, last)
+        _write_json(out / "history.json", {"dataset_version": version, "config": cfg.to_dict(), "history": history})
+    if ckpt is None:  # resumed a finished run
+        ckpt = load_file(last, (CHECKPOINT_FORMAT,))
+    save_atomic(weights_from_checkpoint(ckpt, half=False), out / "weights.pt")
+    return {"run": str(out), "epochs": cfg.epochs, "dataset_version": version, "weights": str(out / "weights.pt"),
+            "seconds": round(time.monotonic() - t_start, 1), "history": history, "config": cfg.to_dict()}
+
+
+def _write_json(path: Path, obj) -> None:
+    from generator.io import write_json_atomic
+    write_json_atomic(path, obj)

@@ -1,0 +1,91 @@
+"""``dockfactory solve | evaluate | report | run`` (registered by generator.cli)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+DEFAULT_ACCEPTANCE = Path(__file__).resolve().parent.parent / "configs" / "acceptance.toml"
+
+
+def cmd_solve(args) -> int:
+    from eval.dataset_access import open_dataset, read_json_for
+    from eval.solve_frames import solve_dataset, write_poses
+    ds = open_dataset(args.dataset)
+    splits = tuple(args.split.split(","))
+    if (args.detections is None) == (args.oracle_noise is None):
+        raise ValueError("give --detections DETS.json or --oracle-noise PX (exactly one)")
+    if args.detections:
+        dets = read_json_for(args.detections, "detections", ds)
+        poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score)
+    else:
+        poses = solve_dataset(ds, splits, oracle_sigma_px=args.oracle_noise)
+    write_poses(args.out, poses, args.detections)
+    n_ok = sum(r["ok"] for r in poses["frames"].values())
+    print(f"{n_ok} of {len(poses['frames'])} frames solved -> {args.out}", file=sys.stderr)
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from eval.acceptance import load_acceptance
+    from eval.dataset_access import open_dataset
+    from eval.evaluate import evaluate, write_outputs
+    from generator.io import write_json_atomic
+    spec = load_acceptance(args.acceptance)
+    ds = open_dataset(args.dataset)
+    metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
+    write_outputs(args.out, metrics, rows)
+    write_json_atomic(Path(args.out) / "provenance.json", {"detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])]})
+    for c in metrics["acceptance"]["criteria"]:
+        print(f"{'PASS' if c['pass'] else 'FAIL'}  {c['name']}: {c['value']} (threshold {c['threshold']} {c['unit']})")
+    accepted = metrics["acceptance"]["accepted"]
+    print(f"verdict: {'ACCEPTED' if accepted else 'REJECTED'}  ({args.out}/metrics.json)")
+    return 0 if accepted else 1
+
+
+def cmd_report(args) -> int:
+    from eval.report import build_report
+    summary = build_report(args.eval_dir, args.out)
+    print(f"verdict: {summary['verdict']}  report: {args.out}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from eval.pipeline import run_pipeline
+    return run_pipeline(args.config, args.out, args.acceptance, weights=args.weights, train=args.train,
+                        oracle_noise_px=args.oracle_noise, workers=args.workers, train_epochs=args.epochs)
+
+
+def add_subcommands(sub) -> None:
+    s = sub.add_parser("solve", help="poses of B relative to A from detections (or label centres + noise)")
+    s.add_argument("dataset")
+    s.add_argument("--detections", help="DETS.json from dockfactory detect")
+    s.add_argument("--oracle-noise", type=float, metavar="PX", help="use exact label centres + Gaussian noise (px)")
+    s.add_argument("--split", default="test,repeat")
+    s.add_argument("--min-score", type=float, default=0.25)
+    s.add_argument("--out", required=True)
+    s.set_defaults(func=cmd_solve)
+
+    e = sub.add_parser("evaluate", help="metrics, per-frame CSV and the acceptance verdict (exit 0/1/2)")
+    e.add_argument("dataset")
+    e.add_argument("--poses", required=True)
+    e.add_argument("--detections")
+    e.add_argument("--acceptance", default=str(DEFAULT_ACCEPTANCE))
+    e.add_argument("--min-score", type=float, default=0.25)
+    e.add_argument("--out", required=True)
+    e.set_defaults(func=cmd_evaluate)
+
+    r = sub.add_parser("report", help="self-contained HTML acceptance report (+ report.json, report.md)")
+    r.add_argument("eval_dir")
+    r.add_argument("--out", required=True)
+    r.set_defaults(func=cmd_report)
+
+    u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")
+    u.add_argument("config")
+    u.add_argument("--out", required=True, help="work directory")
+    u.add_argument("--acceptance", default=str(DEFAULT_ACCEPTANCE))
+    u.add_argument("--weights", help="detector checkpoint (default: the shipped one in models/)")
+    u.add_argument("--train", action="store_true", help="train a detector on the dataset's train split first")
+    u.add_argument("--epochs", type=int, default=None, help="with --train")
+    u.add_argument("--oracle-noise", type=float, metavar="PX", help="skip the detector: exact centres + noise")
+    u.add_argument("--workers", type=int, default=1)
+    u.set_defaults(func=cmd_run)

@@ -1,0 +1,230 @@
+"""``dockfactory evaluate``: metrics, per-frame CSV and the acceptance verdict.
+
+Writes EVAL/metrics.json and EVAL/frames.csv. Exit status 0 accepted, 1 a gated criterion fails,
+2 bad input (for example poses or detections made for another dataset version).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
+from eval.dataset_access import EvalDataset, read_json_for
+from eval.pose_metrics import error_stats, pose_error, repeatability
+from eval.solve_frames import solve_dataset
+from generator.io import write_json_atomic, write_text_atomic
+
+METRICS_FORMAT = "dockfactory.metrics/1"
+
+
+def frame_bound(label: dict, marker_ids, sigma_px: float) -> dict | None:
+    """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry."""
+    from solver import SolverError, crb_d_from_b
+    by_id = {m["id"]: m for m in label["markers"]}
+    ids = [i for i in (marker_ids or []) if i in by_id] or [m["id"] for m in label["markers"] if m.get("visibility") == 2]
+    pa = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("A")]).reshape(-1, 3)
+    pb = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("B")]).reshape(-1, 3)
+    if len(pa) < 4 or len(pb) < 4 or not sigma_px > 0:
+        return None
+    cam_from_d = np.array(label["camera"]["cam_from_d"])
+    cam_from_b = cam_from_d @ np.array(label["d_from_b"])
+    try:
+        b = crb_d_from_b(pa, cam_from_d, pb, cam_from_b, label["camera"]["focal_px"],
+                         label["camera"]["principal_point"], sigma_px)
+    except SolverError:
+        return None
+    return {c: b.std[POSE_KEYS[c]] for c in COMPONENTS}
+
+
+def per_frame_rows(ds: EvalDataset, poses: dict, sigma_px: float) -> list[dict]:
+    rows = []
+    for fid, rec in poses["frames"].items():
+        lab = ds.labels[fid]
+        true = lab["pose_b_in_d"]
+        row = {"frame_id": fid, "split": lab["spec"]["split"], "condition": lab["spec"]["condition"],
+               "pose_index": lab["spec"]["pose_index"], "ok": bool(rec["ok"]),
+               "reason": rec.get("reason", ""), "category": rec.get("category", ""),
+               "focal_true": lab["camera"]["focal_px"], "distance_mm": lab["camera"]["distance_mm"],
+               "visible_a": sum(m.get("visibility") == 2 and m["section"] == "A" for m in lab["markers"]),
+               "visible_b": sum(m.get("visibility") == 2 and m["section"] == "B" for m in lab["markers"])}
+        for c in COMPONENTS:
+            row[f"true_{c}"] = true[POSE_KEYS[c]]
+        if rec["ok"]:
+            err = pose_error(rec["pose"], true)
+            for c in COMPONENTS:
+                row[f"est_{c}"] = rec["pose"][POSE_KEYS[c]]
+                row[f"err_{c}"] = err[c]
+            row["focal_est"] = rec["focal_px"]
+            row["focal_err_pct"] = 100.0 * (rec["focal_px"] - row["focal_true"]) / row["focal_true"]
+            row["rmse_px_a"], row["rmse_px_b"] = rec["rmse_px"]["A"], rec["rmse_px"]["B"]
+            bound = frame_bound(lab, rec.get("marker_ids"), sigma_px)
+            for c in COMPONENTS:
+                row[f"crb_{c}"] = bound[c] if bound else None
+        rows.append(row)
+    return rows
+
+
+def localization_block(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["ok"]]
+    out = {"n_frames": len(rows), "n_solved": len(ok)}
+    out["overall"] = {c: error_stats([r[f"err_{c}"] for r in ok]) for c in COMPONENTS}
+    by_cond = defaultdict(list)
+    for r in ok:
+        by_cond[r["condition"]].append(r)
+    out["by_condition"] = {cond: {c: error_stats([r[f"err_{c}"] for r in rs]) for c in COMPONENTS}
+                           for cond, rs in sorted(by_cond.items())}
+    out["focal_err_pct"] = error_stats([r["focal_err_pct"] for r in ok])
+    out["reprojection_rmse_px"] = {s: error_stats([r[f"rmse_px_{s.lower()}"] for r in ok]) for s in "AB"}
+    crb = {}
+    for c in COMPONENTS:
+        b = [r[f"crb_{c}"] for r in ok if r.get(f"crb_{c}") is not None]
+        if b:
+            bound_rms = float(np.sqrt(np.mean(np.square(b))))
+            rmse = out["overall"][c]["rmse"]
+            crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse,
+                      "ratio": (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None}
+    out["crb"] = crb
+    return out
+
+
+def failures_block(rows: list[dict]) -> dict:
+    failed = [r for r in rows if not r["ok"]]
+    by_cond = defaultdict(lambda: [0, 0])
+    for r in rows:
+        by_cond[r["condition"]][1] += 1
+        if not r["ok"]:
+            by_cond[r["condition"]][0] += 1
+    return {"count": len(failed), "frames": len(rows), "rate": len(failed) / len(rows) if rows else 0.0,
+            "by_condition": {c: {"failed": f, "frames": n, "rate": f / n} for c, (f, n) in sorted(by_cond.items())},
+            "by_category": {cat: sum(r["category"] == cat for r in failed) for cat in sorted({r["category"] for r in failed})},
+            "list": [{"frame_id": r["frame_id"], "condition": r["condition"], "reason": r["reason"]} for r in failed]}
+
+
+def estimation_block(rows: list[dict]) -> dict:
+    groups = defaultdict(list)
+    for r in rows:
+        if r["ok"]:
+            groups[f"pose{r['pose_index']:03d}"].append({c: r[f"est_{c}"] for c in COMPONENTS})
+    rep = repeatability(groups)
+    rep["n_frames"] = len(rows)
+    rep["n_solved"] = sum(r["ok"] for r in rows)
+    return rep
+
+
+def centre_noise_px(ds: EvalDataset, detections: dict | None, min_score: float) -> tuple[float, dict]:
+    """RMS per-axis error of detected centres matched to visible markers (test split)."""
+    if detections is None:
+        return float("nan"), {}
+    errs, by_cond = [], defaultdict(list)
+    for fid in ds.frames(("test",)):
+        lab = ds.labels[fid]
+        dets = [d for d in detections["frames"].get(fid, []) if d.get("score", 1.0) >= min_score]
+        for m in lab["markers"]:
+            if m.get("visibility") != 2:
+                continue
+            best = None
+            for d in dets:
+                if d["class_id"] != m["class_id"]:
+                    continue
+                e = np.subtract(d["center_px"], m["center_px"])
+                if np.hypot(*e) < m["diameter_mm"] and (best is None or np.hypot(*e) < np.hypot(*best)):
+                    best = e
+            if best is not None:
+                errs.append(best)
+                by_cond["normal" if lab["spec"]["condition"] in ("normal", "ideal") else "challenging"].append(np.hypot(*best))
+    if not errs:
+        return float("nan"), {}
+    e = np.array(errs)
+    sigma = float(np.sqrt(np.mean(e ** 2)))   # per-axis RMS
+    return sigma, {k: {"median_px": float(np.median(v)), "n": len(v)} for k, v in by_cond.items()}
+
+
+def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
+    criteria = []
+    for block, gate, label in (("estimation", spec.estimation, "estimation precision (repeatability)"),
+                               ("localization", spec.localization, "localization precision (accuracy)")):
+        for c, thr in gate.gated().items():
+            if block == "estimation":
+                stat = metrics["estimation"]["pooled"][c][gate.statistic]
+            else:
+                stat = metrics["localization"]["overall"][c][gate.statistic]
+            unit = UNITS[c] + ("^2" if gate.statistic == "mse" else "")
+            criteria.append({"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
+                             "value": stat, "threshold": thr, "unit": unit,
+                             "pass": stat is not None and stat <= thr,
+                             "paper": getattr(spec.paper, f"{block}_{c}", None)})
+    det = metrics.get("detection") or {}
+    for key, thr, paper in (("map50", spec.detection.map50_min, spec.paper.map50),
+                            ("map50_95", spec.detection.map50_95_min, spec.paper.map50_95)):
+        if thr >= 0:
+            v = det.get(key)
+            criteria.append({"name": f"detection: {key}", "block": "detection", "component": key, "statistic": "min",
+                             "value": v, "threshold": thr, "unit": "", "pass": v is not None and v >= thr,
+                             "paper": paper})
+    f = metrics["failures_test"]["by_condition"]
+    n_fail = sum(f[c]["failed"] for c in spec.failures.conditions if c in f)
+    n = sum(f[c]["frames"] for c in spec.failures.conditions if c in f)
+    rate = n_fail / n if n else 0.0
+    criteria.append({"name": f"failure rate ({', '.join(spec.failures.conditions)})", "block": "failures",
+                     "component": "rate", "statistic": "max", "value": rate, "threshold": spec.failures.max_rate,
+                     "unit": "", "pass": rate <= spec.failures.max_rate, "paper": None})
+    return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria}
+
+
+def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=None,
+             min_score: float = 0.25, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
+    poses = read_json_for(poses_path, "poses", ds)
+    detections = read_json_for(detections_path, "detections", ds) if detections_path else None
+    sigma, centre_by_cond = centre_noise_px(ds, detections, min_score)
+    if not np.isfinite(sigma):
+        sigma = oracle_sigma_px or poses.get("oracle_sigma_px") or 0.1
+    missing = [fid for fid in ds.frames(("test", "repeat")) if fid not in poses["frames"]]
+    for fid in missing:   # a frame without a pose is a failure, never silently dropped
+        poses["frames"][fid] = {"ok": False, "reason": "no pose in the poses file", "category": "missing"}
+    rows = per_frame_rows(ds, poses, sigma)
+    test = [r for r in rows if r["split"] == "test"]
+    rep = [r for r in rows if r["split"] == "repeat"]
+    metrics = {"format": METRICS_FORMAT, "dataset": {"root": str(ds.root), "version_id": ds.version_id,
+                                                      "name": ds.identity["name"]},
+               "poses": {"source": poses.get("source"), "path": str(poses_path)},
+               "centre_noise_px": sigma, "centre_error": centre_by_cond,
+               "localization": localization_block(test), "estimation": estimation_block(rep),
+               "failures_test": failures_block(test), "failures_repeat": failures_block(rep)}
+    if detections is not None:
+        metrics["detection"] = detection_block(ds, detections)
+    if oracle:
+        o_poses = solve_dataset(ds, splits=("test",), oracle_sigma_px=float(sigma))
+        o_rows = per_frame_rows(ds, o_poses, sigma)
+        metrics["oracle"] = {"sigma_px": sigma, "localization": localization_block(o_rows),
+                             "failures": failures_block(o_rows)}
+    metrics["acceptance"] = verdict(metrics, spec)
+    return metrics, rows
+
+
+def detection_block(ds: EvalDataset, detections: dict) -> dict:
+    try:
+        from eval.detection_metrics import coco_map
+    except ImportError:
+        return {"note": "eval.detection_metrics is not available"}
+    return coco_map(ds.root, detections, split="test")
+
+
+CSV_FIELDS = (["frame_id", "split", "condition", "pose_index", "ok", "category", "reason", "distance_mm",
+               "focal_true", "focal_est", "focal_err_pct", "visible_a", "visible_b", "rmse_px_a", "rmse_px_b"]
+              + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS])
+
+
+def write_outputs(out_dir, metrics: dict, rows: list[dict]) -> None:
+    out = Path(out_dir)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in CSV_FIELDS})
+    write_text_atomic(out / "frames.csv", buf.getvalue())
+    write_json_atomic(out / "metrics.json", json.loads(json.dumps(metrics, default=float)))

@@ -1,0 +1,127 @@
+"""``dockfactory run``: render -> detect -> solve -> evaluate -> report, resumable.
+
+Each stage records a key (a hash of its inputs) in WORKDIR/stages.json and is skipped when its
+key is unchanged and its outputs exist, so an interrupted run resumes where it stopped.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+
+from generator.io import sha256_file, write_json_atomic
+
+
+class Stages:
+    def __init__(self, workdir: Path):
+        self.path = workdir / "stages.json"
+        self.data = json.loads(self.path.read_text()) if self.path.exists() else {}
+
+    def current(self, name: str, key: str, outputs) -> bool:
+        return self.data.get(name, {}).get("key") == key and all(Path(o).exists() for o in outputs)
+
+    def done(self, name: str, key: str, seconds: float) -> None:
+        self.data[name] = {"key": key, "seconds": seconds}
+        write_json_atomic(self.path, self.data)
+
+
+def _key(*parts) -> str:
+    return hashlib.sha256("\n".join(str(p) for p in parts).encode()).hexdigest()[:16]
+
+
+def say(msg: str) -> None:
+    print(f"[run] {msg}", file=sys.stderr, flush=True)
+
+
+def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
+                 oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
+    from eval.acceptance import load_acceptance
+    from eval.dataset_access import open_dataset
+    from eval.evaluate import evaluate, write_outputs
+    from eval.report import build_report
+    from eval.solve_frames import solve_dataset, write_poses
+    from generator.config import load_config
+    from generator.dataset import identity
+    from generator.render_job import JobOptions, print_summary, run_render
+
+    t_all = time.monotonic()
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    cfg = load_config(config_path)
+    spec = load_acceptance(acceptance_path)
+    stages = Stages(workdir)
+    data_dir = workdir / "dataset"
+    commands = [f"dockfactory run {config_path} --out {workdir}"]
+
+    # 1. render (itself resumable: only missing frames are rendered)
+    version = identity(cfg)["version_id"]
+    key = _key("render", version)
+    if stages.current("render", key, [data_dir / "manifest.json"]):
+        say(f"render: dataset {version} complete, skipped")
+    else:
+        say(f"render: dataset {version} -> {data_dir}")
+        t = time.monotonic()
+        summary = run_render(cfg, data_dir, Path(config_path).read_text(), JobOptions(workers=workers))
+        print_summary(summary)
+        if not summary.complete:
+            say("render incomplete: run the same command again")
+            return 1
+        stages.done("render", key, time.monotonic() - t)
+    ds = open_dataset(data_dir)
+
+    # 2. detect
+    dets_path = workdir / "detections.json"
+    model_sha = None
+    if oracle_noise_px is not None:
+        say(f"detect: skipped, oracle mode (exact centres + {oracle_noise_px} px noise)")
+        dets_path = None
+    else:
+        from detector.pipeline_stage import detect_stage   # torch is imported only here
+        weights, model_sha = detect_stage(ds, workdir, weights, train, train_epochs, stages, _key, say)
+        commands.append(f"dockfactory detect {data_dir} --weights {weights} --split test,repeat --out {dets_path}")
+
+    # 3. solve
+    poses_path = workdir / "poses.json"
+    src = sha256_file(dets_path) if dets_path else f"oracle:{oracle_noise_px}"
+    key = _key("solve", version, src)
+    if stages.current("solve", key, [poses_path]):
+        say("solve: poses current, skipped")
+    else:
+        t = time.monotonic()
+        if dets_path:
+            dets = json.loads(dets_path.read_text())
+            poses = solve_dataset(ds, detections=dets)
+        else:
+            poses = solve_dataset(ds, oracle_sigma_px=oracle_noise_px)
+        write_poses(poses_path, poses, dets_path)
+        n_ok = sum(r["ok"] for r in poses["frames"].values())
+        say(f"solve: {n_ok} of {len(poses['frames'])} frames solved")
+        stages.done("solve", key, time.monotonic() - t)
+    commands.append(f"dockfactory solve {data_dir} " + (f"--detections {dets_path}" if dets_path else f"--oracle-noise {oracle_noise_px}")
+                    + f" --out {poses_path}")
+
+    # 4. evaluate
+    eval_dir = workdir / "eval"
+    key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src)
+    if stages.current("evaluate", key, [eval_dir / "metrics.json", eval_dir / "frames.csv"]):
+        say("evaluate: metrics current, skipped")
+        metrics = json.loads((eval_dir / "metrics.json").read_text())
+    else:
+        t = time.monotonic()
+        metrics, rows = evaluate(ds, poses_path, spec, dets_path, oracle_sigma_px=oracle_noise_px)
+        write_outputs(eval_dir, metrics, rows)
+        stages.done("evaluate", key, time.monotonic() - t)
+    commands.append(f"dockfactory evaluate {data_dir} --poses {poses_path}"
+                    + (f" --detections {dets_path}" if dets_path else "") + f" --acceptance {acceptance_path} --out {eval_dir}")
+    write_json_atomic(eval_dir / "provenance.json", {"detections": str(dets_path) if dets_path else None,
+                                                     "model_sha256": model_sha, "commands": commands})
+
+    # 5. report (always rebuilt: cheap, and it carries the date)
+    report = workdir / "report.html"
+    commands.append(f"dockfactory report {eval_dir} --out {report}")
+    summary = build_report(eval_dir, report, commands)
+    say(f"done in {time.monotonic() - t_all:.0f} s")
+    print(f"verdict: {summary['verdict']}  report: {report}")
+    return 0 if metrics["acceptance"]["accepted"] else 1

@@ -1,0 +1,281 @@
+"""``dockfactory report``: one self-contained HTML file (images embedded) a quality engineer can
+read and print, plus report.json and a short Markdown summary for CI logs."""
+from __future__ import annotations
+
+import base64
+import csv
+import datetime as _dt
+import html
+import io
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from eval.acceptance import COMPONENTS, UNITS
+from generator.io import write_json_atomic, write_text_atomic
+from generator.version import GENERATOR_VERSION, package_version
+
+GATED = ("x", "y", "alpha")
+
+
+def _fig_png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _img(b64: str, alt: str) -> str:
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
+
+
+def _num(v, digits=4) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "-"
+    return f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+
+
+def read_rows(eval_dir: Path) -> list[dict]:
+    with open(eval_dir / "frames.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        for k, v in r.items():
+            if k in ("frame_id", "split", "condition", "reason", "category"):
+                continue
+            if k == "ok":
+                r[k] = v == "True"
+            else:
+                try:
+                    r[k] = float(v) if v != "" else None
+                except ValueError:
+                    pass
+    return rows
+
+
+def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    test = [r for r in rows if r["split"] == "test" and r["ok"]]
+    out = {}
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3))
+    for ax, c in zip(axes, GATED):
+        e = [r[f"err_{c}"] for r in test]
+        ax.hist(e, bins=max(5, min(40, len(e) // 2 or 5)), color="#4477aa")
+        ax.set_title(f"{c} error ({UNITS[c]})")
+        ax.axvline(0, color="k", lw=0.8)
+    out["Error histograms (test split)"] = _fig_png(fig)
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.scatter([r["err_x"] for r in test], [r["err_y"] for r in test], s=10, c="#aa3377")
+    ax.set_xlabel("X error (mm)")
+    ax.set_ylabel("Y error (mm)")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.axvline(0, color="k", lw=0.5)
+    ax.set_aspect("equal", "datalim")
+    out["X-Y error scatter"] = _fig_png(fig)
+    conds = sorted({r["condition"] for r in test})
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3))
+    for ax, c in zip(axes, GATED):
+        ax.boxplot([[abs(r[f"err_{c}"]) for r in test if r["condition"] == k] or [0.0] for k in conds])
+        ax.set_xticks(range(1, len(conds) + 1), conds, rotation=20)
+        ax.set_title(f"|{c} error| ({UNITS[c]}) per condition")
+    out["Error per condition"] = _fig_png(fig)
+    fig, axes = plt.subplots(2, 3, figsize=(11, 5.5))
+    for j, c in enumerate(GATED):
+        axes[0, j].scatter([r["distance_mm"] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8)
+        axes[0, j].set_xlabel("camera distance (mm)")
+        axes[0, j].set_ylabel(f"|{c} error| ({UNITS[c]})")
+        axes[1, j].scatter([r["focal_true"] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8, c="#228833")
+        axes[1, j].set_xlabel("focal length (px)")
+        axes[1, j].set_ylabel(f"|{c} error| ({UNITS[c]})")
+    fig.tight_layout()
+    out["Error against camera distance and focal length"] = _fig_png(fig)
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
+    for ax, c in zip(axes, GATED):
+        pts = [(r[f"crb_{c}"], abs(r[f"err_{c}"])) for r in test if r.get(f"crb_{c}")]
+        if pts:
+            b, e = np.array(pts).T
+            ax.scatter(b, e, s=8, c="#ee7733")
+            lim = max(b.max(), e.max()) * 1.05
+            ax.plot([0, lim], [0, lim], "k--", lw=0.8, label="|error| = bound")
+            ax.plot([0, lim], [0, 2 * lim], "k:", lw=0.8, label="2 x bound")
+            ax.legend(fontsize=7)
+        ax.set_xlabel(f"Cramer-Rao std of {c} ({UNITS[c]})")
+        ax.set_ylabel(f"|{c} error|")
+    out["Measured error against the Cramer-Rao bound"] = _fig_png(fig)
+    if detections_pr:
+        fig, ax = plt.subplots(figsize=(5, 4))
+        for name, (rec, prec) in detections_pr.items():
+            ax.plot(rec, prec, label=name)
+        ax.set_xlabel("recall")
+        ax.set_ylabel("precision")
+        ax.set_title("precision-recall at IoU 0.5")
+        ax.legend()
+        out["Precision-recall per class"] = _fig_png(fig)
+    return out
+
+
+def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections: dict | None, n: int = 6) -> list[tuple[str, str]]:
+    """The worst frames (largest normalised X/Y/alpha error; failures first) with markers drawn."""
+    import cv2
+    test = [r for r in rows if r["split"] == "test"]
+
+    def badness(r):
+        if not r["ok"]:
+            return float("inf")
+        return max(abs(r[f"err_{c}"]) / (r.get(f"crb_{c}") or 1.0) for c in GATED)
+
+    worst = sorted(test, key=badness, reverse=True)[:n]
+    items = []
+    for r in worst:
+        fid = r["frame_id"]
+        img = cv2.imread(str(dataset_root / "images" / f"{fid}.png"))
+        lab = json.loads((dataset_root / "labels" / f"{fid}.json").read_text())
+        if img is None:
+            continue
+        for m in lab["markers"]:   # true centres: green circles
+            u, v = m["center_px"]
+            cv2.circle(img, (int(round(u * 16)), int(round(v * 16))), 9 * 16, (0, 220, 0), 1, cv2.LINE_AA, 4)
+        for d in (detections or {}).get("frames", {}).get(fid, []):   # detections: magenta crosses
+            u, v = d["center_px"]
+            cv2.drawMarker(img, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_TILTED_CROSS, 10, 1)
+        rec = (poses or {}).get("frames", {}).get(fid)
+        if rec and rec.get("ok"):   # the layout reprojected with the estimated poses and focal: yellow dots
+            from generator.geometry import intrinsics, project_points
+            k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
+            cam_from_a = np.array(rec["cam_from_a"])
+            for m in lab["markers"]:
+                cam_from_s = cam_from_a @ (np.array(rec["d_from_b"]) if m["section"] == "B" else np.eye(4))
+                uv, _ = project_points(k, cam_from_s, np.array(m["center_section_mm"])[None])
+                if np.all(np.isfinite(uv)):
+                    cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), 3, (0, 255, 255), -1, cv2.LINE_AA)
+        h, w = img.shape[:2]
+        scale = 640 / w
+        img = cv2.resize(img, (640, int(h * scale)), interpolation=cv2.INTER_AREA)
+        ok, png = cv2.imencode(".png", img)
+        cap = (f"{fid} ({r['condition']}): " + (f"failed: {r['reason']}" if not r["ok"] else
+               ", ".join(f"{c} err {r[f'err_{c}']:+.3f} {UNITS[c]}" for c in GATED)))
+        items.append((cap, base64.b64encode(png.tobytes()).decode()))
+    return items
+
+
+def git_describe() -> str:
+    try:
+        return subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], capture_output=True, text=True,
+                              cwd=Path(__file__).resolve().parent.parent, timeout=10).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
+    eval_dir = Path(eval_dir)
+    metrics = json.loads((eval_dir / "metrics.json").read_text())
+    rows = read_rows(eval_dir)
+    prov_path = eval_dir / "provenance.json"
+    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {}
+    dataset_root = Path(metrics["dataset"]["root"])
+    poses = json.loads(Path(metrics["poses"]["path"]).read_text()) if Path(metrics["poses"]["path"]).exists() else None
+    det_path = prov.get("detections")
+    detections = json.loads(Path(det_path).read_text()) if det_path and Path(det_path).exists() else None
+    acc = metrics["acceptance"]
+    verdict = "ACCEPTED" if acc["accepted"] else "REJECTED"
+    provenance = {
+        "dataset_version": metrics["dataset"]["version_id"], "dataset": metrics["dataset"]["root"],
+        "model_sha256": prov.get("model_sha256", "n/a (oracle or no detector)"),
+        "code_version": git_describe(), "generator_version": GENERATOR_VERSION,
+        "software": {p: package_version(p) for p in ("numpy", "torch", "bpy", "opencv-python-headless", "pycocotools", "matplotlib")},
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "commands": commands or prov.get("commands", []),
+    }
+    figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
+    worst = gallery(dataset_root, rows, poses, detections)
+
+    def crit_rows():
+        out = []
+        for c in acc["criteria"]:
+            cls = "pass" if c["pass"] else "fail"
+            out.append(f"<tr class='{cls}'><td>{html.escape(c['name'])}</td><td>{c['statistic']}</td>"
+                       f"<td>{_num(c['value'])} {c['unit']}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
+                       f"<td>{_num(c.get('paper'))}</td><td><b>{'PASS' if c['pass'] else 'FAIL'}</b></td></tr>")
+        return "\n".join(out)
+
+    def stats_table(block, title):
+        head = "<tr><th>component</th><th>n</th><th>MSE</th><th>RMSE</th><th>bias</th><th>std</th><th>p95 |e|</th><th>max |e|</th></tr>"
+        body = "".join(f"<tr><td>{c} ({UNITS[c]})</td>" + "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")) + "</tr>" for c in COMPONENTS)
+        return f"<h3>{html.escape(title)}</h3><table>{head}{body}</table>"
+
+    loc = metrics["localization"]
+    parts = [f"<h1>dockfactory acceptance report: <span class='{'pass' if acc['accepted'] else 'fail'}'>{verdict}</span></h1>",
+             f"<p>Dataset <code>{html.escape(metrics['dataset']['name'])}</code> version <code>{metrics['dataset']['version_id']}</code>; "
+             f"poses from <b>{html.escape(str(metrics['poses']['source']))}</b>; test frames {loc['n_frames']} "
+             f"(solved {loc['n_solved']}); repeatability captures {metrics['estimation']['n_frames']}.</p>",
+             "<h2>Verdict</h2><table><tr><th>criterion</th><th>statistic</th><th>ours</th><th>threshold</th><th>paper</th><th>result</th></tr>",
+             crit_rows(), "</table>",
+             "<p class='note'>Estimation precision = pooled spread of repeated estimates of one static pose; localization precision = "
+             "error against exact ground truth (test split). RMSE in mm / deg, MSE in mm^2 / deg^2. The paper's localization alpha "
+             "figure (0.869 deg) contradicts its own 0.1 deg criterion and is suspect.</p>",
+             "<h2>Localization (test split)</h2>", stats_table(loc["overall"], "all conditions")]
+    for cond, block in loc["by_condition"].items():
+        parts.append(stats_table(block, f"condition: {cond}"))
+    parts.append("<h3>Measured against the Cramer-Rao bound</h3><table><tr><th>component</th><th>measured RMSE</th><th>bound (RMS)</th><th>ratio</th></tr>"
+                 + "".join(f"<tr><td>{c}</td><td>{_num(v['measured_rmse'])}</td><td>{_num(v['bound_rms'])}</td><td>{_num(v['ratio'], 3)}</td></tr>" for c, v in loc["crb"].items())
+                 + f"</table><p class='note'>Bound from each frame's exact geometry and the measured centre noise "
+                   f"({_num(metrics['centre_noise_px'], 3)} px per axis).</p>")
+    if "oracle" in metrics:
+        o = metrics["oracle"]["localization"]["overall"]
+        parts.append("<h3>Oracle (exact centres + noise of the measured size): separates detector from solver error</h3><table>"
+                     "<tr><th>component</th><th>RMSE pipeline</th><th>RMSE oracle</th></tr>"
+                     + "".join(f"<tr><td>{c} ({UNITS[c]})</td><td>{_num(loc['overall'][c]['rmse'])}</td><td>{_num(o[c]['rmse'])}</td></tr>" for c in COMPONENTS) + "</table>")
+    est = metrics["estimation"]
+    parts.append("<h2>Estimation (repeatability)</h2><table><tr><th>pose</th><th>captures</th>"
+                 + "".join(f"<th>std {c}</th>" for c in COMPONENTS) + "</tr>"
+                 + "".join(f"<tr><td>{p['pose']}</td><td>{p['captures']}</td>" + "".join(f"<td>{_num(p[c])}</td>" for c in COMPONENTS) + "</tr>" for p in est["per_pose"])
+                 + "<tr><td><b>pooled</b></td><td></td>" + "".join(f"<td><b>{_num(est['pooled'][c]['rmse'])}</b></td>" for c in COMPONENTS) + "</tr></table>")
+    f = metrics["failures_test"]
+    parts.append(f"<h2>Failures</h2><p>{f['count']} of {f['frames']} test frames without a pose "
+                 f"({100 * f['rate']:.2f} %). By condition: "
+                 + ", ".join(f"{c}: {v['failed']}/{v['frames']}" for c, v in f["by_condition"].items()) + ".</p>")
+    if f["list"]:
+        parts.append("<table><tr><th>frame</th><th>condition</th><th>reason</th></tr>" + "".join(
+            f"<tr><td>{x['frame_id']}</td><td>{x['condition']}</td><td>{html.escape(x['reason'])}</td></tr>" for x in f["list"][:50]) + "</table>")
+    loc_f = loc["focal_err_pct"]
+    parts.append(f"<p>Focal length error: RMSE {_num(loc_f['rmse'])} %, bias {_num(loc_f['mean'])} %. Reprojection RMSE "
+                 f"A {_num(loc['reprojection_rmse_px']['A']['rmse'])} px, B {_num(loc['reprojection_rmse_px']['B']['rmse'])} px.</p>")
+    det = metrics.get("detection")
+    if det and "map50" in det:
+        parts.append("<h2>Detection (test split)</h2><table><tr><th>class</th><th>mAP50</th><th>mAP50:95</th></tr>"
+                     + f"<tr><td>all</td><td>{_num(det['map50'])}</td><td>{_num(det['map50_95'])}</td></tr>"
+                     + "".join(f"<tr><td>{k}</td><td>{_num(v.get('map50'))}</td><td>{_num(v.get('map50_95'))}</td></tr>" for k, v in det.get("per_class", {}).items())
+                     + "</table>")
+    parts.append("<h2>Plots</h2>")
+    for title, b64 in figs.items():
+        parts.append(f"<h3>{html.escape(title)}</h3>{_img(b64, title)}")
+    parts.append("<h2>Worst frames</h2><p class='note'>Green circles: true marker centres; magenta crosses: detections; "
+                 "yellow dots: every marker reprojected with the estimated poses and focal length.</p>")
+    for cap, b64 in worst:
+        parts.append(f"<figure>{_img(b64, cap)}<figcaption>{html.escape(cap)}</figcaption></figure>")
+    parts.append("<h2>Provenance</h2><table>" + "".join(
+        f"<tr><td>{html.escape(k)}</td><td><code>{html.escape(json.dumps(v) if not isinstance(v, str) else v)}</code></td></tr>"
+        for k, v in provenance.items()) + "</table>")
+    css = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;color:#222}"
+           "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;font-size:90%}"
+           "tr.pass td:last-child,.pass{color:#17702a}tr.fail td:last-child,.fail{color:#b00020}"
+           ".note{color:#555;font-size:85%}img{max-width:100%}figure{display:inline-block;margin:4px;max-width:540px}"
+           "@media print{h2{page-break-before:auto}img{max-width:95%}}")
+    doc = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
+           f"<style>{css}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
+    write_text_atomic(out_html, doc)
+    summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,
+               "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
+               "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
+               "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()}}
+    out_html = Path(out_html)
+    write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
+    md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
+    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
+           f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
+    write_text_atomic(out_html.with_suffix(".md"), "\n".join(md) + "\n")
+    return summary
