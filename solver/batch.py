@@ -263,7 +263,7 @@ def _lm_batch(sections, pp, params, max_iter=40):
         tiny = np.max(np.abs(step[acc]) * np.sqrt(dg[acc]), axis=1) < 1e-9
         res[idx], jac[idx], cost[idx] = res_n[acc], jac_n[acc], cost_n[acc]
         lam[idx] = np.maximum(lam[idx] * 0.1, 1e-12)
-        stop = tiny | (dec <= 1e-10 * cost[idx]) | (cost[idx] < 1e-28 * res.shape[1])
+        stop = tiny | (dec <= 1e-9 * cost[idx]) | (cost[idx] < 1e-28 * res.shape[1])
         conv[idx[stop]] = True
         done[idx[stop]] = True
         rej = act[~acc]
@@ -321,10 +321,12 @@ def _docking_outputs(ra, ta, rb, tb, cov13):
 
 def _covariances(jac, res, cost, dof, sigma_px):
     jtj = jac.transpose(0, 2, 1) @ jac
-    try:
-        inv = np.linalg.inv(jtj)
-    except np.linalg.LinAlgError:
-        inv = np.stack([np.linalg.pinv(a) for a in jtj])
+    dg = np.einsum("fii->fi", jtj)
+    sc = 1.0 / np.sqrt(np.where(dg > 0, dg, np.nan))           # Jacobi scaling
+    lam, vec = np.linalg.eigh(np.nan_to_num(jtj * sc[:, :, None] * sc[:, None, :]))
+    inv = ((vec / lam[:, None, :]) @ vec.transpose(0, 2, 1)) * sc[:, :, None] * sc[:, None, :]
+    singular = ~(lam[:, 0] > 1e-15 * lam[:, -1]) | ~np.all(dg > 0, axis=1)
+    inv[singular] = np.inf
     if sigma_px is None:
         s2 = np.where(dof > 0, cost / np.maximum(dof, 1), np.inf)
     else:

@@ -23,7 +23,7 @@ import numpy as np
 
 from solver.checks import as_points, as_principal_point
 from solver.errors import SolverError
-from solver.refine import d_from_b_jacobian, residuals_and_jacobian
+from solver.refine import d_from_b_jacobian, inverse_spd, residuals_and_jacobian
 
 __all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "DockingBound", "POSE_NAMES"]
 
@@ -53,11 +53,11 @@ def _jac(points_3d, cam_from_world, focal_px, principal_point):
 def _inverse_information(jac, sigma_px):
     if not (np.isfinite(sigma_px) and sigma_px >= 0):
         raise SolverError(f"sigma_px must be finite and >= 0, got {sigma_px}")
-    jtj = jac.T @ jac
-    if np.linalg.cond(jtj) > 1e15:
+    inv = inverse_spd(jac.T @ jac)
+    if not np.all(np.isfinite(inv)):
         raise SolverError("Fisher information is singular: the parameters are not observable "
                           "from these points (degenerate configuration)")
-    return sigma_px ** 2 * np.linalg.inv(jtj)
+    return sigma_px ** 2 * inv
 
 
 def crb_pnpf(points_3d, cam_from_world, focal_px: float, principal_point, sigma_px: float,

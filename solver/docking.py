@@ -94,7 +94,7 @@ def layout_arrays(markers):
     return ids, sections, pts
 
 
-def _parse_correspondences(correspondences, n_points_hint=None):
+def _parse_correspondences(correspondences):
     """(ids list (N,), points_2d (N, 2)) from a dict id -> (u, v) or a pair (ids, (N, 2))."""
     if isinstance(correspondences, dict):
         ids = [str(k) for k in correspondences]

@@ -160,10 +160,6 @@ class _Fit:
         self.pairs = dict(pairs)
 
 
-def _last_fit_pairs(fit):
-    return list(fit.pairs.items())
-
-
 def _fit(p3, uv, pairs, pp, accept_rmse=None):
     from solver.pnpf import solve_checked
     from solver.checks import check_correspondences
@@ -207,7 +203,7 @@ def _verify(p3, uv, z, pairs, pp, gate, max_rmse, min_matches, rounds=3):
         pairs = new
     if ref is None or len(pairs) < min_matches:
         return None
-    if sorted(pairs.items()) != sorted(_last_fit_pairs(ref)):
+    if pairs != ref.pairs:
         try:
             ref = _fit(p3, uv, pairs, pp, accept_rmse=max_rmse)
         except (SolverError, np.linalg.LinAlgError):
@@ -385,7 +381,6 @@ def _joint_fit(ha, hb, pts, sel, uv, pp, max_rmse, pairs_a=None, pairs_b=None):
 def _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, max_rmse):
     """RMS of the joint fit (shared focal) of hypothesis ``h`` of section ``s`` with the other
     section's best hypothesis; inf when the pair is inconsistent (shared detections, failure)."""
-    from solver.docking import solve_docking_arrays
     if set(h.pairs.values()) & set(anchor.pairs.values()):
         return np.inf
     parts = {s: h, other: anchor}

@@ -94,7 +94,8 @@ def refine_candidates(p3, p2, pp, cands, sigma_px=None, max_tries: int = 3):
 
 
 def _check_focal_observable(ref, cov):
-    rel = np.sqrt(cov[6, 6]) / ref.focal_px if np.isfinite(cov[6, 6]) else np.inf
+    v = cov[6, 6]
+    rel = float(np.sqrt(v)) / ref.focal_px if np.isfinite(v) and v >= 0 else np.inf
     if not rel <= MAX_FOCAL_REL_STD:
         raise SolverError(
             f"focal length is not observable from these points (estimate {ref.focal_px:.4g} px "

@@ -1,0 +1,224 @@
+"""Every SolverError path: bad input raises a ValueError subclass with a clear message."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solver import (SolverError, crb_d_from_b, crb_pnpf, identify_markers, solve_docking,
+                    solve_docking_batch, solve_pnpf, solve_pnpf_batch, upnp)
+from solver.synthetic import default_layout, docking_scene
+
+PP = np.array([639.5, 479.5])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return docking_scene(np.random.default_rng(0))
+
+
+def test_is_value_error():
+    assert issubclass(SolverError, ValueError)
+
+
+def test_fewer_than_four_points(scene):
+    with pytest.raises(SolverError, match="3 usable points, at least 4"):
+        solve_pnpf(scene.points_a[:3], scene.uv_a[:3], PP)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_inf(scene, bad):
+    uv = scene.uv_a.copy()
+    uv[2, 1] = bad
+    with pytest.raises(SolverError, match="NaN or inf"):
+        solve_pnpf(scene.points_a, uv, PP)
+    p3 = scene.points_a.copy()
+    p3[0, 0] = bad
+    with pytest.raises(SolverError, match="NaN or inf"):
+        solve_pnpf(p3, scene.uv_a, PP)
+    with pytest.raises(SolverError, match="NaN or inf"):
+        solve_pnpf(scene.points_a, scene.uv_a, [bad, 1.0])
+
+
+def test_collinear_points(scene):
+    p3 = np.column_stack([np.linspace(0, 100, 6), np.zeros(6), np.zeros(6)])
+    uv = np.column_stack([np.linspace(300, 600, 6), np.linspace(200, 500, 6) ** 1.01])
+    with pytest.raises(SolverError, match="3D points are collinear"):
+        solve_pnpf(p3, uv, PP)
+    uv_line = np.column_stack([np.linspace(300, 600, 7), np.full(7, 400.0)])
+    with pytest.raises(SolverError, match="image points are collinear"):
+        solve_pnpf(scene.points_a, uv_line, PP)
+
+
+def test_coincident_points():
+    with pytest.raises(SolverError, match="collinear"):
+        solve_pnpf(np.ones((5, 3)), np.random.default_rng(0).random((5, 2)), PP)
+
+
+@pytest.mark.parametrize("p3_shape,p2_shape,msg", [
+    ((7, 3), (6, 2), "shapes do not match"),
+    ((7, 2), (7, 2), r"expected shape \(N, 3\)"),
+    ((7, 3), (7, 3), r"expected shape \(N, 2\)"),
+    ((7,), (7, 2), r"expected shape \(N, 3\)"),
+])
+def test_shape_mismatch(p3_shape, p2_shape, msg):
+    rng = np.random.default_rng(1)
+    with pytest.raises(SolverError, match=msg):
+        solve_pnpf(rng.random(p3_shape), rng.random(p2_shape), PP)
+
+
+def test_principal_point_shape(scene):
+    with pytest.raises(SolverError, match=r"principal_point: expected shape \(2,\)"):
+        solve_pnpf(scene.points_a, scene.uv_a, [1.0, 2.0, 3.0])
+
+
+def test_points_behind_camera():
+    """Image points that only a camera with some points behind it could produce."""
+    rng = np.random.default_rng(3)
+    p3 = rng.uniform(-100, 100, (8, 3))
+    cam_t = np.array([0.0, 0.0, 20.0])                 # camera inside the point cloud
+    pc = p3 + cam_t
+    assert (pc[:, 2] < 0).any() and (pc[:, 2] > 0).any()
+    uv = 1000.0 * pc[:, :2] / pc[:, 2:3] + PP
+    with pytest.raises(SolverError, match="behind the camera"):
+        solve_pnpf(p3, uv, PP)
+
+
+def test_non_numeric():
+    with pytest.raises(SolverError, match="not a numeric array"):
+        solve_pnpf([["a", "b", "c"]] * 5, np.zeros((5, 2)), PP)
+
+
+def test_sigma_and_rng_arguments(scene):
+    with pytest.raises(SolverError, match="sigma_px"):
+        solve_pnpf(scene.points_a, scene.uv_a, PP, sigma_px=-1.0)
+    with pytest.raises(SolverError, match="numpy.random.Generator"):
+        solve_pnpf(scene.points_a, scene.uv_a, PP, robust=True)
+    with pytest.raises(SolverError, match="numpy.random.Generator"):
+        solve_pnpf(scene.points_a, scene.uv_a, PP, robust=True, rng=42)
+
+
+def test_upnp_direct_validation():
+    with pytest.raises(SolverError, match="at least 4"):
+        upnp(np.zeros((2, 3)), np.zeros((2, 2)), PP)
+
+
+# ------------------------------------------------------------------ docking
+
+def _corr(scene):
+    uv = np.vstack([scene.uv_a, scene.uv_b])
+    return {m.id: uv[k] for k, m in enumerate(default_layout())}
+
+
+def test_docking_needs_exactly_one_input(scene):
+    with pytest.raises(SolverError, match="exactly one"):
+        solve_docking(default_layout(), PP)
+    with pytest.raises(SolverError, match="exactly one"):
+        solve_docking(default_layout(), PP, detections=([0], [[1, 2]]), correspondences={})
+
+
+def test_docking_unknown_and_repeated_ids(scene):
+    corr = _corr(scene)
+    corr["Z9"] = (1.0, 2.0)
+    with pytest.raises(SolverError, match="unknown marker ids"):
+        solve_docking(default_layout(), PP, correspondences=corr)
+    ids = ["A0", "A0", "A1", "A2", "A3", "B0", "B1", "B2", "B3"]
+    with pytest.raises(SolverError, match="more than once"):
+        solve_docking(default_layout(), PP, correspondences=(ids, np.zeros((9, 2))))
+
+
+def test_docking_too_few_in_a_section(scene):
+    corr = {k: v for k, v in _corr(scene).items() if k not in ("B0", "B1", "B2", "B3")}
+    with pytest.raises(SolverError, match="section B: 3 usable points"):
+        solve_docking(default_layout(), PP, correspondences=corr)
+
+
+def test_docking_shape_mismatch_and_nan(scene):
+    ids = [m.id for m in default_layout()]
+    with pytest.raises(SolverError, match="shapes do not match"):
+        solve_docking(default_layout(), PP, correspondences=(ids, np.zeros((13, 2))))
+    uv = np.vstack([scene.uv_a, scene.uv_b])
+    uv[3, 0] = np.nan
+    with pytest.raises(SolverError, match="NaN or inf"):
+        solve_docking(default_layout(), PP, correspondences=(ids, uv))
+
+
+def test_docking_bad_layout():
+    with pytest.raises(SolverError, match="markers"):
+        solve_docking([1, 2, 3], PP, correspondences={})
+
+
+def test_detections_bad_class_and_shapes(scene):
+    uv = np.vstack([scene.uv_a, scene.uv_b])
+    with pytest.raises(SolverError, match="unknown class"):
+        solve_docking(default_layout(), PP, detections=(["A"] * 13 + ["C"], uv))
+    with pytest.raises(SolverError, match="shapes do not match"):
+        solve_docking(default_layout(), PP, detections=([0] * 13, uv))
+    with pytest.raises(SolverError, match="pair"):
+        identify_markers(default_layout(), PP, uv)
+
+
+def test_identification_ambiguous_raises():
+    """Markers on a regular grid along the axis: shifting the assignment by one column explains
+    the image equally well; the solver must say so rather than pick one."""
+    from generator.layout import build_layout
+    grid = tuple((s, phi) for s in (40.0, 100.0, 160.0, 220.0) for phi in (-20.0, 0.0, 20.0))
+    markers = build_layout(grid, grid, radius_mm=300.0, diameter_mm=20.0)
+    from generator.geometry import look_at_cam_from_world
+    from generator.layout import marker_points
+    cam = look_at_cam_from_world(np.array([30.0, 10.0, 1800.0]), np.array([0.0, 0.0, 300.0]))
+    f = 1500.0
+    dets, cls = [], []
+    for s, sign in (("A", -1.0), ("B", 1.0)):
+        p = marker_points(markers, s)
+        p = p if s == "A" else p + np.array([60.0, 0.0, 0.0])
+        keep = np.abs(p[:, 0]) < 170.0                # only 2 of 4 columns visible per side
+        pc = p[keep] @ cam[:3, :3].T + cam[:3, 3]
+        dets.append(f * pc[:, :2] / pc[:, 2:3] + PP)
+        cls += [0 if s == "A" else 1] * int(keep.sum())
+    with pytest.raises(SolverError, match="ambiguous"):
+        solve_docking(markers, PP, detections=(cls, np.vstack(dets)), identify_options={
+            "sigma_px": 0.5})
+
+
+def test_identification_too_few(scene):
+    uv = np.vstack([scene.uv_a[:3], scene.uv_b])
+    with pytest.raises(SolverError, match="section A"):
+        solve_docking(default_layout(), PP, detections=([0] * 3 + [1] * 7, uv))
+
+
+# ------------------------------------------------------------------ batch and bounds
+
+def test_batch_shapes_and_nan():
+    layout = default_layout()
+    with pytest.raises(SolverError, match=r"expected shape \(F, 14, 2\)"):
+        solve_docking_batch(layout, PP, np.zeros((5, 13, 2)))
+    uv = np.zeros((2, 14, 2))
+    uv[1, 3, 0] = np.nan
+    with pytest.raises(SolverError, match="visible=False"):
+        solve_docking_batch(layout, PP, uv)
+    with pytest.raises(SolverError, match="visible"):
+        solve_docking_batch(layout, PP, np.zeros((2, 14, 2)), visible=np.ones((3, 14)))
+    with pytest.raises(SolverError, match=r"expected shape \(F, 7, 2\)"):
+        solve_pnpf_batch(np.zeros((7, 3)), np.zeros((7, 2)), PP)
+
+
+def test_batch_reports_per_frame_failure(scene):
+    uv = np.vstack([scene.uv_a, scene.uv_b])[None].repeat(2, axis=0)
+    vis = np.ones((2, 14), dtype=bool)
+    vis[1, :4] = False                                 # frame 1: 3 A markers left
+    out = solve_docking_batch(default_layout(), scene.principal_point, uv, visible=vis)
+    assert out.ok.tolist() == [True, False]
+    assert "section A: 3 usable points" in out.messages[1]
+    assert np.all(np.isfinite(out.pose[0])) and np.all(np.isnan(out.pose[1]))
+
+
+def test_crb_degenerate_and_bad_input(scene):
+    with pytest.raises(SolverError, match="behind the camera"):
+        crb_pnpf(scene.points_a, np.diag([1.0, 1.0, -1.0, 1.0]), 1000.0, PP, 1.0)
+    with pytest.raises(SolverError, match="focal_px"):
+        crb_pnpf(scene.points_a, scene.cam_from_d, -5.0, PP, 1.0)
+    with pytest.raises(SolverError, match="problem must be"):
+        crb_d_from_b(scene.points_a, scene.cam_from_d, scene.points_b, scene.cam_from_b,
+                     scene.focal_px, PP, 1.0, problem="nope")
+    with pytest.raises(SolverError, match="singular"):
+        crb_pnpf(scene.points_a[:3], scene.cam_from_d, scene.focal_px, PP, 1.0)
