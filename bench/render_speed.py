@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -72,7 +73,7 @@ def main() -> int:
           f"max_bounces={cfg.render.max_bounces}, keep_exr={cfg.render.keep_exr}, workers={args.workers}, "
           f"frames={n} (first frame per worker excluded from per-frame figures)")
     print(f"{'condition':10s} {'n':>3s} {'s/image':>8s} {'cycles s':>9s} {'update':>7s} {'read':>6s} "
-          f"{'sensor+lab':>10s} {'write':>6s} {'overhead':>9s}")
+          f"{'sensor+lab':>10s} {'write':>6s} {'overhead':>9s} {'cpu s/img':>9s} {'cycles cpu':>10s} {'cpu ovh':>8s}")
     all_t = []
     for cond in CONDITIONS + ("ALL",):
         ts = all_t if cond == "ALL" else by_cond.get(cond, [])
@@ -83,10 +84,16 @@ def main() -> int:
         med = lambda k: statistics.median(t[k] for t in ts)  # noqa: E731
         tot, cyc = med("total"), med("cycles")
         rows.append((cond, len(ts), tot, cyc))
+        tcpu, ccpu = med("total_cpu"), med("cycles_cpu")
         print(f"{cond:10s} {len(ts):3d} {tot:8.2f} {cyc:9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} "
-              f"{med('sensor_labels'):10.3f} {med('encode_write'):6.3f} {100 * (tot - cyc) / cyc:8.1f}%")
+              f"{med('sensor_labels'):10.3f} {med('encode_write'):6.3f} {100 * (tot - cyc) / cyc:8.1f}% "
+              f"{tcpu:9.2f} {ccpu:10.2f} {100 * (tcpu - ccpu) / ccpu:7.1f}%")
     print(f"job wall time {wall:.1f} s for {n} frames = {wall / n:.2f} s/image including worker start "
           f"({3600 * n / wall:.0f} frames/hour)")
+    cores = os.cpu_count() or 1
+    print(f"cpu s/img = CPU seconds of the worker process (all threads) per frame; on an otherwise idle "
+          f"{cores}-core machine the wall time per image is at least cpu s/img / {cores}. "
+          f"Load average now: {os.getloadavg()[0]:.2f}")
     return 0
 
 

@@ -23,12 +23,19 @@ def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
 def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     scene = h.scene
     c = scene.cycles
-    c.samples = frame.samples
+    rs = frame.render
+    c.samples = rs.samples
     c.seed = frame.render_seed
-    c.max_bounces = frame.max_bounces
-    c.use_denoising = frame.denoise != "off"
-    if frame.denoise != "off":
-        c.denoising_quality = DENOISE_QUALITY[frame.denoise]
+    c.max_bounces = rs.max_bounces
+    c.use_adaptive_sampling = rs.adaptive_threshold > 0
+    if rs.adaptive_threshold > 0:
+        c.adaptive_threshold = rs.adaptive_threshold
+        c.adaptive_min_samples = rs.adaptive_min_samples
+    c.filter_width = rs.filter_width_px
+    c.use_denoising = rs.denoise != "off"
+    if rs.denoise != "off":
+        c.denoising_quality = DENOISE_QUALITY[rs.denoise]
+        c.denoising_prefilter = rs.denoise_prefilter.upper()
 
     h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
 

@@ -30,6 +30,18 @@ def _protocol_stream():
     return out
 
 
+def _rss_mb() -> float:
+    """Resident memory of this process (MB), from /proc (0 where there is no /proc)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
 def _inject_fault(frame_id: str) -> None:
     spec = os.environ.get("DOCKFACTORY_FAULT", "")
     if not spec or ":" not in spec:
@@ -95,15 +107,19 @@ def main() -> int:
                         raise RuntimeError("render before init")
                     frame = from_dict(FrameScene, req["frame"])
                     _inject_fault(frame.spec.frame_id)
-                    t0 = time.perf_counter()
+                    t0, c0 = time.perf_counter(), time.process_time()
                     apply_frame(handles, frame)
-                    t1 = time.perf_counter()
+                    t1, c1 = time.perf_counter(), time.process_time()
                     bpy.ops.render.render(write_still=True)
-                    t2 = time.perf_counter()
+                    t2, c2 = time.perf_counter(), time.process_time()
                     done = finish_frame(frame, static, exr_path, init["root"], init["keep_exr"],
                                         init["visible_threshold"],
                                         {"scene_update": t1 - t0, "cycles": t2 - t1})
                     done["timings_s"]["total"] = time.perf_counter() - t0
+                    # CPU seconds (all threads): a measure of work that other load does not inflate
+                    done["timings_s"]["cycles_cpu"] = c2 - c1
+                    done["timings_s"]["total_cpu"] = time.process_time() - c0
+                    done["rss_mb"] = _rss_mb()
                     reply = {"ok": True, "op": "render", "frame_id": frame.spec.frame_id, **done}
                 else:
                     raise ValueError(f"unknown op {op!r}")

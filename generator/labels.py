@@ -212,7 +212,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
             "sensor": to_dict(frame.sensor),
             "glare_kind": frame.glare_kind,
             "render_seed": frame.render_seed,
-            "samples": frame.samples, "denoise": frame.denoise, "max_bounces": frame.max_bounces,
+            "render": to_dict(frame.render),
         },
         "derived": derived or {},
     }

@@ -150,7 +150,7 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
                     finished += 1
                     summary.rendered += 1
                     summary.timings.append(info["timings_s"])
-                    tlog.write(json.dumps({"frame_id": fid, **info["timings_s"]}) + "\n")
+                    tlog.write(json.dumps({"frame_id": fid, **info["timings_s"], "rss_mb": info.get("rss_mb")}) + "\n")
                     tlog.flush()
                 elif kind == "failed":
                     finished += 1

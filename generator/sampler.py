@@ -19,6 +19,7 @@ from generator.geometry import (look_at_cam_from_world, make_transform, rot_x, r
                                 transform_from_pose_components, transform_points)
 from generator.layout import marker_points
 from generator.scene import (CLUTTER_KINDS, Appearance, CameraModel, FrameScene, FrameSpec, Light, Prop,
+                             RenderSettings,
                              SensorParams, StaticScene, mat4, vec)
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
@@ -340,6 +341,12 @@ def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParam
 
 # ----------------------------------------------------------------------------- frame
 
+def render_settings(cfg: Config) -> RenderSettings:
+    r = cfg.render
+    return RenderSettings(r.samples, r.denoise, r.max_bounces, r.adaptive_threshold,
+                          r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter)
+
+
 def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
     """The full scene of one planned frame (pure and deterministic)."""
     static = static_scene(cfg)
@@ -375,5 +382,4 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
     return FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
                       props=tuple(props), appearance=appearance, sensor=sensor,
                       glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
-                      samples=cfg.render.samples, denoise=cfg.render.denoise,
-                      max_bounces=cfg.render.max_bounces)
+                      render=render_settings(cfg))

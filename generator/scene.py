@@ -115,6 +115,18 @@ class SensorParams:
 
 
 @dataclass(frozen=True)
+class RenderSettings:
+    """Cycles settings of a frame (see [render] in the config)."""
+    samples: int
+    denoise: str                 # off | fast | balanced | high
+    max_bounces: int
+    adaptive_threshold: float    # 0 = adaptive sampling off
+    adaptive_min_samples: int
+    filter_width_px: float       # Blackman-Harris pixel filter width
+    denoise_prefilter: str       # none | fast | accurate
+
+
+@dataclass(frozen=True)
 class StaticScene:
     """What stays the same for a whole dataset (built once per render worker)."""
     radius_mm: float
@@ -137,9 +149,7 @@ class FrameScene:
     sensor: SensorParams
     glare_kind: str                  # "none" | "lamp_in_view" | "specular"
     render_seed: int
-    samples: int
-    denoise: str
-    max_bounces: int
+    render: RenderSettings
 
     def d_from_b_array(self) -> np.ndarray:
         return np.array(self.d_from_b)

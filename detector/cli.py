@@ -1,0 +1,166 @@
+"""Detector subcommands for the ``dockfactory`` CLI: train, detect, ablate, export-onnx.
+
+``add_subcommands(subparsers)`` registers them on an argparse subparsers object. torch is only
+imported inside the command functions, so building the parser (and ``--help``) stays instant.
+Each command returns an exit status (0 ok); bad input raises ValueError (the caller maps it to 2).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+
+SHIPPED_WEIGHTS = Path(__file__).resolve().parent.parent / "models" / "yolov5n_se_markers.pt"
+
+
+def _torch(threads: int | None):
+    """Import torch with a passive OpenMP wait policy (the machine is shared) and set the threads."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    import torch
+    torch.set_num_threads(max(1, threads or os.cpu_count() or 1))
+    return torch
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def _train_config(args, attention: str, seed: int):
+    from detector.data import DataConfig
+    from detector.model import DEFAULT_ANCHORS, DEFAULT_ANCHORS_P2, ModelConfig
+    from detector.train import TrainConfig
+    model = ModelConfig(scale=args.model, attention=attention, p2=args.p2,
+                        anchors=DEFAULT_ANCHORS_P2 if args.p2 else DEFAULT_ANCHORS)
+    data = DataConfig(crops_per_frame=args.crops_per_frame, input_scale=args.input_scale)
+    return TrainConfig(model=model, data=data, epochs=args.epochs, batch_size=args.batch, nbs=args.nbs or args.batch,
+                       seed=seed)
+
+
+def cmd_train(args) -> int:
+    _torch(args.threads)
+    from detector.train import train
+    cfg = _train_config(args, args.attention, args.seed)
+    summary = train(args.dataset, args.out, cfg, resume=args.resume, progress=not args.quiet)
+    h = summary["history"]
+    print(f"trained {summary['epochs']} epochs on dataset {summary['dataset_version']} in {summary['seconds']} s "
+          f"({h[-1]['images_per_s'] if h else float('nan')} img/s last epoch); weights: {summary['weights']}")
+    return 0
+
+
+def cmd_detect(args) -> int:
+    _torch(args.threads)
+    from detector.infer import detect_dataset
+    split = None if args.split == "all" else args.split
+    doc = detect_dataset(args.dataset, args.weights, args.out, split=split, conf_threshold=args.conf,
+                         iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet)
+    n = sum(len(v) for v in doc["frames"].values())
+    print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
+    if args.eval:
+        from eval.detection_metrics import evaluate_detections, format_report
+        print(format_report(evaluate_detections(args.dataset, doc)))
+    return 0
+
+
+def cmd_ablate(args) -> int:
+    _torch(args.threads)
+    from detector.ablate import run_ablation
+    attentions = [a.strip() for a in args.attention.split(",") if a.strip()]
+    seeds = list(range(args.seeds))
+    result = run_ablation(args.dataset, args.out, attentions, seeds,
+                          lambda att, seed: _train_config(args, att, seed), conf=args.conf,
+                          progress=not args.quiet)
+    print(result["table"])
+    print(f"written: {Path(args.out) / 'ablation.md'}, {Path(args.out) / 'ablation.json'}")
+    return 0
+
+
+def cmd_export_onnx(args) -> int:
+    _torch(args.threads)
+    from detector.onnx_export import export_onnx
+    info = export_onnx(args.weights, args.out, height=args.height, width=args.width, check=not args.no_check)
+    print(f"ONNX model -> {info['path']} (input {info['input_shape']}); "
+          + (f"max |onnx - torch| = {info['max_abs_diff']:.2e}" if "max_abs_diff" in info else "not checked"))
+    return 0
+
+
+def add_subcommands(subparsers) -> None:
+    """Register train, detect, ablate and export-onnx on ``subparsers`` (argparse)."""
+    def common_train(p):
+        p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
+        p.add_argument("--epochs", type=_positive_int, default=60, help="epochs (default 60)")
+        p.add_argument("--batch", type=_positive_int, default=16, help="crops per batch (default 16)")
+        p.add_argument("--nbs", type=_positive_int, help="nominal batch for gradient accumulation (default = --batch)")
+        p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
+        p.add_argument("--input-scale", type=float, default=0.5, help="network px per image px (default 0.5)")
+        p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
+        p.add_argument("--threads", type=int, help="torch threads (default: all cores)")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    t = subparsers.add_parser("train", help="train the marker detector on a dataset's train split")
+    t.add_argument("dataset", help="dataset directory (dockfactory render --out)")
+    t.add_argument("--out", required=True, help="run directory (checkpoints, history, weights)")
+    t.add_argument("--attention", choices=("se", "eca", "cbam", "a2", "none"), default="se",
+                   help="attention block after the last backbone C3 (default se)")
+    t.add_argument("--seed", type=int, default=0, help="seed of initial weights, crops and augmentation")
+    t.add_argument("--resume", action="store_true", help="continue from RUN/last.pt")
+    common_train(t)
+    t.set_defaults(func=cmd_train)
+
+    d = subparsers.add_parser("detect", help="detect markers (boxes, refined centres) in a dataset's frames")
+    d.add_argument("dataset")
+    d.add_argument("--weights", default=str(SHIPPED_WEIGHTS),
+                   help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
+    d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
+    d.add_argument("--out", required=True, help="detections JSON")
+    d.add_argument("--conf", type=float, default=0.25, help="score threshold (use 0.001 for mAP)")
+    d.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold")
+    d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")
+    d.add_argument("--eval", action="store_true", help="print mAP, centre error and recall afterwards")
+    d.add_argument("--threads", type=int)
+    d.add_argument("--quiet", action="store_true")
+    d.set_defaults(func=cmd_detect)
+
+    a = subparsers.add_parser("ablate", help="train and evaluate attention variants under one budget")
+    a.add_argument("dataset")
+    a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
+    a.add_argument("--seeds", type=_positive_int, default=1, help="number of seeds (0..S-1)")
+    a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
+    a.add_argument("--conf", type=float, default=0.001, help="score threshold for mAP")
+    common_train(a)
+    a.set_defaults(func=cmd_ablate)
+
+    e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
+    e.add_argument("--weights", default=str(SHIPPED_WEIGHTS), help="default: the shipped weights")
+    e.add_argument("--out", required=True, help="ONNX file")
+    e.add_argument("--height", type=int, default=480, help="network input height (default 480)")
+    e.add_argument("--width", type=int, default=640, help="network input width (default 640)")
+    e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
+    e.add_argument("--threads", type=int)
+    e.set_defaults(func=cmd_export_onnx)
+
+
+def main(argv=None) -> int:
+    """Standalone entry (``python -m detector.cli``) until the commands are wired into dockfactory."""
+    p = argparse.ArgumentParser(prog="python -m detector.cli")
+    add_subcommands(p.add_subparsers(dest="command", required=True))
+    args = p.parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted: run the same command with --resume to continue", file=sys.stderr)
+        return 130
+    except ValueError as exc:
+        print(f"dockfactory: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

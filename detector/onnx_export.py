@@ -1,0 +1,52 @@
+"""ONNX export of trained weights (BatchNorm fused, decoded outputs) and a check with onnxruntime.
+
+The ONNX model takes ``images: (1, 3, H, W) float32`` in [0, 1] (the letterboxed frame, see
+``detector.infer.letterbox``) and returns ``predictions: (1, N, 5 + nc)`` rows
+[cx, cy, w, h, obj, cls...] in network px, exactly what the torch model returns in eval mode;
+NMS and the centre refinement stay in Python. Needs the ``onnx`` package (and ``onnxruntime``
+for the check).
+"""
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+
+def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool = True, seed: int = 0,
+                atol: float = 1e-3) -> dict:
+    import torch
+
+    from detector.checkpoint import load_model
+    if height % 32 or width % 32 or height <= 0 or width <= 0:
+        raise ValueError(f"height and width must be positive multiples of 32, got {height} x {width}")
+    model, _ = load_model(weights, fuse=True)
+    x = torch.rand((1, 3, height, width), generator=torch.Generator().manual_seed(seed))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # tracer warnings about the shape checks (fixed input)
+            torch.onnx.export(model, (x,), str(tmp), input_names=["images"], output_names=["predictions"],
+                              opset_version=17, dynamo=False)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    info = {"path": str(out), "input_shape": [1, 3, height, width]}
+    if check:
+        import onnxruntime as ort
+        sess = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+        got = sess.run(None, {"images": x.numpy()})[0]
+        with torch.inference_mode():
+            ref = model(x).numpy()
+        if got.shape != ref.shape:
+            raise ValueError(f"ONNX output shape {got.shape} != torch {ref.shape}")
+        diff = float(np.abs(got - ref).max())
+        info["max_abs_diff"] = diff
+        if diff > atol * max(1.0, float(np.abs(ref).max())):
+            raise ValueError(f"ONNX output differs from torch by {diff:.3g} (tolerance {atol} relative)")
+    return info

@@ -1,0 +1,56 @@
+"""The detector subcommands: torch-free --help, train -> detect (+ eval) -> export-onnx on synthetic data."""
+import json
+import os
+import subprocess
+import sys
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import pytest
+
+from detector.synthetic import write_synthetic_dataset
+
+
+def test_help_is_torch_free(repo_root):
+    code = ("import argparse, sys\nfrom detector.cli import add_subcommands\n"
+            "p = argparse.ArgumentParser(); add_subcommands(p.add_subparsers(dest='c'))\n"
+            "for c in ('train', 'detect', 'ablate', 'export-onnx'):\n"
+            "    try:\n        p.parse_args([c, '--help'])\n    except SystemExit:\n        pass\n"
+            "assert 'torch' not in sys.modules and 'kornia' not in sys.modules\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=repo_root, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "--attention" in proc.stdout and "--weights" in proc.stdout
+
+
+def test_train_detect_eval_export(tmp_path, capsys):
+    from detector.cli import main
+    data = write_synthetic_dataset(tmp_path / "data", frames=6, width=128, height=96, markers=4, seed=5, test_every=3)
+    run = tmp_path / "run"
+    assert main(["train", str(data), "--out", str(run), "--epochs", "1", "--batch", "4", "--input-scale", "1.0",
+                 "--threads", "1", "--quiet"]) == 0
+    assert (run / "last.pt").is_file() and (run / "weights.pt").is_file()
+    assert main(["train", str(data), "--out", str(run), "--epochs", "2", "--batch", "4", "--input-scale", "1.0",
+                 "--threads", "1", "--quiet", "--resume"]) == 0
+    assert json.loads((run / "history.json").read_text())["history"][-1]["epoch"] == 2
+    dets = tmp_path / "dets.json"
+    assert main(["detect", str(data), "--weights", str(run / "weights.pt"), "--out", str(dets), "--conf", "0.001",
+                 "--threads", "1", "--quiet", "--eval"]) == 0
+    doc = json.loads(dets.read_text())
+    assert doc["dataset_version"] == json.loads((data / "dataset.json").read_text())["version_id"]
+    assert len(doc["weights_sha256"]) == 64 and set(doc["frames"]) == {"000002", "000005"}
+    for d in sum(doc["frames"].values(), []):
+        assert {"class_id", "class_name", "score", "bbox_px", "center_px", "refine_quality"} <= set(d)
+    assert "mAP50" in capsys.readouterr().out
+    pytest.importorskip("onnxruntime")
+    assert main(["export-onnx", "--weights", str(run / "weights.pt"), "--out", str(tmp_path / "m.onnx"),
+                 "--height", "96", "--width", "128", "--threads", "1"]) == 0
+    assert "max |onnx - torch|" in capsys.readouterr().out
+
+
+def test_bad_weights_exit_2(tmp_path, capsys):
+    from detector.cli import main
+    data = write_synthetic_dataset(tmp_path / "data", frames=1, width=64, height=64, markers=2, seed=1, test_every=1)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    assert main(["detect", str(data), "--weights", str(bad), "--out", str(tmp_path / "d.json"), "--quiet"]) == 2
+    assert "bad.pt" in capsys.readouterr().err

@@ -1,0 +1,112 @@
+"""mAP (pycocotools) on hand-built cases, matching, centre error and recall."""
+import numpy as np
+import pytest
+
+from eval.detection_metrics import centre_and_recall, coco_map, coco_results, match_frame
+from generator.export_coco import coco_from_labels
+
+SIZE = 20.0
+
+
+def marker(cls, x, y, vf=1.0, mid="m"):
+    r = SIZE / 2
+    return {"id": mid, "class_id": cls, "center_px": [x, y], "bbox_px": [x - r, y - r, x + r, y + r],
+            "visible_pixels": 300, "visible_fraction": vf, "visibility": 2 if vf >= 0.5 else 1,
+            "area_in_frame_px": np.pi * r * r}
+
+
+def labels():
+    return [{"frame_id": f"{i:06d}", "image": {"width": 200, "height": 100},
+             "spec": {"split": "test", "condition": "normal" if i == 0 else "glare"},
+             "markers": [marker(0, 40.0 + i, 30.0), marker(1, 120.0, 60.0 + i)]} for i in range(2)]
+
+
+def dets_from(labs, shift=0.0, drop=(), score=0.9):
+    out = {}
+    for lab in labs:
+        ds = []
+        for k, m in enumerate(lab["markers"]):
+            if (lab["frame_id"], k) in drop:
+                continue
+            x0, y0, x1, y1 = m["bbox_px"]
+            ds.append({"class_id": m["class_id"], "score": score, "bbox_px": [x0 + shift, y0, x1 + shift, y1],
+                       "center_px": [m["center_px"][0] + shift, m["center_px"][1]]})
+        out[lab["frame_id"]] = ds
+    return out
+
+
+def shift_for_iou(iou):
+    """Horizontal shift of a SIZE x SIZE box that gives this IoU with the original."""
+    return SIZE * (1 - iou) / (1 + iou)
+
+
+def run_map(labs, dets):
+    gt = coco_from_labels(labs, 0.5)
+    return coco_map(gt, coco_results(dets, gt))
+
+
+def test_perfect_detections_give_one():
+    m = run_map(labels(), dets_from(labels()))
+    assert m["mAP50"] == pytest.approx(1.0) and m["mAP50_95"] == pytest.approx(1.0)
+    assert all(v["mAP50"] == pytest.approx(1.0) and v["mAP50_95"] == pytest.approx(1.0)
+               for v in m["per_class"].values())
+
+
+@pytest.mark.parametrize("iou, expected", [(0.72, 0.5), (0.83, 0.7), (0.56, 0.2), (0.97, 1.0)])
+def test_known_shift_gives_known_map(iou, expected):
+    # every detection has this IoU with its marker: it counts at the thresholds 0.50 ... <= iou
+    m = run_map(labels(), dets_from(labels(), shift=shift_for_iou(iou)))
+    assert m["mAP50"] == pytest.approx(1.0)
+    assert m["mAP50_95"] == pytest.approx(expected)
+
+
+def test_shift_below_half_gives_zero():
+    m = run_map(labels(), dets_from(labels(), shift=shift_for_iou(0.45)))
+    assert m["mAP50"] == pytest.approx(0.0) and m["mAP50_95"] == pytest.approx(0.0)
+
+
+def test_missing_detection_gives_known_map():
+    # class 1 finds 1 of its 2 markers: precision 1 up to recall 0.5 -> 51 of 101 recall points
+    m = run_map(labels(), dets_from(labels(), drop={("000001", 1)}))
+    assert m["per_class"]["RedA"]["mAP50"] == pytest.approx(1.0)
+    assert m["per_class"]["BlueB"]["mAP50"] == pytest.approx(51 / 101)
+    assert m["mAP50"] == pytest.approx((1 + 51 / 101) / 2)
+
+
+def test_coco_shift_is_half_pixel():
+    gt = coco_from_labels(labels(), 0.5)
+    rows = coco_results(dets_from(labels()), gt)
+    ann = [a for a in gt["annotations"] if a["image_id"] == 1 and a["category_id"] == 1][0]
+    row = [r for r in rows if r["image_id"] == 1 and r["category_id"] == 1][0]
+    assert row["bbox"] == pytest.approx(ann["bbox"])
+    assert row["bbox"][0] == pytest.approx(labels()[0]["markers"][0]["bbox_px"][0] + 0.5)
+
+
+def test_crowd_markers_are_ignored():
+    labs = labels()
+    labs[0]["markers"].append(marker(0, 170.0, 30.0, vf=0.3))
+    dets = dets_from(labs)              # also detects the hidden marker: neither helps nor hurts
+    assert run_map(labs, dets)["mAP50_95"] == pytest.approx(1.0)
+    dets[labs[0]["frame_id"]].pop()     # not detecting it is fine too
+    assert run_map(labs, dets)["mAP50_95"] == pytest.approx(1.0)
+
+
+def test_centre_error_and_recall():
+    labs = labels()
+    r = centre_and_recall(labs, dets_from(labs, shift=0.25), 0.5)
+    assert r["centre_error"]["normal"]["median_px"] == pytest.approx(0.25)
+    assert r["centre_error"]["challenging"]["n"] == 2
+    assert r["recall_visible50"] == pytest.approx(1.0)
+    r = centre_and_recall(labs, dets_from(labs, drop={("000000", 0)}), 0.5)
+    assert r["recall_visible50"] == pytest.approx(0.75)
+    r = centre_and_recall(labs, dets_from(labs, score=0.1), 0.5, recall_conf=0.25)
+    assert r["recall_visible50"] == pytest.approx(0.0)
+
+
+def test_match_frame_greedy_by_score_and_class():
+    gt = np.array([[0, 0, 10, 10], [20, 0, 30, 10]], float)
+    det = np.array([[1, 0, 11, 10], [0, 0, 10, 10], [20, 0, 30, 10]], float)
+    m = match_frame(gt, [0, 0], det, [0.5, 0.9, 0.8], [0, 0, 1])
+    assert m.tolist() == [1, -1]       # the higher score wins; the class-1 box matches nothing
+    with pytest.raises(ValueError, match="lengths"):
+        match_frame(gt, [0], det, [0.5], [0, 0, 1])
