@@ -114,7 +114,8 @@ def main() -> int:
                     t2, c2 = time.perf_counter(), time.process_time()
                     done = finish_frame(frame, static, exr_path, init["root"], init["keep_exr"],
                                         init["visible_threshold"],
-                                        {"scene_update": t1 - t0, "cycles": t2 - t1})
+                                        {"scene_update": t1 - t0, "cycles": t2 - t1},
+                                        init.get("min_chroma", 0.03))
                     done["timings_s"]["total"] = time.perf_counter() - t0
                     # CPU seconds (all threads): a measure of work that other load does not inflate
                     done["timings_s"]["cycles_cpu"] = c2 - c1

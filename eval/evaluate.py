@@ -125,7 +125,7 @@ def centre_noise_px(ds: EvalDataset, detections: dict | None, min_score: float) 
         lab = ds.labels[fid]
         dets = [d for d in detections["frames"].get(fid, []) if d.get("score", 1.0) >= min_score]
         for m in lab["markers"]:
-            if m.get("visibility") != 2:
+            if m.get("visibility") != 2 or not m.get("legible", True):
                 continue
             best = None
             for d in dets:
@@ -207,16 +207,31 @@ def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=
 
 
 def detection_block(ds: EvalDataset, detections: dict) -> dict:
-    try:
-        from eval.detection_metrics import coco_map
-    except ImportError:
-        return {"note": "eval.detection_metrics is not available"}
-    return coco_map(ds.root, detections, split="test")
+    """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error and recall (test split)."""
+    from eval.detection_metrics import evaluate_detections
+    r = evaluate_detections(ds.root, detections, split="test")
+    out = {k: v for k, v in r.items() if k not in ("mAP50", "mAP50_95", "per_class")}
+    out.update({"map50": r["mAP50"], "map50_95": r["mAP50_95"],
+                "per_class": {n: {"map50": v["mAP50"], "map50_95": v["mAP50_95"]} for n, v in r["per_class"].items()}})
+    return out
 
 
 CSV_FIELDS = (["frame_id", "split", "condition", "pose_index", "ok", "category", "reason", "distance_mm",
                "focal_true", "focal_est", "focal_err_pct", "visible_a", "visible_b", "rmse_px_a", "rmse_px_b"]
               + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS])
+
+
+def json_safe(obj):
+    """NaN and inf become None (JSON has no NaN); numpy scalars become Python numbers."""
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
 
 
 def write_outputs(out_dir, metrics: dict, rows: list[dict]) -> None:
@@ -227,4 +242,4 @@ def write_outputs(out_dir, metrics: dict, rows: list[dict]) -> None:
     for r in rows:
         w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in CSV_FIELDS})
     write_text_atomic(out / "frames.csv", buf.getvalue())
-    write_json_atomic(out / "metrics.json", json.loads(json.dumps(metrics, default=float)))
+    write_json_atomic(out / "metrics.json", json_safe(metrics))

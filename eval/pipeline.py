@@ -27,12 +27,61 @@ class Stages:
         write_json_atomic(self.path, self.data)
 
 
+def code_fingerprint(*packages: str) -> str:
+    """Hash of the Python sources of ``packages``: a code change makes their stages stale."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for pkg in packages:
+        for path in sorted((root / pkg).glob("*.py")):
+            h.update(path.name.encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def _key(*parts) -> str:
     return hashlib.sha256("\n".join(str(p) for p in parts).encode()).hexdigest()[:16]
 
 
 def say(msg: str) -> None:
     print(f"[run] {msg}", file=sys.stderr, flush=True)
+
+
+def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epochs, stages: Stages):
+    """Detections for every frame (shipped weights, given weights, or a detector trained here)."""
+    import os
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    import torch   # only this stage needs torch
+
+    from detector.cli import SHIPPED_WEIGHTS
+    from detector.infer import detect_dataset
+    torch.set_num_threads(os.cpu_count() or 1)
+    if train:
+        from detector.train import TrainConfig
+        from detector.train import train as train_detector
+        run_dir = workdir / "train"
+        cfg = TrainConfig(epochs=epochs or TrainConfig().epochs)
+        key = _key("train", ds.version_id, cfg, code_fingerprint("detector"))
+        if stages.current("train", key, [run_dir / "weights.pt"]):
+            say("train: weights current, skipped")
+        else:
+            say(f"train: {cfg.epochs} epochs on the train split -> {run_dir}")
+            t = time.monotonic()
+            train_detector(ds.root, run_dir, cfg, resume=(run_dir / "last.pt").exists())
+            stages.done("train", key, time.monotonic() - t)
+        weights = run_dir / "weights.pt"
+    weights = Path(weights) if weights else SHIPPED_WEIGHTS
+    if not weights.exists():
+        raise FileNotFoundError(f"{weights}: detector weights not found (use --weights, --train or --oracle-noise)")
+    model_sha = sha256_file(weights)
+    key = _key("detect", ds.version_id, model_sha, code_fingerprint("detector"))
+    if stages.current("detect", key, [dets_path]):
+        say("detect: detections current, skipped")
+    else:
+        say(f"detect: {weights.name} on every frame")
+        t = time.monotonic()
+        detect_dataset(ds.root, weights, dets_path, split=None)
+        stages.done("detect", key, time.monotonic() - t)
+    return weights, model_sha
 
 
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
@@ -78,14 +127,13 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
         say(f"detect: skipped, oracle mode (exact centres + {oracle_noise_px} px noise)")
         dets_path = None
     else:
-        from detector.pipeline_stage import detect_stage   # torch is imported only here
-        weights, model_sha = detect_stage(ds, workdir, weights, train, train_epochs, stages, _key, say)
-        commands.append(f"dockfactory detect {data_dir} --weights {weights} --split test,repeat --out {dets_path}")
+        weights, model_sha = detect_stage(ds, workdir, dets_path, weights, train, train_epochs, stages)
+        commands.append(f"dockfactory detect {data_dir} --weights {weights} --split all --out {dets_path}")
 
     # 3. solve
     poses_path = workdir / "poses.json"
     src = sha256_file(dets_path) if dets_path else f"oracle:{oracle_noise_px}"
-    key = _key("solve", version, src)
+    key = _key("solve", version, src, code_fingerprint("solver", "eval"))
     if stages.current("solve", key, [poses_path]):
         say("solve: poses current, skipped")
     else:
@@ -104,7 +152,8 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
 
     # 4. evaluate
     eval_dir = workdir / "eval"
-    key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src)
+    key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src,
+               code_fingerprint("solver", "eval"))
     if stages.current("evaluate", key, [eval_dir / "metrics.json", eval_dir / "frames.csv"]):
         say("evaluate: metrics current, skipped")
         metrics = json.loads((eval_dir / "metrics.json").read_text())

@@ -30,8 +30,8 @@ def failure_category(reason: str) -> str:
 
 
 def oracle_detections(label: dict, sigma_px: float, rng: np.random.Generator):
-    """(class_ids (N,), points (N, 2)): exact centres of the visible markers + N(0, sigma^2)."""
-    vis = [m for m in label["markers"] if m.get("visibility") == 2]
+    """(class_ids (N,), points (N, 2)): exact centres of the visible, legible markers + N(0, sigma^2)."""
+    vis = [m for m in label["markers"] if m.get("visibility") == 2 and m.get("legible", True)]
     cls = np.array([m["class_id"] for m in vis], dtype=int)
     uv = np.array([m["center_px"] for m in vis], dtype=float).reshape(-1, 2)
     return cls, uv + rng.normal(0.0, sigma_px, size=uv.shape) if sigma_px > 0 else uv

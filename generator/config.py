@@ -134,6 +134,7 @@ class GlareConfig:
 @dataclass(frozen=True)
 class LabelsConfig:
     visible_threshold: float = 0.5  # visible fraction at or above which COCO visibility is 2
+    min_chroma: float = 0.03        # a marker whose colour is washed out below this is not legible
 
 
 @dataclass(frozen=True)
@@ -367,6 +368,8 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     if not cfg.glare.kinds:
         raise _err(source, "glare", "kinds", "is empty")
     _check_range(source, "glare", "bloom", cfg.glare.bloom, lo=0, hi=1)
+    if not 0 <= cfg.labels.min_chroma < 1:
+        raise _err(source, "labels", "min_chroma", f"must be in [0, 1), got {cfg.labels.min_chroma}")
     if not 0 < cfg.labels.visible_threshold <= 1:
         raise _err(source, "labels", "visible_threshold",
                    f"must be in (0, 1], got {cfg.labels.visible_threshold}")

@@ -5,8 +5,9 @@
 - one annotation per marker that has visible pixels: ``bbox`` [x, y, w, h] is the projected
   marker outline clipped to the image, ``keypoints`` [x, y, v] its projected centre, ``area``
   the projected disc area inside the image; a marker whose visible fraction is below the
-  dataset's ``visible_threshold`` gets ``iscrowd`` 1 (an ignore region: finding it neither helps
-  nor hurts mAP); fully hidden and out-of-frame markers get no annotation.
+  dataset's ``visible_threshold``, or whose colour is washed out (label ``legible`` false), gets
+  ``iscrowd`` 1 (an ignore region: finding it neither helps nor hurts mAP); fully hidden and
+  out-of-frame markers get no annotation.
 - COCO's pixel convention: (0, 0) is the top-left corner of the top-left pixel, so every
   coordinate is the label's (OpenCV convention) + 0.5.
 """
@@ -47,7 +48,7 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5) -> dict
                 continue
             x0, y0, x1, y1 = m["bbox_px"]
             u, v = m["center_px"]
-            visible = m["visible_fraction"] >= visible_threshold
+            visible = m["visible_fraction"] >= visible_threshold and m.get("legible", True)
             annotations.append({
                 "id": len(annotations) + 1, "image_id": image_id, "category_id": m["class_id"] + 1,
                 "bbox": [x0 + COCO_SHIFT, y0 + COCO_SHIFT, x1 - x0, y1 - y0],

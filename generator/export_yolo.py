@@ -6,7 +6,8 @@ exports/yolo/
   train.txt, test.txt                   image lists
   data.yaml                             path, train, val, test, names [RedA, BlueB]
 Boxes are the projected marker outlines clipped to the image; markers whose visible fraction is
-below the dataset's visible_threshold are left out (YOLO has no ignore regions).
+below the dataset's visible_threshold, or whose colour is washed out (``legible`` false), are left
+out (YOLO has no ignore regions).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def yolo_lines(label: dict, visible_threshold: float) -> list[str]:
     w, h = label["image"]["width"], label["image"]["height"]
     lines = []
     for m in label["markers"]:
-        if m["bbox_px"] is None or m.get("visible_fraction", 0.0) < visible_threshold:
+        if m["bbox_px"] is None or m.get("visible_fraction", 0.0) < visible_threshold or not m.get("legible", True):
             continue
         x0, y0, x1, y1 = m["bbox_px"]
         cx, cy = (x0 + x1) / 2 + 0.5, (y0 + y1) / 2 + 0.5     # OpenCV centres -> pixel-edge frame

@@ -37,14 +37,14 @@ def label_text(label: dict) -> str:
 
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
-                 visible_threshold: float, timings: dict | None = None) -> dict:
+                 visible_threshold: float, timings: dict | None = None, min_chroma: float = 0.03) -> dict:
     """Write the frame's files from the render's scratch EXR; returns its meta record."""
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
     t1 = time.perf_counter()
     image, derived = apply_sensor(passes.rgb, frame.sensor)
-    label = frame_labels(frame, static, passes.index, visible_threshold, derived)
+    label = frame_labels(frame, static, passes.index, visible_threshold, derived, image, min_chroma)
     t2 = time.perf_counter()
     ok, png = cv2.imencode(".png", image[..., ::-1], PNG_PARAMS)
     if not ok:

@@ -110,6 +110,18 @@ class IndexStats:
         self._pix = {int(v): (xs[vals == v], ys[vals == v]) for v in np.unique(vals)}
         self.small = small
 
+    def chroma(self, value: int, image: np.ndarray, section: str) -> float | None:
+        """Median marker-colour excess over the value's pixels in ``image`` (H, W, 3) uint8 RGB:
+        red minus the larger of green and blue for A, blue minus the larger of red and green for B,
+        in [0, 1]. None when the marker has no visible pixel."""
+        if value not in self._pix:
+            return None
+        xs, ys = self._pix[value]
+        px = image[ys, xs].astype(np.float32) / 255.0
+        r, g, b = px[:, 0], px[:, 1], px[:, 2]
+        c = r - np.maximum(g, b) if section == "A" else b - np.maximum(r, g)
+        return float(np.median(c))
+
     def box(self, value: int) -> list[float] | None:
         if value not in self._pix:
             return None
@@ -125,11 +137,15 @@ class IndexStats:
 
 
 def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
-                 visible_threshold: float, derived: dict | None = None) -> dict:
+                 visible_threshold: float, derived: dict | None = None, image: np.ndarray | None = None,
+                 min_chroma: float = 0.03) -> dict:
     """The label record of one frame.
 
     ``index``: (H, W) int object-index pass, or None before rendering (visibility then unknown).
     ``derived``: values computed while rendering (e.g. the auto exposure scale).
+    ``image``: (H, W, 3) uint8 RGB final image; with the index pass it gives each marker's
+    ``chroma`` and ``legible`` (chroma >= ``min_chroma``: the disc's colour is not washed out by
+    glare or lost in the dark). Geometric visibility stays in ``visibility``.
     """
     cam = frame.camera
     w, h = cam.width, cam.height
@@ -176,6 +192,10 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
             rec["visible_fraction"] = frac
             rec["bbox_visible_px"] = stats.box(m.pass_index)
             rec["visibility"] = 0 if not in_frame else (2 if frac >= visible_threshold else 1)
+            if image is not None:
+                chroma = stats.chroma(m.pass_index, image, m.section)
+                rec["chroma"] = chroma
+                rec["legible"] = chroma is not None and chroma >= min_chroma
         markers.append(rec)
     sections = []
     for sec in SECTIONS:

@@ -127,7 +127,8 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
     threads = opts.threads or max(1, cores() // n_workers)
     init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
             "height": cfg.image.height, "threads": threads, "root": str(root.resolve()),
-            "keep_exr": cfg.render.keep_exr, "visible_threshold": cfg.labels.visible_threshold}
+            "keep_exr": cfg.render.keep_exr, "visible_threshold": cfg.labels.visible_threshold,
+            "min_chroma": cfg.labels.min_chroma}
     log_dir = root / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
     if opts.executor == "ray":

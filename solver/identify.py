@@ -14,9 +14,10 @@ Ids follow from the known layout:
    within a tight gate, and refitted. A verified hypothesis is the set of (marker, detection)
    pairs it explains and its reprojection RMS.
 3. Decide: the hypothesis explaining the most detections wins (ties: smaller RMS). If another
-   verified hypothesis that conflicts with it (a marker or a detection assigned differently)
-   explains as many detections, the identification is ambiguous and SolverError is raised:
-   the solver reports ambiguity instead of guessing.
+   verified hypothesis that gives some detection a different marker explains as many
+   detections, the identification is ambiguous and SolverError is raised: the solver reports
+   ambiguity instead of guessing. Hypotheses that differ only in which of two nearby
+   detections (a duplicate) serves a marker agree on every identity; the better fit is kept.
 4. Both sections: one joint fit (shared focal) re-projects all markers and assigns every
    detection to the nearest projected marker within the tight gate, one to one; detections
    left over are spurious (inlier mask False); a detection whose class label disagrees with its
@@ -89,6 +90,16 @@ class _Hyp:
             if d in inv_a and inv_a[d] != m:
                 return True
         return False
+
+    def identity_conflicts(self, other) -> bool:
+        """True when some detection is given a different marker by ``other``.
+
+        Two hypotheses that differ only in which detection serves a marker (a duplicate or a
+        spurious detection next to it) agree on every identity: that is not an ambiguity, and the
+        better-fitting one is kept.
+        """
+        inv_a = {d: m for m, d in self.pairs.items()}
+        return any(d in inv_a and inv_a[d] != m for m, d in other.pairs.items())
 
 
 def _similarity_hypotheses(w, z, anchor_idx, scale_range, max_roll_rad, gate_frac, spacing_mm,
@@ -250,11 +261,12 @@ def _identify_section(p3, uv, z, cls, section_class, pp, opts):
 
 
 def _rivals(hyps):
-    """Verified hypotheses that conflict with the best one and explain as many detections."""
+    """Verified hypotheses that give some detection another identity than the best one does and
+    explain as many detections."""
     if not hyps:
         return []
     best = hyps[0]
-    return [h for h in hyps[1:] if len(h.pairs) >= len(best.pairs) and best.conflicts(h)]
+    return [h for h in hyps[1:] if len(h.pairs) >= len(best.pairs) and best.identity_conflicts(h)]
 
 
 def identify_markers(markers, principal_point, detections, *, sigma_px: float = 1.0,

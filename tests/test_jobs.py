@@ -182,7 +182,7 @@ def test_yolo_round_trip(job):
         lab = json.loads(lab_path.read_text())
         split = lab["spec"]["split"]
         lines = (yolo / "labels" / split / f"{lab['frame_id']}.txt").read_text().splitlines()
-        expected = [m for m in lab["markers"] if m["bbox_px"] and m["visible_fraction"] >= 0.5]
+        expected = [m for m in lab["markers"] if m["bbox_px"] and m["visible_fraction"] >= 0.5 and m["legible"]]
         assert len(lines) == len(expected)
         for line, m in zip(lines, expected):
             c, box = parse_yolo_line(line, 320, 240)
@@ -210,7 +210,7 @@ def test_coco_round_trip(job):
             assert np.allclose([x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5], m["bbox_px"], atol=1e-9)
             assert np.allclose(np.array(a["keypoints"][:2]) - 0.5, m["center_px"], atol=1e-9)
             assert a["category_id"] == m["class_id"] + 1 and a["area"] > 0
-            assert a["iscrowd"] == (0 if m["visible_fraction"] >= 0.5 else 1)
+            assert a["iscrowd"] == (0 if m["visible_fraction"] >= 0.5 and m["legible"] else 1)
 
 
 def test_bop_round_trip(job):

@@ -63,6 +63,15 @@ def test_visibility_from_index_pass():
     assert rec0["visible_pixels"] == remaining
     assert rec0["visible_fraction"] == pytest.approx(remaining / first["area_in_frame_px"])
     assert 0.35 < rec0["visible_fraction"] < 0.65
+    # legibility from the final image: marker 1 washed out to white, the others in their colour
+    image = np.zeros((h, w, 3), np.uint8)
+    for m in static.markers:
+        image[index == m.pass_index] = (200, 20, 30) if m.section == "A" else (20, 30, 200)
+    image[index == base["markers"][1]["pass_index"]] = (250, 250, 250)
+    lab2 = frame_labels(frame, static, index, 0.5, None, image, min_chroma=0.03)
+    assert lab2["markers"][1]["legible"] is False and lab2["markers"][1]["chroma"] == pytest.approx(0.0)
+    assert all(r["legible"] for i, r in enumerate(lab2["markers"]) if i != 1)
+    assert lab2["markers"][2]["chroma"] == pytest.approx(170 / 255, abs=1e-6)
     # raise the threshold: the half-hidden marker becomes "occluded"
     strict = frame_labels(frame, static, index, 0.7)
     assert strict["markers"][0]["visibility"] == 1

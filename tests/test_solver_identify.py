@@ -128,3 +128,20 @@ def test_seed_reproducible():
     b = solve_docking(LAYOUT, sc.principal_point, correspondences=(IDS, uv), robust=True,
                       rng=np.random.default_rng(5))
     assert np.array_equal(a.d_from_b, b.d_from_b) and np.array_equal(a.inliers, b.inliers)
+
+
+def test_duplicate_detection_next_to_a_marker_is_not_an_ambiguity():
+    """A detector firing twice on one marker (second hit ~1 px off) must not block the
+    identification: both candidate assignments give every detection the same identity."""
+    rng = np.random.default_rng(12)
+    for trial in range(8):
+        sc, cls, uv, truth = _frame(rng, sigma=0.15)
+        k = int(rng.integers(len(truth)))
+        dup = uv[k] + rng.normal(0, 1.0, 2)
+        cls2 = np.concatenate([cls, [cls[k]]])
+        uv2 = np.vstack([uv, dup])
+        res = solve_docking(LAYOUT, sc.principal_point, detections=(cls2, uv2))
+        ids = list(res.marker_ids)
+        assert ids[:len(truth)] == truth or (ids[k] is None and ids[-1] == truth[k]), trial
+        assert sum(i is not None for i in ids) == len(truth)
+        assert abs(res.x_mm - sc.d_from_b[0, 3]) < 8 * res.std["x_mm"] + 1e-9
