@@ -10,6 +10,9 @@
   normal frames (conditions normal, ideal) and challenging ones (low_light, occlusion, glare).
 - Recall of visible markers: the share of markers with visible fraction >= 0.5 matched by a
   detection with score >= ``recall_conf``.
+Markers whose label says ``legible`` false (colour washed out by glare or lost in the dark) are
+ignore regions in the COCO export and are left out of the centre error and the recall as well;
+labels without the field count as legible.
 """
 from __future__ import annotations
 
@@ -129,7 +132,7 @@ def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 
     seen = found = 0
     for lab in labels:
         ms = [m for m in lab["markers"] if m.get("visible_pixels") and m.get("bbox_px") is not None
-              and m["visible_fraction"] >= threshold]
+              and m["visible_fraction"] >= threshold and m.get("legible", True)]
         dets = frames_dets.get(lab["frame_id"], [])
         gb = np.array([m["bbox_px"] for m in ms], dtype=np.float64).reshape(-1, 4)
         gc = np.array([m["class_id"] for m in ms], dtype=np.int64)

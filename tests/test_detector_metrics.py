@@ -110,3 +110,12 @@ def test_match_frame_greedy_by_score_and_class():
     assert m.tolist() == [1, -1]       # the higher score wins; the class-1 box matches nothing
     with pytest.raises(ValueError, match="lengths"):
         match_frame(gt, [0], det, [0.5], [0, 0, 1])
+
+
+def test_illegible_markers_are_ignored():
+    labs = labels()
+    labs[1]["markers"][0]["legible"] = False                         # washed out by glare
+    dets = dets_from(labs, drop={("000001", 0)})                      # and not found
+    assert run_map(labs, dets)["mAP50_95"] == pytest.approx(1.0)
+    r = centre_and_recall(labs, dets, 0.5)
+    assert r["recall_visible50"] == pytest.approx(1.0) and r["recall_markers"] == 3

@@ -58,7 +58,7 @@ def test_labels_agree_with_the_index_pass(label_dataset):
             if not m["in_frame"] or m["visible_fraction"] < 0.999:
                 continue
             ys, xs = np.nonzero(passes.index == m["pass_index"])
-            assert len(xs) > 50
+            assert len(xs) > 20   # foreshortened markers at +-60 deg are small at 640 x 480
             centroid = np.array([xs.mean(), ys.mean()])
             errors.append(np.linalg.norm(centroid - np.array(m["center_px"])))
             x0, y0, x1, y1 = m["bbox_px"]
