@@ -80,7 +80,8 @@ def solve_dataset(ds: EvalDataset, splits=("test", "repeat"), detections: dict |
         else:
             rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
             cls, uv = oracle_detections(label, oracle_sigma_px, rng)
-            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px or (oracle_sigma_px or None))
+            # the oracle knows its noise: the covariances use it unless told otherwise
+            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px if sigma_px is not None else oracle_sigma_px or None)
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
