@@ -14,9 +14,10 @@ A marker is a red or blue disc inside a dark ring. Inside a window around the de
 5. centre = coverage-weighted centroid; second moments give the ellipse of the disc
    (for a uniform ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of
    the pixel footprint), hence a refined outline box. The moments fall short of the true
-   outline by about 0.075 px per side (edge blur against the ring level; median over 1284 fully
-   visible markers of every second train frame of configs/detector.toml): ``edge_bias_px`` adds
-   it back.
+   outline by a few hundredths of a px per side (edge blur against the ring level; 0.024 px:
+   median over 1444 fully visible markers of every second train frame of configs/detector.toml,
+   dataset 5a22444cf4c39419; it was 0.074 px with the earlier 2-spp render settings):
+   ``edge_bias_px`` adds it back.
 
 Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
 over the disc: noise and shading), and how well
@@ -57,7 +58,7 @@ def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
     return lin[..., c] - 0.5 * (lin[..., others[0]] + lin[..., others[1]])
 
 
-EDGE_BIAS_PX = 0.075  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
+EDGE_BIAS_PX = 0.025  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
