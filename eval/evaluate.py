@@ -206,13 +206,56 @@ def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=
     return metrics, rows
 
 
+def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, max_points: int = 200) -> dict:
+    """Precision-recall at IoU 0.5 per class: {class name: (recall list, precision list)}.
+
+    Ground truth: markers with visible fraction >= ``visible_threshold`` and a legible colour; a
+    detection that only overlaps an ignored marker (occluded or washed out) counts neither way.
+    """
+    from eval.detection_metrics import match_frame
+    from generator.layout import CLASS_NAMES
+    curves = {}
+    for c, name in enumerate(CLASS_NAMES):
+        scored, n_gt = [], 0
+        for lab in labels:
+            marks = [m for m in lab["markers"] if m["class_id"] == c and m.get("bbox_px")]
+            gt = [m for m in marks if m["visible_fraction"] >= visible_threshold and m.get("legible", True)]
+            ign = [m for m in marks if m not in gt and m.get("visible_pixels")]
+            dets = [d for d in frames_dets.get(lab["frame_id"], []) if d["class_id"] == c]
+            n_gt += len(gt)
+            if not dets:
+                continue
+            boxes = np.array([d["bbox_px"] for d in dets])
+            scores = np.array([d["score"] for d in dets])
+            match = match_frame(np.array([m["bbox_px"] for m in gt]).reshape(-1, 4), np.full(len(gt), c), boxes, scores, np.full(len(dets), c))
+            tp = np.zeros(len(dets), bool)
+            tp[match[match >= 0]] = True
+            ignored = np.zeros(len(dets), bool)
+            if ign:
+                m_ign = match_frame(np.array([m["bbox_px"] for m in ign]).reshape(-1, 4), np.full(len(ign), c), boxes, scores, np.full(len(dets), c))
+                ignored[m_ign[m_ign >= 0]] = True
+            scored += [(s, bool(t)) for s, t, i in zip(scores, tp, ignored) if t or not i]
+        if not scored or n_gt == 0:
+            continue
+        scored.sort(key=lambda x: -x[0])
+        tps = np.cumsum([t for _, t in scored])
+        recall = tps / n_gt
+        precision = tps / np.arange(1, len(scored) + 1)
+        keep = np.unique(np.linspace(0, len(scored) - 1, min(max_points, len(scored))).astype(int))
+        curves[name] = (recall[keep].tolist(), precision[keep].tolist())
+    return curves
+
+
 def detection_block(ds: EvalDataset, detections: dict) -> dict:
-    """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error and recall (test split)."""
+    """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error, recall and
+    precision-recall curves (test split)."""
     from eval.detection_metrics import evaluate_detections
     r = evaluate_detections(ds.root, detections, split="test")
     out = {k: v for k, v in r.items() if k not in ("mAP50", "mAP50_95", "per_class")}
     out.update({"map50": r["mAP50"], "map50_95": r["mAP50_95"],
                 "per_class": {n: {"map50": v["mAP50"], "map50_95": v["mAP50_95"]} for n, v in r["per_class"].items()}})
+    labels = [ds.labels[f] for f in ds.frames(("test",))]
+    out["pr_curves"] = pr_curves(labels, detections["frames"], ds.config.labels.visible_threshold)
     return out
 
 

@@ -25,6 +25,7 @@ from generator.scene import (CLUTTER_KINDS, Appearance, CameraModel, FrameScene,
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
 CLUTTER_SLOTS = 8
 FLOOR_GAP_MM = 350.0  # floor sits this far below the sections' underside
+LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
 
 
 def rng_for(seed: int, *keys: int) -> np.random.Generator:
@@ -194,7 +195,7 @@ def _area_light(name, rng, target, azimuth_deg, elevation_deg, dist_mm, size_mm,
     y = np.cross(z, x)
     d_from_light = make_transform(np.stack([x, y, z], axis=1), pos)
     # irradiance ~ P / d^2: scale power with distance so rel_power sets the light level
-    power = rel_power * (dist_mm / 1000.0) ** 2 * 400.0
+    power = rel_power * (dist_mm / 1000.0) ** 2 * LIGHT_LEVEL_W
     return Light(name, "AREA", mat4(d_from_light), float(power), float(size_mm), _kelvin_tint(rng))
 
 
@@ -320,8 +321,10 @@ def sample_glare(cfg: Config, rng, kind: str, static: StaticScene, cam: CameraMo
     z = mirror
     x = np.cross([0.0, 1.0, 0.0], z)
     x /= np.linalg.norm(x)
+    # 1.5 to 4 times the key light's level: on the glossy paint a small source saturates in a
+    # highlight without flooding the whole scene with diffuse light
     light = Light("glare", "AREA", mat4(make_transform(np.stack([x, np.cross(z, x), z], axis=1), pos)),
-                  float(rng.uniform(3000, 12000) * (dist / 1000) ** 2), float(rng.uniform(40, 150)),
+                  float(rng.uniform(1.5, 4.0) * LIGHT_LEVEL_W * (dist / 1000) ** 2), float(rng.uniform(40, 150)),
                   (1.0, 0.97, 0.92))
     return (), (light,), float(rng.uniform(0.08, 0.2))
 

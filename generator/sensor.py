@@ -46,15 +46,24 @@ def _srgb_lut(levels: int) -> np.ndarray:
     return np.clip(np.rint(s * 255.0), 0, 255).astype(np.uint8)
 
 
+VEIL_SOURCE_CAP = 64.0  # radiance (x mid-grey 0.18 -> 11.5) above which a source adds no more veil
+
+
 def veiling_glare(linear: np.ndarray, amount: float) -> np.ndarray:
-    """(1 - amount) * L + amount * wide_blur(L): light scattered in the lens around bright sources."""
+    """L + amount * (wide_blur(min(L, cap)) - min(L, cap)): light scattered in the lens.
+
+    A halo around bright sources and a veil that lowers contrast. The scattered radiance is
+    capped (``VEIL_SOURCE_CAP`` x mid-grey) so that a lamp in view washes out its neighbourhood,
+    not the whole frame. ``linear``: (H, W, 3) float32, exposure-normalised.
+    """
     h, w = linear.shape[:2]
-    small = cv2.resize(linear, (max(1, w // 8), max(1, h // 8)), interpolation=cv2.INTER_AREA)
+    src = np.minimum(linear, np.float32(VEIL_SOURCE_CAP * TARGET_GREY))
+    small = cv2.resize(src, (max(1, w // 8), max(1, h // 8)), interpolation=cv2.INTER_AREA)
     sigma = 0.03 * max(small.shape[:2])
     blurred = cv2.GaussianBlur(small, (0, 0), sigmaX=sigma) * 0.6 + \
         cv2.GaussianBlur(small, (0, 0), sigmaX=4 * sigma) * 0.4
     big = cv2.resize(blurred, (w, h), interpolation=cv2.INTER_LINEAR)
-    return (1.0 - amount) * linear + amount * big
+    return linear + np.float32(amount) * (big - src)
 
 
 def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]:
