@@ -15,7 +15,7 @@ import numpy as np
 
 from eval.acceptance import COMPONENTS, UNITS
 from generator.io import write_json_atomic, write_text_atomic
-from generator.version import GENERATOR_VERSION, package_version
+from generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")
 
@@ -185,7 +185,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     provenance = {
         "dataset_version": metrics["dataset"]["version_id"], "dataset": metrics["dataset"]["root"],
         "model_sha256": prov.get("model_sha256", "n/a (oracle or no detector)"),
-        "code_version": git_describe(), "generator_version": GENERATOR_VERSION,
+        "code_version": git_describe(), "generator_version": generator_version(),
         "software": {p: package_version(p) for p in ("numpy", "torch", "bpy", "opencv-python-headless", "pycocotools", "matplotlib")},
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "commands": commands or prov.get("commands", []),

@@ -20,7 +20,7 @@ from generator.frame_output import frame_paths
 from generator.io import sha256_file, write_json_atomic, write_text_atomic
 from generator.layout import CLASS_NAMES
 from generator.sampler import frame_plan, static_scene
-from generator.version import GENERATOR_VERSION, blender_version, dataset_version_id, package_version
+from generator.version import blender_version, dataset_version_id, generator_version, package_version
 
 DATASET_FORMAT = "dockfactory.dataset/1"
 CONVENTIONS = {
@@ -42,12 +42,13 @@ class DatasetError(ValueError):
 
 def identity(cfg: Config) -> dict:
     blender = blender_version()
+    generator = generator_version()
     return {
         "format": DATASET_FORMAT,
-        "version_id": dataset_version_id(cfg.canonical_json(), blender),
+        "version_id": dataset_version_id(cfg.canonical_json(), blender, generator),
         "name": cfg.dataset.name,
         "seed": cfg.dataset.seed,
-        "generator_version": GENERATOR_VERSION,
+        "generator_version": generator,
         "blender_version": blender,
         "config": cfg.to_dict(),
     }

@@ -63,3 +63,15 @@ def test_canonical_json_is_stable():
     b = config_from_dict({"dataset": {"seed": 5}})
     assert a.canonical_json() == b.canonical_json()
     assert a.canonical_json() != config_from_dict({"dataset": {"seed": 6}}).canonical_json()
+
+
+def test_version_id_covers_config_code_and_blender():
+    from generator.version import dataset_version_id, generator_source_fingerprint, generator_version
+    cfg = config_from_dict({}).canonical_json()
+    base = dataset_version_id(cfg, "5.0.1", "0.1.0+aaaa")
+    assert base == dataset_version_id(cfg, "5.0.1", "0.1.0+aaaa")
+    assert base != dataset_version_id(cfg, "5.0.1", "0.1.0+bbbb")      # generator code changed
+    assert base != dataset_version_id(cfg, "5.1.0", "0.1.0+aaaa")      # Blender changed
+    assert base != dataset_version_id(config_from_dict({"dataset": {"seed": 1}}).canonical_json(), "5.0.1", "0.1.0+aaaa")
+    assert generator_version().endswith("+" + generator_source_fingerprint())
+    assert len(generator_source_fingerprint()) == 16
