@@ -114,7 +114,7 @@ class SensorConfig:
     adc_bits: int = 12
     exposure_ev: Range = (-0.4, 0.3)         # normal frames, around auto exposure
     low_light_ev: Range = (-5.0, -3.0)       # several stops down
-    low_light_gain_ev: Range = (1.0, 3.0)    # digital gain that partly makes up for it
+    low_light_gain_ev: Range = (0.5, 2.0)    # digital gain that partly makes up for it (net 1-4.5 EV darker)
     vignetting: Range = (0.0, 0.25)          # relative fall-off at the image corners
 
 
