@@ -84,7 +84,7 @@ def paint_material(name):
     mapping = nt.nodes.new("ShaderNodeMapping")
     mapping.name = "mapping"
     noise = nt.nodes.new("ShaderNodeTexNoise")
-    noise.inputs["Detail"].default_value = 3.0
+    noise.inputs["Detail"].default_value = 0.0   # one octave: finer octaves cost ~10 % of the render at 1 spp
     nt.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
     nt.links.new(mapping.outputs["Vector"], noise.inputs["Vector"])
     fac = noise.outputs["Fac"]
