@@ -18,6 +18,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import time
 import traceback
 
@@ -76,11 +77,41 @@ def _scratch_dir() -> str:
     return tempfile.mkdtemp(prefix=f"dockfactory-{os.getpid()}-", dir=base)
 
 
+class _Replies:
+    """Writes replies in request order; a frame's post-processing runs in a thread while the next
+    frame renders (Cycles leaves some CPU idle in its serial phases), at most one at a time."""
+
+    def __init__(self, proto):
+        self.proto = proto
+        self.lock = threading.Lock()
+        self.post: threading.Thread | None = None
+
+    def send(self, reply: dict) -> None:
+        with self.lock:
+            self.proto.write(json.dumps(reply) + "\n")
+
+    def wait(self) -> None:
+        if self.post is not None:
+            self.post.join()
+            self.post = None
+
+    def start_post(self, target) -> None:
+        self.wait()
+        self.post = threading.Thread(target=target, daemon=True)
+        self.post.start()
+
+
+def _error(op, exc) -> dict:
+    return {"ok": False, "op": op, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+
+
 def main() -> int:
-    proto = _protocol_stream()
+    replies = _Replies(_protocol_stream())
     scratch = _scratch_dir()
-    exr_path = os.path.join(scratch, "render.exr")
+    # two scratch EXRs: frame k+1 renders into one while frame k is read from the other
+    exr_paths = [os.path.join(scratch, "render0.exr"), os.path.join(scratch, "render1.exr")]
     handles = static = init = None
+    n_rendered = 0
     try:
         import bpy  # noqa: F401  (only ever imported in this process)
 
@@ -94,41 +125,60 @@ def main() -> int:
             op = req.get("op")
             if op == "quit":
                 break
-            try:
-                if op == "init":
+            if op == "init":
+                try:
                     init = req
                     static = from_dict(StaticScene, req["static"])
                     t0 = time.perf_counter()
-                    handles = build_scene(static, req["width"], req["height"], req["threads"], exr_path)
-                    reply = {"ok": True, "op": "init", "build_s": time.perf_counter() - t0,
-                             "blender_version": bpy.app.version_string, "pid": os.getpid()}
-                elif op == "render":
-                    if handles is None:
-                        raise RuntimeError("render before init")
-                    frame = from_dict(FrameScene, req["frame"])
-                    _inject_fault(frame.spec.frame_id)
-                    t0, c0 = time.perf_counter(), time.process_time()
-                    apply_frame(handles, frame)
-                    t1, c1 = time.perf_counter(), time.process_time()
-                    bpy.ops.render.render(write_still=True)
-                    t2, c2 = time.perf_counter(), time.process_time()
+                    handles = build_scene(static, req["width"], req["height"], req["threads"], exr_paths[0])
+                    replies.send({"ok": True, "op": "init", "build_s": time.perf_counter() - t0,
+                                  "blender_version": bpy.app.version_string, "pid": os.getpid()})
+                except Exception as exc:
+                    replies.send(_error(op, exc))
+                continue
+            try:
+                if op != "render":
+                    raise ValueError(f"unknown op {op!r}")
+                if handles is None:
+                    raise RuntimeError("render before init")
+                frame = from_dict(FrameScene, req["frame"])
+                _inject_fault(frame.spec.frame_id)
+                exr_path = exr_paths[n_rendered % 2]
+                n_rendered += 1
+                t0, c0 = time.perf_counter(), time.process_time()
+                handles.scene.render.filepath = exr_path
+                apply_frame(handles, frame)
+                t1 = time.perf_counter()
+                bpy.ops.render.render(write_still=True)
+                t2, c2 = time.perf_counter(), time.process_time()
+            except Exception as exc:  # reported to the job, which decides to retry or fail
+                replies.wait()
+                fid = (req.get("frame") or {}).get("spec", {}).get("frame_id")
+                replies.send({**_error(op, exc), "frame_id": fid})
+                continue
+
+            def post(frame=frame, exr_path=exr_path, t0=t0, t1=t1, t2=t2, render_cpu=c2 - c0):
+                try:
+                    p0 = time.thread_time()
                     done = finish_frame(frame, static, exr_path, init["root"], init["keep_exr"],
                                         init["visible_threshold"],
                                         {"scene_update": t1 - t0, "cycles": t2 - t1},
                                         init.get("min_chroma", 0.03))
                     done["timings_s"]["total"] = time.perf_counter() - t0
-                    # CPU seconds (all threads): a measure of work that other load does not inflate
-                    done["timings_s"]["cycles_cpu"] = c2 - c1
-                    done["timings_s"]["total_cpu"] = time.process_time() - c0
+                    # CPU seconds: the render's (whole process, all threads; it includes the
+                    # previous frame's post-processing that ran alongside) and this thread's
+                    done["timings_s"]["cycles_cpu"] = render_cpu
+                    done["timings_s"]["post_cpu"] = time.thread_time() - p0
                     done["rss_mb"] = _rss_mb()
-                    reply = {"ok": True, "op": "render", "frame_id": frame.spec.frame_id, **done}
-                else:
-                    raise ValueError(f"unknown op {op!r}")
-            except Exception as exc:  # reported to the job, which decides to retry or fail
-                reply = {"ok": False, "op": op, "error": f"{type(exc).__name__}: {exc}",
-                         "traceback": traceback.format_exc()}
-            proto.write(json.dumps(reply) + "\n")
+                    done["finished_at"] = time.time()
+                    replies.send({"ok": True, "op": "render", "frame_id": frame.spec.frame_id, **done})
+                except Exception as exc:
+                    replies.send({**_error("render", exc), "frame_id": frame.spec.frame_id})
+
+            replies.start_post(post)
+        replies.wait()
     finally:
+        replies.wait()
         shutil.rmtree(scratch, ignore_errors=True)
     return 0
 

@@ -45,13 +45,106 @@ def render_with_retries(worker: WorkerProcess, frame: dict, timeout_s: float, re
         events.append(("retry", fid, reason))
 
 
-class LocalExecutor:
-    """``workers`` render processes on this machine, each fed by a thread."""
+def render_pipelined(worker: WorkerProcess, next_frame, timeout_s: float, retries: int, recycle_after: int,
+                     is_done, emit, depth: int = 2) -> None:
+    """Feed one worker with up to ``depth`` frames in flight until ``next_frame()`` returns None.
 
-    def __init__(self, workers: int, log_dir: Path, env: dict | None = None):
+    The worker finishes frame k (sensor model, labels, writes) while it renders frame k + 1, and
+    answers in request order. A crash or hang loses every frame in flight. A frame that turns out
+    to be complete on disk (``is_done(frame_id)``) is not rendered again. When several frames
+    were in flight nobody knows which one killed the worker, so each is retried alone; only a
+    crash with a single frame in flight counts against that frame (at most ``retries`` retries).
+    ``emit(event)`` receives ("done" | "retry" | "failed", frame_id, info) events.
+    """
+    from collections import deque
+    attempts: dict[str, int] = {}
+    isolate: deque = deque()     # frames to retry alone
+    inflight: deque = deque()    # (frame, alone)
+    draining = False             # recycling: let the frames in flight finish, then restart
+
+    def lost(frames, reason):
+        suspects = [f for f in frames if not is_done(f["spec"]["frame_id"])]
+        for f in frames:
+            if f not in suspects:
+                emit(("done", f["spec"]["frame_id"], {"timings_s": None, "recovered": True}))
+        for f in suspects:
+            fid = f["spec"]["frame_id"]
+            if len(frames) == 1:
+                attempts[fid] = attempts.get(fid, 0) + 1
+                if attempts[fid] > retries:
+                    emit(("failed", fid, reason))
+                    continue
+            emit(("retry", fid, reason))
+            isolate.append(f)
+
+    while True:
+        while not draining and len(inflight) < depth and not (inflight and inflight[-1][1]):
+            if isolate:
+                if inflight:
+                    break        # a frame under suspicion goes alone
+                frame, alone = isolate.popleft(), True
+            else:
+                frame, alone = next_frame(), False
+            if frame is None:
+                break
+            try:
+                if worker.proc is None:
+                    worker.start(timeout_s)
+                worker.send({"op": "render", "frame": frame})
+                inflight.append((frame, alone))
+            except Exception as exc:   # could not start or reach the worker
+                worker.kill()
+                frames = [f for f, _ in inflight] + [frame]
+                inflight.clear()
+                lost(frames if len(frames) > 1 else [frame], f"{type(exc).__name__}: {exc}")
+        if not inflight:
+            if draining:
+                draining = False
+                continue
+            return
+        frame, _ = inflight[0]
+        try:
+            reply = worker.recv(timeout_s)
+        except (WorkerDied, ValueError) as exc:
+            worker.kill()
+            frames = [f for f, _ in inflight]
+            inflight.clear()
+            draining = False
+            lost(frames, f"worker crashed or hung: {exc}")
+            continue
+        inflight.popleft()
+        fid = frame["spec"]["frame_id"]
+        if reply.get("frame_id") not in (None, fid):
+            worker.kill()
+            frames = [frame] + [f for f, _ in inflight]
+            inflight.clear()
+            lost(frames, f"worker answered for {reply.get('frame_id')}, expected {fid}")
+            continue
+        if reply.get("ok"):
+            worker.frames_done += 1
+            emit(("done", fid, reply))
+            if worker.frames_done >= recycle_after:   # cap memory growth of long bpy runs
+                draining = True
+        else:   # an error the worker reported for this very frame
+            attempts[fid] = attempts.get(fid, 0) + 1
+            if attempts[fid] > retries:
+                emit(("failed", fid, reply.get("error", "unknown error")))
+            else:
+                emit(("retry", fid, reply.get("error", "unknown error")))
+                isolate.append(frame)
+        if draining and not inflight:
+            worker.close()
+
+
+class LocalExecutor:
+    """``workers`` render processes on this machine, each fed by a thread (two frames in flight
+    per worker, see :func:`render_pipelined`)."""
+
+    def __init__(self, workers: int, log_dir: Path, env: dict | None = None, is_done=None):
         self.workers = workers
         self.log_dir = Path(log_dir)
         self.env = env
+        self.is_done = is_done or (lambda fid: False)
 
     def run(self, frames: list[dict], init: dict, timeout_s: float, retries: int,
             recycle_after: int) -> Iterator[tuple[str, str, object]]:
@@ -61,16 +154,18 @@ class LocalExecutor:
         events: queue.Queue = queue.Queue()
         stop = threading.Event()
 
+        def next_frame():
+            if stop.is_set():
+                return None
+            try:
+                return work.get_nowait()
+            except queue.Empty:
+                return None
+
         def slot(i: int) -> None:
             worker = WorkerProcess(init, self.log_dir / f"worker-{i}.log", self.env)
             try:
-                while not stop.is_set():
-                    try:
-                        frame = work.get_nowait()
-                    except queue.Empty:
-                        return
-                    for ev in render_with_retries(worker, frame, timeout_s, retries, recycle_after):
-                        events.put(ev)
+                render_pipelined(worker, next_frame, timeout_s, retries, recycle_after, self.is_done, events.put)
             finally:
                 worker.close()
                 events.put(("slot-exit", str(i), None))

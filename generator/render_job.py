@@ -44,6 +44,7 @@ class JobSummary:
     planned: int = 0
     skipped: int = 0
     rendered: int = 0
+    recovered: int = 0   # completed by a worker that died before it could answer
     retried: int = 0
     failed: dict = field(default_factory=dict)
     seconds: float = 0.0
@@ -57,7 +58,8 @@ class JobSummary:
     def text(self) -> str:
         lines = [f"dataset {self.root} (version {self.version_id})",
                  f"  frames in this run: {self.planned}, already done: {self.skipped}, "
-                 f"rendered: {self.rendered}, retried: {self.retried}, failed: {len(self.failed)}",
+                 f"rendered: {self.rendered}, retried: {self.retried}, failed: {len(self.failed)}"
+                 + (f", recovered after a crash: {self.recovered}" if self.recovered else ""),
                  f"  wall time: {self.seconds:.1f} s"]
         if self.timings:
             cyc = sorted(t["cycles"] for t in self.timings)
@@ -134,7 +136,8 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
     if opts.executor == "ray":
         executor = RayExecutor(n_workers, threads, opts.ray_address, log_dir, opts.env)
     elif opts.executor == "local":
-        executor = LocalExecutor(n_workers, log_dir, opts.env)
+        executor = LocalExecutor(n_workers, log_dir, opts.env,
+                                 is_done=lambda fid: frame_done(root, fid, cfg.render.keep_exr))
     else:
         raise ValueError(f"--executor must be local or ray, got {opts.executor!r}")
     frames = [to_dict(scenes[s.frame_id]) for s in todo]
@@ -149,10 +152,14 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
                     continue
                 if kind == "done":
                     finished += 1
-                    summary.rendered += 1
-                    summary.timings.append(info["timings_s"])
-                    tlog.write(json.dumps({"frame_id": fid, **info["timings_s"], "rss_mb": info.get("rss_mb")}) + "\n")
-                    tlog.flush()
+                    if info.get("recovered"):   # finished by a worker that died before answering
+                        summary.recovered += 1
+                    else:
+                        summary.rendered += 1
+                        summary.timings.append(info["timings_s"])
+                        tlog.write(json.dumps({"frame_id": fid, **info["timings_s"], "rss_mb": info.get("rss_mb"),
+                                               "finished_at": info.get("finished_at")}) + "\n")
+                        tlog.flush()
                 elif kind == "failed":
                     finished += 1
                     summary.failed[fid] = info

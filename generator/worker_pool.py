@@ -52,7 +52,7 @@ class WorkerProcess:
     def pid(self) -> int | None:
         return self.proc.pid if self.proc else None
 
-    def request(self, msg: dict, timeout_s: float) -> dict:
+    def send(self, msg: dict) -> None:
         if self.proc is None or self.proc.poll() is not None:
             raise WorkerDied("worker is not running")
         try:
@@ -60,7 +60,14 @@ class WorkerProcess:
             self.proc.stdin.flush()
         except (BrokenPipeError, OSError) as exc:
             raise WorkerDied(f"worker pipe closed ({exc})") from exc
+
+    def recv(self, timeout_s: float) -> dict:
+        """The next reply (replies come in request order)."""
         return json.loads(self._read_line(timeout_s))
+
+    def request(self, msg: dict, timeout_s: float) -> dict:
+        self.send(msg)
+        return self.recv(timeout_s)
 
     def _read_line(self, timeout_s: float) -> bytes:
         deadline = time.monotonic() + timeout_s

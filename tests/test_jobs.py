@@ -157,7 +157,8 @@ def test_hung_worker_is_killed_and_frame_retried(tmp_path):
     path.write_text(text)
     env = dict(os.environ, DOCKFACTORY_FAULT="hang:000000", DOCKFACTORY_FAULT_DIR=str(tmp_path))
     summary = run_render(load_config(path), tmp_path / "ds", text, JobOptions(progress=False, env=env))
-    assert summary.ok and summary.complete and summary.retried == 1
+    assert summary.ok and summary.complete and summary.retried >= 1  # the hung frame (and any in flight with it)
+    assert summary.rendered + summary.recovered == 4
 
 
 def test_frame_that_keeps_failing_is_reported(tmp_path):
@@ -167,7 +168,7 @@ def test_frame_that_keeps_failing_is_reported(tmp_path):
     env = dict(os.environ, DOCKFACTORY_FAULT="crash-always:000001")
     summary = run_render(load_config(path), tmp_path / "ds", text, JobOptions(progress=False, env=env, retries=1))
     assert not summary.ok and list(summary.failed) == ["000001"] and not summary.complete
-    assert summary.retried == 1 and summary.rendered == 3  # the other three frames
+    assert summary.retried >= 1 and summary.rendered + summary.recovered == 3  # the other three frames
     assert "FAILED 000001: worker crashed or hung" in summary.text()
     assert not (tmp_path / "ds" / "labels" / "000001.json").exists()
 

@@ -134,7 +134,7 @@ def test_crashed_worker_is_restarted_and_frame_retried(tmp_path):
     env = dict(os.environ, DOCKFACTORY_FAULT="crash:000001", DOCKFACTORY_FAULT_DIR=str(tmp_path))
     summary = run_render(load_config(cfg_path), tmp_path / "ds", text, JobOptions(progress=False, env=env))
     assert summary.ok and summary.complete
-    assert summary.retried == 1 and summary.rendered == 2
+    assert summary.retried >= 1 and summary.rendered + summary.recovered == 2
     assert (tmp_path / "fault-crash-000001").exists()
 
 
