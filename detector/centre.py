@@ -14,10 +14,9 @@ A marker is a red or blue disc inside a dark ring. Inside a window around the de
 5. centre = coverage-weighted centroid; second moments give the ellipse of the disc
    (for a uniform ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of
    the pixel footprint), hence a refined outline box. The moments fall short of the true
-   outline by a few hundredths of a px per side (edge blur against the ring level; 0.024 px:
-   median over 1444 fully visible markers of every second train frame of configs/detector.toml,
-   dataset 5a22444cf4c39419; it was 0.074 px with the earlier 2-spp render settings):
-   ``edge_bias_px`` adds it back.
+   outline by a few hundredths of a px per side (edge blur against the ring level; 0.041 px:
+   median over 1441 fully visible markers of every second train frame of configs/detector.toml,
+   dataset 2601360c1f4c4e22, 2 spp; 0.024 px on 1-spp renders): ``edge_bias_px`` adds it back.
 
 Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
 over the disc: noise and shading), and how well
@@ -58,13 +57,29 @@ def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
     return lin[..., c] - 0.5 * (lin[..., others[0]] + lin[..., others[1]])
 
 
-EDGE_BIAS_PX = 0.025  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
+EDGE_BIAS_PX = 0.041  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
                   edge_bias_px: float = EDGE_BIAS_PX) -> Refined:
     """Refine one detection. ``image: (H, W, 3) uint8`` RGB at full resolution,
-    ``box: (4,) [x0, y0, x1, y1]`` px (OpenCV convention)."""
+    ``box: (4,) [x0, y0, x1, y1]`` px (OpenCV convention).
+
+    Two passes: the window, the inner and ring masks of the first pass come from the detector's
+    box; when that box is a few tenths of the radius too small the ring mask lands on the disc
+    and the cut at 1.3 box radii clips it. The second pass repeats the measurement in the window
+    of the first refined ellipse (kept if it is refined too)."""
+    first = _refine_once(image, box, class_id, min_quality, edge_bias_px)
+    if not first.refined:
+        return first
+    second = _refine_once(image, first.box, class_id, min_quality, edge_bias_px)
+    if not second.refined:
+        return first
+    return Refined(center=second.center, box=second.box, quality=second.quality, refined=True)
+
+
+def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
+                 edge_bias_px: float) -> Refined:
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise ValueError(f"image must be (H, W, 3) uint8, got {image.shape} {image.dtype}")
     box = np.asarray(box, dtype=np.float64).reshape(-1)

@@ -27,3 +27,12 @@ def tmp_config(tmp_path):
 
 
 os.environ.setdefault("HYPOTHESIS_PROFILE", "ci")
+
+# Property tests draw their examples from a fixed seed by default, so a red CI run is
+# reproducible and a green one stays green; HYPOTHESIS_PROFILE=explore draws fresh examples
+# (and more of them) to hunt for new counter-examples locally.
+from hypothesis import settings  # noqa: E402
+
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+settings.register_profile("explore", max_examples=500, derandomize=False)
+settings.load_profile(os.environ["HYPOTHESIS_PROFILE"])
