@@ -57,6 +57,21 @@ def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
     return lin[..., c] - 0.5 * (lin[..., others[0]] + lin[..., others[1]])
 
 
+def colour_purity(rgb: np.ndarray, class_id: int) -> np.ndarray:
+    """``(H, W) float32``: (class channel - largest other channel) / class channel, linear; 1
+    for a pure marker colour, 0 for grey, small for a warm or cold colour that only leans
+    toward the class (orange for red)."""
+    lin = _SRGB_TO_LINEAR[rgb]
+    c = CLASS_CHANNEL[class_id]
+    others = [k for k in range(3) if k != c]
+    top = lin[..., c]
+    return (top - np.maximum(lin[..., others[0]], lin[..., others[1]])) / np.maximum(top, 1e-4)
+
+
+PURITY_SHARE = 0.5  # pixels under this share of the disc's median purity are not the disc
+MAX_SCORE_RATIO = 3.0  # pixels scoring this many times the disc's level (above the ring's) neither
+
+
 EDGE_BIAS_PX = 0.041  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
 
 
@@ -106,8 +121,16 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     noise = float(1.4826 * np.median(np.abs(s[inner] - np.median(s[inner])))) + 1e-4
     if fg - bg <= 0:
         return fallback
-    w = np.clip((s - bg) / (fg - bg), 0.0, 1.0).astype(np.float32)
+    w_raw = (s - bg) / (fg - bg)
+    w = np.clip(w_raw, 0.0, 1.0).astype(np.float32)
     w[rho > 1.3] = 0.0
+    w[w_raw > MAX_SCORE_RATIO] = 0.0      # far redder (bluer) than the disc: not the disc
+    # an occluder that merely leans toward the class colour (orange beside red) scores high
+    # too: keep the pixels about as pure as the disc itself
+    pur = colour_purity(image[y0:y1, x0:x1], class_id)
+    p_disc = float(np.median(pur[inner]))
+    if p_disc > 0:
+        w[pur < PURITY_SHARE * p_disc] = 0.0
     n, lab = cv2.connectedComponents((w > 0.5).astype(np.uint8), connectivity=8)
     if n < 2:
         return fallback

@@ -209,7 +209,21 @@ class MarkerDetector:
                              center_px=[round(float((x0 + x1) / 2), 4), round(float((y0 + y1) / 2), 4)],
                              refine_quality=0.0, refined=False, bbox_detector_px=[round(float(v), 4) for v in box])
             out.append(entry)
-        return out
+        return drop_nested(out)
+
+
+def drop_nested(dets: list[dict]) -> list[dict]:
+    """Drop a detection whose centre lies inside the box of a higher-scoring detection of the
+    same class. Markers sit in dark rings and never inside each other's outline, so such a pair
+    is one marker seen twice (a part of a partly hidden disc and the whole of it, whose thin
+    boxes overlap too little for NMS). ``dets`` sorted by falling score."""
+    kept: list[dict] = []
+    for d in dets:
+        u, v = d["center_px"]
+        if not any(k["class_id"] == d["class_id"] and k["bbox_px"][0] <= u <= k["bbox_px"][2]
+                   and k["bbox_px"][1] <= v <= k["bbox_px"][3] for k in kept):
+            kept.append(d)
+    return kept
 
 
 def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = 0.25,

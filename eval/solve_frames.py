@@ -4,8 +4,8 @@ Input per frame: detections (class and refined centre from ``dockfactory detect`
 oracle, the exact label centres of the visible markers plus Gaussian noise. Output POSES.json:
   {"format": "dockfactory.poses/1", "dataset_version": ..., "source": "detections" | "oracle",
    "sigma_px": ..., "frames": {frame_id: {"ok": true, "d_from_b": 4x4, "pose": {...},
-   "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"}, "marker_ids": [...],
-   "n_markers": {"A", "B"}} | {"ok": false, "reason": ..., "category": ...}}}
+   "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"}, "marker_ids": [...] (used in the fit),
+   "rejected_ids": [...] (identified, left out as outliers), "n_markers": {"A", "B"}} | {"ok": false, "reason": ..., "category": ...}}}
 Frames without a pose are kept with their reason: never dropped.
 """
 from __future__ import annotations
@@ -38,24 +38,34 @@ def oracle_detections(label: dict, sigma_px: float, rng: np.random.Generator):
 
 
 def detection_arrays(dets: list[dict], min_score: float):
+    """(class_ids (N,), centres (N, 2), boxes (N, 4) or None, refined (N,) bool or None) of
+    the detections scoring at least ``min_score``; boxes / refined are None unless every
+    detection has them."""
     keep = [d for d in dets if d.get("score", 1.0) >= min_score]
     cls = np.array([d["class_id"] for d in keep], dtype=int)
     uv = np.array([d["center_px"] for d in keep], dtype=float).reshape(-1, 2)
-    return cls, uv
+    boxes = (np.array([d["bbox_px"] for d in keep], dtype=float).reshape(-1, 4)
+             if all("bbox_px" in d for d in keep) else None)
+    refined = (np.array([bool(d["refined"]) for d in keep], dtype=bool)
+               if all("refined" in d for d in keep) else None)
+    return cls, uv, boxes, refined
 
 
-def solve_one(markers, principal_point, cls, uv, sigma_px: float | None) -> dict:
+def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
+              refined=None) -> dict:
     from solver import SolverError, solve_docking
     try:
-        res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px)
+        res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px,
+                            boxes=boxes, refined=refined)
     except SolverError as exc:
         return {"ok": False, "reason": str(exc), "category": failure_category(str(exc))}
-    used = [i for i in res.marker_ids if i is not None]
+    used = [i for i, ok in zip(res.marker_ids, res.inliers) if ok and i is not None]
+    rejected = [i for i, ok in zip(res.marker_ids, res.inliers) if not ok and i is not None]
     return {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),
             "pose": res.pose(), "focal_px": res.focal_px,
             "covariance": res.covariance.tolist(), "rmse_px": res.rmse_px, "marker_ids": used,
             "n_markers": {"A": sum(i.startswith("A") for i in used), "B": sum(i.startswith("B") for i in used)},
-            "n_detections": int(len(cls))}
+            "rejected_ids": rejected, "n_detections": int(len(cls))}
 
 
 def solve_dataset(ds: EvalDataset, splits=("test", "repeat"), detections: dict | None = None,
@@ -75,8 +85,8 @@ def solve_dataset(ds: EvalDataset, splits=("test", "repeat"), detections: dict |
             if dets is None:
                 frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
                 continue
-            cls, uv = detection_arrays(dets, min_score)
-            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px)
+            cls, uv, boxes, refined = detection_arrays(dets, min_score)
+            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px, boxes, refined)
         else:
             rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
             cls, uv = oracle_detections(label, oracle_sigma_px, rng)

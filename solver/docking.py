@@ -10,6 +10,7 @@ or correspondences (marker id + pixel centre, optionally with outliers: LO-RANSA
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +19,7 @@ from generator.geometry import pose_components
 from solver.checks import MIN_POINTS, as_points, as_principal_point, check_correspondences
 from solver.crb import POSE_NAMES
 from solver.errors import SolverError
+from solver.identify import parse_detections
 from solver.pnpf import solve_checked
 from solver.upnp import upnp
 from solver.refine import (covariance_from_jacobian, d_from_b_jacobian, refine_joint,
@@ -43,8 +45,10 @@ class DockingResult:
       ``std`` the matching dict of standard deviations;
     - ``covariance_params`` (13, 13) over (w_A, t_A, w_B, t_B, f) (see :mod:`solver.refine`);
     - ``rmse_px``: {"A": ..., "B": ...} reprojection RMS per section (px, per point);
-    - ``marker_ids``: per input row, the marker id used ("A3") or None (rejected);
-    - ``inliers`` (N,) bool per input row; ``swapped`` (N,) bool: detections whose class label
+    - ``marker_ids``: per input row, the marker id ("A3") or None (not identified, or rejected
+      by RANSAC);
+    - ``inliers`` (N,) bool per input row: used in the final fit (an identified detection
+      whose residual marks it as an outlier keeps its id and is not an inlier); ``swapped`` (N,) bool: detections whose class label
       disagreed with the section of the marker they were identified as (all False for
       correspondences);
     - ``cam_from_a``, ``cam_from_b`` (4, 4); ``sigma_px``: noise std used for the covariances.
@@ -117,7 +121,8 @@ def _parse_correspondences(correspondences):
 def solve_docking(markers, principal_point, *, detections=None, correspondences=None,
                   sigma_px: float | None = None, robust: bool = False,
                   rng: np.random.Generator | None = None, threshold_px: float = 4.0,
-                  identify_options: dict | None = None) -> DockingResult:
+                  identify_options: dict | None = None, boxes=None, refined=None,
+                  min_extent: float = 0.85) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
 
     ``markers``: the layout, a sequence of :class:`generator.layout.Marker` of both sections
@@ -132,6 +137,13 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     - ``correspondences``: dict marker id -> (u, v), or a pair (marker_ids (N,), points_2d
       (N, 2)). With ``robust=True`` (needs ``rng``), outliers are rejected per section by
       LO-RANSAC with inlier threshold ``threshold_px``.
+    Detections only: identification uses every detection; the pose then leaves out, worst
+    first, identified detections whose centre is suspect (see :mod:`solver.suspects`), as long
+    as each section keeps ``MIN_POINTS`` (suspects left out keep their id; ``inliers`` False):
+    - ``boxes`` (N, 4) [x0, y0, x1, y1] px: the detected outline; narrower or lower than
+      ``min_extent`` x the outline the first fit predicts for its marker = partly hidden;
+    - ``refined`` (N,) bool: False where the detector could not refine the centre (box
+      centre only).
     ``sigma_px``: pixel noise std for the covariances; None estimates it from the residuals.
 
     Every section needs at least 4 usable points. Returns a :class:`DockingResult`; raises
@@ -144,8 +156,14 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     pp = as_principal_point(principal_point)
     if sigma_px is not None and not (np.isfinite(sigma_px) and sigma_px > 0):
         raise SolverError(f"sigma_px must be positive and finite, got {sigma_px}")
+    if correspondences is not None and (boxes is not None or refined is not None):
+        raise SolverError("boxes= and refined= describe detections: give them with detections=")
     if detections is not None:
         from solver.identify import identify_markers
+        n_det = len(parse_detections(detections)[0])
+        boxes = _row_array(boxes, n_det, (4,), "boxes")
+        refined = _row_array(refined, n_det, (), "refined")
+        refined = None if refined is None else refined.astype(bool)
         ident = identify_markers(markers, pp, detections, **(identify_options or {}))
         ids = list(ident.marker_ids)
         uv = ident.points_2d
@@ -191,8 +209,33 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
         # final inlier check with the joint model over every correspondence
         out, inliers, rows = _recheck_inliers(out, ids, uv, index, sections, pts_layout, pp,
                                               threshold_px, sigma_px, inliers)
-    marker_ids = tuple(ids[k] if inliers[k] else None for k in range(len(ids)))
+    identified = inliers.copy()
+    if detections is not None:
+        from solver.suspects import leave_out_suspects
+        fit = functools.partial(solve_docking_arrays, pp=pp, sigma_px=sigma_px)
+        by_id = markers_by_id(markers)
+        out, inliers = leave_out_suspects(out, rows, p3, p2, fit, inliers,
+                                          [by_id.get(i) for i in ids], pp, boxes, refined,
+                                          min_extent)
+    marker_ids = tuple(ids[k] if identified[k] else None for k in range(len(ids)))
     return _finish(out, marker_ids, inliers, swapped)
+
+
+def markers_by_id(markers) -> dict:
+    return {m.id: m for m in markers}
+
+
+def _row_array(value, n, shape, name):
+    """None, or ``value`` as an (n, *shape) array (one row per detection)."""
+    if value is None:
+        return None
+    arr = np.asarray(value)
+    if arr.shape != (n, *shape):
+        raise SolverError(f"{name}: expected shape {(n, *shape)} (one row per detection), "
+                          f"got {arr.shape}")
+    if arr.dtype != bool and not np.all(np.isfinite(arr)):
+        raise SolverError(f"{name}: contains NaN or inf")
+    return arr
 
 
 def _recheck_inliers(out, ids, uv, index, sections, pts_layout, pp, thr, sigma_px, inliers):

@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from detector.centre import colour_score, refine_centre
-from detector.synthetic import make_frame
+from detector.synthetic import make_frame  # noqa: E402
 
 
 @settings(max_examples=25, deadline=None)
@@ -48,3 +48,40 @@ def test_bad_input():
         refine_centre(img[..., 0], [1, 1, 9, 9], 0)
     with pytest.raises(ValueError, match="class_id"):
         colour_score(img, 3)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_occluder_leaning_to_the_class_colour_is_not_the_disc(seed, monkeypatch):
+    """A bright orange occluder over the left part of a shaded red marker's ring and disc (as
+    in frame 000057 of configs/detector.toml: orange (225, 151, 77) beside a (105, 18, 10)
+    disc) scores four times higher for red than the disc itself. The refined centre must be
+    the centroid of the disc's visible part (0.15 px), not spread over the occluder."""
+    import detector.centre as centre
+    from detector.synthetic import disc_coverage
+    rng = np.random.default_rng(seed)
+    img, markers = make_frame(rng, 96, 96, 2, r_range=(9.0, 11.0))
+    m = markers[0]                                   # class 0: red
+    cx, cy = m["center_px"]
+    r = (m["bbox_px"][2] - m["bbox_px"][0]) / 2
+    x_end = int(np.floor(cx - 0.85 * r)) + 1          # first column of the disc left visible
+    ring = disc_coverage(96, 96, cx, cy, 1.3 * r)[..., None]
+    img = (img * (1 - 0.45 * ring)).round().astype(np.uint8)      # the marker in shade
+    img[max(int(cy - 2 * r), 0):int(cy + 2 * r), max(int(cx - 2 * r), 0):x_end] = (225, 151, 77)
+    cov = disc_coverage(96, 96, cx, cy, r)
+    cov[:, :x_end] = 0
+    ys, xs = np.mgrid[0:96, 0:96]
+    visible = np.array([(cov * xs).sum(), (cov * ys).sum()]) / cov.sum()
+    box = np.array([x_end - 0.5, m["bbox_px"][1], m["bbox_px"][2], m["bbox_px"][3]])
+    r_ok = refine_centre(img, box, 0)
+    assert r_ok.refined and np.hypot(*(r_ok.center - visible)) < 0.15
+    monkeypatch.setattr(centre, "MAX_SCORE_RATIO", np.inf)       # without the score cap
+    r_bad = centre.refine_centre(img, box, 0)
+    assert (not r_bad.refined) or np.hypot(*(r_bad.center - visible)) > 0.5
+
+
+def test_colour_purity():
+    from detector.centre import colour_purity
+    px = np.array([[[200, 25, 25], [240, 160, 90], [128, 128, 128], [30, 50, 210]]], np.uint8)
+    p_red = colour_purity(px, 0)[0]
+    assert p_red[0] > 0.95 and p_red[1] < 0.75 and abs(p_red[2]) < 1e-6 and p_red[3] < 0
+    assert colour_purity(px, 1)[0][3] > 0.9

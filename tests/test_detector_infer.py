@@ -95,3 +95,17 @@ def test_postprocess_decodes_boxes_and_scores():
     assert out.shape == (2, 6)
     assert torch.allclose(out[0], torch.tensor([8, 8, 12, 12, 0.81, 0]))
     assert torch.allclose(out[1], torch.tensor([40, 35, 60, 45, 0.72, 1]))
+
+
+def test_drop_nested_keeps_one_detection_per_marker():
+    from detector.infer import drop_nested
+
+    def det(c, score, box, centre):
+        return {"class_id": c, "score": score, "bbox_px": box, "center_px": centre}
+    dets = [det(0, 0.9, [10, 10, 30, 20], [20, 15]),
+            det(0, 0.5, [6, 8, 26, 18], [16, 13]),       # same class, centre inside the first box
+            det(1, 0.4, [12, 11, 28, 19], [20, 15]),     # other class: kept (the solver decides)
+            det(0, 0.3, [40, 10, 60, 20], [50, 15])]     # another marker
+    kept = drop_nested(dets)
+    assert [d["score"] for d in kept] == [0.9, 0.4, 0.3]
+    assert drop_nested([]) == []
