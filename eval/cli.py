@@ -59,7 +59,7 @@ def add_subcommands(sub) -> None:
     s = sub.add_parser("solve", help="poses of B relative to A from detections (or label centres + noise)")
     s.add_argument("dataset")
     s.add_argument("--detections", help="DETS.json from dockfactory detect")
-    s.add_argument("--oracle-noise", type=float, metavar="PX", help="use exact label centres + Gaussian noise (px)")
+    s.add_argument("--oracle-noise", type=float, metavar="PX", help="use the exact image centroids of the markers (labels) + Gaussian noise (px)")
     s.add_argument("--split", default="test,repeat")
     s.add_argument("--min-score", type=float, default=0.25)
     s.add_argument("--out", required=True)

@@ -1,7 +1,8 @@
 """``dockfactory solve``: poses of B relative to A for a dataset's frames.
 
 Input per frame: detections (class and refined centre from ``dockfactory detect``) or, for the
-oracle, the exact label centres of the visible markers plus Gaussian noise. Output POSES.json:
+oracle, what a perfect detector would measure for the visible markers (the exact centroid of
+each disc's image, label ``outline_centroid_px``) plus Gaussian noise. Output POSES.json:
   {"format": "dockfactory.poses/1", "dataset_version": ..., "source": "detections" | "oracle",
    "sigma_px": ..., "frames": {frame_id: {"ok": true, "d_from_b": 4x4, "pose": {...},
    "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"}, "marker_ids": [...] (used in the fit),
@@ -30,10 +31,13 @@ def failure_category(reason: str) -> str:
 
 
 def oracle_detections(label: dict, sigma_px: float, rng: np.random.Generator):
-    """(class_ids (N,), points (N, 2)): exact centres of the visible, legible markers + N(0, sigma^2)."""
+    """(class_ids (N,), points (N, 2)): exact image centroids of the visible, legible markers
+    + N(0, sigma^2). The centroid of a disc's image, not the projection of its centre, is what
+    a detector measures; the solver corrects the difference (solver.eccentricity)."""
     vis = [m for m in label["markers"] if m.get("visibility") == 2 and m.get("legible", True)]
     cls = np.array([m["class_id"] for m in vis], dtype=int)
-    uv = np.array([m["center_px"] for m in vis], dtype=float).reshape(-1, 2)
+    uv = np.array([m.get("outline_centroid_px") or m["center_px"] for m in vis],
+                  dtype=float).reshape(-1, 2)
     return cls, uv + rng.normal(0.0, sigma_px, size=uv.shape) if sigma_px > 0 else uv
 
 

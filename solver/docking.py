@@ -122,7 +122,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                   sigma_px: float | None = None, robust: bool = False,
                   rng: np.random.Generator | None = None, threshold_px: float = 4.0,
                   identify_options: dict | None = None, boxes=None, refined=None,
-                  min_extent: float = 0.85) -> DockingResult:
+                  min_extent: float = 0.85, eccentricity: bool = True) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
 
     ``markers``: the layout, a sequence of :class:`generator.layout.Marker` of both sections
@@ -144,6 +144,9 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
       ``min_extent`` x the outline the first fit predicts for its marker = partly hidden;
     - ``refined`` (N,) bool: False where the detector could not refine the centre (box
       centre only).
+    ``eccentricity`` (detections only): detected centres are centroids of the disc's image;
+    after the fit each is corrected by its predicted perspective offset and the pose refitted
+    (see :mod:`solver.eccentricity`).
     ``sigma_px``: pixel noise std for the covariances; None estimates it from the residuals.
 
     Every section needs at least 4 usable points. Returns a :class:`DockingResult`; raises
@@ -214,9 +217,12 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
         from solver.suspects import leave_out_suspects
         fit = functools.partial(solve_docking_arrays, pp=pp, sigma_px=sigma_px)
         by_id = markers_by_id(markers)
-        out, inliers = leave_out_suspects(out, rows, p3, p2, fit, inliers,
-                                          [by_id.get(i) for i in ids], pp, boxes, refined,
-                                          min_extent)
+        row_markers = [by_id.get(i) for i in ids]
+        out, inliers = leave_out_suspects(out, rows, p3, p2, fit, inliers, row_markers, pp,
+                                          boxes, refined, min_extent)
+        if eccentricity:
+            from solver.eccentricity import correct_eccentricity
+            out = correct_eccentricity(out, rows, p3, p2, fit, inliers, row_markers, pp)
     marker_ids = tuple(ids[k] if identified[k] else None for k in range(len(ids)))
     return _finish(out, marker_ids, inliers, swapped)
 
