@@ -5,8 +5,9 @@ oracle, what a perfect detector would measure for the visible markers (the exact
 each disc's image, label ``outline_centroid_px``) plus Gaussian noise. Output POSES.json:
   {"format": "dockfactory.poses/1", "dataset_version": ..., "source": "detections" | "oracle",
    "sigma_px": ..., "frames": {frame_id: {"ok": true, "d_from_b": 4x4, "pose": {...},
-   "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"}, "marker_ids": [...] (used in the fit),
-   "rejected_ids": [...] (identified, left out as outliers), "n_markers": {"A", "B"}} | {"ok": false, "reason": ..., "category": ...}}}
+   "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"},
+   "marker_ids": [...] (used in the fit), "rejected_ids": [...] (identified, left out as
+   suspect), "n_markers": {"A", "B"}} | {"ok": false, "reason": ..., "category": ...}}}
 Frames without a pose are kept with their reason: never dropped.
 """
 from __future__ import annotations

@@ -47,10 +47,10 @@ class DockingResult:
     - ``rmse_px``: {"A": ..., "B": ...} reprojection RMS per section (px, per point);
     - ``marker_ids``: per input row, the marker id ("A3") or None (not identified, or rejected
       by RANSAC);
-    - ``inliers`` (N,) bool per input row: used in the final fit (an identified detection
-      whose residual marks it as an outlier keeps its id and is not an inlier); ``swapped`` (N,) bool: detections whose class label
-      disagreed with the section of the marker they were identified as (all False for
-      correspondences);
+    - ``inliers`` (N,) bool per input row: used in the final fit (an identified detection left
+      out as suspect keeps its id and is not an inlier);
+    - ``swapped`` (N,) bool: detections whose class label disagreed with the section of the
+      marker they were identified as (all False for correspondences);
     - ``cam_from_a``, ``cam_from_b`` (4, 4); ``sigma_px``: noise std used for the covariances.
     """
 
@@ -164,9 +164,8 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     if detections is not None:
         from solver.identify import identify_markers
         n_det = len(parse_detections(detections)[0])
-        boxes = _row_array(boxes, n_det, (4,), "boxes")
-        refined = _row_array(refined, n_det, (), "refined")
-        refined = None if refined is None else refined.astype(bool)
+        boxes = _row_array(boxes, n_det, (4,), "boxes", float)
+        refined = _row_array(refined, n_det, (), "refined", bool)
         ident = identify_markers(markers, pp, detections, **(identify_options or {}))
         ids = list(ident.marker_ids)
         uv = ident.points_2d
@@ -216,7 +215,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     if detections is not None:
         from solver.suspects import leave_out_suspects
         fit = functools.partial(solve_docking_arrays, pp=pp, sigma_px=sigma_px)
-        by_id = markers_by_id(markers)
+        by_id = {m.id: m for m in markers}
         row_markers = [by_id.get(i) for i in ids]
         out, inliers = leave_out_suspects(out, rows, p3, p2, fit, inliers, row_markers, pp,
                                           boxes, refined, min_extent)
@@ -227,19 +226,18 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     return _finish(out, marker_ids, inliers, swapped)
 
 
-def markers_by_id(markers) -> dict:
-    return {m.id: m for m in markers}
-
-
-def _row_array(value, n, shape, name):
-    """None, or ``value`` as an (n, *shape) array (one row per detection)."""
+def _row_array(value, n, shape, name, dtype):
+    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection)."""
     if value is None:
         return None
-    arr = np.asarray(value)
+    try:
+        arr = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise SolverError(f"{name}: not an array of {dtype.__name__}: {exc}") from None
     if arr.shape != (n, *shape):
         raise SolverError(f"{name}: expected shape {(n, *shape)} (one row per detection), "
                           f"got {arr.shape}")
-    if arr.dtype != bool and not np.all(np.isfinite(arr)):
+    if not np.all(np.isfinite(arr)):
         raise SolverError(f"{name}: contains NaN or inf")
     return arr
 
