@@ -84,6 +84,8 @@ def test_bad_suspect_inputs():
         bad = boxes.copy()
         bad[0, 0] = np.nan
         solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), boxes=bad)
+    with pytest.raises(SolverError, match="boxes: not an array of float"):
+        solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), boxes=[["x"] * 4] * 14)
     with pytest.raises(SolverError, match="refined: expected shape"):
         solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), refined=[True])
     with pytest.raises(SolverError, match="with detections="):
