@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.geometry import transform_points
-from generator.labels import marker_outline, polygon_area_centroid
+from generator.labels import polygon_area_centroid
+from solver.outline import projected_outline
 
 SECTIONS = ("A", "B")
 
@@ -21,15 +21,14 @@ SECTIONS = ("A", "B")
 def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
     """(2,) px: centroid of the projected disc minus the projection of its centre (0 when the
     disc is not entirely in front of the camera)."""
-    pp = np.asarray(pp, dtype=float)
-    pc = transform_points(cam_from_s, np.vstack([marker_outline(marker), marker.center_mm]))
-    if np.any(pc[:, 2] <= 0):
+    proj = projected_outline(marker, cam_from_s, focal_px, pp)
+    if proj is None:
         return np.zeros(2)
-    uv = focal_px * pc[:, :2] / pc[:, 2:3] + pp
-    area, centroid = polygon_area_centroid(uv[:-1])
+    outline, centre = proj
+    area, centroid = polygon_area_centroid(outline)
     if area <= 0 or not np.all(np.isfinite(centroid)):
         return np.zeros(2)
-    return centroid - uv[-1]
+    return centroid - centre
 
 
 def correct_eccentricity(out, rows, p3, p2, fit, inliers, row_markers, pp):

@@ -26,10 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.geometry import transform_points
-from generator.labels import marker_outline
 from solver.checks import MIN_POINTS
 from solver.errors import SolverError
+from solver.outline import projected_outline
 
 SECTIONS = ("A", "B")
 
@@ -37,10 +36,10 @@ SECTIONS = ("A", "B")
 def predicted_outline_box(marker, cam_from_s, focal_px, pp) -> np.ndarray | None:
     """(4,) [x0, y0, x1, y1] px of the marker's projected circle, or None when part of it is
     behind the camera."""
-    pc = transform_points(cam_from_s, marker_outline(marker))
-    if np.any(pc[:, 2] <= 0):
+    proj = projected_outline(marker, cam_from_s, focal_px, pp)
+    if proj is None:
         return None
-    uv = focal_px * pc[:, :2] / pc[:, 2:3] + np.asarray(pp)
+    uv = proj[0]
     return np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
 
 
