@@ -15,14 +15,14 @@ Units: mm, degrees at the API (radians inside), pixels in the OpenCV convention.
 from solver.batch import DockingBatch, PnPfBatch, solve_docking_batch, solve_pnpf_batch
 from solver.crb import DockingBound, POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf
 from solver.docking import DockingResult, solve_docking
-from solver.errors import SolverError
+from solver.errors import AmbiguousIdentification, SolverError
 from solver.identify import Identification, identify_markers
 from solver.pnpf import PnPfResult, solve_pnpf
 from solver.ransac import ransac_pnpf
 from solver.upnp import Candidate, upnp
 
 __all__ = [
-    "SolverError", "solve_pnpf", "PnPfResult", "solve_docking", "DockingResult",
+    "SolverError", "AmbiguousIdentification", "solve_pnpf", "PnPfResult", "solve_docking", "DockingResult",
     "solve_pnpf_batch", "PnPfBatch", "solve_docking_batch", "DockingBatch", "upnp", "Candidate",
     "ransac_pnpf", "identify_markers", "Identification", "crb_pnpf", "crb_joint",
     "crb_d_from_b", "DockingBound", "POSE_NAMES",

@@ -1,7 +1,7 @@
-"""The one exception type of the solver package."""
+"""The exception types of the solver package."""
 from __future__ import annotations
 
-__all__ = ["SolverError"]
+__all__ = ["SolverError", "AmbiguousIdentification"]
 
 
 class SolverError(ValueError):
@@ -10,3 +10,8 @@ class SolverError(ValueError):
     A subclass of ``ValueError`` so that callers checking for bad input catch it too. The solver
     never returns a silent garbage pose: whatever it cannot stand behind raises this.
     """
+
+
+class AmbiguousIdentification(SolverError):
+    """Two conflicting marker assignments explain the detections equally well: the solver
+    refuses to guess (no second search can settle it)."""

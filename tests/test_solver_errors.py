@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solver import (SolverError, crb_d_from_b, crb_pnpf, identify_markers, solve_docking,
-                    solve_docking_batch, solve_pnpf, solve_pnpf_batch, upnp)
+from solver import (AmbiguousIdentification, SolverError, crb_d_from_b, crb_pnpf,
+                    identify_markers, solve_docking, solve_docking_batch, solve_pnpf,
+                    solve_pnpf_batch, upnp)
 from solver.synthetic import default_layout, docking_scene
 
 PP = np.array([639.5, 479.5])
@@ -175,7 +176,7 @@ def test_identification_ambiguous_raises():
         pc = p[keep] @ cam[:3, :3].T + cam[:3, 3]
         dets.append(f * pc[:, :2] / pc[:, 2:3] + PP)
         cls += [0 if s == "A" else 1] * int(keep.sum())
-    with pytest.raises(SolverError, match="ambiguous"):
+    with pytest.raises(AmbiguousIdentification, match="ambiguous"):
         solve_docking(markers, PP, detections=(cls, np.vstack(dets)), identify_options={
             "sigma_px": 0.5})
 
