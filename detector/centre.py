@@ -49,27 +49,29 @@ class Refined:
 def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
     """``rgb: (H, W, 3) uint8`` sRGB -> ``(H, W) float32`` linear class channel minus the mean of
     the other two (a washed-out cyan-white blue disc still scores above white)."""
-    if class_id not in CLASS_CHANNEL:
-        raise ValueError(f"class_id must be 0 (RedA) or 1 (BlueB), got {class_id!r}")
-    lin = _SRGB_TO_LINEAR[rgb]
-    c = CLASS_CHANNEL[class_id]
-    others = [k for k in range(3) if k != c]
-    return lin[..., c] - 0.5 * (lin[..., others[0]] + lin[..., others[1]])
+    return score_and_purity(rgb, class_id)[0]
 
 
 def colour_purity(rgb: np.ndarray, class_id: int) -> np.ndarray:
     """``(H, W) float32``: (class channel - largest other channel) / class channel, linear; 1
     for a pure marker colour, 0 for grey, small for a warm or cold colour that only leans
     toward the class (orange for red)."""
+    return score_and_purity(rgb, class_id)[1]
+
+
+def score_and_purity(rgb: np.ndarray, class_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`colour_score`, :func:`colour_purity`) from one sRGB-to-linear lookup."""
+    if class_id not in CLASS_CHANNEL:
+        raise ValueError(f"class_id must be 0 (RedA) or 1 (BlueB), got {class_id!r}")
     lin = _SRGB_TO_LINEAR[rgb]
     c = CLASS_CHANNEL[class_id]
-    others = [k for k in range(3) if k != c]
+    o1, o2 = (lin[..., k] for k in range(3) if k != c)
     top = lin[..., c]
-    return (top - np.maximum(lin[..., others[0]], lin[..., others[1]])) / np.maximum(top, 1e-4)
+    return top - 0.5 * (o1 + o2), (top - np.maximum(o1, o2)) / np.maximum(top, 1e-4)
 
 
 PURITY_SHARE = 0.5  # pixels under this share of the disc's median purity are not the disc
-MAX_SCORE_RATIO = 3.0  # pixels scoring this many times the disc's level (above the ring's) neither
+MAX_SCORE_RATIO = 3.0  # pixels scoring this many times the disc's level (above the ring's) are not the disc
 
 
 EDGE_BIAS_PX = 0.041  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
@@ -111,7 +113,7 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w_img), min(y1, h_img)
     if x1 - x0 < 4 or y1 - y0 < 4:
         return fallback
-    s = colour_score(image[y0:y1, x0:x1], class_id)
+    s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
     ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
     inner, ring = rho <= 0.5, (rho >= 1.08) & (rho <= 1.22)
@@ -127,7 +129,6 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     w[w_raw > MAX_SCORE_RATIO] = 0.0      # far redder (bluer) than the disc: not the disc
     # an occluder that merely leans toward the class colour (orange beside red) scores high
     # too: keep the pixels about as pure as the disc itself
-    pur = colour_purity(image[y0:y1, x0:x1], class_id)
     p_disc = float(np.median(pur[inner]))
     if p_disc > 0:
         w[pur < PURITY_SHARE * p_disc] = 0.0

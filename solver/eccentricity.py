@@ -14,8 +14,7 @@ import numpy as np
 
 from generator.labels import polygon_area_centroid
 from solver.outline import projected_outline
-
-SECTIONS = ("A", "B")
+from solver.suspects import SECTIONS, refit_subset, section_cams
 
 
 def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
@@ -34,13 +33,11 @@ def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
 def correct_eccentricity(out, rows, p3, p2, fit, inliers, row_markers, pp):
     """Refit with every inlier's centre moved by minus its predicted offset under ``out``.
     Returns the new fit result (the arrays ``p2`` are not modified)."""
-    cams = {"A": out["cam_from_a"], "B": out["cam_from_b"]}
+    cams = section_cams(out)
     keep = {s: np.array([bool(inliers[k]) for k in rows[s]], dtype=bool) for s in SECTIONS}
     corrected = {}
     for s in SECTIONS:
         off = np.array([eccentricity_offset(row_markers[k], cams[s], out["focal_px"], pp)
                         for k in rows[s]]).reshape(-1, 2)
         corrected[s] = p2[s] - off
-    return fit(p3["A"][keep["A"]], corrected["A"][keep["A"]], p3["B"][keep["B"]],
-               corrected["B"][keep["B"]],
-               init=(out["cam_from_a"], out["cam_from_b"], out["focal_px"]))
+    return refit_subset(out, p3, corrected, keep, fit)

@@ -50,11 +50,13 @@ def extent_ratio(box, predicted) -> float:
                      (box[3] - box[1]) / max(predicted[3] - predicted[1], 1e-9)))
 
 
-def _cams(out):
+def section_cams(out) -> dict:
+    """{"A": cam_from_a, "B": cam_from_b} of a fit result."""
     return {"A": out["cam_from_a"], "B": out["cam_from_b"]}
 
 
-def _refit(out, p3, p2, keep, fit):
+def refit_subset(out, p3, p2, keep, fit):
+    """``fit`` on the points ``keep[s]`` of each section, started from the fit ``out``."""
     return fit(p3["A"][keep["A"]], p2["A"][keep["A"]], p3["B"][keep["B"]], p2["B"][keep["B"]],
                init=(out["cam_from_a"], out["cam_from_b"], out["focal_px"]))
 
@@ -64,7 +66,7 @@ def suspect_scores(out, rows, row_markers, pp, boxes, refined, min_extent) -> di
     for a box under ``min_extent`` of its predicted outline (partly hidden)."""
     if not (np.isfinite(min_extent) and 0 < min_extent <= 1):
         raise SolverError(f"min_extent must be in (0, 1], got {min_extent}")
-    cams = _cams(out)
+    cams = section_cams(out)
     scores = {}
     for s in SECTIONS:
         sc = np.zeros(len(rows[s]))
@@ -99,4 +101,4 @@ def leave_out_suspects(out, rows, p3, p2, fit, inliers, row_markers, pp, boxes, 
             inliers[rows[s][j]] = False
     if all(keep[s].all() for s in SECTIONS):
         return out, inliers
-    return _refit(out, p3, p2, keep, fit), inliers
+    return refit_subset(out, p3, p2, keep, fit), inliers
