@@ -16,15 +16,12 @@ Targets (issue 5): <= 60 ms per image, mAP50 >= 0.995, mAP50:95 >= 0.85, centre 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 DEFAULT_WEIGHTS = ROOT / "models" / "yolov5n_se_markers.pt"
 TARGETS = {"ms_per_image": 60.0, "mAP50": 0.995, "mAP50_95": 0.85, "centre_normal_px": 0.1,
@@ -35,9 +32,9 @@ def bench_inference(weights, frames, rounds: int) -> dict:
     import numpy as np
     import torch
 
-    from detector.centre import refine_centre
-    from detector.data import read_rgb
-    from detector.infer import MarkerDetector, letterbox, postprocess
+    from dockfactory.detector.centre import refine_centre
+    from dockfactory.detector.data import read_rgb
+    from dockfactory.detector.infer import MarkerDetector, letterbox, postprocess
     det = MarkerDetector(weights, conf_threshold=0.25)
     images = [read_rgb(f.image_path) for f in frames]
     for img in images[:3]:
@@ -78,10 +75,10 @@ def bench_inference(weights, frames, rounds: int) -> dict:
 def bench_training(dataset, batches: int) -> dict:
     import torch
 
-    from detector.data import CropDataset, DataConfig, load_frames
-    from detector.loss import YoloLoss
-    from detector.model import ModelConfig, build_model
-    from detector.train import ModelEMA, param_groups
+    from dockfactory.detector.data import CropDataset, DataConfig, load_frames
+    from dockfactory.detector.loss import YoloLoss
+    from dockfactory.detector.model import ModelConfig, build_model
+    from dockfactory.detector.train import ModelEMA, param_groups
     cfg = DataConfig()
     frames = load_frames(dataset, "train")
     ds = CropDataset(frames, cfg, seed=0)
@@ -121,8 +118,8 @@ def main(argv=None) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
     torch.set_num_threads(args.threads)
-    from detector.data import dataset_version, load_frames
-    from detector.infer import sha256_of
+    from dockfactory.detector.data import dataset_version, load_frames
+    from dockfactory.detector.infer import sha256_of
     test = load_frames(args.dataset, "test")
     print(f"dataset {args.dataset} (version {dataset_version(args.dataset)}), {len(test)} test frames")
     print(f"weights {args.weights} (sha256 {sha256_of(args.weights)[:16]}...), torch {torch.__version__}, "
@@ -140,8 +137,8 @@ def main(argv=None) -> int:
     if not args.skip_accuracy:
         import tempfile
 
-        from detector.infer import detect_dataset
-        from eval.detection_metrics import evaluate_detections, format_report
+        from dockfactory.detector.infer import detect_dataset
+        from dockfactory.eval.detection_metrics import evaluate_detections, format_report
         with tempfile.TemporaryDirectory() as tmp:
             doc = detect_dataset(args.dataset, args.weights, Path(tmp) / "dets.json", split="test",
                                  conf_threshold=0.001, progress=False)
@@ -156,7 +153,7 @@ def main(argv=None) -> int:
               f"[target <= 0.25: {ok(ce['challenging']['median_px'] <= 0.25)}]")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     if args.out:
-        from generator.io import write_json_atomic
+        from dockfactory.core.io import write_json_atomic
         write_json_atomic(args.out, res)
     return 0
 

@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from generator.config import config_from_dict  # noqa: E402
-from generator.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, marker_points  # noqa: E402
-from generator.sampler import frame_plan, sample_frame, static_scene  # noqa: E402
-from solver import crb_d_from_b  # noqa: E402
+from dockfactory.core.config import config_from_dict  # noqa: E402
+from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, marker_points  # noqa: E402
+from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene  # noqa: E402
+from dockfactory.solver import crb_d_from_b  # noqa: E402
 
 
 def bound(data: dict, sigma: float) -> np.ndarray:

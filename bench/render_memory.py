@@ -17,10 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from generator.config import config_from_dict  # noqa: E402
-from generator.render_job import JobOptions, run_render  # noqa: E402
+from dockfactory.core.config import config_from_dict  # noqa: E402
+from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402
 
 
 def main() -> int:

@@ -20,10 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from generator.config import config_from_dict  # noqa: E402
-from generator.render_job import JobOptions, run_render  # noqa: E402
+from dockfactory.core.config import config_from_dict  # noqa: E402
+from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402
 
 CONDITIONS = ("normal", "low_light", "occlusion", "glare")
 

@@ -39,20 +39,18 @@ import itertools
 import math
 import multiprocessing
 import os
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from generator.geometry import pose_components  # noqa: E402
-from solver import (SolverError, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,  # noqa: E402
+from dockfactory.core.geometry import pose_components  # noqa: E402
+from dockfactory.solver import (SolverError, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,  # noqa: E402
                     solve_docking_batch, solve_pnpf, upnp)
-from solver.lie import rotation_angle_deg  # noqa: E402
-from solver.refine import relative_pose  # noqa: E402
-from solver.synthetic import default_layout, docking_scene  # noqa: E402
+from dockfactory.solver.lie import rotation_angle_deg  # noqa: E402
+from dockfactory.solver.refine import relative_pose  # noqa: E402
+from dockfactory.solver.synthetic import default_layout, docking_scene  # noqa: E402
 
 LAYOUT = default_layout()
 IDS = [m.id for m in LAYOUT]

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 from mathutils import Matrix
 
-from blender_scenes import materials as mats
-from blender_scenes.scene_builder import MM, SceneHandles
-from generator.geometry import blender_camera_intrinsics, blender_world_from_camera
-from generator.scene import FrameScene
+from dockfactory.blender_scenes import materials as mats
+from dockfactory.blender_scenes.scene_builder import MM, SceneHandles
+from dockfactory.core.geometry import blender_camera_intrinsics, blender_world_from_camera
+from dockfactory.core.scene import FrameScene
 
 DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
 

@@ -10,6 +10,8 @@ corrupted or not ours raises :class:`CheckpointError` (a ValueError) with the pa
 """
 from __future__ import annotations
 
+from dockfactory.core.errors import DockfactoryError
+
 import os
 from pathlib import Path
 
@@ -19,7 +21,7 @@ CHECKPOINT_FORMAT = "dockfactory.detector.checkpoint/1"
 WEIGHTS_FORMAT = "dockfactory.detector.weights/1"
 
 
-class CheckpointError(ValueError):
+class CheckpointError(DockfactoryError):
     """A checkpoint or weights file that cannot be used; the message names the file."""
 
 
@@ -74,8 +76,8 @@ def weights_from_checkpoint(ckpt: dict, half: bool = True) -> dict:
 
 def load_model(path, fuse: bool = True):
     """(model in eval mode (float32), weights dict) from a checkpoint (its EMA) or a weights file."""
-    from detector.data import DataConfig
-    from detector.model import ModelConfig, build_model
+    from dockfactory.detector.data import DataConfig
+    from dockfactory.detector.model import ModelConfig, build_model
     obj = load_file(path)
     if obj["format"] == CHECKPOINT_FORMAT:
         obj = weights_from_checkpoint(obj, half=False)

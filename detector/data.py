@@ -106,7 +106,7 @@ def frame_from_label(root, label: dict) -> Frame:
 
 def load_frames(root, split: str | None) -> list[Frame]:
     """Frames of ``split`` ('train', 'test', 'repeat' or None for all), in frame-id order."""
-    from generator.export_coco import load_labels
+    from dockfactory.core.io import load_labels
     root = Path(root)
     if not (root / "labels").is_dir():
         raise ValueError(f"{root}: no labels/ folder (not a dockfactory dataset?)")

@@ -8,7 +8,6 @@ Coordinates:
 from __future__ import annotations
 
 import hashlib
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from detector.data import resize_exact
-from detector.model import CLASS_NAMES
+from dockfactory.detector.data import resize_exact
+from dockfactory.detector.model import CLASS_NAMES
 
 
 @dataclass(frozen=True)
@@ -171,7 +170,7 @@ class MarkerDetector:
 
     def __init__(self, weights, conf_threshold: float = 0.25, iou_threshold: float = 0.45,
                  max_det: int = 100, refine: bool = True):
-        from detector.checkpoint import load_model
+        from dockfactory.detector.checkpoint import load_model
         self.weights = Path(weights)
         self.model, self.meta = load_model(self.weights, fuse=True)
         self.model = self.model.to(memory_format=torch.channels_last)  # about 25 % faster on CPU
@@ -191,7 +190,7 @@ class MarkerDetector:
 
     def detect(self, image: np.ndarray) -> list[dict]:
         """``image: (H, W, 3) uint8`` RGB -> detections sorted by falling score."""
-        from detector.centre import refine_centre
+        from dockfactory.detector.centre import refine_centre
         det, _ = self.raw(image)
         out = []
         for x0, y0, x1, y1, score, cls in det:
@@ -237,8 +236,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     """
     import sys
 
-    from detector.data import dataset_version, load_frames, read_rgb
-    from generator.io import write_json_atomic
+    from dockfactory.detector.data import dataset_version, load_frames, read_rgb
+    from dockfactory.core.io import write_json_atomic
     version = dataset_version(dataset)
     frames = load_frames(dataset, split)
     det = MarkerDetector(weights, conf_threshold, iou_threshold, refine=refine)

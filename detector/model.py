@@ -22,13 +22,13 @@ Detect convs ((sum of head channels + 3) x 234 fewer weights).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
-from detector.attention import ATTENTIONS, make_attention
-from detector.blocks import C3, SPPF, Conv, fuse_conv_bn
+from dockfactory.detector.attention import ATTENTIONS, make_attention
+from dockfactory.detector.blocks import C3, SPPF, Conv, fuse_conv_bn
 
 SCALES = {"n": (0.33, 0.25), "s": (0.33, 0.50)}  # depth multiple, width multiple
 CLASS_NAMES = ("RedA", "BlueB")

@@ -19,7 +19,7 @@ def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool =
                 atol: float = 1e-3) -> dict:
     import torch
 
-    from detector.checkpoint import load_model
+    from dockfactory.detector.checkpoint import load_model
     if height % 32 or width % 32 or height <= 0 or width <= 0:
         raise ValueError(f"height and width must be positive multiples of 32, got {height} x {width}")
     model, _ = load_model(weights, fuse=True)

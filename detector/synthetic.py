@@ -6,13 +6,12 @@ of the labels are exact up to the supersampling.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from generator.io import write_bytes_atomic, write_json_atomic
+from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 
 RED, BLUE, RING = (200, 25, 25), (30, 50, 210), (25, 25, 25)
 

@@ -27,10 +27,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from detector.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_file, save_atomic, weights_from_checkpoint
-from detector.data import CropDataset, DataConfig, dataset_version, load_frames
-from detector.loss import LossGains, YoloLoss
-from detector.model import ModelConfig, build_model
+from dockfactory.detector.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_file, save_atomic, weights_from_checkpoint
+from dockfactory.detector.data import CropDataset, DataConfig, dataset_version, load_frames
+from dockfactory.detector.loss import LossGains, YoloLoss
+from dockfactory.detector.model import ModelConfig, build_model
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,7 @@ class EpochBar:
 
 def fit_anchor_config(cfg: TrainConfig, frames) -> tuple[ModelConfig, float]:
     """(model config with k-means anchors for the training boxes at the network scale, BPR)."""
-    from detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
+    from dockfactory.detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
     s = cfg.data.input_scale
     wh = np.concatenate([(f.boxes[:, 2:] - f.boxes[:, :2])[f.visible >= cfg.data.min_visible_fraction]
                          for f in frames]) * s
@@ -257,5 +257,5 @@ def train(dataset, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, 
 
 
 def _write_json(path: Path, obj) -> None:
-    from generator.io import write_json_atomic
+    from dockfactory.core.io import write_json_atomic
     write_json_atomic(path, obj)

@@ -14,7 +14,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from generator.config import ConfigError, build_dataclass
+from dockfactory.core.config import ConfigError, build_dataclass
 
 COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 UNITS = {"x": "mm", "y": "mm", "z": "mm", "alpha": "deg", "beta": "deg", "gamma": "deg"}

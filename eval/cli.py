@@ -1,19 +1,31 @@
-"""``dockfactory solve | evaluate | report | run`` (registered by generator.cli)."""
+"""The ``dockfactory`` command line (the root of the layers: it registers the factory's and the
+detector's subcommands beside its own solve, evaluate, report and run). Heavy imports (bpy, torch)
+happen inside the subcommands, so ``--help`` is instant.
+
+Exit status: 0 success, 1 a failure or a rejected verdict, 2 bad input (a DockfactoryError: one
+line naming the file, key or value), 130 interrupted.
+"""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
-DEFAULT_ACCEPTANCE = Path(__file__).resolve().parent.parent / "configs" / "acceptance.toml"
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.resources import default_acceptance, resolve_config
+from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
+from dockfactory.generator.cli import add_subcommands as add_factory_commands
+
+EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 
 
 def cmd_solve(args) -> int:
-    from eval.dataset_access import open_dataset, read_json_for
-    from eval.solve_frames import solve_dataset, write_poses
+    from dockfactory.eval.dataset_access import open_dataset, read_json_for
+    from dockfactory.eval.solve_frames import solve_dataset, write_poses
     ds = open_dataset(args.dataset)
     splits = tuple(args.split.split(","))
     if (args.detections is None) == (args.oracle_noise is None):
-        raise ValueError("give --detections DETS.json or --oracle-noise PX (exactly one)")
+        raise DockfactoryError("give --detections DETS.json or --oracle-noise PX (exactly one)")
     if args.detections:
         dets = read_json_for(args.detections, "detections", ds)
         poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score)
@@ -26,11 +38,11 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from eval.acceptance import load_acceptance
-    from eval.dataset_access import open_dataset
-    from eval.evaluate import evaluate, write_outputs
-    from generator.io import write_json_atomic
-    spec = load_acceptance(args.acceptance)
+    from dockfactory.eval.acceptance import load_acceptance
+    from dockfactory.eval.dataset_access import open_dataset
+    from dockfactory.eval.evaluate import evaluate, write_outputs
+    from dockfactory.core.io import write_json_atomic
+    spec = load_acceptance(args.acceptance or default_acceptance())
     ds = open_dataset(args.dataset)
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
     write_outputs(args.out, metrics, rows)
@@ -43,19 +55,20 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from eval.report import build_report
+    from dockfactory.eval.report import build_report
     summary = build_report(args.eval_dir, args.out)
     print(f"verdict: {summary['verdict']}  report: {args.out}")
     return 0
 
 
 def cmd_run(args) -> int:
-    from eval.pipeline import run_pipeline
-    return run_pipeline(args.config, args.out, args.acceptance, weights=args.weights, train=args.train,
+    from dockfactory.eval.pipeline import run_pipeline
+    return run_pipeline(resolve_config(args.config), args.out, args.acceptance or default_acceptance(), weights=args.weights, train=args.train,
                         oracle_noise_px=args.oracle_noise, workers=args.workers, train_epochs=args.epochs)
 
 
-def add_subcommands(sub) -> None:
+def add_eval_commands(sub) -> None:
+    """Register solve, evaluate, report and run on ``sub`` (argparse subparsers)."""
     s = sub.add_parser("solve", help="poses of B relative to A from detections (or label centres + noise)")
     s.add_argument("dataset")
     s.add_argument("--detections", help="DETS.json from dockfactory detect")
@@ -69,7 +82,7 @@ def add_subcommands(sub) -> None:
     e.add_argument("dataset")
     e.add_argument("--poses", required=True)
     e.add_argument("--detections")
-    e.add_argument("--acceptance", default=str(DEFAULT_ACCEPTANCE))
+    e.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
     e.add_argument("--min-score", type=float, default=0.25)
     e.add_argument("--out", required=True)
     e.set_defaults(func=cmd_evaluate)
@@ -80,12 +93,38 @@ def add_subcommands(sub) -> None:
     r.set_defaults(func=cmd_report)
 
     u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")
-    u.add_argument("config")
+    u.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, ...)")
     u.add_argument("--out", required=True, help="work directory")
-    u.add_argument("--acceptance", default=str(DEFAULT_ACCEPTANCE))
-    u.add_argument("--weights", help="detector checkpoint (default: the shipped one in models/)")
+    u.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
+    u.add_argument("--weights", help="detector checkpoint (default: the shipped one)")
     u.add_argument("--train", action="store_true", help="train a detector on the dataset's train split first")
     u.add_argument("--epochs", type=int, default=None, help="with --train")
     u.add_argument("--oracle-noise", type=float, metavar="PX", help="skip the detector: exact centres + noise")
     u.add_argument("--workers", type=int, default=1)
     u.set_defaults(func=cmd_run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
+                                "for uncalibrated monocular docking of cylindrical sections.")
+    sub = p.add_subparsers(dest="command", required=True)
+    add_factory_commands(sub)
+    add_eval_commands(sub)
+    add_detector_commands(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted: run the same command again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except DockfactoryError as exc:  # bad input: ConfigError, DatasetError, SolverError, ...
+        print(f"dockfactory: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

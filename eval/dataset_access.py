@@ -5,9 +5,9 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from generator.config import Config, config_from_dict
-from generator.dataset import DatasetError, read_identity
-from generator.export_coco import load_labels
+from dockfactory.core.config import Config, config_from_dict
+from dockfactory.generator.dataset import DatasetError, read_identity
+from dockfactory.core.io import load_labels
 
 
 @dataclass

@@ -107,7 +107,8 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
 
 def evaluate_detections(dataset, detections, split: str | None = None, recall_conf: float = 0.25) -> dict:
     """All metrics for a detections JSON (path or dict) on ``dataset`` (its split by default)."""
-    from generator.export_coco import coco_from_labels, load_labels
+    from dockfactory.core.io import load_labels
+    from dockfactory.generator.export_coco import coco_from_labels
     doc = json.loads(Path(detections).read_text()) if isinstance(detections, (str, Path)) else detections
     if "frames" not in doc:
         raise ValueError("detections: no 'frames' (not a dockfactory detections file?)")

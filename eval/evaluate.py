@@ -7,24 +7,23 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
-from eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
-from eval.dataset_access import EvalDataset, read_json_for
-from eval.pose_metrics import error_stats, pose_error, repeatability
-from eval.solve_frames import solve_dataset
-from generator.io import write_json_atomic, write_text_atomic
+from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
+from dockfactory.eval.dataset_access import EvalDataset, read_json_for
+from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
+from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.core.io import write_json_atomic, write_text_atomic
 
 METRICS_FORMAT = "dockfactory.metrics/1"
 
 
 def frame_bound(label: dict, marker_ids, sigma_px: float) -> dict | None:
     """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry."""
-    from solver import SolverError, crb_d_from_b
+    from dockfactory.solver import SolverError, crb_d_from_b
     by_id = {m["id"]: m for m in label["markers"]}
     ids = [i for i in (marker_ids or []) if i in by_id] or [m["id"] for m in label["markers"] if m.get("visibility") == 2]
     pa = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("A")]).reshape(-1, 3)
@@ -212,8 +211,8 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
     Ground truth: markers with visible fraction >= ``visible_threshold`` and a legible colour; a
     detection that only overlaps an ignored marker (occluded or washed out) counts neither way.
     """
-    from eval.detection_metrics import match_frame
-    from generator.layout import CLASS_NAMES
+    from dockfactory.eval.detection_metrics import match_frame
+    from dockfactory.core.layout import CLASS_NAMES
     curves = {}
     for c, name in enumerate(CLASS_NAMES):
         scored, n_gt = [], 0
@@ -249,7 +248,7 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
 def detection_block(ds: EvalDataset, detections: dict) -> dict:
     """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error, recall and
     precision-recall curves (test split)."""
-    from eval.detection_metrics import evaluate_detections
+    from dockfactory.eval.detection_metrics import evaluate_detections
     r = evaluate_detections(ds.root, detections, split="test")
     out = {k: v for k, v in r.items() if k not in ("mAP50", "mAP50_95", "per_class")}
     out.update({"map50": r["mAP50"], "map50_95": r["mAP50_95"],

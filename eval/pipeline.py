@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from generator.io import sha256_file, write_json_atomic
+from dockfactory.core.io import sha256_file, write_json_atomic
 
 
 class Stages:
@@ -52,12 +52,12 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch   # only this stage needs torch
 
-    from detector.cli import SHIPPED_WEIGHTS
-    from detector.infer import detect_dataset
+    from dockfactory.core.resources import shipped_weights
+    from dockfactory.detector.infer import detect_dataset
     torch.set_num_threads(os.cpu_count() or 1)
     if train:
-        from detector.train import TrainConfig
-        from detector.train import train as train_detector
+        from dockfactory.detector.train import TrainConfig
+        from dockfactory.detector.train import train as train_detector
         run_dir = workdir / "train"
         cfg = TrainConfig(epochs=epochs or TrainConfig().epochs)
         key = _key("train", ds.version_id, cfg, code_fingerprint("detector"))
@@ -69,7 +69,7 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
             train_detector(ds.root, run_dir, cfg, resume=(run_dir / "last.pt").exists())
             stages.done("train", key, time.monotonic() - t)
         weights = run_dir / "weights.pt"
-    weights = Path(weights) if weights else SHIPPED_WEIGHTS
+    weights = Path(weights) if weights else shipped_weights()
     if not weights.exists():
         raise FileNotFoundError(f"{weights}: detector weights not found (use --weights, --train or --oracle-noise)")
     model_sha = sha256_file(weights)
@@ -86,14 +86,15 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
 
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
                  oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
-    from eval.acceptance import load_acceptance
-    from eval.dataset_access import open_dataset
-    from eval.evaluate import evaluate, write_outputs
-    from eval.report import build_report
-    from eval.solve_frames import solve_dataset, write_poses
-    from generator.config import load_config
-    from generator.dataset import identity
-    from generator.render_job import JobOptions, print_summary, run_render
+    from dockfactory.eval.acceptance import load_acceptance
+    from dockfactory.eval.dataset_access import open_dataset
+    from dockfactory.eval.evaluate import evaluate, write_outputs
+    from dockfactory.eval.report import build_report
+    from dockfactory.eval.solve_frames import solve_dataset, write_poses
+    from dockfactory.core.config import load_config
+    from dockfactory.generator.dataset import identity
+    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
+    from dockfactory.generator.sampler import check_focal_fits
 
     t_all = time.monotonic()
     workdir = Path(workdir)
@@ -112,6 +113,7 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     else:
         say(f"render: dataset {version} -> {data_dir}")
         t = time.monotonic()
+        check_focal_fits(cfg, str(config_path))
         summary = run_render(cfg, data_dir, Path(config_path).read_text(), JobOptions(workers=workers))
         print_summary(summary)
         if not summary.complete:

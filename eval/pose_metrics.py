@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eval.acceptance import COMPONENTS, POSE_KEYS
+from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS
 
 
 def wrap_deg(a):

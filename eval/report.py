@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.acceptance import COMPONENTS, UNITS
-from generator.io import write_json_atomic, write_text_atomic
-from generator.version import generator_version, package_version
+from dockfactory.eval.acceptance import COMPONENTS, UNITS
+from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")
 
@@ -144,7 +144,7 @@ def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections
             cv2.drawMarker(img, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_TILTED_CROSS, 10, 1)
         rec = (poses or {}).get("frames", {}).get(fid)
         if rec and rec.get("ok"):   # the layout reprojected with the estimated poses and focal: yellow dots
-            from generator.geometry import intrinsics, project_points
+            from dockfactory.core.geometry import intrinsics, project_points
             k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
             cam_from_a = np.array(rec["cam_from_a"])
             for m in lab["markers"]:

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from eval.dataset_access import EvalDataset
-from generator.io import sha256_file, write_json_atomic
-from generator.sampler import rng_for
+from dockfactory.eval.dataset_access import EvalDataset
+from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.generator.sampler import rng_for
 
 POSES_FORMAT = "dockfactory.poses/1"
 ORACLE_STREAM = 101  # rng stream of the oracle's centre noise (see generator.sampler.rng_for)
@@ -58,7 +58,7 @@ def detection_arrays(dets: list[dict], min_score: float):
 
 def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
               refined=None) -> dict:
-    from solver import SolverError, solve_docking
+    from dockfactory.solver import SolverError, solve_docking
     try:
         res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px,
                             boxes=boxes, refined=refined)

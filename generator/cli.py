@@ -1,11 +1,14 @@
-"""The ``dockfactory`` command line. Heavy imports happen inside the subcommands."""
+"""Factory subcommands of ``dockfactory``: render, dataset, check-config, show (registered by the
+root CLI, ``dockfactory.eval.cli``). Heavy imports happen inside the commands."""
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+from dockfactory.core.errors import DockfactoryError
+
+EXIT_OK, EXIT_FAILED = 0, 1
 
 
 def _shard(text: str) -> tuple[int, int]:
@@ -19,12 +22,18 @@ def _shard(text: str) -> tuple[int, int]:
 
 
 def _load(path):
-    from generator.config import load_config
-    return load_config(path), Path(path).read_text(encoding="utf-8")
+    """Load a config and check it is feasible (every planned frame fits its markers): the check
+    samples every frame's geometry, so it runs here (render, check-config), not on every load."""
+    from dockfactory.core.config import load_config
+    from dockfactory.core.resources import resolve_config
+    from dockfactory.generator.sampler import check_focal_fits
+    cfg = load_config(resolve_config(path))
+    check_focal_fits(cfg, str(path))
+    return cfg, resolve_config(path).read_text(encoding="utf-8")
 
 
 def cmd_render(args) -> int:
-    from generator.render_job import JobOptions, print_summary, run_render
+    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
     cfg, text = _load(args.config)
     frame_ids = tuple(args.frames.split(",")) if args.frames else None
     opts = JobOptions(workers=args.workers, shard=args.shard, frame_ids=frame_ids,
@@ -41,7 +50,7 @@ def cmd_render(args) -> int:
 def cmd_dataset(args) -> int:
     import json
 
-    from generator import dataset_tools as dt
+    from dockfactory.generator import dataset_tools as dt
     if args.action == "verify":
         report = dt.verify(args.dirs[0])
         print(report.text())
@@ -52,7 +61,7 @@ def cmd_dataset(args) -> int:
         return EXIT_OK
     if args.action == "diff":
         if len(args.dirs) != 2:
-            raise ValueError("dataset diff needs two directories: DIR_A DIR_B")
+            raise DockfactoryError("dataset diff needs two directories: DIR_A DIR_B")
         d = dt.diff(*args.dirs)
         print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, *args.dirs))
         return EXIT_OK
@@ -60,14 +69,14 @@ def cmd_dataset(args) -> int:
         for fmt in args.format.split(","):
             print(dt.export(args.dirs[0], fmt.strip()))
         return EXIT_OK
-    raise ValueError(f"unknown dataset action {args.action!r}")
+    raise DockfactoryError(f"unknown dataset action {args.action!r}")
 
 
 def cmd_check(args) -> int:
     from collections import Counter
 
-    from generator.dataset import identity
-    from generator.sampler import frame_plan
+    from dockfactory.generator.dataset import identity
+    from dockfactory.generator.sampler import frame_plan
     cfg, _ = _load(args.config)
     plan = frame_plan(cfg)
     print(f"{args.config}: valid; dataset version {identity(cfg)['version_id']}, {len(plan)} frames")
@@ -77,19 +86,17 @@ def cmd_check(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from generator.overlay import draw_overlay
+    from dockfactory.generator.overlay import draw_overlay
     out = draw_overlay(args.dataset, args.frame_id, args.out)
     print(out)
     return EXIT_OK
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
-                                "for uncalibrated monocular docking of cylindrical sections.")
-    sub = p.add_subparsers(dest="command", required=True)
+def add_subcommands(sub) -> None:
+    """Register render, dataset, check-config and show on ``sub`` (argparse subparsers)."""
 
     r = sub.add_parser("render", help="render (the missing frames of) a dataset from a TOML config")
-    r.add_argument("config", help="TOML config (see configs/)")
+    r.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, paper, ideal, detector)")
     r.add_argument("--out", required=True, help="dataset directory")
     r.add_argument("--workers", type=int, default=1, help="render processes sharing the cores")
     r.add_argument("--shard", type=_shard, default=(1, 1), metavar="K/N",
@@ -120,27 +127,3 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("frame_id")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_show)
-
-    from eval.cli import add_subcommands as add_eval
-    add_eval(sub)
-    import importlib.util
-    if importlib.util.find_spec("detector.cli") is not None:
-        from detector.cli import add_subcommands as add_detector
-        add_detector(sub)
-    return p
-
-
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted: run the same command again to resume", file=sys.stderr)
-        return 130
-    except ValueError as exc:  # ConfigError, DatasetError, SolverError ...: bad input
-        print(f"dockfactory: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-
-
-if __name__ == "__main__":
-    sys.exit(main())

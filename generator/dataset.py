@@ -11,16 +11,18 @@ Layout of a dataset directory:
 """
 from __future__ import annotations
 
+from dockfactory.core.errors import DockfactoryError
+
 import json
 from collections import Counter
 from pathlib import Path
 
-from generator.config import Config
-from generator.frame_output import frame_paths
-from generator.io import sha256_file, write_json_atomic, write_text_atomic
-from generator.layout import CLASS_NAMES
-from generator.sampler import frame_plan, static_scene
-from generator.version import blender_version, dataset_version_id, generator_version, package_version
+from dockfactory.core.config import Config
+from dockfactory.generator.frame_output import frame_paths
+from dockfactory.core.io import sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.generator.sampler import frame_plan, static_scene
+from dockfactory.generator.version import blender_version, dataset_version_id, generator_version, package_version
 
 DATASET_FORMAT = "dockfactory.dataset/1"
 CONVENTIONS = {
@@ -36,7 +38,7 @@ CONVENTIONS = {
 }
 
 
-class DatasetError(ValueError):
+class DatasetError(DockfactoryError):
     """A dataset directory that cannot be used as asked; the message says why."""
 
 

@@ -5,8 +5,8 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from generator.dataset import DatasetError, config_differences, read_identity
-from generator.io import is_temp_name, sha256_file
+from dockfactory.generator.dataset import DatasetError, config_differences, read_identity
+from dockfactory.core.io import is_temp_name, sha256_file
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
 
@@ -89,8 +89,8 @@ def info(root) -> dict:
     out = {"root": str(root), "name": ident["name"], "version_id": ident["version_id"], "seed": ident["seed"],
            "generator_version": ident["generator_version"], "blender_version": ident["blender_version"],
            "image_size": [ident["config"]["image"]["width"], ident["config"]["image"]["height"]]}
-    from generator.config import config_from_dict
-    from generator.sampler import frame_plan
+    from dockfactory.core.config import config_from_dict
+    from dockfactory.generator.sampler import frame_plan
     cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
     plan = frame_plan(cfg)
     done = sum(1 for s in plan if (root / "labels" / f"{s.frame_id}.json").is_file())
@@ -164,9 +164,9 @@ def export(root, fmt: str) -> Path:
     import os
     import shutil
 
-    from generator.export_bop import export_bop
-    from generator.export_coco import export_coco
-    from generator.export_yolo import export_yolo
+    from dockfactory.generator.export_bop import export_bop
+    from dockfactory.generator.export_coco import export_coco
+    from dockfactory.generator.export_yolo import export_yolo
     writers = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
     root = Path(root)
     if fmt not in writers:

@@ -1,6 +1,6 @@
 """Where frames are rendered: local worker processes, or actors on a Ray cluster.
 
-Both drive the same render worker (``python -m blender_scenes.worker``) through
+Both drive the same render worker (``python -m dockfactory.generator.render_worker``) through
 :func:`render_with_retries`, and both yield the same events to the job:
 ``("done", frame_id, info)``, ``("retry", frame_id, reason)``, ``("failed", frame_id, reason)``.
 """
@@ -11,7 +11,7 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
-from generator.worker_pool import WorkerDied, WorkerProcess
+from dockfactory.generator.worker_pool import WorkerDied, WorkerProcess
 
 
 def render_with_retries(worker: WorkerProcess, frame: dict, timeout_s: float, retries: int,

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from generator.export_coco import load_labels
-from generator.export_files import place_file
-from generator.io import write_json_atomic, write_text_atomic
-from generator.layout import SECTIONS
+from dockfactory.core.io import load_labels
+from dockfactory.generator.export_files import place_file
+from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.core.layout import SECTIONS
 
 OBJ_ID = {"A": 1, "B": 2}
 

@@ -16,20 +16,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from generator.io import write_json_atomic
-from generator.layout import CLASS_NAMES
+from dockfactory.core.io import load_labels, write_json_atomic
+from dockfactory.core.layout import CLASS_NAMES
 
 COCO_SHIFT = 0.5  # OpenCV pixel centres -> COCO pixel corners
-
-
-def load_labels(root, split: str | None = None) -> list[dict]:
-    """Labels of a dataset (optionally one split), in frame-id order."""
-    out = []
-    for path in sorted((Path(root) / "labels").glob("*.json")):
-        label = json.loads(path.read_text())
-        if split is None or label["spec"]["split"] == split:
-            out.append(label)
-    return out
 
 
 def categories() -> list[dict]:

@@ -5,7 +5,7 @@ import os
 import shutil
 from pathlib import Path
 
-from generator.io import atomic_path
+from dockfactory.core.io import atomic_path
 
 
 def place_file(src: Path, dst: Path) -> None:

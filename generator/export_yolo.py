@@ -14,10 +14,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from generator.export_coco import load_labels
-from generator.export_files import place_file
-from generator.io import write_text_atomic
-from generator.layout import CLASS_NAMES
+from dockfactory.core.io import load_labels
+from dockfactory.generator.export_files import place_file
+from dockfactory.core.io import write_text_atomic
+from dockfactory.core.layout import CLASS_NAMES
 
 
 def yolo_lines(label: dict, visible_threshold: float) -> list[str]:

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import cv2
 
-from generator.exr import read_passes, write_compact
-from generator.io import sha256_bytes, sha256_file, write_bytes_atomic, write_json_atomic
-from generator.labels import frame_labels
-from generator.scene import FrameScene, StaticScene
-from generator.sensor import apply_sensor
+from dockfactory.generator.exr import read_passes, write_compact
+from dockfactory.core.io import sha256_bytes, sha256_file, write_bytes_atomic, write_json_atomic
+from dockfactory.generator.labels import frame_labels
+from dockfactory.core.scene import FrameScene, StaticScene
+from dockfactory.generator.sensor import apply_sensor
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
 # zlib strategies (1280x960: 49 ms, 1.36 MB vs 64 ms, 1.70 MB for the default strategy at level 1)
@@ -58,7 +58,6 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
                         "sha256": sha256_file(paths["exr"])}
     text = label_text(label).encode("utf-8")
     files["label"] = {"path": f"labels/{paths['label'].name}", "bytes": len(text), "sha256": sha256_bytes(text)}
-    t3 = time.perf_counter()
     meta = {"frame_id": frame.spec.frame_id, "files": files}
     write_json_atomic(paths["meta"], meta)
     write_bytes_atomic(paths["label"], text)   # last: the commit point of the frame

@@ -7,38 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.geometry import pose_components, project_points, transform_points
-from generator.layout import SECTION_PASS_INDEX, SECTIONS, Marker
-from generator.scene import FrameScene, StaticScene, to_dict
+from dockfactory.core.geometry import pose_components, project_points, transform_points
+from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
+from dockfactory.core.scene import FrameScene, StaticScene, to_dict
 
 LABEL_FORMAT = "dockfactory.label/1"
-OUTLINE_POINTS = 256
-
-
-def marker_outline(marker: Marker, n: int = OUTLINE_POINTS) -> np.ndarray:
-    """Edge of the coloured disc (n, 3) mm in the marker's section frame."""
-    normal = np.asarray(marker.normal)
-    x = np.cross([1.0, 0.0, 0.0], normal) if abs(normal[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], normal)
-    x /= np.linalg.norm(x)
-    y = np.cross(normal, x)
-    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    r = marker.diameter_mm / 2.0
-    return np.asarray(marker.center_mm) + r * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)
-
-
-def polygon_area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
-    """Signed-area-free area and centroid of a simple polygon (n, 2)."""
-    if len(poly) < 3:
-        return 0.0, np.full(2, np.nan)
-    x, y = poly[:, 0], poly[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    a = cross.sum() / 2.0
-    if abs(a) < 1e-12:
-        return 0.0, np.full(2, np.nan)
-    cx = ((x + xn) * cross).sum() / (6 * a)
-    cy = ((y + yn) * cross).sum() / (6 * a)
-    return abs(float(a)), np.array([cx, cy])
 
 
 def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:

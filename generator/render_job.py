@@ -14,13 +14,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from generator.config import Config
-from generator.dataset import frame_done, prepare, write_manifest
-from generator.progress import Progress
-from generator.sampler import frame_plan, sample_frame, static_scene
-from generator.scene import FrameSpec, to_dict
-from generator.executors import LocalExecutor, RayExecutor
-from generator.io import remove_stale_temps
+from dockfactory.core.config import Config
+from dockfactory.generator.dataset import frame_done, prepare, write_manifest
+from dockfactory.generator.progress import Progress
+from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
+from dockfactory.core.scene import FrameSpec, to_dict
+from dockfactory.generator.executors import LocalExecutor, RayExecutor
+from dockfactory.core.io import remove_stale_temps
 
 
 @dataclass(frozen=True)
@@ -116,7 +116,7 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
-        from generator.dataset_tools import export
+        from dockfactory.generator.dataset_tools import export
         for fmt in cfg.export.formats:
             if not (root / "exports" / fmt).exists():   # written once, when the dataset completes
                 export(root, fmt)

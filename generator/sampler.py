@@ -14,27 +14,20 @@ from functools import lru_cache
 
 import numpy as np
 
-from generator.config import CONDITIONS, Config, ConfigError
-from generator.geometry import (look_at_cam_from_world, make_transform, rot_x, rot_y, rot_z,
+from dockfactory.core.config import CONDITIONS, Config, ConfigError
+from dockfactory.core.geometry import (look_at_cam_from_world, make_transform, rot_x, rot_y, rot_z,
                                 transform_from_pose_components, transform_points)
-from generator.layout import marker_points
-from generator.scene import (CLUTTER_KINDS, Appearance, CameraModel, FrameScene, FrameSpec, Light, Prop,
-                             RenderSettings,
-                             SensorParams, StaticScene, mat4, vec)
+from dockfactory.core.layout import marker_points
+from dockfactory.core.scene import (CLUTTER_KINDS, CLUTTER_SLOTS, Appearance, CameraModel, FrameScene, FrameSpec, Light,
+                                   Prop, RenderSettings, SensorParams, StaticScene, floor_y_mm, mat4, vec)
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
-CLUTTER_SLOTS = 8
-FLOOR_GAP_MM = 350.0  # floor sits this far below the sections' underside
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
 
 
 def rng_for(seed: int, *keys: int) -> np.random.Generator:
     """The Generator of one named stream of a dataset."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
-
-
-def floor_y_mm(radius_mm: float) -> float:
-    return -(radius_mm + FLOOR_GAP_MM)
 
 
 # ----------------------------------------------------------------------------- plan

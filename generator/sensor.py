@@ -13,7 +13,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from generator.scene import SensorParams
+from dockfactory.core.scene import SensorParams
 
 TARGET_GREY = 0.18
 LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)

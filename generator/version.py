@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 from importlib import metadata
 from pathlib import Path
 
@@ -20,22 +21,35 @@ def blender_version() -> str:
     return package_version("bpy")
 
 
-# the modules whose code decides what a rendered dataset contains
-OUTPUT_SOURCES = ("generator/config.py", "generator/layout.py", "generator/geometry.py",
-                  "generator/scene.py", "generator/sampler.py", "generator/sensor.py",
-                  "generator/labels.py", "generator/exr.py", "generator/frame_output.py",
-                  "blender_scenes/meshes.py", "blender_scenes/materials.py",
-                  "blender_scenes/scene_builder.py", "blender_scenes/frame_update.py")
+# the modules whose code decides what a rendered dataset contains: every dockfactory module the
+# render worker process imports (tests/test_version.py checks the list against a real worker)
+OUTPUT_SOURCES = (
+    "dockfactory.core.config", "dockfactory.core.errors", "dockfactory.core.geometry",
+    "dockfactory.core.io", "dockfactory.core.layout", "dockfactory.core.scene",
+    "dockfactory.generator.exr", "dockfactory.generator.frame_output", "dockfactory.generator.labels",
+    "dockfactory.generator.render_worker", "dockfactory.generator.sampler",
+    "dockfactory.generator.sensor",
+    "dockfactory.blender_scenes.frame_update", "dockfactory.blender_scenes.materials",
+    "dockfactory.blender_scenes.meshes", "dockfactory.blender_scenes.render",
+    "dockfactory.blender_scenes.scene_builder",
+)
+
+
+def module_source(name: str) -> bytes:
+    """The source bytes of an installed dockfactory module (found without importing it)."""
+    spec = importlib.util.find_spec(name)
+    if spec is None or not spec.origin or not spec.origin.endswith(".py"):
+        raise RuntimeError(f"{name}: source not found (a broken install?)")
+    return Path(spec.origin).read_bytes()
 
 
 def generator_source_fingerprint() -> str:
     """Hash of the sources that shape a dataset's content: any change to them is a new version,
     so two datasets with one version id hold the same bytes."""
-    root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
-    for rel in OUTPUT_SOURCES:
-        h.update(rel.encode())
-        h.update((root / rel).read_bytes())
+    for name in OUTPUT_SOURCES:
+        h.update(name.encode())
+        h.update(module_source(name))
     return h.hexdigest()[:16]
 
 

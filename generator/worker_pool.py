@@ -1,6 +1,6 @@
 """Render worker processes seen from the job: start, request with a time limit, kill, restart.
 
-Each worker is ``python -m blender_scenes.worker`` (bpy is imported only there). A worker that
+Each worker is ``python -m dockfactory.generator.render_worker`` (bpy is imported only there). A worker that
 dies (segfault, kill) or exceeds its time limit is killed and reported, so the job can restart it
 and retry the frame.
 """
@@ -34,11 +34,11 @@ class WorkerProcess:
         log = open(self.log_path, "ab")
         env = dict(os.environ if self.env is None else self.env)
         env.setdefault("PYTHONUNBUFFERED", "1")
-        root = str(Path(__file__).resolve().parent.parent)
-        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self.proc = subprocess.Popen([sys.executable, "-m", "blender_scenes.worker"],
+        # the installed package (no sys.path edits); the worker's cwd is the log folder, so no
+        # folder of the caller's can shadow an import
+        self.proc = subprocess.Popen([sys.executable, "-m", "dockfactory.generator.render_worker"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log,
-                                     env=env, cwd=root)
+                                     env=env, cwd=str(self.log_path.parent))
         log.close()
         self._buf = b""
         self.frames_done = 0

@@ -12,14 +12,14 @@ Public entry points: :func:`solve_pnpf`, :func:`solve_docking`, :func:`solve_pnp
 :func:`solve_docking_batch`. Bad input raises :class:`SolverError` (a ``ValueError``).
 Units: mm, degrees at the API (radians inside), pixels in the OpenCV convention.
 """
-from solver.batch import DockingBatch, PnPfBatch, solve_docking_batch, solve_pnpf_batch
-from solver.crb import DockingBound, POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf
-from solver.docking import DockingResult, solve_docking
-from solver.errors import AmbiguousIdentification, SolverError
-from solver.identify import Identification, identify_markers
-from solver.pnpf import PnPfResult, solve_pnpf
-from solver.ransac import ransac_pnpf
-from solver.upnp import Candidate, upnp
+from dockfactory.solver.batch import DockingBatch, PnPfBatch, solve_docking_batch, solve_pnpf_batch
+from dockfactory.solver.crb import DockingBound, POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf
+from dockfactory.solver.docking import DockingResult, solve_docking
+from dockfactory.solver.errors import AmbiguousIdentification, SolverError
+from dockfactory.solver.identify import Identification, identify_markers
+from dockfactory.solver.pnpf import PnPfResult, solve_pnpf
+from dockfactory.solver.ransac import ransac_pnpf
+from dockfactory.solver.upnp import Candidate, upnp
 
 __all__ = [
     "SolverError", "AmbiguousIdentification", "solve_pnpf", "PnPfResult", "solve_docking", "DockingResult",

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.checks import as_principal_point
-from solver.crb import POSE_NAMES
-from solver.errors import SolverError
+from dockfactory.solver.checks import as_principal_point
+from dockfactory.solver.crb import POSE_NAMES
+from dockfactory.solver.errors import SolverError
 
 __all__ = ["DockingBatch", "PnPfBatch", "solve_docking_batch", "solve_pnpf_batch"]
 
@@ -165,7 +165,7 @@ def _closed_form_k1(p3, uv, w, pp, planar: bool = False):
 # ---------------------------------------------------------------------------- batched LM
 
 def _so3_exp(wv):
-    from solver.lie import so3_exp_batch
+    from dockfactory.solver.lie import so3_exp_batch
     return so3_exp_batch(wv)
 
 
@@ -353,7 +353,7 @@ def solve_docking_batch(markers, principal_point, points_2d, visible=None, *,
     Returns a :class:`DockingBatch`. Raises SolverError only for malformed input (shapes,
     NaN at visible points); per-frame failures are reported in ``ok``/``messages``.
     """
-    from solver.docking import layout_arrays, solve_docking_arrays
+    from dockfactory.solver.docking import layout_arrays, solve_docking_arrays
 
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)
@@ -376,14 +376,14 @@ def solve_docking_batch(markers, principal_point, points_2d, visible=None, *,
             continue                       # too few points: no solver can help
         try:
             pa, pb = sel["A"][vis[fi, sel["A"]]], sel["B"][vis[fi, sel["B"]]]
-            from solver.checks import check_correspondences
+            from dockfactory.solver.checks import check_correspondences
             p3a, p2a = check_correspondences(pts[pa], uv[fi, pa], what="section A")
             p3b, p2b = check_correspondences(pts[pb], uv[fi, pb], what="section B")
             res = solve_docking_arrays(p3a, p2a, p3b, p2b, pp, sigma_px)
         except SolverError as exc:
             msgs[fi] = str(exc)
             continue
-        from generator.geometry import pose_components
+        from dockfactory.core.geometry import pose_components
         out["d"][fi] = res["d_from_b"]
         out["pose"][fi] = [pose_components(res["d_from_b"])[k] for k in POSE_NAMES]
         out["f"][fi] = res["focal_px"]
@@ -472,8 +472,8 @@ def solve_pnpf_batch(points_3d, points_2d, principal_point, visible=None, *,
     ``visible``: (F, N) bool or None; ``principal_point``: (2,) px.
     Returns a :class:`PnPfBatch` (covariance over (w, t, f) as in :mod:`solver.refine`).
     """
-    from solver.checks import as_points, check_correspondences
-    from solver.pnpf import solve_checked
+    from dockfactory.solver.checks import as_points, check_correspondences
+    from dockfactory.solver.pnpf import solve_checked
 
     p3 = as_points("points_3d", points_3d, 3)
     pp = as_principal_point(principal_point)

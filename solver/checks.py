@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.errors import SolverError
+from dockfactory.solver.errors import SolverError
 
 __all__ = ["as_points", "as_principal_point", "check_correspondences", "MIN_POINTS"]
 

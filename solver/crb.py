@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.checks import as_points, as_principal_point
-from solver.errors import SolverError
-from solver.refine import d_from_b_jacobian, inverse_spd, residuals_and_jacobian
+from dockfactory.solver.checks import as_points, as_principal_point
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.refine import d_from_b_jacobian, inverse_spd, residuals_and_jacobian
 
 __all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "DockingBound", "POSE_NAMES"]
 

@@ -15,14 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from generator.geometry import pose_components
-from solver.checks import MIN_POINTS, as_points, as_principal_point, check_correspondences
-from solver.crb import POSE_NAMES
-from solver.errors import SolverError
-from solver.identify import parse_detections
-from solver.pnpf import solve_checked
-from solver.upnp import upnp
-from solver.refine import (covariance_from_jacobian, d_from_b_jacobian, refine_joint,
+from dockfactory.core.geometry import pose_components
+from dockfactory.solver.checks import MIN_POINTS, as_points, as_principal_point, check_correspondences
+from dockfactory.solver.crb import POSE_NAMES
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.identify import parse_detections
+from dockfactory.solver.pnpf import solve_checked
+from dockfactory.solver.upnp import upnp
+from dockfactory.solver.refine import (covariance_from_jacobian, d_from_b_jacobian, refine_joint,
                            relative_pose)
 
 __all__ = ["DockingResult", "solve_docking", "layout_arrays", "solve_docking_arrays",
@@ -162,7 +162,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     if correspondences is not None and (boxes is not None or refined is not None):
         raise SolverError("boxes= and refined= describe detections: give them with detections=")
     if detections is not None:
-        from solver.identify import identify_markers
+        from dockfactory.solver.identify import identify_markers
         n_det = len(parse_detections(detections)[0])
         boxes = _row_array(boxes, n_det, (4,), "boxes", float)
         refined = _row_array(refined, n_det, (), "refined", bool)
@@ -196,7 +196,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     inliers = used.copy()
     init = None
     if robust and correspondences is not None:
-        from solver.ransac import ransac_docking
+        from dockfactory.solver.ransac import ransac_docking
         if not isinstance(rng, np.random.Generator):
             raise SolverError("robust=True needs rng, a numpy.random.Generator (explicit seed)")
         keep_a, keep_b, init = ransac_docking(p3["A"], p2["A"], p3["B"], p2["B"], pp, rng,
@@ -213,14 +213,14 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                                               threshold_px, sigma_px, inliers)
     identified = inliers.copy()
     if detections is not None:
-        from solver.suspects import leave_out_suspects
+        from dockfactory.solver.suspects import leave_out_suspects
         fit = functools.partial(solve_docking_arrays, pp=pp, sigma_px=sigma_px)
         by_id = {m.id: m for m in markers}
         row_markers = [by_id.get(i) for i in ids]
         out, inliers = leave_out_suspects(out, rows, p3, p2, fit, inliers, row_markers, pp,
                                           boxes, refined, min_extent)
         if eccentricity:
-            from solver.eccentricity import correct_eccentricity
+            from dockfactory.solver.eccentricity import correct_eccentricity
             out = correct_eccentricity(out, rows, p3, p2, fit, inliers, row_markers, pp)
     marker_ids = tuple(ids[k] if identified[k] else None for k in range(len(ids)))
     return _finish(out, marker_ids, inliers, swapped)

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.labels import polygon_area_centroid
-from solver.outline import projected_outline
-from solver.suspects import SECTIONS, refit_subset, section_cams
+from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.solver.outline import projected_outline
+from dockfactory.solver.suspects import SECTIONS, refit_subset, section_cams
 
 
 def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:

@@ -1,10 +1,12 @@
 """The exception types of the solver package."""
 from __future__ import annotations
 
+from dockfactory.core.errors import DockfactoryError
+
 __all__ = ["SolverError", "AmbiguousIdentification"]
 
 
-class SolverError(ValueError):
+class SolverError(DockfactoryError):
     """Bad input or an unsolvable / ambiguous problem; the message says what is wrong.
 
     A subclass of ``ValueError`` so that callers checking for bad input catch it too. The solver

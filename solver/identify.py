@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.checks import as_points
-from solver.errors import AmbiguousIdentification, SolverError
+from dockfactory.solver.checks import as_points
+from dockfactory.solver.errors import AmbiguousIdentification, SolverError
 
 __all__ = ["Identification", "identify_markers", "parse_detections"]
 
@@ -172,8 +172,8 @@ class _Fit:
 
 
 def _fit(p3, uv, pairs, pp, accept_rmse=None):
-    from solver.pnpf import solve_checked
-    from solver.checks import check_correspondences
+    from dockfactory.solver.pnpf import solve_checked
+    from dockfactory.solver.checks import check_correspondences
     ms = sorted(pairs)
     q3, q2 = check_correspondences(p3[ms], uv[[pairs[m] for m in ms]])
     rescue = None if accept_rmse is None else 4.0 * accept_rmse
@@ -319,8 +319,8 @@ def identify_markers(markers, principal_point, detections, *, sigma_px: float = 
     classes: refusals 1.1 % -> 0.5 %, wrong ids unchanged; the retry costs time only on frames
     that would otherwise be refused).
     """
-    from solver.checks import as_principal_point
-    from solver.docking import layout_arrays
+    from dockfactory.solver.checks import as_principal_point
+    from dockfactory.solver.docking import layout_arrays
 
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)
@@ -427,7 +427,7 @@ def _hyp_init(ha, hb):
 
 
 def _joint_fit(ha, hb, pts, sel, uv, pp, max_rmse, pairs_a=None, pairs_b=None):
-    from solver.docking import solve_docking_arrays
+    from dockfactory.solver.docking import solve_docking_arrays
     pa = sorted((pairs_a if pairs_a is not None else ha.pairs.items()))
     pb = sorted((pairs_b if pairs_b is not None else hb.pairs.items()))
     return solve_docking_arrays(pts[[sel["A"][m] for m, _ in pa]], uv[[d for _, d in pa]],

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.geometry import transform_points
-from generator.labels import marker_outline
+from dockfactory.core.geometry import transform_points
+from dockfactory.core.layout import marker_outline
 
 
 def projected_outline(marker, cam_from_s, focal_px, pp):

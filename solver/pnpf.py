@@ -5,10 +5,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solver.checks import as_principal_point, check_correspondences
-from solver.errors import SolverError
-from solver.refine import covariance_from_jacobian, refine_pnpf
-from solver.upnp import Candidate, upnp
+from dockfactory.solver.checks import as_principal_point, check_correspondences
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.refine import covariance_from_jacobian, refine_pnpf
+from dockfactory.solver.upnp import Candidate, upnp
 
 __all__ = ["PnPfResult", "solve_pnpf", "MAX_FOCAL_REL_STD"]
 
@@ -129,7 +129,7 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     p3, p2 = check_correspondences(points_3d, points_2d)
     pp = as_principal_point(principal_point)
     if robust:
-        from solver.ransac import ransac_pnpf
+        from dockfactory.solver.ransac import ransac_pnpf
         if not isinstance(rng, np.random.Generator):
             raise SolverError("robust=True needs rng, a numpy.random.Generator (explicit seed)")
         return ransac_pnpf(p3, p2, pp, rng, threshold_px=threshold_px, sigma_px=sigma_px)
@@ -202,7 +202,7 @@ def _profile_focal(p3, p2, pp):
     """Profile likelihood over the focal length: calibrated refinement at each focal of a grid
     (from the sweep's poses), then a full refinement from the best grid point. Robust to the
     several basins a near-planar, few-point problem can have in f; slow, so a last resort."""
-    from solver.upnp import focal_sweep
+    from dockfactory.solver.upnp import focal_sweep
     best = None
     for cand in focal_sweep(p3, p2, pp, num=9):
         try:

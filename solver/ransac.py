@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 
-from solver.checks import _collinear_2d, _collinear_3d
-from solver.errors import SolverError
-from solver.pnpf import PnPfResult, make_result, refine_candidates
-from solver.refine import covariance_from_jacobian, refine_pnpf
-from solver.upnp import upnp
+from dockfactory.solver.checks import _collinear_2d, _collinear_3d
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.pnpf import PnPfResult, make_result, refine_candidates
+from dockfactory.solver.refine import covariance_from_jacobian, refine_pnpf
+from dockfactory.solver.upnp import upnp
 
 __all__ = ["ransac_pnpf", "ransac_docking"]
 
@@ -140,7 +140,7 @@ def facing_init(a: complex, b: complex, pp, points_3d, distance_mm: float = 1500
     ``distance_mm`` from the points' mean Z plane and f = |a| * depth; the focal/depth split
     is what refinement then settles.
     """
-    from solver.lie import so3_exp
+    from dockfactory.solver.lie import so3_exp
     theta = float(np.angle(a))
     k = float(abs(a))
     r = so3_exp([0.0, 0.0, theta]) @ np.diag([1.0, -1.0, -1.0])
@@ -239,7 +239,7 @@ def ransac_docking(p3a, p2a, p3b, p2b, pp, rng: np.random.Generator, *,
     Returns (inliers_a (Na,) bool, inliers_b (Nb,) bool, (cam_from_a, cam_from_b, focal)).
     Raises SolverError when a section has no model with 4 or more inliers.
     """
-    from solver.refine import refine_joint
+    from dockfactory.solver.refine import refine_joint
     if not isinstance(rng, np.random.Generator):
         raise SolverError("ransac needs rng, a numpy.random.Generator (explicit seed)")
     if not (np.isfinite(threshold_px) and threshold_px > 0):

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from generator.geometry import euler_deg_from_rotation
-from solver.errors import SolverError
-from solver.lie import so3_exp
+from dockfactory.core.geometry import euler_deg_from_rotation
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.lie import so3_exp
 
 __all__ = ["residuals_and_jacobian", "refine_pnpf", "refine_joint", "covariance_from_jacobian",
            "inverse_spd",

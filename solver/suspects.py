@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.checks import MIN_POINTS
-from solver.errors import SolverError
-from solver.outline import projected_outline
+from dockfactory.solver.checks import MIN_POINTS
+from dockfactory.solver.errors import SolverError
+from dockfactory.solver.outline import projected_outline
 
 SECTIONS = ("A", "B")
 

@@ -43,8 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.checks import check_correspondences, as_principal_point
-from solver.errors import SolverError
+from dockfactory.solver.checks import check_correspondences, as_principal_point
+from dockfactory.solver.errors import SolverError
 
 __all__ = ["Candidate", "upnp", "focal_sweep", "PLANAR_TOL", "NEAR_PLANAR_TOL"]
 

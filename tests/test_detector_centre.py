@@ -4,8 +4,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from detector.centre import colour_score, refine_centre
-from detector.synthetic import make_frame  # noqa: E402
+from dockfactory.detector.centre import colour_score, refine_centre
+from dockfactory.detector.synthetic import make_frame  # noqa: E402
 
 
 @settings(max_examples=25, deadline=None)
@@ -56,8 +56,8 @@ def test_occluder_leaning_to_the_class_colour_is_not_the_disc(seed, monkeypatch)
     in frame 000057 of configs/detector.toml: orange (225, 151, 77) beside a (105, 18, 10)
     disc) scores four times higher for red than the disc itself. The refined centre must be
     the centroid of the disc's visible part (0.15 px), not spread over the occluder."""
-    import detector.centre as centre
-    from detector.synthetic import disc_coverage
+    import dockfactory.detector.centre as centre
+    from dockfactory.detector.synthetic import disc_coverage
     rng = np.random.default_rng(seed)
     img, markers = make_frame(rng, 96, 96, 2, r_range=(9.0, 11.0))
     m = markers[0]                                   # class 0: red
@@ -80,7 +80,7 @@ def test_occluder_leaning_to_the_class_colour_is_not_the_disc(seed, monkeypatch)
 
 
 def test_colour_purity():
-    from detector.centre import colour_purity
+    from dockfactory.detector.centre import colour_purity
     px = np.array([[[200, 25, 25], [240, 160, 90], [128, 128, 128], [30, 50, 210]]], np.uint8)
     p_red = colour_purity(px, 0)[0]
     assert p_red[0] > 0.95 and p_red[1] < 0.75 and abs(p_red[2]) < 1e-6 and p_red[3] < 0

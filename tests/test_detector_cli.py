@@ -8,11 +8,11 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
 
-from detector.synthetic import write_synthetic_dataset
+from dockfactory.detector.synthetic import write_synthetic_dataset
 
 
 def test_help_is_torch_free(repo_root):
-    code = ("import argparse, sys\nfrom detector.cli import add_subcommands\n"
+    code = ("import argparse, sys\nfrom dockfactory.eval.detector_cli import add_subcommands\n"
             "p = argparse.ArgumentParser(); add_subcommands(p.add_subparsers(dest='c'))\n"
             "for c in ('train', 'detect', 'ablate', 'export-onnx'):\n"
             "    try:\n        p.parse_args([c, '--help'])\n    except SystemExit:\n        pass\n"
@@ -23,7 +23,7 @@ def test_help_is_torch_free(repo_root):
 
 
 def test_train_detect_eval_export(tmp_path, capsys):
-    from detector.cli import main
+    from dockfactory.eval.cli import main
     data = write_synthetic_dataset(tmp_path / "data", frames=6, width=128, height=96, markers=4, seed=5, test_every=3)
     run = tmp_path / "run"
     assert main(["train", str(data), "--out", str(run), "--epochs", "1", "--batch", "4", "--input-scale", "1.0",
@@ -48,7 +48,7 @@ def test_train_detect_eval_export(tmp_path, capsys):
 
 
 def test_bad_weights_exit_2(tmp_path, capsys):
-    from detector.cli import main
+    from dockfactory.eval.cli import main
     data = write_synthetic_dataset(tmp_path / "data", frames=1, width=64, height=64, markers=2, seed=1, test_every=1)
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"PK\x03\x04 truncated")

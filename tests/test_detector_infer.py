@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from detector.infer import batched_nms, box_iou, letterbox, nms, postprocess
+from dockfactory.detector.infer import batched_nms, box_iou, letterbox, nms, postprocess
 
 
 @settings(max_examples=60, deadline=None)
@@ -98,7 +98,7 @@ def test_postprocess_decodes_boxes_and_scores():
 
 
 def test_drop_nested_keeps_one_detection_per_marker():
-    from detector.infer import drop_nested
+    from dockfactory.detector.infer import drop_nested
 
     def det(c, score, box, centre):
         return {"class_id": c, "score": score, "bbox_px": box, "center_px": centre}

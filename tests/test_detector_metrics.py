@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from eval.detection_metrics import centre_and_recall, coco_map, coco_results, match_frame
-from generator.export_coco import coco_from_labels
+from dockfactory.eval.detection_metrics import centre_and_recall, coco_map, coco_results, match_frame
+from dockfactory.generator.export_coco import coco_from_labels
 
 SIZE = 20.0
 

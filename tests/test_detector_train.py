@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
-from detector.checkpoint import CheckpointError, load_file, load_model
-from detector.data import CropDataset, DataConfig, load_frames
-from detector.infer import MarkerDetector
-from detector.model import ModelConfig
-from detector.synthetic import write_synthetic_dataset
-from detector.train import TrainConfig, train
-from eval.detection_metrics import match_frame
+from dockfactory.detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
+from dockfactory.detector.checkpoint import CheckpointError, load_file, load_model
+from dockfactory.detector.data import CropDataset, DataConfig, load_frames
+from dockfactory.detector.infer import MarkerDetector
+from dockfactory.detector.model import ModelConfig
+from dockfactory.detector.synthetic import write_synthetic_dataset
+from dockfactory.detector.train import TrainConfig, train
+from dockfactory.eval.detection_metrics import match_frame
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def test_overfit_loss_falls_and_markers_found(overfit_run):
     total = [h["box"] + h["obj"] + h["cls"] for h in summary["history"]]
     assert np.mean(total[-10:]) < 0.35 * np.mean(total[:5])
     det = MarkerDetector(run / "weights.pt", conf_threshold=0.1)
-    from detector.data import read_rgb
+    from dockfactory.detector.data import read_rgb
     found = errors = 0
     for f in load_frames(root, "train"):
         d = det.detect(read_rgb(f.image_path))
@@ -174,5 +174,5 @@ def test_p2_model_trains_and_detects(tmp_path):
     summary = train(root, tmp_path / "run", cfg, progress=False, log=lambda *a: None)
     assert len(summary["config"]["model"]["anchors"]) == 4          # k-means refit for 4 levels
     det = MarkerDetector(tmp_path / "run" / "weights.pt", conf_threshold=0.0)
-    from detector.data import read_rgb
+    from dockfactory.detector.data import read_rgb
     assert isinstance(det.detect(read_rgb(load_frames(root, "train")[0].image_path)), list)

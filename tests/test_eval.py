@@ -7,9 +7,9 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from eval.acceptance import AcceptanceSpec, Gate, load_acceptance
-from eval.pose_metrics import error_stats, pose_error, repeatability, wrap_deg
-from generator.config import ConfigError
+from dockfactory.eval.acceptance import AcceptanceSpec, Gate, load_acceptance
+from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability, wrap_deg
+from dockfactory.core.config import ConfigError
 
 
 def test_error_stats_by_hand():
@@ -66,7 +66,7 @@ def _fake_metrics(loc_rmse, est_rmse, fail_rate=0.0):
 
 
 def test_verdict_gates_what_the_spec_names():
-    from eval.evaluate import verdict
+    from dockfactory.eval.evaluate import verdict
     good = {c: 0.01 for c in ("x", "y", "z", "alpha", "beta", "gamma")}
     v = verdict(_fake_metrics(good, good), AcceptanceSpec())
     assert v["accepted"] and len(v["criteria"]) == 7   # 3 + 3 pose criteria + failure rate (normal only)
@@ -100,7 +100,7 @@ class _Collect(HTMLParser):
 @pytest.mark.render
 def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "generator.cli", "run", str(repo_root / "configs/smoke.toml"), "--out", str(out),
+    cmd = [sys.executable, "-m", "dockfactory", "run", str(repo_root / "configs/smoke.toml"), "--out", str(out),
            "--oracle-noise", "0.05"]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=repo_root, timeout=900)
     assert proc.returncode in (0, 1), proc.stderr
@@ -132,7 +132,7 @@ def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
     poses["dataset_version"] = "0000000000000000"
     bad = tmp_path / "bad_poses.json"
     bad.write_text(json.dumps(poses))
-    proc3 = subprocess.run([sys.executable, "-m", "generator.cli", "evaluate", str(out / "dataset"), "--poses", str(bad),
+    proc3 = subprocess.run([sys.executable, "-m", "dockfactory", "evaluate", str(out / "dataset"), "--poses", str(bad),
                             "--out", str(tmp_path / "ev")], capture_output=True, text=True, cwd=repo_root)
     assert proc3.returncode == 2 and "another dataset version" not in proc3.stdout
     assert "refusing to mix" in proc3.stderr
@@ -142,7 +142,7 @@ def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
     del poses["frames"][dropped]
     partial = tmp_path / "partial.json"
     partial.write_text(json.dumps(poses))
-    proc4 = subprocess.run([sys.executable, "-m", "generator.cli", "evaluate", str(out / "dataset"), "--poses", str(partial),
+    proc4 = subprocess.run([sys.executable, "-m", "dockfactory", "evaluate", str(out / "dataset"), "--poses", str(partial),
                             "--out", str(tmp_path / "ev2")], capture_output=True, text=True, cwd=repo_root)
     assert proc4.returncode == 1
     m2 = json.loads((tmp_path / "ev2" / "metrics.json").read_text())

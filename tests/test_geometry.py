@@ -3,7 +3,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from generator.geometry import (BLENDER_CAM_FROM_CV_CAM, blender_camera_intrinsics,
+from dockfactory.core.geometry import (BLENDER_CAM_FROM_CV_CAM, blender_camera_intrinsics,
                                 blender_world_from_camera, euler_deg_from_rotation, intrinsics,
                                 invert_transform, look_at_cam_from_world, pose_components,
                                 project_points, rot_x, rot_y, rot_z, rotation_from_euler_deg,

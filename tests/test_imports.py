@@ -1,4 +1,4 @@
-"""Every module outside blender_scenes/ imports in a process where bpy is absent."""
+"""Every module outside blender_scenes/ imports in a process where bpy is absent, from any folder."""
 import subprocess
 import sys
 
@@ -10,22 +10,34 @@ class Block(importlib.abc.MetaPathFinder):
             raise ImportError('bpy is not available in this process')
 sys.meta_path.insert(0, Block())
 """
+PACKAGES = ("core", "generator", "detector", "solver", "eval")
 
 
-def test_modules_import_without_bpy(repo_root):
-    modules = []
-    for pkg in ("generator", "detector", "solver", "eval"):
+def test_modules_import_without_bpy(repo_root, tmp_path):
+    modules = ["dockfactory"]
+    for pkg in PACKAGES:
         for path in sorted((repo_root / pkg).glob("*.py")):
-            modules.append(pkg if path.stem == "__init__" else f"{pkg}.{path.stem}")
+            modules.append(f"dockfactory.{pkg}" if path.stem == "__init__" else f"dockfactory.{pkg}.{path.stem}")
     code = BLOCK_BPY + "\nimport importlib\n" + "".join(f"importlib.import_module({m!r})\n" for m in modules)
     code += "assert 'bpy' not in sys.modules\nprint('ok', len(%r))\n" % (modules,)
-    proc = subprocess.run([sys.executable, "-c", code], cwd=repo_root, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("ok")
 
 
-def test_cli_help_is_instant_and_bpy_free(repo_root):
-    code = BLOCK_BPY + "\nfrom generator.cli import build_parser\nbuild_parser().format_help()\n" \
+def test_cli_help_is_instant_and_bpy_free(tmp_path):
+    code = BLOCK_BPY + "\nfrom dockfactory.eval.cli import build_parser\nbuild_parser().format_help()\n" \
         "assert 'bpy' not in sys.modules and 'torch' not in sys.modules\n"
-    proc = subprocess.run([sys.executable, "-c", code], cwd=repo_root, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_a_foreign_folder_named_like_a_subpackage_cannot_shadow_ours(tmp_path):
+    """The old layout imported `eval`, `solver`, ...: a folder of that name in the working directory
+    shadowed them. Under one import root it cannot."""
+    for name in ("eval", "solver", "generator", "detector", "core"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text("raise ImportError('foreign package imported')\n")
+    code = "import dockfactory.eval.cli, dockfactory.solver, dockfactory.core.config; print('ok')"
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr

@@ -9,9 +9,9 @@ import time
 import numpy as np
 import pytest
 
-from generator import dataset_tools as dt
-from generator.config import load_config
-from generator.render_job import JobOptions, run_render
+from dockfactory.generator import dataset_tools as dt
+from dockfactory.core.config import load_config
+from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = pytest.mark.render
 
@@ -72,7 +72,7 @@ def test_clean_run_verifies(job):
 def test_kill_process_group_then_resume(job, tmp_path, repo_root):
     cfg, path, clean = job
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "generator.cli", "render", str(path), "--out", str(out), "--quiet"]
+    cmd = [sys.executable, "-m", "dockfactory", "render", str(path), "--out", str(out), "--quiet"]
     proc = subprocess.Popen(cmd, cwd=repo_root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     deadline = time.monotonic() + 120
@@ -122,7 +122,7 @@ def test_flipped_byte_is_named(job, tmp_path):
     assert report.unexpected == ["images/stray.png"]
     text = report.text()
     assert "images/000003.png" in text and "sha256" in text
-    proc = subprocess.run([sys.executable, "-m", "generator.cli", "dataset", "verify", str(copy)],
+    proc = subprocess.run([sys.executable, "-m", "dockfactory", "dataset", "verify", str(copy)],
                           capture_output=True, text=True)
     assert proc.returncode == 1 and "images/000003.png" in proc.stdout
 
@@ -174,7 +174,7 @@ def test_frame_that_keeps_failing_is_reported(tmp_path):
 
 
 def test_yolo_round_trip(job):
-    from generator.export_yolo import parse_yolo_line
+    from dockfactory.generator.export_yolo import parse_yolo_line
     _, _, clean = job
     yolo = clean / "exports" / "yolo"
     assert "names:\n  0: RedA\n  1: BlueB" in (yolo / "data.yaml").read_text()
@@ -215,7 +215,7 @@ def test_coco_round_trip(job):
 
 
 def test_bop_round_trip(job):
-    from generator.export_bop import read_ply_vertices
+    from dockfactory.generator.export_bop import read_ply_vertices
     _, _, clean = job
     bop = clean / "exports" / "bop"
     verts = read_ply_vertices(bop / "models" / "obj_000001.ply")
@@ -249,7 +249,7 @@ def test_bop_round_trip(job):
 
 def test_dataset_info_and_diff_cli(job, tmp_path):
     _, _, clean = job
-    proc = subprocess.run([sys.executable, "-m", "generator.cli", "dataset", "info", str(clean)],
+    proc = subprocess.run([sys.executable, "-m", "dockfactory", "dataset", "info", str(clean)],
                           capture_output=True, text=True)
     assert proc.returncode == 0 and "14 of 14 done; complete" in proc.stdout
     d = dt.diff(clean, clean)

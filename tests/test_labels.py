@@ -1,9 +1,11 @@
 import numpy as np
 import pytest
 
-from generator.config import config_from_dict
-from generator.labels import clip_polygon, frame_labels, marker_outline, polygon_area_centroid
-from generator.sampler import frame_plan, sample_frame, static_scene
+from dockfactory.core.config import config_from_dict
+from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.layout import marker_outline
+from dockfactory.generator.labels import clip_polygon, frame_labels
+from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
 
 
 def test_polygon_area_and_centroid():
@@ -42,7 +44,7 @@ def test_visibility_from_index_pass():
     base = frame_labels(frame, static, None, 0.5)
     import cv2
     index = np.zeros((h, w), np.int32)
-    from generator.geometry import project_points, transform_points
+    from dockfactory.core.geometry import project_points, transform_points
     for m, rec in zip(static.markers, base["markers"]):
         d_from_s = frame.d_from_b_array() if m.section == "B" else np.eye(4)
         uv, _ = project_points(frame.camera.k(), frame.camera.cam_from_d_array(),

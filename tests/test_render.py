@@ -6,10 +6,10 @@ import sys
 import numpy as np
 import pytest
 
-from generator.config import load_config
-from generator.dataset import DatasetError
-from generator.exr import read_compact
-from generator.render_job import JobOptions, run_render
+from dockfactory.core.config import load_config
+from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.exr import read_compact
+from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = pytest.mark.render
 
@@ -50,9 +50,9 @@ def test_labels_agree_with_the_index_pass(label_dataset):
     """
     from matplotlib.path import Path as PolyPath
 
-    from generator.geometry import project_points, transform_points
-    from generator.labels import marker_outline
-    from generator.sampler import static_scene
+    from dockfactory.core.geometry import project_points
+    from dockfactory.core.layout import marker_outline
+    from dockfactory.generator.sampler import static_scene
     cfg, root, _ = label_dataset
     layout = {m.id: m for m in static_scene(cfg).markers}
     errors, mismatch = [], []
@@ -140,7 +140,7 @@ def test_crashed_worker_is_restarted_and_frame_retried(tmp_path):
 
 def test_smoke_config_through_the_cli(repo_root, tmp_path):
     out = tmp_path / "smoke"
-    proc = subprocess.run([sys.executable, "-m", "generator.cli", "render", str(repo_root / "configs/smoke.toml"),
+    proc = subprocess.run([sys.executable, "-m", "dockfactory", "render", str(repo_root / "configs/smoke.toml"),
                            "--out", str(out)], capture_output=True, text=True, cwd=repo_root, timeout=600)
     assert proc.returncode == 0, proc.stderr
     manifest = json.loads((out / "manifest.json").read_text())
@@ -155,6 +155,6 @@ def test_smoke_config_through_the_cli(repo_root, tmp_path):
         assert lab["image"]["width"] == 320
     assert occluded >= 1  # occluders hide markers, and the labels say so
     overlay = tmp_path / "ov.png"
-    proc = subprocess.run([sys.executable, "-m", "generator.cli", "show", str(out), "000000", "--out", str(overlay)],
+    proc = subprocess.run([sys.executable, "-m", "dockfactory", "show", str(out), "000000", "--out", str(overlay)],
                           capture_output=True, text=True, cwd=repo_root)
     assert proc.returncode == 0 and overlay.stat().st_size > 1000

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from generator.scene import SensorParams
-from generator.sensor import TARGET_GREY, _srgb_lut, apply_sensor, auto_exposure_scale
+from dockfactory.core.scene import SensorParams
+from dockfactory.generator.sensor import TARGET_GREY, _srgb_lut, apply_sensor, auto_exposure_scale
 
 
 def params(**kw):

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from generator.geometry import pose_components, transform_from_pose_components
-from solver import (POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,
+from dockfactory.core.geometry import pose_components, transform_from_pose_components
+from dockfactory.solver import (POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,
                     solve_docking_batch, solve_pnpf, solve_pnpf_batch)
-from solver.lie import so3_exp
-from solver.refine import d_from_b_jacobian, relative_pose, residuals_and_jacobian
-from solver.synthetic import default_layout, docking_scene
+from dockfactory.solver.lie import so3_exp
+from dockfactory.solver.refine import d_from_b_jacobian, relative_pose, residuals_and_jacobian
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
 IDS = [m.id for m in LAYOUT]
@@ -135,7 +135,7 @@ def test_crb_consistency():
 
 
 def test_pose_components_roundtrip_for_batch_euler():
-    from solver.batch import _euler_batch
+    from dockfactory.solver.batch import _euler_batch
     rng = np.random.default_rng(9)
     angles = rng.uniform([-20, -20, -20], [20, 20, 20], (50, 3))
     rots = np.stack([transform_from_pose_components(0, 0, 0, *a)[:3, :3] for a in angles])

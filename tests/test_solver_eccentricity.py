@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from generator.geometry import pose_components, transform_points
-from generator.labels import marker_outline, polygon_area_centroid
-from solver import solve_docking
-from solver.eccentricity import eccentricity_offset
-from solver.synthetic import default_layout, docking_scene
+from dockfactory.core.geometry import pose_components, transform_points
+from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.layout import marker_outline
+from dockfactory.solver import solve_docking
+from dockfactory.solver.eccentricity import eccentricity_offset
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solver import (AmbiguousIdentification, SolverError, crb_d_from_b, crb_pnpf,
+from dockfactory.solver import (AmbiguousIdentification, SolverError, crb_d_from_b, crb_pnpf,
                     identify_markers, solve_docking, solve_docking_batch, solve_pnpf,
                     solve_pnpf_batch, upnp)
-from solver.synthetic import default_layout, docking_scene
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 PP = np.array([639.5, 479.5])
 
@@ -161,11 +161,11 @@ def test_detections_bad_class_and_shapes(scene):
 def test_identification_ambiguous_raises():
     """Markers on a regular grid along the axis: shifting the assignment by one column explains
     the image equally well; the solver must say so rather than pick one."""
-    from generator.layout import build_layout
+    from dockfactory.core.layout import build_layout
     grid = tuple((s, phi) for s in (40.0, 100.0, 160.0, 220.0) for phi in (-20.0, 0.0, 20.0))
     markers = build_layout(grid, grid, radius_mm=300.0, diameter_mm=20.0)
-    from generator.geometry import look_at_cam_from_world
-    from generator.layout import marker_points
+    from dockfactory.core.geometry import look_at_cam_from_world
+    from dockfactory.core.layout import marker_points
     cam = look_at_cam_from_world(np.array([30.0, 10.0, 1800.0]), np.array([0.0, 0.0, 300.0]))
     f = 1500.0
     dets, cls = [], []

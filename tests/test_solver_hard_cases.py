@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.pnpf import solve_checked
-from solver.synthetic import default_layout
+from dockfactory.solver.pnpf import solve_checked
+from dockfactory.solver.synthetic import default_layout
 
 LAYOUT = default_layout()
 
@@ -32,7 +32,7 @@ def test_identification_sheds_a_stray_pair():
     """Identification benchmark case (seed [0, 888], trial 99): markers A1 and A2 are missing
     and a spurious detection lies where A2 would project; the first search pairs them, the fit
     fails, and without a second, one-pair-shedding search the frame was refused."""
-    from solver import identify_markers
+    from dockfactory.solver import identify_markers
     res = identify_markers(LAYOUT, (639.5, 479.5), (np.array(CLASSES_99), np.array(UV_99)))
     assert list(res.marker_ids) == TRUTH_99
 

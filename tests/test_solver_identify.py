@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solver import SolverError, identify_markers, solve_docking, solve_pnpf
-from solver.synthetic import default_layout, docking_scene
+from dockfactory.solver import SolverError, identify_markers, solve_docking, solve_pnpf
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
 IDS = [m.id for m in LAYOUT]

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from generator.geometry import pose_components
-from solver import SolverError, solve_docking
-from solver.suspects import extent_ratio, predicted_outline_box
-from solver.synthetic import default_layout, docking_scene
+from dockfactory.core.geometry import pose_components
+from dockfactory.solver import SolverError, solve_docking
+from dockfactory.solver.suspects import extent_ratio, predicted_outline_box
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
 IDS = [m.id for m in LAYOUT]

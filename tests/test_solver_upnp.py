@@ -12,10 +12,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from generator.geometry import look_at_cam_from_world, make_transform, rot_z
-from solver import SolverError, solve_pnpf, upnp
-from solver.lie import rotation_angle_deg
-from solver.synthetic import docking_scene
+from dockfactory.core.geometry import look_at_cam_from_world, make_transform, rot_z
+from dockfactory.solver import SolverError, solve_pnpf, upnp
+from dockfactory.solver.lie import rotation_angle_deg
+from dockfactory.solver.synthetic import docking_scene
 
 PP = np.array([639.5, 479.5])
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from generator.geometry import intrinsics
-from generator.layout import Marker
+from dockfactory.core.geometry import intrinsics
+from dockfactory.core.layout import Marker
 
 Mat4 = tuple[tuple[float, ...], ...]
 Vec3 = tuple[float, float, float]
@@ -161,6 +161,13 @@ class FrameScene:
 
 OCCLUDER_KINDS = ("cable", "bar", "tool", "blob")
 CLUTTER_KINDS = ("box", "drum")
+CLUTTER_SLOTS = 8
+FLOOR_GAP_MM = 350.0  # floor sits this far below the sections' underside
+
+
+def floor_y_mm(radius_mm: float) -> float:
+    """Height of the floor plane (mm) below sections of this radius."""
+    return -(radius_mm + FLOOR_GAP_MM)
 
 
 def to_dict(obj) -> dict:

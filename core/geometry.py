@@ -16,7 +16,7 @@ __all__ = [
     "make_transform", "invert_transform", "transform_points", "pose_components",
     "transform_from_pose_components", "intrinsics", "project_points",
     "look_at_cam_from_world", "BLENDER_CAM_FROM_CV_CAM", "blender_world_from_camera",
-    "blender_camera_intrinsics", "check_array",
+    "blender_camera_intrinsics", "check_array", "polygon_area_centroid",
 ]
 
 
@@ -185,3 +185,18 @@ def blender_camera_intrinsics(focal_px: float, principal_point, width: int, heig
         "shift_x": (c[0] + 0.5 - width / 2.0) / side,
         "shift_y": -(c[1] + 0.5 - height / 2.0) / side,
     }
+
+
+def polygon_area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
+    """Signed-area-free area and centroid of a simple polygon (n, 2)."""
+    if len(poly) < 3:
+        return 0.0, np.full(2, np.nan)
+    x, y = poly[:, 0], poly[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    a = cross.sum() / 2.0
+    if abs(a) < 1e-12:
+        return 0.0, np.full(2, np.nan)
+    cx = ((x + xn) * cross).sum() / (6 * a)
+    cy = ((y + yn) * cross).sum() / (6 * a)
+    return abs(float(a)), np.array([cx, cy])

@@ -91,3 +91,13 @@ def remove_stale_temps(root, max_age_s: float) -> list[Path]:
                 path.unlink()
                 removed.append(path)
     return removed
+
+
+def load_labels(root, split: str | None = None) -> list[dict]:
+    """Labels of a dataset (optionally one split), in frame-id order."""
+    out = []
+    for path in sorted((Path(root) / "labels").glob("*.json")):
+        label = json.loads(path.read_text())
+        if split is None or label["spec"]["split"] == split:
+            out.append(label)
+    return out

@@ -1,4 +1,4 @@
-"""Detector subcommands for the ``dockfactory`` CLI: train, detect, ablate, export-onnx.
+"""Detector subcommands of ``dockfactory``: train, detect, ablate, export-onnx.
 
 ``add_subcommands(subparsers)`` registers them on an argparse subparsers object. torch is only
 imported inside the command functions, so building the parser (and ``--help``) stays instant.
@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
 
-
-SHIPPED_WEIGHTS = Path(__file__).resolve().parent.parent / "models" / "yolov5n_se_markers.pt"
+from dockfactory.core.resources import shipped_weights
 
 
 def _torch(threads: int | None):
@@ -34,9 +32,9 @@ def _positive_int(text: str) -> int:
 
 
 def _train_config(args, attention: str, seed: int):
-    from detector.data import DataConfig
-    from detector.model import DEFAULT_ANCHORS, DEFAULT_ANCHORS_P2, ModelConfig
-    from detector.train import TrainConfig
+    from dockfactory.detector.data import DataConfig
+    from dockfactory.detector.model import DEFAULT_ANCHORS, DEFAULT_ANCHORS_P2, ModelConfig
+    from dockfactory.detector.train import TrainConfig
     model = ModelConfig(scale=args.model, attention=attention, p2=args.p2,
                         anchors=DEFAULT_ANCHORS_P2 if args.p2 else DEFAULT_ANCHORS)
     data = DataConfig(crops_per_frame=args.crops_per_frame, input_scale=args.input_scale)
@@ -46,7 +44,7 @@ def _train_config(args, attention: str, seed: int):
 
 def cmd_train(args) -> int:
     _torch(args.threads)
-    from detector.train import train
+    from dockfactory.detector.train import train
     cfg = _train_config(args, args.attention, args.seed)
     summary = train(args.dataset, args.out, cfg, resume=args.resume, progress=not args.quiet)
     h = summary["history"]
@@ -57,21 +55,21 @@ def cmd_train(args) -> int:
 
 def cmd_detect(args) -> int:
     _torch(args.threads)
-    from detector.infer import detect_dataset
+    from dockfactory.detector.infer import detect_dataset
     split = None if args.split == "all" else args.split
-    doc = detect_dataset(args.dataset, args.weights, args.out, split=split, conf_threshold=args.conf,
+    doc = detect_dataset(args.dataset, args.weights or shipped_weights(), args.out, split=split, conf_threshold=args.conf,
                          iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet)
     n = sum(len(v) for v in doc["frames"].values())
     print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
     if args.eval:
-        from eval.detection_metrics import evaluate_detections, format_report
+        from dockfactory.eval.detection_metrics import evaluate_detections, format_report
         print(format_report(evaluate_detections(args.dataset, doc)))
     return 0
 
 
 def cmd_ablate(args) -> int:
     _torch(args.threads)
-    from detector.ablate import run_ablation
+    from dockfactory.eval.ablate import run_ablation
     attentions = [a.strip() for a in args.attention.split(",") if a.strip()]
     seeds = list(range(args.seeds))
     result = run_ablation(args.dataset, args.out, attentions, seeds,
@@ -84,8 +82,8 @@ def cmd_ablate(args) -> int:
 
 def cmd_export_onnx(args) -> int:
     _torch(args.threads)
-    from detector.onnx_export import export_onnx
-    info = export_onnx(args.weights, args.out, height=args.height, width=args.width, check=not args.no_check)
+    from dockfactory.detector.onnx_export import export_onnx
+    info = export_onnx(args.weights or shipped_weights(), args.out, height=args.height, width=args.width, check=not args.no_check)
     print(f"ONNX model -> {info['path']} (input {info['input_shape']}); "
           + (f"max |onnx - torch| = {info['max_abs_diff']:.2e}" if "max_abs_diff" in info else "not checked"))
     return 0
@@ -116,7 +114,7 @@ def add_subcommands(subparsers) -> None:
 
     d = subparsers.add_parser("detect", help="detect markers (boxes, refined centres) in a dataset's frames")
     d.add_argument("dataset")
-    d.add_argument("--weights", default=str(SHIPPED_WEIGHTS),
+    d.add_argument("--weights",
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
@@ -138,29 +136,10 @@ def add_subcommands(subparsers) -> None:
     a.set_defaults(func=cmd_ablate)
 
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
-    e.add_argument("--weights", default=str(SHIPPED_WEIGHTS), help="default: the shipped weights")
+    e.add_argument("--weights", help="default: the shipped weights")
     e.add_argument("--out", required=True, help="ONNX file")
     e.add_argument("--height", type=int, default=480, help="network input height (default 480)")
     e.add_argument("--width", type=int, default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
     e.add_argument("--threads", type=int)
     e.set_defaults(func=cmd_export_onnx)
-
-
-def main(argv=None) -> int:
-    """Standalone entry (``python -m detector.cli``) until the commands are wired into dockfactory."""
-    p = argparse.ArgumentParser(prog="python -m detector.cli")
-    add_subcommands(p.add_subparsers(dest="command", required=True))
-    args = p.parse_args(argv)
-    try:
-        return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted: run the same command with --resume to continue", file=sys.stderr)
-        return 130
-    except ValueError as exc:
-        print(f"dockfactory: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

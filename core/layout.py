@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SECTIONS = ("A", "B")
+OUTLINE_POINTS = 256  # points on a marker disc's edge (labels, solver outline)
 CLASS_NAMES = ("RedA", "BlueB")  # detector class ids 0 and 1
 
 # (s_mm, phi_deg): irregular patterns near the seam on the camera-facing side. The angular span
@@ -114,3 +115,14 @@ def layout_problems(markers, min_spacing_factor: float = 1.5,
                     problems.append(f"section {section}: markers {ms[i].id} and {ms[j].id} have "
                                     f"the same distance signature (symmetric layout)")
     return problems
+
+
+def marker_outline(marker: Marker, n: int = OUTLINE_POINTS) -> np.ndarray:
+    """Edge of the coloured disc (n, 3) mm in the marker's section frame."""
+    normal = np.asarray(marker.normal)
+    x = np.cross([1.0, 0.0, 0.0], normal) if abs(normal[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], normal)
+    x /= np.linalg.norm(x)
+    y = np.cross(normal, x)
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    r = marker.diameter_mm / 2.0
+    return np.asarray(marker.center_mm) + r * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from generator.io import write_json_atomic, write_text_atomic
+from dockfactory.core.io import write_json_atomic, write_text_atomic
 
 LABELS = {"none": "YOLOv5", "se": "+ SE", "eca": "+ ECA", "cbam": "+ CBAM", "a2": "+ A2"}
 
@@ -27,11 +27,11 @@ def _fmt(values) -> str:
 
 def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True) -> dict:
     """Train/evaluate every (attention, seed); ``make_config(attention, seed) -> TrainConfig``."""
-    from detector.attention import ATTENTIONS
-    from detector.data import dataset_version, load_frames
-    from detector.infer import detect_dataset
-    from detector.train import train
-    from eval.detection_metrics import evaluate_detections
+    from dockfactory.detector.attention import ATTENTIONS
+    from dockfactory.detector.data import dataset_version, load_frames
+    from dockfactory.detector.infer import detect_dataset
+    from dockfactory.detector.train import train
+    from dockfactory.eval.detection_metrics import evaluate_detections
     bad = [a for a in attentions if a not in ATTENTIONS]
     if bad or not attentions:
         raise ValueError(f"attention variants must be among {', '.join(ATTENTIONS)}, got {attentions}")

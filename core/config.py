@@ -6,6 +6,8 @@ Ranges are written ``[min, max]``.
 """
 from __future__ import annotations
 
+from dockfactory.core.errors import DockfactoryError
+
 import dataclasses
 import json
 import tomllib
@@ -13,14 +15,14 @@ import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from generator import layout as layout_mod
+from dockfactory.core import layout as layout_mod
 
 Range = tuple[float, float]
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
 CHALLENGING = ("low_light", "occlusion", "glare")
 
 
-class ConfigError(ValueError):
+class ConfigError(DockfactoryError):
     """A config that cannot be used; the message names file, table and key."""
 
 
@@ -376,6 +378,3 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     for f in cfg.export.formats:
         if f not in EXPORT_FORMATS:
             raise _err(source, "export", "formats", f"unknown format {f!r} (known: {', '.join(EXPORT_FORMATS)})")
-    # geometric feasibility (the focal range must fit the markers) needs the sampler
-    from generator.sampler import check_focal_fits
-    check_focal_fits(cfg, source)

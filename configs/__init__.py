@@ -1,0 +1,1 @@
+"""Configs shipped with dockfactory (package data; see core/resources.py)."""

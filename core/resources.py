@@ -1,0 +1,54 @@
+"""Files shipped inside the package (configs, detector weights), read through importlib.resources,
+so an installed dockfactory finds them wherever it is installed and whatever the working folder."""
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from dockfactory.core.errors import DockfactoryError
+
+WEIGHTS_NAME = "yolov5n_se_markers.pt"   # the shipped detector (model card: models/README.md)
+ACCEPTANCE_NAME = "acceptance.toml"
+
+
+def _shipped(package: str, name: str) -> Path:
+    path = Path(str(resources.files(package).joinpath(name)))
+    if not path.is_file():
+        raise DockfactoryError(f"{name}: not shipped with this dockfactory install ({package})")
+    return path
+
+
+def shipped_configs() -> tuple[str, ...]:
+    """Names (without .toml) of the configs shipped with the package."""
+    folder = resources.files("dockfactory.configs")
+    return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
+
+
+def shipped_config(name: str) -> Path:
+    """Path of a shipped config, by name (``quick`` or ``quick.toml``)."""
+    stem = name[:-5] if name.endswith(".toml") else name
+    return _shipped("dockfactory.configs", stem + ".toml")
+
+
+def shipped_weights() -> Path:
+    """Path of the shipped detector weights."""
+    return _shipped("dockfactory.models", WEIGHTS_NAME)
+
+
+def default_acceptance() -> Path:
+    """Path of the shipped acceptance spec (the paper's criteria)."""
+    return _shipped("dockfactory.configs", ACCEPTANCE_NAME)
+
+
+def resolve_config(arg: str | Path) -> Path:
+    """A config given on the command line: an existing file, else a shipped config named by
+    ``NAME``, ``NAME.toml`` or ``configs/NAME.toml`` (so the README's commands work from any
+    folder)."""
+    path = Path(arg)
+    if path.is_file():
+        return path
+    known = shipped_configs()
+    stem = path.name[:-5] if path.name.endswith(".toml") else path.name
+    if stem in known and path.parent in (Path("."), Path("configs")):
+        return shipped_config(stem)
+    raise DockfactoryError(f"{arg}: no such config file (shipped configs: {', '.join(known)})")

@@ -1,0 +1,1 @@
+"""Detector weights shipped with dockfactory (package data; see core/resources.py)."""
