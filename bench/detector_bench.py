@@ -31,7 +31,6 @@ TARGETS = {"ms_per_image": 60.0, "mAP50": 0.995, "mAP50_95": 0.85, "centre_norma
 def bench_inference(weights, frames, rounds: int) -> dict:
     import numpy as np
     import torch
-
     from dockfactory.detector.centre import refine_centre
     from dockfactory.detector.data import read_rgb
     from dockfactory.detector.infer import MarkerDetector, letterbox, postprocess
@@ -74,7 +73,6 @@ def bench_inference(weights, frames, rounds: int) -> dict:
 
 def bench_training(dataset, batches: int) -> dict:
     import torch
-
     from dockfactory.detector.data import CropDataset, DataConfig, load_frames
     from dockfactory.detector.loss import YoloLoss
     from dockfactory.detector.model import ModelConfig, build_model
@@ -138,7 +136,10 @@ def main(argv=None) -> int:
         import tempfile
 
         from dockfactory.detector.infer import detect_dataset
-        from dockfactory.eval.detection_metrics import evaluate_detections, format_report
+        from dockfactory.eval.detection_metrics import (
+            evaluate_detections,
+            format_report,
+        )
         with tempfile.TemporaryDirectory() as tmp:
             doc = detect_dataset(args.dataset, args.weights, Path(tmp) / "dets.json", split="test",
                                  conf_threshold=0.001, progress=False)

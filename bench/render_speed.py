@@ -20,7 +20,6 @@ import tempfile
 import time
 from pathlib import Path
 
-
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402
 

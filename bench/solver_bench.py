@@ -43,11 +43,17 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-
-
 from dockfactory.core.geometry import pose_components  # noqa: E402
-from dockfactory.solver import (SolverError, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,  # noqa: E402
-                    solve_docking_batch, solve_pnpf, upnp)
+from dockfactory.solver import (  # noqa: E402
+    SolverError,
+    crb_d_from_b,
+    crb_joint,
+    crb_pnpf,
+    solve_docking,
+    solve_docking_batch,
+    solve_pnpf,
+    upnp,
+)
 from dockfactory.solver.lie import rotation_angle_deg  # noqa: E402
 from dockfactory.solver.refine import relative_pose  # noqa: E402
 from dockfactory.solver.synthetic import default_layout, docking_scene  # noqa: E402

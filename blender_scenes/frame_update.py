@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import numpy as np
-from mathutils import Matrix
-
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes.scene_builder import MM, SceneHandles
-from dockfactory.core.geometry import blender_camera_intrinsics, blender_world_from_camera
+from dockfactory.core.geometry import (
+    blender_camera_intrinsics,
+    blender_world_from_camera,
+)
 from dockfactory.core.scene import FrameScene
+from mathutils import Matrix
 
 DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
 

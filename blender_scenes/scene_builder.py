@@ -6,12 +6,17 @@ from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
-
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
 from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
-from dockfactory.core.scene import (CLUTTER_KINDS, CLUTTER_SLOTS, FLOOR_GAP_MM, OCCLUDER_KINDS, StaticScene,
-                                   floor_y_mm)
+from dockfactory.core.scene import (
+    CLUTTER_KINDS,
+    CLUTTER_SLOTS,
+    FLOOR_GAP_MM,
+    OCCLUDER_KINDS,
+    StaticScene,
+    floor_y_mm,
+)
 
 MM = 0.001
 

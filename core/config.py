@@ -6,8 +6,6 @@ Ranges are written ``[min, max]``.
 """
 from __future__ import annotations
 
-from dockfactory.core.errors import DockfactoryError
-
 import dataclasses
 import json
 import tomllib
@@ -16,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core import layout as layout_mod
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import MIN_CHROMA
 
 Range = tuple[float, float]
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
@@ -136,7 +136,7 @@ class GlareConfig:
 @dataclass(frozen=True)
 class LabelsConfig:
     visible_threshold: float = 0.5  # visible fraction at or above which COCO visibility is 2
-    min_chroma: float = 0.03        # a marker whose colour is washed out below this is not legible
+    min_chroma: float = MIN_CHROMA  # a marker whose colour is washed out below this is not legible
 
 
 @dataclass(frozen=True)

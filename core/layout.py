@@ -15,10 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dockfactory.core.names import CLASS_NAMES, SECTIONS  # noqa: F401  (re-exported)
 
-SECTIONS = ("A", "B")
 OUTLINE_POINTS = 256  # points on a marker disc's edge (labels, solver outline)
-CLASS_NAMES = ("RedA", "BlueB")  # detector class ids 0 and 1
 
 # (s_mm, phi_deg): irregular patterns near the seam on the camera-facing side. The angular span
 # (about +-60 deg) matters: at 0.1 px of centre noise the Cramer-Rao bound of X is 0.31 mm RMS

@@ -10,7 +10,6 @@ import typing
 from dataclasses import dataclass
 
 import numpy as np
-
 from dockfactory.core.geometry import intrinsics
 from dockfactory.core.layout import Marker
 

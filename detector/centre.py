@@ -30,10 +30,11 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from dockfactory.core.names import CLASS_CHANNELS
 
 _SRGB_TO_LINEAR = np.where(np.arange(256) / 255.0 <= 0.04045, np.arange(256) / 255.0 / 12.92,
                            ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4).astype(np.float32)
-CLASS_CHANNEL = {0: 0, 1: 2}  # RedA -> R, BlueB -> B (RGB order)
+CLASS_CHANNEL = dict(enumerate(CLASS_CHANNELS))  # class id -> RGB channel of its colour
 
 
 @dataclass(frozen=True)

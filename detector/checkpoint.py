@@ -10,12 +10,11 @@ corrupted or not ours raises :class:`CheckpointError` (a ValueError) with the pa
 """
 from __future__ import annotations
 
-from dockfactory.core.errors import DockfactoryError
-
 import os
 from pathlib import Path
 
 import torch
+from dockfactory.core.errors import DockfactoryError
 
 CHECKPOINT_FORMAT = "dockfactory.detector.checkpoint/1"
 WEIGHTS_FORMAT = "dockfactory.detector.weights/1"

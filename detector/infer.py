@@ -14,9 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
+from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.data import resize_exact
-from dockfactory.detector.model import CLASS_NAMES
 
 
 @dataclass(frozen=True)
@@ -137,7 +136,7 @@ def batched_nms(boxes, scores, classes, iou_threshold: float) -> torch.Tensor:
     return nms(boxes + offset, scores, iou_threshold)
 
 
-def postprocess(pred: torch.Tensor, conf_threshold: float = 0.25, iou_threshold: float = 0.45,
+def postprocess(pred: torch.Tensor, conf_threshold: float = MIN_SCORE, iou_threshold: float = NMS_IOU,
                 max_det: int = 300, max_nms: int = 3000) -> list[torch.Tensor]:
     """``pred: (B, N, 5 + nc)`` decoded [cx, cy, w, h, obj, cls...] -> per image ``(K, 6)``
     [x0, y0, x1, y1, score, class] network px, score = obj x class probability (best class)."""
@@ -168,7 +167,7 @@ def sha256_of(path) -> str:
 class MarkerDetector:
     """Loaded weights + inference settings. ``detect(image)`` -> list of detection dicts."""
 
-    def __init__(self, weights, conf_threshold: float = 0.25, iou_threshold: float = 0.45,
+    def __init__(self, weights, conf_threshold: float = MIN_SCORE, iou_threshold: float = NMS_IOU,
                  max_det: int = 100, refine: bool = True):
         from dockfactory.detector.checkpoint import load_model
         self.weights = Path(weights)
@@ -225,8 +224,8 @@ def drop_nested(dets: list[dict]) -> list[dict]:
     return kept
 
 
-def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = 0.25,
-                   iou_threshold: float = 0.45, refine: bool = True, progress: bool = True) -> dict:
+def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = MIN_SCORE,
+                   iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True) -> dict:
     """Run the detector over the frames of ``split`` and write the detections JSON atomically.
 
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
@@ -236,8 +235,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     """
     import sys
 
-    from dockfactory.detector.data import dataset_version, load_frames, read_rgb
     from dockfactory.core.io import write_json_atomic
+    from dockfactory.detector.data import dataset_version, load_frames, read_rgb
     version = dataset_version(dataset)
     frames = load_frames(dataset, split)
     det = MarkerDetector(weights, conf_threshold, iou_threshold, refine=refine)

@@ -25,13 +25,12 @@ import math
 from dataclasses import asdict, dataclass
 
 import torch
-from torch import nn
-
+from dockfactory.core.names import CLASS_NAMES  # noqa: F401  (re-exported)
 from dockfactory.detector.attention import ATTENTIONS, make_attention
 from dockfactory.detector.blocks import C3, SPPF, Conv, fuse_conv_bn
+from torch import nn
 
 SCALES = {"n": (0.33, 0.25), "s": (0.33, 0.50)}  # depth multiple, width multiple
-CLASS_NAMES = ("RedA", "BlueB")
 # YOLOv5's COCO anchors (P3, P4, P5), px at the network input; replaced by k-means anchors.
 DEFAULT_ANCHORS = (((10, 13), (16, 30), (33, 23)), ((30, 61), (62, 45), (59, 119)),
                    ((116, 90), (156, 198), (373, 326)))

@@ -25,12 +25,22 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch import nn
-
-from dockfactory.detector.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_file, save_atomic, weights_from_checkpoint
-from dockfactory.detector.data import CropDataset, DataConfig, dataset_version, load_frames
+from dockfactory.detector.checkpoint import (
+    CHECKPOINT_FORMAT,
+    CheckpointError,
+    load_file,
+    save_atomic,
+    weights_from_checkpoint,
+)
+from dockfactory.detector.data import (
+    CropDataset,
+    DataConfig,
+    dataset_version,
+    load_frames,
+)
 from dockfactory.detector.loss import LossGains, YoloLoss
 from dockfactory.detector.model import ModelConfig, build_model
+from torch import nn
 
 
 @dataclass(frozen=True)
@@ -145,7 +155,11 @@ class EpochBar:
 
 def fit_anchor_config(cfg: TrainConfig, frames) -> tuple[ModelConfig, float]:
     """(model config with k-means anchors for the training boxes at the network scale, BPR)."""
-    from dockfactory.detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
+    from dockfactory.detector.anchors import (
+        anchor_fitness,
+        anchors_per_level,
+        kmeans_anchors,
+    )
     s = cfg.data.input_scale
     wh = np.concatenate([(f.boxes[:, 2:] - f.boxes[:, :2])[f.visible >= cfg.data.min_visible_fraction]
                          for f in frames]) * s

@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 
 LABELS = {"none": "YOLOv5", "se": "+ SE", "eca": "+ ECA", "cbam": "+ CBAM", "a2": "+ A2"}

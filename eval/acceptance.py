@@ -15,10 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import ConfigError, build_dataclass
-
-COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
-UNITS = {"x": "mm", "y": "mm", "z": "mm", "alpha": "deg", "beta": "deg", "gamma": "deg"}
-POSE_KEYS = {"x": "x_mm", "y": "y_mm", "z": "z_mm", "alpha": "alpha_deg", "beta": "beta_deg", "gamma": "gamma_deg"}
+from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
@@ -38,10 +39,10 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
+    from dockfactory.core.io import write_json_atomic
     from dockfactory.eval.acceptance import load_acceptance
     from dockfactory.eval.dataset_access import open_dataset
     from dockfactory.eval.evaluate import evaluate, write_outputs
-    from dockfactory.core.io import write_json_atomic
     spec = load_acceptance(args.acceptance or default_acceptance())
     ds = open_dataset(args.dataset)
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
@@ -74,7 +75,7 @@ def add_eval_commands(sub) -> None:
     s.add_argument("--detections", help="DETS.json from dockfactory detect")
     s.add_argument("--oracle-noise", type=float, metavar="PX", help="use the exact image centroids of the markers (labels) + Gaussian noise (px)")
     s.add_argument("--split", default="test,repeat")
-    s.add_argument("--min-score", type=float, default=0.25)
+    s.add_argument("--min-score", type=float, default=MIN_SCORE)
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_solve)
 
@@ -83,7 +84,7 @@ def add_eval_commands(sub) -> None:
     e.add_argument("--poses", required=True)
     e.add_argument("--detections")
     e.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
-    e.add_argument("--min-score", type=float, default=0.25)
+    e.add_argument("--min-score", type=float, default=MIN_SCORE)
     e.add_argument("--out", required=True)
     e.set_defaults(func=cmd_evaluate)
 

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dockfactory.core.config import Config, config_from_dict
-from dockfactory.generator.dataset import DatasetError, read_identity
 from dockfactory.core.io import load_labels
+from dockfactory.generator.dataset import DatasetError, read_identity
 
 
 @dataclass

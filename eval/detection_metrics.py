@@ -22,6 +22,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from dockfactory.core.names import MIN_SCORE
 
 COCO_SHIFT = 0.5
 NORMAL_CONDITIONS = ("normal", "ideal")
@@ -105,7 +106,7 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
     return match
 
 
-def evaluate_detections(dataset, detections, split: str | None = None, recall_conf: float = 0.25) -> dict:
+def evaluate_detections(dataset, detections, split: str | None = None, recall_conf: float = MIN_SCORE) -> dict:
     """All metrics for a detections JSON (path or dict) on ``dataset`` (its split by default)."""
     from dockfactory.core.io import load_labels
     from dockfactory.generator.export_coco import coco_from_labels
@@ -128,7 +129,7 @@ def evaluate_detections(dataset, detections, split: str | None = None, recall_co
     return result
 
 
-def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 0.5, recall_conf: float = 0.25) -> dict:
+def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 0.5, recall_conf: float = MIN_SCORE) -> dict:
     errs = {"normal": [], "challenging": []}
     seen = found = 0
     for lab in labels:

@@ -10,6 +10,7 @@ import argparse
 import os
 from pathlib import Path
 
+from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 
 
@@ -33,7 +34,11 @@ def _positive_int(text: str) -> int:
 
 def _train_config(args, attention: str, seed: int):
     from dockfactory.detector.data import DataConfig
-    from dockfactory.detector.model import DEFAULT_ANCHORS, DEFAULT_ANCHORS_P2, ModelConfig
+    from dockfactory.detector.model import (
+        DEFAULT_ANCHORS,
+        DEFAULT_ANCHORS_P2,
+        ModelConfig,
+    )
     from dockfactory.detector.train import TrainConfig
     model = ModelConfig(scale=args.model, attention=attention, p2=args.p2,
                         anchors=DEFAULT_ANCHORS_P2 if args.p2 else DEFAULT_ANCHORS)
@@ -62,7 +67,10 @@ def cmd_detect(args) -> int:
     n = sum(len(v) for v in doc["frames"].values())
     print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
     if args.eval:
-        from dockfactory.eval.detection_metrics import evaluate_detections, format_report
+        from dockfactory.eval.detection_metrics import (
+            evaluate_detections,
+            format_report,
+        )
         print(format_report(evaluate_detections(args.dataset, doc)))
     return 0
 
@@ -118,7 +126,7 @@ def add_subcommands(subparsers) -> None:
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
-    d.add_argument("--conf", type=float, default=0.25, help="score threshold (use 0.001 for mAP)")
+    d.add_argument("--conf", type=float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
     d.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold")
     d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")
     d.add_argument("--eval", action="store_true", help="print mAP, centre error and recall afterwards")

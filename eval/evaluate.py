@@ -11,12 +11,12 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-
+from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
 from dockfactory.eval.dataset_access import EvalDataset, read_json_for
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.core.io import write_json_atomic, write_text_atomic
 
 METRICS_FORMAT = "dockfactory.metrics/1"
 
@@ -176,7 +176,7 @@ def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
 
 
 def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=None,
-             min_score: float = 0.25, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
+             min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
     poses = read_json_for(poses_path, "poses", ds)
     detections = read_json_for(detections_path, "detections", ds) if detections_path else None
     sigma, centre_by_cond = centre_noise_px(ds, detections, min_score)
@@ -211,8 +211,8 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
     Ground truth: markers with visible fraction >= ``visible_threshold`` and a legible colour; a
     detection that only overlaps an ignored marker (occluded or washed out) counts neither way.
     """
-    from dockfactory.eval.detection_metrics import match_frame
     from dockfactory.core.layout import CLASS_NAMES
+    from dockfactory.eval.detection_metrics import match_frame
     curves = {}
     for c, name in enumerate(CLASS_NAMES):
         scored, n_gt = [], 0

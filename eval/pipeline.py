@@ -50,8 +50,7 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     """Detections for every frame (shipped weights, given weights, or a detector trained here)."""
     import os
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    import torch   # only this stage needs torch
-
+    import torch  # only this stage needs torch
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import detect_dataset
     torch.set_num_threads(os.cpu_count() or 1)
@@ -86,12 +85,12 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
 
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
                  oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
+    from dockfactory.core.config import load_config
     from dockfactory.eval.acceptance import load_acceptance
     from dockfactory.eval.dataset_access import open_dataset
     from dockfactory.eval.evaluate import evaluate, write_outputs
     from dockfactory.eval.report import build_report
     from dockfactory.eval.solve_frames import solve_dataset, write_poses
-    from dockfactory.core.config import load_config
     from dockfactory.generator.dataset import identity
     from dockfactory.generator.render_job import JobOptions, print_summary, run_render
     from dockfactory.generator.sampler import check_focal_fits

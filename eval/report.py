@@ -12,9 +12,8 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
-
-from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")

@@ -13,9 +13,9 @@ Frames without a pose are kept with their reason: never dropped.
 from __future__ import annotations
 
 import numpy as np
-
-from dockfactory.eval.dataset_access import EvalDataset
 from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.core.names import MIN_SCORE
+from dockfactory.eval.dataset_access import EvalDataset
 from dockfactory.generator.sampler import rng_for
 
 POSES_FORMAT = "dockfactory.poses/1"
@@ -74,7 +74,7 @@ def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=N
 
 
 def solve_dataset(ds: EvalDataset, splits=("test", "repeat"), detections: dict | None = None,
-                  oracle_sigma_px: float | None = None, min_score: float = 0.25,
+                  oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``."""
     if (detections is None) == (oracle_sigma_px is None):

@@ -11,18 +11,22 @@ Layout of a dataset directory:
 """
 from __future__ import annotations
 
-from dockfactory.core.errors import DockfactoryError
-
 import json
 from collections import Counter
 from pathlib import Path
 
 from dockfactory.core.config import Config
-from dockfactory.generator.frame_output import frame_paths
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan, static_scene
-from dockfactory.generator.version import blender_version, dataset_version_id, generator_version, package_version
+from dockfactory.generator.version import (
+    blender_version,
+    dataset_version_id,
+    generator_version,
+    package_version,
+)
 
 DATASET_FORMAT = "dockfactory.dataset/1"
 CONVENTIONS = {

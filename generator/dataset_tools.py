@@ -5,8 +5,12 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dockfactory.generator.dataset import DatasetError, config_differences, read_identity
 from dockfactory.core.io import is_temp_name, sha256_file
+from dockfactory.generator.dataset import (
+    DatasetError,
+    config_differences,
+    read_identity,
+)
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
 

@@ -14,10 +14,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dockfactory.core.io import load_labels
-from dockfactory.generator.export_files import place_file
-from dockfactory.core.io import write_text_atomic
+from dockfactory.core.io import load_labels, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.generator.export_files import place_file
 
 
 def yolo_lines(label: dict, visible_threshold: float) -> list[str]:

@@ -7,14 +7,12 @@ first part, so every part is read. The kept EXR is one ZIP-compressed part with 
 """
 from __future__ import annotations
 
-from dockfactory.core.errors import DockfactoryError
-
 import os
 from dataclasses import dataclass
 
 import numpy as np
 import OpenEXR
-
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import atomic_path
 
 

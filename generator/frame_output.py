@@ -14,11 +14,16 @@ import time
 from pathlib import Path
 
 import cv2
-
-from dockfactory.generator.exr import read_passes, write_compact
-from dockfactory.core.io import sha256_bytes, sha256_file, write_bytes_atomic, write_json_atomic
-from dockfactory.generator.labels import frame_labels
+from dockfactory.core.io import (
+    sha256_bytes,
+    sha256_file,
+    write_bytes_atomic,
+    write_json_atomic,
+)
+from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
+from dockfactory.generator.exr import read_passes, write_compact
+from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.sensor import apply_sensor
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
@@ -37,7 +42,7 @@ def label_text(label: dict) -> str:
 
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
-                 visible_threshold: float, timings: dict | None = None, min_chroma: float = 0.03) -> dict:
+                 visible_threshold: float, timings: dict | None = None, min_chroma: float = MIN_CHROMA) -> dict:
     """Write the frame's files from the render's scratch EXR; returns its meta record."""
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)

@@ -6,10 +6,14 @@ Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image
 from __future__ import annotations
 
 import numpy as np
-
-from dockfactory.core.geometry import pose_components, project_points, transform_points
-from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.geometry import (
+    polygon_area_centroid,
+    pose_components,
+    project_points,
+    transform_points,
+)
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
+from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene, to_dict
 
 LABEL_FORMAT = "dockfactory.label/1"
@@ -112,7 +116,7 @@ class IndexStats:
 
 def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
                  visible_threshold: float, derived: dict | None = None, image: np.ndarray | None = None,
-                 min_chroma: float = 0.03) -> dict:
+                 min_chroma: float = MIN_CHROMA) -> dict:
     """The label record of one frame.
 
     ``index``: (H, W) int object-index pass, or None before rendering (visibility then unknown).

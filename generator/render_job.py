@@ -15,12 +15,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import Config
+from dockfactory.core.io import remove_stale_temps
+from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import frame_done, prepare, write_manifest
+from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.generator.progress import Progress
 from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
-from dockfactory.core.scene import FrameSpec, to_dict
-from dockfactory.generator.executors import LocalExecutor, RayExecutor
-from dockfactory.core.io import remove_stale_temps
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,33 @@ import dataclasses
 from functools import lru_cache
 
 import numpy as np
-
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
-from dockfactory.core.geometry import (look_at_cam_from_world, make_transform, rot_x, rot_y, rot_z,
-                                transform_from_pose_components, transform_points)
+from dockfactory.core.geometry import (
+    look_at_cam_from_world,
+    make_transform,
+    rot_x,
+    rot_y,
+    rot_z,
+    transform_from_pose_components,
+    transform_points,
+)
 from dockfactory.core.layout import marker_points
-from dockfactory.core.scene import (CLUTTER_KINDS, CLUTTER_SLOTS, Appearance, CameraModel, FrameScene, FrameSpec, Light,
-                                   Prop, RenderSettings, SensorParams, StaticScene, floor_y_mm, mat4, vec)
+from dockfactory.core.scene import (
+    CLUTTER_KINDS,
+    CLUTTER_SLOTS,
+    Appearance,
+    CameraModel,
+    FrameScene,
+    FrameSpec,
+    Light,
+    Prop,
+    RenderSettings,
+    SensorParams,
+    StaticScene,
+    floor_y_mm,
+    mat4,
+    vec,
+)
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m

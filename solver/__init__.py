@@ -12,8 +12,19 @@ Public entry points: :func:`solve_pnpf`, :func:`solve_docking`, :func:`solve_pnp
 :func:`solve_docking_batch`. Bad input raises :class:`SolverError` (a ``ValueError``).
 Units: mm, degrees at the API (radians inside), pixels in the OpenCV convention.
 """
-from dockfactory.solver.batch import DockingBatch, PnPfBatch, solve_docking_batch, solve_pnpf_batch
-from dockfactory.solver.crb import DockingBound, POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf
+from dockfactory.solver.batch import (
+    DockingBatch,
+    PnPfBatch,
+    solve_docking_batch,
+    solve_pnpf_batch,
+)
+from dockfactory.solver.crb import (
+    POSE_NAMES,
+    DockingBound,
+    crb_d_from_b,
+    crb_joint,
+    crb_pnpf,
+)
 from dockfactory.solver.docking import DockingResult, solve_docking
 from dockfactory.solver.errors import AmbiguousIdentification, SolverError
 from dockfactory.solver.identify import Identification, identify_markers

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from dockfactory.solver.checks import as_principal_point
 from dockfactory.solver.crb import POSE_NAMES
 from dockfactory.solver.errors import SolverError

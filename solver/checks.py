@@ -6,7 +6,6 @@ Every public entry point runs its arguments through these before any math, and t
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.solver.errors import SolverError
 
 __all__ = ["as_points", "as_principal_point", "check_correspondences", "MIN_POINTS"]

@@ -20,14 +20,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
+from dockfactory.core.names import POSE_NAMES
 from dockfactory.solver.checks import as_points, as_principal_point
 from dockfactory.solver.errors import SolverError
-from dockfactory.solver.refine import d_from_b_jacobian, inverse_spd, residuals_and_jacobian
+from dockfactory.solver.refine import (
+    d_from_b_jacobian,
+    inverse_spd,
+    residuals_and_jacobian,
+)
 
 __all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "DockingBound", "POSE_NAMES"]
 
-POSE_NAMES = ("x_mm", "y_mm", "z_mm", "alpha_deg", "beta_deg", "gamma_deg")
 
 
 def _check_transform(name, value):

@@ -14,16 +14,24 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from dockfactory.core.geometry import pose_components
-from dockfactory.solver.checks import MIN_POINTS, as_points, as_principal_point, check_correspondences
+from dockfactory.solver.checks import (
+    MIN_POINTS,
+    as_points,
+    as_principal_point,
+    check_correspondences,
+)
 from dockfactory.solver.crb import POSE_NAMES
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.identify import parse_detections
 from dockfactory.solver.pnpf import solve_checked
+from dockfactory.solver.refine import (
+    covariance_from_jacobian,
+    d_from_b_jacobian,
+    refine_joint,
+    relative_pose,
+)
 from dockfactory.solver.upnp import upnp
-from dockfactory.solver.refine import (covariance_from_jacobian, d_from_b_jacobian, refine_joint,
-                           relative_pose)
 
 __all__ = ["DockingResult", "solve_docking", "layout_arrays", "solve_docking_arrays",
            "MAX_JOINT_FOCAL_REL_STD"]

@@ -11,7 +11,6 @@ polygon minus the projected centre), taken off its detected centre, and the pose
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.core.geometry import polygon_area_centroid
 from dockfactory.solver.outline import projected_outline
 from dockfactory.solver.suspects import SECTIONS, refit_subset, section_cams

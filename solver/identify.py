@@ -28,7 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from dockfactory.solver.checks import as_points
 from dockfactory.solver.errors import AmbiguousIdentification, SolverError
 
@@ -172,8 +171,8 @@ class _Fit:
 
 
 def _fit(p3, uv, pairs, pp, accept_rmse=None):
-    from dockfactory.solver.pnpf import solve_checked
     from dockfactory.solver.checks import check_correspondences
+    from dockfactory.solver.pnpf import solve_checked
     ms = sorted(pairs)
     q3, q2 = check_correspondences(p3[ms], uv[[pairs[m] for m in ms]])
     rescue = None if accept_rmse is None else 4.0 * accept_rmse

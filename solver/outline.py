@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.layout import marker_outline
 

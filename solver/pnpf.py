@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from dockfactory.solver.checks import as_principal_point, check_correspondences
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.refine import covariance_from_jacobian, refine_pnpf

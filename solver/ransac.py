@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from dockfactory.solver.checks import _collinear_2d, _collinear_3d
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.pnpf import PnPfResult, make_result, refine_candidates

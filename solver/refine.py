@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from dockfactory.core.geometry import euler_deg_from_rotation
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.lie import so3_exp

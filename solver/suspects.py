@@ -25,7 +25,6 @@ uv_a, points_b, uv_b, init=...)``, and return (fit result dict, inliers (N,) boo
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.solver.checks import MIN_POINTS
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.outline import projected_outline

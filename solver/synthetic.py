@@ -12,10 +12,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from dockfactory.core.geometry import (look_at_cam_from_world, make_transform, rot_x, rot_y, rot_z,
-                                transform_from_pose_components, transform_points)
-from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, build_layout, marker_points
+from dockfactory.core.geometry import (
+    look_at_cam_from_world,
+    make_transform,
+    rot_x,
+    rot_y,
+    rot_z,
+    transform_from_pose_components,
+    transform_points,
+)
+from dockfactory.core.layout import (
+    DEFAULT_LAYOUT_A,
+    DEFAULT_LAYOUT_B,
+    build_layout,
+    marker_points,
+)
 
 __all__ = ["DockingScene", "default_layout", "docking_scene", "project"]
 

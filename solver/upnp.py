@@ -42,8 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from dockfactory.solver.checks import check_correspondences, as_principal_point
+from dockfactory.solver.checks import as_principal_point, check_correspondences
 from dockfactory.solver.errors import SolverError
 
 __all__ = ["Candidate", "upnp", "focal_sweep", "PLANAR_TOL", "NEAR_PLANAR_TOL"]

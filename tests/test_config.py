@@ -2,7 +2,6 @@ import subprocess
 import sys
 
 import pytest
-
 from dockfactory.core.config import Config, ConfigError, config_from_dict, load_config
 
 
@@ -70,7 +69,11 @@ def test_canonical_json_is_stable():
 
 
 def test_version_id_covers_config_code_and_blender():
-    from dockfactory.generator.version import dataset_version_id, generator_source_fingerprint, generator_version
+    from dockfactory.generator.version import (
+        dataset_version_id,
+        generator_source_fingerprint,
+        generator_version,
+    )
     cfg = config_from_dict({}).canonical_json()
     base = dataset_version_id(cfg, "5.0.1", "0.1.0+aaaa")
     assert base == dataset_version_id(cfg, "5.0.1", "0.1.0+aaaa")

@@ -1,8 +1,12 @@
 """mAP (pycocotools) on hand-built cases, matching, centre error and recall."""
 import numpy as np
 import pytest
-
-from dockfactory.eval.detection_metrics import centre_and_recall, coco_map, coco_results, match_frame
+from dockfactory.eval.detection_metrics import (
+    centre_and_recall,
+    coco_map,
+    coco_results,
+    match_frame,
+)
 from dockfactory.generator.export_coco import coco_from_labels
 
 SIZE = 20.0

@@ -5,9 +5,18 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
 import torch
-
-from dockfactory.detector.attention import ATTENTIONS, ECA, eca_kernel_size, make_attention
-from dockfactory.detector.model import DEFAULT_ANCHORS_P2, ModelConfig, build_model, count_parameters
+from dockfactory.detector.attention import (
+    ATTENTIONS,
+    ECA,
+    eca_kernel_size,
+    make_attention,
+)
+from dockfactory.detector.model import (
+    DEFAULT_ANCHORS_P2,
+    ModelConfig,
+    build_model,
+    count_parameters,
+)
 
 # 2 classes, BatchNorm unfused. 'none' equals YOLOv5 v6's published unfused 80-class counts
 # (n 1,872,157; s 7,235,389) minus the Detect convs' (sum of head channels + 3) x 234 weights;

@@ -8,8 +8,11 @@ import json
 import numpy as np
 import pytest
 import torch
-
-from dockfactory.detector.anchors import anchor_fitness, anchors_per_level, kmeans_anchors
+from dockfactory.detector.anchors import (
+    anchor_fitness,
+    anchors_per_level,
+    kmeans_anchors,
+)
 from dockfactory.detector.checkpoint import CheckpointError, load_file, load_model
 from dockfactory.detector.data import CropDataset, DataConfig, load_frames
 from dockfactory.detector.infer import MarkerDetector

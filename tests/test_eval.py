@@ -6,10 +6,14 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
-
-from dockfactory.eval.acceptance import AcceptanceSpec, Gate, load_acceptance
-from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability, wrap_deg
 from dockfactory.core.config import ConfigError
+from dockfactory.eval.acceptance import AcceptanceSpec, Gate, load_acceptance
+from dockfactory.eval.pose_metrics import (
+    error_stats,
+    pose_error,
+    repeatability,
+    wrap_deg,
+)
 
 
 def test_error_stats_by_hand():

@@ -1,13 +1,24 @@
 import numpy as np
 import pytest
+from dockfactory.core.geometry import (
+    BLENDER_CAM_FROM_CV_CAM,
+    blender_camera_intrinsics,
+    blender_world_from_camera,
+    euler_deg_from_rotation,
+    intrinsics,
+    invert_transform,
+    look_at_cam_from_world,
+    pose_components,
+    project_points,
+    rot_x,
+    rot_y,
+    rot_z,
+    rotation_from_euler_deg,
+    transform_from_pose_components,
+    transform_points,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from dockfactory.core.geometry import (BLENDER_CAM_FROM_CV_CAM, blender_camera_intrinsics,
-                                blender_world_from_camera, euler_deg_from_rotation, intrinsics,
-                                invert_transform, look_at_cam_from_world, pose_components,
-                                project_points, rot_x, rot_y, rot_z, rotation_from_euler_deg,
-                                transform_from_pose_components, transform_points)
 
 angles = st.floats(-89.0, 89.0)
 

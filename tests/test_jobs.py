@@ -8,9 +8,8 @@ import time
 
 import numpy as np
 import pytest
-
-from dockfactory.generator import dataset_tools as dt
 from dockfactory.core.config import load_config
+from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = pytest.mark.render

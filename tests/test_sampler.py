@@ -2,14 +2,24 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from dockfactory.core.config import CHALLENGING, config_from_dict
 from dockfactory.core.geometry import pose_components, project_points, transform_points
-from dockfactory.core.layout import marker_outline
-from dockfactory.core.layout import (DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, build_layout, layout_problems,
-                              marker_points)
-from dockfactory.generator.sampler import condition_counts, frame_plan, markers_in_d, sample_frame, static_scene
+from dockfactory.core.layout import (
+    DEFAULT_LAYOUT_A,
+    DEFAULT_LAYOUT_B,
+    build_layout,
+    layout_problems,
+    marker_outline,
+    marker_points,
+)
 from dockfactory.core.scene import FrameScene, from_dict, to_dict
+from dockfactory.generator.sampler import (
+    condition_counts,
+    frame_plan,
+    markers_in_d,
+    sample_frame,
+    static_scene,
+)
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,12 @@
 import numpy as np
 import pytest
-
 from dockfactory.core.scene import SensorParams
-from dockfactory.generator.sensor import TARGET_GREY, _srgb_lut, apply_sensor, auto_exposure_scale
+from dockfactory.generator.sensor import (
+    TARGET_GREY,
+    _srgb_lut,
+    apply_sensor,
+    auto_exposure_scale,
+)
 
 
 def params(**kw):

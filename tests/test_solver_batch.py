@@ -2,12 +2,23 @@
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.core.geometry import pose_components, transform_from_pose_components
-from dockfactory.solver import (POSE_NAMES, crb_d_from_b, crb_joint, crb_pnpf, solve_docking,
-                    solve_docking_batch, solve_pnpf, solve_pnpf_batch)
+from dockfactory.solver import (
+    POSE_NAMES,
+    crb_d_from_b,
+    crb_joint,
+    crb_pnpf,
+    solve_docking,
+    solve_docking_batch,
+    solve_pnpf,
+    solve_pnpf_batch,
+)
 from dockfactory.solver.lie import so3_exp
-from dockfactory.solver.refine import d_from_b_jacobian, relative_pose, residuals_and_jacobian
+from dockfactory.solver.refine import (
+    d_from_b_jacobian,
+    relative_pose,
+    residuals_and_jacobian,
+)
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from dockfactory.core.geometry import pose_components, transform_points
-from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.geometry import (
+    polygon_area_centroid,
+    pose_components,
+    transform_points,
+)
 from dockfactory.core.layout import marker_outline
 from dockfactory.solver import solve_docking
 from dockfactory.solver.eccentricity import eccentricity_offset

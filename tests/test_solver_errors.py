@@ -3,10 +3,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from dockfactory.solver import (AmbiguousIdentification, SolverError, crb_d_from_b, crb_pnpf,
-                    identify_markers, solve_docking, solve_docking_batch, solve_pnpf,
-                    solve_pnpf_batch, upnp)
+from dockfactory.solver import (
+    AmbiguousIdentification,
+    SolverError,
+    crb_d_from_b,
+    crb_pnpf,
+    identify_markers,
+    solve_docking,
+    solve_docking_batch,
+    solve_pnpf,
+    solve_pnpf_batch,
+    upnp,
+)
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 PP = np.array([639.5, 479.5])

@@ -3,7 +3,6 @@ that slides to the orthographic limit, and an identification that must shed a st
 from __future__ import annotations
 
 import numpy as np
-
 from dockfactory.solver.pnpf import solve_checked
 from dockfactory.solver.synthetic import default_layout
 

@@ -9,10 +9,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from dockfactory.core.geometry import pose_components
-from dockfactory.solver import (crb_d_from_b, crb_joint, crb_pnpf, solve_docking, solve_docking_batch,
-                    solve_pnpf)
+from dockfactory.solver import (
+    crb_d_from_b,
+    crb_joint,
+    crb_pnpf,
+    solve_docking,
+    solve_docking_batch,
+    solve_pnpf,
+)
 from dockfactory.solver.lie import rotation_angle_deg
 from dockfactory.solver.synthetic import default_layout, docking_scene
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from dockfactory.core.geometry import pose_components
 from dockfactory.solver import SolverError, solve_docking
 from dockfactory.solver.suspects import extent_ratio, predicted_outline_box
