@@ -25,10 +25,11 @@ error beyond 10 Cramer-Rao standard deviations (of the solver's problem, per tri
 metric. Timing: median microseconds per call on this machine (per section for single-section
 solvers, per frame for ours-joint), measured as process CPU time because the cores are shared.
 
-Also: batch throughput (solve_docking_batch, frames/s, 1 and 2 processes) and the robust layer
-with 20 % outliers (3 of 14 correspondences replaced by wrong pixels): fraction of trials whose
-inlier mask is exactly right; and identification from class-only detections with missing
-markers, spurious detections and swapped classes.
+Also: the robust layer with 20 % outliers (3 of 14 correspondences replaced by wrong pixels):
+fraction of trials whose inlier mask is exactly right; and identification from class-only
+detections with missing markers, spurious detections and swapped classes. (The batch API and
+its throughput figure were removed with solver/batch.py: it was a second implementation of the
+closed form, LM and covariance used by no production path.)
 
 Run: python bench/solver_bench.py [--trials 500] [--seed 0]
 """
@@ -36,27 +37,22 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import math
-import multiprocessing
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-from dockfactory.core.geometry import pose_components  # noqa: E402
-from dockfactory.solver import (  # noqa: E402
+from dockfactory.core.geometry import pose_components
+from dockfactory.solver import (
     SolverError,
     crb_d_from_b,
     crb_joint,
     crb_pnpf,
     solve_docking,
-    solve_docking_batch,
     solve_pnpf,
     upnp,
 )
-from dockfactory.solver.lie import rotation_angle_deg  # noqa: E402
-from dockfactory.solver.refine import relative_pose  # noqa: E402
-from dockfactory.solver.synthetic import default_layout, docking_scene  # noqa: E402
+from dockfactory.solver.lie import rotation_angle_deg
+from dockfactory.solver.refine import relative_pose
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
 IDS = [m.id for m in LAYOUT]
@@ -266,37 +262,6 @@ def report(sigma, rows, bnds):
 
 # ------------------------------------------------------------------------------------ extras
 
-def _batch_worker(args):
-    uv, pp = args
-    out = solve_docking_batch(LAYOUT, pp, uv)
-    return int(out.ok.sum())
-
-
-def batch_throughput(trials, repeats=3):
-    uv = np.stack([np.vstack([ua, ub]) for _, ua, ub in trials])
-    pp = trials[0][0].principal_point
-    uv = np.concatenate([uv] * max(1, math.ceil(4000 / len(uv))))[:4000]
-    best1, cpu1 = 0.0, 0.0
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), _clock()
-        solve_docking_batch(LAYOUT, pp, uv)
-        best1 = max(best1, len(uv) / (time.perf_counter() - t0))
-        cpu1 = max(cpu1, len(uv) / (_clock() - c0))
-    best2 = 0.0
-    halves = [(uv[: len(uv) // 2], pp), (uv[len(uv) // 2:], pp)]
-    # one BLAS thread per worker process (set before the spawned workers import numpy)
-    os.environ["OPENBLAS_NUM_THREADS"] = "1"
-    os.environ["OMP_NUM_THREADS"] = "1"
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=2, mp_context=ctx) as ex:
-        list(ex.map(_batch_worker, halves))          # warm up the workers
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            list(ex.map(_batch_worker, halves))
-            best2 = max(best2, len(uv) / (time.perf_counter() - t0))
-    return best1, cpu1, best2
-
-
 def outlier_trials(seed, n, sigma=0.5, n_bad=3):
     rng = np.random.default_rng([seed, 777])
     ok, fail_msgs, times = 0, [], []
@@ -397,11 +362,6 @@ def main(argv=None):
             rows[name] = (*run_single_section(fn, trials, bnds[problem]), problem)
         report(sigma, rows, bnds)
 
-    trials = make_trials(args.seed, 0.3, 500)
-    f1, c1, f2 = batch_throughput(trials)
-    print(f"\nbatch mode (solve_docking_batch, sigma 0.3, 4000 frames): 1 process {c1:,.0f} "
-          f"frames per CPU-second ({f1:,.0f} frames/s wall); 2 processes {f2:,.0f} frames/s "
-          f"wall (load average now {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
     rate, msgs, t = outlier_trials(args.seed, args.outlier_trials)
     print(f"robust layer, 20 % outliers (3 of 14 correspondences wrong, sigma 0.5): inlier "
           f"mask exact in {100 * rate:.1f} % of {args.outlier_trials} trials "

@@ -17,13 +17,13 @@ from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, Acceptance
 from dockfactory.eval.dataset_access import EvalDataset, read_json_for
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.solver import SolverError, crb_d_from_b
 
 METRICS_FORMAT = "dockfactory.metrics/1"
 
 
 def frame_bound(label: dict, marker_ids, sigma_px: float) -> dict | None:
     """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry."""
-    from dockfactory.solver import SolverError, crb_d_from_b
     by_id = {m["id"]: m for m in label["markers"]}
     ids = [i for i in (marker_ids or []) if i in by_id] or [m["id"] for m in label["markers"] if m.get("visibility") == 2]
     pa = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("A")]).reshape(-1, 3)

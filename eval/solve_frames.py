@@ -17,16 +17,22 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.dataset_access import EvalDataset
 from dockfactory.generator.sampler import rng_for
+from dockfactory.solver import (
+    AmbiguousIdentification,
+    SolverError,
+    TooFewPoints,
+    solve_docking,
+)
 
 POSES_FORMAT = "dockfactory.poses/1"
 ORACLE_STREAM = 101  # rng stream of the oracle's centre noise (see generator.sampler.rng_for)
 
 
-def failure_category(reason: str) -> str:
-    r = reason.lower()
-    if "ambiguous" in r:
+def failure_category(exc: SolverError) -> str:
+    """Category of a solver failure in POSES.json and the report, by exception type."""
+    if isinstance(exc, AmbiguousIdentification):
         return "ambiguous identification"
-    if "usable points" in r or "at least" in r or "too few" in r:
+    if isinstance(exc, TooFewPoints):
         return "too few markers"
     return "solver error"
 
@@ -58,12 +64,11 @@ def detection_arrays(dets: list[dict], min_score: float):
 
 def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
               refined=None) -> dict:
-    from dockfactory.solver import SolverError, solve_docking
     try:
         res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px,
                             boxes=boxes, refined=refined)
     except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(str(exc))}
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}
     used = [i for i, ok in zip(res.marker_ids, res.inliers) if ok and i is not None]
     rejected = [i for i, ok in zip(res.marker_ids, res.inliers) if not ok and i is not None]
     return {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),

@@ -14,6 +14,9 @@ The bound on ``d_from_b``'s (X, Y, Z, alpha, beta, gamma) follows by first-order
 ``"joint"`` (both sections in one estimation, shared focal: what :func:`solver.solve_docking`
 solves) and ``"independent"`` (each section solved on its own with its own focal: the bound for
 any single-section solver applied twice).
+
+A side branch of the solver: uses only the Jacobian and the covariance inverse of
+:mod:`solver.refine` (the same ones the estimators use) and the input checks.
 """
 from __future__ import annotations
 
@@ -22,21 +25,22 @@ from dataclasses import dataclass
 import numpy as np
 from dockfactory.core.names import POSE_NAMES
 from dockfactory.solver.checks import as_points, as_principal_point
-from dockfactory.solver.errors import SolverError
+from dockfactory.solver.errors import DegenerateGeometry, InvalidSolverInput
 from dockfactory.solver.refine import (
     d_from_b_jacobian,
     inverse_spd,
+    joint_jacobian,
     residuals_and_jacobian,
 )
 
 __all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "DockingBound", "POSE_NAMES"]
 
 
-
 def _check_transform(name, value):
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
-        raise SolverError(f"{name}: expected a finite (4, 4) transform, got shape {arr.shape}")
+        raise InvalidSolverInput(f"{name}: expected a finite (4, 4) transform, got shape "
+                                 f"{arr.shape}")
     return arr
 
 
@@ -45,21 +49,21 @@ def _jac(points_3d, cam_from_world, focal_px, principal_point):
     cam = _check_transform("cam_from_world", cam_from_world)
     pp = as_principal_point(principal_point)
     if not (np.isfinite(focal_px) and focal_px > 0):
-        raise SolverError(f"focal_px must be positive and finite, got {focal_px}")
+        raise InvalidSolverInput(f"focal_px must be positive and finite, got {focal_px}")
     uv = np.zeros((p3.shape[0], 2))
     _, jac, z = residuals_and_jacobian(p3, uv, pp, cam[:3, :3], cam[:3, 3], float(focal_px))
     if np.any(z <= 0):
-        raise SolverError("points behind the camera: the bound is undefined")
+        raise DegenerateGeometry("points behind the camera: the bound is undefined")
     return jac
 
 
 def _inverse_information(jac, sigma_px):
     if not (np.isfinite(sigma_px) and sigma_px >= 0):
-        raise SolverError(f"sigma_px must be finite and >= 0, got {sigma_px}")
+        raise InvalidSolverInput(f"sigma_px must be finite and >= 0, got {sigma_px}")
     inv = inverse_spd(jac.T @ jac)
     if not np.all(np.isfinite(inv)):
-        raise SolverError("Fisher information is singular: the parameters are not observable "
-                          "from these points (degenerate configuration)")
+        raise DegenerateGeometry("Fisher information is singular: the parameters are not "
+                                 "observable from these points (degenerate configuration)")
     return sigma_px ** 2 * inv
 
 
@@ -79,12 +83,7 @@ def crb_pnpf(points_3d, cam_from_world, focal_px: float, principal_point, sigma_
 def _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point):
     ja = _jac(points_a, cam_from_a, focal_px, principal_point)
     jb = _jac(points_b, cam_from_b, focal_px, principal_point)
-    jac = np.zeros((ja.shape[0] + jb.shape[0], 13))
-    jac[:ja.shape[0], :6] = ja[:, :6]
-    jac[:ja.shape[0], 12] = ja[:, 6]
-    jac[ja.shape[0]:, 6:12] = jb[:, :6]
-    jac[ja.shape[0]:, 12] = jb[:, 6]
-    return jac
+    return joint_jacobian(ja, jb)
 
 
 def crb_joint(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
@@ -128,8 +127,8 @@ def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, pr
         cov12[:6, :6] = cov_a[:6, :6]
         cov12[6:, 6:] = cov_b[:6, :6]
     else:
-        raise SolverError(f"problem must be 'joint', 'independent' or 'calibrated', got "
-                          f"{problem!r}")
+        raise InvalidSolverInput(f"problem must be 'joint', 'independent' or 'calibrated', "
+                                 f"got {problem!r}")
     cov6 = prop @ cov12 @ prop.T
     std = dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist()))
     return DockingBound(cov6, std, problem)

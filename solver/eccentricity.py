@@ -7,13 +7,17 @@ the markers of configs/detector.toml, against a median centre error of the detec
 0.09 px), and the difference is systematic: it follows the marker's tilt, not the image noise.
 Once a pose is known, each marker's offset is predicted (centroid of the projected outline
 polygon minus the projected centre), taken off its detected centre, and the pose refitted.
+A step of the docking pipeline (layer 5, beside :mod:`solver.suspects`).
 """
 from __future__ import annotations
 
 import numpy as np
 from dockfactory.core.geometry import polygon_area_centroid
+from dockfactory.core.names import SECTIONS
+from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
 from dockfactory.solver.outline import projected_outline
-from dockfactory.solver.suspects import SECTIONS, refit_subset, section_cams
+
+__all__ = ["eccentricity_offset", "correct_eccentricity"]
 
 
 def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
@@ -29,14 +33,17 @@ def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
     return centroid - centre
 
 
-def correct_eccentricity(out, rows, p3, p2, fit, inliers, row_markers, pp):
-    """Refit with every inlier's centre moved by minus its predicted offset under ``out``.
-    Returns the new fit result (the arrays ``p2`` are not modified)."""
-    cams = section_cams(out)
-    keep = {s: np.array([bool(inliers[k]) for k in rows[s]], dtype=bool) for s in SECTIONS}
+def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitter,
+                         inliers) -> JointFit:
+    """Refit with every inlier's centre moved by minus its predicted offset under ``fit``
+    (``inliers`` (N,) bool per input row). ``points`` is not modified."""
+    cams = fit.cams
+    pp = fitter.principal_point
+    keep = {s: np.array([bool(inliers[k]) for k in points.rows[s]], dtype=bool)
+            for s in SECTIONS}
     corrected = {}
     for s in SECTIONS:
-        off = np.array([eccentricity_offset(row_markers[k], cams[s], out["focal_px"], pp)
-                        for k in rows[s]]).reshape(-1, 2)
-        corrected[s] = p2[s] - off
-    return refit_subset(out, p3, corrected, keep, fit)
+        off = np.array([eccentricity_offset(points.markers[k], cams[s], fit.focal_px, pp)
+                        for k in points.rows[s]]).reshape(-1, 2)
+        corrected[s] = points.points_2d[s] - off
+    return fitter.refit(fit, points, keep, points_2d=corrected)

@@ -22,14 +22,37 @@ Ids follow from the known layout:
    detection to the nearest projected marker within the tight gate, one to one; detections
    left over are spurious (inlier mask False); a detection whose class label disagrees with its
    marker's section is flagged as swapped.
+
+Layer 4 of the solver (beside RANSAC): fits through the estimators :mod:`solver.estimate` and
+:mod:`solver.joint`; options: :class:`solver.options.IdentifyOptions`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from dockfactory.solver.checks import as_points
-from dockfactory.solver.errors import AmbiguousIdentification, SolverError
+from dockfactory.solver.checks import (
+    as_points,
+    as_principal_point,
+    check_correspondences,
+    layout_arrays,
+)
+from dockfactory.solver.errors import (
+    AmbiguousIdentification,
+    IdentificationFailed,
+    InvalidSolverInput,
+    SolverError,
+    TooFewPoints,
+)
+from dockfactory.solver.estimate import estimate_pnpf
+from dockfactory.solver.joint import JointFit, JointStart, fit_joint
+from dockfactory.solver.options import (
+    DEFAULT_IDENTIFY,
+    FacingPrior,
+    IdentifyOptions,
+    RefineOptions,
+)
+from dockfactory.solver.refine import DEFAULT_REFINE
 
 __all__ = ["Identification", "identify_markers", "parse_detections"]
 
@@ -56,8 +79,8 @@ def parse_detections(detections):
     try:
         classes, uv = detections
     except (TypeError, ValueError):
-        raise SolverError("detections: expected a pair (class_ids (N,), points_2d (N, 2))") \
-            from None
+        raise InvalidSolverInput("detections: expected a pair (class_ids (N,), points_2d "
+                                 "(N, 2))") from None
     uv = as_points("detections points_2d", uv, 2)
     cls = []
     for c in np.asarray(classes, dtype=object).reshape(-1):
@@ -65,13 +88,13 @@ def parse_detections(detections):
         if isinstance(c, (float, np.floating)) and float(c).is_integer():
             key = str(int(c))
         if key not in _CLASS_NAMES:
-            raise SolverError(f"detections: unknown class {c!r} (use 0/1, 'A'/'B' or "
+            raise InvalidSolverInput(f"detections: unknown class {c!r} (use 0/1, 'A'/'B' or "
                               "'RedA'/'BlueB')")
         cls.append(_CLASS_NAMES[key])
     cls = np.array(cls, dtype=int)
     if cls.size != uv.shape[0]:
-        raise SolverError(f"detections: {cls.size} class ids but {uv.shape[0]} points: shapes "
-                          "do not match")
+        raise InvalidSolverInput(f"detections: {cls.size} class ids but {uv.shape[0]} points: "
+                                 "shapes do not match")
     return cls, uv
 
 
@@ -101,9 +124,12 @@ class _Hyp:
         return any(d in inv_a and inv_a[d] != m for m, d in other.pairs.items())
 
 
-def _similarity_hypotheses(w, z, anchor_idx, scale_range, max_roll_rad, gate_frac, spacing_mm,
-                           max_keep):
-    """Score all similarity hypotheses; return list of (score, a, b) best first."""
+def _similarity_hypotheses(w, z, anchor_idx, prior: FacingPrior, spacing_mm, max_keep):
+    """Score the similarities through every pair of anchor detections and ordered pair of
+    markers (``w`` (M,) complex marker coordinates X - iY, ``z`` (N,) complex pixels); return
+    up to ``max_keep`` distinct match keys (per marker: detection index or -1), best first."""
+    scale_range, max_roll_rad = prior.scale_range, np.radians(prior.max_roll_deg)
+    gate_frac = prior.loose_gate
     m = w.size
     ii, jj = np.triu_indices(anchor_idx.size, 1)
     di, dj = anchor_idx[ii], anchor_idx[jj]
@@ -170,18 +196,41 @@ class _Fit:
         self.pairs = dict(pairs)
 
 
-def _fit(p3, uv, pairs, pp, accept_rmse=None):
-    from dockfactory.solver.checks import check_correspondences
-    from dockfactory.solver.pnpf import solve_checked
+@dataclass(frozen=True)
+class _Search:
+    """Settings of one identification search, derived from :class:`IdentifyOptions`."""
+
+    gate: float                 # px, before the cap by the projected spacing
+    max_rmse: float             # px, largest RMS of a verified hypothesis
+    min_matches: int
+    max_hypotheses: int
+    prior: FacingPrior
+    max_gate_spacing: float
+    rescue_below: float         # px, see estimate_pnpf
+    refine: RefineOptions
+    leave_one_out: bool = False
+
+    @classmethod
+    def from_options(cls, options: IdentifyOptions, refine: RefineOptions) -> _Search:
+        max_rmse = options.max_rmse
+        return cls(options.gate, max_rmse, max(4, int(options.min_matches)),
+                   int(options.max_hypotheses), options.prior, options.max_gate_spacing,
+                   options.rescue_rmse_factor * max_rmse, refine)
+
+    def match_gate(self, proj) -> float:
+        """Gate (px) for matching detections to the projected markers ``proj`` (M,) complex."""
+        return min(self.gate, self.max_gate_spacing * _min_spacing(proj))
+
+
+def _fit(p3, uv, pairs, pp, search: _Search):
     ms = sorted(pairs)
     q3, q2 = check_correspondences(p3[ms], uv[[pairs[m] for m in ms]])
-    rescue = None if accept_rmse is None else 4.0 * accept_rmse
-    ref = solve_checked(q3, q2, pp, check_focal=False, accept_rmse=accept_rmse,
-                        rescue_below=rescue)[0]
-    return _Fit(ref, pairs)
+    est = estimate_pnpf(q3, q2, pp, check_focal=False, accept_rmse=search.max_rmse,
+                        rescue_below=search.rescue_below, options=search.refine)
+    return _Fit(est, pairs)
 
 
-def _fit_leaving_one_out(p3, uv, pairs, pp, max_rmse):
+def _fit_leaving_one_out(p3, uv, pairs, pp, search: _Search):
     """Best fit (lowest RMS, at most ``max_rmse``) over the hypothesis without one of its pairs,
     or None: the loose similarity gate can pair a marker missing from the image with a stray
     detection, and that one wrong pair spoils the fit of all the others."""
@@ -189,10 +238,10 @@ def _fit_leaving_one_out(p3, uv, pairs, pp, max_rmse):
     for m in pairs:
         sub = {k: d for k, d in pairs.items() if k != m}
         try:
-            ref = _fit(p3, uv, sub, pp, accept_rmse=max_rmse)
+            ref = _fit(p3, uv, sub, pp, search)
         except (SolverError, np.linalg.LinAlgError):
             continue
-        if ref.rmse_px <= max_rmse and (best is None or ref.rmse_px < best.rmse_px):
+        if ref.rmse_px <= search.max_rmse and (best is None or ref.rmse_px < best.rmse_px):
             best = ref
     return best
 
@@ -206,23 +255,20 @@ def _project(p3, ref, pp):
     return uv[:, 0] + 1j * uv[:, 1]
 
 
-def _verify(p3, uv, z, pairs, pp, gate, max_rmse, min_matches, rounds=3, leave_one_out=False):
-    """Fit, re-project, re-match within ``gate`` px, refit. Returns _Hyp or None.
+def _verify(p3, uv, z, pairs, pp, search: _Search, rounds=3):
+    """Fit, re-project, re-match within the gate, refit. Returns _Hyp or None.
 
     A hypothesis is kept only if its final fit explains ``min_matches`` or more detections
     with a reprojection RMS of at most ``max_rmse`` px (consistent with the pixel noise).
     """
     ref = None
     for rnd in range(rounds):
-        if len(pairs) < min_matches:
+        if len(pairs) < search.min_matches:
             return None
-        try:
-            ref = _fit(p3, uv, pairs, pp, accept_rmse=max_rmse)
-        except (SolverError, np.linalg.LinAlgError):
-            ref = None
-        if leave_one_out and rnd == 0 and (ref is None or not ref.rmse_px <= max_rmse) \
-                and len(pairs) > min_matches:
-            ref = _fit_leaving_one_out(p3, uv, pairs, pp, max_rmse)
+        ref = _try_fit(p3, uv, pairs, pp, search)
+        poor = ref is None or not ref.rmse_px <= search.max_rmse
+        if search.leave_one_out and rnd == 0 and poor and len(pairs) > search.min_matches:
+            ref = _fit_leaving_one_out(p3, uv, pairs, pp, search)
             if ref is not None:
                 pairs = ref.pairs
         if ref is None:
@@ -230,22 +276,29 @@ def _verify(p3, uv, z, pairs, pp, gate, max_rmse, min_matches, rounds=3, leave_o
         proj = _project(p3, ref, pp)
         if proj is None:
             return None
-        new = _one_to_one(proj, z, min(gate, 0.3 * _min_spacing(proj)))
+        new = _one_to_one(proj, z, search.match_gate(proj))
         if new == pairs:
             break
         pairs = new
-    if ref is None or len(pairs) < min_matches:
+    if ref is None or len(pairs) < search.min_matches:
         return None
     if pairs != ref.pairs:
-        try:
-            ref = _fit(p3, uv, pairs, pp, accept_rmse=max_rmse)
-        except (SolverError, np.linalg.LinAlgError):
+        ref = _try_fit(p3, uv, pairs, pp, search)
+        if ref is None:
             return None
-    if not ref.rmse_px <= max_rmse:
+    if not ref.rmse_px <= search.max_rmse:
         return None
     cam = np.eye(4)
     cam[:3, :3], cam[:3, 3] = ref.rotation, ref.translation
     return _Hyp(dict(pairs), ref.rmse_px, (cam, ref.focal_px))
+
+
+def _try_fit(p3, uv, pairs, pp, search: _Search):
+    """:func:`_fit`, or None when it fails."""
+    try:
+        return _fit(p3, uv, pairs, pp, search)
+    except (SolverError, np.linalg.LinAlgError):
+        return None
 
 
 def _min_spacing(p):
@@ -254,7 +307,7 @@ def _min_spacing(p):
     return float(d.min())
 
 
-def _identify_section(p3, uv, z, cls, section_class, pp, opts):
+def _identify_section(p3, uv, z, cls, section_class, pp, search: _Search):
     """All verified hypotheses for one section, best first (most matches, then smallest RMS)."""
     w = p3[:, 0] - 1j * p3[:, 1]
     spacing_mm = _min_spacing(w)
@@ -264,16 +317,14 @@ def _identify_section(p3, uv, z, cls, section_class, pp, opts):
     for anchors in (labelled, np.arange(z.size)):
         if anchors.size < 2:
             continue
-        keys = _similarity_hypotheses(w, z, anchors, opts["scale_range"],
-                                      np.radians(opts["max_roll_deg"]), opts["loose_gate"],
-                                      spacing_mm, opts["max_hypotheses"])
+        keys = _similarity_hypotheses(w, z, anchors, search.prior, spacing_mm,
+                                      search.max_hypotheses)
         for key in keys:
             if key in tried:
                 continue
             tried.add(key)
             pairs = {m: d for m, d in enumerate(key) if d >= 0}
-            h = _verify(p3, uv, z, pairs, pp, opts["gate"], opts["max_rmse"],
-                        opts["min_matches"], leave_one_out=opts["leave_one_out"])
+            h = _verify(p3, uv, z, pairs, pp, search)
             if h is not None and not any(h.pairs == g.pairs for g in hyps):
                 hyps.append(h)
         if hyps and max(len(h.pairs) for h in hyps) >= min(p3.shape[0], 5):
@@ -291,25 +342,19 @@ def _rivals(hyps):
     return [h for h in hyps[1:] if len(h.pairs) >= len(best.pairs) and best.identity_conflicts(h)]
 
 
-def identify_markers(markers, principal_point, detections, *, sigma_px: float = 1.0,
-                     gate_px: float | None = None, loose_gate: float = 0.4,
-                     max_roll_deg: float = 30.0, scale_range=(0.05, 50.0),
-                     max_hypotheses: int = 8, min_matches: int = 4) -> Identification:
+def identify_markers(markers, principal_point, detections,
+                     options: IdentifyOptions = DEFAULT_IDENTIFY,
+                     refine_options: RefineOptions = DEFAULT_REFINE) -> Identification:
     """Assign layout marker ids to detections (see the module docstring).
 
-    ``markers``: sequence of :class:`generator.layout.Marker` (both sections).
+    ``markers``: sequence of :class:`core.layout.Marker` (both sections).
     ``principal_point``: (2,) px. ``detections``: pair (class_ids (N,), points_2d (N, 2) px),
-    classes 0/1 or "A"/"B" (or "RedA"/"BlueB").
-    ``sigma_px``: expected std of the detected centres (px); a hypothesis counts as explaining
-    the detections if its reprojection RMS is at most 2.5 sigma, and detections match markers
-    within ``gate_px`` (default 4 sigma, at most 0.3 x the projected marker spacing).
-    ``loose_gate``: hypothesis gate as a fraction of the smallest marker spacing.
-    ``max_roll_deg``, ``scale_range`` (px per mm): plausible image roll and scale (f / depth).
-    ``min_matches``: markers a section hypothesis must explain (>= 4).
+    classes 0/1 or "A"/"B" (or "RedA"/"BlueB"). ``options``: gates, prior and budgets
+    (:class:`IdentifyOptions`); ``refine_options``: the refinement of every fit.
 
-    Raises SolverError when a section cannot be identified with ``min_matches`` markers or when
-    the identification is ambiguous (two conflicting assignments explain the detections
-    equally well, even with the focal length shared between the sections).
+    Raises IdentificationFailed (or TooFewPoints) when a section cannot be identified with
+    ``min_matches`` markers, AmbiguousIdentification when two conflicting assignments explain
+    the detections equally well, even with the focal length shared between the sections.
 
     When identification fails for another reason, it is tried once more with hypotheses that
     may shed one pair: the loose similarity gate can pair a marker missing from the image with
@@ -318,45 +363,41 @@ def identify_markers(markers, principal_point, detections, *, sigma_px: float = 
     classes: refusals 1.1 % -> 0.5 %, wrong ids unchanged; the retry costs time only on frames
     that would otherwise be refused).
     """
-    from dockfactory.solver.checks import as_principal_point
-    from dockfactory.solver.docking import layout_arrays
-
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)
     cls, uv = parse_detections(detections)
-    if not (np.isfinite(sigma_px) and sigma_px > 0):
-        raise SolverError(f"sigma_px must be positive and finite, got {sigma_px}")
-    if gate_px is not None and not (np.isfinite(gate_px) and gate_px > 0):
-        raise SolverError(f"gate_px must be positive and finite, got {gate_px}")
-    min_matches = max(4, int(min_matches))
-    gate = float(gate_px) if gate_px is not None else 4.0 * float(sigma_px)
-    opts = {"gate": gate, "max_rmse": 2.5 * float(sigma_px), "loose_gate": float(loose_gate),
-            "max_roll_deg": max_roll_deg, "scale_range": scale_range,
-            "max_hypotheses": int(max_hypotheses), "min_matches": min_matches,
-            "leave_one_out": False}
+    search = _Search.from_options(options, refine_options)
     try:
-        return _search(ids, sections, pts, pp, cls, uv, opts)
+        return _search(ids, sections, pts, pp, cls, uv, search)
     except AmbiguousIdentification:
         raise
     except SolverError as first:
         try:
-            return _search(ids, sections, pts, pp, cls, uv, {**opts, "leave_one_out": True})
+            return _search(ids, sections, pts, pp, cls, uv, replace(search, leave_one_out=True))
         except SolverError:
             raise first from None
 
 
-def _search(ids, sections, pts, pp, cls, uv, opts) -> Identification:
+def _search(ids, sections, pts, pp, cls, uv, search: _Search) -> Identification:
     """Hypothesise, verify and decide on validated inputs (see :func:`identify_markers`)."""
-    min_matches, gate = opts["min_matches"], opts["gate"]
     z = uv[:, 0] + 1j * uv[:, 1]
     sel = {s: [k for k, sec in enumerate(sections) if sec == s] for s in ("A", "B")}
     hyps = {}
     for s, c in (("A", 0), ("B", 1)):
-        hyps[s] = _identify_section(pts[sel[s]], uv, z, cls, c, pp, opts)
+        hyps[s] = _identify_section(pts[sel[s]], uv, z, cls, c, pp, search)
         if not hyps[s]:
-            raise SolverError(f"section {s}: could not identify {min_matches} or more markers "
-                              f"among {uv.shape[0]} detections (within {gate:.3g} px)")
-    # a section with rivals is re-judged jointly with the other section (shared focal length)
+            raise IdentificationFailed(
+                f"section {s}: could not identify {search.min_matches} or more markers among "
+                f"{uv.shape[0]} detections (within {search.gate:.3g} px)")
+    _settle_rivals(hyps, ids, pts, sel, uv, pp, search)
+    best = {s: hyps[s][0] for s in ("A", "B")}
+    out = _unclaimed_joint_fit(best, pts, sel, uv, pp, search)
+    return _final_assignment(out, ids, sections, pts, sel, cls, uv, z, pp, search)
+
+
+def _settle_rivals(hyps, ids, pts, sel, uv, pp, search: _Search) -> None:
+    """A section with rivals is re-judged jointly with the other section's best hypothesis
+    (shared focal length); ``hyps[s]`` becomes the one survivor, or the search refuses."""
     order = sorted(("A", "B"), key=lambda s: (len(_rivals(hyps[s])), -len(hyps[s][0].pairs)))
     strong, weak = order
     for s, other in ((weak, strong), (strong, weak)):
@@ -368,18 +409,21 @@ def _search(ids, sections, pts, pp, cls, uv, opts) -> Identification:
         anchor = hyps[other][0]
         judged = []
         for h in [hyps[s][0]] + rivals:
-            rmse = _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, opts["max_rmse"])
-            if rmse <= opts["max_rmse"]:
+            rmse = _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, search)
+            if rmse <= search.max_rmse:
                 judged.append((rmse, h))
         if len(judged) != 1:
             if not judged:
-                raise SolverError(f"section {s}: no assignment is consistent with section "
-                                  f"{other} under a shared focal length")
+                raise IdentificationFailed(f"section {s}: no assignment is consistent with "
+                                           f"section {other} under a shared focal length")
             judged.sort(key=lambda x: x[0])
             _raise_ambiguous(s, judged[0][1], judged[1][1], ids, sel[s])
         hyps[s] = [judged[0][1]]
-    best = {s: hyps[s][0] for s in ("A", "B")}
-    # joint fit on the union (detections claimed by both sections are left out of this fit)
+
+
+def _unclaimed_joint_fit(best, pts, sel, uv, pp, search: _Search) -> JointFit:
+    """Joint fit of the two best hypotheses on their union (detections claimed by both
+    sections are left out of this fit)."""
     claimed = {}
     for s, h in best.items():
         for m, d in h.pairs.items():
@@ -388,33 +432,36 @@ def _search(ids, sections, pts, pp, cls, uv, opts) -> Identification:
            for s, h in best.items()}
     for s in fit:
         if len(fit[s]) < 4:
-            raise SolverError(f"section {s}: only {len(fit[s])} markers identified without "
-                              "conflict, at least 4 needed")
-    out = _joint_fit(best["A"], best["B"], pts, sel, uv, pp, opts["max_rmse"],
-                     fit["A"], fit["B"])
-    # final one-to-one assignment of all detections to all projected markers
+            raise TooFewPoints(f"section {s}: only {len(fit[s])} markers identified without "
+                               "conflict, at least 4 needed")
+    return _joint_fit(best["A"], best["B"], pts, sel, uv, pp, search, fit["A"], fit["B"])
+
+
+def _final_assignment(out: JointFit, ids, sections, pts, sel, cls, uv, z, pp,
+                      search: _Search) -> Identification:
+    """One-to-one assignment of all detections to all markers projected by the joint fit."""
     proj = np.empty(len(ids), dtype=complex)
-    for s, cam in (("A", out["cam_from_a"]), ("B", out["cam_from_b"])):
+    for s, cam in out.cams.items():
         pc = pts[sel[s]] @ cam[:3, :3].T + cam[:3, 3]
-        q = out["focal_px"] * pc[:, :2] / pc[:, 2:3] + pp
+        q = out.focal_px * pc[:, :2] / pc[:, 2:3] + pp
         proj[sel[s]] = q[:, 0] + 1j * q[:, 1]
-    pairs = _one_to_one(proj, z, min(gate, 0.3 * _min_spacing(proj)))
+    pairs = _one_to_one(proj, z, search.match_gate(proj))
     marker_ids = [None] * uv.shape[0]
     for g, d in pairs.items():
         marker_ids[d] = ids[g]
     for s in ("A", "B"):
         n_s = sum(1 for g in pairs if sections[g] == s)
         if n_s < 4:
-            raise SolverError(f"section {s}: only {n_s} detections match the fitted markers, "
-                              "at least 4 needed")
+            raise TooFewPoints(f"section {s}: only {n_s} detections match the fitted markers, "
+                               "at least 4 needed")
     inl = np.array([mid is not None for mid in marker_ids])
     swapped = np.array([mid is not None and sections[ids.index(mid)] != "AB"[cls[k]]
                         for k, mid in enumerate(marker_ids)])
-    rmse = max(out["rmse_a"], out["rmse_b"])
+    rmse = max(out.rmse_a, out.rmse_b)
     return Identification(tuple(marker_ids), uv, cls, swapped, inl, float(rmse))
 
 
-def _hyp_init(ha, hb):
+def _hyp_init(ha, hb) -> JointStart:
     """Joint LM start from two section hypotheses: shared focal = geometric mean, translations
     rescaled so that f / depth is kept."""
     (ca, fa), (cb, fb) = ha.model, hb.model
@@ -422,30 +469,31 @@ def _hyp_init(ha, hb):
     ca, cb = ca.copy(), cb.copy()
     ca[:3, 3] *= f0 / fa
     cb[:3, 3] *= f0 / fb
-    return ca, cb, f0
+    return JointStart(ca, cb, f0)
 
 
-def _joint_fit(ha, hb, pts, sel, uv, pp, max_rmse, pairs_a=None, pairs_b=None):
-    from dockfactory.solver.docking import solve_docking_arrays
-    pa = sorted((pairs_a if pairs_a is not None else ha.pairs.items()))
-    pb = sorted((pairs_b if pairs_b is not None else hb.pairs.items()))
-    return solve_docking_arrays(pts[[sel["A"][m] for m, _ in pa]], uv[[d for _, d in pa]],
-                                pts[[sel["B"][m] for m, _ in pb]], uv[[d for _, d in pb]], pp,
-                                init=_hyp_init(ha, hb), accept_rmse=max_rmse)
+def _joint_fit(ha, hb, pts, sel, uv, pp, search: _Search, pairs_a=None,
+               pairs_b=None) -> JointFit:
+    pa = sorted(pairs_a if pairs_a is not None else ha.pairs.items())
+    pb = sorted(pairs_b if pairs_b is not None else hb.pairs.items())
+    return fit_joint(pts[[sel["A"][m] for m, _ in pa]], uv[[d for _, d in pa]],
+                     pts[[sel["B"][m] for m, _ in pb]], uv[[d for _, d in pb]], pp,
+                     start=_hyp_init(ha, hb), accept_rmse=search.max_rmse,
+                     options=search.refine)
 
 
-def _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, max_rmse):
+def _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, search: _Search):
     """RMS of the joint fit (shared focal) of hypothesis ``h`` of section ``s`` with the other
     section's best hypothesis; inf when the pair is inconsistent (shared detections, failure)."""
     if set(h.pairs.values()) & set(anchor.pairs.values()):
         return np.inf
     parts = {s: h, other: anchor}
     try:
-        out = _joint_fit(parts["A"], parts["B"], pts, sel, uv, pp, max_rmse)
+        out = _joint_fit(parts["A"], parts["B"], pts, sel, uv, pp, search)
     except (SolverError, np.linalg.LinAlgError):
         return np.inf
     na, nb = len(parts["A"].pairs), len(parts["B"].pairs)
-    return float(np.sqrt((na * out["rmse_a"] ** 2 + nb * out["rmse_b"] ** 2) / (na + nb)))
+    return float(np.sqrt((na * out.rmse_a ** 2 + nb * out.rmse_b ** 2) / (na + nb)))
 
 
 def _raise_ambiguous(s, h1, h2, ids, sel):

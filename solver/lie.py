@@ -1,11 +1,13 @@
-"""Small rotation helpers: exponential map and its batched form (radians)."""
+"""Small rotation helpers (radians): exponential map, rotation angle, projection onto SO(3).
+
+Bottom layer of the solver (numpy only)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-__all__ = ["so3_exp", "so3_exp_batch", "rotation_angle_deg", "project_to_so3"]
+__all__ = ["so3_exp", "rotation_angle_deg", "project_to_so3"]
 
 
 def so3_exp(w) -> np.ndarray:
@@ -21,27 +23,6 @@ def so3_exp(w) -> np.ndarray:
         [1.0 - b * (y * y + z * z), b * x * y - a * z, b * x * z + a * y],
         [b * x * y + a * z, 1.0 - b * (x * x + z * z), b * y * z - a * x],
         [b * x * z - a * y, b * y * z + a * x, 1.0 - b * (x * x + y * y)]])
-
-
-def so3_exp_batch(w: np.ndarray) -> np.ndarray:
-    """Rotation matrices (F, 3, 3) of rotation vectors ``w`` (F, 3) in radians."""
-    th2 = np.einsum("fi,fi->f", w, w)
-    small = th2 < 1e-16
-    th = np.sqrt(np.where(small, 1.0, th2))
-    a = np.where(small, 1.0 - th2 / 6.0, np.sin(th) / th)
-    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
-    x, y, z = w[:, 0], w[:, 1], w[:, 2]
-    out = np.empty((w.shape[0], 3, 3))
-    out[:, 0, 0] = 1.0 - b * (y * y + z * z)
-    out[:, 0, 1] = b * x * y - a * z
-    out[:, 0, 2] = b * x * z + a * y
-    out[:, 1, 0] = b * x * y + a * z
-    out[:, 1, 1] = 1.0 - b * (x * x + z * z)
-    out[:, 1, 2] = b * y * z - a * x
-    out[:, 2, 0] = b * x * z - a * y
-    out[:, 2, 1] = b * y * z + a * x
-    out[:, 2, 2] = 1.0 - b * (x * x + y * y)
-    return out
 
 
 def rotation_angle_deg(r_a, r_b) -> np.ndarray:

@@ -1,4 +1,7 @@
-"""Image of a marker disc under a fitted camera (pinhole, OpenCV pixel convention)."""
+"""Image of a marker disc under a fitted camera (pinhole, OpenCV pixel convention).
+
+Bottom layer of the solver (imports only core); used by the docking pipeline steps
+:mod:`solver.suspects` and :mod:`solver.eccentricity`."""
 from __future__ import annotations
 
 import numpy as np

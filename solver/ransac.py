@@ -10,23 +10,51 @@ set changes. The number of iterations adapts to the inlier ratio for the request
 
 Two sections (:func:`ransac_docking`): the same with samples drawn from both sections and the
 joint model (one shared focal length), which is far better conditioned than either section.
-Randomness comes only from the ``rng`` passed in.
+Randomness comes only from the ``rng`` passed in. Thresholds and budgets:
+:class:`solver.options.RansacOptions`.
+
+Layer 4 of the solver (robust estimation): uses the closed form (:mod:`solver.upnp`), the one
+refinement (:mod:`solver.refine`) and the estimators (:mod:`solver.estimate`,
+:mod:`solver.joint`); used by the public :func:`solver.solve_pnpf` and the docking pipeline.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
-from dockfactory.solver.checks import _collinear_2d, _collinear_3d
-from dockfactory.solver.errors import SolverError
-from dockfactory.solver.pnpf import PnPfResult, make_result, refine_candidates
-from dockfactory.solver.refine import covariance_from_jacobian, refine_pnpf
+from dockfactory.solver.checks import collinear_2d, collinear_3d
+from dockfactory.solver.errors import InvalidSolverInput, NoConsensus, SolverError
+from dockfactory.solver.estimate import PnPfResult, refine_best_candidate
+from dockfactory.solver.joint import JointStart
+from dockfactory.solver.lie import so3_exp
+from dockfactory.solver.options import RansacOptions, RefineOptions
+from dockfactory.solver.refine import DEFAULT_REFINE, refine_joint, refine_pnpf
 from dockfactory.solver.upnp import upnp
 
-__all__ = ["ransac_pnpf", "ransac_docking"]
+__all__ = ["ransac_pnpf", "ransac_docking", "DockingConsensus", "facing_init",
+           "DEFAULT_RANSAC"]
+
+DEFAULT_RANSAC = RansacOptions()
+
+
+@dataclass(frozen=True)
+class DockingConsensus:
+    """Result of :func:`ransac_docking`: ``inliers_a`` (Na,) and ``inliers_b`` (Nb,) bool, and
+    the joint model as the ``start`` of the final fit."""
+
+    inliers_a: np.ndarray
+    inliers_b: np.ndarray
+    start: JointStart
+
+
+def _check_rng(rng) -> None:
+    if not isinstance(rng, np.random.Generator):
+        raise InvalidSolverInput("ransac needs rng, a numpy.random.Generator (explicit seed)")
 
 
 def _reproj_sq(p3, p2, pp, rot, t, f):
+    """(N,) squared reprojection errors (px^2); inf for points behind the camera."""
     pc = p3 @ rot.T + t
     z = pc[:, 2]
     e = f * pc[:, :2] / np.where(z > 0, z, np.nan)[:, None] + pp - p2
@@ -34,71 +62,76 @@ def _reproj_sq(p3, p2, pp, rot, t, f):
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def ransac_pnpf(p3, p2, pp, rng: np.random.Generator, *, threshold_px: float = 4.0,
-                confidence: float = 0.9999, max_iterations: int = 2000, sample_size: int = 6,
+def _closed_form_refined(q3, q2, pp, options: RefineOptions):
+    """The cheapest closed-form candidate (every candidate if that fails), refined."""
+    cands = upnp(q3, q2, pp, checked=True, first_only=True) or upnp(q3, q2, pp, checked=True)
+    return refine_pnpf(q3, q2, pp, cands[0].rotation, cands[0].translation, cands[0].focal_px,
+                       options)
+
+
+def ransac_pnpf(p3, p2, pp, rng: np.random.Generator, options: RansacOptions = DEFAULT_RANSAC,
+                refine_options: RefineOptions = DEFAULT_REFINE, *,
                 sigma_px: float | None = None, refine: bool = True) -> PnPfResult:
     """Robust pose + focal from correspondences with outliers.
 
     ``p3`` (N, 3) mm, ``p2`` (N, 2) px, ``pp`` (2,) px (validated by the caller or by
-    :func:`solver.solve_pnpf`); ``rng``: numpy Generator (the only source of randomness);
-    ``threshold_px``: inlier threshold on the reprojection error (px). Returns a
-    :class:`PnPfResult` whose ``inliers`` (N,) marks the points used; with ``refine=False``
-    the pose is the LO estimate (inliers are still final). Raises SolverError if fewer than
-    4 inliers support any model.
+    :func:`solver.solve_pnpf`); ``rng``: numpy Generator (the only source of randomness).
+    Returns a :class:`PnPfResult` whose ``inliers`` (N,) marks the points used; with
+    ``refine=False`` the pose is the LO estimate (inliers are still final). Raises NoConsensus
+    if fewer than 4 inliers support any model.
     """
-    if not isinstance(rng, np.random.Generator):
-        raise SolverError("ransac needs rng, a numpy.random.Generator (explicit seed)")
-    if not (np.isfinite(threshold_px) and threshold_px > 0):
-        raise SolverError(f"threshold_px must be positive and finite, got {threshold_px}")
+    _check_rng(rng)
+    model, inl = _pnpf_consensus(p3, p2, pp, rng, options, refine_options)
+    if model is None or inl.sum() < 4:
+        raise NoConsensus(f"RANSAC found no model supported by 4 or more of the {p3.shape[0]} "
+                          f"points within {options.threshold_px} px")
+    q3, q2 = p3[inl], p2[inl]
+    if not refine:
+        lo = refine_pnpf(q3, q2, pp, *model, refine_options)
+        return PnPfResult.from_refinement(lo, sigma_px, (), inl)
+    ref = refine_best_candidate(q3, q2, pp, upnp(q3, q2, pp, checked=True), refine_options,
+                                max_tries=options.final_starts)
+    # keep the LO model if the fresh closed form went elsewhere
+    lo = refine_pnpf(q3, q2, pp, *model, refine_options)
+    if float(lo.residuals @ lo.residuals) < float(ref.residuals @ ref.residuals):
+        ref = lo
+    return PnPfResult.from_refinement(ref, sigma_px, (), inl)
+
+
+def _pnpf_consensus(p3, p2, pp, rng, options: RansacOptions, refine_options: RefineOptions):
+    """Sampling loop of :func:`ransac_pnpf`: (best model (R, t, f) or None, inliers (N,))."""
     n = p3.shape[0]
-    s = int(min(max(sample_size, 4), n))
-    thr2 = float(threshold_px) ** 2
+    s = int(min(max(options.sample_size, 4), n))
+    thr2 = float(options.threshold_px) ** 2
+    polish = replace(refine_options, max_iterations=options.sample_refine_iterations)
+    lo_opts = replace(refine_options, max_iterations=options.lo_refine_iterations)
     best_score, best_model, best_inl = np.inf, None, None
-    needed = max_iterations
+    needed = options.max_iterations
     it = 0
-    while it < min(needed, max_iterations):
+    while it < min(needed, options.max_iterations):
         it += 1
         idx = rng.choice(n, size=s, replace=False)
         q3, q2 = p3[idx], p2[idx]
-        if _collinear_3d(q3) or _collinear_2d(q2):
+        if collinear_3d(q3) or collinear_2d(q2):
             continue
         try:
-            cands = upnp(q3, q2, pp, checked=True, first_only=True) or \
-                upnp(q3, q2, pp, checked=True)
-            ref = refine_pnpf(q3, q2, pp, cands[0].rotation, cands[0].translation,
-                              cands[0].focal_px, max_iter=10)
+            c = _closed_form_refined(q3, q2, pp, polish)
         except (SolverError, np.linalg.LinAlgError):
             continue
-        for c in (ref,):
-            e2 = _reproj_sq(p3, p2, pp, c.rotation, c.translation, c.focal_px)
-            score = float(np.minimum(e2, thr2).sum())
-            if score >= best_score:
-                continue
-            model, inl, score = _local_optimise(p3, p2, pp, (c.rotation, c.translation,
-                                                             c.focal_px), e2, thr2)
-            if score < best_score:
-                best_score, best_model, best_inl = score, model, inl
-                w = inl.mean()
-                needed = _iterations_needed(w, s, confidence)
-    if best_model is None or best_inl.sum() < 4:
-        raise SolverError(f"RANSAC found no model supported by 4 or more of the {n} points "
-                          f"within {threshold_px} px")
-    inl = best_inl
-    if not refine:
-        ref = refine_pnpf(p3[inl], p2[inl], pp, *best_model)
-        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
-        return make_result(ref, cov, sigma, (), inl)
-    ref, cov, sigma = refine_candidates(p3[inl], p2[inl], pp, upnp(p3[inl], p2[inl], pp,
-                                                                   checked=True), sigma_px)
-    # keep the LO model if the fresh closed form went elsewhere
-    lo = refine_pnpf(p3[inl], p2[inl], pp, *best_model)
-    if float(lo.residuals @ lo.residuals) < float(ref.residuals @ ref.residuals):
-        ref = lo
-        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
-    return make_result(ref, cov, sigma, (), inl)
+        e2 = _reproj_sq(p3, p2, pp, c.rotation, c.translation, c.focal_px)
+        score = float(np.minimum(e2, thr2).sum())
+        if score >= best_score:
+            continue
+        model, inl, score = _local_optimise(p3, p2, pp, (c.rotation, c.translation,
+                                                         c.focal_px), e2, thr2, lo_opts,
+                                            options.lo_rounds)
+        if score < best_score:
+            best_score, best_model, best_inl = score, model, inl
+            needed = _iterations_needed(inl.mean(), s, options.confidence)
+    return best_model, best_inl
 
 
-def _local_optimise(p3, p2, pp, model, e2, thr2, rounds: int = 4):
+def _local_optimise(p3, p2, pp, model, e2, thr2, lo_opts: RefineOptions, rounds: int):
     """Refine on the inliers, re-score, repeat while the inlier set changes."""
     inl = e2 <= thr2
     score = float(np.minimum(e2, thr2).sum())
@@ -106,7 +139,7 @@ def _local_optimise(p3, p2, pp, model, e2, thr2, rounds: int = 4):
         if inl.sum() < 4:
             break
         try:
-            ref = refine_pnpf(p3[inl], p2[inl], pp, *model, max_iter=15)
+            ref = refine_pnpf(p3[inl], p2[inl], pp, *model, lo_opts)
         except SolverError:
             break
         cand = (ref.rotation, ref.translation, ref.focal_px)
@@ -123,6 +156,7 @@ def _local_optimise(p3, p2, pp, model, e2, thr2, rounds: int = 4):
 
 
 def _iterations_needed(w: float, s: int, confidence: float) -> int:
+    """Samples of size ``s`` needed to draw a clean one with ``confidence`` at inlier ratio w."""
     p_good = w ** s
     if p_good <= 0.0:
         return 10 ** 9
@@ -131,15 +165,14 @@ def _iterations_needed(w: float, s: int, confidence: float) -> int:
     return int(math.ceil(math.log(1.0 - confidence) / math.log(1.0 - p_good)))
 
 
-def facing_init(a: complex, b: complex, pp, points_3d, distance_mm: float = 1500.0):
+def facing_init(a: complex, b: complex, pp, points_3d, distance_mm: float):
     """Camera (R, t, f) of a weak-perspective similarity ``z = a (X - iY) + b`` (px).
 
     The docking camera faces the markers along -Z of their frame, so the similarity's angle is
     the image roll and its modulus |a| = f / depth (px per mm). Depth is taken as
     ``distance_mm`` from the points' mean Z plane and f = |a| * depth; the focal/depth split
-    is what refinement then settles.
+    is what refinement then settles. ``points_3d`` (N, 3) mm.
     """
-    from dockfactory.solver.lie import so3_exp
     theta = float(np.angle(a))
     k = float(abs(a))
     r = so3_exp([0.0, 0.0, theta]) @ np.diag([1.0, -1.0, -1.0])
@@ -159,9 +192,13 @@ def _similarity_model(w2, z2):
     return a, z2[0] - a * w2[0]
 
 
-def _ransac_section(p3, p2, pp, rng, thr2, confidence, max_iterations, max_roll_rad,
-                    scale_range, loose_frac):
-    """One section's LO-RANSAC with 2-point weak-perspective hypotheses (see ransac_docking)."""
+def _ransac_section(p3, p2, pp, rng, options: RansacOptions, refine_options: RefineOptions):
+    """One section's LO-RANSAC with 2-point weak-perspective hypotheses (see ransac_docking).
+    Returns (model (R, t, f), inliers (N,) bool) or None."""
+    prior = options.prior
+    max_roll_rad = np.radians(prior.max_roll_deg)
+    thr2 = float(options.threshold_px) ** 2
+    lo_opts = replace(refine_options, max_iterations=options.lo_refine_iterations)
     n = p3.shape[0]
     w = p3[:, 0] - 1j * p3[:, 1]
     z = p2[:, 0] + 1j * p2[:, 1]
@@ -169,95 +206,109 @@ def _ransac_section(p3, p2, pp, rng, thr2, confidence, max_iterations, max_roll_
     d[np.eye(n, dtype=bool)] = np.inf
     spacing = float(d.min())
     best_score, best = np.inf, None
-    needed, it = max_iterations, 0
-    while it < min(needed, max_iterations):
+    needed, it = options.section_iterations, 0
+    while it < min(needed, options.section_iterations):
         it += 1
         idx = rng.choice(n, size=2, replace=False)
         sim = _similarity_model(w[idx], z[idx])
         if sim is None:
             continue
         a, b = sim
-        if not (scale_range[0] <= abs(a) <= scale_range[1]) or abs(np.angle(a)) > max_roll_rad:
+        if not (prior.scale_range[0] <= abs(a) <= prior.scale_range[1]) \
+                or abs(np.angle(a)) > max_roll_rad:
             continue
-        loose = np.abs(a * w + b - z) <= loose_frac * spacing * abs(a)
+        loose = np.abs(a * w + b - z) <= prior.loose_gate * spacing * abs(a)
         if loose.sum() < 4:
             continue
-        ref = None
-        for _ in range(3):
-            try:
-                c = upnp(p3[loose], p2[loose], pp, checked=True, first_only=True) or \
-                    upnp(p3[loose], p2[loose], pp, checked=True)
-                ref = refine_pnpf(p3[loose], p2[loose], pp, c[0].rotation, c[0].translation,
-                                  c[0].focal_px, max_iter=15)
-            except (SolverError, np.linalg.LinAlgError):
-                ref = None
-                break
-            e2 = _reproj_sq(p3, p2, pp, ref.rotation, ref.translation, ref.focal_px)
-            if (e2 <= thr2).sum() >= 4 or loose.sum() <= 4:
-                break
-            # a wrong point inside the loose gate spoils the fit: drop the worst and refit
-            worst = np.flatnonzero(loose)[np.argmax(e2[loose])]
-            loose = loose.copy()
-            loose[worst] = False
-        if ref is None or (e2 <= thr2).sum() < 4:
-            # closed form on few near-planar points can miss: start from the similarity
-            try:
-                ref = refine_pnpf(p3[loose], p2[loose], pp, *facing_init(a, b, pp, p3),
-                                  max_iter=30)
-            except SolverError:
-                continue
-            e2 = _reproj_sq(p3, p2, pp, ref.rotation, ref.translation, ref.focal_px)
-        if float(np.minimum(e2, thr2).sum()) >= best_score:
+        fitted = _fit_hypothesis(p3, p2, pp, sim, loose, thr2, options, refine_options)
+        if fitted is None or float(np.minimum(fitted[1], thr2).sum()) >= best_score:
             continue
+        ref, e2 = fitted
         model, inl, score = _local_optimise(p3, p2, pp, (ref.rotation, ref.translation,
-                                                         ref.focal_px), e2, thr2)
+                                                         ref.focal_px), e2, thr2, lo_opts,
+                                            options.lo_rounds)
         if score < best_score:
             best_score, best = score, (model, inl)
             p_good = inl.mean() ** 2
-            needed = _iterations_needed(p_good ** 0.5, 2, confidence)
+            needed = _iterations_needed(p_good ** 0.5, 2, options.confidence)
     return best
 
 
-def ransac_docking(p3a, p2a, p3b, p2b, pp, rng: np.random.Generator, *,
-                   threshold_px: float = 4.0, confidence: float = 0.9999,
-                   max_iterations: int = 300, max_roll_deg: float = 30.0,
-                   scale_range=(0.05, 50.0), loose_frac: float = 0.4):
+def _fit_hypothesis(p3, p2, pp, sim, loose, thr2, options: RansacOptions,
+                    refine_options: RefineOptions):
+    """UPnP + LM on the points ``loose`` (N,) bool that the similarity ``sim`` = (a, b)
+    predicts, dropping the worst while fewer than 4 points fit; from the facing camera when the
+    closed form misses. (refinement, squared errors (N,)) or None."""
+    ref = None
+    fit_opts = replace(refine_options, max_iterations=options.loose_refine_iterations)
+    for _ in range(options.loose_refits):
+        try:
+            ref = _closed_form_refined(p3[loose], p2[loose], pp, fit_opts)
+        except (SolverError, np.linalg.LinAlgError):
+            ref = None
+            break
+        e2 = _reproj_sq(p3, p2, pp, ref.rotation, ref.translation, ref.focal_px)
+        if (e2 <= thr2).sum() >= 4 or loose.sum() <= 4:
+            break
+        # a wrong point inside the loose gate spoils the fit: drop the worst and refit
+        worst = np.flatnonzero(loose)[np.argmax(e2[loose])]
+        loose = loose.copy()
+        loose[worst] = False
+    if ref is None or (e2 <= thr2).sum() < 4:
+        # closed form on few near-planar points can miss: start from the similarity
+        facing = replace(refine_options, max_iterations=options.facing_refine_iterations)
+        try:
+            ref = refine_pnpf(p3[loose], p2[loose], pp,
+                              *facing_init(*sim, pp, p3, options.facing_distance_mm), facing)
+        except SolverError:
+            return None
+        e2 = _reproj_sq(p3, p2, pp, ref.rotation, ref.translation, ref.focal_px)
+    return ref, e2
+
+
+def ransac_docking(p3a, p2a, p3b, p2b, pp, rng: np.random.Generator,
+                   options: RansacOptions = DEFAULT_RANSAC,
+                   refine_options: RefineOptions = DEFAULT_REFINE) -> DockingConsensus:
     """LO-RANSAC for a docking frame (two sections, shared focal length).
 
     Hypotheses come from 2-point samples per section: the camera faces the markers (the
     docking setup), so two correspondences fix a weak-perspective similarity of the markers'
-    (X, -Y) coordinates (roll within ``max_roll_deg``, scale within ``scale_range`` px/mm);
-    points it predicts within ``loose_frac`` of the marker spacing are fitted by UPnP + LM, and
-    the model is scored by MSAC at ``threshold_px``. A two-point sample is clean far more
-    often than a five-point one (a section may keep only 4 of its 7 markers), which is what
-    makes 20 % outliers cheap. Every new best is locally optimised on its inliers; the number
-    of samples adapts to the inlier ratio. Finally the two sections are refitted jointly
-    (shared focal) and every point is re-classified against the joint model.
+    (X, -Y) coordinates (roll and scale within ``options.prior``); points it predicts within
+    the prior's loose gate are fitted by UPnP + LM, and the model is scored by MSAC at
+    ``options.threshold_px``. A two-point sample is clean far more often than a five-point one
+    (a section may keep only 4 of its 7 markers), which is what makes 20 % outliers cheap.
+    Every new best is locally optimised on its inliers; the number of samples adapts to the
+    inlier ratio. Finally the two sections are refitted jointly (shared focal) and every point
+    is re-classified against the joint model.
 
     ``p3a`` (Na, 3) mm in A's frame with pixels ``p2a`` (Na, 2); same for B; ``pp`` (2,) px.
-    Returns (inliers_a (Na,) bool, inliers_b (Nb,) bool, (cam_from_a, cam_from_b, focal)).
-    Raises SolverError when a section has no model with 4 or more inliers.
+    Returns a :class:`DockingConsensus`. Raises NoConsensus when a section has no model with
+    4 or more inliers.
     """
-    from dockfactory.solver.refine import refine_joint
-    if not isinstance(rng, np.random.Generator):
-        raise SolverError("ransac needs rng, a numpy.random.Generator (explicit seed)")
-    if not (np.isfinite(threshold_px) and threshold_px > 0):
-        raise SolverError(f"threshold_px must be positive and finite, got {threshold_px}")
-    thr2 = float(threshold_px) ** 2
+    _check_rng(rng)
     res = {}
     for name, (p3, p2) in (("A", (p3a, p2a)), ("B", (p3b, p2b))):
-        best = _ransac_section(p3, p2, pp, rng, thr2, confidence, max_iterations,
-                               np.radians(max_roll_deg), scale_range, loose_frac)
+        best = _ransac_section(p3, p2, pp, rng, options, refine_options)
         if best is None or best[1].sum() < 4:
-            raise SolverError(f"section {name}: RANSAC found no model with 4 or more inliers "
-                              f"within {threshold_px} px")
+            raise NoConsensus(f"section {name}: RANSAC found no model with 4 or more inliers "
+                              f"within {options.threshold_px} px")
         res[name] = best
     (ma, ia), (mb, ib) = res["A"], res["B"]
     f0 = float(np.sqrt(ma[2] * mb[2]))
     model = (ma[0], ma[1] * (f0 / ma[2]), mb[0], mb[1] * (f0 / mb[2]), f0)
-    for _ in range(3):
+    return _joint_reclassify((p3a, p2a, p3b, p2b, pp), model, ia, ib, options, refine_options)
+
+
+def _joint_reclassify(data, model, ia, ib, options: RansacOptions,
+                      refine_options: RefineOptions) -> DockingConsensus:
+    """Refit both sections jointly on their inliers and re-classify every point against the
+    joint model, while the inlier sets change (up to ``options.joint_rounds`` rounds)."""
+    p3a, p2a, p3b, p2b, pp = data
+    thr2 = float(options.threshold_px) ** 2
+    joint_opts = replace(refine_options, max_iterations=options.joint_refine_iterations)
+    for _ in range(options.joint_rounds):
         try:
-            jr = refine_joint(p3a[ia], p2a[ia], p3b[ib], p2b[ib], pp, *model, max_iter=30)
+            jr = refine_joint(p3a[ia], p2a[ia], p3b[ib], p2b[ib], pp, *model, joint_opts)
         except SolverError:
             break
         model = (jr.rotation_a, jr.translation_a, jr.rotation_b, jr.translation_b, jr.focal_px)
@@ -271,4 +322,4 @@ def ransac_docking(p3a, p2a, p3b, p2b, pp, rng: np.random.Generator, *,
     cam_a[:3, :3], cam_a[:3, 3] = model[0], model[1]
     cam_b = np.eye(4)
     cam_b[:3, :3], cam_b[:3, 3] = model[2], model[3]
-    return ia, ib, (cam_a, cam_b, float(model[4]))
+    return DockingConsensus(ia, ib, JointStart(cam_a, cam_b, float(model[4])))

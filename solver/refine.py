@@ -1,4 +1,12 @@
-"""Levenberg-Marquardt refinement of (R, t, f) on reprojection error, and its covariance.
+"""The one refinement: Levenberg-Marquardt of (R, t, f) on reprojection error, its Jacobian,
+its covariance and the propagation to ``d_from_b``.
+
+Layer 2 of the solver (closed form -> refinement -> estimators -> robust / identification ->
+docking pipeline): imports only :mod:`solver.lie`, :mod:`solver.options`,
+:mod:`solver.errors` and core. Every caller (single-section estimator, joint fit, RANSAC,
+identification, Cramer-Rao bounds) uses the one Jacobian :func:`residuals_and_jacobian`, the one
+LM loop (:func:`refine_pnpf`, :func:`refine_joint`) and the one covariance
+:func:`covariance_from_jacobian`.
 
 Parameters and their order (every covariance in the package uses it):
 - one section, 7 parameters: ``(w_x, w_y, w_z, t_x, t_y, t_z, f)``: ``w`` (rad) a left
@@ -17,12 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 from dockfactory.core.geometry import euler_deg_from_rotation
-from dockfactory.solver.errors import SolverError
+from dockfactory.solver.errors import NoValidCamera
 from dockfactory.solver.lie import so3_exp
+from dockfactory.solver.options import RefineOptions
 
-__all__ = ["residuals_and_jacobian", "refine_pnpf", "refine_joint", "covariance_from_jacobian",
-           "inverse_spd",
-           "d_from_b_jacobian", "relative_pose", "RefineResult", "JointRefineResult"]
+__all__ = ["residuals_and_jacobian", "joint_jacobian", "refine_pnpf", "refine_joint",
+           "covariance_from_jacobian", "inverse_spd",
+           "d_from_b_jacobian", "relative_pose", "rel_focal_std", "RefineResult",
+           "JointRefineResult", "DEFAULT_REFINE"]
+
+DEFAULT_REFINE = RefineOptions()
 
 
 def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.ndarray,
@@ -67,6 +79,18 @@ def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.
     return r.reshape(-1), j.reshape(2 * n, 7), z
 
 
+def joint_jacobian(jac_a: np.ndarray, jac_b: np.ndarray) -> np.ndarray:
+    """(2Na + 2Nb, 13) Jacobian over (w_A, t_A, w_B, t_B, f) from the two sections' (2N, 7)
+    Jacobians over (w, t, f): the focal column is shared."""
+    na = jac_a.shape[0]
+    jac = np.zeros((na + jac_b.shape[0], 13))
+    jac[:na, :6] = jac_a[:, :6]
+    jac[:na, 12] = jac_a[:, 6]
+    jac[na:, 6:12] = jac_b[:, :6]
+    jac[na:, 12] = jac_b[:, 6]
+    return jac
+
+
 def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: float | None):
     """(cov (p, p), sigma used) = sigma^2 (J^T J)^-1; sigma estimated from residuals if None."""
     m, p = jac.shape
@@ -99,6 +123,13 @@ def inverse_spd(a: np.ndarray) -> np.ndarray:
     return ((vec / lam) @ vec.T) * s[:, None] * s[None, :]
 
 
+def rel_focal_std(cov: np.ndarray, focal: float) -> float:
+    """Standard deviation of the focal (the last parameter of ``cov`` (p, p)) over ``focal``;
+    inf when the variance is not finite and non-negative."""
+    v = cov[-1, -1]
+    return float(np.sqrt(v)) / focal if np.isfinite(v) and v >= 0 else np.inf
+
+
 @dataclass(frozen=True)
 class RefineResult:
     """One section: R (3, 3), t (3,) mm, f px, residuals (2N,) px, J (2N, 7), iterations."""
@@ -116,69 +147,75 @@ class RefineResult:
         return float(np.sqrt(2.0 * (r @ r) / r.size))
 
 
-def _lm(evaluate, update, state, max_iter: int):
+def _lm(evaluate, update, state, options: RefineOptions):
     """Generic Levenberg-Marquardt (Marquardt scaling) on a residual function.
 
-    ``evaluate(state) -> (res, jac, valid)``; ``update(state, step) -> state``. Stops when
-    a step changes no residual by more than ~1e-9 px along any parameter, when the cost
-    stagnates (relative decrease < 1e-12), or when no damped step decreases it.
+    ``evaluate(state) -> (res, jac, valid)``; ``update(state, step) -> state`` (None when the
+    step leaves the valid region). Stopping rules: see :class:`RefineOptions`.
     Returns (state, res, jac, iterations, converged).
     """
     res, jac, valid = evaluate(state)
     if not valid:
-        raise SolverError("refinement started from an invalid camera (points behind it)")
+        raise NoValidCamera("refinement started from an invalid camera (points behind it)")
     cost = float(res @ res)
-    lam = 1e-6
+    lam = options.initial_damping
     it = 0
     converged = False
-    for it in range(1, max_iter + 1):
+    for it in range(1, options.max_iterations + 1):
         jtj = jac.T @ jac
         g = jac.T @ res
         d = jtj.diagonal().copy()
         d[d <= 0.0] = 1.0
-        accepted = False
-        for _ in range(12):
-            a = jtj.copy()
-            a.flat[::a.shape[0] + 1] += lam * d
-            try:
-                step = np.linalg.solve(a, -g)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            predicted = -float(g @ step) - 0.5 * float(step @ (jtj @ step))
-            if predicted <= 1e-12 * cost:
-                break                 # the model promises nothing: at a minimum to precision
-            new_state = update(state, step)
-            if new_state is not None:
-                res_n, jac_n, valid_n = evaluate(new_state)
-                cost_n = float(res_n @ res_n)
-                if valid_n and cost_n <= cost:
-                    accepted = True
-                    break
-            lam *= 10.0
-        if not accepted:
+        step, trial, lam = _damped_step(evaluate, update, state, jtj, g, d, cost, lam, options)
+        if trial is None:
             converged = True   # no damped step decreases the cost: a minimum to precision
             break
-        tiny = float(np.max(np.abs(step) * np.sqrt(d))) < 1e-9
-        stagnant = cost - cost_n <= 1e-9 * cost
+        new_state, res_n, jac_n, cost_n = trial
+        tiny = float(np.max(np.abs(step) * np.sqrt(d))) < options.step_tol_px
+        stagnant = cost - cost_n <= options.cost_rel_tol * cost
         state, res, jac, cost = new_state, res_n, jac_n, cost_n
-        lam = max(lam * 0.1, 1e-12)
-        if tiny or stagnant or cost < 1e-28 * res.size:
+        lam = max(lam * 0.1, options.min_damping)
+        if tiny or stagnant or cost < options.exact_cost_per_residual * res.size:
             converged = True
             break
     if not np.isfinite(cost):
-        raise SolverError("refinement diverged (non-finite cost)")
+        raise NoValidCamera("refinement diverged (non-finite cost)")
     return state, res, jac, it, converged
 
 
+def _damped_step(evaluate, update, state, jtj, g, d, cost, lam, options: RefineOptions):
+    """One LM iteration's search over the damping: (step, (state, res, jac, cost) or None,
+    damping). None when the model promises no decrease or no damped step decreases the cost."""
+    for _ in range(options.damping_tries):
+        a = jtj.copy()
+        a.flat[::a.shape[0] + 1] += lam * d
+        try:
+            step = np.linalg.solve(a, -g)
+        except np.linalg.LinAlgError:
+            lam *= 10.0
+            continue
+        predicted = -float(g @ step) - 0.5 * float(step @ (jtj @ step))
+        if predicted <= options.predicted_rel_tol * cost:
+            break                 # the model promises nothing: at a minimum to precision
+        new_state = update(state, step)
+        if new_state is not None:
+            res_n, jac_n, valid_n = evaluate(new_state)
+            cost_n = float(res_n @ res_n)
+            if valid_n and cost_n <= cost:
+                return step, (new_state, res_n, jac_n, cost_n), lam
+        lam *= 10.0
+    return None, None, lam
+
+
 def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
-                max_iter: int = 60, fix_focal: bool = False) -> RefineResult:
+                options: RefineOptions = DEFAULT_REFINE, *, fix_focal: bool = False
+                ) -> RefineResult:
     """Levenberg-Marquardt on reprojection error over (R, t, f) for one section.
 
-    Inputs as in :func:`residuals_and_jacobian` (already validated). ``fix_focal`` keeps f
-    (calibrated refinement over (R, t); the returned Jacobian still has 7 columns).
-    Raises SolverError if the estimate leaves the valid region (points behind the camera,
-    f <= 0) and cannot come back.
+    Inputs as in :func:`residuals_and_jacobian` (already validated); ``options`` the LM budget
+    and stopping rules. ``fix_focal`` keeps f (calibrated refinement over (R, t); the returned
+    Jacobian still has 7 columns). Raises NoValidCamera if the start is not a valid camera or
+    the cost diverges.
     """
     def evaluate(st):
         res, jac, z = residuals_and_jacobian(points_3d, points_2d, pp, st[0], st[1], st[2])
@@ -196,7 +233,7 @@ def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
 
     state = (np.array(rotation, dtype=np.float64), np.array(translation, dtype=np.float64),
              float(focal))
-    state, res, jac, it, conv = _lm(evaluate, update, state, max_iter)
+    state, res, jac, it, conv = _lm(evaluate, update, state, options)
     if fix_focal:
         jac = residuals_and_jacobian(points_3d, points_2d, pp, *state)[1]
     return RefineResult(state[0], state[1], float(state[2]), res, jac, it, conv)
@@ -218,7 +255,7 @@ class JointRefineResult:
 
 
 def refine_joint(points_a, uv_a, points_b, uv_b, pp, rot_a, t_a, rot_b, t_b, focal,
-                 max_iter: int = 60) -> JointRefineResult:
+                 options: RefineOptions = DEFAULT_REFINE) -> JointRefineResult:
     """LM over (w_A, t_A, w_B, t_B, f): both sections in one image, one shared focal length.
 
     ``points_a`` (Na, 3) mm in A's frame with pixels ``uv_a`` (Na, 2); same for B; the initial
@@ -230,11 +267,7 @@ def refine_joint(points_a, uv_a, points_b, uv_b, pp, rot_a, t_a, rot_b, t_b, foc
         ra_, ta_, rb_, tb_, f_ = st
         res_a, ja, za = residuals_and_jacobian(points_a, uv_a, pp, ra_, ta_, f_)
         res_b, jb, zb = residuals_and_jacobian(points_b, uv_b, pp, rb_, tb_, f_)
-        jac = np.zeros((na + res_b.size, 13))
-        jac[:na, :6] = ja[:, :6]
-        jac[:na, 12] = ja[:, 6]
-        jac[na:, 6:12] = jb[:, :6]
-        jac[na:, 12] = jb[:, 6]
+        jac = joint_jacobian(ja, jb)
         res = np.concatenate([res_a, res_b])
         return res, jac, bool(min(za.min(), zb.min()) > 0.0) and np.isfinite(res).all()
 
@@ -247,7 +280,7 @@ def refine_joint(points_a, uv_a, points_b, uv_b, pp, rot_a, t_a, rot_b, t_b, foc
 
     state = (np.array(rot_a, dtype=np.float64), np.array(t_a, dtype=np.float64),
              np.array(rot_b, dtype=np.float64), np.array(t_b, dtype=np.float64), float(focal))
-    state, res, jac, it, conv = _lm(evaluate, update, state, max_iter)
+    state, res, jac, it, conv = _lm(evaluate, update, state, options)
     return JointRefineResult(state[0], state[1], state[2], state[3], float(state[4]),
                              res[:na], res[na:], jac, it, conv)
 

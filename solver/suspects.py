@@ -18,18 +18,20 @@ the others projects its marker, beyond 3-6 robust sigmas) was measured on the sa
 made the test RMSE of X worse (0.69 mm -> 0.84-0.99 mm): with 5-7 points per section it as
 often removes a good point at the edge of the layout as the bad one.
 
-It takes the per-section arrays of :func:`solver.docking.solve_docking` (``rows[s]``: input
-rows of the section's points, ``p3[s]`` (n, 3) mm, ``p2[s]`` (n, 2) px) and ``fit(points_a,
-uv_a, points_b, uv_b, init=...)``, and return (fit result dict, inliers (N,) bool).
+It takes the points of the first fit (:class:`solver.joint.SectionPoints`), that fit
+(:class:`solver.joint.JointFit`) and the :class:`solver.joint.JointFitter` of the frame, and
+returns (the refitted :class:`JointFit`, inliers (N,) bool). A step of the docking pipeline
+(layer 5, beside :mod:`solver.eccentricity`).
 """
 from __future__ import annotations
 
 import numpy as np
+from dockfactory.core.names import SECTIONS
 from dockfactory.solver.checks import MIN_POINTS
-from dockfactory.solver.errors import SolverError
+from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
 from dockfactory.solver.outline import projected_outline
 
-SECTIONS = ("A", "B")
+__all__ = ["predicted_outline_box", "extent_ratio", "suspect_scores", "leave_out_suspects"]
 
 
 def predicted_outline_box(marker, cam_from_s, focal_px, pp) -> np.ndarray | None:
@@ -49,31 +51,21 @@ def extent_ratio(box, predicted) -> float:
                      (box[3] - box[1]) / max(predicted[3] - predicted[1], 1e-9)))
 
 
-def section_cams(out) -> dict:
-    """{"A": cam_from_a, "B": cam_from_b} of a fit result."""
-    return {"A": out["cam_from_a"], "B": out["cam_from_b"]}
-
-
-def refit_subset(out, p3, p2, keep, fit):
-    """``fit`` on the points ``keep[s]`` of each section, started from the fit ``out``."""
-    return fit(p3["A"][keep["A"]], p2["A"][keep["A"]], p3["B"][keep["B"]], p2["B"][keep["B"]],
-               init=(out["cam_from_a"], out["cam_from_b"], out["focal_px"]))
-
-
-def suspect_scores(out, rows, row_markers, pp, boxes, refined, min_extent) -> dict:
+def suspect_scores(fit: JointFit, points: SectionPoints, pp, boxes, refined,
+                   min_extent) -> dict:
     """{section: (n,) float} 0 for a trusted point; 1 for an unrefined centre; 2 + shortfall
-    for a box under ``min_extent`` of its predicted outline (partly hidden)."""
-    if not (np.isfinite(min_extent) and 0 < min_extent <= 1):
-        raise SolverError(f"min_extent must be in (0, 1], got {min_extent}")
-    cams = section_cams(out)
+    for a box under ``min_extent`` of its predicted outline (partly hidden).
+    ``boxes`` (N, 4) px or None, ``refined`` (N,) bool or None, per input row."""
+    cams = fit.cams
     scores = {}
     for s in SECTIONS:
-        sc = np.zeros(len(rows[s]))
-        for j, k in enumerate(rows[s]):
+        sc = np.zeros(len(points.rows[s]))
+        for j, k in enumerate(points.rows[s]):
             if refined is not None and not bool(refined[k]):
                 sc[j] = 1.0
-            if boxes is not None and row_markers[k] is not None:
-                pred = predicted_outline_box(row_markers[k], cams[s], out["focal_px"], pp)
+            marker = points.markers[k]
+            if boxes is not None and marker is not None:
+                pred = predicted_outline_box(marker, cams[s], fit.focal_px, pp)
                 if pred is not None:
                     r = extent_ratio(boxes[k], pred)
                     if r < min_extent:
@@ -82,22 +74,21 @@ def suspect_scores(out, rows, row_markers, pp, boxes, refined, min_extent) -> di
     return scores
 
 
-def leave_out_suspects(out, rows, p3, p2, fit, inliers, row_markers, pp, boxes, refined,
-                       min_extent):
+def leave_out_suspects(fit: JointFit, points: SectionPoints, fitter: JointFitter, inliers,
+                       boxes, refined, min_extent):
     """Leave out suspect points (see :func:`suspect_scores`), worst first, while the section
-    keeps more than ``MIN_POINTS``; one refit. ``row_markers``: (N,) layout marker per input
-    row (None if not identified)."""
+    keeps more than ``MIN_POINTS``; one refit. Returns (fit, inliers (N,) bool)."""
     if boxes is None and refined is None:
-        return out, inliers
-    scores = suspect_scores(out, rows, row_markers, pp, boxes, refined, min_extent)
-    keep = {s: np.ones(len(rows[s]), dtype=bool) for s in SECTIONS}
+        return fit, inliers
+    scores = suspect_scores(fit, points, fitter.principal_point, boxes, refined, min_extent)
+    keep = {s: np.ones(len(points.rows[s]), dtype=bool) for s in SECTIONS}
     inliers = inliers.copy()
     for s in SECTIONS:
         for j in np.argsort(-scores[s], kind="stable"):
             if scores[s][j] <= 0 or keep[s].sum() <= MIN_POINTS:
                 break
             keep[s][j] = False
-            inliers[rows[s][j]] = False
+            inliers[points.rows[s][j]] = False
     if all(keep[s].all() for s in SECTIONS):
-        return out, inliers
-    return refit_subset(out, p3, p2, keep, fit), inliers
+        return fit, inliers
+    return fitter.refit(fit, points, keep), inliers

@@ -34,7 +34,10 @@ pinned down by the four constraints ``K^-1 M`` orthogonal with equal row norms, 
 by relinearisation.
 
 The closed form is an initialiser: it is exact on noise-free data for general configurations and
-close enough for :mod:`solver.refine` otherwise. Near fronto-parallel planar scenes carry almost
+close enough for :mod:`solver.refine` otherwise.
+
+Layer 1 of the solver (closed form: every candidate, no refinement, no choice beyond sorting by
+reprojection RMS); imports only :mod:`solver.checks` and :mod:`solver.errors`. Near fronto-parallel planar scenes carry almost
 no information on the focal length (only f / depth is seen); no closed form can fix that.
 """
 from __future__ import annotations
@@ -43,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from dockfactory.solver.checks import as_principal_point, check_correspondences
-from dockfactory.solver.errors import SolverError
+from dockfactory.solver.errors import NoValidCamera
 
 __all__ = ["Candidate", "upnp", "focal_sweep", "PLANAR_TOL", "NEAR_PLANAR_TOL"]
 
@@ -346,39 +349,7 @@ _IU6_ALL = _IU6
 
 def _dlt4_branch(pr: _Problem) -> list:
     """Exactly four non-coplanar points: DLT null space (4-dim) + relinearisation."""
-    xh = np.hstack([pr.xn, np.ones((4, 1))])
-    m = np.zeros((8, 12))
-    m[0::2, 0:4] = xh
-    m[0::2, 8:12] = -xh * pr.un[:, 0:1]
-    m[1::2, 4:8] = xh
-    m[1::2, 8:12] = -xh * pr.un[:, 1:2]
-    _, _, vt = np.linalg.svd(m)
-    ps = vt[8:].reshape(4, 3, 4)[:, :, :3]                      # (basis k, row r, col)
-    g = np.einsum("kri,lsi->rskl", ps, ps)                       # m_r . m_s as forms in a
-    forms = [g[0, 1], g[0, 2], g[1, 2], g[0, 0] - g[1, 1]]
-    a_rows = np.array([(0.5 * (q + q.T))[_IU4] * _W4 for q in forms])   # (4, 10)
-    _, _, vt2 = np.linalg.svd(a_rows)
-    kb = vt2[4:]                                                 # (6, 10): Veronese = kb^T lam
-    ks = np.zeros((6, 4, 4))
-    ks[:, _IU4[0], _IU4[1]] = kb
-    ks = ks + np.triu(ks, 1).transpose(0, 2, 1)
-    i, j, k, l = _MINORS4.T
-    # S_ik S_jl - S_il S_jk = 0, quadratic in lam
-    t1 = ks[:, i, k][:, None, :] * ks[:, j, l][None, :, :]
-    t2 = ks[:, i, l][:, None, :] * ks[:, j, k][None, :, :]
-    quad = t1 - t2                                               # (6, 6, 36)
-    quad = 0.5 * (quad + quad.transpose(1, 0, 2))
-    rows = quad[_IU6_ALL[0], _IU6_ALL[1]].T * _W6                # (36, 21)
-    _, _, vt3 = np.linalg.svd(rows)
-    lam2 = np.zeros((6, 6))
-    lam2[_IU6_ALL] = vt3[-1]
-    lam2 = lam2 + np.triu(lam2, 1).T
-    ev, evec = np.linalg.eigh(lam2)
-    lam = evec[:, -1] if abs(ev[-1]) >= abs(ev[0]) else evec[:, 0]
-    s_mat = np.einsum("m,mij->ij", lam, ks)
-    ev, evec = np.linalg.eigh(s_mat)
-    coef = evec[:, -1] if abs(ev[-1]) >= abs(ev[0]) else evec[:, 0]
-    p = np.einsum("k,kij->ij", coef, vt[8:].reshape(4, 3, 4))
+    p = _dlt4_camera_matrix(pr)
     mm = p[:, :3]
     if np.linalg.det(mm) < 0.0:
         p = -p
@@ -396,6 +367,50 @@ def _dlt4_branch(pr: _Problem) -> list:
     tn = kinv @ p[:, 3] / scale
     cand = pr.finish(r, tn, fn, "dlt4")
     return [] if cand is None else [cand]
+
+
+def _dlt4_camera_matrix(pr: _Problem) -> np.ndarray:
+    """(3, 4) DLT camera P = [M | m] (normalised units, up to scale) in the 4-dim null space of
+    the four points' projection equations, pinned down by the four quadrics (relinearised)."""
+    xh = np.hstack([pr.xn, np.ones((4, 1))])
+    m = np.zeros((8, 12))
+    m[0::2, 0:4] = xh
+    m[0::2, 8:12] = -xh * pr.un[:, 0:1]
+    m[1::2, 4:8] = xh
+    m[1::2, 8:12] = -xh * pr.un[:, 1:2]
+    _, _, vt = np.linalg.svd(m)
+    ps = vt[8:].reshape(4, 3, 4)[:, :, :3]                      # (basis k, row r, col)
+    g = np.einsum("kri,lsi->rskl", ps, ps)                       # m_r . m_s as forms in a
+    forms = [g[0, 1], g[0, 2], g[1, 2], g[0, 0] - g[1, 1]]
+    a_rows = np.array([(0.5 * (q + q.T))[_IU4] * _W4 for q in forms])   # (4, 10)
+    _, _, vt2 = np.linalg.svd(a_rows)
+    kb = vt2[4:]                                                 # (6, 10): Veronese = kb^T lam
+    ks = np.zeros((6, 4, 4))
+    ks[:, _IU4[0], _IU4[1]] = kb
+    ks = ks + np.triu(ks, 1).transpose(0, 2, 1)
+    coef = _dlt4_null_coefficients(ks)
+    return np.einsum("k,kij->ij", coef, vt[8:].reshape(4, 3, 4))
+
+
+def _dlt4_null_coefficients(ks: np.ndarray) -> np.ndarray:
+    """(4,) coefficients of the camera in the DLT null space: the Veronese matrix S = sum_m
+    lam_m ks_m (4, 4) must have rank one (its 2 x 2 minors vanish, quadratic in lam)."""
+    i, j, k, l = _MINORS4.T
+    # S_ik S_jl - S_il S_jk = 0, quadratic in lam
+    t1 = ks[:, i, k][:, None, :] * ks[:, j, l][None, :, :]
+    t2 = ks[:, i, l][:, None, :] * ks[:, j, k][None, :, :]
+    quad = t1 - t2                                               # (6, 6, 36)
+    quad = 0.5 * (quad + quad.transpose(1, 0, 2))
+    rows = quad[_IU6_ALL[0], _IU6_ALL[1]].T * _W6                # (36, 21)
+    _, _, vt3 = np.linalg.svd(rows)
+    lam2 = np.zeros((6, 6))
+    lam2[_IU6_ALL] = vt3[-1]
+    lam2 = lam2 + np.triu(lam2, 1).T
+    ev, evec = np.linalg.eigh(lam2)
+    lam = evec[:, -1] if abs(ev[-1]) >= abs(ev[0]) else evec[:, 0]
+    s_mat = np.einsum("m,mij->ij", lam, ks)
+    ev, evec = np.linalg.eigh(s_mat)
+    return evec[:, -1] if abs(ev[-1]) >= abs(ev[0]) else evec[:, 0]
 
 
 def _focal_sweep(pr: _Problem, num: int = 13, every: bool = False) -> list:
@@ -444,8 +459,8 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
     ``points_3d``: (N, 3) float64, mm, N >= 4. ``points_2d``: (N, 2) float64, pixels.
     ``principal_point``: (2,) float64, pixels. Returns a list of :class:`Candidate`, sorted by
     reprojection RMS; candidates that are not valid cameras (f^2 <= 0, points behind the camera,
-    non-finite numbers) are dropped. Raises SolverError on bad input or when no candidate is
-    valid. ``checked=True`` skips input validation (internal callers that already did it).
+    non-finite numbers) are dropped. Raises InvalidSolverInput / TooFewPoints /
+    DegenerateGeometry on bad input, NoValidCamera when no candidate is valid. ``checked=True`` skips input validation (internal callers that already did it).
 
     Branches: N >= 6 general K = 1, 2, 3; N = 5 general K = 2, 3; N = 4 DLT relinearisation;
     planar sets the planar branch only, near-planar ones (spread ratio < NEAR_PLANAR_TOL) both.
@@ -465,16 +480,34 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
         p3, p2 = check_correspondences(points_3d, points_2d)
         pp = as_principal_point(principal_point)
     pr = _Problem(p3, p2, pp)
-    cands: list = []
     planar = pr.planarity < PLANAR_TOL
     if first_only:
-        if planar:
-            cands = _planar_branch(pr)
-        elif pr.n == 4:
-            cands = _dlt4_branch(pr)
-        else:
-            cands = _general_branch(pr, (2,) if pr.n == 5 else (1,))
-        return cands
+        return _cheapest_candidates(pr, planar)
+    cands = _every_candidate(pr, planar)
+    if not cands or (sweep_above_px is not None and min(c.rmse_px for c in cands) > sweep_above_px):
+        cands += _focal_sweep(pr)
+    if not cands:
+        if pr.rejected_depth:
+            raise NoValidCamera("points behind the camera: every closed-form camera that fits "
+                                "the image points puts some of the 3D points behind it")
+        raise NoValidCamera("closed form found no valid camera (every candidate had a negative "
+                            "squared focal length)")
+    cands.sort(key=lambda c: c.rmse_px)
+    return cands
+
+
+def _cheapest_candidates(pr: _Problem, planar: bool) -> list:
+    """The smallest null-space dimension that determines the problem only (may be empty)."""
+    if planar:
+        return _planar_branch(pr)
+    if pr.n == 4:
+        return _dlt4_branch(pr)
+    return _general_branch(pr, (2,) if pr.n == 5 else (1,))
+
+
+def _every_candidate(pr: _Problem, planar: bool) -> list:
+    """Every branch that applies to the point set (see :func:`upnp`), unsorted."""
+    cands: list = []
     if pr.n == 4:
         cands += _planar_branch(pr)
         if not planar:
@@ -485,15 +518,6 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
             cands += _general_branch(pr, dims)
         if pr.planarity < NEAR_PLANAR_TOL:
             cands += _planar_branch(pr)
-    if not cands or (sweep_above_px is not None and min(c.rmse_px for c in cands) > sweep_above_px):
-        cands += _focal_sweep(pr)
-    if not cands:
-        if pr.rejected_depth:
-            raise SolverError("points behind the camera: every closed-form camera that fits "
-                              "the image points puts some of the 3D points behind it")
-        raise SolverError("closed form found no valid camera (every candidate had a negative "
-                          "squared focal length)")
-    cands.sort(key=lambda c: c.rmse_px)
     return cands
 
 

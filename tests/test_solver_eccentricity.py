@@ -10,7 +10,7 @@ from dockfactory.core.geometry import (
     transform_points,
 )
 from dockfactory.core.layout import marker_outline
-from dockfactory.solver import solve_docking
+from dockfactory.solver import DockingOptions, solve_docking
 from dockfactory.solver.eccentricity import eccentricity_offset
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
@@ -33,7 +33,8 @@ def test_exact_image_centroids_give_the_exact_pose(seed):
     uv = _image_centroids(sc)
     cls = np.array([0 if m.section == "A" else 1 for m in LAYOUT])
     truth = pose_components(sc.d_from_b)
-    plain = solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), eccentricity=False)
+    plain = solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv),
+                          options=DockingOptions(eccentricity=False))
     fixed = solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv))
     err = {k: abs(getattr(fixed, k) - truth[k]) for k in ("x_mm", "y_mm", "alpha_deg")}
     # the offsets come from the first fit's pose, so one correction leaves a second-order

@@ -5,14 +5,23 @@ import numpy as np
 import pytest
 from dockfactory.solver import (
     AmbiguousIdentification,
+    DegenerateGeometry,
+    DockingOptions,
+    FocalNotObservable,
+    IdentificationFailed,
+    IdentifyOptions,
+    InvalidSolverInput,
+    NoConsensus,
+    RansacOptions,
+    RefineOptions,
     SolverError,
+    TooFewPoints,
     crb_d_from_b,
     crb_pnpf,
     identify_markers,
+    ransac_pnpf,
     solve_docking,
-    solve_docking_batch,
     solve_pnpf,
-    solve_pnpf_batch,
     upnp,
 )
 from dockfactory.solver.synthetic import default_layout, docking_scene
@@ -185,8 +194,8 @@ def test_identification_ambiguous_raises():
         dets.append(f * pc[:, :2] / pc[:, 2:3] + PP)
         cls += [0 if s == "A" else 1] * int(keep.sum())
     with pytest.raises(AmbiguousIdentification, match="ambiguous"):
-        solve_docking(markers, PP, detections=(cls, np.vstack(dets)), identify_options={
-            "sigma_px": 0.5})
+        solve_docking(markers, PP, detections=(cls, np.vstack(dets)), options=DockingOptions(
+            identify=IdentifyOptions(sigma_px=0.5)))
 
 
 def test_identification_too_few(scene):
@@ -195,31 +204,7 @@ def test_identification_too_few(scene):
         solve_docking(default_layout(), PP, detections=([0] * 3 + [1] * 7, uv))
 
 
-# ------------------------------------------------------------------ batch and bounds
-
-def test_batch_shapes_and_nan():
-    layout = default_layout()
-    with pytest.raises(SolverError, match=r"expected shape \(F, 14, 2\)"):
-        solve_docking_batch(layout, PP, np.zeros((5, 13, 2)))
-    uv = np.zeros((2, 14, 2))
-    uv[1, 3, 0] = np.nan
-    with pytest.raises(SolverError, match="visible=False"):
-        solve_docking_batch(layout, PP, uv)
-    with pytest.raises(SolverError, match="visible"):
-        solve_docking_batch(layout, PP, np.zeros((2, 14, 2)), visible=np.ones((3, 14)))
-    with pytest.raises(SolverError, match=r"expected shape \(F, 7, 2\)"):
-        solve_pnpf_batch(np.zeros((7, 3)), np.zeros((7, 2)), PP)
-
-
-def test_batch_reports_per_frame_failure(scene):
-    uv = np.vstack([scene.uv_a, scene.uv_b])[None].repeat(2, axis=0)
-    vis = np.ones((2, 14), dtype=bool)
-    vis[1, :4] = False                                 # frame 1: 3 A markers left
-    out = solve_docking_batch(default_layout(), scene.principal_point, uv, visible=vis)
-    assert out.ok.tolist() == [True, False]
-    assert "section A: 3 usable points" in out.messages[1]
-    assert np.all(np.isfinite(out.pose[0])) and np.all(np.isnan(out.pose[1]))
-
+# ------------------------------------------------------------------ bounds
 
 def test_crb_degenerate_and_bad_input(scene):
     with pytest.raises(SolverError, match="behind the camera"):
@@ -231,3 +216,54 @@ def test_crb_degenerate_and_bad_input(scene):
                      scene.focal_px, PP, 1.0, problem="nope")
     with pytest.raises(SolverError, match="singular"):
         crb_pnpf(scene.points_a[:3], scene.cam_from_d, scene.focal_px, PP, 1.0)
+
+
+# ------------------------------------------------------------------ failure categories by type
+
+def test_every_failure_is_a_typed_solver_error(scene):
+    """Callers classify failures by exception type (never by message text)."""
+    with pytest.raises(TooFewPoints):
+        solve_pnpf(scene.points_a[:3], scene.uv_a[:3], PP)
+    corr = {m.id: uv for m, uv in zip(default_layout(), np.vstack([scene.uv_a, scene.uv_b]))
+            if m.id not in ("B0", "B1", "B2", "B3")}
+    with pytest.raises(TooFewPoints):
+        solve_docking(default_layout(), PP, correspondences=corr)
+    line = np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)])
+    with pytest.raises(DegenerateGeometry):
+        solve_pnpf(line, np.random.default_rng(1).uniform(0, 500, (5, 2)), PP)
+    with pytest.raises(InvalidSolverInput):
+        solve_pnpf(scene.points_a, scene.uv_a[:6], PP)
+    with pytest.raises(InvalidSolverInput):
+        solve_pnpf(scene.points_a, scene.uv_a, PP, robust=True)
+    # 5 near-planar points with 2 px noise: the focal is not determined
+    rng = np.random.default_rng(3)
+    with pytest.raises(FocalNotObservable):
+        for _ in range(50):
+            sc = docking_scene(rng)
+            solve_pnpf(sc.points_a[:4], sc.uv_a[:4] + 2.0 * rng.standard_normal((4, 2)), PP)
+    # every point an outlier of every other: no consensus
+    junk = np.random.default_rng(4).uniform(0, 900, (7, 2))
+    with pytest.raises(NoConsensus):
+        ransac_pnpf(scene.points_a, junk, PP, np.random.default_rng(0),
+                    RansacOptions(threshold_px=0.01, max_iterations=20))
+    with pytest.raises(IdentificationFailed, match="could not identify"):
+        identify_markers(default_layout(), PP, ([0] * 7, junk))
+    assert issubclass(AmbiguousIdentification, IdentificationFailed)
+
+
+def test_options_are_frozen_and_checked():
+    with pytest.raises(InvalidSolverInput, match="threshold_px"):
+        RansacOptions(threshold_px=-1.0)
+    with pytest.raises(InvalidSolverInput, match="sigma_px"):
+        IdentifyOptions(sigma_px=0.0)
+    with pytest.raises(InvalidSolverInput, match="gate_px"):
+        IdentifyOptions(gate_px=float("nan"))
+    with pytest.raises(InvalidSolverInput, match="max_iterations"):
+        RefineOptions(max_iterations=0)
+    with pytest.raises(InvalidSolverInput, match="min_extent"):
+        DockingOptions(min_extent=1.5)
+    opts = DockingOptions()
+    with pytest.raises(AttributeError):
+        opts.min_extent = 0.5
+    # one threshold, one place: the docking options carry the layers' defaults
+    assert opts.refine == RefineOptions() and opts.identify.prior == opts.ransac.prior

@@ -3,7 +3,7 @@ that slides to the orthographic limit, and an identification that must shed a st
 from __future__ import annotations
 
 import numpy as np
-from dockfactory.solver.pnpf import solve_checked
+from dockfactory.solver.estimate import estimate_pnpf
 from dockfactory.solver.synthetic import default_layout
 
 LAYOUT = default_layout()
@@ -16,7 +16,7 @@ def test_runaway_focal_falls_back_to_the_other_starts():
     p3 = np.array([by_id[i].center_mm for i in ids], dtype=float)
     p2 = np.array(UV_132)
     pp = np.array([639.5, 479.5])
-    ref = solve_checked(p3, p2, pp, check_focal=False, accept_rmse=2.5, rescue_below=10.0)[0]
+    ref = estimate_pnpf(p3, p2, pp, check_focal=False, accept_rmse=2.5, rescue_below=10.0)
     # true focal 1937.5 px, detections with 0.5 px noise: the right basin ends near 1885 px
     # with 0.42 px RMS; the runaway ended at 9e11 px with 26 px RMS
     assert ref.rmse_px < 1.0

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from dockfactory.core.geometry import pose_components
 from dockfactory.solver import (
+    FocalNotObservable,
     crb_d_from_b,
     crb_joint,
     crb_pnpf,
     solve_docking,
-    solve_docking_batch,
     solve_pnpf,
 )
 from dockfactory.solver.lie import rotation_angle_deg
@@ -43,22 +43,27 @@ def test_joint_docking_unbiased_at_crb(sigma):
     scenes = [docking_scene(rng) for _ in range(n)]
     uv = np.stack([np.vstack([s.uv_a, s.uv_b]) for s in scenes])
     uv = uv + sigma * rng.standard_normal(uv.shape)
-    out = solve_docking_batch(LAYOUT, scenes[0].principal_point, uv, sigma_px=sigma)
+    results = []
+    for sc, frame in zip(scenes, uv):
+        try:
+            results.append(solve_docking(LAYOUT, sc.principal_point, correspondences=(IDS, frame),
+                                         sigma_px=sigma))
+        except FocalNotObservable:
+            results.append(None)
     # At 1 px a rare noise draw puts the maximum of the likelihood at f = infinity (an affine
-    # camera fits better than any finite one); the solver refuses those frames.
-    assert out.ok.mean() >= (1.0 if sigma < 0.5 else 0.99)
-    for k in np.flatnonzero(~out.ok):
-        assert "focal length is not observable" in out.messages[k]
+    # camera fits better than any finite one); the solver refuses those frames (only those:
+    # any other SolverError fails the test).
+    ok = np.array([r is not None for r in results])
+    assert ok.mean() >= (1.0 if sigma < 0.5 else 0.99)
     err, bound = [], []
-    for k, sc in enumerate(scenes):
-        if not out.ok[k]:
+    for sc, res in zip(scenes, results):
+        if res is None:
             continue
         truth = pose_components(sc.d_from_b)
         b = crb_d_from_b(sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px,
                          sc.principal_point, sigma)
-        err.append([out.component("x_mm")[k] - truth["x_mm"],
-                    out.component("y_mm")[k] - truth["y_mm"],
-                    out.component("alpha_deg")[k] - truth["alpha_deg"]])
+        err.append([res.x_mm - truth["x_mm"], res.y_mm - truth["y_mm"],
+                    res.alpha_deg - truth["alpha_deg"]])
         bound.append([b.std["x_mm"], b.std["y_mm"], b.std["alpha_deg"]])
     _check(err, bound, ["X", "Y", "alpha"])
 

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from dockfactory.core.geometry import pose_components
-from dockfactory.solver import SolverError, solve_docking
+from dockfactory.solver import (
+    DockingOptions,
+    InvalidSolverInput,
+    SolverError,
+    solve_docking,
+)
 from dockfactory.solver.suspects import extent_ratio, predicted_outline_box
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
@@ -89,5 +94,5 @@ def test_bad_suspect_inputs():
         solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), refined=[True])
     with pytest.raises(SolverError, match="with detections="):
         solve_docking(LAYOUT, sc.principal_point, correspondences=(IDS, uv), boxes=boxes)
-    with pytest.raises(SolverError, match="min_extent"):
-        solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), boxes=boxes, min_extent=0)
+    with pytest.raises(InvalidSolverInput, match="min_extent"):
+        DockingOptions(min_extent=0)

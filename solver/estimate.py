@@ -1,0 +1,230 @@
+"""Single-section estimator: closed-form candidates -> the one refinement, on validated arrays.
+
+Layer 3 of the solver (closed form :mod:`solver.upnp` and refinement :mod:`solver.refine`
+below; the joint fit, RANSAC, identification and the public :func:`solver.solve_pnpf` above).
+
+Fast path: the cheapest closed-form candidate, refined. Slow path (no valid camera, no
+convergence, an RMS above the acceptable one, or a focal that ran off toward the orthographic
+limit): every closed-form candidate plus the focal sweep, the best few refined, and as a last
+resort a profile likelihood over the focal length. Thresholds: :class:`RefineOptions`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from dockfactory.solver.errors import FocalNotObservable, NoValidCamera, SolverError
+from dockfactory.solver.options import RefineOptions
+from dockfactory.solver.refine import (
+    DEFAULT_REFINE,
+    RefineResult,
+    covariance_from_jacobian,
+    refine_pnpf,
+    rel_focal_std,
+)
+from dockfactory.solver.upnp import focal_sweep, upnp
+
+__all__ = ["PnPfResult", "PnPfEstimate", "estimate_pnpf", "refine_best_candidate",
+           "check_focal_observable"]
+
+
+@dataclass(frozen=True)
+class PnPfResult:
+    """Result of :func:`solver.solve_pnpf` (and :func:`solver.ransac.ransac_pnpf`).
+
+    - ``cam_from_world`` (4, 4): world (the frame of ``points_3d``) to OpenCV camera;
+    - ``focal_px``: focal length (px); ``rmse_px``: reprojection RMS, sqrt(mean |r_i|^2) over
+      the points used (px, Euclidean per point);
+    - ``candidates``: the closed-form :class:`solver.upnp.Candidate` computed, best first;
+    - ``covariance`` (7, 7): sigma^2 (J^T J)^-1 over (w_x, w_y, w_z [rad], t_x, t_y, t_z [mm],
+      f [px]) with w a left perturbation of the rotation; ``sigma_px`` the noise std used
+      (given, or estimated from the residuals);
+    - ``inliers`` (N,) bool: points used (all True unless the robust path rejected some);
+    - ``iterations``: Levenberg-Marquardt iterations; ``residuals_px`` (n, 2) of the points used.
+    """
+
+    cam_from_world: np.ndarray
+    focal_px: float
+    rmse_px: float
+    candidates: tuple
+    covariance: np.ndarray
+    sigma_px: float
+    inliers: np.ndarray
+    iterations: int = 0
+    residuals_px: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return self.cam_from_world[:3, :3]
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.cam_from_world[:3, 3]
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations (7,) of the parameters, from ``covariance``."""
+        return np.sqrt(np.diag(self.covariance))
+
+    @classmethod
+    def from_refinement(cls, ref: RefineResult, sigma_px, candidates, inliers) -> PnPfResult:
+        """Package a refinement with its covariance (``sigma_px`` None: from the residuals)."""
+        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+        cam = np.eye(4)
+        cam[:3, :3] = ref.rotation
+        cam[:3, 3] = ref.translation
+        return cls(cam, float(ref.focal_px), ref.rmse_px, tuple(candidates), cov, sigma,
+                   inliers, ref.iterations, ref.residuals.reshape(-1, 2))
+
+
+@dataclass(frozen=True)
+class PnPfEstimate:
+    """Output of :func:`estimate_pnpf`: the chosen ``refinement``, its ``covariance`` (7, 7)
+    and ``sigma_px``, and the closed-form ``candidates`` computed."""
+
+    refinement: RefineResult
+    covariance: np.ndarray
+    sigma_px: float
+    candidates: tuple
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return self.refinement.rotation
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.refinement.translation
+
+    @property
+    def focal_px(self) -> float:
+        return self.refinement.focal_px
+
+    @property
+    def rmse_px(self) -> float:
+        return self.refinement.rmse_px
+
+    def result(self, inliers: np.ndarray) -> PnPfResult:
+        """The public :class:`PnPfResult` (``inliers`` (N,) bool)."""
+        ref = self.refinement
+        cam = np.eye(4)
+        cam[:3, :3] = ref.rotation
+        cam[:3, 3] = ref.translation
+        return PnPfResult(cam, float(ref.focal_px), ref.rmse_px, tuple(self.candidates),
+                          self.covariance, self.sigma_px, inliers, ref.iterations,
+                          ref.residuals.reshape(-1, 2))
+
+
+def refine_best_candidate(p3, p2, pp, cands, options: RefineOptions = DEFAULT_REFINE,
+                          max_tries: int = 3) -> RefineResult:
+    """Refine the best candidates (up to ``max_tries``, stopping at the first that converges)
+    and keep the lowest cost. Raises NoValidCamera if none reaches a valid camera."""
+    best = None
+    errors = []
+    for cand in cands[:max_tries]:
+        try:
+            ref = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px,
+                              options)
+        except SolverError as exc:
+            errors.append(str(exc))
+            continue
+        cost = float(ref.residuals @ ref.residuals)
+        if best is None or cost < best[0]:
+            best = (cost, ref)
+        if ref.converged:
+            break
+    if best is None:
+        raise NoValidCamera("refinement failed from every closed-form candidate: "
+                            + "; ".join(errors))
+    return best[1]
+
+
+def check_focal_observable(focal_px: float, cov: np.ndarray, options: RefineOptions) -> None:
+    """FocalNotObservable when the focal's relative std (from ``cov`` (7, 7)) is above
+    ``options.max_focal_rel_std``."""
+    rel = rel_focal_std(cov, focal_px)
+    if not rel <= options.max_focal_rel_std:
+        raise FocalNotObservable(
+            f"focal length is not observable from these points (estimate {focal_px:.4g} px "
+            f"with relative std {rel:.3g}): the points are too close to planar and fronto-"
+            "parallel for this noise level; use more points, a wider depth range, or "
+            "solve_docking, which shares the focal length between two sections")
+
+
+def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_focal=True,
+                  accept_rmse=None, rescue_below=None,
+                  options: RefineOptions = DEFAULT_REFINE) -> PnPfEstimate:
+    """Closed form + refinement on validated arrays ``p3`` (N, 3) mm, ``p2`` (N, 2) px, ``pp``
+    (2,) px (see the module docstring).
+
+    ``accept_rmse`` (px): a fast-path RMS above it takes the slow path; with ``rescue_below``
+    only when the fast RMS is below that (a near miss worth rescuing; far worse fits are wrong
+    models, e.g. wrong marker assignments, not local minima). ``all_candidates``: skip the fast
+    path. ``check_focal``: raise FocalNotObservable for an unobservable focal.
+    """
+    cands = [] if all_candidates else upnp(p3, p2, pp, checked=True, first_only=True)
+    ref = None
+    if cands:
+        try:
+            ref = refine_best_candidate(p3, p2, pp, cands, options, max_tries=1)
+        except SolverError:
+            ref = None
+    near_miss = accept_rmse is not None and ref is not None and ref.rmse_px > accept_rmse and (
+        rescue_below is None or ref.rmse_px <= rescue_below)
+    if ref is None or not ref.converged or near_miss or _focal_ran_off(ref, p2, pp, options):
+        cands = upnp(p3, p2, pp, checked=True, sweep_above_px=0.0)
+        ref = _slow_path(p3, p2, pp, cands, ref, accept_rmse, options)
+    cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+    if check_focal:
+        check_focal_observable(ref.focal_px, cov, options)
+    return PnPfEstimate(ref, cov, sigma, tuple(cands))
+
+
+def _slow_path(p3, p2, pp, cands, fast, accept_rmse, options: RefineOptions) -> RefineResult:
+    """Best of: the fast-path refinement (may be None), the best ``options.fallback_starts``
+    candidates refined, and (when still unacceptable) the profile likelihood over f."""
+    best = None
+    for cand in cands[:options.fallback_starts]:
+        try:
+            r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, options)
+        except SolverError:
+            continue
+        if best is None or r.rmse_px < best.rmse_px:
+            best = r
+    if fast is not None and (best is None or fast.rmse_px <= best.rmse_px):
+        best = fast
+    if best is None or (accept_rmse is not None and best.rmse_px > accept_rmse) \
+            or not best.converged:
+        prof = _profile_focal(p3, p2, pp, options)
+        if prof is not None and (best is None or prof.rmse_px < best.rmse_px):
+            best = prof
+    if best is None:
+        raise NoValidCamera("refinement failed from every closed-form candidate")
+    return best
+
+
+def _focal_ran_off(ref, p2, pp, options: RefineOptions) -> bool:
+    """True when f ended above ``options.focal_runaway`` x the points' image extent."""
+    extent = float(np.max(np.abs(np.asarray(p2) - np.asarray(pp)))) + 1.0
+    return not (ref.focal_px < options.focal_runaway * extent)
+
+
+def _profile_focal(p3, p2, pp, options: RefineOptions):
+    """Profile likelihood over the focal length: calibrated refinement at each focal of a grid
+    (from the sweep's poses), then a full refinement from the best grid point. Robust to the
+    several basins a near-planar, few-point problem can have in f; slow, so a last resort."""
+    short = replace(options, max_iterations=options.profile_iterations)
+    best = None
+    for cand in focal_sweep(p3, p2, pp, num=options.profile_focals):
+        try:
+            r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, short,
+                            fix_focal=True)
+        except SolverError:
+            continue
+        if best is None or r.rmse_px < best.rmse_px:
+            best = r
+    if best is None:
+        return None
+    try:
+        return refine_pnpf(p3, p2, pp, best.rotation, best.translation, best.focal_px, options)
+    except SolverError:
+        return None

@@ -1,0 +1,241 @@
+"""Options of every solver layer as frozen dataclasses (bottom layer: imports only errors).
+
+As PoseLib passes ``RansacOptions`` and ``BundleOptions``, each layer here takes one options
+object; every threshold and budget is a documented default defined only here:
+
+- :class:`RefineOptions`: the one Levenberg-Marquardt refinement and the acceptance of its
+  result (focal observability);
+- :class:`FacingPrior`: what "the camera faces the markers" allows (image roll and scale of the
+  weak-perspective similarity), shared by RANSAC's and identification's hypotheses;
+- :class:`RansacOptions`: the robust layer (single section and docking);
+- :class:`IdentifyOptions`: marker identification (hypothesise and verify);
+- :class:`DockingOptions`: the docking pipeline (holds the three above).
+
+Invalid values raise :class:`solver.errors.InvalidSolverInput` when the object is built.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from dockfactory.solver.errors import InvalidSolverInput
+
+__all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
+           "DockingOptions", "DEFAULT_IDENTIFY", "DEFAULT_DOCKING"]
+
+
+def _positive(name: str, value, allow_none: bool = False) -> None:
+    if value is None and allow_none:
+        return
+    try:
+        ok = math.isfinite(float(value)) and float(value) > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InvalidSolverInput(f"{name} must be positive and finite, got {value}")
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Levenberg-Marquardt over (R, t, f) (:mod:`solver.refine`) and when to accept its result.
+
+    Budget and stopping rules of the LM loop:
+    - ``max_iterations``: LM iterations (each tries up to ``damping_tries`` damped steps);
+    - ``initial_damping``: Marquardt damping at the start (relative to diag(J^T J)); divided by
+      10 after an accepted step (not below ``min_damping``), multiplied by 10 after a rejected
+      one;
+    - converged when a step moves no residual by more than ``step_tol_px`` px along any
+      parameter, when the cost decreases by less than ``cost_rel_tol`` of itself, when the
+      model predicts a decrease below ``predicted_rel_tol`` of the cost, or when the cost is
+      below ``exact_cost_per_residual`` x the number of residuals (an exact fit).
+
+    Acceptance:
+    - ``max_focal_rel_std``: one section, the focal's standard deviation over its value above
+      which the focal counts as unobservable (``FocalNotObservable``): the points are too close
+      to planar and fronto-parallel for the noise (the estimate runs off toward an affine
+      camera);
+    - ``max_joint_focal_rel_std``: the same for the joint (two-section) fit; it only refuses
+      a focal that clearly ran off, since X, Y and alpha stay well determined when the shared
+      focal is poorly known (they hardly depend on the focal / depth trade-off) and the
+      covariances report the rest;
+    - ``focal_runaway``: a single-section refinement that ends with f above this many times
+      the image extent of the points (px from the principal point, + 1) slid toward the
+      orthographic limit, the signature of a start in the wrong basin on a few near-planar
+      points (measured: the cheapest closed-form candidate at f 2261 px ran off to 9e11 px with
+      26 px RMS; the next one, f 1842, converged to 1885 px with 0.42 px RMS; true f 1938):
+      the other closed-form candidates are then tried.
+    Fallback of the single-section estimator (:mod:`solver.estimate`):
+    - ``accept_rmse_sigmas``: when the pixel noise sigma is known, a fast-path fit whose RMS
+      exceeds this many sigma takes the slow path (every closed-form candidate);
+    - ``fallback_starts``: closed-form candidates refined on the slow path;
+    - ``profile_focals``, ``profile_iterations``: the profile-likelihood last resort refines
+      the calibrated pose at that many grid focals for that many iterations.
+    """
+
+    max_iterations: int = 60
+    initial_damping: float = 1e-6
+    min_damping: float = 1e-12
+    damping_tries: int = 12
+    step_tol_px: float = 1e-9
+    cost_rel_tol: float = 1e-9
+    predicted_rel_tol: float = 1e-12
+    exact_cost_per_residual: float = 1e-28
+    max_focal_rel_std: float = 1.0
+    max_joint_focal_rel_std: float = 10.0
+    focal_runaway: float = 1000.0
+    accept_rmse_sigmas: float = 3.0
+    fallback_starts: int = 4
+    profile_focals: int = 9
+    profile_iterations: int = 6
+
+    def __post_init__(self):
+        for name in ("max_iterations", "damping_tries", "max_focal_rel_std",
+                     "max_joint_focal_rel_std", "focal_runaway", "accept_rmse_sigmas",
+                     "fallback_starts",
+                     "profile_focals", "profile_iterations"):
+            _positive(name, getattr(self, name))
+
+
+@dataclass(frozen=True)
+class FacingPrior:
+    """The docking camera faces the markers: to first order a section's image is a similarity
+    ``z = a (X - iY) + b`` of its markers' coordinates (weak perspective).
+
+    - ``max_roll_deg``: largest plausible image roll (angle of ``a``);
+    - ``scale_range``: plausible |a| = f / depth (px per mm);
+    - ``loose_gate``: a projected marker within this fraction of the smallest marker spacing
+      (scaled to pixels) of a detection counts as matched by a hypothesis.
+    """
+
+    max_roll_deg: float = 30.0
+    scale_range: tuple = (0.05, 50.0)
+    loose_gate: float = 0.4
+
+    def __post_init__(self):
+        _positive("max_roll_deg", self.max_roll_deg)
+        _positive("loose_gate", self.loose_gate)
+        lo, hi = self.scale_range
+        if not (0 < lo < hi and math.isfinite(hi)):
+            raise InvalidSolverInput(f"scale_range must be 0 < low < high, got "
+                                     f"{self.scale_range}")
+
+
+@dataclass(frozen=True)
+class RansacOptions:
+    """LO-RANSAC (:mod:`solver.ransac`).
+
+    - ``threshold_px``: inlier threshold on the reprojection error (px); MSAC scores truncate
+      the squared error there;
+    - ``confidence``: probability of having drawn one clean sample when sampling stops;
+    - single section: at most ``max_iterations`` samples of ``sample_size`` points (6, the
+      smallest set with a one-dimensional UPnP null space), each polished by
+      ``sample_refine_iterations`` LM iterations; the final fit on the inliers refines the
+      best ``final_starts`` closed-form candidates;
+    - docking: at most ``section_iterations`` two-point samples per section under ``prior``;
+      the points a sample's similarity predicts are fitted by UPnP + LM
+      (``loose_refine_iterations``), dropping the worst point up to ``loose_refits`` times;
+      a hypothesis whose closed form misses restarts LM (``facing_refine_iterations``) from the
+      facing camera at ``facing_distance_mm``; the joint refit of both sections runs
+      ``joint_refine_iterations`` per round for up to ``joint_rounds`` rounds;
+    - local optimisation: up to ``lo_rounds`` refits (``lo_refine_iterations`` each) on the
+      inliers of every new best model.
+    """
+
+    threshold_px: float = 4.0
+    confidence: float = 0.9999
+    max_iterations: int = 2000
+    sample_size: int = 6
+    sample_refine_iterations: int = 10
+    final_starts: int = 3
+    section_iterations: int = 300
+    prior: FacingPrior = field(default_factory=FacingPrior)
+    loose_refine_iterations: int = 15
+    loose_refits: int = 3
+    facing_distance_mm: float = 1500.0
+    facing_refine_iterations: int = 30
+    joint_refine_iterations: int = 30
+    joint_rounds: int = 3
+    lo_rounds: int = 4
+    lo_refine_iterations: int = 15
+
+    def __post_init__(self):
+        _positive("threshold_px", self.threshold_px)
+        if not 0 < self.confidence < 1:
+            raise InvalidSolverInput(f"confidence must be in (0, 1), got {self.confidence}")
+        for name in ("max_iterations", "sample_size", "sample_refine_iterations",
+                     "final_starts", "section_iterations", "loose_refine_iterations",
+                     "loose_refits", "facing_distance_mm", "facing_refine_iterations",
+                     "joint_refine_iterations", "joint_rounds", "lo_rounds",
+                     "lo_refine_iterations"):
+            _positive(name, getattr(self, name))
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Marker identification (:mod:`solver.identify`).
+
+    - ``sigma_px``: expected std of the detected centres (px); a hypothesis explains the
+      detections if its reprojection RMS is at most ``max_rmse_sigmas`` x sigma;
+    - ``gate_px``: detections match projected markers within this distance (default
+      ``gate_sigmas`` x sigma), at most ``max_gate_spacing`` x the projected marker spacing;
+    - ``prior``: plausible roll and scale of the hypotheses, and their loose gate;
+    - ``max_hypotheses``: similarity hypotheses verified per section and anchor set;
+    - ``min_matches``: markers a section hypothesis must explain (at least 4);
+    - ``rescue_rmse_factor``: a hypothesis fit whose RMS is above the acceptable RMS but below
+      this factor times it is a near miss worth the slow solver path (far worse fits are wrong
+      assignments, not local minima).
+    """
+
+    sigma_px: float = 1.0
+    gate_px: float | None = None
+    gate_sigmas: float = 4.0
+    max_rmse_sigmas: float = 2.5
+    max_gate_spacing: float = 0.3
+    prior: FacingPrior = field(default_factory=FacingPrior)
+    max_hypotheses: int = 8
+    min_matches: int = 4
+    rescue_rmse_factor: float = 4.0
+
+    def __post_init__(self):
+        _positive("sigma_px", self.sigma_px)
+        _positive("gate_px", self.gate_px, allow_none=True)
+        for name in ("gate_sigmas", "max_rmse_sigmas", "max_gate_spacing", "max_hypotheses",
+                     "min_matches", "rescue_rmse_factor"):
+            _positive(name, getattr(self, name))
+
+    @property
+    def gate(self) -> float:
+        """Match gate (px) before the cap by the projected marker spacing."""
+        return float(self.gate_px) if self.gate_px is not None else \
+            self.gate_sigmas * float(self.sigma_px)
+
+    @property
+    def max_rmse(self) -> float:
+        """Largest reprojection RMS (px) of a verified hypothesis."""
+        return self.max_rmse_sigmas * float(self.sigma_px)
+
+
+@dataclass(frozen=True)
+class DockingOptions:
+    """The docking pipeline (:func:`solver.solve_docking`).
+
+    - ``refine``, ``ransac``, ``identify``: options of the layers it calls;
+    - ``min_extent``: a detected box narrower or lower than this fraction of the outline the
+      first fit predicts for its marker is a partly hidden marker (:mod:`solver.suspects`);
+    - ``eccentricity``: correct detected centres (centroids of the disc's image) by their
+      predicted perspective offset and refit (:mod:`solver.eccentricity`).
+    """
+
+    refine: RefineOptions = field(default_factory=RefineOptions)
+    ransac: RansacOptions = field(default_factory=RansacOptions)
+    identify: IdentifyOptions = field(default_factory=IdentifyOptions)
+    min_extent: float = 0.85
+    eccentricity: bool = True
+
+    def __post_init__(self):
+        if not (math.isfinite(self.min_extent) and 0 < self.min_extent <= 1):
+            raise InvalidSolverInput(f"min_extent must be in (0, 1], got {self.min_extent}")
+
+
+DEFAULT_IDENTIFY = IdentifyOptions()
+DEFAULT_DOCKING = DockingOptions()
