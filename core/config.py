@@ -30,8 +30,9 @@ class ConfigError(DockfactoryError):
 class DatasetConfig:
     name: str = "dockfactory"
     seed: int = 0
-    frames: int = 50             # main frames (train + test); the repeatability subset is extra
-    train_fraction: float = 0.8  # split stratified by condition
+    frames: int = 50             # main frames (train + val + test); the repeatability subset is extra
+    train_fraction: float = 0.8  # share of each condition's frames outside the test split
+    val_fraction: float = 0.1    # share of each condition's train frames held out as the val split
 
 
 @dataclass(frozen=True)
@@ -276,11 +277,20 @@ def _check_positive(source, table, key, value, allow_zero=False):
 
 
 def validate(cfg: Config, source: str = "<config>") -> None:
-    """Reject impossible configs before anything is rendered or written."""
+    """Reject impossible configs before anything is rendered or written (no frame is sampled)."""
+    for check in (_validate_dataset, _validate_image_camera, _validate_pose_sections, _validate_markers,
+                  _validate_render, _validate_sensor, _validate_occlusion_glare, _validate_labels_export):
+        check(cfg, source)
+
+
+def _validate_dataset(cfg: Config, source: str) -> None:
+    """[dataset], [conditions] and [repeatability]."""
     d = cfg.dataset
     _check_positive(source, "dataset", "frames", d.frames, allow_zero=True)
     if not 0.0 <= d.train_fraction <= 1.0:
         raise _err(source, "dataset", "train_fraction", f"must be in [0, 1], got {d.train_fraction}")
+    if not 0.0 <= d.val_fraction < 1.0:
+        raise _err(source, "dataset", "val_fraction", f"must be in [0, 1), got {d.val_fraction}")
     if not 0 <= d.seed < 2**63:
         raise _err(source, "dataset", "seed", f"must be in [0, 2^63), got {d.seed}")
     weights = dataclasses.asdict(cfg.conditions)
@@ -295,12 +305,14 @@ def validate(cfg: Config, source: str = "<config>") -> None:
         raise _err(source, "repeatability", "condition", f"{r.condition!r} is not one of {CONDITIONS}")
     if d.frames + r.poses * r.captures == 0:
         raise _err(source, "dataset", "frames", "the dataset would have no frames")
-    im = cfg.image
+
+
+def _validate_image_camera(cfg: Config, source: str) -> None:
+    im, c = cfg.image, cfg.camera
     for k in ("width", "height"):
         v = getattr(im, k)
         if not 16 <= v <= 16384:
             raise _err(source, "image", k, f"must be in [16, 16384], got {v}")
-    c = cfg.camera
     _check_range(source, "camera", "distance_mm", c.distance_mm, lo=1e-3)
     _check_range(source, "camera", "focal_px", c.focal_px, lo=1e-3)
     for k in ("tilt_deg", "roll_deg"):
@@ -311,6 +323,9 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     if 2 * c.margin_px >= min(im.width, im.height):
         raise _err(source, "camera", "margin_px", f"{c.margin_px} leaves no room in a "
                    f"{im.width}x{im.height} image")
+
+
+def _validate_pose_sections(cfg: Config, source: str) -> None:
     for k in ("x_mm", "y_mm", "z_mm"):
         _check_range(source, "pose", k, getattr(cfg.pose, k))
     for k in ("alpha_deg", "beta_deg", "gamma_deg"):
@@ -320,21 +335,28 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     _check_positive(source, "sections", "length_mm", s.length_mm)
     _check_positive(source, "sections", "flange_width_mm", s.flange_width_mm, allow_zero=True)
     _check_positive(source, "sections", "flange_height_mm", s.flange_height_mm, allow_zero=True)
-    m = cfg.markers
+
+
+def _validate_markers(cfg: Config, source: str) -> None:
+    m, s = cfg.markers, cfg.sections
     _check_positive(source, "markers", "diameter_mm", m.diameter_mm)
     _check_positive(source, "markers", "raise_mm", m.raise_mm)
+    reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM
+    lo, hi = s.flange_width_mm + reach + 2.0, s.length_mm - reach
     for key, pattern in (("layout_a", m.layout_a), ("layout_b", m.layout_b)):
         for i, (s_mm, phi) in enumerate(pattern):
-            reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM
-            if not s.flange_width_mm + reach + 2.0 <= s_mm <= s.length_mm - reach:
+            if not lo <= s_mm <= hi:
                 raise _err(source, "markers", f"{key}[{i}]",
                            f"axial offset {s_mm} mm puts the marker on the flange or off the section "
-                           f"(allowed: {s.flange_width_mm + reach + 2.0:g} to {s.length_mm - reach:g} mm)")
+                           f"(allowed: {lo:g} to {hi:g} mm)")
             if not -80 <= phi <= 80:
                 raise _err(source, "markers", f"{key}[{i}]", f"angle {phi} deg is not on the camera side")
     problems = layout_mod.layout_problems(cfg.markers_layout())
     if problems:
         raise _err(source, "markers", "layout_a/layout_b", "; ".join(problems))
+
+
+def _validate_render(cfg: Config, source: str) -> None:
     rc = cfg.render
     _check_positive(source, "render", "samples", rc.samples)
     if rc.denoise not in ("off", "fast", "balanced", "high"):
@@ -347,6 +369,9 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     if not 0.01 <= rc.filter_width_px <= 10:
         raise _err(source, "render", "filter_width_px", f"must be in [0.01, 10], got {rc.filter_width_px}")
     _check_positive(source, "render", "frame_timeout_s", rc.frame_timeout_s)
+
+
+def _validate_sensor(cfg: Config, source: str) -> None:
     se = cfg.sensor
     _check_range(source, "sensor", "full_well_e", se.full_well_e, lo=1.0)
     _check_range(source, "sensor", "read_noise_e", se.read_noise_e, lo=0.0)
@@ -356,20 +381,26 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     _check_range(source, "sensor", "low_light_ev", se.low_light_ev, lo=-12, hi=0)
     _check_range(source, "sensor", "low_light_gain_ev", se.low_light_gain_ev, lo=0, hi=12)
     _check_range(source, "sensor", "vignetting", se.vignetting, lo=0, hi=0.9)
+
+
+def _check_kinds(source, table: str, kinds: tuple[str, ...], known: tuple[str, ...], what: str) -> None:
+    for k in kinds:
+        if k not in known:
+            raise _err(source, table, "kinds", f"unknown {what} kind {k!r}")
+    if not kinds:
+        raise _err(source, table, "kinds", "is empty")
+
+
+def _validate_occlusion_glare(cfg: Config, source: str) -> None:
     o = cfg.occlusion
     _check_range(source, "occlusion", "occluders", o.occluders, lo=1, hi=8)
     _check_range(source, "occlusion", "gap_mm", o.gap_mm, lo=5)
-    for k in o.kinds:
-        if k not in ("cable", "bar", "tool", "blob"):
-            raise _err(source, "occlusion", "kinds", f"unknown occluder kind {k!r}")
-    if not o.kinds:
-        raise _err(source, "occlusion", "kinds", "is empty")
-    for k in cfg.glare.kinds:
-        if k not in ("lamp_in_view", "specular"):
-            raise _err(source, "glare", "kinds", f"unknown glare kind {k!r}")
-    if not cfg.glare.kinds:
-        raise _err(source, "glare", "kinds", "is empty")
+    _check_kinds(source, "occlusion", o.kinds, ("cable", "bar", "tool", "blob"), "occluder")
+    _check_kinds(source, "glare", cfg.glare.kinds, ("lamp_in_view", "specular"), "glare")
     _check_range(source, "glare", "bloom", cfg.glare.bloom, lo=0, hi=1)
+
+
+def _validate_labels_export(cfg: Config, source: str) -> None:
     if not 0 <= cfg.labels.min_chroma < 1:
         raise _err(source, "labels", "min_chroma", f"must be in [0, 1), got {cfg.labels.min_chroma}")
     if not 0 < cfg.labels.visible_threshold <= 1:

@@ -35,7 +35,7 @@ class FrameSpec:
     frame_id: str
     index: int        # main frames: 0..frames-1; repeatability frames continue after them
     kind: str         # "main" | "repeat"
-    split: str        # "train" | "test" | "repeat"
+    split: str        # "train" | "val" | "test" | "repeat"
     condition: str    # one of generator.config.CONDITIONS
     pose_index: int   # repeatability: static pose number (main frames: -1)
     capture: int      # repeatability: capture number (main frames: -1)

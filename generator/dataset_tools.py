@@ -2,15 +2,24 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dockfactory.core.config import config_from_dict
 from dockfactory.core.io import is_temp_name, sha256_file
 from dockfactory.generator.dataset import (
     DatasetError,
     config_differences,
     read_identity,
 )
+from dockfactory.generator.export_bop import export_bop
+from dockfactory.generator.export_coco import export_coco
+from dockfactory.generator.export_yolo import export_yolo
+from dockfactory.generator.sampler import frame_plan
+
+EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
 
@@ -93,8 +102,6 @@ def info(root) -> dict:
     out = {"root": str(root), "name": ident["name"], "version_id": ident["version_id"], "seed": ident["seed"],
            "generator_version": ident["generator_version"], "blender_version": ident["blender_version"],
            "image_size": [ident["config"]["image"]["width"], ident["config"]["image"]["height"]]}
-    from dockfactory.core.config import config_from_dict
-    from dockfactory.generator.sampler import frame_plan
     cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
     plan = frame_plan(cfg)
     done = sum(1 for s in plan if (root / "labels" / f"{s.frame_id}.json").is_file())
@@ -165,22 +172,15 @@ def diff_text(d: dict, a, b) -> str:
 
 def export(root, fmt: str) -> Path:
     """Write one export of a complete dataset as DIR/exports/<fmt>/ (built aside, then renamed)."""
-    import os
-    import shutil
-
-    from dockfactory.generator.export_bop import export_bop
-    from dockfactory.generator.export_coco import export_coco
-    from dockfactory.generator.export_yolo import export_yolo
-    writers = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
     root = Path(root)
-    if fmt not in writers:
-        raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(writers)})")
+    if fmt not in EXPORT_WRITERS:
+        raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     if not (root / "manifest.json").exists():
         raise DatasetError(f"{root}: dataset is not complete (no manifest.json); finish rendering first")
     final = root / "exports" / fmt
     tmp = root / "exports" / f".{fmt}.tmp-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
-    writers[fmt](root, tmp)
+    EXPORT_WRITERS[fmt](root, tmp)
     if final.exists():
         shutil.rmtree(final)
     os.replace(tmp, final)

@@ -63,7 +63,7 @@ def _xywh(box):
     if box is None:
         return [-1, -1, -1, -1]
     x0, y0, x1, y1 = box
-    return [int(round(x0 + 0.5)), int(round(y0 + 0.5)), int(round(x1 - x0)), int(round(y1 - y0))]
+    return [round(x0 + 0.5), round(y0 + 0.5), round(x1 - x0), round(y1 - y0)]
 
 
 def export_bop(root, out) -> Path:

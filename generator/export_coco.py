@@ -1,66 +1,206 @@
-"""COCO detection/keypoint JSON from a dataset's labels (loads in pycocotools).
+"""COCO keypoint JSON from a dataset's labels (loads in pycocotools, detectron2 and datumaro).
 
-- one image per frame of the split, ids from 1 in frame order;
-- categories 1 RedA and 2 BlueB (ids start at 1: pycocotools treats 0 as unmatched);
+Layout (datumaro's COCO layout; pycocotools and detectron2 take the paths as given)::
+
+    exports/coco/
+      annotations/person_keypoints_<split>.json   split: train, val, test, repeat (when not empty)
+      images/<split>/<frame_id>.png               hard links to the dataset's images (else copies)
+
+- one image per frame; image and annotation ids run on across the split files (train, val, test,
+  repeat, in that order), so the files of one export can be merged without collisions;
+- categories 1 RedA and 2 BlueB (ids start at 1: pycocotools treats 0 as unmatched), each with
+  the one keypoint ``centre``;
 - one annotation per marker that has visible pixels: ``bbox`` [x, y, w, h] is the projected
-  marker outline clipped to the image, ``keypoints`` [x, y, v] its projected centre, ``area``
-  the projected disc area inside the image; a marker whose visible fraction is below the
+  marker outline clipped to the image, ``segmentation`` that clipped outline as one polygon
+  (amodal: occluders are not cut out; ``[]`` when the dataset has no layout.json), ``area`` its
+  area, ``keypoints`` [x, y, v] the projected centre; a marker whose visible fraction is below the
   dataset's ``visible_threshold``, or whose colour is washed out (label ``legible`` false), gets
   ``iscrowd`` 1 (an ignore region: finding it neither helps nor hurts mAP); fully hidden and
-  out-of-frame markers get no annotation.
-- COCO's pixel convention: (0, 0) is the top-left corner of the top-left pixel, so every
-  coordinate is the label's (OpenCV convention) + 0.5.
+  out-of-frame markers get no annotation; a marker whose centre is outside the image (only part
+  of its disc in view) gets the keypoint [0, 0, 0] and ``num_keypoints`` 0.
+
+Pixel conventions (stated again in each file's ``info``):
+
+- ``bbox`` and ``segmentation``: continuous coordinates, (0, 0) is the top-left corner of the
+  top-left pixel: the label's (OpenCV) coordinates + 0.5;
+- ``keypoints``: pixel indices, the OpenCV convention of the labels ((0, 0) is the centre of the
+  top-left pixel): the label's ``center_px`` unchanged. Keypoint consumers (detectron2 and its
+  forks, MMPose) add 0.5 when they load COCO keypoints, which gives the continuous centre.
+
+``info.kpt_oks_sigmas`` holds the OKS sigma of the ``centre`` keypoint for keypoint COCOeval
+(``COCOeval(gt, dt, 'keypoints')`` needs ``params.kpt_oks_sigmas`` set to it).
 """
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
+from dockfactory.core.geometry import project_points, transform_points
 from dockfactory.core.io import load_labels, write_json_atomic
-from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
+from dockfactory.generator.export_files import place_file
+from dockfactory.generator.labels import clip_polygon
 
-COCO_SHIFT = 0.5  # OpenCV pixel centres -> COCO pixel corners
+COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
+SPLITS = ("train", "val", "test", "repeat")
+KEYPOINTS = ("centre",)
+# The sigma COCO gives eyes, its most precisely placed keypoints. With the marker's area A as the
+# scale, OKS = exp(-d^2 / (2 A (2 sigma)^2)) falls to 0.5 at d ~ 0.1 marker radius.
+KPT_OKS_SIGMAS = (0.025,)
+POLYGON_TOLERANCE_PX = 0.02   # the written polygon stays this close to the label's outline
+POLYGON_DECIMALS = 3
+
+CONVENTIONS = {
+    "bbox": "continuous: (0,0) is the top-left corner of the top-left pixel (label bbox_px + 0.5)",
+    "segmentation": "continuous, like bbox: the marker outline clipped to the image (label + 0.5)",
+    "keypoints": "pixel indices: OpenCV, (0,0) is the centre of the top-left pixel (label center_px "
+                 "unchanged); consumers such as detectron2 add 0.5 on loading",
+}
 
 
 def categories() -> list[dict]:
-    return [{"id": i + 1, "name": name, "supercategory": "marker", "keypoints": ["centre"],
+    return [{"id": i + 1, "name": name, "supercategory": "marker", "keypoints": list(KEYPOINTS),
              "skeleton": []} for i, name in enumerate(CLASS_NAMES)]
 
 
-def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5) -> dict:
+def coco_info(**extra) -> dict:
+    return {"description": "dockfactory markers", "pixel_conventions": dict(CONVENTIONS),
+            "kpt_oks_sigmas": list(KPT_OKS_SIGMAS),
+            "segmentation": f"clipped marker outline, within {POLYGON_TOLERANCE_PX} px of the "
+                            f"label's outline polygon; amodal (occluders not cut out)", **extra}
+
+
+# ----------------------------------------------------------------------------- outlines
+
+def read_layout(root) -> dict[str, Marker] | None:
+    """Markers of a dataset's layout.json by id (None when the file is missing)."""
+    path = Path(root) / "layout.json"
+    if not path.exists():
+        return None
+    recs = json.loads(path.read_text())["markers"]
+    return {r["id"]: Marker(r["id"], r["section"], r["index"], tuple(r["center_mm"]), tuple(r["normal"]),
+                            r["diameter_mm"]) for r in recs}
+
+
+def outline_px(label: dict, marker: Marker) -> np.ndarray:
+    """The marker's projected outline clipped to the image, (M, 2) float64 OpenCV px.
+
+    The same computation as the label's ``bbox_px`` (generator.labels.frame_labels), on the
+    label's K, ``cam_from_d`` and ``d_from_b``; (0, 2) when the outline is not in front of the
+    camera or not in the image.
+    """
+    w, h = label["image"]["width"], label["image"]["height"]
+    d_from_s = np.asarray(label["d_from_b"], dtype=np.float64) if marker.section == "B" else np.eye(4)
+    uv, z = project_points(np.asarray(label["camera"]["K"], dtype=np.float64),
+                           np.asarray(label["camera"]["cam_from_d"], dtype=np.float64),
+                           transform_points(d_from_s, marker_outline(marker)))
+    if not np.all(z > 0):
+        return np.zeros((0, 2))
+    bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
+    inside = (uv[:, 0].min() >= bounds[0] and uv[:, 1].min() >= bounds[1]
+              and uv[:, 0].max() <= bounds[2] and uv[:, 1].max() <= bounds[3])
+    return uv if inside else clip_polygon(uv, *bounds)
+
+
+def simplify_closed(poly: np.ndarray, tolerance: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker on a closed polygon (N, 2): every dropped vertex lies within
+    ``tolerance`` of the kept outline. Returns (M, 2), M <= N, vertices in their order."""
+    n = len(poly)
+    if n <= 4:
+        return poly
+    far = int(np.argmax(np.hypot(*(poly - poly[0]).T)))
+    chain = np.vstack([poly, poly[:1]])
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, far]] = True
+    stack = [(0, far), (far, n)]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        p, seg = chain[a], chain[a + 1:b] - chain[a]
+        d = chain[b] - p
+        length = np.hypot(*d)
+        dist = np.abs(d[0] * seg[:, 1] - d[1] * seg[:, 0]) / length if length > 0 else np.hypot(*seg.T)
+        i = int(np.argmax(dist))
+        if dist[i] > tolerance:
+            keep[a + 1 + i] = True
+            stack += [(a, a + 1 + i), (a + 1 + i, b)]
+    return poly[keep]
+
+
+def segmentation(label: dict, marker: Marker | None) -> list:
+    """COCO polygon list of the marker's clipped outline ([] without geometry)."""
+    if marker is None or "camera" not in label or "d_from_b" not in label:
+        return []
+    poly = outline_px(label, marker)
+    if len(poly) < 3:
+        return []
+    simple = simplify_closed(poly, POLYGON_TOLERANCE_PX)
+    poly = (simple if len(simple) >= 3 else poly) + COCO_SHIFT
+    return [np.round(poly, POLYGON_DECIMALS).ravel().tolist()]
+
+
+# ----------------------------------------------------------------------------- annotations
+
+def centre_in_image(m: dict, w: int, h: int) -> bool:
+    if "in_frame" in m:
+        return bool(m["in_frame"])
+    u, v = m["center_px"]
+    return -0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5
+
+
+def marker_annotation(label: dict, m: dict, visible_threshold: float, marker: Marker | None) -> dict:
+    """One COCO annotation (without ids) of label marker record ``m``."""
+    x0, y0, x1, y1 = m["bbox_px"]
+    visible = m["visible_fraction"] >= visible_threshold and m.get("legible", True)
+    if centre_in_image(m, label["image"]["width"], label["image"]["height"]):
+        u, v = m["center_px"]
+        keypoints, n_kp = [float(u), float(v), 2 if m.get("visibility", 2) == 2 else 1], 1
+    else:
+        keypoints, n_kp = [0, 0, 0], 0
+    return {"category_id": m["class_id"] + 1,
+            "bbox": [x0 + COCO_SHIFT, y0 + COCO_SHIFT, x1 - x0, y1 - y0],
+            "segmentation": segmentation(label, marker), "area": m["area_in_frame_px"],
+            "iscrowd": 0 if visible else 1, "keypoints": keypoints, "num_keypoints": n_kp,
+            "marker_id": m["id"], "visible_fraction": m["visible_fraction"]}
+
+
+def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layout: dict | None = None,
+                     first_image_id: int = 1, first_annotation_id: int = 1, info: dict | None = None) -> dict:
+    """The COCO dict of ``labels``; ``layout`` (marker id -> Marker) gives the polygons."""
     images, annotations = [], []
-    for image_id, lab in enumerate(labels, start=1):
+    for image_id, lab in enumerate(labels, start=first_image_id):
         images.append({"id": image_id, "file_name": f"{lab['frame_id']}.png", "frame_id": lab["frame_id"],
                        "width": lab["image"]["width"], "height": lab["image"]["height"],
                        "condition": lab["spec"]["condition"], "split": lab["spec"]["split"]})
         for m in lab["markers"]:
             if not m.get("visible_pixels") or m["bbox_px"] is None:
                 continue
-            x0, y0, x1, y1 = m["bbox_px"]
-            u, v = m["center_px"]
-            visible = m["visible_fraction"] >= visible_threshold and m.get("legible", True)
-            annotations.append({
-                "id": len(annotations) + 1, "image_id": image_id, "category_id": m["class_id"] + 1,
-                "bbox": [x0 + COCO_SHIFT, y0 + COCO_SHIFT, x1 - x0, y1 - y0],
-                "area": m["area_in_frame_px"], "iscrowd": 0 if visible else 1,
-                "keypoints": [u + COCO_SHIFT, v + COCO_SHIFT, 2 if m["visibility"] == 2 else 1],
-                "num_keypoints": 1, "marker_id": m["id"], "visible_fraction": m["visible_fraction"],
-            })
-    return {"info": {"description": "dockfactory markers", "pixel_convention":
-                     "COCO: (0,0) is the top-left corner of the top-left pixel"},
-            "images": images, "annotations": annotations, "categories": categories()}
-
-
-def write_coco(root, split: str, out_path) -> Path:
-    root = Path(root)
-    ident = json.loads((root / "dataset.json").read_text())
-    threshold = ident["config"]["labels"]["visible_threshold"]
-    coco = coco_from_labels(load_labels(root, split), threshold)
-    write_json_atomic(out_path, coco, indent=None)
-    return Path(out_path)
+            ann = marker_annotation(lab, m, visible_threshold, (layout or {}).get(m["id"]))
+            annotations.append({"id": first_annotation_id + len(annotations), "image_id": image_id, **ann})
+    return {"info": info if info is not None else coco_info(), "images": images,
+            "annotations": annotations, "categories": categories()}
 
 
 def export_coco(root, out) -> Path:
-    for split in ("train", "test", "repeat"):
-        write_coco(root, split, Path(out) / f"{split}.json")
-    return Path(out)
+    """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
+    root, out = Path(root), Path(out)
+    ident = json.loads((root / "dataset.json").read_text())
+    threshold = ident["config"]["labels"]["visible_threshold"]
+    layout = read_layout(root)
+    labels = load_labels(root)
+    next_image, next_ann = 1, 1
+    for split in SPLITS:
+        split_labels = [lab for lab in labels if lab["spec"]["split"] == split]
+        if not split_labels:
+            continue
+        info = coco_info(version=str(ident.get("version_id", "")), dataset=ident.get("name", ""), split=split)
+        coco = coco_from_labels(split_labels, threshold, layout=layout, first_image_id=next_image,
+                                first_annotation_id=next_ann, info=info)
+        next_image += len(coco["images"])
+        next_ann += len(coco["annotations"])
+        for lab in split_labels:
+            place_file(root / "images" / f"{lab['frame_id']}.png", out / "images" / split / f"{lab['frame_id']}.png")
+        write_json_atomic(out / "annotations" / f"person_keypoints_{split}.json", coco, indent=None)
+    return out

@@ -1,13 +1,20 @@
-"""YOLO export in the layout ultralytics reads.
+"""YOLO export in the layout ultralytics reads (a copied or moved export folder keeps working).
 
 exports/yolo/
-  images/{train,test,repeat}/<id>.png   (hard links to the dataset's images)
-  labels/{train,test,repeat}/<id>.txt   one line per marker: class cx cy w h (normalised)
-  train.txt, test.txt                   image lists
-  data.yaml                             path, train, val, test, names [RedA, BlueB]
-Boxes are the projected marker outlines clipped to the image; markers whose visible fraction is
-below the dataset's visible_threshold, or whose colour is washed out (``legible`` false), are left
-out (YOLO has no ignore regions).
+  data.yaml                              train/val/test relative to the yaml (no ``path:`` key:
+                                         ultralytics then resolves them against the yaml's folder)
+  images/{train,val,test,repeat}/<id>.png   hard links to the dataset's images (else copies)
+  labels/{train,val,test,repeat}/<id>.txt   one line per marker: class cx cy w h (normalised)
+
+``images/train``, ``images/val`` and ``images/test`` always exist (empty when the split is);
+ultralytics finds each image's label by replacing ``/images/`` with ``/labels/`` and the
+extension with ``.txt``. ``val`` is the dataset's validation split (``[dataset] val_fraction``,
+carved from train), never the test split while there are train frames: without a val split it
+falls back to the train split (and to the test split for a dataset with no train frames, which can
+only be evaluated). Boxes are the projected marker outlines clipped to the image, in continuous
+coordinates ((0, 0) is the top-left corner of the top-left pixel: label + 0.5) divided by the
+image size; markers whose visible fraction is below the dataset's visible_threshold, or whose
+colour is washed out (``legible`` false), are left out (YOLO has no ignore regions).
 """
 from __future__ import annotations
 
@@ -17,6 +24,8 @@ from pathlib import Path
 from dockfactory.core.io import load_labels, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.export_files import place_file
+
+YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
 
 def yolo_lines(label: dict, visible_threshold: float) -> list[str]:
@@ -38,20 +47,34 @@ def parse_yolo_line(line: str, w: int, h: int) -> tuple[int, list[float]]:
     return int(c), [cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2]
 
 
+def data_yaml(version_id: str, counts: dict[str, int]) -> str:
+    """data.yaml text for split frame ``counts``: keys relative to the yaml, no ``path:``."""
+    if counts.get("val"):
+        val, note = "val", ""
+    elif counts.get("train"):
+        val, note = "train", "  # this dataset has no val split ([dataset] val_fraction): validating on train"
+    else:
+        val, note = "test", "  # no train frames: an evaluation-only dataset"
+    names = "".join(f"  {i}: {n}\n" for i, n in enumerate(CLASS_NAMES))
+    frames = ", ".join(f"{s} {counts.get(s, 0)}" for s in (*YOLO_SPLITS, "repeat"))
+    return (f"# dockfactory dataset {version_id}: frames {frames}\n"
+            f"# paths are relative to this file; labels/<split>/<id>.txt beside images/<split>/<id>.png\n"
+            f"train: images/train\nval: images/{val}{note}\ntest: images/test\n"
+            f"nc: {len(CLASS_NAMES)}\nnames:\n{names}")
+
+
 def export_yolo(root, out) -> Path:
     root, out = Path(root), Path(out)
     ident = json.loads((root / "dataset.json").read_text())
     threshold = ident["config"]["labels"]["visible_threshold"]
-    lists: dict[str, list[str]] = {}
+    counts: dict[str, int] = {}
+    for split in YOLO_SPLITS:
+        (out / "images" / split).mkdir(parents=True, exist_ok=True)
+        (out / "labels" / split).mkdir(parents=True, exist_ok=True)
     for label in load_labels(root):
         split, fid = label["spec"]["split"], label["frame_id"]
         place_file(root / "images" / f"{fid}.png", out / "images" / split / f"{fid}.png")
         write_text_atomic(out / "labels" / split / f"{fid}.txt", "".join(l + "\n" for l in yolo_lines(label, threshold)))
-        lists.setdefault(split, []).append(f"./images/{split}/{fid}.png")
-    for split, items in lists.items():
-        write_text_atomic(out / f"{split}.txt", "".join(i + "\n" for i in items))
-    names = "".join(f"  {i}: {n}\n" for i, n in enumerate(CLASS_NAMES))
-    write_text_atomic(out / "data.yaml",
-                      f"# dockfactory dataset {ident['version_id']}\npath: {(root / 'exports' / 'yolo').resolve()}\n"
-                      f"train: train.txt\nval: test.txt\ntest: test.txt\nnc: {len(CLASS_NAMES)}\nnames:\n{names}")
+        counts[split] = counts.get(split, 0) + 1
+    write_text_atomic(out / "data.yaml", data_yaml(str(ident.get("version_id", "")), counts))
     return out

@@ -66,8 +66,25 @@ def condition_counts(weights: dict[str, float], total: int) -> dict[str, int]:
     return counts
 
 
+def _split_members(cfg: Config, members: np.ndarray, ci: int) -> dict[str, np.ndarray]:
+    """Frame indices of one condition per split: test, then val carved from train.
+
+    One permutation of the condition's frames decides everything: its first
+    round(train_fraction * n) frames are train + val, the rest test (so ``val_fraction`` never
+    moves a frame into or out of the test split); the first round(val_fraction * n_train) of
+    the train frames are val.
+    """
+    d = cfg.dataset
+    n_train = int(np.floor(d.train_fraction * len(members) + 0.5))
+    n_val = int(np.floor(d.val_fraction * n_train + 0.5))
+    order = rng_for(d.seed, STREAM_PLAN, 1 + ci).permutation(len(members))
+    return {"val": members[order[:n_val]], "train": members[order[n_val:n_train]],
+            "test": members[order[n_train:]]}
+
+
 def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
-    """Every frame of the dataset: main frames (train/test) then the repeatability subset."""
+    """Every frame of the dataset: main frames (train/val/test, stratified by condition) then the
+    repeatability subset."""
     seed, n = cfg.dataset.seed, cfg.dataset.frames
     counts = condition_counts(dataclasses.asdict(cfg.conditions), n)
     perm = rng_for(seed, STREAM_PLAN).permutation(n)
@@ -78,10 +95,8 @@ def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
         members = np.sort(perm[start:start + counts[cond]])
         start += counts[cond]
         condition_of[members] = cond
-        n_train = int(np.floor(cfg.dataset.train_fraction * len(members) + 0.5))
-        order = rng_for(seed, STREAM_PLAN, 1 + ci).permutation(len(members))
-        split_of[members[order[:n_train]]] = "train"
-        split_of[members[order[n_train:]]] = "test"
+        for split, idx in _split_members(cfg, members, ci).items():
+            split_of[idx] = split
     specs = [FrameSpec(f"{i:06d}", i, "main", str(split_of[i]), str(condition_of[i]), -1, -1)
              for i in range(n)]
     r = cfg.repeatability

@@ -12,6 +12,7 @@ def test_defaults_are_valid_and_match_the_brief():
     assert cfg.markers.diameter_mm == 20
     assert cfg.pose.x_mm == (5.0, 150.0) and cfg.pose.gamma_deg == (-5.0, 5.0)
     assert cfg.camera.distance_mm == (1000.0, 1800.0)
+    assert cfg.dataset.train_fraction == 0.8 and cfg.dataset.val_fraction == 0.1
     assert isinstance(cfg, Config)
 
 
@@ -32,6 +33,11 @@ def test_repo_configs_load(repo_root):
     ("[markers]\nlayout_a = [[50, 0], [52, 1], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout"),
     ("[markers]\nlayout_a = [[5, 0], [60, 10], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout_a[0]"),
     ("[dataset\nframes = 3\n", "TOML"),
+    ("[dataset]\nval_fraction = 1.0\n", "val_fraction"),
+    ("[dataset]\nval_fraction = -0.1\n", "val_fraction"),
+    ("[dataset]\ntrain_fraction = 1.5\n", "train_fraction"),
+    ("[glare]\nkinds = []\n", "kinds"),
+    ("[occlusion]\nkinds = ['rope']\n", "rope"),
 ])
 def test_bad_configs_name_the_key(tmp_config, text, key):
     path = tmp_config(text)
@@ -82,3 +88,14 @@ def test_version_id_covers_config_code_and_blender():
     assert base != dataset_version_id(config_from_dict({"dataset": {"seed": 1}}).canonical_json(), "5.0.1", "0.1.0+aaaa")
     assert generator_version().endswith("+" + generator_source_fingerprint())
     assert len(generator_source_fingerprint()) == 16
+
+
+def test_validate_is_split_into_short_functions():
+    import ast
+    import inspect
+
+    from dockfactory.core import config
+    tree = ast.parse(inspect.getsource(config))
+    long = [(f.name, f.end_lineno - f.lineno + 1) for f in ast.walk(tree)
+            if isinstance(f, ast.FunctionDef) and f.end_lineno - f.lineno + 1 > 50]
+    assert long == []

@@ -176,7 +176,8 @@ def test_yolo_round_trip(job):
     from dockfactory.generator.export_yolo import parse_yolo_line
     _, _, clean = job
     yolo = clean / "exports" / "yolo"
-    assert "names:\n  0: RedA\n  1: BlueB" in (yolo / "data.yaml").read_text()
+    text = (yolo / "data.yaml").read_text()
+    assert "names:\n  0: RedA\n  1: BlueB" in text and "path:" not in text
     n = 0
     for lab_path in (clean / "labels").glob("*.json"):
         lab = json.loads(lab_path.read_text())
@@ -196,9 +197,8 @@ def test_yolo_round_trip(job):
 def test_coco_round_trip(job):
     from pycocotools.coco import COCO
     _, _, clean = job
-    coco = COCO(str(clean / "exports" / "coco" / "test.json"))
+    coco = COCO(str(clean / "exports" / "coco" / "annotations" / "person_keypoints_test.json"))
     assert [c["name"] for c in coco.loadCats(coco.getCatIds())] == ["RedA", "BlueB"]
-    assert min(coco.getImgIds()) == 1 and min(coco.getAnnIds()) == 1
     for img in coco.loadImgs(coco.getImgIds()):
         lab = json.loads((clean / "labels" / f"{img['frame_id']}.json").read_text())
         by_id = {m["id"]: m for m in lab["markers"]}
@@ -208,7 +208,10 @@ def test_coco_round_trip(job):
             m = by_id[a["marker_id"]]
             x, y, w, h = a["bbox"]
             assert np.allclose([x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5], m["bbox_px"], atol=1e-9)
-            assert np.allclose(np.array(a["keypoints"][:2]) - 0.5, m["center_px"], atol=1e-9)
+            # keypoints are pixel indices (the label's OpenCV centre), boxes continuous (+0.5)
+            assert a["keypoints"][:2] == (m["center_px"] if m["in_frame"] else [0, 0])
+            assert (img["file_name"], img["frame_id"]) == (f"{lab['frame_id']}.png", lab["frame_id"])
+            assert a["segmentation"] and len(a["segmentation"][0]) >= 6
             assert a["category_id"] == m["class_id"] + 1 and a["area"] > 0
             assert a["iscrowd"] == (0 if m["visible_fraction"] >= 0.5 and m["legible"] else 1)
 

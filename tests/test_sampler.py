@@ -59,9 +59,45 @@ def test_condition_counts_are_exact_and_split_is_stratified():
     assert len(by["normal"]) == 2000
     assert sum(len(by[c]) for c in CHALLENGING) == 1000
     for cond, splits in by.items():
-        assert splits.count("train") == int(np.floor(0.8 * len(splits) + 0.5)), cond
+        n_train = int(np.floor(0.8 * len(splits) + 0.5))
+        assert splits.count("train") + splits.count("val") == n_train, cond
+        assert splits.count("val") == int(np.floor(0.1 * n_train + 0.5)), cond
     assert condition_counts({"normal": 1.0, "glare": 1.0, "low_light": 1.0}, 10) == \
         {"normal": 4, "glare": 3, "low_light": 3}
+
+
+def test_val_is_carved_from_train_and_leaves_test_alone():
+    base = {"frames": 600, "seed": 9, "train_fraction": 0.7}
+    without = frame_plan(config_from_dict({"dataset": {**base, "val_fraction": 0.0}}))
+    with_val = frame_plan(config_from_dict({"dataset": {**base, "val_fraction": 0.25}}))
+    assert with_val == frame_plan(config_from_dict({"dataset": {**base, "val_fraction": 0.25}}))  # deterministic
+    assert "val" not in {s.split for s in without}
+    for a, b in zip(without, with_val):
+        assert (a.frame_id, a.condition) == (b.frame_id, b.condition)
+        assert (a.split == "test") == (b.split == "test")
+        assert b.split != "val" or a.split == "train"
+    for cond in {s.condition for s in with_val}:
+        n_train = sum(1 for s in without if s.condition == cond and s.split == "train")
+        assert sum(1 for s in with_val if s.condition == cond and s.split == "val") == int(np.floor(0.25 * n_train + 0.5))
+
+
+# sha256 of the comma-joined test frame ids, computed with frame_plan at commit 8f58d10 (before
+# the val split existed): adding val_fraction must not move a frame into or out of the test split
+TEST_SPLIT_SHA256 = {
+    "detector.toml": (61, "108ebf372716564602ea87135fd96ef90bf9427fc93df43bb97aa2abecedae93"),
+    "paper.toml": (601, "0d1723b453a57bd2b0099c3592ee3428c2b1e44cac9c5bbaa9ad55e25d5526b8"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(TEST_SPLIT_SHA256))
+def test_test_split_of_shipped_configs_is_unchanged(repo_root, name):
+    import hashlib
+
+    from dockfactory.core.config import load_config
+    plan = frame_plan(load_config(repo_root / "configs" / name))
+    test_ids = [s.frame_id for s in plan if s.split == "test"]
+    assert (len(test_ids), hashlib.sha256(",".join(test_ids).encode()).hexdigest()) == TEST_SPLIT_SHA256[name]
+    assert any(s.split == "val" for s in plan)
 
 
 def test_sampled_ranges_and_focal_fit(cfg):
