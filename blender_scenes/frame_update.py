@@ -22,8 +22,8 @@ def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
     return Matrix(m.tolist())
 
 
-def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
-    scene = h.scene
+def _apply_render_settings(scene, frame: FrameScene) -> None:
+    """Cycles samples, seed, bounces, adaptive sampling, filter and denoising of the frame."""
     c = scene.cycles
     rs = frame.render
     c.samples = rs.samples
@@ -39,9 +39,8 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
         c.denoising_quality = DENOISE_QUALITY[rs.denoise]
         c.denoising_prefilter = rs.denoise_prefilter.upper()
 
-    h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
 
-    cam = frame.camera
+def _apply_camera(h: SceneHandles, cam) -> None:
     h.camera.matrix_world = Matrix(blender_world_from_camera(cam.cam_from_d_array(), MM).tolist())
     intr = blender_camera_intrinsics(cam.focal_px, cam.principal_point, cam.width, cam.height)
     h.camera.data.lens = intr["lens_mm"]
@@ -49,6 +48,9 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     h.camera.data.shift_x = intr["shift_x"]
     h.camera.data.shift_y = intr["shift_y"]
 
+
+def _apply_lights(h: SceneHandles, frame: FrameScene) -> None:
+    """Place and switch on the frame's lights; the others are hidden."""
     lights = {light.name: light for light in frame.lights}
     for name, obj in h.lights.items():
         light = lights.get(name)
@@ -60,7 +62,9 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
             obj.data.size = light.size_mm * MM
             obj.data.color = light.color
 
-    a = frame.appearance
+
+def _apply_appearance(h: SceneHandles, a) -> None:
+    """Paint, marker, floor, wall and world colours of the frame's appearance ``a``."""
     for mat, color in ((h.paint_a, a.section_color_a), (h.paint_b, a.section_color_b)):
         mats.set_paint(mat, color, a.metallic, a.roughness, a.roughness_variation, a.grime,
                        a.texture_scale, a.texture_offset)
@@ -71,6 +75,9 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     mats.set_diffuse(h.wall, color=a.wall_color)
     mats.set_world(h.world, a.world_color, a.world_strength)
 
+
+def _apply_props(h: SceneHandles, frame: FrameScene) -> None:
+    """Show the frame's props from the pooled objects; hide every pooled object it does not use."""
     used = set()
     for p in frame.props:
         key = (p.kind, p.slot)
@@ -87,3 +94,12 @@ def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     for key, obj in h.props.items():
         if key not in used:
             obj.hide_render = True
+
+
+def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
+    _apply_render_settings(h.scene, frame)
+    h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
+    _apply_camera(h, frame.camera)
+    _apply_lights(h, frame)
+    _apply_appearance(h, frame.appearance)
+    _apply_props(h, frame)

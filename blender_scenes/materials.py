@@ -70,6 +70,60 @@ def set_diffuse(mat, color=None, gloss=None, roughness=None):
         nodes["rough"].outputs[0].default_value = roughness
 
 
+def _noise_factor(nt):
+    """The "Fac" output of a one-octave noise texture on object coordinates (mapping node "mapping")."""
+    coords = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.name = "mapping"
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Detail"].default_value = 0.0   # one octave: finer octaves cost ~10 % of the render at 1 spp
+    nt.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], noise.inputs["Vector"])
+    return noise.outputs["Fac"]
+
+
+def _grimy_colour(nt, paint, grime, fac):
+    """Diffuse colour = paint * (1 - grime * noise); returns the colour output."""
+    darken = _math(nt, "SUBTRACT", 1.0, _math(nt, "MULTIPLY", grime.outputs[0], fac))
+    col = nt.nodes.new("ShaderNodeMix")
+    col.data_type = "RGBA"
+    col.blend_type = "MULTIPLY"
+    col.inputs["Factor"].default_value = 1.0
+    nt.links.new(paint.outputs[0], col.inputs[6])
+    nt.links.new(darken, col.inputs[7])
+    return col.outputs[2]
+
+
+def _glossy_tint(nt, metal, paint):
+    """Glossy tint between white (paint clear coat) and the paint colour (metal); the colour output."""
+    tint = nt.nodes.new("ShaderNodeMix")
+    tint.data_type = "RGBA"
+    tint.inputs[6].default_value = (1.0, 1.0, 1.0, 1.0)
+    nt.links.new(metal.outputs[0], tint.inputs["Factor"])
+    nt.links.new(paint.outputs[0], tint.inputs[7])
+    return tint.outputs[2]
+
+
+def _diffuse_glossy_mix(nt, out, colour, tint, roughness, metal) -> None:
+    """Diffuse + GGX glossy into ``out``; the glossy share grows with metalness and at grazing
+    angles (layer weight)."""
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(colour, diffuse.inputs["Color"])
+    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.distribution = "GGX"
+    nt.links.new(tint, glossy.inputs["Color"])
+    nt.links.new(roughness, glossy.inputs["Roughness"])
+    layer = nt.nodes.new("ShaderNodeLayerWeight")
+    layer.inputs["Blend"].default_value = 0.3
+    share = _math(nt, "ADD", _math(nt, "MULTIPLY", metal.outputs[0], 0.6),
+                  _math(nt, "MULTIPLY", layer.outputs["Fresnel"], 0.4), clamp=True)
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(share, mix.inputs[0])
+    nt.links.new(diffuse.outputs[0], mix.inputs[1])
+    nt.links.new(glossy.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+
+
 def paint_material(name):
     """Painted industrial metal: a noise texture drives grime (darker paint) and roughness.
 
@@ -80,51 +134,17 @@ def paint_material(name):
     mat.use_nodes = True
     nt = mat.node_tree
     out = _clear(nt)
-    coords = nt.nodes.new("ShaderNodeTexCoord")
-    mapping = nt.nodes.new("ShaderNodeMapping")
-    mapping.name = "mapping"
-    noise = nt.nodes.new("ShaderNodeTexNoise")
-    noise.inputs["Detail"].default_value = 0.0   # one octave: finer octaves cost ~10 % of the render at 1 spp
-    nt.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
-    nt.links.new(mapping.outputs["Vector"], noise.inputs["Vector"])
-    fac = noise.outputs["Fac"]
+    fac = _noise_factor(nt)
     paint = nt.nodes.new("ShaderNodeRGB")
     paint.name = "paint"
     grime, rough, rough_var = _value(nt, "grime", 0.1), _value(nt, "rough", 0.4), _value(nt, "rough_var", 0.1)
     metal = _value(nt, "metal", 0.3)
-    # diffuse colour = paint * (1 - grime * noise)
-    darken = _math(nt, "SUBTRACT", 1.0, _math(nt, "MULTIPLY", grime.outputs[0], fac))
-    col = nt.nodes.new("ShaderNodeMix")
-    col.data_type = "RGBA"
-    col.blend_type = "MULTIPLY"
-    col.inputs["Factor"].default_value = 1.0
-    nt.links.new(paint.outputs[0], col.inputs[6])
-    nt.links.new(darken, col.inputs[7])
+    colour = _grimy_colour(nt, paint, grime, fac)
     # roughness = rough + rough_var * (noise - 0.5)
     roughness = _math(nt, "ADD", rough.outputs[0],
                       _math(nt, "MULTIPLY", _math(nt, "SUBTRACT", fac, 0.5), rough_var.outputs[0]), clamp=True)
-    # glossy tint: between white (paint clear coat) and the paint colour (metal)
-    tint = nt.nodes.new("ShaderNodeMix")
-    tint.data_type = "RGBA"
-    tint.inputs[6].default_value = (1.0, 1.0, 1.0, 1.0)
-    nt.links.new(metal.outputs[0], tint.inputs["Factor"])
-    nt.links.new(paint.outputs[0], tint.inputs[7])
-    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    nt.links.new(col.outputs[2], diffuse.inputs["Color"])
-    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.distribution = "GGX"
-    nt.links.new(tint.outputs[2], glossy.inputs["Color"])
-    nt.links.new(roughness, glossy.inputs["Roughness"])
-    # glossy share grows with metalness and at grazing angles (layer weight)
-    layer = nt.nodes.new("ShaderNodeLayerWeight")
-    layer.inputs["Blend"].default_value = 0.3
-    share = _math(nt, "ADD", _math(nt, "MULTIPLY", metal.outputs[0], 0.6),
-                  _math(nt, "MULTIPLY", layer.outputs["Fresnel"], 0.4), clamp=True)
-    mix = nt.nodes.new("ShaderNodeMixShader")
-    nt.links.new(share, mix.inputs[0])
-    nt.links.new(diffuse.outputs[0], mix.inputs[1])
-    nt.links.new(glossy.outputs[0], mix.inputs[2])
-    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    tint = _glossy_tint(nt, metal, paint)
+    _diffuse_glossy_mix(nt, out, colour, tint, roughness, metal)
     return mat
 
 

@@ -95,62 +95,61 @@ def configure_render(scene, width, height, threads, exr_path):
     r.use_file_extension = False
 
 
-def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_path: str) -> SceneHandles:
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    configure_render(scene, width, height, threads, exr_path)
-    world = mats.world(scene)
+def _section_cradles(static: StaticScene, sec: str, sign: int, support) -> list:
+    """The two cradles under section ``sec`` (in the section's frame)."""
+    r_m = static.radius_mm * MM
+    cradles = []
+    for x_mm in (sign * 0.25 * static.length_mm, sign * 0.8 * static.length_mm):
+        cradle = meshes.unit_box(f"cradle_{sec}_{x_mm:.0f}")
+        cradle.data.materials.append(support)
+        height_mm = FLOOR_GAP_MM + 120.0  # from the floor to 120 mm up the section's underside
+        cradle.scale = (0.12, height_mm * MM, 1.5 * r_m)
+        cradle.location = (x_mm * MM, (floor_y_mm(static.radius_mm) + height_mm / 2) * MM, 0)
+        cradles.append(cradle)
+    return cradles
 
+
+def _build_section(static: StaticScene, sec: str, sign: int, paint, face, support, parent) -> None:
+    """Body, flange, paint band and cradles of one section; section A in D: x in [-L, 0], section
+    B in its own frame: x in [0, L] (parented to ``parent``)."""
     r_m, l_m = static.radius_mm * MM, static.length_mm * MM
-    paint_a, paint_b = mats.paint_material("paint_A"), mats.paint_material("paint_B")
-    red = mats.diffuse_material("marker_red", (0.6, 0.02, 0.02))
-    blue = mats.diffuse_material("marker_blue", (0.02, 0.05, 0.6))
-    ring = mats.diffuse_material("marker_ring", (0.02, 0.02, 0.02))
-    face = mats.diffuse_material("docking_face", (0.08, 0.08, 0.09), gloss=0.6, roughness=0.3)
-    support = mats.diffuse_material("cradle", (0.05, 0.12, 0.2))
-
-    # section A in D: x in [-L, 0]; section B in its own frame: x in [0, L], parented to b_root
-    b_root = bpy.data.objects.new("B_root", None)
-    scene.collection.objects.link(b_root)
     fh, fw = static.flange_height_mm * MM, static.flange_width_mm * MM
-    for sec, sign, paint, parent in (("A", -1, paint_a, None), ("B", 1, paint_b, b_root)):
-        body = meshes.tube_x(f"section_{sec}", min(0, sign * l_m), max(0, sign * l_m), r_m)
-        flange = meshes.tube_x(f"flange_{sec}", min(0, sign * fw), max(0, sign * fw), r_m + fh, segments=256)
-        band = meshes.tube_x(f"band_{sec}", min(sign * 0.45 * l_m, sign * 0.45 * l_m + sign * 0.02),
-                             max(sign * 0.45 * l_m, sign * 0.45 * l_m + sign * 0.02), r_m + 0.002)
-        body.data.materials.append(paint)
-        band.data.materials.append(paint)
-        flange.data.materials.append(face)
-        objs = [body, flange, band]
+    body = meshes.tube_x(f"section_{sec}", min(0, sign * l_m), max(0, sign * l_m), r_m)
+    flange = meshes.tube_x(f"flange_{sec}", min(0, sign * fw), max(0, sign * fw), r_m + fh, segments=256)
+    band = meshes.tube_x(f"band_{sec}", min(sign * 0.45 * l_m, sign * 0.45 * l_m + sign * 0.02),
+                         max(sign * 0.45 * l_m, sign * 0.45 * l_m + sign * 0.02), r_m + 0.002)
+    body.data.materials.append(paint)
+    band.data.materials.append(paint)
+    flange.data.materials.append(face)
+    objs = [body, flange, band]
+    for o in objs:
+        o.pass_index = SECTION_PASS_INDEX[sec]
+    objs += _section_cradles(static, sec, sign, support)
+    if parent is not None:
         for o in objs:
-            o.pass_index = SECTION_PASS_INDEX[sec]
-        for x_mm in (sign * 0.25 * static.length_mm, sign * 0.8 * static.length_mm):
-            cradle = meshes.unit_box(f"cradle_{sec}_{x_mm:.0f}")
-            cradle.data.materials.append(support)
-            height_mm = FLOOR_GAP_MM + 120.0  # from the floor to 120 mm up the section's underside
-            cradle.scale = (0.12, height_mm * MM, 1.5 * r_m)
-            cradle.location = (x_mm * MM, (floor_y_mm(static.radius_mm) + height_mm / 2) * MM, 0)
-            objs.append(cradle)
-        if parent is not None:
-            for o in objs:
-                o.parent = parent
+            o.parent = parent
 
-    for m in static.markers:
-        rot = _basis_from_normal(m.normal)
-        centre = np.array(m.center_mm) * MM
-        disc = meshes.disc_z(f"marker_{m.id}", m.diameter_mm / 2 * MM)
-        disc.data.materials.append(red if m.section == "A" else blue)
-        disc.pass_index = m.pass_index
-        disc.matrix_basis = _matrix(rot, centre)
-        base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
-                                 -(1.0 + 1.5) * MM, -0.05 * MM)  # top just below the disc
-        base.data.materials.append(ring)
-        base.pass_index = SECTION_PASS_INDEX[m.section]
-        base.matrix_basis = _matrix(rot, centre)
-        if m.section == "B":
-            disc.parent = b_root
-            base.parent = b_root
 
+def _build_marker(m, disc_material, ring_material, b_root) -> None:
+    """A marker's disc and the dark ring under it; B's markers are parented to ``b_root``."""
+    rot = _basis_from_normal(m.normal)
+    centre = np.array(m.center_mm) * MM
+    disc = meshes.disc_z(f"marker_{m.id}", m.diameter_mm / 2 * MM)
+    disc.data.materials.append(disc_material)
+    disc.pass_index = m.pass_index
+    disc.matrix_basis = _matrix(rot, centre)
+    base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
+                             -(1.0 + 1.5) * MM, -0.05 * MM)  # top just below the disc
+    base.data.materials.append(ring_material)
+    base.pass_index = SECTION_PASS_INDEX[m.section]
+    base.matrix_basis = _matrix(rot, centre)
+    if m.section == "B":
+        disc.parent = b_root
+        base.parent = b_root
+
+
+def _build_floor_and_wall(static: StaticScene) -> tuple[object, object]:
+    """(floor material, wall material) of the floor plane and the back wall."""
     floor_y = floor_y_mm(static.radius_mm) * MM
     floor = meshes.mesh_object("floor", [(-20, floor_y, -20), (20, floor_y, -20), (20, floor_y, 20),
                                          (-20, floor_y, 20)], [(3, 2, 1, 0)])
@@ -160,11 +159,11 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
                               [(0, 1, 2, 3)])
     wall_mat = mats.diffuse_material("wall")
     wall.data.materials.append(wall_mat)
+    return floor_mat, wall_mat
 
-    handles = SceneHandles(scene=scene, camera=None, b_root=b_root, paint_a=paint_a, paint_b=paint_b,
-                           marker_red=red, marker_blue=blue, ring=ring, floor=floor_mat,
-                           wall=wall_mat, world=world)
 
+def _build_props(static: StaticScene, handles: SceneHandles) -> None:
+    """Hidden occluder and clutter slots plus the lamp prop, registered in ``handles``."""
     builders = {"cable": meshes.unit_cylinder_x, "bar": meshes.unit_box, "tool": meshes.unit_tool,
                 "blob": meshes.unit_sphere, "box": meshes.unit_box, "drum": meshes.unit_cylinder_x}
     slots = {k: static.max_occluders for k in OCCLUDER_KINDS}
@@ -185,6 +184,9 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     handles.props[("lamp", 0)] = lamp
     handles.prop_materials[("lamp", 0)] = lamp_mat
 
+
+def _build_lights_and_camera(scene, handles: SceneHandles) -> None:
+    """The hidden key, fill and glare disk lights and the scene camera, registered in ``handles``."""
     for name in ("key", "fill", "glare"):
         data = bpy.data.lights.new(name, type="AREA")
         data.shape = "DISK"
@@ -192,7 +194,6 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
         scene.collection.objects.link(obj)
         obj.hide_render = True
         handles.lights[name] = obj
-
     cam_data = bpy.data.cameras.new("camera")
     cam_data.sensor_fit = "HORIZONTAL"
     cam_data.clip_start, cam_data.clip_end = 0.05, 100.0
@@ -200,5 +201,32 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     scene.collection.objects.link(cam)
     scene.camera = cam
     handles.camera = cam
-    return handles
 
+
+def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_path: str) -> SceneHandles:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    configure_render(scene, width, height, threads, exr_path)
+    world = mats.world(scene)
+
+    paint_a, paint_b = mats.paint_material("paint_A"), mats.paint_material("paint_B")
+    red = mats.diffuse_material("marker_red", (0.6, 0.02, 0.02))
+    blue = mats.diffuse_material("marker_blue", (0.02, 0.05, 0.6))
+    ring = mats.diffuse_material("marker_ring", (0.02, 0.02, 0.02))
+    face = mats.diffuse_material("docking_face", (0.08, 0.08, 0.09), gloss=0.6, roughness=0.3)
+    support = mats.diffuse_material("cradle", (0.05, 0.12, 0.2))
+
+    b_root = bpy.data.objects.new("B_root", None)
+    scene.collection.objects.link(b_root)
+    for sec, sign, paint, parent in (("A", -1, paint_a, None), ("B", 1, paint_b, b_root)):
+        _build_section(static, sec, sign, paint, face, support, parent)
+    for m in static.markers:
+        _build_marker(m, red if m.section == "A" else blue, ring, b_root)
+    floor_mat, wall_mat = _build_floor_and_wall(static)
+
+    handles = SceneHandles(scene=scene, camera=None, b_root=b_root, paint_a=paint_a, paint_b=paint_b,
+                           marker_red=red, marker_blue=blue, ring=ring, floor=floor_mat,
+                           wall=wall_mat, world=world)
+    _build_props(static, handles)
+    _build_lights_and_camera(scene, handles)
+    return handles

@@ -96,34 +96,39 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     return Refined(center=second.center, box=second.box, quality=second.quality, refined=True)
 
 
-def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
-                 edge_bias_px: float) -> Refined:
+def _checked_box(image: np.ndarray, box) -> np.ndarray:
+    """``box`` as a ``(4,) float64`` array; ValueError for a bad image or box."""
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise ValueError(f"image must be (H, W, 3) uint8, got {image.shape} {image.dtype}")
     box = np.asarray(box, dtype=np.float64).reshape(-1)
     if box.shape != (4,) or not np.isfinite(box).all() or box[2] <= box[0] or box[3] <= box[1]:
         raise ValueError(f"box must be finite [x0, y0, x1, y1] with x1 > x0 and y1 > y0, got {box}")
-    h_img, w_img = image.shape[:2]
-    fallback = Refined(center=np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2]), box=box.copy(),
-                       quality=0.0, refined=False)
-    cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
-    hw, hh = max((box[2] - box[0]) / 2, 1.0), max((box[3] - box[1]) / 2, 1.0)
+    return box
+
+
+def _window(cx: float, cy: float, hw: float, hh: float, w_img: int, h_img: int) -> tuple[int, int, int, int] | None:
+    """(x0, y0, x1, y1) pixel slice bounds of the search window around the box, clipped to the
+    image; None when it is under 4 px wide or high."""
     m = 1.45  # window half-size in box half-sizes
     x0, x1 = int(np.floor(cx - m * hw - 2)), int(np.ceil(cx + m * hw + 2)) + 1
     y0, y1 = int(np.floor(cy - m * hh - 2)), int(np.ceil(cy + m * hh + 2)) + 1
     x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w_img), min(y1, h_img)
     if x1 - x0 < 4 or y1 - y0 < 4:
-        return fallback
-    s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
-    ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-    rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
+        return None
+    return x0, y0, x1, y1
+
+
+def _soft_coverage(s: np.ndarray, pur: np.ndarray, rho: np.ndarray):
+    """(coverage w (h, w) float32 in [0, 1], disc level, ring level, noise of the score over the
+    disc) from the window's score ``s``, purity ``pur`` and normalised radius ``rho``; None when
+    the disc does not stand out from the ring."""
     inner, ring = rho <= 0.5, (rho >= 1.08) & (rho <= 1.22)
     if inner.sum() < 3 or ring.sum() < 4:
-        return fallback
+        return None
     fg, bg = float(np.percentile(s[inner], 25)), float(np.median(s[ring]))
     noise = float(1.4826 * np.median(np.abs(s[inner] - np.median(s[inner])))) + 1e-4
     if fg - bg <= 0:
-        return fallback
+        return None
     w_raw = (s - bg) / (fg - bg)
     w = np.clip(w_raw, 0.0, 1.0).astype(np.float32)
     w[rho > 1.3] = 0.0
@@ -133,34 +138,75 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     p_disc = float(np.median(pur[inner]))
     if p_disc > 0:
         w[pur < PURITY_SHARE * p_disc] = 0.0
+    return w, fg, bg, noise
+
+
+def _disc_component(w: np.ndarray, ci: int, cj: int) -> np.ndarray | None:
+    """``w`` restricted to the connected component (w > 0.5) at window pixel (row ``ci``, column
+    ``cj``) (else the largest one), dilated by two pixels; None without any component."""
     n, lab = cv2.connectedComponents((w > 0.5).astype(np.uint8), connectivity=8)
     if n < 2:
-        return fallback
-    ci, cj = int(round(cy)) - y0, int(round(cx)) - x0
+        return None
     k = lab[min(max(ci, 0), lab.shape[0] - 1), min(max(cj, 0), lab.shape[1] - 1)]
     if k == 0:  # centre not on the disc: take the largest component
         k = 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
     region = cv2.dilate((lab == k).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
-    w = np.where(region, w, 0.0)
+    return np.where(region, w, 0.0)
+
+
+def _moments(w: np.ndarray, xs: np.ndarray, ys: np.ndarray):
+    """(area, mean x, mean y, var x, var y, cov xy) of the coverage ``w`` (variances include the
+    1/12 px^2 of the pixel footprint); None below 3 px of area."""
     area = float(w.sum())
     if area < 3:
-        return fallback
+        return None
     mx, my = float((w * xs).sum() / area), float((w * ys).sum() / area)
     vxx = float((w * (xs - mx) ** 2).sum() / area) + 1 / 12
     vyy = float((w * (ys - my) ** 2).sum() / area) + 1 / 12
     vxy = float((w * (xs - mx) * (ys - my)).sum() / area)
-    det = vxx * vyy - vxy ** 2
-    if det <= 0:
-        return fallback
+    return area, mx, my, vxx, vyy, vxy
+
+
+def _quality(area: float, det: float, hw: float, hh: float, contrast: float) -> float:
+    """Contrast x ellipse shape x agreement with the detector's box, each in [0, 1]."""
     ellipse_area = 4 * np.pi * np.sqrt(det)
     box_area = np.pi * hw * hh
     shape_ok = min(area / ellipse_area, ellipse_area / area)      # 1 for an ellipse
     box_ok = min(area / box_area, box_area / area)                # 1 when it fills the box's ellipse
-    contrast = (fg - bg) / noise
     q_contrast = float(np.clip((contrast - 2) / 4, 0, 1))
     q_shape = float(np.clip((shape_ok - 0.85) / 0.13, 0, 1))
     q_box = float(np.clip((box_ok - 0.4) / 0.3, 0, 1))
-    quality = q_contrast * q_shape * q_box
+    return q_contrast * q_shape * q_box
+
+
+def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
+                 edge_bias_px: float) -> Refined:
+    box = _checked_box(image, box)
+    h_img, w_img = image.shape[:2]
+    fallback = Refined(center=np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2]), box=box.copy(),
+                       quality=0.0, refined=False)
+    cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+    hw, hh = max((box[2] - box[0]) / 2, 1.0), max((box[3] - box[1]) / 2, 1.0)
+    win = _window(cx, cy, hw, hh, w_img, h_img)
+    if win is None:
+        return fallback
+    x0, y0, x1, y1 = win
+    s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
+    ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+    rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
+    coverage = _soft_coverage(s, pur, rho)
+    if coverage is None:
+        return fallback
+    w, fg, bg, noise = coverage
+    w = _disc_component(w, int(round(cy)) - y0, int(round(cx)) - x0)
+    moments = None if w is None else _moments(w, xs, ys)
+    if moments is None:
+        return fallback
+    area, mx, my, vxx, vyy, vxy = moments
+    det = vxx * vyy - vxy ** 2
+    if det <= 0:
+        return fallback
+    quality = _quality(area, det, hw, hh, (fg - bg) / noise)
     if quality < min_quality:
         return Refined(center=fallback.center, box=fallback.box, quality=quality, refined=False)
     ex, ey = 2 * np.sqrt(vxx) + edge_bias_px, 2 * np.sqrt(vyy) + edge_bias_px

@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
+from dockfactory.core.errors import DockfactoryError
 
 
 @dataclass(frozen=True)
@@ -47,13 +48,13 @@ class DataConfig:
 
     def __post_init__(self):
         if not 0 < self.input_scale <= 1:
-            raise ValueError(f"input_scale must be in (0, 1], got {self.input_scale}")
+            raise DockfactoryError(f"input_scale must be in (0, 1], got {self.input_scale}")
         if self.crop < 32 or self.crop % 32:
-            raise ValueError(f"crop must be a positive multiple of 32, got {self.crop}")
+            raise DockfactoryError(f"crop must be a positive multiple of 32, got {self.crop}")
         if self.crops_per_frame < 1:
-            raise ValueError(f"crops_per_frame must be >= 1, got {self.crops_per_frame}")
+            raise DockfactoryError(f"crops_per_frame must be >= 1, got {self.crops_per_frame}")
         if not 0 <= self.background_fraction <= 1:
-            raise ValueError(f"background_fraction must be in [0, 1], got {self.background_fraction}")
+            raise DockfactoryError(f"background_fraction must be in [0, 1], got {self.background_fraction}")
 
     def to_dict(self) -> dict:
         return json.loads(json.dumps(asdict(self)))
@@ -62,7 +63,7 @@ class DataConfig:
     def from_dict(cls, d: dict) -> "DataConfig":
         unknown = set(d) - set(cls.__dataclass_fields__)
         if unknown:
-            raise ValueError(f"unknown data config keys: {sorted(unknown)}")
+            raise DockfactoryError(f"unknown data config keys: {sorted(unknown)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
@@ -85,11 +86,11 @@ def dataset_version(root) -> str:
     """``version_id`` of a dockfactory dataset directory (from DIR/dataset.json)."""
     path = Path(root) / "dataset.json"
     if not path.is_file():
-        raise ValueError(f"{root}: not a dockfactory dataset (no dataset.json)")
+        raise DockfactoryError(f"{root}: not a dockfactory dataset (no dataset.json)")
     try:
         return str(json.loads(path.read_text())["version_id"])
     except (KeyError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: no version_id ({exc})") from None
+        raise DockfactoryError(f"{path}: no version_id ({exc})") from None
 
 
 def frame_from_label(root, label: dict) -> Frame:
@@ -109,10 +110,10 @@ def load_frames(root, split: str | None) -> list[Frame]:
     from dockfactory.core.io import load_labels
     root = Path(root)
     if not (root / "labels").is_dir():
-        raise ValueError(f"{root}: no labels/ folder (not a dockfactory dataset?)")
+        raise DockfactoryError(f"{root}: no labels/ folder (not a dockfactory dataset?)")
     frames = [frame_from_label(root, lab) for lab in load_labels(root, split)]
     if not frames:
-        raise ValueError(f"{root}: no frames in split {split!r}")
+        raise DockfactoryError(f"{root}: no frames in split {split!r}")
     return frames
 
 
@@ -120,7 +121,7 @@ def read_rgb(path) -> np.ndarray:
     """``(H, W, 3) uint8`` RGB image."""
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
-        raise ValueError(f"cannot read image {path}")
+        raise DockfactoryError(f"cannot read image {path}")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 

@@ -13,6 +13,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from dockfactory.core.errors import DockfactoryError
 
 
 def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool = True, seed: int = 0,
@@ -20,7 +21,7 @@ def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool =
     import torch
     from dockfactory.detector.checkpoint import load_model
     if height % 32 or width % 32 or height <= 0 or width <= 0:
-        raise ValueError(f"height and width must be positive multiples of 32, got {height} x {width}")
+        raise DockfactoryError(f"height and width must be positive multiples of 32, got {height} x {width}")
     model, _ = load_model(weights, fuse=True)
     x = torch.rand((1, 3, height, width), generator=torch.Generator().manual_seed(seed))
     out = Path(out)

@@ -24,13 +24,42 @@ def _fmt(values) -> str:
     return f"{v.mean():.3f} ± {v.std(ddof=1):.3f}"
 
 
+def _train_and_evaluate(dataset, run: Path, att: str, seed: int, cfg, conf: float, progress: bool) -> dict:
+    """Train one variant into ``run``, detect on the test split and evaluate; its metrics record."""
+    from dockfactory.detector.infer import detect_dataset
+    from dockfactory.detector.train import train
+    from dockfactory.eval.detection_metrics import evaluate_detections
+    t0 = time.monotonic()
+    summary = train(dataset, run, cfg, resume=(run / "last.pt").is_file(), progress=progress)
+    train_s = time.monotonic() - t0
+    doc = detect_dataset(dataset, run / "weights.pt", run / "dets_test.json", split="test",
+                         conf_threshold=conf, progress=progress)
+    m = evaluate_detections(dataset, doc)
+    return {"attention": att, "seed": seed, "train_seconds": round(train_s, 1),
+            "epochs": summary["epochs"], "images_per_s": summary["history"][-1]["images_per_s"],
+            "mAP50": m["mAP50"], "mAP50_95": m["mAP50_95"], "per_class": m["per_class"],
+            "centre_error": m["centre_error"], "recall_visible50": m["recall_visible50"]}
+
+
+def _table_lines(runs: list[dict], attentions, scale: str) -> list[str]:
+    """Markdown rows of table 2: one per attention variant, mean ± std over its seeds."""
+    classes = list(runs[0]["per_class"])
+    head = ["model", "mAP50 all", "mAP50:95 all"] + [f"{c} {k}" for c in classes for k in ("mAP50", "mAP50:95")]
+    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for att in attentions:
+        rs = [r for r in runs if r["attention"] == att]
+        cells = [f"YOLOv5{scale} {LABELS[att]}".replace("YOLOv5n YOLOv5", "YOLOv5n").replace(
+            "YOLOv5s YOLOv5", "YOLOv5s"), _fmt([r["mAP50"] for r in rs]), _fmt([r["mAP50_95"] for r in rs])]
+        for c in classes:
+            cells += [_fmt([r["per_class"][c]["mAP50"] for r in rs]), _fmt([r["per_class"][c]["mAP50_95"] for r in rs])]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True) -> dict:
     """Train/evaluate every (attention, seed); ``make_config(attention, seed) -> TrainConfig``."""
     from dockfactory.detector.attention import ATTENTIONS
     from dockfactory.detector.data import dataset_version, load_frames
-    from dockfactory.detector.infer import detect_dataset
-    from dockfactory.detector.train import train
-    from dockfactory.eval.detection_metrics import evaluate_detections
     bad = [a for a in attentions if a not in ATTENTIONS]
     if bad or not attentions:
         raise ValueError(f"attention variants must be among {', '.join(ATTENTIONS)}, got {attentions}")
@@ -45,32 +74,13 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
             if metrics_path.is_file() and (run / "weights.pt").is_file():
                 runs.append(json.loads(metrics_path.read_text()))
                 continue
-            cfg = make_config(att, seed)
-            t0 = time.monotonic()
-            summary = train(dataset, run, cfg, resume=(run / "last.pt").is_file(), progress=progress)
-            train_s = time.monotonic() - t0
-            doc = detect_dataset(dataset, run / "weights.pt", run / "dets_test.json", split="test",
-                                 conf_threshold=conf, progress=progress)
-            m = evaluate_detections(dataset, doc)
-            rec = {"attention": att, "seed": seed, "train_seconds": round(train_s, 1),
-                   "epochs": summary["epochs"], "images_per_s": summary["history"][-1]["images_per_s"],
-                   "mAP50": m["mAP50"], "mAP50_95": m["mAP50_95"], "per_class": m["per_class"],
-                   "centre_error": m["centre_error"], "recall_visible50": m["recall_visible50"]}
+            rec = _train_and_evaluate(dataset, run, att, seed, make_config(att, seed), conf, progress)
             write_json_atomic(metrics_path, rec)
             runs.append(rec)
     cfg0 = make_config(attentions[0], seeds[0])
     n_train = len(load_frames(dataset, "train"))
     n_test = len(load_frames(dataset, "test"))
-    classes = list(runs[0]["per_class"])
-    head = ["model", "mAP50 all", "mAP50:95 all"] + [f"{c} {k}" for c in classes for k in ("mAP50", "mAP50:95")]
-    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-    for att in attentions:
-        rs = [r for r in runs if r["attention"] == att]
-        cells = [f"YOLOv5{cfg0.model.scale} {LABELS[att]}".replace("YOLOv5n YOLOv5", "YOLOv5n").replace(
-            "YOLOv5s YOLOv5", "YOLOv5s"), _fmt([r["mAP50"] for r in rs]), _fmt([r["mAP50_95"] for r in rs])]
-        for c in classes:
-            cells += [_fmt([r["per_class"][c]["mAP50"] for r in rs]), _fmt([r["per_class"][c]["mAP50_95"] for r in rs])]
-        lines.append("| " + " | ".join(cells) + " |")
+    lines = _table_lines(runs, attentions, cfg0.model.scale)
     wall = sum(r["train_seconds"] for r in runs)
     budget = (f"Budget per run: {cfg0.epochs} epochs x {n_train} train frames x {cfg0.data.crops_per_frame} crops "
               f"of {cfg0.data.crop} px (input scale {cfg0.data.input_scale}), batch {cfg0.batch_size}, from scratch; "

@@ -22,6 +22,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 
 COCO_SHIFT = 0.5
@@ -112,14 +113,14 @@ def evaluate_detections(dataset, detections, split: str | None = None, recall_co
     from dockfactory.generator.export_coco import coco_from_labels
     doc = json.loads(Path(detections).read_text()) if isinstance(detections, (str, Path)) else detections
     if "frames" not in doc:
-        raise ValueError("detections: no 'frames' (not a dockfactory detections file?)")
+        raise DockfactoryError("detections: no 'frames' (not a dockfactory detections file?)")
     split = split if split is not None else doc.get("split")
     root = Path(dataset)
     ident = json.loads((root / "dataset.json").read_text())
     threshold = float(ident["config"]["labels"]["visible_threshold"])
     labels = [lab for lab in load_labels(root, split) if lab["frame_id"] in doc["frames"]]
     if not labels:
-        raise ValueError(f"no labelled frame of split {split!r} has detections")
+        raise DockfactoryError(f"no labelled frame of split {split!r} has detections")
     gt = coco_from_labels(labels, threshold)
     result = coco_map(gt, coco_results(doc["frames"], gt))
     result.update(centre_and_recall(labels, doc["frames"], threshold, recall_conf))

@@ -97,19 +97,20 @@ def cmd_export_onnx(args) -> int:
     return 0
 
 
-def add_subcommands(subparsers) -> None:
-    """Register train, detect, ablate and export-onnx on ``subparsers`` (argparse)."""
-    def common_train(p):
-        p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
-        p.add_argument("--epochs", type=_positive_int, default=60, help="epochs (default 60)")
-        p.add_argument("--batch", type=_positive_int, default=16, help="crops per batch (default 16)")
-        p.add_argument("--nbs", type=_positive_int, help="nominal batch for gradient accumulation (default = --batch)")
-        p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
-        p.add_argument("--input-scale", type=float, default=0.5, help="network px per image px (default 0.5)")
-        p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
-        p.add_argument("--threads", type=int, help="torch threads (default: all cores)")
-        p.add_argument("--quiet", action="store_true", help="no progress bar")
+def _add_training_options(p) -> None:
+    """Options shared by train and ablate."""
+    p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
+    p.add_argument("--epochs", type=_positive_int, default=60, help="epochs (default 60)")
+    p.add_argument("--batch", type=_positive_int, default=16, help="crops per batch (default 16)")
+    p.add_argument("--nbs", type=_positive_int, help="nominal batch for gradient accumulation (default = --batch)")
+    p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
+    p.add_argument("--input-scale", type=float, default=0.5, help="network px per image px (default 0.5)")
+    p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
+    p.add_argument("--threads", type=int, help="torch threads (default: all cores)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_train_parser(subparsers) -> None:
     t = subparsers.add_parser("train", help="train the marker detector on a dataset's train split")
     t.add_argument("dataset", help="dataset directory (dockfactory render --out)")
     t.add_argument("--out", required=True, help="run directory (checkpoints, history, weights)")
@@ -117,9 +118,11 @@ def add_subcommands(subparsers) -> None:
                    help="attention block after the last backbone C3 (default se)")
     t.add_argument("--seed", type=int, default=0, help="seed of initial weights, crops and augmentation")
     t.add_argument("--resume", action="store_true", help="continue from RUN/last.pt")
-    common_train(t)
+    _add_training_options(t)
     t.set_defaults(func=cmd_train)
 
+
+def _add_detect_parser(subparsers) -> None:
     d = subparsers.add_parser("detect", help="detect markers (boxes, refined centres) in a dataset's frames")
     d.add_argument("dataset")
     d.add_argument("--weights",
@@ -134,15 +137,19 @@ def add_subcommands(subparsers) -> None:
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_detect)
 
+
+def _add_ablate_parser(subparsers) -> None:
     a = subparsers.add_parser("ablate", help="train and evaluate attention variants under one budget")
     a.add_argument("dataset")
     a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
     a.add_argument("--seeds", type=_positive_int, default=1, help="number of seeds (0..S-1)")
     a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
     a.add_argument("--conf", type=float, default=0.001, help="score threshold for mAP")
-    common_train(a)
+    _add_training_options(a)
     a.set_defaults(func=cmd_ablate)
 
+
+def _add_export_parser(subparsers) -> None:
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
     e.add_argument("--weights", help="default: the shipped weights")
     e.add_argument("--out", required=True, help="ONNX file")
@@ -151,3 +158,11 @@ def add_subcommands(subparsers) -> None:
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
     e.add_argument("--threads", type=int)
     e.set_defaults(func=cmd_export_onnx)
+
+
+def add_subcommands(subparsers) -> None:
+    """Register train, detect, ablate and export-onnx on ``subparsers`` (argparse)."""
+    _add_train_parser(subparsers)
+    _add_detect_parser(subparsers)
+    _add_ablate_parser(subparsers)
+    _add_export_parser(subparsers)

@@ -83,17 +83,73 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     return weights, model_sha
 
 
+def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages) -> str | None:
+    """Render the dataset (itself resumable: only missing frames are rendered); its version id,
+    or None when the render is incomplete."""
+    from dockfactory.generator.dataset import identity
+    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
+    from dockfactory.generator.sampler import check_focal_fits
+    version = identity(cfg)["version_id"]
+    key = _key("render", version)
+    if stages.current("render", key, [data_dir / "manifest.json"]):
+        say(f"render: dataset {version} complete, skipped")
+        return version
+    say(f"render: dataset {version} -> {data_dir}")
+    t = time.monotonic()
+    check_focal_fits(cfg, str(config_path))
+    summary = run_render(cfg, data_dir, Path(config_path).read_text(), JobOptions(workers=workers))
+    print_summary(summary)
+    if not summary.complete:
+        say("render incomplete: run the same command again")
+        return None
+    stages.done("render", key, time.monotonic() - t)
+    return version
+
+
+def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, poses_path: Path, stages: Stages) -> str:
+    """Poses of every frame from the detections (or from oracle centres when ``dets_path`` is None);
+    returns the key part naming the detections."""
+    from dockfactory.eval.solve_frames import solve_dataset, write_poses
+    src = sha256_file(dets_path) if dets_path else f"oracle:{oracle_noise_px}"
+    key = _key("solve", version, src, code_fingerprint("solver", "eval"))
+    if stages.current("solve", key, [poses_path]):
+        say("solve: poses current, skipped")
+        return src
+    t = time.monotonic()
+    if dets_path:
+        dets = json.loads(dets_path.read_text())
+        poses = solve_dataset(ds, detections=dets)
+    else:
+        poses = solve_dataset(ds, oracle_sigma_px=oracle_noise_px)
+    write_poses(poses_path, poses, dets_path)
+    n_ok = sum(r["ok"] for r in poses["frames"].values())
+    say(f"solve: {n_ok} of {len(poses['frames'])} frames solved")
+    stages.done("solve", key, time.monotonic() - t)
+    return src
+
+
+def _evaluate_stage(ds, eval_dir: Path, poses_path: Path, spec, acceptance_path, src: str,
+                    dets_path: Path | None, oracle_noise_px, stages: Stages) -> dict:
+    """Metrics against the acceptance spec, written to ``eval_dir`` (read back when current)."""
+    from dockfactory.eval.evaluate import evaluate, write_outputs
+    key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src,
+               code_fingerprint("solver", "eval"))
+    if stages.current("evaluate", key, [eval_dir / "metrics.json", eval_dir / "frames.csv"]):
+        say("evaluate: metrics current, skipped")
+        return json.loads((eval_dir / "metrics.json").read_text())
+    t = time.monotonic()
+    metrics, rows = evaluate(ds, poses_path, spec, dets_path, oracle_sigma_px=oracle_noise_px)
+    write_outputs(eval_dir, metrics, rows)
+    stages.done("evaluate", key, time.monotonic() - t)
+    return metrics
+
+
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
                  oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
     from dockfactory.core.config import load_config
     from dockfactory.eval.acceptance import load_acceptance
     from dockfactory.eval.dataset_access import open_dataset
-    from dockfactory.eval.evaluate import evaluate, write_outputs
     from dockfactory.eval.report import build_report
-    from dockfactory.eval.solve_frames import solve_dataset, write_poses
-    from dockfactory.generator.dataset import identity
-    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
-    from dockfactory.generator.sampler import check_focal_fits
 
     t_all = time.monotonic()
     workdir = Path(workdir)
@@ -104,25 +160,12 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     data_dir = workdir / "dataset"
     commands = [f"dockfactory run {config_path} --out {workdir}"]
 
-    # 1. render (itself resumable: only missing frames are rendered)
-    version = identity(cfg)["version_id"]
-    key = _key("render", version)
-    if stages.current("render", key, [data_dir / "manifest.json"]):
-        say(f"render: dataset {version} complete, skipped")
-    else:
-        say(f"render: dataset {version} -> {data_dir}")
-        t = time.monotonic()
-        check_focal_fits(cfg, str(config_path))
-        summary = run_render(cfg, data_dir, Path(config_path).read_text(), JobOptions(workers=workers))
-        print_summary(summary)
-        if not summary.complete:
-            say("render incomplete: run the same command again")
-            return 1
-        stages.done("render", key, time.monotonic() - t)
+    version = _render_stage(cfg, config_path, data_dir, workers, stages)   # 1. render
+    if version is None:
+        return 1
     ds = open_dataset(data_dir)
 
-    # 2. detect
-    dets_path = workdir / "detections.json"
+    dets_path = workdir / "detections.json"   # 2. detect
     model_sha = None
     if oracle_noise_px is not None:
         say(f"detect: skipped, oracle mode (exact centres + {oracle_noise_px} px noise)")
@@ -131,38 +174,13 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
         weights, model_sha = detect_stage(ds, workdir, dets_path, weights, train, train_epochs, stages)
         commands.append(f"dockfactory detect {data_dir} --weights {weights} --split all --out {dets_path}")
 
-    # 3. solve
-    poses_path = workdir / "poses.json"
-    src = sha256_file(dets_path) if dets_path else f"oracle:{oracle_noise_px}"
-    key = _key("solve", version, src, code_fingerprint("solver", "eval"))
-    if stages.current("solve", key, [poses_path]):
-        say("solve: poses current, skipped")
-    else:
-        t = time.monotonic()
-        if dets_path:
-            dets = json.loads(dets_path.read_text())
-            poses = solve_dataset(ds, detections=dets)
-        else:
-            poses = solve_dataset(ds, oracle_sigma_px=oracle_noise_px)
-        write_poses(poses_path, poses, dets_path)
-        n_ok = sum(r["ok"] for r in poses["frames"].values())
-        say(f"solve: {n_ok} of {len(poses['frames'])} frames solved")
-        stages.done("solve", key, time.monotonic() - t)
+    poses_path = workdir / "poses.json"   # 3. solve
+    src = _solve_stage(ds, version, dets_path, oracle_noise_px, poses_path, stages)
     commands.append(f"dockfactory solve {data_dir} " + (f"--detections {dets_path}" if dets_path else f"--oracle-noise {oracle_noise_px}")
                     + f" --out {poses_path}")
 
-    # 4. evaluate
-    eval_dir = workdir / "eval"
-    key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src,
-               code_fingerprint("solver", "eval"))
-    if stages.current("evaluate", key, [eval_dir / "metrics.json", eval_dir / "frames.csv"]):
-        say("evaluate: metrics current, skipped")
-        metrics = json.loads((eval_dir / "metrics.json").read_text())
-    else:
-        t = time.monotonic()
-        metrics, rows = evaluate(ds, poses_path, spec, dets_path, oracle_sigma_px=oracle_noise_px)
-        write_outputs(eval_dir, metrics, rows)
-        stages.done("evaluate", key, time.monotonic() - t)
+    eval_dir = workdir / "eval"   # 4. evaluate
+    metrics = _evaluate_stage(ds, eval_dir, poses_path, spec, acceptance_path, src, dets_path, oracle_noise_px, stages)
     commands.append(f"dockfactory evaluate {data_dir} --poses {poses_path}"
                     + (f" --detections {dets_path}" if dets_path else "") + f" --acceptance {acceptance_path} --out {eval_dir}")
     write_json_atomic(eval_dir / "provenance.json", {"detections": str(dets_path) if dets_path else None,

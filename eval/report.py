@@ -54,19 +54,17 @@ def read_rows(eval_dir: Path) -> list[dict]:
     return rows
 
 
-def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    test = [r for r in rows if r["split"] == "test" and r["ok"]]
-    out = {}
+def _plot_error_histograms(plt, test: list[dict]) -> str:
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     for ax, c in zip(axes, GATED):
         e = [r[f"err_{c}"] for r in test]
         ax.hist(e, bins=max(5, min(40, len(e) // 2 or 5)), color="#4477aa")
         ax.set_title(f"{c} error ({UNITS[c]})")
         ax.axvline(0, color="k", lw=0.8)
-    out["Error histograms (test split)"] = _fig_png(fig)
+    return _fig_png(fig)
+
+
+def _plot_xy_scatter(plt, test: list[dict]) -> str:
     fig, ax = plt.subplots(figsize=(4.5, 4.5))
     ax.scatter([r["err_x"] for r in test], [r["err_y"] for r in test], s=10, c="#aa3377")
     ax.set_xlabel("X error (mm)")
@@ -74,14 +72,20 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
     ax.axhline(0, color="k", lw=0.5)
     ax.axvline(0, color="k", lw=0.5)
     ax.set_aspect("equal", "datalim")
-    out["X-Y error scatter"] = _fig_png(fig)
+    return _fig_png(fig)
+
+
+def _plot_per_condition(plt, test: list[dict]) -> str:
     conds = sorted({r["condition"] for r in test})
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     for ax, c in zip(axes, GATED):
         ax.boxplot([[abs(r[f"err_{c}"]) for r in test if r["condition"] == k] or [0.0] for k in conds])
         ax.set_xticks(range(1, len(conds) + 1), conds, rotation=20)
         ax.set_title(f"|{c} error| ({UNITS[c]}) per condition")
-    out["Error per condition"] = _fig_png(fig)
+    return _fig_png(fig)
+
+
+def _plot_distance_focal(plt, test: list[dict]) -> str:
     fig, axes = plt.subplots(2, 3, figsize=(11, 5.5))
     for j, c in enumerate(GATED):
         axes[0, j].scatter([r["distance_mm"] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8)
@@ -91,7 +95,10 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
         axes[1, j].set_xlabel("focal length (px)")
         axes[1, j].set_ylabel(f"|{c} error| ({UNITS[c]})")
     fig.tight_layout()
-    out["Error against camera distance and focal length"] = _fig_png(fig)
+    return _fig_png(fig)
+
+
+def _plot_against_crb(plt, test: list[dict]) -> str:
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
     for ax, c in zip(axes, GATED):
         pts = [(r[f"crb_{c}"], abs(r[f"err_{c}"])) for r in test if r.get(f"crb_{c}")]
@@ -104,16 +111,33 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
             ax.legend(fontsize=7)
         ax.set_xlabel(f"Cramer-Rao std of {c} ({UNITS[c]})")
         ax.set_ylabel(f"|{c} error|")
-    out["Measured error against the Cramer-Rao bound"] = _fig_png(fig)
+    return _fig_png(fig)
+
+
+def _plot_precision_recall(plt, detections_pr: dict) -> str:
+    fig, ax = plt.subplots(figsize=(5, 4))
+    for name, (rec, prec) in detections_pr.items():
+        ax.plot(rec, prec, label=name)
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_title("precision-recall at IoU 0.5")
+    ax.legend()
+    return _fig_png(fig)
+
+
+def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    test = [r for r in rows if r["split"] == "test" and r["ok"]]
+    out = {}
+    out["Error histograms (test split)"] = _plot_error_histograms(plt, test)
+    out["X-Y error scatter"] = _plot_xy_scatter(plt, test)
+    out["Error per condition"] = _plot_per_condition(plt, test)
+    out["Error against camera distance and focal length"] = _plot_distance_focal(plt, test)
+    out["Measured error against the Cramer-Rao bound"] = _plot_against_crb(plt, test)
     if detections_pr:
-        fig, ax = plt.subplots(figsize=(5, 4))
-        for name, (rec, prec) in detections_pr.items():
-            ax.plot(rec, prec, label=name)
-        ax.set_xlabel("recall")
-        ax.set_ylabel("precision")
-        ax.set_title("precision-recall at IoU 0.5")
-        ax.legend()
-        out["Precision-recall per class"] = _fig_png(fig)
+        out["Precision-recall per class"] = _plot_precision_recall(plt, detections_pr)
     return out
 
 
@@ -169,19 +193,12 @@ def git_describe() -> str:
         return "unknown"
 
 
-def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
-    eval_dir = Path(eval_dir)
-    metrics = json.loads((eval_dir / "metrics.json").read_text())
-    rows = read_rows(eval_dir)
-    prov_path = eval_dir / "provenance.json"
-    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {}
-    dataset_root = Path(metrics["dataset"]["root"])
-    poses = json.loads(Path(metrics["poses"]["path"]).read_text()) if Path(metrics["poses"]["path"]).exists() else None
-    det_path = prov.get("detections")
-    detections = json.loads(Path(det_path).read_text()) if det_path and Path(det_path).exists() else None
-    acc = metrics["acceptance"]
-    verdict = "ACCEPTED" if acc["accepted"] else "REJECTED"
-    provenance = {
+def _read_json_if_exists(path, default=None):
+    return json.loads(Path(path).read_text()) if Path(path).exists() else default
+
+
+def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) -> dict:
+    return {
         "dataset_version": metrics["dataset"]["version_id"], "dataset": metrics["dataset"]["root"],
         "model_sha256": prov.get("model_sha256", "n/a (oracle or no detector)"),
         "code_version": git_describe(), "generator_version": generator_version(),
@@ -189,36 +206,42 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "commands": commands or prov.get("commands", []),
     }
-    figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
-    worst = gallery(dataset_root, rows, poses, detections)
 
-    def crit_rows():
-        out = []
-        for c in acc["criteria"]:
-            cls = "pass" if c["pass"] else "fail"
-            out.append(f"<tr class='{cls}'><td>{html.escape(c['name'])}</td><td>{c['statistic']}</td>"
-                       f"<td>{_num(c['value'])} {c['unit']}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
-                       f"<td>{_num(c.get('paper'))}</td><td><b>{'PASS' if c['pass'] else 'FAIL'}</b></td></tr>")
-        return "\n".join(out)
 
-    def stats_table(block, title):
-        head = "<tr><th>component</th><th>n</th><th>MSE</th><th>RMSE</th><th>bias</th><th>std</th><th>p95 |e|</th><th>max |e|</th></tr>"
-        body = "".join(f"<tr><td>{c} ({UNITS[c]})</td>" + "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")) + "</tr>" for c in COMPONENTS)
-        return f"<h3>{html.escape(title)}</h3><table>{head}{body}</table>"
+def _criteria_rows(acc: dict) -> str:
+    out = []
+    for c in acc["criteria"]:
+        cls = "pass" if c["pass"] else "fail"
+        out.append(f"<tr class='{cls}'><td>{html.escape(c['name'])}</td><td>{c['statistic']}</td>"
+                   f"<td>{_num(c['value'])} {c['unit']}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
+                   f"<td>{_num(c.get('paper'))}</td><td><b>{'PASS' if c['pass'] else 'FAIL'}</b></td></tr>")
+    return "\n".join(out)
 
+
+def _stats_table(block: dict, title: str) -> str:
+    head = "<tr><th>component</th><th>n</th><th>MSE</th><th>RMSE</th><th>bias</th><th>std</th><th>p95 |e|</th><th>max |e|</th></tr>"
+    body = "".join(f"<tr><td>{c} ({UNITS[c]})</td>" + "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")) + "</tr>" for c in COMPONENTS)
+    return f"<h3>{html.escape(title)}</h3><table>{head}{body}</table>"
+
+
+def _html_verdict(metrics: dict, acc: dict, verdict: str) -> list[str]:
     loc = metrics["localization"]
-    parts = [f"<h1>dockfactory acceptance report: <span class='{'pass' if acc['accepted'] else 'fail'}'>{verdict}</span></h1>",
-             f"<p>Dataset <code>{html.escape(metrics['dataset']['name'])}</code> version <code>{metrics['dataset']['version_id']}</code>; "
-             f"poses from <b>{html.escape(str(metrics['poses']['source']))}</b>; test frames {loc['n_frames']} "
-             f"(solved {loc['n_solved']}); repeatability captures {metrics['estimation']['n_frames']}.</p>",
-             "<h2>Verdict</h2><table><tr><th>criterion</th><th>statistic</th><th>ours</th><th>threshold</th><th>paper</th><th>result</th></tr>",
-             crit_rows(), "</table>",
-             "<p class='note'>Estimation precision = pooled spread of repeated estimates of one static pose; localization precision = "
-             "error against exact ground truth (test split). RMSE in mm / deg, MSE in mm^2 / deg^2. The paper's localization alpha "
-             "figure (0.869 deg) contradicts its own 0.1 deg criterion and is suspect.</p>",
-             "<h2>Localization (test split)</h2>", stats_table(loc["overall"], "all conditions")]
+    return [f"<h1>dockfactory acceptance report: <span class='{'pass' if acc['accepted'] else 'fail'}'>{verdict}</span></h1>",
+            f"<p>Dataset <code>{html.escape(metrics['dataset']['name'])}</code> version <code>{metrics['dataset']['version_id']}</code>; "
+            f"poses from <b>{html.escape(str(metrics['poses']['source']))}</b>; test frames {loc['n_frames']} "
+            f"(solved {loc['n_solved']}); repeatability captures {metrics['estimation']['n_frames']}.</p>",
+            "<h2>Verdict</h2><table><tr><th>criterion</th><th>statistic</th><th>ours</th><th>threshold</th><th>paper</th><th>result</th></tr>",
+            _criteria_rows(acc), "</table>",
+            "<p class='note'>Estimation precision = pooled spread of repeated estimates of one static pose; localization precision = "
+            "error against exact ground truth (test split). RMSE in mm / deg, MSE in mm^2 / deg^2. The paper's localization alpha "
+            "figure (0.869 deg) contradicts its own 0.1 deg criterion and is suspect.</p>"]
+
+
+def _html_localization(metrics: dict) -> list[str]:
+    loc = metrics["localization"]
+    parts = ["<h2>Localization (test split)</h2>", _stats_table(loc["overall"], "all conditions")]
     for cond, block in loc["by_condition"].items():
-        parts.append(stats_table(block, f"condition: {cond}"))
+        parts.append(_stats_table(block, f"condition: {cond}"))
     parts.append("<h3>Measured against the Cramer-Rao bound</h3><table><tr><th>component</th><th>measured RMSE</th><th>bound (RMS)</th><th>ratio</th></tr>"
                  + "".join(f"<tr><td>{c}</td><td>{_num(v['measured_rmse'])}</td><td>{_num(v['bound_rms'])}</td><td>{_num(v['ratio'], 3)}</td></tr>" for c, v in loc["crb"].items())
                  + f"</table><p class='note'>Bound from each frame's exact geometry and the measured centre noise "
@@ -228,53 +251,99 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
         parts.append("<h3>Oracle (exact centres + noise of the measured size): separates detector from solver error</h3><table>"
                      "<tr><th>component</th><th>RMSE pipeline</th><th>RMSE oracle</th></tr>"
                      + "".join(f"<tr><td>{c} ({UNITS[c]})</td><td>{_num(loc['overall'][c]['rmse'])}</td><td>{_num(o[c]['rmse'])}</td></tr>" for c in COMPONENTS) + "</table>")
-    est = metrics["estimation"]
-    parts.append("<h2>Estimation (repeatability)</h2><table><tr><th>pose</th><th>captures</th>"
-                 + "".join(f"<th>std {c}</th>" for c in COMPONENTS) + "</tr>"
-                 + "".join(f"<tr><td>{p['pose']}</td><td>{p['captures']}</td>" + "".join(f"<td>{_num(p[c])}</td>" for c in COMPONENTS) + "</tr>" for p in est["per_pose"])
-                 + "<tr><td><b>pooled</b></td><td></td>" + "".join(f"<td><b>{_num(est['pooled'][c]['rmse'])}</b></td>" for c in COMPONENTS) + "</tr></table>")
+    return parts
+
+
+def _html_estimation(est: dict) -> str:
+    return ("<h2>Estimation (repeatability)</h2><table><tr><th>pose</th><th>captures</th>"
+            + "".join(f"<th>std {c}</th>" for c in COMPONENTS) + "</tr>"
+            + "".join(f"<tr><td>{p['pose']}</td><td>{p['captures']}</td>" + "".join(f"<td>{_num(p[c])}</td>" for c in COMPONENTS) + "</tr>" for p in est["per_pose"])
+            + "<tr><td><b>pooled</b></td><td></td>" + "".join(f"<td><b>{_num(est['pooled'][c]['rmse'])}</b></td>" for c in COMPONENTS) + "</tr></table>")
+
+
+def _html_failures(metrics: dict) -> list[str]:
     f = metrics["failures_test"]
-    parts.append(f"<h2>Failures</h2><p>{f['count']} of {f['frames']} test frames without a pose "
-                 f"({100 * f['rate']:.2f} %). By condition: "
-                 + ", ".join(f"{c}: {v['failed']}/{v['frames']}" for c, v in f["by_condition"].items()) + ".</p>")
+    parts = [f"<h2>Failures</h2><p>{f['count']} of {f['frames']} test frames without a pose "
+             f"({100 * f['rate']:.2f} %). By condition: "
+             + ", ".join(f"{c}: {v['failed']}/{v['frames']}" for c, v in f["by_condition"].items()) + ".</p>"]
     if f["list"]:
         parts.append("<table><tr><th>frame</th><th>condition</th><th>reason</th></tr>" + "".join(
             f"<tr><td>{x['frame_id']}</td><td>{x['condition']}</td><td>{html.escape(x['reason'])}</td></tr>" for x in f["list"][:50]) + "</table>")
+    loc = metrics["localization"]
     loc_f = loc["focal_err_pct"]
     parts.append(f"<p>Focal length error: RMSE {_num(loc_f['rmse'])} %, bias {_num(loc_f['mean'])} %. Reprojection RMSE "
                  f"A {_num(loc['reprojection_rmse_px']['A']['rmse'])} px, B {_num(loc['reprojection_rmse_px']['B']['rmse'])} px.</p>")
-    det = metrics.get("detection")
-    if det and "map50" in det:
-        parts.append("<h2>Detection (test split)</h2><table><tr><th>class</th><th>mAP50</th><th>mAP50:95</th></tr>"
-                     + f"<tr><td>all</td><td>{_num(det['map50'])}</td><td>{_num(det['map50_95'])}</td></tr>"
-                     + "".join(f"<tr><td>{k}</td><td>{_num(v.get('map50'))}</td><td>{_num(v.get('map50_95'))}</td></tr>" for k, v in det.get("per_class", {}).items())
-                     + "</table>")
-    parts.append("<h2>Plots</h2>")
+    return parts
+
+
+def _html_detection(det: dict | None) -> list[str]:
+    if not (det and "map50" in det):
+        return []
+    return ["<h2>Detection (test split)</h2><table><tr><th>class</th><th>mAP50</th><th>mAP50:95</th></tr>"
+            + f"<tr><td>all</td><td>{_num(det['map50'])}</td><td>{_num(det['map50_95'])}</td></tr>"
+            + "".join(f"<tr><td>{k}</td><td>{_num(v.get('map50'))}</td><td>{_num(v.get('map50_95'))}</td></tr>" for k, v in det.get("per_class", {}).items())
+            + "</table>"]
+
+
+def _html_figures(figs: dict[str, str], worst: list[tuple[str, str]]) -> list[str]:
+    parts = ["<h2>Plots</h2>"]
     for title, b64 in figs.items():
         parts.append(f"<h3>{html.escape(title)}</h3>{_img(b64, title)}")
     parts.append("<h2>Worst frames</h2><p class='note'>Green circles: true marker centres; magenta crosses: detections; "
                  "yellow dots: every marker reprojected with the estimated poses and focal length.</p>")
     for cap, b64 in worst:
         parts.append(f"<figure>{_img(b64, cap)}<figcaption>{html.escape(cap)}</figcaption></figure>")
-    parts.append("<h2>Provenance</h2><table>" + "".join(
+    return parts
+
+
+def _html_provenance(provenance: dict) -> str:
+    return "<h2>Provenance</h2><table>" + "".join(
         f"<tr><td>{html.escape(k)}</td><td><code>{html.escape(json.dumps(v) if not isinstance(v, str) else v)}</code></td></tr>"
-        for k, v in provenance.items()) + "</table>")
+        for k, v in provenance.items()) + "</table>"
+
+
+def _html_document(parts: list[str]) -> str:
     css = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;color:#222}"
            "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;font-size:90%}"
            "tr.pass td:last-child,.pass{color:#17702a}tr.fail td:last-child,.fail{color:#b00020}"
            ".note{color:#555;font-size:85%}img{max-width:100%}figure{display:inline-block;margin:4px;max-width:540px}"
            "@media print{h2{page-break-before:auto}img{max-width:95%}}")
-    doc = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
-           f"<style>{css}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
-    write_text_atomic(out_html, doc)
+    return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
+            f"<style>{css}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
+
+
+def _summary_markdown(verdict: str, acc: dict) -> str:
+    md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
+    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
+           f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
+    return "\n".join(md) + "\n"
+
+
+def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
+    eval_dir = Path(eval_dir)
+    metrics = json.loads((eval_dir / "metrics.json").read_text())
+    rows = read_rows(eval_dir)
+    prov = _read_json_if_exists(eval_dir / "provenance.json", {})
+    dataset_root = Path(metrics["dataset"]["root"])
+    poses = _read_json_if_exists(metrics["poses"]["path"])
+    det_path = prov.get("detections")
+    detections = _read_json_if_exists(det_path) if det_path else None
+    acc = metrics["acceptance"]
+    verdict = "ACCEPTED" if acc["accepted"] else "REJECTED"
+    provenance = _report_provenance(metrics, prov, commands)
+    figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
+    worst = gallery(dataset_root, rows, poses, detections)
+    parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics)
+             + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
+             + _html_detection(metrics.get("detection")) + _html_figures(figs, worst)
+             + [_html_provenance(provenance)])
+    write_text_atomic(out_html, _html_document(parts))
+    loc, est = metrics["localization"], metrics["estimation"]
     summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,
                "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
                "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
                "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()}}
     out_html = Path(out_html)
     write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
-    md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
-    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
-           f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
-    write_text_atomic(out_html.with_suffix(".md"), "\n".join(md) + "\n")
+    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc))
     return summary

@@ -45,6 +45,108 @@ def render_with_retries(worker: WorkerProcess, frame: dict, timeout_s: float, re
         events.append(("retry", fid, reason))
 
 
+class _PipelinedFeeder:
+    """The state of :func:`render_pipelined`: frames in flight, frames to retry alone, attempts."""
+
+    def __init__(self, worker: WorkerProcess, next_frame, timeout_s: float, retries: int, recycle_after: int,
+                 is_done, emit, depth: int):
+        from collections import deque
+        self.worker, self.next_frame, self.is_done, self.emit = worker, next_frame, is_done, emit
+        self.timeout_s, self.retries, self.recycle_after, self.depth = timeout_s, retries, recycle_after, depth
+        self.attempts: dict[str, int] = {}
+        self.isolate: deque = deque()     # frames to retry alone
+        self.inflight: deque = deque()    # (frame, alone)
+        self.draining = False             # recycling: let the frames in flight finish, then restart
+
+    def run(self) -> None:
+        while True:
+            self._fill()
+            if not self.inflight:
+                if self.draining:
+                    self.draining = False
+                    continue
+                return
+            self._receive()
+
+    def _lost(self, frames: list[dict], reason: str) -> None:
+        """Frames lost with the worker: complete ones are done, the others are retried alone."""
+        suspects = [f for f in frames if not self.is_done(f["spec"]["frame_id"])]
+        for f in frames:
+            if f not in suspects:
+                self.emit(("done", f["spec"]["frame_id"], {"timings_s": None, "recovered": True}))
+        for f in suspects:
+            fid = f["spec"]["frame_id"]
+            if len(frames) == 1:
+                self.attempts[fid] = self.attempts.get(fid, 0) + 1
+                if self.attempts[fid] > self.retries:
+                    self.emit(("failed", fid, reason))
+                    continue
+            self.emit(("retry", fid, reason))
+            self.isolate.append(f)
+
+    def _drop_inflight(self, first: list[dict], reason: str) -> None:
+        """Kill the worker and count ``first`` and every frame in flight as lost."""
+        self.worker.kill()
+        frames = first + [f for f, _ in self.inflight]
+        self.inflight.clear()
+        self._lost(frames, reason)
+
+    def _fill(self) -> None:
+        """Send frames until ``depth`` are in flight (a frame under suspicion goes alone)."""
+        inflight = self.inflight
+        while not self.draining and len(inflight) < self.depth and not (inflight and inflight[-1][1]):
+            if self.isolate:
+                if inflight:
+                    break        # a frame under suspicion goes alone
+                frame, alone = self.isolate.popleft(), True
+            else:
+                frame, alone = self.next_frame(), False
+            if frame is None:
+                break
+            try:
+                if self.worker.proc is None:
+                    self.worker.start(self.timeout_s)
+                self.worker.send({"op": "render", "frame": frame})
+                inflight.append((frame, alone))
+            except Exception as exc:   # could not start or reach the worker
+                self.worker.kill()
+                frames = [f for f, _ in inflight] + [frame]
+                inflight.clear()
+                self._lost(frames if len(frames) > 1 else [frame], f"{type(exc).__name__}: {exc}")
+
+    def _receive(self) -> None:
+        """Wait for the answer about the oldest frame in flight and act on it."""
+        frame, _ = self.inflight[0]
+        try:
+            reply = self.worker.recv(self.timeout_s)
+        except (WorkerDied, ValueError) as exc:
+            self.draining = False
+            self._drop_inflight([], f"worker crashed or hung: {exc}")
+            return
+        self.inflight.popleft()
+        fid = frame["spec"]["frame_id"]
+        if reply.get("frame_id") not in (None, fid):
+            self._drop_inflight([frame], f"worker answered for {reply.get('frame_id')}, expected {fid}")
+            return
+        if reply.get("ok"):
+            self.worker.frames_done += 1
+            self.emit(("done", fid, reply))
+            if self.worker.frames_done >= self.recycle_after:   # cap memory growth of long bpy runs
+                self.draining = True
+        else:   # an error the worker reported for this very frame
+            self._frame_error(frame, fid, reply.get("error", "unknown error"))
+        if self.draining and not self.inflight:
+            self.worker.close()
+
+    def _frame_error(self, frame: dict, fid: str, error: str) -> None:
+        self.attempts[fid] = self.attempts.get(fid, 0) + 1
+        if self.attempts[fid] > self.retries:
+            self.emit(("failed", fid, error))
+        else:
+            self.emit(("retry", fid, error))
+            self.isolate.append(frame)
+
+
 def render_pipelined(worker: WorkerProcess, next_frame, timeout_s: float, retries: int, recycle_after: int,
                      is_done, emit, depth: int = 2) -> None:
     """Feed one worker with up to ``depth`` frames in flight until ``next_frame()`` returns None.
@@ -56,84 +158,7 @@ def render_pipelined(worker: WorkerProcess, next_frame, timeout_s: float, retrie
     crash with a single frame in flight counts against that frame (at most ``retries`` retries).
     ``emit(event)`` receives ("done" | "retry" | "failed", frame_id, info) events.
     """
-    from collections import deque
-    attempts: dict[str, int] = {}
-    isolate: deque = deque()     # frames to retry alone
-    inflight: deque = deque()    # (frame, alone)
-    draining = False             # recycling: let the frames in flight finish, then restart
-
-    def lost(frames, reason):
-        suspects = [f for f in frames if not is_done(f["spec"]["frame_id"])]
-        for f in frames:
-            if f not in suspects:
-                emit(("done", f["spec"]["frame_id"], {"timings_s": None, "recovered": True}))
-        for f in suspects:
-            fid = f["spec"]["frame_id"]
-            if len(frames) == 1:
-                attempts[fid] = attempts.get(fid, 0) + 1
-                if attempts[fid] > retries:
-                    emit(("failed", fid, reason))
-                    continue
-            emit(("retry", fid, reason))
-            isolate.append(f)
-
-    while True:
-        while not draining and len(inflight) < depth and not (inflight and inflight[-1][1]):
-            if isolate:
-                if inflight:
-                    break        # a frame under suspicion goes alone
-                frame, alone = isolate.popleft(), True
-            else:
-                frame, alone = next_frame(), False
-            if frame is None:
-                break
-            try:
-                if worker.proc is None:
-                    worker.start(timeout_s)
-                worker.send({"op": "render", "frame": frame})
-                inflight.append((frame, alone))
-            except Exception as exc:   # could not start or reach the worker
-                worker.kill()
-                frames = [f for f, _ in inflight] + [frame]
-                inflight.clear()
-                lost(frames if len(frames) > 1 else [frame], f"{type(exc).__name__}: {exc}")
-        if not inflight:
-            if draining:
-                draining = False
-                continue
-            return
-        frame, _ = inflight[0]
-        try:
-            reply = worker.recv(timeout_s)
-        except (WorkerDied, ValueError) as exc:
-            worker.kill()
-            frames = [f for f, _ in inflight]
-            inflight.clear()
-            draining = False
-            lost(frames, f"worker crashed or hung: {exc}")
-            continue
-        inflight.popleft()
-        fid = frame["spec"]["frame_id"]
-        if reply.get("frame_id") not in (None, fid):
-            worker.kill()
-            frames = [frame] + [f for f, _ in inflight]
-            inflight.clear()
-            lost(frames, f"worker answered for {reply.get('frame_id')}, expected {fid}")
-            continue
-        if reply.get("ok"):
-            worker.frames_done += 1
-            emit(("done", fid, reply))
-            if worker.frames_done >= recycle_after:   # cap memory growth of long bpy runs
-                draining = True
-        else:   # an error the worker reported for this very frame
-            attempts[fid] = attempts.get(fid, 0) + 1
-            if attempts[fid] > retries:
-                emit(("failed", fid, reply.get("error", "unknown error")))
-            else:
-                emit(("retry", fid, reply.get("error", "unknown error")))
-                isolate.append(frame)
-        if draining and not inflight:
-            worker.close()
+    _PipelinedFeeder(worker, next_frame, timeout_s, retries, recycle_after, is_done, emit, depth).run()
 
 
 class LocalExecutor:

@@ -114,6 +114,87 @@ class IndexStats:
         return None if w == 0 else [x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5]
 
 
+def _projected_outline(outline_uv: np.ndarray, outline_z: np.ndarray, bounds) -> tuple[float, np.ndarray, np.ndarray]:
+    """(full area px^2, centroid (2,) px, outline clipped to ``bounds`` (M, 2) px) of a projected
+    marker outline; zero area, NaN centroid and an empty outline when part of it is behind the camera."""
+    if not np.all(outline_z > 0):
+        return 0.0, np.full(2, np.nan), np.zeros((0, 2))
+    full_area, outline_centroid = polygon_area_centroid(outline_uv)
+    inside = (outline_uv[:, 0].min() >= bounds[0] and outline_uv[:, 1].min() >= bounds[1]
+              and outline_uv[:, 0].max() <= bounds[2] and outline_uv[:, 1].max() <= bounds[3])
+    clipped = outline_uv if inside else clip_polygon(outline_uv, *bounds)
+    return full_area, outline_centroid, clipped
+
+
+def _marker_geometry(m, k: np.ndarray, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds) -> dict:
+    """The geometric part of a marker's label (projection, boxes, areas; no visibility)."""
+    d_from_s = d_from_b if m.section == "B" else np.eye(4)
+    centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
+    normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
+    uv, depth = project_points(k, cam_from_d, centre_d[None])
+    outline_uv, outline_z = project_points(k, cam_from_d, transform_points(d_from_s, marker_outline(m)))
+    centre = uv[0]
+    in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
+    full_area, outline_centroid, clipped = _projected_outline(outline_uv, outline_z, bounds)
+    area_in_frame = full_area if len(clipped) == len(outline_uv) and full_area > 0 else polygon_area_centroid(clipped)[0]
+    return {
+        "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
+        "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
+        "normal_d": normal_d.tolist(), "diameter_mm": m.diameter_mm,
+        "center_px": centre.tolist(), "depth_mm": float(depth[0]),
+        "outline_centroid_px": outline_centroid.tolist(),
+        "bbox_px": _bbox(clipped) if len(clipped) else None,
+        "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
+        "in_frame": in_frame, "area_px": full_area, "area_in_frame_px": area_in_frame,
+    }
+
+
+def _add_marker_visibility(rec: dict, m, stats: IndexStats, image: np.ndarray | None,
+                           visible_threshold: float, min_chroma: float) -> None:
+    """Add the index pass's visibility (and, with ``image``, chroma and legibility) to ``rec``."""
+    visible = int(stats.counts[m.pass_index])
+    area_in_frame = rec["area_in_frame_px"]
+    frac = min(1.0, visible / area_in_frame) if area_in_frame > 0 else 0.0
+    rec["visible_pixels"] = visible
+    rec["visible_fraction"] = frac
+    rec["bbox_visible_px"] = stats.box(m.pass_index)
+    rec["visibility"] = 0 if not rec["in_frame"] else (2 if frac >= visible_threshold else 1)
+    if image is not None:
+        chroma = stats.chroma(m.pass_index, image, m.section)
+        rec["chroma"] = chroma
+        rec["legible"] = chroma is not None and chroma >= min_chroma
+
+
+def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
+                   stats: IndexStats | None) -> dict:
+    """A section's label: silhouette pixels and box, and with the index pass its visible part."""
+    d_from_s = d_from_b if sec == "B" else np.eye(4)
+    pts = transform_points(cam_from_d @ d_from_s, section_silhouette(static, sec))
+    rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
+    if np.all(pts[:, 2] > 0):
+        uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
+        rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, cam.width, cam.height)
+    if stats is not None:
+        ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
+        rec["pixels_visible"] = int(stats.counts[ids].sum())
+        rec["bbox_visible_px"] = stats.union_box(ids)
+        rec["visible_fraction"] = (min(1.0, rec["pixels_visible"] / rec["pixels_all"])
+                                   if rec.get("pixels_all") else 0.0)
+    return rec
+
+
+def _sampled_record(frame: FrameScene) -> dict:
+    return {
+        "lights": [to_dict(light) for light in frame.lights],
+        "props": [to_dict(p) for p in frame.props],
+        "appearance": to_dict(frame.appearance),
+        "sensor": to_dict(frame.sensor),
+        "glare_kind": frame.glare_kind,
+        "render_seed": frame.render_seed,
+        "render": to_dict(frame.render),
+    }
+
+
 def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
                  visible_threshold: float, derived: dict | None = None, image: np.ndarray | None = None,
                  min_chroma: float = MIN_CHROMA) -> dict:
@@ -138,58 +219,11 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
     markers = []
     for m in static.markers:
-        d_from_s = d_from_b if m.section == "B" else np.eye(4)
-        centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
-        normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
-        uv, depth = project_points(k, cam_from_d, centre_d[None])
-        outline_uv, outline_z = project_points(k, cam_from_d, transform_points(d_from_s, marker_outline(m)))
-        centre = uv[0]
-        in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
-        if np.all(outline_z > 0):
-            full_area, outline_centroid = polygon_area_centroid(outline_uv)
-            inside = (outline_uv[:, 0].min() >= bounds[0] and outline_uv[:, 1].min() >= bounds[1]
-                      and outline_uv[:, 0].max() <= bounds[2] and outline_uv[:, 1].max() <= bounds[3])
-            clipped = outline_uv if inside else clip_polygon(outline_uv, *bounds)
-        else:
-            full_area, outline_centroid, clipped = 0.0, np.full(2, np.nan), np.zeros((0, 2))
-        area_in_frame = full_area if len(clipped) == len(outline_uv) and full_area > 0 else polygon_area_centroid(clipped)[0]
-        rec = {
-            "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
-            "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
-            "normal_d": normal_d.tolist(), "diameter_mm": m.diameter_mm,
-            "center_px": centre.tolist(), "depth_mm": float(depth[0]),
-            "outline_centroid_px": outline_centroid.tolist(),
-            "bbox_px": _bbox(clipped) if len(clipped) else None,
-            "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
-            "in_frame": in_frame, "area_px": full_area, "area_in_frame_px": area_in_frame,
-        }
+        rec = _marker_geometry(m, k, cam_from_d, d_from_b, bounds)
         if stats is not None:
-            visible = int(stats.counts[m.pass_index])
-            frac = min(1.0, visible / area_in_frame) if area_in_frame > 0 else 0.0
-            rec["visible_pixels"] = visible
-            rec["visible_fraction"] = frac
-            rec["bbox_visible_px"] = stats.box(m.pass_index)
-            rec["visibility"] = 0 if not in_frame else (2 if frac >= visible_threshold else 1)
-            if image is not None:
-                chroma = stats.chroma(m.pass_index, image, m.section)
-                rec["chroma"] = chroma
-                rec["legible"] = chroma is not None and chroma >= min_chroma
+            _add_marker_visibility(rec, m, stats, image, visible_threshold, min_chroma)
         markers.append(rec)
-    sections = []
-    for sec in SECTIONS:
-        d_from_s = d_from_b if sec == "B" else np.eye(4)
-        pts = transform_points(cam_from_d @ d_from_s, section_silhouette(static, sec))
-        rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
-        if np.all(pts[:, 2] > 0):
-            uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
-            rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, w, h)
-        if stats is not None:
-            ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
-            rec["pixels_visible"] = int(stats.counts[ids].sum())
-            rec["bbox_visible_px"] = stats.union_box(ids)
-            rec["visible_fraction"] = (min(1.0, rec["pixels_visible"] / rec["pixels_all"])
-                                       if rec.get("pixels_all") else 0.0)
-        sections.append(rec)
+    sections = [_section_label(sec, static, cam, cam_from_d, d_from_b, stats) for sec in SECTIONS]
     return {
         "format": LABEL_FORMAT,
         "frame_id": frame.spec.frame_id,
@@ -203,14 +237,6 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         "pose_b_in_d": pose_components(d_from_b),
         "markers": markers,
         "sections": sections,
-        "sampled": {
-            "lights": [to_dict(light) for light in frame.lights],
-            "props": [to_dict(p) for p in frame.props],
-            "appearance": to_dict(frame.appearance),
-            "sensor": to_dict(frame.sensor),
-            "glare_kind": frame.glare_kind,
-            "render_seed": frame.render_seed,
-            "render": to_dict(frame.render),
-        },
+        "sampled": _sampled_record(frame),
         "derived": derived or {},
     }

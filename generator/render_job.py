@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import Config
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import frame_done, prepare, write_manifest
@@ -84,13 +85,13 @@ def select_frames(cfg: Config, opts: JobOptions) -> list[FrameSpec]:
     plan = frame_plan(cfg)
     k, n = opts.shard
     if not (n >= 1 and 1 <= k <= n):
-        raise ValueError(f"--shard {k}/{n}: expected K/N with 1 <= K <= N")
+        raise DockfactoryError(f"--shard {k}/{n}: expected K/N with 1 <= K <= N")
     chosen = [s for s in plan if s.index % n == k - 1]
     if opts.frame_ids is not None:
         known = {s.frame_id for s in plan}
         unknown = sorted(set(opts.frame_ids) - known)
         if unknown:
-            raise ValueError(f"frame {unknown[0]!r} is not in this dataset's plan")
+            raise DockfactoryError(f"frame {unknown[0]!r} is not in this dataset's plan")
         wanted = set(opts.frame_ids)
         chosen = [s for s in chosen if s.frame_id in wanted]
     return chosen
@@ -100,7 +101,7 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     """Render (the missing frames of) a dataset into ``root``."""
     t_start = time.monotonic()
     if opts.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {opts.workers}")
+        raise DockfactoryError(f"--workers must be >= 1, got {opts.workers}")
     frames = select_frames(cfg, opts)
     # sample every scene up front: a bad frame fails before anything is written
     scenes = {s.frame_id: sample_frame(cfg, s) for s in frames}
@@ -139,7 +140,7 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
         executor = LocalExecutor(n_workers, log_dir, opts.env,
                                  is_done=lambda fid: frame_done(root, fid, cfg.render.keep_exr))
     else:
-        raise ValueError(f"--executor must be local or ray, got {opts.executor!r}")
+        raise DockfactoryError(f"--executor must be local or ray, got {opts.executor!r}")
     frames = [to_dict(scenes[s.frame_id]) for s in todo]
     progress = Progress(len(todo), "render", enabled=opts.progress)
     finished = 0
