@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test venv clean-demo
+.PHONY: demo test test-fast venv clean-demo
 
 venv: $(STAMP)
 
@@ -26,6 +26,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# everything that neither renders nor trains for long (pyproject.toml: markers): < 60 s on 2 cores
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not render and not slow"
 
 clean-demo:
 	rm -rf out/quick

@@ -57,13 +57,23 @@ def sha256_bytes(data: bytes) -> str:
 
 
 def pid_alive(pid: int) -> bool:
+    """Whether a process with this pid is running on this host. A zombie (killed, not yet reaped by
+    its new parent) counts as dead: it will never finish a write."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    return not _is_zombie(pid)
+
+
+def _is_zombie(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:  # no /proc (not Linux) or the process is gone
+        return False
+    return stat.rsplit(")", 1)[-1].split()[0] in ("Z", "X")
 
 
 def is_temp_name(name: str) -> bool:

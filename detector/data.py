@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 import torch
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import load_labels
 
 
 @dataclass(frozen=True)
@@ -107,7 +108,6 @@ def frame_from_label(root, label: dict) -> Frame:
 
 def load_frames(root, split: str | None) -> list[Frame]:
     """Frames of ``split`` ('train', 'test', 'repeat' or None for all), in frame-id order."""
-    from dockfactory.core.io import load_labels
     root = Path(root)
     if not (root / "labels").is_dir():
         raise DockfactoryError(f"{root}: no labels/ folder (not a dockfactory dataset?)")

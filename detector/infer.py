@@ -8,13 +8,16 @@ Coordinates:
 from __future__ import annotations
 
 import hashlib
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
+from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
+from dockfactory.detector.centre import refine_centre
 from dockfactory.detector.data import resize_exact
 
 
@@ -189,7 +192,6 @@ class MarkerDetector:
 
     def detect(self, image: np.ndarray) -> list[dict]:
         """``image: (H, W, 3) uint8`` RGB -> detections sorted by falling score."""
-        from dockfactory.detector.centre import refine_centre
         det, _ = self.raw(image)
         out = []
         for x0, y0, x1, y1, score, cls in det:
@@ -233,9 +235,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined,
     bbox_detector_px}``.
     """
-    import sys
 
-    from dockfactory.core.io import write_json_atomic
     from dockfactory.detector.data import dataset_version, load_frames, read_rgb
     version = dataset_version(dataset)
     frames = load_frames(dataset, split)

@@ -25,6 +25,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from dockfactory.core.io import write_json_atomic
+from dockfactory.detector.anchors import (
+    anchor_fitness,
+    anchors_per_level,
+    kmeans_anchors,
+)
 from dockfactory.detector.checkpoint import (
     CHECKPOINT_FORMAT,
     CheckpointError,
@@ -155,11 +161,6 @@ class EpochBar:
 
 def fit_anchor_config(cfg: TrainConfig, frames) -> tuple[ModelConfig, float]:
     """(model config with k-means anchors for the training boxes at the network scale, BPR)."""
-    from dockfactory.detector.anchors import (
-        anchor_fitness,
-        anchors_per_level,
-        kmeans_anchors,
-    )
     s = cfg.data.input_scale
     wh = np.concatenate([(f.boxes[:, 2:] - f.boxes[:, :2])[f.visible >= cfg.data.min_visible_fraction]
                          for f in frames]) * s
@@ -330,5 +331,4 @@ def train(dataset, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, 
 
 
 def _write_json(path: Path, obj) -> None:
-    from dockfactory.core.io import write_json_atomic
     write_json_atomic(path, obj)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.eval.detection_metrics import evaluate_detections
 
 LABELS = {"none": "YOLOv5", "se": "+ SE", "eca": "+ ECA", "cbam": "+ CBAM", "a2": "+ A2"}
 
@@ -28,7 +29,6 @@ def _train_and_evaluate(dataset, run: Path, att: str, seed: int, cfg, conf: floa
     """Train one variant into ``run``, detect on the test split and evaluate; its metrics record."""
     from dockfactory.detector.infer import detect_dataset
     from dockfactory.detector.train import train
-    from dockfactory.eval.detection_metrics import evaluate_detections
     t0 = time.monotonic()
     summary = train(dataset, run, cfg, resume=(run / "last.pt").is_file(), progress=progress)
     train_s = time.monotonic() - t0

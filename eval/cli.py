@@ -12,17 +12,22 @@ import sys
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import default_acceptance, resolve_config
+from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.dataset_access import open_dataset, read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
+from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.pipeline import run_pipeline
+from dockfactory.eval.report import build_report
+from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 
 
 def cmd_solve(args) -> int:
-    from dockfactory.eval.dataset_access import open_dataset, read_json_for
-    from dockfactory.eval.solve_frames import solve_dataset, write_poses
     ds = open_dataset(args.dataset)
     splits = tuple(args.split.split(","))
     if (args.detections is None) == (args.oracle_noise is None):
@@ -39,10 +44,6 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from dockfactory.core.io import write_json_atomic
-    from dockfactory.eval.acceptance import load_acceptance
-    from dockfactory.eval.dataset_access import open_dataset
-    from dockfactory.eval.evaluate import evaluate, write_outputs
     spec = load_acceptance(args.acceptance or default_acceptance())
     ds = open_dataset(args.dataset)
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
@@ -56,14 +57,12 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from dockfactory.eval.report import build_report
     summary = build_report(args.eval_dir, args.out)
     print(f"verdict: {summary['verdict']}  report: {args.out}")
     return 0
 
 
 def cmd_run(args) -> int:
-    from dockfactory.eval.pipeline import run_pipeline
     return run_pipeline(resolve_config(args.config), args.out, args.acceptance or default_acceptance(), weights=args.weights, train=args.train,
                         oracle_noise_px=args.oracle_noise, workers=args.workers, train_epochs=args.epochs)
 

@@ -23,7 +23,11 @@ from pathlib import Path
 
 import numpy as np
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import load_labels
 from dockfactory.core.names import MIN_SCORE
+from dockfactory.generator.export_coco import coco_from_labels
+from pycocotools.coco import COCO
+from pycocotools.cocoeval import COCOeval
 
 COCO_SHIFT = 0.5
 NORMAL_CONDITIONS = ("normal", "ideal")
@@ -57,8 +61,6 @@ def coco_results(frames_dets: dict, coco_gt: dict) -> list[dict]:
 
 def coco_map(coco_gt: dict, results: list[dict]) -> dict:
     """``{"mAP50", "mAP50_95", "per_class": {name: {"mAP50", "mAP50_95"}}}`` with COCOeval."""
-    from pycocotools.coco import COCO
-    from pycocotools.cocoeval import COCOeval
     names = {c["id"]: c["name"] for c in coco_gt["categories"]}
     empty = {"mAP50": 0.0, "mAP50_95": 0.0, "per_class": {n: {"mAP50": 0.0, "mAP50_95": 0.0} for n in names.values()}}
     if not results:
@@ -109,8 +111,6 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
 
 def evaluate_detections(dataset, detections, split: str | None = None, recall_conf: float = MIN_SCORE) -> dict:
     """All metrics for a detections JSON (path or dict) on ``dataset`` (its split by default)."""
-    from dockfactory.core.io import load_labels
-    from dockfactory.generator.export_coco import coco_from_labels
     doc = json.loads(Path(detections).read_text()) if isinstance(detections, (str, Path)) else detections
     if "frames" not in doc:
         raise DockfactoryError("detections: no 'frames' (not a dockfactory detections file?)")

@@ -12,6 +12,12 @@ from pathlib import Path
 
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
+from dockfactory.detector.onnx_export import export_onnx
+from dockfactory.eval.ablate import run_ablation
+from dockfactory.eval.detection_metrics import (
+    evaluate_detections,
+    format_report,
+    )
 
 
 def _torch(threads: int | None):
@@ -67,17 +73,12 @@ def cmd_detect(args) -> int:
     n = sum(len(v) for v in doc["frames"].values())
     print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
     if args.eval:
-        from dockfactory.eval.detection_metrics import (
-            evaluate_detections,
-            format_report,
-        )
         print(format_report(evaluate_detections(args.dataset, doc)))
     return 0
 
 
 def cmd_ablate(args) -> int:
     _torch(args.threads)
-    from dockfactory.eval.ablate import run_ablation
     attentions = [a.strip() for a in args.attention.split(",") if a.strip()]
     seeds = list(range(args.seeds))
     result = run_ablation(args.dataset, args.out, attentions, seeds,
@@ -90,7 +91,6 @@ def cmd_ablate(args) -> int:
 
 def cmd_export_onnx(args) -> int:
     _torch(args.threads)
-    from dockfactory.detector.onnx_export import export_onnx
     info = export_onnx(args.weights or shipped_weights(), args.out, height=args.height, width=args.width, check=not args.no_check)
     print(f"ONNX model -> {info['path']} (input {info['input_shape']}); "
           + (f"max |onnx - torch| = {info['max_abs_diff']:.2e}" if "max_abs_diff" in info else "not checked"))

@@ -12,9 +12,11 @@ from pathlib import Path
 
 import numpy as np
 from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
 from dockfactory.eval.dataset_access import EvalDataset, read_json_for
+from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.solver import SolverError, crb_d_from_b
@@ -181,7 +183,10 @@ def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=
     detections = read_json_for(detections_path, "detections", ds) if detections_path else None
     sigma, centre_by_cond = centre_noise_px(ds, detections, min_score)
     if not np.isfinite(sigma):
-        sigma = oracle_sigma_px or poses.get("oracle_sigma_px") or 0.1
+        # no detections to measure it from: the oracle noise the poses were made with (0 is a
+        # valid noise level), else 0.1 px
+        given = (oracle_sigma_px, poses.get("oracle_sigma_px"))
+        sigma = next((float(s) for s in given if s is not None), 0.1)
     missing = [fid for fid in ds.frames(("test", "repeat")) if fid not in poses["frames"]]
     for fid in missing:   # a frame without a pose is a failure, never silently dropped
         poses["frames"][fid] = {"ok": False, "reason": "no pose in the poses file", "category": "missing"}
@@ -211,8 +216,6 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
     Ground truth: markers with visible fraction >= ``visible_threshold`` and a legible colour; a
     detection that only overlaps an ignored marker (occluded or washed out) counts neither way.
     """
-    from dockfactory.core.layout import CLASS_NAMES
-    from dockfactory.eval.detection_metrics import match_frame
     curves = {}
     for c, name in enumerate(CLASS_NAMES):
         scored, n_gt = [], 0
@@ -248,7 +251,6 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
 def detection_block(ds: EvalDataset, detections: dict) -> dict:
     """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error, recall and
     precision-recall curves (test split)."""
-    from dockfactory.eval.detection_metrics import evaluate_detections
     r = evaluate_detections(ds.root, detections, split="test")
     out = {k: v for k, v in r.items() if k not in ("mAP50", "mAP50_95", "per_class")}
     out.update({"map50": r["mAP50"], "map50_95": r["mAP50_95"],

@@ -7,11 +7,22 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
+from dockfactory.core.config import load_config
 from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.core.resources import shipped_weights
+from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.dataset_access import open_dataset
+from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.report import build_report
+from dockfactory.eval.solve_frames import solve_dataset, write_poses
+from dockfactory.generator.dataset import identity
+from dockfactory.generator.render_job import JobOptions, print_summary, run_render
+from dockfactory.generator.sampler import check_focal_fits
 
 
 class Stages:
@@ -48,10 +59,8 @@ def say(msg: str) -> None:
 
 def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epochs, stages: Stages):
     """Detections for every frame (shipped weights, given weights, or a detector trained here)."""
-    import os
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch  # only this stage needs torch
-    from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import detect_dataset
     torch.set_num_threads(os.cpu_count() or 1)
     if train:
@@ -86,9 +95,6 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
 def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages) -> str | None:
     """Render the dataset (itself resumable: only missing frames are rendered); its version id,
     or None when the render is incomplete."""
-    from dockfactory.generator.dataset import identity
-    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
-    from dockfactory.generator.sampler import check_focal_fits
     version = identity(cfg)["version_id"]
     key = _key("render", version)
     if stages.current("render", key, [data_dir / "manifest.json"]):
@@ -109,7 +115,6 @@ def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages
 def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, poses_path: Path, stages: Stages) -> str:
     """Poses of every frame from the detections (or from oracle centres when ``dets_path`` is None);
     returns the key part naming the detections."""
-    from dockfactory.eval.solve_frames import solve_dataset, write_poses
     src = sha256_file(dets_path) if dets_path else f"oracle:{oracle_noise_px}"
     key = _key("solve", version, src, code_fingerprint("solver", "eval"))
     if stages.current("solve", key, [poses_path]):
@@ -131,7 +136,6 @@ def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, pose
 def _evaluate_stage(ds, eval_dir: Path, poses_path: Path, spec, acceptance_path, src: str,
                     dets_path: Path | None, oracle_noise_px, stages: Stages) -> dict:
     """Metrics against the acceptance spec, written to ``eval_dir`` (read back when current)."""
-    from dockfactory.eval.evaluate import evaluate, write_outputs
     key = _key("evaluate", sha256_file(poses_path), sha256_file(acceptance_path), src,
                code_fingerprint("solver", "eval"))
     if stages.current("evaluate", key, [eval_dir / "metrics.json", eval_dir / "frames.csv"]):
@@ -146,10 +150,6 @@ def _evaluate_stage(ds, eval_dir: Path, poses_path: Path, spec, acceptance_path,
 
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
                  oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
-    from dockfactory.core.config import load_config
-    from dockfactory.eval.acceptance import load_acceptance
-    from dockfactory.eval.dataset_access import open_dataset
-    from dockfactory.eval.report import build_report
 
     t_all = time.monotonic()
     workdir = Path(workdir)

@@ -11,7 +11,9 @@ import json
 import subprocess
 from pathlib import Path
 
+import cv2
 import numpy as np
+from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.generator.version import generator_version, package_version
@@ -143,7 +145,6 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
 
 def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections: dict | None, n: int = 6) -> list[tuple[str, str]]:
     """The worst frames (largest normalised X/Y/alpha error; failures first) with markers drawn."""
-    import cv2
     test = [r for r in rows if r["split"] == "test"]
 
     def badness(r):
@@ -167,7 +168,6 @@ def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections
             cv2.drawMarker(img, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_TILTED_CROSS, 10, 1)
         rec = (poses or {}).get("frames", {}).get(fid)
         if rec and rec.get("ok"):   # the layout reprojected with the estimated poses and focal: yellow dots
-            from dockfactory.core.geometry import intrinsics, project_points
             k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
             cam_from_a = np.array(rec["cam_from_a"])
             for m in lab["markers"]:
@@ -186,9 +186,14 @@ def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections
 
 
 def git_describe() -> str:
+    """The commit of a source checkout of dockfactory ("installed" for a wheel install: the folder
+    above the package may belong to some other repository, whose commit would be a lie)."""
+    checkout = Path(__file__).resolve().parent.parent
+    if not (checkout / "pyproject.toml").is_file() or not (checkout / "eval" / "report.py").is_file():
+        return "installed (no source checkout)"
     try:
         return subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parent.parent, timeout=10).stdout.strip() or "unknown"
+                              cwd=checkout, timeout=10).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 

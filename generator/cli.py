@@ -3,10 +3,19 @@ root CLI, ``dockfactory.eval.cli``). Heavy imports happen inside the commands.""
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from collections import Counter
 from pathlib import Path
 
+from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.resources import resolve_config
+from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.dataset import identity
+from dockfactory.generator.overlay import draw_overlay
+from dockfactory.generator.render_job import JobOptions, print_summary, run_render
+from dockfactory.generator.sampler import check_focal_fits, frame_plan
 
 EXIT_OK, EXIT_FAILED = 0, 1
 
@@ -24,16 +33,12 @@ def _shard(text: str) -> tuple[int, int]:
 def _load(path):
     """Load a config and check it is feasible (every planned frame fits its markers): the check
     samples every frame's geometry, so it runs here (render, check-config), not on every load."""
-    from dockfactory.core.config import load_config
-    from dockfactory.core.resources import resolve_config
-    from dockfactory.generator.sampler import check_focal_fits
     cfg = load_config(resolve_config(path))
     check_focal_fits(cfg, str(path))
     return cfg, resolve_config(path).read_text(encoding="utf-8")
 
 
 def cmd_render(args) -> int:
-    from dockfactory.generator.render_job import JobOptions, print_summary, run_render
     cfg, text = _load(args.config)
     frame_ids = tuple(args.frames.split(",")) if args.frames else None
     opts = JobOptions(workers=args.workers, shard=args.shard, frame_ids=frame_ids,
@@ -48,9 +53,7 @@ def cmd_render(args) -> int:
 
 
 def cmd_dataset(args) -> int:
-    import json
 
-    from dockfactory.generator import dataset_tools as dt
     if args.action == "verify":
         report = dt.verify(args.dirs[0])
         print(report.text())
@@ -73,10 +76,7 @@ def cmd_dataset(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from collections import Counter
 
-    from dockfactory.generator.dataset import identity
-    from dockfactory.generator.sampler import frame_plan
     cfg, _ = _load(args.config)
     plan = frame_plan(cfg)
     print(f"{args.config}: valid; dataset version {identity(cfg)['version_id']}, {len(plan)} frames")
@@ -86,7 +86,6 @@ def cmd_check(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from dockfactory.generator.overlay import draw_overlay
     out = draw_overlay(args.dataset, args.frame_id, args.out)
     print(out)
     return EXIT_OK

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import queue
 import threading
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -50,7 +51,6 @@ class _PipelinedFeeder:
 
     def __init__(self, worker: WorkerProcess, next_frame, timeout_s: float, retries: int, recycle_after: int,
                  is_done, emit, depth: int):
-        from collections import deque
         self.worker, self.next_frame, self.is_done, self.emit = worker, next_frame, is_done, emit
         self.timeout_s, self.retries, self.recycle_after, self.depth = timeout_s, retries, recycle_after, depth
         self.attempts: dict[str, int] = {}

@@ -5,6 +5,7 @@ Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from dockfactory.core.geometry import (
     polygon_area_centroid,
@@ -57,7 +58,6 @@ def section_silhouette(static: StaticScene, section: str, n: int = 128) -> np.nd
 
 def hull_pixels(uv: np.ndarray, w: int, h: int) -> tuple[int, list[float] | None]:
     """Pixel centres inside the convex hull of ``uv`` (N, 2) within a w x h image: count and box."""
-    import cv2
     hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
     mask = np.zeros((h, w), np.uint8)
     cv2.fillConvexPoly(mask, hull, 1, cv2.LINE_8, 4)
@@ -109,7 +109,6 @@ class IndexStats:
     def union_box(self, values) -> list[float] | None:
         lut = np.zeros(256, np.uint8)
         lut[list(values)] = 1
-        import cv2
         x, y, w, h = cv2.boundingRect(lut[self.small])
         return None if w == 0 else [x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5]
 

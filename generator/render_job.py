@@ -19,6 +19,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import frame_done, prepare, write_manifest
+from dockfactory.generator.dataset_tools import export
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.generator.progress import Progress
 from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
@@ -114,10 +115,11 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
 
     if todo:
         _render(cfg, root, todo, scenes, opts, summary)
+    # temporaries of a killed earlier run whose writer had not yet exited when this run started
+    remove_stale_temps(root, max_age_s=cfg.render.frame_timeout_s + 60.0)
     summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
-        from dockfactory.generator.dataset_tools import export
         for fmt in cfg.export.formats:
             if not (root / "exports" / fmt).exists():   # written once, when the dataset completes
                 export(root, fmt)

@@ -21,6 +21,7 @@ def test_help_is_torch_free(repo_root):
     assert "--attention" in proc.stdout and "--weights" in proc.stdout
 
 
+@pytest.mark.slow   # trains, detects, exports and checks ONNX: about 10 s
 def test_train_detect_eval_export(tmp_path, capsys):
     from dockfactory.eval.cli import main
     data = write_synthetic_dataset(tmp_path / "data", frames=6, width=128, height=96, markers=4, seed=5, test_every=3)

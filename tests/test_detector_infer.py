@@ -60,6 +60,7 @@ def brute_nms(boxes, scores, thr):
     return keep
 
 
+@pytest.mark.slow   # 80 examples against an O(n^2) reference: about 10 s
 @settings(max_examples=80, deadline=None)
 @given(n=st.integers(0, 60), seed=st.integers(0, 2**31), thr=st.sampled_from([0.3, 0.45, 0.6, 0.9]),
        ties=st.booleans())

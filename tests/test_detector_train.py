@@ -36,6 +36,7 @@ def overfit_run(tmp_path_factory):
     return root, run, summary
 
 
+@pytest.mark.slow   # the overfit run trains for 200 steps: about a minute on 2 cores
 def test_overfit_loss_falls_and_markers_found(overfit_run):
     root, run, summary = overfit_run
     total = [h["box"] + h["obj"] + h["cls"] for h in summary["history"]]
@@ -55,6 +56,7 @@ def test_overfit_loss_falls_and_markers_found(overfit_run):
     assert errors >= 14           # and (nearly) all refined centres within 1 px
 
 
+@pytest.mark.slow   # needs the overfit run
 def test_weights_file_is_weights_only(overfit_run):
     _, run, _ = overfit_run
     obj = torch.load(run / "weights.pt", weights_only=True)
@@ -74,6 +76,7 @@ def _tiny(tmp_path, epochs, out, resume=False):
     return train(root, tmp_path / out, cfg, resume=resume, progress=False, log=lambda *a: None)
 
 
+@pytest.mark.slow   # three short trainings: several seconds
 def test_resume_equals_not_stopping(tmp_path):
     torch.set_num_threads(1)
     _tiny(tmp_path, 2, "straight")                    # 2 epochs of one optimiser step each

@@ -1,0 +1,2 @@
+"""VIOLATION: a data package importing the project."""
+import dockfactory.core  # noqa: F401

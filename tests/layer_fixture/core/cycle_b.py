@@ -1,0 +1,1 @@
+from dockfactory.core.cycle_a import *  # noqa: F401,F403

@@ -1,0 +1,1 @@
+"""Layer fixture (never imported)."""

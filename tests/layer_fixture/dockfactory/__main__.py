@@ -1,0 +1,2 @@
+from dockfactory.eval.cli import main   # allowed: the entry point
+main()

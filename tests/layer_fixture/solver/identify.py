@@ -1,0 +1,5 @@
+from dockfactory.solver import docking  # noqa: F401
+
+
+def identify(x):
+    return x

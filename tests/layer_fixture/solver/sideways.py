@@ -1,0 +1,2 @@
+"""VIOLATION (sideways): solver imports detector."""
+from dockfactory.detector import infer  # noqa: F401
