@@ -31,6 +31,7 @@ TARGETS = {"ms_per_image": 60.0, "mAP50": 0.995, "mAP50_95": 0.85, "centre_norma
 def bench_inference(weights, frames, rounds: int) -> dict:
     import numpy as np
     import torch
+
     from dockfactory.detector.centre import refine_centre
     from dockfactory.detector.data import read_rgb
     from dockfactory.detector.infer import MarkerDetector, letterbox, postprocess
@@ -73,6 +74,7 @@ def bench_inference(weights, frames, rounds: int) -> dict:
 
 def bench_training(dataset, batches: int) -> dict:
     import torch
+
     from dockfactory.detector.data import CropDataset, DataConfig, load_frames
     from dockfactory.detector.loss import YoloLoss
     from dockfactory.detector.model import ModelConfig, build_model

@@ -12,6 +12,7 @@ import argparse
 import sys
 
 import numpy as np
+
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, marker_points  # noqa: E402
 from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene  # noqa: E402

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402
 

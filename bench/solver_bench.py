@@ -40,6 +40,7 @@ import itertools
 import time
 
 import numpy as np
+
 from dockfactory.core.geometry import pose_components
 from dockfactory.solver import (
     SolverError,

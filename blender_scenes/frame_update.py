@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
+from mathutils import Matrix
+
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes.scene_builder import MM, SceneHandles
 from dockfactory.core.geometry import (
@@ -9,7 +11,6 @@ from dockfactory.core.geometry import (
     blender_world_from_camera,
 )
 from dockfactory.core.scene import FrameScene
-from mathutils import Matrix
 
 DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
 

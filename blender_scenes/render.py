@@ -8,6 +8,7 @@ from __future__ import annotations
 import time
 
 import bpy
+
 from dockfactory.blender_scenes.frame_update import apply_frame
 from dockfactory.blender_scenes.scene_builder import build_scene
 from dockfactory.core.scene import FrameScene, StaticScene

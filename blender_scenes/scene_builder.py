@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
+
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
 from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX

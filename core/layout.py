@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.core.names import CLASS_NAMES, SECTIONS  # noqa: F401  (re-exported)
 
 OUTLINE_POINTS = 256  # points on a marker disc's edge (labels, solver outline)

@@ -10,6 +10,7 @@ import typing
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.core.geometry import intrinsics
 from dockfactory.core.layout import Marker
 

@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 import torch
+
 from dockfactory.core.errors import DockfactoryError
 
 CHECKPOINT_FORMAT = "dockfactory.detector.checkpoint/1"

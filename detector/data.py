@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
+
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import load_labels
 

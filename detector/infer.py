@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre import refine_centre

@@ -25,10 +25,11 @@ import math
 from dataclasses import asdict, dataclass
 
 import torch
+from torch import nn
+
 from dockfactory.core.names import CLASS_NAMES  # noqa: F401  (re-exported)
 from dockfactory.detector.attention import ATTENTIONS, make_attention
 from dockfactory.detector.blocks import C3, SPPF, Conv, fuse_conv_bn
-from torch import nn
 
 SCALES = {"n": (0.33, 0.25), "s": (0.33, 0.50)}  # depth multiple, width multiple
 # YOLOv5's COCO anchors (P3, P4, P5), px at the network input; replaced by k-means anchors.

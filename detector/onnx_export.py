@@ -13,12 +13,14 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
 from dockfactory.core.errors import DockfactoryError
 
 
 def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool = True, seed: int = 0,
                 atol: float = 1e-3) -> dict:
     import torch
+
     from dockfactory.detector.checkpoint import load_model
     if height % 32 or width % 32 or height <= 0 or width <= 0:
         raise DockfactoryError(f"height and width must be positive multiples of 32, got {height} x {width}")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 
 RED, BLUE, RING = (200, 25, 25), (30, 50, 210), (25, 25, 25)

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch import nn
+
 from dockfactory.core.io import write_json_atomic
 from dockfactory.detector.anchors import (
     anchor_fitness,
@@ -46,7 +48,6 @@ from dockfactory.detector.data import (
 )
 from dockfactory.detector.loss import LossGains, YoloLoss
 from dockfactory.detector.model import ModelConfig, build_model
-from torch import nn
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.detection_metrics import evaluate_detections
 

@@ -22,12 +22,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+from pycocotools.coco import COCO
+from pycocotools.cocoeval import COCOeval
+
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import load_labels
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.export_coco import coco_from_labels
-from pycocotools.coco import COCO
-from pycocotools.cocoeval import COCOeval
 
 COCO_SHIFT = 0.5
 NORMAL_CONDITIONS = ("normal", "ideal")

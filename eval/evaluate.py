@@ -11,6 +11,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE

@@ -61,6 +61,7 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     """Detections for every frame (shipped weights, given weights, or a detector trained here)."""
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch  # only this stage needs torch
+
     from dockfactory.detector.infer import detect_dataset
     torch.set_num_threads(os.cpu_count() or 1)
     if train:

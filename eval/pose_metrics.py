@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS
 
 

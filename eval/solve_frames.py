@@ -13,6 +13,7 @@ Frames without a pose are kept with their reason: never dropped.
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.dataset_access import EvalDataset

@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from dockfactory.core.io import load_labels, write_json_atomic, write_text_atomic
 from dockfactory.core.layout import SECTIONS
 from dockfactory.generator.export_files import place_file

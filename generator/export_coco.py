@@ -36,6 +36,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from dockfactory.core.geometry import project_points, transform_points
 from dockfactory.core.io import load_labels, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import OpenEXR
+
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import atomic_path
 

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import cv2
+
 from dockfactory.core.io import (
     sha256_bytes,
     sha256_file,

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from dockfactory.core.io import write_bytes_atomic
 
 COLORS = {"A": (60, 60, 255), "B": (255, 160, 40)}  # BGR

@@ -13,6 +13,7 @@ import dataclasses
 from functools import lru_cache
 
 import numpy as np
+
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
 from dockfactory.core.geometry import (
     look_at_cam_from_world,

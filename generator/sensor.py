@@ -12,6 +12,7 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
+
 from dockfactory.core.scene import SensorParams
 
 TARGET_GREY = 0.18

@@ -8,6 +8,7 @@ arguments through these before any math; they raise :class:`solver.errors.Invali
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.errors import (
     DegenerateGeometry,

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.core.names import POSE_NAMES
 from dockfactory.solver.checks import as_points, as_principal_point
 from dockfactory.solver.errors import DegenerateGeometry, InvalidSolverInput

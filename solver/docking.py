@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from dockfactory.core.geometry import pose_components
 from dockfactory.core.names import POSE_NAMES, SECTIONS
 from dockfactory.solver.checks import (

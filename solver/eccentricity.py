@@ -12,6 +12,7 @@ A step of the docking pipeline (layer 5, beside :mod:`solver.suspects`).
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.core.geometry import polygon_area_centroid
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
 from dockfactory.solver.errors import FocalNotObservable, NoValidCamera, SolverError
 from dockfactory.solver.options import RefineOptions
 from dockfactory.solver.refine import (
@@ -22,14 +23,14 @@ from dockfactory.solver.refine import (
     refine_pnpf,
     rel_focal_std,
 )
-from dockfactory.solver.upnp import focal_sweep, upnp
+from dockfactory.solver.upnp import CameraPose, focal_sweep, upnp
 
 __all__ = ["PnPfResult", "PnPfEstimate", "estimate_pnpf", "refine_best_candidate",
            "check_focal_observable"]
 
 
 @dataclass(frozen=True)
-class PnPfResult:
+class PnPfResult(CameraPose):
     """Result of :func:`solver.solve_pnpf` (and :func:`solver.ransac.ransac_pnpf`).
 
     - ``cam_from_world`` (4, 4): world (the frame of ``points_3d``) to OpenCV camera;
@@ -52,14 +53,6 @@ class PnPfResult:
     inliers: np.ndarray
     iterations: int = 0
     residuals_px: np.ndarray = field(default=None, repr=False)
-
-    @property
-    def rotation(self) -> np.ndarray:
-        return self.cam_from_world[:3, :3]
-
-    @property
-    def translation(self) -> np.ndarray:
-        return self.cam_from_world[:3, 3]
 
     @property
     def std(self) -> np.ndarray:

@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+
 from dockfactory.solver.checks import (
     as_points,
     as_principal_point,

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.solver.errors import FocalNotObservable, NoValidCamera, SolverError
 from dockfactory.solver.estimate import estimate_pnpf
 from dockfactory.solver.options import RefineOptions

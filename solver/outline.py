@@ -5,6 +5,7 @@ Bottom layer of the solver (imports only core); used by the docking pipeline ste
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.layout import marker_outline
 

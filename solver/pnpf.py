@@ -7,6 +7,7 @@ LO-RANSAC (:func:`solver.ransac.ransac_pnpf`).
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.solver.checks import (
     as_principal_point,
     check_correspondences,

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+
 from dockfactory.solver.checks import collinear_2d, collinear_3d
 from dockfactory.solver.errors import InvalidSolverInput, NoConsensus, SolverError
 from dockfactory.solver.estimate import PnPfResult, refine_best_candidate

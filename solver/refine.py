@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.core.geometry import euler_deg_from_rotation
 from dockfactory.solver.errors import NoValidCamera
 from dockfactory.solver.lie import so3_exp

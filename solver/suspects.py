@@ -26,6 +26,7 @@ returns (the refitted :class:`JointFit`, inliers (N,) bool). A step of the docki
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.checks import MIN_POINTS
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints

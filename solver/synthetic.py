@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.core.geometry import (
     look_at_cam_from_world,
     make_transform,

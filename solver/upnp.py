@@ -45,6 +45,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from dockfactory.solver.checks import as_principal_point, check_correspondences
 from dockfactory.solver.errors import NoValidCamera
 
@@ -59,8 +60,20 @@ _PAIRS4 = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 _PAIRS3 = np.array([(0, 1), (0, 2), (1, 2)])
 
 
+class CameraPose:
+    """Rotation (3, 3) and translation (3,) views of a result's ``cam_from_world`` (4, 4)."""
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return self.cam_from_world[:3, :3]
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.cam_from_world[:3, 3]
+
+
 @dataclass(frozen=True)
-class Candidate:
+class Candidate(CameraPose):
     """One closed-form solution.
 
     ``cam_from_world``: (4, 4); ``focal_px``: focal length (px); ``rmse_px``: reprojection RMS
@@ -72,14 +85,6 @@ class Candidate:
     focal_px: float
     rmse_px: float
     method: str
-
-    @property
-    def rotation(self) -> np.ndarray:
-        return self.cam_from_world[:3, :3]
-
-    @property
-    def translation(self) -> np.ndarray:
-        return self.cam_from_world[:3, 3]
 
 
 # ----------------------------------------------------------------------------------------------

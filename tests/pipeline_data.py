@@ -23,6 +23,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from dockfactory.core.config import Config, load_config
 from dockfactory.core.geometry import invert_transform, project_points, transform_points
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline

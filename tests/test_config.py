@@ -2,6 +2,7 @@ import subprocess
 import sys
 
 import pytest
+
 from dockfactory.core.config import Config, ConfigError, config_from_dict, load_config
 
 

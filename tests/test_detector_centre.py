@@ -1,10 +1,11 @@
 """Sub-pixel centre refinement on synthetic discs with exact coverage."""
 import numpy as np
 import pytest
-from dockfactory.detector.centre import colour_score, refine_centre
-from dockfactory.detector.synthetic import make_frame  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from dockfactory.detector.centre import colour_score, refine_centre
+from dockfactory.detector.synthetic import make_frame  # noqa: E402
 
 
 @settings(max_examples=25, deadline=None)

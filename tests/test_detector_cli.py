@@ -7,6 +7,7 @@ import sys
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
+
 from dockfactory.detector.synthetic import write_synthetic_dataset
 
 

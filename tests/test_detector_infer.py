@@ -6,9 +6,10 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np
 import pytest
 import torch
-from dockfactory.detector.infer import batched_nms, box_iou, letterbox, nms, postprocess
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from dockfactory.detector.infer import batched_nms, box_iou, letterbox, nms, postprocess
 
 
 @settings(max_examples=60, deadline=None)

@@ -1,6 +1,7 @@
 """mAP (pycocotools) on hand-built cases, matching, centre error and recall."""
 import numpy as np
 import pytest
+
 from dockfactory.eval.detection_metrics import (
     centre_and_recall,
     coco_map,

@@ -5,6 +5,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
 import torch
+
 from dockfactory.detector.attention import (
     ATTENTIONS,
     ECA,

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
+
 from dockfactory.detector.anchors import (
     anchor_fitness,
     anchors_per_level,

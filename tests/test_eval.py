@@ -6,6 +6,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
+
 from dockfactory.core.config import ConfigError
 from dockfactory.eval.acceptance import AcceptanceSpec, Gate, load_acceptance
 from dockfactory.eval.pose_metrics import (

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.geometry import (
     polygon_area_centroid,

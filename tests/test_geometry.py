@@ -1,5 +1,8 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from dockfactory.core.geometry import (
     BLENDER_CAM_FROM_CV_CAM,
     blender_camera_intrinsics,
@@ -17,8 +20,6 @@ from dockfactory.core.geometry import (
     transform_from_pose_components,
     transform_points,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 angles = st.floats(-89.0, 89.0)
 

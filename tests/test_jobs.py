@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+
 from dockfactory.core.config import load_config
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.render_job import JobOptions, run_render

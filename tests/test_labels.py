@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.geometry import polygon_area_centroid
 from dockfactory.core.layout import marker_outline

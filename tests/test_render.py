@@ -5,6 +5,7 @@ import sys
 
 import numpy as np
 import pytest
+
 from dockfactory.core.config import load_config
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.exr import read_compact
@@ -47,10 +48,11 @@ def test_labels_agree_with_the_index_pass(label_dataset):
     2. The centroid of those pixels is within 0.25 px of the label's projected centre for every
        marker of at least 150 px (smaller, thin ellipses carry more pixel quantisation).
     """
+    from matplotlib.path import Path as PolyPath
+
     from dockfactory.core.geometry import project_points
     from dockfactory.core.layout import marker_outline
     from dockfactory.generator.sampler import static_scene
-    from matplotlib.path import Path as PolyPath
     cfg, root, _ = label_dataset
     layout = {m.id: m for m in static_scene(cfg).markers}
     errors, mismatch = [], []

@@ -2,6 +2,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from dockfactory.core.config import CHALLENGING, config_from_dict
 from dockfactory.core.geometry import pose_components, project_points, transform_points
 from dockfactory.core.layout import (

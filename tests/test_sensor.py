@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+
 from dockfactory.core.scene import SensorParams
 from dockfactory.generator.sensor import (
     TARGET_GREY,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from dockfactory.core.geometry import (
     polygon_area_centroid,
     pose_components,

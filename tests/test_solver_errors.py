@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from dockfactory.solver import (
     AmbiguousIdentification,
     DegenerateGeometry,

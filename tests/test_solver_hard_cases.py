@@ -3,6 +3,7 @@ that slides to the orthographic limit, and an identification that must shed a st
 from __future__ import annotations
 
 import numpy as np
+
 from dockfactory.solver.estimate import estimate_pnpf
 from dockfactory.solver.synthetic import default_layout
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from dockfactory.solver import SolverError, identify_markers, solve_docking, solve_pnpf
 from dockfactory.solver.synthetic import default_layout, docking_scene
 

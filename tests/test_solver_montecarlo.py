@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from dockfactory.core.geometry import pose_components
 from dockfactory.solver import (
     FocalNotObservable,

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from dockfactory.core.geometry import look_at_cam_from_world, make_transform, rot_z
 from dockfactory.solver import SolverError, solve_pnpf, upnp
 from dockfactory.solver.lie import rotation_angle_deg
 from dockfactory.solver.synthetic import docking_scene
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 PP = np.array([639.5, 479.5])
 

@@ -15,6 +15,8 @@ import shutil
 
 import numpy as np
 import pytest
+from pipeline_data import write_painted_dataset
+
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import default_acceptance, shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec, load_acceptance
@@ -24,7 +26,6 @@ from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
-from pipeline_data import write_painted_dataset
 
 TOL_MM, TOL_DEG, TOL_FOCAL_PX = 1e-3, 1e-3, 0.01
 COMPS = ("x", "y", "z", "alpha", "beta", "gamma")

@@ -18,6 +18,7 @@ import subprocess
 import sys
 
 import pytest
+
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import to_dict
