@@ -100,3 +100,20 @@ def test_validate_is_split_into_short_functions():
     long = [(f.name, f.end_lineno - f.lineno + 1) for f in ast.walk(tree)
             if isinstance(f, ast.FunctionDef) and f.end_lineno - f.lineno + 1 > 50]
     assert long == []
+
+
+def test_configs_resolve_to_files_or_shipped_names(tmp_path, monkeypatch):
+    from dockfactory.core.errors import DockfactoryError
+    from dockfactory.core.resources import resolve_config, shipped_config, shipped_configs
+    assert {"smoke", "quick", "paper", "ideal", "detector", "acceptance"} <= set(shipped_configs())
+    monkeypatch.chdir(tmp_path)
+    for arg in ("smoke", "smoke.toml", "configs/smoke.toml"):
+        assert resolve_config(arg) == shipped_config("smoke") and resolve_config(arg).is_file()
+    (tmp_path / "configs").mkdir()
+    own = tmp_path / "configs" / "smoke.toml"
+    own.write_text("[dataset]\nframes = 3\n")
+    assert resolve_config("configs/smoke.toml").resolve() == own   # a file that exists wins
+    with pytest.raises(DockfactoryError, match=r"nope.toml: no such config file \(shipped configs: .*smoke"):
+        resolve_config("nope.toml")
+    with pytest.raises(DockfactoryError, match="no such config file"):
+        resolve_config("elsewhere/smoke.toml")                 # only ./ and configs/ fall back

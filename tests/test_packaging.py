@@ -125,6 +125,9 @@ def test_the_installed_wheel_works_from_another_folder(fresh, repo_root, tmp_pat
 
     proc = _check(_run(["dockfactory", "check-config", "smoke"], cwd=work, env=env, timeout=300))
     assert "smoke" in proc.stdout + proc.stderr
+    # the README's spelling, from a folder that has no configs/: the shipped config is used
+    proc = _check(_run(["dockfactory", "check-config", "configs/smoke.toml"], cwd=work, env=env, timeout=300))
+    assert "valid; dataset version" in proc.stdout
 
     # render -> detect (shipped weights) -> solve -> evaluate (shipped spec) -> report;
     # exit 0 accepted, 1 rejected: both are results, anything else is a failure
