@@ -1,6 +1,7 @@
 """Apply one frozen FrameScene to the built Blender scene (bpy): transforms, lights, materials."""
 from __future__ import annotations
 
+import bpy
 import numpy as np
 from mathutils import Matrix
 
@@ -14,6 +15,13 @@ from dockfactory.core.scene import FrameScene
 
 DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
 
+# What a frame leaves behind must not depend on the frames before it: every property apply_frame
+# ever changes is set on every frame, and an object a frame does not use is hidden *and* parked
+# in one fixed state (identity transform, these values), never left as the last frame that used
+# it had it.
+PARKED_DENOISE_QUALITY = "HIGH"
+PARKED_COLOR = (0.5, 0.5, 0.5)
+
 
 def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
     m = np.array(d_from_x, dtype=float)
@@ -24,21 +32,20 @@ def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
 
 
 def _apply_render_settings(scene, frame: FrameScene) -> None:
-    """Cycles samples, seed, bounces, adaptive sampling, filter and denoising of the frame."""
+    """Cycles samples, seed, bounces, adaptive sampling, filter and denoising of the frame (every
+    one set on every frame, also those the frame switches off)."""
     c = scene.cycles
     rs = frame.render
     c.samples = rs.samples
     c.seed = frame.render_seed
     c.max_bounces = rs.max_bounces
     c.use_adaptive_sampling = rs.adaptive_threshold > 0
-    if rs.adaptive_threshold > 0:
-        c.adaptive_threshold = rs.adaptive_threshold
-        c.adaptive_min_samples = rs.adaptive_min_samples
+    c.adaptive_threshold = rs.adaptive_threshold
+    c.adaptive_min_samples = rs.adaptive_min_samples
     c.filter_width = rs.filter_width_px
     c.use_denoising = rs.denoise != "off"
-    if rs.denoise != "off":
-        c.denoising_quality = DENOISE_QUALITY[rs.denoise]
-        c.denoising_prefilter = rs.denoise_prefilter.upper()
+    c.denoising_quality = DENOISE_QUALITY.get(rs.denoise, PARKED_DENOISE_QUALITY)
+    c.denoising_prefilter = rs.denoise_prefilter.upper()
 
 
 def _apply_camera(h: SceneHandles, cam) -> None:
@@ -51,17 +58,22 @@ def _apply_camera(h: SceneHandles, cam) -> None:
 
 
 def _apply_lights(h: SceneHandles, frame: FrameScene) -> None:
-    """Place and switch on the frame's lights; the others are hidden."""
+    """Place and switch on the frame's lights; the others are hidden and parked."""
     lights = {light.name: light for light in frame.lights}
+    unknown = sorted(set(lights) - set(h.lights))
+    if unknown:
+        raise ValueError(f"frame {frame.spec.frame_id}: no light named {unknown[0]!r}")
     for name, obj in h.lights.items():
         light = lights.get(name)
         on = light is not None and light.power_w > 0
+        if on and light.kind != obj.data.type:
+            raise ValueError(f"frame {frame.spec.frame_id}: light {name} is {light.kind}, the scene's is "
+                             f"{obj.data.type}")
         obj.hide_render = not on
-        if on:
-            obj.matrix_world = _blender_matrix(light.d_from_light)
-            obj.data.energy = light.power_w
-            obj.data.size = light.size_mm * MM
-            obj.data.color = light.color
+        obj.matrix_world = _blender_matrix(light.d_from_light) if on else Matrix.Identity(4)
+        obj.data.energy = light.power_w if on else 0.0
+        obj.data.size = light.size_mm * MM if on else 0.0
+        obj.data.color = light.color if on else (1.0, 1.0, 1.0)
 
 
 def _apply_appearance(h: SceneHandles, a) -> None:
@@ -78,29 +90,115 @@ def _apply_appearance(h: SceneHandles, a) -> None:
 
 
 def _apply_props(h: SceneHandles, frame: FrameScene) -> None:
-    """Show the frame's props from the pooled objects; hide every pooled object it does not use."""
-    used = set()
+    """Show the frame's props from the pooled objects; hide and park every pooled object it does
+    not use."""
+    used = {}
     for p in frame.props:
         key = (p.kind, p.slot)
         if key not in h.props:
             raise ValueError(f"frame {frame.spec.frame_id}: no pooled object for {p.kind} slot {p.slot}")
-        used.add(key)
-        obj = h.props[key]
-        obj.matrix_world = _blender_matrix(p.d_from_prop, p.size_mm)
-        obj.hide_render = False
-        if p.kind == "lamp":
-            mats.set_emission(h.prop_materials[key], p.color, p.emission)
-        else:
-            mats.set_diffuse(h.prop_materials[key], color=p.color)
+        if key in used:
+            raise ValueError(f"frame {frame.spec.frame_id}: two props in {p.kind} slot {p.slot}")
+        used[key] = p
     for key, obj in h.props.items():
-        if key not in used:
-            obj.hide_render = True
+        p = used.get(key)
+        obj.hide_render = p is None
+        obj.matrix_world = Matrix.Identity(4) if p is None else _blender_matrix(p.d_from_prop, p.size_mm)
+        color = PARKED_COLOR if p is None else p.color
+        if key[0] == "lamp":
+            mats.set_emission(h.prop_materials[key], color, 0.0 if p is None else p.emission)
+        else:
+            mats.set_diffuse(h.prop_materials[key], color=color)
 
 
 def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
+    """Set the scene to ``frame``: every property this changes is set on every frame, so the
+    scene afterwards depends on ``frame`` alone (:func:`scene_state`), whatever came before."""
     _apply_render_settings(h.scene, frame)
     h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
     _apply_camera(h, frame.camera)
     _apply_lights(h, frame)
     _apply_appearance(h, frame.appearance)
     _apply_props(h, frame)
+
+
+# --- the Blender state a frame leaves behind (tests: it must not depend on earlier frames) ------
+
+# RNA properties that are bookkeeping, not scene content
+_VOLATILE = {"rna_type", "session_uid", "users", "is_evaluated", "original", "is_runtime_data",
+             "is_missing", "use_fake_user", "use_extra_user", "is_embedded_data", "tag", "is_library_indirect",
+             "library_weak_reference", "preview", "filepath", "is_dirty", "mode", "select", "is_active"}
+
+
+def _plain(v):
+    if isinstance(v, (bool, int, float, str)) or v is None:
+        return v
+    if isinstance(v, set):
+        return sorted(v)
+    try:
+        return [_plain(x) for x in v]
+    except TypeError:
+        return repr(v)
+
+
+def _is_id(struct_type) -> bool:
+    while struct_type is not None:
+        if struct_type.identifier == "ID":
+            return True
+        struct_type = struct_type.base
+    return False
+
+
+def _rna_values(struct, prefix: str, out: dict, depth: int = 0) -> None:
+    """Every value property of ``struct`` and of its nested (non-ID) structs, into ``out``."""
+    for prop in struct.bl_rna.properties:
+        pid = prop.identifier
+        if pid in _VOLATILE:
+            continue
+        if prop.type == "POINTER":
+            if depth < 2 and not _is_id(prop.fixed_type):
+                sub = getattr(struct, pid, None)
+                if sub is not None:
+                    _rna_values(sub, f"{prefix}.{pid}", out, depth + 1)
+            elif _is_id(prop.fixed_type):
+                ref = getattr(struct, pid, None)
+                out[f"{prefix}.{pid}"] = None if ref is None else ref.name
+            continue
+        if prop.type == "COLLECTION":
+            continue
+        try:
+            out[f"{prefix}.{pid}"] = _plain(getattr(struct, pid))
+        except (AttributeError, RuntimeError):
+            pass
+
+
+def _node_tree_values(nt, prefix: str, out: dict) -> None:
+    for node in nt.nodes:
+        _rna_values(node, f"{prefix}.{node.name}", out, depth=2)
+        for kind, sockets in (("in", node.inputs), ("out", node.outputs)):
+            for i, sock in enumerate(sockets):
+                if hasattr(sock, "default_value"):
+                    out[f"{prefix}.{node.name}.{kind}{i}"] = _plain(sock.default_value)
+    out[f"{prefix}.links"] = sorted(
+        f"{ln.from_node.name}:{ln.from_socket.identifier}->{ln.to_node.name}:{ln.to_socket.identifier}"
+        for ln in nt.links)
+
+
+def scene_state(h: SceneHandles) -> dict:
+    """Every property of the Blender scene a render can read (render and Cycles settings, objects,
+    lights, camera, materials and world with their node values), as plain values by path.
+
+    ``apply_frame`` sets every property it ever changes on every frame, so this state after
+    ``apply_frame(h, frame)`` is a function of the static scene and ``frame`` alone, whatever was
+    applied before (a test compares it across frame orders)."""
+    out: dict = {}
+    scene = h.scene
+    _rna_values(scene, "scene", out)
+    for vl in scene.view_layers:
+        _rna_values(vl, f"view_layer[{vl.name}]", out)
+    for kind in ("objects", "lights", "cameras", "meshes", "worlds", "materials"):
+        for block in getattr(bpy.data, kind):
+            _rna_values(block, f"{kind}[{block.name}]", out)
+            if getattr(block, "node_tree", None) is not None:
+                _node_tree_values(block.node_tree, f"{kind}[{block.name}].nodes", out)
+    return out

@@ -9,7 +9,7 @@ import time
 
 import bpy
 
-from dockfactory.blender_scenes.frame_update import apply_frame
+from dockfactory.blender_scenes.frame_update import apply_frame, scene_state
 from dockfactory.blender_scenes.scene_builder import build_scene
 from dockfactory.core.scene import FrameScene, StaticScene
 
@@ -32,3 +32,9 @@ class BlenderRenderer:
         t1 = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         return {"scene_update": t1 - t0, "cycles": time.perf_counter() - t1}
+
+    def state(self, frame: FrameScene) -> dict:
+        """Apply ``frame`` without rendering; the Blender state a render would read (see
+        :func:`~dockfactory.blender_scenes.frame_update.scene_state`)."""
+        apply_frame(self.handles, frame)
+        return scene_state(self.handles)

@@ -7,6 +7,8 @@ prints is sent to stderr (the job's log). Requests:
   {"op": "init", "static": ..., "width": W, "height": H, "threads": T, "root": DIR,
    "keep_exr": bool, "visible_threshold": x}
   {"op": "render", "frame": <FrameScene dict>}
+  {"op": "state", "frame": <FrameScene dict>, "full": bool}  apply the frame without rendering;
+      reply "digest" (sha256 of the Blender state a render would read) and, if full, "state"
   {"op": "quit"}
 Replies: {"ok": true, ...} or {"ok": false, "error": "..."}.
 Fault injection for tests: DOCKFACTORY_FAULT="crash:<frame_id>" or "hang:<frame_id>" acts once per
@@ -14,6 +16,7 @@ frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it); "crash-always:<fram
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -153,6 +156,24 @@ class _Session:
             return
         self.replies.start_post(lambda: self.post_process(frame, exr_path, t0, timings, render_cpu))
 
+    def handle_state(self, req: dict) -> None:
+        """Apply a frame without rendering and report the resulting Blender state (tests check
+        that it does not depend on the frames applied before)."""
+        self.replies.wait()   # replies stay in request order
+        try:
+            if self.renderer is None:
+                raise RuntimeError("state before init")
+            frame = from_dict(FrameScene, req["frame"])
+            state = self.renderer.state(frame)
+            text = json.dumps(state, sort_keys=True)
+            reply = {"ok": True, "op": "state", "frame_id": frame.spec.frame_id,
+                     "digest": hashlib.sha256(text.encode()).hexdigest()}
+            if req.get("full"):
+                reply["state"] = state
+            self.replies.send(reply)
+        except Exception as exc:
+            self.replies.send(_error("state", exc))
+
     def post_process(self, frame, exr_path: str, t0: float, timings: dict, render_cpu: float) -> None:
         """Sensor model, labels and writes of a rendered frame (runs beside the next render)."""
         init = self.init
@@ -183,6 +204,8 @@ def main() -> int:
                 break
             if req.get("op") == "init":
                 session.handle_init(req)
+            elif req.get("op") == "state":
+                session.handle_state(req)
             else:
                 session.handle_render(req)
         replies.wait()
