@@ -29,7 +29,7 @@ test: $(STAMP)
 
 # everything that neither renders nor trains for long (pyproject.toml: markers): < 60 s on 2 cores
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not render and not slow"
+	$(BIN)/python -m pytest -q -n 2 -m "not render and not slow"   # both cores (pytest-xdist)
 
 clean-demo:
 	rm -rf out/quick

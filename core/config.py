@@ -2,12 +2,14 @@
 
 Every key has a default, so an empty file is a valid config; unknown keys, wrong types and
 impossible values raise :class:`ConfigError` naming the file, the table and the key.
-Ranges are written ``[min, max]``.
+Ranges are written ``[min, max]``. NaN and inf never pass (one check over every float), and counts
+have the named upper bounds below (MAX_FRAMES, MAX_REPEAT_POSES, ...).
 """
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -18,6 +20,24 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_CHROMA
 
 Range = tuple[float, float]
+
+# Upper bounds of the counts and sizes a config may ask for; beyond them a config used to end in a
+# MemoryError traceback (frames = 1e12) or a hang (100 M repeat poses) after it passed validation.
+# MAX_FRAMES bounds the whole dataset (main + repeatability frames): `render` samples every frame's
+# scene before it writes anything (measured ~16 KB and ~13 ms per frame: 1.6 GB and ~20 min at the
+# bound) and `check-config` samples every frame's geometry (~0.4 ms per frame). The largest shipped
+# config (paper) has 3 200 frames.
+MAX_FRAMES = 100_000
+MAX_REPEAT_POSES = 1_000        # repeatability ids are repPPP_CC: three digits of pose ...
+MAX_REPEAT_CAPTURES = 100       # ... and two of capture
+MIN_IMAGE_PX, MAX_IMAGE_PX = 16, 16384  # per side; at 16384 one float32 RGB pass is 3.2 GB
+MAX_SAMPLES = 1 << 24           # Cycles' hard limit on samples per pixel
+MAX_BOUNCES = 1024              # Blender's limit on light path bounces
+# Every float (mm, deg, s, electrons, weights) is finite and at most this in size: 1e9 mm is
+# 1000 km, far beyond any docking scene, and sums, spans and products of config values stay finite
+# (a [-1e308, 1e308] range passed and then overflowed numpy's uniform sampler).
+MAX_MAGNITUDE = 1e9
+
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
 CHALLENGING = ("low_light", "occlusion", "glare")
 
@@ -276,9 +296,34 @@ def _check_positive(source, table, key, value, allow_zero=False):
         raise _err(source, table, key, f"must be {'>= 0' if allow_zero else '> 0'}, got {value}")
 
 
+def _check_finite(source, table, key, value) -> None:
+    """Every float (also inside ranges and layouts) finite and at most MAX_MAGNITUDE in size."""
+    if isinstance(value, tuple):
+        for i, v in enumerate(value):
+            _check_finite(source, table, f"{key}[{i}]", v)
+    elif isinstance(value, float):
+        if not math.isfinite(value):
+            raise _err(source, table, key, f"must be a finite number, got {value}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise _err(source, table, key, f"{value:g} is out of range (|value| <= {MAX_MAGNITUDE:g})")
+
+
+def _validate_numbers(cfg: Config, source: str) -> None:
+    """One generic pass over every field: NaN and inf pass every ``<`` test, so reject them first."""
+    for table in dataclasses.fields(cfg):
+        section = getattr(cfg, table.name)
+        for f in dataclasses.fields(section):
+            _check_finite(source, table.name, f.name, getattr(section, f.name))
+
+
+def _check_at_most(source, table, key, value, limit, why: str) -> None:
+    if value > limit:
+        raise _err(source, table, key, f"{value} is above the limit {limit} ({why})")
+
+
 def validate(cfg: Config, source: str = "<config>") -> None:
     """Reject impossible configs before anything is rendered or written (no frame is sampled)."""
-    for check in (_validate_dataset, _validate_image_camera, _validate_pose_sections, _validate_markers,
+    for check in (_validate_numbers, _validate_dataset, _validate_image_camera, _validate_pose_sections, _validate_markers,
                   _validate_render, _validate_sensor, _validate_occlusion_glare, _validate_labels_export):
         check(cfg, source)
 
@@ -287,6 +332,7 @@ def _validate_dataset(cfg: Config, source: str) -> None:
     """[dataset], [conditions] and [repeatability]."""
     d = cfg.dataset
     _check_positive(source, "dataset", "frames", d.frames, allow_zero=True)
+    _check_at_most(source, "dataset", "frames", d.frames, MAX_FRAMES, "frames of one dataset")
     if not 0.0 <= d.train_fraction <= 1.0:
         raise _err(source, "dataset", "train_fraction", f"must be in [0, 1], got {d.train_fraction}")
     if not 0.0 <= d.val_fraction < 1.0:
@@ -301,8 +347,15 @@ def _validate_dataset(cfg: Config, source: str) -> None:
     r = cfg.repeatability
     _check_positive(source, "repeatability", "poses", r.poses, allow_zero=True)
     _check_positive(source, "repeatability", "captures", r.captures)
+    _check_at_most(source, "repeatability", "poses", r.poses, MAX_REPEAT_POSES,
+                   "repeatability ids have three digits of pose")
+    _check_at_most(source, "repeatability", "captures", r.captures, MAX_REPEAT_CAPTURES,
+                   "repeatability ids have two digits of capture")
     if r.condition not in CONDITIONS:
         raise _err(source, "repeatability", "condition", f"{r.condition!r} is not one of {CONDITIONS}")
+    if d.frames + r.poses * r.captures > MAX_FRAMES:
+        raise _err(source, "repeatability", "poses", f"{r.poses} poses x {r.captures} captures + {d.frames} "
+                   f"main frames is above the limit of {MAX_FRAMES} frames of one dataset")
     if d.frames + r.poses * r.captures == 0:
         raise _err(source, "dataset", "frames", "the dataset would have no frames")
 
@@ -311,8 +364,8 @@ def _validate_image_camera(cfg: Config, source: str) -> None:
     im, c = cfg.image, cfg.camera
     for k in ("width", "height"):
         v = getattr(im, k)
-        if not 16 <= v <= 16384:
-            raise _err(source, "image", k, f"must be in [16, 16384], got {v}")
+        if not MIN_IMAGE_PX <= v <= MAX_IMAGE_PX:
+            raise _err(source, "image", k, f"must be in [{MIN_IMAGE_PX}, {MAX_IMAGE_PX}], got {v}")
     _check_range(source, "camera", "distance_mm", c.distance_mm, lo=1e-3)
     _check_range(source, "camera", "focal_px", c.focal_px, lo=1e-3)
     for k in ("tilt_deg", "roll_deg"):
@@ -359,11 +412,15 @@ def _validate_markers(cfg: Config, source: str) -> None:
 def _validate_render(cfg: Config, source: str) -> None:
     rc = cfg.render
     _check_positive(source, "render", "samples", rc.samples)
+    _check_at_most(source, "render", "samples", rc.samples, MAX_SAMPLES, "Cycles' limit")
     if rc.denoise not in ("off", "fast", "balanced", "high"):
         raise _err(source, "render", "denoise", f"{rc.denoise!r} is not one of off, fast, balanced, high")
     _check_positive(source, "render", "max_bounces", rc.max_bounces, allow_zero=True)
+    _check_at_most(source, "render", "max_bounces", rc.max_bounces, MAX_BOUNCES, "Blender's limit")
     _check_positive(source, "render", "adaptive_threshold", rc.adaptive_threshold, allow_zero=True)
     _check_positive(source, "render", "adaptive_min_samples", rc.adaptive_min_samples, allow_zero=True)
+    _check_at_most(source, "render", "adaptive_min_samples", rc.adaptive_min_samples, MAX_SAMPLES,
+                   "Cycles' limit")
     if rc.denoise_prefilter not in ("none", "fast", "accurate"):
         raise _err(source, "render", "denoise_prefilter", f"{rc.denoise_prefilter!r} is not one of none, fast, accurate")
     if not 0.01 <= rc.filter_width_px <= 10:

@@ -1,32 +1,72 @@
-"""Atomic file writes: write to a temporary name in the same folder, fsync, rename."""
+"""Atomic file writes (a temporary name in the same folder, fsync, rename), the cleanup of the
+temporaries a killed writer leaves, and exclusive folder locks."""
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import os
+import shlex
+import shutil
 import socket
+import sys
 import time
 from pathlib import Path
 
+from dockfactory.core.errors import DockfactoryError
+
 HOST = socket.gethostname().replace("-", "_")
 TMP_MARK = ".tmp-"
+LOCK_NAME = ".dockfactory.lock"
+
+
+def temp_name(name: str) -> str:
+    """The temporary name of ``name`` for this process: ``.<name>.tmp-<host>-<pid>``."""
+    return f".{name}{TMP_MARK}{HOST}-{os.getpid()}"
+
+
+class WriteError(DockfactoryError, OSError):
+    """An output that cannot be written (a folder, read-only, a full disk): one line naming the
+    path. Still an ``OSError`` with the original ``errno``, so callers that handle OSError work."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def write_error(path, exc: OSError) -> WriteError:
+    """The one-line :class:`WriteError` for ``exc``, raised while writing ``path``."""
+    path = Path(path)
+    why = exc.strerror or str(exc)
+    if isinstance(exc, IsADirectoryError) or path.is_dir():
+        why = "it is a folder"
+    elif isinstance(exc, (FileExistsError, NotADirectoryError)):
+        why = f"a parent of it is not a folder ({why})"
+    err = WriteError(f"{path}: cannot write: {why}")
+    err.errno, err.strerror, err.filename = exc.errno, exc.strerror, str(path)
+    return err
 
 
 @contextlib.contextmanager
 def atomic_path(path):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically."""
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
+
+    An OSError on the way (making the folder, the body, fsync, the rename) becomes one
+    :class:`WriteError` naming ``path``; the temporary is removed, ``path`` keeps its old bytes.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}{TMP_MARK}{HOST}-{os.getpid()}")
+    tmp = path.with_name(temp_name(path.name))
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         yield tmp
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError) and not isinstance(exc, WriteError):
+            raise write_error(path, exc) from exc
         raise
 
 
@@ -80,27 +120,102 @@ def is_temp_name(name: str) -> bool:
     return name.startswith(".") and TMP_MARK in name
 
 
-def stale_temp(path: Path, max_age_s: float) -> bool:
-    """A temporary file left by a killed writer: its process is gone (same host) or it is old."""
-    tag = path.name.rsplit(TMP_MARK, 1)[-1]
+def temp_writer(path: Path) -> tuple[str, int | None]:
+    """(host, pid) of the process that made temporary ``path`` (pid None when the name has none)."""
+    tag = Path(path).name.rsplit(TMP_MARK, 1)[-1]
     host, _, pid = tag.rpartition("-")
+    return host, (int(pid) if pid.isdigit() else None)
+
+
+def dead_writer(path: Path) -> bool:
+    """True when temporary ``path`` was made by a process of this host that is gone (or a zombie)."""
+    host, pid = temp_writer(path)
+    return host == HOST and pid is not None and not pid_alive(pid)
+
+
+def stale_temp(path: Path, max_age_s: float, own: bool = False) -> bool:
+    """A temporary file or folder left by a killed writer: its process is gone (same host), or it
+    is older than ``max_age_s``; with ``own``, also one of this very process (a caller that holds
+    the folder's lock and is not writing it any more)."""
     try:
-        if host == HOST and pid.isdigit() and not pid_alive(int(pid)):
+        if dead_writer(path):
             return True
-        return time.time() - path.stat().st_mtime > max_age_s
+        if own and temp_writer(path) == (HOST, os.getpid()):
+            return True
+        return time.time() - path.lstat().st_mtime > max_age_s
     except FileNotFoundError:
         return False
 
 
-def remove_stale_temps(root, max_age_s: float) -> list[Path]:
-    """Delete stale temporary files under ``root``; returns what was removed."""
-    removed = []
-    for path in Path(root).rglob(f".*{TMP_MARK}*"):
-        if path.is_file() and stale_temp(path, max_age_s):
-            with contextlib.suppress(FileNotFoundError):
+def remove_stale_temps(root, max_age_s: float, own: bool = False) -> list[Path]:
+    """Delete stale temporary files and folders (an export built aside) under ``root``; returns
+    what was removed. Symlinks are removed, never followed."""
+    removed: list[Path] = []
+    for path in sorted(Path(root).rglob(f".*{TMP_MARK}*")):
+        if any(parent in removed for parent in path.parents) or not stale_temp(path, max_age_s, own):
+            continue
+        with contextlib.suppress(FileNotFoundError):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
                 path.unlink()
-                removed.append(path)
+            removed.append(path)
     return removed
+
+
+# ----------------------------------------------------------------------------- locks
+
+class FolderBusy(DockfactoryError):
+    """Another process holds the folder's lock; the message names it."""
+
+
+def _command_line() -> str:
+    argv = list(sys.argv) or ["?"]
+    if Path(argv[0]).name in ("dockfactory", "__main__.py"):
+        argv[0] = "dockfactory"
+    return shlex.join(argv)
+
+
+def _holder_text(raw: bytes) -> str:
+    try:
+        h = json.loads(raw.decode("utf-8"))
+        text = (f"{h['what']} by pid {h['pid']} on host {h['host']} since {h['since']}: "
+                f"{h['command']}")
+        return " ".join(text.split())[:500]   # one line, whatever the holder's arguments
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        return "holder unknown: it has not written its name yet"
+
+
+@contextlib.contextmanager
+def folder_lock(folder, what: str, lock_path=None):
+    """Hold the exclusive lock of ``folder`` (``fcntl.flock`` on ``lock_path``, by default
+    ``folder/.dockfactory.lock``) for the duration of the block. Non-blocking: when another process
+    holds it, raise :class:`FolderBusy` naming the holder (what, pid, host, command). The lock dies
+    with its process (kill -9 included); the lock file stays (removing it would race)."""
+    folder = Path(folder)
+    path = Path(lock_path) if lock_path is not None else folder / LOCK_NAME
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise DockfactoryError(f"{path}: cannot create the lock file of {folder} ({exc.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise FolderBusy(f"{folder}: in use by another dockfactory process ({_holder_text(os.pread(fd, 4096, 0))}); "
+                             f"wait for it to finish (or stop it) and run this command again") from None
+        me = {"what": what, "pid": os.getpid(), "host": HOST, "command": _command_line(),
+              "since": time.strftime("%Y-%m-%d %H:%M:%S")}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(me) + "\n").encode("utf-8"), 0)
+        try:
+            yield path
+        finally:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)   # releases the lock
 
 
 def load_labels(root, split: str | None = None) -> list[dict]:

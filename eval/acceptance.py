@@ -1,7 +1,11 @@
 """Acceptance spec (``configs/acceptance.toml``): what is gated, on which statistic, at what value.
 
 Thresholds apply to the components named in each table (x, y, z in mm; alpha, beta, gamma in deg);
-components not named are reported but not gated. With ``statistic = "rmse"`` (the default) a
+components not named are reported but not gated: leaving a component out is the one way to ungate
+it. A threshold that is given must be a finite number > 0 (NaN, inf, zero and negative values are
+refused, never read as "not gated"); detection minima are in (0, 1]; ``[failures] max_rate`` is in
+[0, 1] and its ``conditions`` are names from ``core.config.CONDITIONS`` (case matters: "Normal" is
+refused), at least one, each once. With ``statistic = "rmse"`` (the default) a
 threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
 - estimation: repeatability, the pooled spread of repeated estimates of one static pose about
   that pose's mean (RMS deviation; its square for mse);
@@ -10,18 +14,19 @@ threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dockfactory.core.config import ConfigError, build_dataclass
+from dockfactory.core.config import CONDITIONS, ConfigError, build_dataclass
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)
 class Gate:
     statistic: str = "rmse"
-    x: float = -1.0        # -1: not gated
+    x: float = -1.0        # -1: not gated (the default of a component a spec leaves out)
     y: float = -1.0
     z: float = -1.0
     alpha: float = -1.0
@@ -29,7 +34,7 @@ class Gate:
     gamma: float = -1.0
 
     def gated(self) -> dict[str, float]:
-        return {c: getattr(self, c) for c in COMPONENTS if getattr(self, c) >= 0}
+        return {c: getattr(self, c) for c in COMPONENTS if getattr(self, c) != -1.0}
 
 
 @dataclass(frozen=True)
@@ -72,18 +77,53 @@ def load_acceptance(path) -> AcceptanceSpec:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read acceptance spec: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: acceptance spec is not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
     # a table that is given replaces the default gates wholesale: only what it names is gated
     spec = build_dataclass(AcceptanceSpec, data, str(path))
+    validate_acceptance(spec, data, str(path))
+    return spec
+
+
+def _bad(source: str, table: str, key: str, msg: str) -> ConfigError:
+    return ConfigError(f"{source}: [{table}] {key}: {msg}")
+
+
+def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
+    """Refuse a spec that would switch a gate off by accident. ``data``: the TOML tables as read
+    (a component the file names must carry a real threshold; one it leaves out is not gated)."""
     for name in ("estimation", "localization"):
         gate = getattr(spec, name)
         if gate.statistic not in ("rmse", "mse"):
-            raise ConfigError(f"{path}: [{name}] statistic: {gate.statistic!r} is not rmse or mse")
-    if not 0 <= spec.failures.max_rate <= 1:
-        raise ConfigError(f"{path}: [failures] max_rate: must be in [0, 1], got {spec.failures.max_rate}")
+            raise _bad(source, name, "statistic", f"{gate.statistic!r} is not rmse or mse")
+        given = data.get(name, {})
+        for c in COMPONENTS:
+            if c in given:
+                v = getattr(gate, c)
+                if not math.isfinite(v) or v <= 0:
+                    raise _bad(source, name, c, f"a threshold must be a finite number > 0, got {v} "
+                               "(leave the component out to report it without gating it)")
+    given = data.get("detection", {})
     for m in ("map50_min", "map50_95_min"):
         v = getattr(spec.detection, m)
-        if v > 1:
-            raise ConfigError(f"{path}: [detection] {m}: must be at most 1, got {v}")
-    return spec
+        if m in given and not (math.isfinite(v) and 0 < v <= 1):
+            raise _bad(source, "detection", m, f"must be in (0, 1], got {v} "
+                       "(leave it out to report mAP without gating it)")
+    f = spec.failures
+    if not (math.isfinite(f.max_rate) and 0 <= f.max_rate <= 1):
+        raise _bad(source, "failures", "max_rate", f"must be in [0, 1], got {f.max_rate}")
+    if not f.conditions:
+        raise _bad(source, "failures", "conditions", f"name at least one of {', '.join(CONDITIONS)}")
+    for c in f.conditions:
+        if c not in CONDITIONS:
+            hint = f" (did you mean {c.lower()!r}?)" if c.lower() in CONDITIONS else ""
+            raise _bad(source, "failures", "conditions", f"{c!r} is not a condition{hint}; "
+                       f"known: {', '.join(CONDITIONS)}")
+    if len(set(f.conditions)) != len(f.conditions):
+        raise _bad(source, "failures", "conditions", f"a condition is listed twice: {list(f.conditions)}")
+    for k in PaperFigures.__dataclass_fields__:
+        v = getattr(spec.paper, k)
+        if not (math.isfinite(v) and v >= 0):
+            raise _bad(source, "paper", k, f"must be a finite number >= 0, got {v}")

@@ -8,9 +8,11 @@ line naming the file, key or value), 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
+from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import MIN_SCORE
@@ -27,11 +29,40 @@ from dockfactory.generator.cli import add_subcommands as add_factory_commands
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 
 
+SPLITS = ("train", "val", "test", "repeat")
+
+
+def parse_splits(text: str) -> tuple[str, ...]:
+    """``--split test,repeat`` -> ("test", "repeat"); unknown, empty or repeated names refused."""
+    splits = tuple(s.strip() for s in text.split(","))
+    for s in splits:
+        if s not in SPLITS:
+            raise DockfactoryError(f"--split: {s!r} is not a split (known: {', '.join(SPLITS)}; "
+                                   "several separated by commas)")
+    if len(set(splits)) != len(splits):
+        raise DockfactoryError(f"--split: a split is named twice in {text!r}")
+    return splits
+
+
+def check_min_score(value: float) -> float:
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise DockfactoryError(f"--min-score: must be in [0, 1], got {value}")
+    return value
+
+
+def check_oracle_noise(value: float | None) -> float | None:
+    if value is not None and not (math.isfinite(value) and value >= 0.0):
+        raise DockfactoryError(f"--oracle-noise: must be a finite number of pixels >= 0, got {value}")
+    return value
+
+
 def cmd_solve(args) -> int:
-    ds = open_dataset(args.dataset)
-    splits = tuple(args.split.split(","))
+    splits = parse_splits(args.split)
+    check_min_score(args.min_score)
+    check_oracle_noise(args.oracle_noise)
     if (args.detections is None) == (args.oracle_noise is None):
         raise DockfactoryError("give --detections DETS.json or --oracle-noise PX (exactly one)")
+    ds = open_dataset(args.dataset)
     if args.detections:
         dets = read_json_for(args.detections, "detections", ds)
         poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score)
@@ -44,13 +75,15 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
+    check_min_score(args.min_score)
     spec = load_acceptance(args.acceptance or default_acceptance())
     ds = open_dataset(args.dataset)
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {"detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])]})
     for c in metrics["acceptance"]["criteria"]:
-        print(f"{'PASS' if c['pass'] else 'FAIL'}  {c['name']}: {c['value']} (threshold {c['threshold']} {c['unit']})")
+        note = f" [{c['note']}]" if c.get("note") else ""
+        print(f"{'PASS' if c['pass'] else 'FAIL'}  {c['name']}: {c['value']}{note} (threshold {c['threshold']} {c['unit']})")
     accepted = metrics["acceptance"]["accepted"]
     print(f"verdict: {'ACCEPTED' if accepted else 'REJECTED'}  ({args.out}/metrics.json)")
     return 0 if accepted else 1
@@ -62,8 +95,30 @@ def cmd_report(args) -> int:
     return 0
 
 
+def _check_run_flags(args) -> None:
+    """Flags that were silently ignored or accepted (negative counts, --weights beside --train)."""
+    check_oracle_noise(args.oracle_noise)
+    if args.workers < 1:
+        raise DockfactoryError(f"--workers: must be >= 1, got {args.workers}")
+    if args.epochs is not None and args.epochs < 1:
+        raise DockfactoryError(f"--epochs: must be >= 1, got {args.epochs}")
+    if args.oracle_noise is not None and (args.train or args.weights):
+        raise DockfactoryError("--oracle-noise skips the detector: --weights and --train do not apply with it")
+    if args.train and args.weights:
+        raise DockfactoryError("--weights and --train exclude each other (--train uses the detector it trains)")
+    if args.epochs is not None and not args.train:
+        raise DockfactoryError("--epochs applies only with --train")
+    if args.weights and not Path(args.weights).is_file():
+        raise DockfactoryError(f"--weights: {args.weights}: no such file")
+
+
 def cmd_run(args) -> int:
-    return run_pipeline(resolve_config(args.config), args.out, args.acceptance or default_acceptance(), weights=args.weights, train=args.train,
+    _check_run_flags(args)
+    config = resolve_config(args.config)
+    acceptance = args.acceptance or default_acceptance()
+    load_config(config)          # a bad config or spec is refused before the work folder is made
+    load_acceptance(acceptance)
+    return run_pipeline(config, args.out, acceptance, weights=args.weights, train=args.train,
                         oracle_noise_px=args.oracle_noise, workers=args.workers, train_epochs=args.epochs)
 
 
@@ -96,11 +151,11 @@ def add_eval_commands(sub) -> None:
     u.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, ...)")
     u.add_argument("--out", required=True, help="work directory")
     u.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
-    u.add_argument("--weights", help="detector checkpoint (default: the shipped one)")
+    u.add_argument("--weights", help="detector checkpoint (default: the shipped one; not with --train)")
     u.add_argument("--train", action="store_true", help="train a detector on the dataset's train split first")
-    u.add_argument("--epochs", type=int, default=None, help="with --train")
+    u.add_argument("--epochs", type=int, default=None, help="with --train: training epochs")
     u.add_argument("--oracle-noise", type=float, metavar="PX", help="skip the detector: exact centres + noise")
-    u.add_argument("--workers", type=int, default=1)
+    u.add_argument("--workers", type=int, default=1, help="render processes (>= 1)")
     u.set_defaults(func=cmd_run)
 
 

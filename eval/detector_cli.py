@@ -7,6 +7,7 @@ Each command returns an exit status (0 ok); bad input raises ValueError (the cal
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 
@@ -36,6 +37,36 @@ def _positive_int(text: str) -> int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return v
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return v
+
+
+def _float_in(low: float, high: float, low_open: bool = False):
+    """argparse type: a finite number in [low, high] (``(low, high]`` with ``low_open``)."""
+    span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):
+            raise argparse.ArgumentTypeError(f"expected a number in {span}, got {text!r}")
+        return v
+    parse.__name__ = f"number in {span}"
+    return parse
+
+
+_unit_float = _float_in(0.0, 1.0)                 # scores and IoU thresholds
+_input_scale = _float_in(0.0, 8.0, low_open=True)  # network px per image px
 
 
 def _train_config(args, attention: str, seed: int):
@@ -104,9 +135,9 @@ def _add_training_options(p) -> None:
     p.add_argument("--batch", type=_positive_int, default=16, help="crops per batch (default 16)")
     p.add_argument("--nbs", type=_positive_int, help="nominal batch for gradient accumulation (default = --batch)")
     p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
-    p.add_argument("--input-scale", type=float, default=0.5, help="network px per image px (default 0.5)")
+    p.add_argument("--input-scale", type=_input_scale, default=0.5, help="network px per image px (default 0.5)")
     p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
-    p.add_argument("--threads", type=int, help="torch threads (default: all cores)")
+    p.add_argument("--threads", type=_positive_int, help="torch threads (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -116,7 +147,7 @@ def _add_train_parser(subparsers) -> None:
     t.add_argument("--out", required=True, help="run directory (checkpoints, history, weights)")
     t.add_argument("--attention", choices=("se", "eca", "cbam", "a2", "none"), default="se",
                    help="attention block after the last backbone C3 (default se)")
-    t.add_argument("--seed", type=int, default=0, help="seed of initial weights, crops and augmentation")
+    t.add_argument("--seed", type=_non_negative_int, default=0, help="seed of initial weights, crops and augmentation")
     t.add_argument("--resume", action="store_true", help="continue from RUN/last.pt")
     _add_training_options(t)
     t.set_defaults(func=cmd_train)
@@ -129,11 +160,11 @@ def _add_detect_parser(subparsers) -> None:
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
-    d.add_argument("--conf", type=float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
-    d.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold")
+    d.add_argument("--conf", type=_unit_float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
+    d.add_argument("--iou", type=_unit_float, default=0.45, help="NMS IoU threshold")
     d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")
     d.add_argument("--eval", action="store_true", help="print mAP, centre error and recall afterwards")
-    d.add_argument("--threads", type=int)
+    d.add_argument("--threads", type=_positive_int)
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_detect)
 
@@ -144,7 +175,7 @@ def _add_ablate_parser(subparsers) -> None:
     a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
     a.add_argument("--seeds", type=_positive_int, default=1, help="number of seeds (0..S-1)")
     a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
-    a.add_argument("--conf", type=float, default=0.001, help="score threshold for mAP")
+    a.add_argument("--conf", type=_unit_float, default=0.001, help="score threshold for mAP")
     _add_training_options(a)
     a.set_defaults(func=cmd_ablate)
 
@@ -153,10 +184,10 @@ def _add_export_parser(subparsers) -> None:
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
     e.add_argument("--weights", help="default: the shipped weights")
     e.add_argument("--out", required=True, help="ONNX file")
-    e.add_argument("--height", type=int, default=480, help="network input height (default 480)")
-    e.add_argument("--width", type=int, default=640, help="network input width (default 640)")
+    e.add_argument("--height", type=_positive_int, default=480, help="network input height (default 480)")
+    e.add_argument("--width", type=_positive_int, default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
-    e.add_argument("--threads", type=int)
+    e.add_argument("--threads", type=_positive_int)
     e.set_defaults(func=cmd_export_onnx)
 
 

@@ -16,10 +16,12 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
-from dockfactory.eval.dataset_access import EvalDataset, read_json_for
+from dockfactory.eval.dataset_access import EvalDataset, read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.sampler import frame_plan
 from dockfactory.solver import SolverError, crb_d_from_b
 
 METRICS_FORMAT = "dockfactory.metrics/1"
@@ -43,20 +45,52 @@ def frame_bound(label: dict, marker_ids, sigma_px: float) -> dict | None:
     return {c: b.std[POSE_KEYS[c]] for c in COMPONENTS}
 
 
-def per_frame_rows(ds: EvalDataset, poses: dict, sigma_px: float) -> list[dict]:
+def _missing_row(spec, reason: str, category: str) -> dict:
+    """The row of a planned frame that has no label in the dataset: a failure."""
+    return {"frame_id": spec.frame_id, "split": spec.split, "condition": spec.condition,
+            "pose_index": spec.pose_index, "ok": False, "reason": reason, "category": category}
+
+
+def evaluated_frames(ds: EvalDataset) -> list:
+    """The population the verdict is computed over: every frame the dataset's plan puts in the
+    test split or the repeatability subset (FrameSpec, plan order), whether or not its label, its
+    image or its pose exists. Never a directory listing: a frame that disappears is a failure."""
+    return [s for s in frame_plan(ds.config) if s.split in ("test", "repeat")]
+
+
+def per_frame_rows(ds: EvalDataset, poses: dict, sigma_px: float, population=None, source="poses") -> list[dict]:
+    """One row per frame: the ``population`` (FrameSpecs, default :func:`evaluated_frames`) first,
+    then any other frame of the dataset the poses file holds (another split). A planned frame
+    without a label or without a pose is a failed row with its reason; a pose for a frame the
+    dataset does not have is refused (``source``: the poses file, for the message)."""
+    population = evaluated_frames(ds) if population is None else population
+    planned = {s.frame_id for s in population}
+    order = [s.frame_id for s in population] + [f for f in poses["frames"] if f not in planned]
+    spec_of = {s.frame_id: s for s in population}
     rows = []
-    for fid, rec in poses["frames"].items():
+    for fid in order:
+        if fid not in ds.labels:
+            if fid in spec_of:
+                rows.append(_missing_row(spec_of[fid], "frame missing from the dataset (no label)",
+                                         "missing from dataset"))
+                continue
+            raise DatasetError(f"{source}: frames.{fid}: not a frame of the "
+                               f"dataset {ds.root}")
+        rec = poses["frames"].get(fid) or {"ok": False, "reason": "no pose in the poses file",
+                                           "category": "missing"}
         lab = ds.labels[fid]
+        spec = spec_of.get(fid)
         true = lab["pose_b_in_d"]
-        row = {"frame_id": fid, "split": lab["spec"]["split"], "condition": lab["spec"]["condition"],
-               "pose_index": lab["spec"]["pose_index"], "ok": bool(rec["ok"]),
-               "reason": rec.get("reason", ""), "category": rec.get("category", ""),
+        row = {"frame_id": fid, "split": spec.split if spec else lab["spec"]["split"],
+               "condition": spec.condition if spec else lab["spec"]["condition"],
+               "pose_index": spec.pose_index if spec else lab["spec"]["pose_index"], "ok": rec["ok"] is True,
+               "reason": rec.get("reason") or "", "category": rec.get("category") or "",
                "focal_true": lab["camera"]["focal_px"], "distance_mm": lab["camera"]["distance_mm"],
                "visible_a": sum(m.get("visibility") == 2 and m["section"] == "A" for m in lab["markers"]),
                "visible_b": sum(m.get("visibility") == 2 and m["section"] == "B" for m in lab["markers"])}
         for c in COMPONENTS:
             row[f"true_{c}"] = true[POSE_KEYS[c]]
-        if rec["ok"]:
+        if row["ok"]:
             err = pose_error(rec["pose"], true)
             for c in COMPONENTS:
                 row[f"est_{c}"] = rec["pose"][POSE_KEYS[c]]
@@ -101,7 +135,7 @@ def failures_block(rows: list[dict]) -> dict:
         by_cond[r["condition"]][1] += 1
         if not r["ok"]:
             by_cond[r["condition"]][0] += 1
-    return {"count": len(failed), "frames": len(rows), "rate": len(failed) / len(rows) if rows else 0.0,
+    return {"count": len(failed), "frames": len(rows), "rate": len(failed) / len(rows) if rows else None,
             "by_condition": {c: {"failed": f, "frames": n, "rate": f / n} for c, (f, n) in sorted(by_cond.items())},
             "by_category": {cat: sum(r["category"] == cat for r in failed) for cat in sorted({r["category"] for r in failed})},
             "list": [{"frame_id": r["frame_id"], "condition": r["condition"], "reason": r["reason"]} for r in failed]}
@@ -146,52 +180,95 @@ def centre_noise_px(ds: EvalDataset, detections: dict | None, min_score: float) 
     return sigma, {k: {"median_px": float(np.median(v)), "n": len(v)} for k, v in by_cond.items()}
 
 
+def _without_pose(block: dict) -> tuple[int, int | None]:
+    """(frames without a pose, frames) of a localization / estimation block (0, None when the
+    block does not say)."""
+    n, solved = block.get("n_frames"), block.get("n_solved")
+    if n is None or solved is None:
+        return 0, None
+    return n - solved, n
+
+
 def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
+    """The acceptance criteria and the verdict (accepted: every criterion passes).
+
+    Monotone by construction: a frame that fails or disappears can only turn a criterion from pass
+    to fail, never the other way.
+    - A gated pose statistic is defined only over its whole population (localization: every
+      planned test frame; estimation: every planned repeatability capture). If any frame of it has
+      no pose (failed, absent from the poses file or from the dataset) the statistic has no value
+      and the criterion fails, with a note saying how many frames lack a pose; a statistic over
+      zero frames (or a spread with no degree of freedom) fails too.
+    - The failure rate covers the test frames and the repeatability captures of the listed
+      conditions; over zero such frames it has no value and fails.
+    Every criterion passes exactly when its value is not None and within its threshold, so the
+    rows a report prints determine the verdict.
+    """
     criteria = []
-    for block, gate, label in (("estimation", spec.estimation, "estimation precision (repeatability)"),
-                               ("localization", spec.localization, "localization precision (accuracy)")):
+    for block, gate, label, what in (("estimation", spec.estimation, "estimation precision (repeatability)", "captures"),
+                                     ("localization", spec.localization, "localization precision (accuracy)", "test frames")):
+        blk = metrics[block]
+        lacking, n = _without_pose(blk)
         for c, thr in gate.gated().items():
-            if block == "estimation":
-                stat = metrics["estimation"]["pooled"][c][gate.statistic]
-            else:
-                stat = metrics["localization"]["overall"][c][gate.statistic]
+            stat = (blk["pooled"] if block == "estimation" else blk["overall"])[c][gate.statistic]
+            note = ""
+            if lacking:
+                stat, note = None, f"{lacking} of {n} {what} without a pose"
+            elif stat is None:
+                note = ("no pose captured twice" if block == "estimation" else "no test frame") + ": nothing to measure"
             unit = UNITS[c] + ("^2" if gate.statistic == "mse" else "")
             criteria.append({"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
-                             "value": stat, "threshold": thr, "unit": unit,
-                             "pass": stat is not None and stat <= thr,
+                             "value": stat, "threshold": thr, "unit": unit, "note": note,
+                             "pass": criterion_passes("max", stat, thr),
                              "paper": getattr(spec.paper, f"{block}_{c}", None)})
     det = metrics.get("detection") or {}
     for key, thr, paper in (("map50", spec.detection.map50_min, spec.paper.map50),
                             ("map50_95", spec.detection.map50_95_min, spec.paper.map50_95)):
-        if thr >= 0:
+        if thr != -1.0:
             v = det.get(key)
             criteria.append({"name": f"detection: {key}", "block": "detection", "component": key, "statistic": "min",
-                             "value": v, "threshold": thr, "unit": "", "pass": v is not None and v >= thr,
-                             "paper": paper})
-    f = metrics["failures_test"]["by_condition"]
-    n_fail = sum(f[c]["failed"] for c in spec.failures.conditions if c in f)
-    n = sum(f[c]["frames"] for c in spec.failures.conditions if c in f)
-    rate = n_fail / n if n else 0.0
+                             "value": v, "threshold": thr, "unit": "", "note": "" if v is not None else "no detections",
+                             "pass": criterion_passes("min", v, thr), "paper": paper})
+    n_fail = n = 0
+    for block in ("failures_test", "failures_repeat"):
+        f = (metrics.get(block) or {}).get("by_condition", {})
+        n_fail += sum(f[c]["failed"] for c in spec.failures.conditions if c in f)
+        n += sum(f[c]["frames"] for c in spec.failures.conditions if c in f)
+    rate = n_fail / n if n else None
     criteria.append({"name": f"failure rate ({', '.join(spec.failures.conditions)})", "block": "failures",
                      "component": "rate", "statistic": "max", "value": rate, "threshold": spec.failures.max_rate,
-                     "unit": "", "pass": rate <= spec.failures.max_rate, "paper": None})
+                     "unit": "", "note": f"{n_fail} of {n} test frames and repeatability captures" if n else
+                     "no test frame or repeatability capture of these conditions",
+                     "pass": criterion_passes("max", rate, spec.failures.max_rate), "paper": None})
     return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria}
+
+
+def criterion_passes(statistic: str, value, threshold) -> bool:
+    """A criterion's result from its value and threshold: "min" needs value >= threshold, every
+    other statistic value <= threshold; no value (None, NaN) fails."""
+    if value is None or threshold is None or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    if not (np.isfinite(value) and np.isfinite(threshold)):
+        return False
+    return bool(value >= threshold) if statistic == "min" else bool(value <= threshold)
 
 
 def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=None,
              min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
     poses = read_json_for(poses_path, "poses", ds)
-    detections = read_json_for(detections_path, "detections", ds) if detections_path else None
+    detections = None
+    if detections_path:   # mAP needs every detection's box and score
+        detections = validate_detections(read_json_for(detections_path, "detections", ds), detections_path,
+                                         required=("bbox_px", "score"))
     sigma, centre_by_cond = centre_noise_px(ds, detections, min_score)
     if not np.isfinite(sigma):
         # no detections to measure it from: the oracle noise the poses were made with (0 is a
         # valid noise level), else 0.1 px
         given = (oracle_sigma_px, poses.get("oracle_sigma_px"))
         sigma = next((float(s) for s in given if s is not None), 0.1)
-    missing = [fid for fid in ds.frames(("test", "repeat")) if fid not in poses["frames"]]
-    for fid in missing:   # a frame without a pose is a failure, never silently dropped
-        poses["frames"][fid] = {"ok": False, "reason": "no pose in the poses file", "category": "missing"}
-    rows = per_frame_rows(ds, poses, sigma)
+    # the population is the plan: a frame without a pose (failed, absent from the poses file or
+    # from the dataset) is a failure with its reason, never silently dropped
+    rows = per_frame_rows(ds, poses, sigma, source=str(poses_path))
     test = [r for r in rows if r["split"] == "test"]
     rep = [r for r in rows if r["split"] == "repeat"]
     metrics = {"format": METRICS_FORMAT, "dataset": {"root": str(ds.root), "version_id": ds.version_id,
@@ -204,7 +281,7 @@ def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=
         metrics["detection"] = detection_block(ds, detections)
     if oracle:
         o_poses = solve_dataset(ds, splits=("test",), oracle_sigma_px=float(sigma))
-        o_rows = per_frame_rows(ds, o_poses, sigma)
+        o_rows = per_frame_rows(ds, o_poses, sigma, [s for s in evaluated_frames(ds) if s.split == "test"])
         metrics["oracle"] = {"sigma_px": sigma, "localization": localization_block(o_rows),
                              "failures": failures_block(o_rows)}
     metrics["acceptance"] = verdict(metrics, spec)

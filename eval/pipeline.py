@@ -5,6 +5,7 @@ key is unchanged and its outputs exist, so an interrupted run resumes where it s
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -13,7 +14,7 @@ import time
 from pathlib import Path
 
 from dockfactory.core.config import load_config
-from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import open_dataset
@@ -149,6 +150,17 @@ def _evaluate_stage(ds, eval_dir: Path, poses_path: Path, spec, acceptance_path,
     return metrics
 
 
+def _holds_workdir_lock(fn):
+    """Run ``fn(config_path, workdir, ...)`` holding the work folder's exclusive lock
+    (WORKDIR/.dockfactory.lock): a second ``run`` into it fails at once, naming the first."""
+    @functools.wraps(fn)
+    def locked(config_path, workdir, *args, **kwargs):
+        with folder_lock(Path(workdir), "run"):
+            return fn(config_path, workdir, *args, **kwargs)
+    return locked
+
+
+@_holds_workdir_lock
 def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: bool = False,
                  oracle_noise_px: float | None = None, workers: int = 1, train_epochs: int | None = None) -> int:
 

@@ -17,6 +17,10 @@ import numpy as np
 from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
+from dockfactory.eval.dataset_access import (json_kind, read_json_file, validate_detections,
+                                             validate_poses)
+from dockfactory.eval.evaluate import criterion_passes
+from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")
@@ -40,20 +44,45 @@ def _num(v, digits=4) -> str:
     return f"{v:.{digits}g}" if isinstance(v, float) else str(v)
 
 
+ROW_TEXT = ("frame_id", "split", "condition", "reason", "category")
+ROW_NEEDED = ("frame_id", "split", "condition", "ok")
+
+
 def read_rows(eval_dir: Path) -> list[dict]:
-    with open(eval_dir / "frames.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    for r in rows:
-        for k, v in r.items():
-            if k in ("frame_id", "split", "condition", "reason", "category"):
+    """The rows of EVAL/frames.csv, typed; a DatasetError naming the file, row and column when a
+    column the report uses is missing or not a number."""
+    path = eval_dir / "frames.csv"
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: per-frame table not found (run dockfactory evaluate first)") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DatasetError(f"{path}: unreadable per-frame table ({exc})") from None
+    for i, r in enumerate(rows, start=2):
+        for k in ROW_NEEDED:
+            if r.get(k) in (None, ""):
+                raise DatasetError(f"{path}: line {i}: column {k!r} missing or empty")
+        if r["ok"] not in ("True", "False"):
+            raise DatasetError(f"{path}: line {i}: ok: expected True or False, got {r['ok']!r}")
+        for k, v in list(r.items()):
+            if k is None or k in ROW_TEXT:
+                if k is None:
+                    raise DatasetError(f"{path}: line {i}: more values than columns")
                 continue
             if k == "ok":
                 r[k] = v == "True"
-            else:
-                try:
-                    r[k] = float(v) if v != "" else None
-                except ValueError:
-                    pass
+                continue
+            try:
+                r[k] = float(v) if v not in ("", None) else None
+            except ValueError:
+                raise DatasetError(f"{path}: line {i}: {k}: expected a number, got {v!r}") from None
+            if r[k] is not None and not np.isfinite(r[k]):
+                raise DatasetError(f"{path}: line {i}: {k}: must be finite, got {v!r}")
+        if r["ok"] and r["split"] == "test":
+            for k in [f"err_{c}" for c in GATED] + ["distance_mm", "focal_true"]:
+                if r.get(k) is None:
+                    raise DatasetError(f"{path}: line {i}: {k}: missing for a solved test frame")
     return rows
 
 
@@ -157,33 +186,45 @@ def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections
     items = []
     for r in worst:
         fid = r["frame_id"]
-        img = cv2.imread(str(dataset_root / "images" / f"{fid}.png"))
-        lab = json.loads((dataset_root / "labels" / f"{fid}.json").read_text())
-        if img is None:
+        if "/" in fid or "\\" in fid or fid in (".", ".."):
             continue
-        for m in lab["markers"]:   # true centres: green circles
-            u, v = m["center_px"]
-            cv2.circle(img, (int(round(u * 16)), int(round(v * 16))), 9 * 16, (0, 220, 0), 1, cv2.LINE_AA, 4)
-        for d in (detections or {}).get("frames", {}).get(fid, []):   # detections: magenta crosses
-            u, v = d["center_px"]
-            cv2.drawMarker(img, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_TILTED_CROSS, 10, 1)
-        rec = (poses or {}).get("frames", {}).get(fid)
-        if rec and rec.get("ok"):   # the layout reprojected with the estimated poses and focal: yellow dots
-            k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
-            cam_from_a = np.array(rec["cam_from_a"])
-            for m in lab["markers"]:
-                cam_from_s = cam_from_a @ (np.array(rec["d_from_b"]) if m["section"] == "B" else np.eye(4))
-                uv, _ = project_points(k, cam_from_s, np.array(m["center_section_mm"])[None])
-                if np.all(np.isfinite(uv)):
-                    cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), 3, (0, 255, 255), -1, cv2.LINE_AA)
-        h, w = img.shape[:2]
-        scale = 640 / w
-        img = cv2.resize(img, (640, int(h * scale)), interpolation=cv2.INTER_AREA)
-        ok, png = cv2.imencode(".png", img)
-        cap = (f"{fid} ({r['condition']}): " + (f"failed: {r['reason']}" if not r["ok"] else
-               ", ".join(f"{c} err {r[f'err_{c}']:+.3f} {UNITS[c]}" for c in GATED)))
-        items.append((cap, base64.b64encode(png.tobytes()).decode()))
+        img = cv2.imread(str(dataset_root / "images" / f"{fid}.png"))
+        if img is None:   # the dataset moved or lost the frame: no picture
+            continue
+        try:
+            lab = read_json_file(dataset_root / "labels" / f"{fid}.json", "label")
+            item = _gallery_item(img, r, lab, poses, detections)
+        except (DatasetError, KeyError, TypeError, ValueError, IndexError):
+            continue   # the gallery is an illustration: a frame it cannot draw is left out
+        items.append(item)
     return items
+
+
+def _gallery_item(img, r: dict, lab: dict, poses: dict | None, detections: dict | None) -> tuple[str, str]:
+    fid = r["frame_id"]
+    for m in lab["markers"]:   # true centres: green circles
+        u, v = m["center_px"]
+        cv2.circle(img, (int(round(u * 16)), int(round(v * 16))), 9 * 16, (0, 220, 0), 1, cv2.LINE_AA, 4)
+    for d in (detections or {}).get("frames", {}).get(fid, []):   # detections: magenta crosses
+        u, v = d["center_px"]
+        cv2.drawMarker(img, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_TILTED_CROSS, 10, 1)
+    rec = (poses or {}).get("frames", {}).get(fid)
+    # the layout reprojected with the estimated poses and focal: yellow dots
+    if rec and rec.get("ok") is True and rec.get("cam_from_a") is not None and rec.get("d_from_b") is not None:
+        k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
+        cam_from_a = np.array(rec["cam_from_a"])
+        for m in lab["markers"]:
+            cam_from_s = cam_from_a @ (np.array(rec["d_from_b"]) if m["section"] == "B" else np.eye(4))
+            uv, _ = project_points(k, cam_from_s, np.array(m["center_section_mm"])[None])
+            if np.all(np.isfinite(uv)):
+                cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), 3, (0, 255, 255), -1, cv2.LINE_AA)
+    h, w = img.shape[:2]
+    scale = 640 / w
+    img = cv2.resize(img, (640, int(h * scale)), interpolation=cv2.INTER_AREA)
+    ok, png = cv2.imencode(".png", img)
+    cap = (f"{fid} ({r['condition']}): " + (f"failed: {r['reason']}" if not r["ok"] else
+           ", ".join(f"{c} err {r[f'err_{c}']:+.3f} {UNITS[c]}" for c in GATED)))
+    return cap, base64.b64encode(png.tobytes()).decode()
 
 
 def git_describe() -> str:
@@ -199,8 +240,122 @@ def git_describe() -> str:
         return "unknown"
 
 
-def _read_json_if_exists(path, default=None):
-    return json.loads(Path(path).read_text()) if Path(path).exists() else default
+# ----------------------------------------------------------------------------- inputs
+# A small schema of what the report reads from metrics.json (and provenance.json): "num" a finite
+# number, "num?" a finite number or null, "int", "str", "str?", "bool", "any"; a dict is an
+# object with those keys (a key ending in "?" may be absent); ("map", S) an object whose values
+# are S; ("list", S) a list of S.
+_STATS = {k: "num?" for k in ("mse", "rmse", "mean", "std", "p95", "max")} | {"n": "int"}
+_COMPS = {c: _STATS for c in COMPONENTS}
+METRICS_SCHEMA = {
+    "dataset": {"root": "str", "version_id": "str", "name": "str"},
+    "poses": {"source": "str?", "path": "str"},
+    "centre_noise_px": "num?",
+    "localization": {"n_frames": "int", "n_solved": "int", "overall": _COMPS, "by_condition": ("map", _COMPS),
+                     "focal_err_pct": _STATS, "reprojection_rmse_px": {"A": _STATS, "B": _STATS},
+                     "crb": ("map", {"bound_rms": "num?", "measured_rmse": "num?", "ratio": "num?"})},
+    "estimation": {"n_frames": "int", "n_solved": "int",
+                   "per_pose": ("list", {"pose": "str", "captures": "int"} | {c: "num?" for c in COMPONENTS}),
+                   "pooled": {c: {"rmse": "num?", "mse": "num?"} for c in COMPONENTS}},
+    "failures_test": {"count": "int", "frames": "int", "rate": "num?",
+                      "by_condition": ("map", {"failed": "int", "frames": "int"}),
+                      "list": ("list", {"frame_id": "str", "condition": "str", "reason": "str"})},
+    "oracle?": {"localization": {"overall": {c: {"rmse": "num?"} for c in COMPONENTS}}},
+    "detection?": {"map50?": "num?", "map50_95?": "num?",
+                   "per_class?": ("map", {"map50?": "num?", "map50_95?": "num?"}),
+                   "pr_curves?": ("map", ("list", ("list", "num")))},
+    "acceptance": {"accepted": "bool",
+                   "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
+                                         "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"})},
+}
+PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model_sha256?": "str?"}
+
+
+def check_schema(value, schema, path, key: str = "") -> None:
+    """Raise DatasetError("PATH: KEY: problem") where ``value`` does not follow ``schema``."""
+    where = key or "(top level)"
+
+    def bad(msg):
+        raise DatasetError(f"{path}: {where}: {msg}")
+
+    if isinstance(schema, dict):
+        if not isinstance(value, dict):
+            bad(f"expected an object, got {json_kind(value)}")
+        for k, sub in schema.items():
+            name, optional = (k[:-1], True) if k.endswith("?") else (k, False)
+            if name not in value:
+                if optional:
+                    continue
+                raise DatasetError(f"{path}: {key + '.' if key else ''}{name}: missing")
+            check_schema(value[name], sub, path, f"{key}.{name}" if key else name)
+    elif isinstance(schema, tuple):
+        kind, sub = schema
+        if kind == "map":
+            if not isinstance(value, dict):
+                bad(f"expected an object, got {json_kind(value)}")
+            for k, v in value.items():
+                check_schema(v, sub, path, f"{key}.{k}")
+        else:
+            if not isinstance(value, list):
+                bad(f"expected a list, got {json_kind(value)}")
+            for i, v in enumerate(value):
+                check_schema(v, sub, path, f"{key}[{i}]")
+    elif schema == "any":
+        return
+    else:
+        if schema.endswith("?"):
+            if value is None:
+                return
+            schema = schema[:-1]
+        if schema == "num":
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                bad(f"expected a number, got {json_kind(value)}")
+            if not np.isfinite(value):
+                bad(f"must be finite, got {value}")
+        elif schema == "int":
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                bad(f"expected a count (integer >= 0), got {json_kind(value)} {value!r:.40}")
+        elif schema == "str":
+            if not isinstance(value, str):
+                bad(f"expected a string, got {json_kind(value)}")
+        elif schema == "bool":
+            if not isinstance(value, bool):
+                bad(f"expected true or false, got {json_kind(value)} {value!r:.40}")
+        else:
+            raise ValueError(f"unknown schema {schema!r}")   # programming error
+
+
+def checked_verdict(acc: dict, path) -> str:
+    """The verdict of the criteria rows the report prints, recomputed from each row's value and
+    threshold; a metrics.json whose pass flags or ``accepted`` disagree with its own rows (edited
+    by hand, or written by a buggy tool) is refused, never believed."""
+    if not acc["criteria"]:
+        raise DatasetError(f"{path}: acceptance.criteria: empty (a verdict needs criteria)")
+    for i, c in enumerate(acc["criteria"]):
+        passes = criterion_passes(c["statistic"], c["value"], c["threshold"])
+        if passes != c["pass"]:
+            raise DatasetError(f"{path}: acceptance.criteria[{i}] ({c['name']}): pass is {str(c['pass']).lower()} "
+                               f"but value {c['value']} against threshold {c['threshold']} "
+                               f"({c['statistic']}) {'passes' if passes else 'fails'}; refusing an "
+                               "inconsistent metrics.json (run dockfactory evaluate again)")
+    accepted = all(c["pass"] for c in acc["criteria"])
+    if accepted != acc["accepted"]:
+        raise DatasetError(f"{path}: acceptance.accepted: {str(acc['accepted']).lower()} contradicts its criteria "
+                           f"(which give {'ACCEPTED' if accepted else 'REJECTED'}); refusing an inconsistent "
+                           "metrics.json (run dockfactory evaluate again)")
+    return "ACCEPTED" if accepted else "REJECTED"
+
+
+def _optional_json(path, what: str, named_by: str):
+    """The JSON of ``path`` named by another file, or None when it does not exist (a report of a
+    moved evaluation draws fewer pictures); a broken one is refused naming both files."""
+    p = Path(path)
+    if not p.is_file() and not p.is_dir():
+        return None
+    try:
+        return read_json_file(p, what)
+    except DatasetError as exc:
+        raise DatasetError(f"{named_by}: {exc}") from None
 
 
 def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) -> dict:
@@ -214,12 +369,16 @@ def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) ->
     }
 
 
+def _note(c: dict) -> str:
+    return f" ({html.escape(c['note'])})" if c.get("note") else ""
+
+
 def _criteria_rows(acc: dict) -> str:
     out = []
     for c in acc["criteria"]:
         cls = "pass" if c["pass"] else "fail"
         out.append(f"<tr class='{cls}'><td>{html.escape(c['name'])}</td><td>{c['statistic']}</td>"
-                   f"<td>{_num(c['value'])} {c['unit']}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
+                   f"<td>{_num(c['value'])} {c['unit']}{_note(c)}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
                    f"<td>{_num(c.get('paper'))}</td><td><b>{'PASS' if c['pass'] else 'FAIL'}</b></td></tr>")
     return "\n".join(out)
 
@@ -269,8 +428,9 @@ def _html_estimation(est: dict) -> str:
 
 def _html_failures(metrics: dict) -> list[str]:
     f = metrics["failures_test"]
+    rate = f"{100 * f['rate']:.2f} %" if f["rate"] is not None else "no test frames"
     parts = [f"<h2>Failures</h2><p>{f['count']} of {f['frames']} test frames without a pose "
-             f"({100 * f['rate']:.2f} %). By condition: "
+             f"({rate}). By condition: "
              + ", ".join(f"{c}: {v['failed']}/{v['frames']}" for c, v in f["by_condition"].items()) + ".</p>"]
     if f["list"]:
         parts.append("<table><tr><th>frame</th><th>condition</th><th>reason</th></tr>" + "".join(
@@ -320,22 +480,42 @@ def _html_document(parts: list[str]) -> str:
 
 def _summary_markdown(verdict: str, acc: dict) -> str:
     md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
-    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
+    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']}{' (' + c['note'] + ')' if c.get('note') else ''} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
            f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
     return "\n".join(md) + "\n"
 
 
 def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     eval_dir = Path(eval_dir)
-    metrics = json.loads((eval_dir / "metrics.json").read_text())
-    rows = read_rows(eval_dir)
-    prov = _read_json_if_exists(eval_dir / "provenance.json", {})
-    dataset_root = Path(metrics["dataset"]["root"])
-    poses = _read_json_if_exists(metrics["poses"]["path"])
-    det_path = prov.get("detections")
-    detections = _read_json_if_exists(det_path) if det_path else None
+    if not eval_dir.is_dir():
+        raise DatasetError(f"{eval_dir}: no such evaluation folder (run dockfactory evaluate first)")
+    metrics_path = eval_dir / "metrics.json"
+    metrics = read_json_file(metrics_path, "metrics")
+    check_schema(metrics, METRICS_SCHEMA, metrics_path)
+    for name, curve in ((metrics.get("detection") or {}).get("pr_curves") or {}).items():
+        if len(curve) != 2 or len(curve[0]) != len(curve[1]):
+            raise DatasetError(f"{metrics_path}: detection.pr_curves.{name}: expected [recall list, precision list] "
+                               "of equal length")
     acc = metrics["acceptance"]
-    verdict = "ACCEPTED" if acc["accepted"] else "REJECTED"
+    verdict = checked_verdict(acc, metrics_path)
+    rows = read_rows(eval_dir)
+    prov_path = eval_dir / "provenance.json"
+    prov = read_json_file(prov_path, "provenance") if prov_path.exists() else {}
+    check_schema(prov, PROVENANCE_SCHEMA, prov_path)
+    dataset_root = Path(metrics["dataset"]["root"])
+    poses = _optional_json(metrics["poses"]["path"], "poses", f"{metrics_path}: poses.path")
+    if poses is not None:
+        try:
+            validate_poses(poses, metrics["poses"]["path"])
+        except DatasetError as exc:
+            raise DatasetError(f"{metrics_path}: poses.path: {exc}") from None
+    det_path = prov.get("detections")
+    detections = _optional_json(det_path, "detections", f"{prov_path}: detections") if det_path else None
+    if detections is not None:
+        try:
+            validate_detections(detections, det_path)
+        except DatasetError as exc:
+            raise DatasetError(f"{prov_path}: detections: {exc}") from None
     provenance = _report_provenance(metrics, prov, commands)
     figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
     worst = gallery(dataset_root, rows, poses, detections)

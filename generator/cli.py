@@ -30,6 +30,20 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
+def _int_at_least(low: int):
+    """argparse type: an integer >= ``low`` (a negative count used to be accepted silently)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
+        if v < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
+        return v
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
 def _load(path):
     """Load a config and check it is feasible (every planned frame fits its markers): the check
     samples every frame's geometry, so it runs here (render, check-config), not on every load."""
@@ -53,24 +67,35 @@ def cmd_render(args) -> int:
 
 
 def cmd_dataset(args) -> int:
-
+    """Every DIR is taken: verify/info/export run on each (in order), diff needs exactly two."""
     if args.action == "verify":
-        report = dt.verify(args.dirs[0])
-        print(report.text())
-        return EXIT_OK if report.ok else EXIT_FAILED
+        reports = []
+        for root in args.dirs:
+            reports.append(dt.verify(root))
+            print(reports[-1].text())
+        return EXIT_OK if all(r.ok for r in reports) else EXIT_FAILED
     if args.action == "info":
-        d = dt.info(args.dirs[0])
-        print(json.dumps(d, indent=1) if args.json else dt.info_text(d))
+        infos = [dt.info(root) for root in args.dirs]
+        if args.json:
+            print(json.dumps(infos[0] if len(infos) == 1 else infos, indent=1))
+        else:
+            print("\n".join(dt.info_text(d) for d in infos))
         return EXIT_OK
     if args.action == "diff":
         if len(args.dirs) != 2:
-            raise DockfactoryError("dataset diff needs two directories: DIR_A DIR_B")
+            raise DockfactoryError(f"dataset diff needs two directories DIR_A DIR_B, got {len(args.dirs)}")
         d = dt.diff(*args.dirs)
         print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, *args.dirs))
         return EXIT_OK
     if args.action == "export":
-        for fmt in args.format.split(","):
-            print(dt.export(args.dirs[0], fmt.strip()))
+        formats = [f.strip() for f in args.format.split(",")]
+        unknown = [f for f in formats if f not in dt.EXPORT_WRITERS]
+        if unknown:
+            raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
+                                   f"(known: {', '.join(dt.EXPORT_WRITERS)})")
+        for root in args.dirs:
+            for fmt in formats:
+                print(dt.export(root, fmt))
         return EXIT_OK
     raise DockfactoryError(f"unknown dataset action {args.action!r}")
 
@@ -97,12 +122,13 @@ def add_subcommands(sub) -> None:
     r = sub.add_parser("render", help="render (the missing frames of) a dataset from a TOML config")
     r.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, paper, ideal, detector)")
     r.add_argument("--out", required=True, help="dataset directory")
-    r.add_argument("--workers", type=int, default=1, help="render processes sharing the cores")
+    r.add_argument("--workers", type=_int_at_least(1), default=1, help="render processes sharing the cores")
     r.add_argument("--shard", type=_shard, default=(1, 1), metavar="K/N",
                    help="render only shard K of N (frames with index %% N == K-1)")
     r.add_argument("--frames", help="comma-separated frame ids to render (default: all)")
-    r.add_argument("--retries", type=int, default=2, help="retries of a frame whose worker crashed")
-    r.add_argument("--recycle-after", type=int, default=100, help="restart a worker after this many frames")
+    r.add_argument("--retries", type=_int_at_least(0), default=2, help="retries of a frame whose worker crashed")
+    r.add_argument("--recycle-after", type=_int_at_least(1), default=100,
+                   help="restart a worker after this many frames")
     r.add_argument("--executor", choices=("local", "ray"), default="local",
                    help="local worker processes, or actors on a Ray cluster")
     r.add_argument("--ray-address", default=None,
@@ -112,7 +138,8 @@ def add_subcommands(sub) -> None:
 
     d = sub.add_parser("dataset", help="verify, describe, compare or export datasets")
     d.add_argument("action", choices=("verify", "info", "diff", "export"))
-    d.add_argument("dirs", nargs="+", metavar="DIR")
+    d.add_argument("dirs", nargs="+", metavar="DIR", help="dataset directories (verify, info, export: "
+                   "each of them; diff: exactly two)")
     d.add_argument("--format", default="coco,yolo,bop", help="export: coco, yolo, bop (comma-separated)")
     d.add_argument("--json", action="store_true", help="info/diff: print JSON")
     d.set_defaults(func=cmd_dataset)

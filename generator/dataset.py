@@ -5,19 +5,22 @@ Layout of a dataset directory:
   config.toml        the config file as given
   layout.json        the marker layout (ids, section, centre and normal in the section frame)
   images/ labels/ meta/ [exr/]   per-frame files (see generator.frame_output)
-  logs/              worker logs and per-frame timings (not part of the dataset's content)
+  logs/              worker logs and per-frame timings (not part of the dataset's content), and
+                     the dataset's lock file (logs/.dockfactory.lock: render and export hold it)
   manifest.json      written once every planned frame is complete: counts and every file's
                      size and sha256
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import re
 from collections import Counter
 from pathlib import Path
 
 from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan, static_scene
@@ -44,6 +47,55 @@ CONVENTIONS = {
 
 class DatasetError(DockfactoryError):
     """A dataset directory that cannot be used as asked; the message says why."""
+
+
+# ----------------------------------------------------------------------------- names and locks
+
+FRAME_ID_RE = re.compile(r"^\d{6}$|^rep\d{3}_\d{2}$")
+SPLITS = ("train", "val", "test", "repeat")
+LOCK_FILE = Path("logs") / LOCK_NAME    # inside the dataset, outside its content
+
+
+def check_frame_id(frame_id, where) -> str:
+    """``frame_id`` when it is a frame id (000123, rep001_02), else DatasetError naming ``where``:
+    a name that goes into a path is checked before the path is built."""
+    if not isinstance(frame_id, str) or not FRAME_ID_RE.match(frame_id) or frame_id.endswith("\n"):
+        raise DatasetError(f"{where}: frame id {frame_id!r} is not a frame id (expected 000123 or rep001_02)")
+    return frame_id
+
+
+def check_split(split, where) -> str:
+    if not isinstance(split, str) or split not in SPLITS:
+        raise DatasetError(f"{where}: split {split!r} is not one of {', '.join(SPLITS)}")
+    return split
+
+
+@contextlib.contextmanager
+def dataset_lock(root, what: str):
+    """The dataset's exclusive lock (render, export); readers need none. A second writer fails at
+    once with a DatasetError naming the holder."""
+    with folder_lock(root, what, Path(root) / LOCK_FILE):
+        yield
+
+
+def _only_lock(root: Path) -> bool:
+    """True when ``root`` holds nothing but (an empty logs/ or) the dataset lock file."""
+    entries = list(root.iterdir())
+    if not entries:
+        return True
+    if [e.name for e in entries] != ["logs"] or not entries[0].is_dir() or entries[0].is_symlink():
+        return False
+    return all(e.name == LOCK_NAME for e in entries[0].iterdir())
+
+
+def check_target(root) -> None:
+    """Refuse (DatasetError, nothing written) a directory that is neither empty nor a dataset."""
+    root = Path(root)
+    if root.exists() and not root.is_dir():
+        raise DatasetError(f"{root}: not a directory; refusing to write a dataset there")
+    if read_identity(root) is None and root.exists() and not _only_lock(root):
+        raise DatasetError(f"{root}: directory is not empty and holds no dataset.json; "
+                           f"refusing to write a dataset into it")
 
 
 def identity(cfg: Config) -> dict:
@@ -89,9 +141,7 @@ def prepare(root, cfg: Config, config_text: str) -> dict:
     ident = identity(cfg)
     existing = read_identity(root)
     if existing is None:
-        if root.exists() and any(root.iterdir()):
-            raise DatasetError(f"{root}: directory is not empty and holds no dataset.json; "
-                               f"refusing to write a dataset into it")
+        check_target(root)
     elif existing.get("version_id") != ident["version_id"]:
         diffs = config_differences(existing.get("config", {}), ident["config"])
         what = "; ".join(diffs[:5]) or (
@@ -127,8 +177,17 @@ def config_differences(a, b, prefix: str = "") -> list[str]:
     return out
 
 
+def frame_files(frame_id: str, keep_exr: bool) -> dict[str, str]:
+    """The files a frame's meta record vouches for: kind -> path relative to the dataset."""
+    out = {"image": f"images/{frame_id}.png", "label": f"labels/{frame_id}.json"}
+    if keep_exr:
+        out["exr"] = f"exr/{frame_id}.exr"
+    return out
+
+
 def frame_done(root, frame_id: str, keep_exr: bool) -> bool:
-    """True when the frame's label (the commit point) and the files it vouches for exist."""
+    """True when the frame's label (the commit point) and the files it vouches for exist. The meta
+    record must name exactly the frame's own files (a record pointing elsewhere is not done)."""
     p = frame_paths(root, frame_id)
     if not (p["label"].is_file() and p["image"].is_file() and p["meta"].is_file()):
         return False
@@ -136,11 +195,17 @@ def frame_done(root, frame_id: str, keep_exr: bool) -> bool:
         return False
     try:
         meta = json.loads(p["meta"].read_text())
+        expected = frame_files(frame_id, keep_exr)
+        if {k: r["path"] for k, r in meta["files"].items() if k in expected} != expected:
+            return False
         for rec in meta["files"].values():
-            if (Path(root) / rec["path"]).stat().st_size != rec["bytes"]:
+            if rec["path"] not in expected.values():
+                return False
+            path = Path(root) / rec["path"]
+            if path.is_symlink() or path.stat().st_size != rec["bytes"]:
                 return False
         label = json.loads(p["label"].read_text())
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return False
     return label.get("frame_id") == frame_id
 
@@ -154,6 +219,11 @@ def write_manifest(root, cfg: Config) -> dict:
     for spec in plan:
         meta = json.loads(frame_paths(root, spec.frame_id)["meta"].read_text())
         frames.append({"frame_id": spec.frame_id, "split": spec.split, "condition": spec.condition})
+        own = set(frame_files(spec.frame_id, cfg.render.keep_exr).values())
+        stray = [r["path"] for r in meta["files"].values() if r["path"] not in own]
+        if stray:
+            raise DatasetError(f"{frame_paths(root, spec.frame_id)['meta']}: lists {stray[0]!r}, "
+                               f"not a file of frame {spec.frame_id}")
         files += [{"path": r["path"], "bytes": r["bytes"], "sha256": r["sha256"]}
                   for r in meta["files"].values()]
         meta_path = frame_paths(root, spec.frame_id)["meta"]

@@ -8,10 +8,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import config_from_dict
-from dockfactory.core.io import is_temp_name, sha256_file
+from dockfactory.core.io import (
+    dead_writer,
+    is_temp_name,
+    remove_stale_temps,
+    sha256_file,
+    temp_name,
+    write_json_atomic,
+)
 from dockfactory.generator.dataset import (
     DatasetError,
     config_differences,
+    dataset_lock,
     read_identity,
 )
 from dockfactory.generator.export_bop import export_bop
@@ -22,6 +30,8 @@ from dockfactory.generator.sampler import frame_plan
 EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
+EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
+STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this
 
 
 @dataclass
@@ -30,19 +40,24 @@ class VerifyReport:
     missing: list = field(default_factory=list)
     corrupt: list = field(default_factory=list)      # (path, reason)
     unexpected: list = field(default_factory=list)
+    unsafe: list = field(default_factory=list)       # (path, reason): outside the dataset, symlinks
+    ignored: list = field(default_factory=list)      # temporaries of dead writers (never content)
     incomplete: str = ""
 
     @property
     def ok(self) -> bool:
-        return not (self.missing or self.corrupt or self.unexpected or self.incomplete)
+        return not (self.missing or self.corrupt or self.unexpected or self.unsafe or self.incomplete)
 
     def text(self) -> str:
         lines = [f"{self.root}: {'OK: complete and intact' if self.ok else 'FAILED'}"]
         if self.incomplete:
             lines.append(f"  incomplete: {self.incomplete}")
+        lines += [f"  unsafe: {p} ({why})" for p, why in self.unsafe]
         lines += [f"  missing: {p}" for p in self.missing]
         lines += [f"  corrupt: {p} ({why})" for p, why in self.corrupt]
         lines += [f"  unexpected: {p}" for p in self.unexpected]
+        lines += [f"  ignored: {p} (temporary file of a writer that died; never part of the dataset)"
+                  for p in self.ignored]
         return "\n".join(lines)
 
 
@@ -57,29 +72,100 @@ def content_files(root: Path) -> list[str]:
 
 
 def load_manifest(root: Path) -> dict:
+    """manifest.json of ``root``, its shape checked (a ``files`` list of {path, bytes, sha256});
+    DatasetError naming the file otherwise."""
     path = root / "manifest.json"
     try:
-        return json.loads(path.read_text())
+        manifest = json.loads(path.read_text())
     except FileNotFoundError:
         raise DatasetError(f"{root}: no manifest.json (dataset not complete: run its render command again)") from None
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:
         raise DatasetError(f"{path}: unreadable manifest ({exc})") from exc
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(files, list):
+        raise DatasetError(f"{path}: unreadable manifest (expected an object with a 'files' list)")
+    for i, rec in enumerate(files):
+        if not (isinstance(rec, dict) and isinstance(rec.get("path"), str) and isinstance(rec.get("sha256"), str)
+                and isinstance(rec.get("bytes"), int) and not isinstance(rec.get("bytes"), bool)):
+            raise DatasetError(f"{path}: unreadable manifest (files[{i}] is not "
+                               f"{{path: text, bytes: integer, sha256: text}})")
+    return manifest
+
+
+IDENTITY_KEYS = ("name", "version_id", "seed", "generator_version", "blender_version", "config")
+
+
+def load_identity(root: Path) -> dict:
+    """dataset.json of ``root``, its shape checked; DatasetError naming the file otherwise."""
+    path = root / "dataset.json"
+    ident = read_identity(root)
+    if ident is None and not path.exists():
+        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    if not isinstance(ident, dict):   # also JSON null, which read_identity returns as None
+        raise DatasetError(f"{path}: not a dataset identity (expected a JSON object)")
+    missing = [k for k in IDENTITY_KEYS if k not in ident]
+    if missing:
+        raise DatasetError(f"{path}: not a dataset identity (no {missing[0]!r})")
+    if not isinstance(ident["config"], dict) or not isinstance(ident["version_id"], str):
+        raise DatasetError(f"{path}: not a dataset identity ('config' must be an object, 'version_id' text)")
+    return ident
+
+
+def outside_reason(rel) -> str:
+    """Why manifest path ``rel`` does not name a file inside the dataset ("" when it does): it
+    must be a plain relative POSIX path, without ``..``, ``.`` or empty parts."""
+    if not isinstance(rel, str) or not rel:
+        return "not a path"
+    if "\\" in rel or "\x00" in rel:
+        return "outside the dataset (not a plain relative path)"
+    if rel.startswith("/") or (len(rel) > 1 and rel[1] == ":"):
+        return "outside the dataset (absolute path)"
+    if any(part in ("", ".", "..") for part in rel.split("/")):
+        return "outside the dataset (.. or empty parts)"
+    return ""
+
+
+def symlinks(root: Path) -> list[tuple[str, str]]:
+    """Every symlink inside the dataset (logs and exports included): (relative path, reason)."""
+    out = []
+    real_root = root.resolve()
+    for dirpath, dirnames, filenames in os.walk(root):   # never follows symlinked folders
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            if not p.is_symlink():
+                continue
+            target = os.readlink(p)
+            rel = p.relative_to(root).as_posix()
+            if not p.exists():
+                out.append((rel, f"dangling symlink to {target}"))
+            elif not p.resolve().is_relative_to(real_root):
+                out.append((rel, f"symlink to {target}, outside the dataset"))
+            else:
+                out.append((rel, f"symlink to {target}; a dataset holds files, not links"))
+    return sorted(out)
 
 
 def verify(root) -> VerifyReport:
     root = Path(root)
     report = VerifyReport(str(root))
-    if read_identity(root) is None:
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    load_identity(root)   # a dataset, with a readable identity
+    report.unsafe += symlinks(root)
     try:
         manifest = load_manifest(root)
     except DatasetError as exc:
         report.incomplete = str(exc)
         return report
+    linked = {p for p, _ in report.unsafe}
     listed = {}
     for rec in manifest["files"]:
+        why = outside_reason(rec.get("path") if isinstance(rec, dict) else None)
+        if why:   # checked before the path is built: never read
+            report.unsafe.append((str(rec.get("path") if isinstance(rec, dict) else rec), why))
+            continue
         listed[rec["path"]] = rec
         path = root / rec["path"]
+        if any(p.is_symlink() for p in (path, *path.parents) if p != root and p.is_relative_to(root)):
+            continue   # the symlink (a file or one of its folders) is reported above, once
         if not path.is_file():
             report.missing.append(rec["path"])
             continue
@@ -89,26 +175,31 @@ def verify(root) -> VerifyReport:
         elif sha256_file(path) != rec["sha256"]:
             report.corrupt.append((rec["path"], "sha256 differs from the manifest"))
     for rel in content_files(root):
-        if rel not in listed:
-            report.unexpected.append(rel + (" (temporary file of an interrupted write)" if is_temp_name(Path(rel).name) else ""))
+        if rel in listed or rel in linked:
+            continue
+        if is_temp_name(Path(rel).name) and dead_writer(root / rel):
+            report.ignored.append(rel)
+        else:
+            report.unexpected.append(rel + (" (temporary file of a write in progress or of another host)"
+                                            if is_temp_name(Path(rel).name) else ""))
     return report
 
 
 def info(root) -> dict:
     root = Path(root)
-    ident = read_identity(root)
-    if ident is None:
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    ident = load_identity(root)
+    cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
     out = {"root": str(root), "name": ident["name"], "version_id": ident["version_id"], "seed": ident["seed"],
            "generator_version": ident["generator_version"], "blender_version": ident["blender_version"],
-           "image_size": [ident["config"]["image"]["width"], ident["config"]["image"]["height"]]}
-    cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
+           "image_size": [cfg.image.width, cfg.image.height]}
     plan = frame_plan(cfg)
     done = sum(1 for s in plan if (root / "labels" / f"{s.frame_id}.json").is_file())
     out["frames"] = {"planned": len(plan), "done": done}
     manifest_path = root / "manifest.json"
     if manifest_path.exists():
-        m = json.loads(manifest_path.read_text())
+        m = load_manifest(root)
+        if not isinstance(m.get("counts"), dict) or not isinstance(m["counts"].get("by_split_condition"), dict):
+            raise DatasetError(f"{manifest_path}: unreadable manifest (no 'counts' with 'by_split_condition')")
         out["complete"] = True
         out["counts"] = m["counts"]
         out["bytes"] = sum(f["bytes"] for f in m["files"])
@@ -132,16 +223,13 @@ def info_text(d: dict) -> str:
 def _file_index(root: Path) -> dict[str, str]:
     manifest_path = root / "manifest.json"
     if manifest_path.exists():
-        return {f["path"]: f["sha256"] for f in json.loads(manifest_path.read_text())["files"]}
+        return {f["path"]: f["sha256"] for f in load_manifest(root)["files"]}
     return {rel: sha256_file(root / rel) for rel in content_files(root)}
 
 
 def diff(root_a, root_b) -> dict:
     a, b = Path(root_a), Path(root_b)
-    ia, ib = read_identity(a), read_identity(b)
-    for r, i in ((a, ia), (b, ib)):
-        if i is None:
-            raise DatasetError(f"{r}: not a dockfactory dataset (no dataset.json)")
+    ia, ib = load_identity(a), load_identity(b)
     fa, fb = _file_index(a), _file_index(b)
     return {
         "version": [ia["version_id"], ib["version_id"]],
@@ -170,18 +258,60 @@ def diff_text(d: dict, a, b) -> str:
     return "\n".join(lines)
 
 
-def export(root, fmt: str) -> Path:
-    """Write one export of a complete dataset as DIR/exports/<fmt>/ (built aside, then renamed)."""
+def export_complete(root, fmt: str) -> bool:
+    """True when DIR/exports/<fmt>/ is a finished export of this dataset version (its completion
+    mark, written last, names the format and the version): a partial folder is not done."""
+    root = Path(root)
+    mark = root / "exports" / fmt / EXPORT_MARK
+    try:
+        rec = json.loads(mark.read_text())
+        ident = read_identity(root) or {}
+        return (not (root / "exports" / fmt).is_symlink() and isinstance(rec, dict) and rec.get("format") == fmt
+                and rec.get("version_id") == ident.get("version_id"))
+    except (OSError, ValueError, DatasetError):
+        return False
+
+
+def write_export(root, fmt: str) -> Path:
+    """:func:`export` for a caller that already holds the dataset lock (``render``)."""
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     if not (root / "manifest.json").exists():
         raise DatasetError(f"{root}: dataset is not complete (no manifest.json); finish rendering first")
-    final = root / "exports" / fmt
-    tmp = root / "exports" / f".{fmt}.tmp-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    EXPORT_WRITERS[fmt](root, tmp)
-    if final.exists():
-        shutil.rmtree(final)
-    os.replace(tmp, final)
+    exports = root / "exports"
+    if exports.is_symlink() or (exports / fmt).is_symlink():
+        raise DatasetError(f"{exports}: is (or holds) a symlink; exports are written inside the dataset only")
+    exports.mkdir(exist_ok=True)
+    # built aside by a killed export (of this host, or old): never part of any export
+    remove_stale_temps(exports, max_age_s=STALE_EXPORT_S, own=True)
+    final = exports / fmt
+    tmp = exports / temp_name(fmt)
+    aside = exports / temp_name(f"{fmt}.old")
+    try:
+        EXPORT_WRITERS[fmt](root, tmp)
+        n_files = sum(1 for p in tmp.rglob("*") if p.is_file())
+        write_json_atomic(tmp / EXPORT_MARK, {"format": fmt, "version_id": (read_identity(root) or {}).get("version_id"),
+                                              "files": n_files})
+        # old or new, never partial: the old export steps aside, the new one takes its name
+        if final.exists():
+            os.rename(final, aside)
+        os.rename(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
     return final
+
+
+def export(root, fmt: str) -> Path:
+    """Write one export of a complete dataset as DIR/exports/<fmt>/: built aside, then swapped in
+    by rename (an interrupted export leaves the old one, the new one or none, never a partial
+    one), under the dataset's lock (a concurrent render or export is refused, naming it)."""
+    root = Path(root)
+    if fmt not in EXPORT_WRITERS:
+        raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
+    if read_identity(root) is None:
+        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    with dataset_lock(root, f"export {fmt}"):
+        return write_export(root, fmt)

@@ -12,14 +12,13 @@ flange, unoccluded), px_count_visib the pixels of the section in the index pass.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from dockfactory.core.io import load_labels, write_json_atomic, write_text_atomic
+from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import SECTIONS
-from dockfactory.generator.export_files import place_file
+from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
 
 OBJ_ID = {"A": 1, "B": 2}
 
@@ -69,7 +68,8 @@ def _xywh(box):
 
 def export_bop(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = json.loads((root / "dataset.json").read_text())
+    ident = read_dataset_identity(root)
+    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
     cfg = ident["config"]
     sec = cfg["sections"]
     info = {}
@@ -86,12 +86,12 @@ def export_bop(root, out) -> Path:
                                             "fx": float(np.mean(cfg["camera"]["focal_px"])),
                                             "fy": float(np.mean(cfg["camera"]["focal_px"])), "depth_scale": 1.0})
     scenes: dict[str, dict] = {}
-    for label in load_labels(root):
+    for label in labels:
         split = label["spec"]["split"]
         sc = scenes.setdefault(split, {"camera": {}, "gt": {}, "info": {}, "ids": {}})
         im = str(len(sc["ids"]))
         sc["ids"][im] = label["frame_id"]
-        place_file(root / "images" / f"{label['frame_id']}.png", out / split / "000000" / "rgb" / f"{int(im):06d}.png")
+        place_file(source_image(root, label["frame_id"]), out / split / "000000" / "rgb" / f"{int(im):06d}.png")
         k = np.array(label["camera"]["K"], dtype=float)
         k[0, 2] += 0.5   # BOP/OpenGL-style pixel corners, like COCO
         k[1, 2] += 0.5

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.geometry import project_points, transform_points
-from dockfactory.core.io import load_labels, write_json_atomic
+from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
-from dockfactory.generator.export_files import place_file
+from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
 from dockfactory.generator.labels import clip_polygon
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
@@ -187,10 +187,10 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
     root, out = Path(root), Path(out)
-    ident = json.loads((root / "dataset.json").read_text())
+    ident = read_dataset_identity(root)
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)
-    labels = load_labels(root)
+    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
     next_image, next_ann = 1, 1
     for split in SPLITS:
         split_labels = [lab for lab in labels if lab["spec"]["split"] == split]
@@ -202,6 +202,6 @@ def export_coco(root, out) -> Path:
         next_image += len(coco["images"])
         next_ann += len(coco["annotations"])
         for lab in split_labels:
-            place_file(root / "images" / f"{lab['frame_id']}.png", out / "images" / split / f"{lab['frame_id']}.png")
+            place_file(source_image(root, lab["frame_id"]), out / "images" / split / f"{lab['frame_id']}.png")
         write_json_atomic(out / "annotations" / f"person_keypoints_{split}.json", coco, indent=None)
     return out

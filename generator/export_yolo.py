@@ -18,12 +18,11 @@ colour is washed out (``legible`` false), are left out (YOLO has no ignore regio
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from dockfactory.core.io import load_labels, write_text_atomic
+from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator.export_files import place_file
+from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
@@ -65,15 +64,16 @@ def data_yaml(version_id: str, counts: dict[str, int]) -> str:
 
 def export_yolo(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = json.loads((root / "dataset.json").read_text())
+    ident = read_dataset_identity(root)
     threshold = ident["config"]["labels"]["visible_threshold"]
+    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
     counts: dict[str, int] = {}
     for split in YOLO_SPLITS:
         (out / "images" / split).mkdir(parents=True, exist_ok=True)
         (out / "labels" / split).mkdir(parents=True, exist_ok=True)
-    for label in load_labels(root):
+    for label in labels:
         split, fid = label["spec"]["split"], label["frame_id"]
-        place_file(root / "images" / f"{fid}.png", out / "images" / split / f"{fid}.png")
+        place_file(source_image(root, fid), out / "images" / split / f"{fid}.png")
         write_text_atomic(out / "labels" / split / f"{fid}.txt", "".join(l + "\n" for l in yolo_lines(label, threshold)))
         counts[split] = counts.get(split, 0) + 1
     write_text_atomic(out / "data.yaml", data_yaml(str(ident.get("version_id", "")), counts))

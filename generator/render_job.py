@@ -18,8 +18,8 @@ from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
-from dockfactory.generator.dataset import frame_done, prepare, write_manifest
-from dockfactory.generator.dataset_tools import export
+from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
+from dockfactory.generator.dataset_tools import export_complete, write_export
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.generator.progress import Progress
 from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
@@ -106,24 +106,32 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     frames = select_frames(cfg, opts)
     # sample every scene up front: a bad frame fails before anything is written
     scenes = {s.frame_id: sample_frame(cfg, s) for s in frames}
+    check_target(root)   # a foreign folder is refused before the lock file is made in it
+    with dataset_lock(root, "render"):   # one writer per dataset: a second render fails at once
+        summary = _run_locked(cfg, Path(root), config_text, opts, frames, scenes)
+    summary.seconds = time.monotonic() - t_start
+    return summary
+
+
+def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, frames, scenes) -> JobSummary:
     ident = prepare(root, cfg, config_text)
-    root = Path(root)
-    remove_stale_temps(root, max_age_s=cfg.render.frame_timeout_s + 60.0)  # left by a killed run
+    stale_s = cfg.render.frame_timeout_s + 60.0
+    remove_stale_temps(root, max_age_s=stale_s)  # left by a killed run
     summary = JobSummary(root=str(root), version_id=ident["version_id"], planned=len(frames))
     todo = [s for s in frames if not frame_done(root, s.frame_id, cfg.render.keep_exr)]
     summary.skipped = len(frames) - len(todo)
 
     if todo:
         _render(cfg, root, todo, scenes, opts, summary)
-    # temporaries of a killed earlier run whose writer had not yet exited when this run started
-    remove_stale_temps(root, max_age_s=cfg.render.frame_timeout_s + 60.0)
+    # temporaries of a killed worker (or of a killed earlier run whose writer had not yet exited
+    # when this run started): removed before the dataset is declared complete
+    remove_stale_temps(root, max_age_s=stale_s)
     summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
         for fmt in cfg.export.formats:
-            if not (root / "exports" / fmt).exists():   # written once, when the dataset completes
-                export(root, fmt)
-    summary.seconds = time.monotonic() - t_start
+            if not export_complete(root, fmt):   # written once, when the dataset completes
+                write_export(root, fmt)          # (a partial export of a killed run is replaced)
     return summary
 
 

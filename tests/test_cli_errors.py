@@ -1,0 +1,268 @@
+"""Bad command-line input is one line and exit 2, never a traceback (issue 10, finding 8: flags,
+``show``, multi-path ``dataset`` commands, damaged dataset.json / manifest, unwritable outputs).
+
+No rendering: datasets come from tests/pipeline_data.py (the smoke config, painted); commands
+that would render or train are replaced by stubs that must not be reached.
+"""
+import errno
+import json
+import os
+import shutil
+
+import pytest
+from pipeline_data import write_painted_dataset
+
+from dockfactory.core import io as io_mod
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import write_bytes_atomic, write_json_atomic
+from dockfactory.core.resources import shipped_config
+from dockfactory.eval.cli import main
+
+
+def _run(argv, capsys):
+    """(exit status, stdout, stderr) of ``dockfactory ARGV``; argparse's exits count too."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _one_line_error(err: str) -> str:
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert lines and "Traceback" not in err, err
+    assert "error:" in lines[-1], err
+    return lines[-1]
+
+
+@pytest.fixture(scope="module")
+def painted(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cli-errors") / "dataset"
+    write_painted_dataset(root, shipped_config("smoke"))
+    return root
+
+
+@pytest.fixture
+def copy_of(painted, tmp_path):
+    def make(name: str):
+        dst = tmp_path / name
+        shutil.copytree(painted, dst)
+        return dst
+    return make
+
+
+def _a_frame(root) -> str:
+    return min(p.stem for p in (root / "labels").glob("*.json"))
+
+
+# ----------------------------------------------------------------------------- show
+
+@pytest.mark.parametrize("frame_id", ["999999", "nope", "../labels/000000", ""])
+def test_show_unknown_frame_names_dataset_and_id(painted, tmp_path, capsys, frame_id):
+    code, _, err = _run(["show", painted, frame_id, "--out", tmp_path / "o.png"], capsys)
+    line = _one_line_error(err)
+    assert code == 2 and str(painted) in line and repr(frame_id) in line
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_show_not_a_dataset(tmp_path, capsys):
+    code, _, err = _run(["show", tmp_path, "000000", "--out", tmp_path / "o.png"], capsys)
+    assert code == 2 and str(tmp_path) in _one_line_error(err)
+
+
+def test_show_draws_a_known_frame(painted, tmp_path, capsys):
+    out = tmp_path / "o.png"
+    code, _, _ = _run(["show", painted, _a_frame(painted), "--out", out], capsys)
+    assert code == 0 and out.stat().st_size > 0
+
+
+def test_show_out_is_a_folder(painted, tmp_path, capsys):
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    code, _, err = _run(["show", painted, _a_frame(painted), "--out", folder], capsys)
+    assert code == 2 and str(folder) in _one_line_error(err)
+    assert os.listdir(folder) == [] and [p.name for p in tmp_path.iterdir()] == ["folder"]  # no temporary left
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_show_out_in_a_read_only_folder(painted, tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        code, _, err = _run(["show", painted, _a_frame(painted), "--out", ro / "o.png"], capsys)
+    finally:
+        ro.chmod(0o755)
+    assert code == 2 and str(ro / "o.png") in _one_line_error(err)
+
+
+@pytest.mark.parametrize("exc", [OSError(errno.ENOSPC, "No space left on device"),
+                                 PermissionError(errno.EACCES, "Permission denied")], ids=["full", "read-only"])
+def test_show_out_write_fails(painted, tmp_path, capsys, monkeypatch, exc):
+    """A full disk (or a refused write) surfaces at fsync/close; simulated, since root ignores modes."""
+    out = tmp_path / "o.png"
+    out.write_bytes(b"old")
+
+    def fail(fd):
+        raise exc
+    monkeypatch.setattr(io_mod.os, "fsync", fail)
+    code, _, err = _run(["show", painted, _a_frame(painted), "--out", out], capsys)
+    line = _one_line_error(err)
+    assert code == 2 and str(out) in line and exc.strerror in line
+    assert out.read_bytes() == b"old"                          # atomic: the old file is untouched
+    assert [p.name for p in tmp_path.iterdir()] == ["o.png"]   # and no temporary is left
+
+
+def test_write_errors_are_dockfactory_errors_and_still_oserrors(tmp_path):
+    (tmp_path / "d").mkdir()
+    with pytest.raises(DockfactoryError) as err:
+        write_json_atomic(tmp_path / "d", {"a": 1})
+    assert isinstance(err.value, OSError) and err.value.errno == errno.EISDIR
+    assert str(tmp_path / "d") in str(err.value) and "\n" not in str(err.value)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(DockfactoryError, match="file"):     # a parent that is a file
+        write_bytes_atomic(tmp_path / "file" / "sub" / "o.bin", b"x")
+
+
+# ----------------------------------------------------------------------------- dataset A B
+
+def test_verify_takes_every_path(painted, copy_of, capsys):
+    b = copy_of("b")
+    code, out, _ = _run(["dataset", "verify", painted, b], capsys)
+    assert code == 0 and str(painted) in out and str(b) in out
+    label = min((b / "labels").glob("*.json"))
+    label.write_text(label.read_text().replace('"x_mm": ', '"x_mm": 1'))   # B damaged, A intact
+    code, out, _ = _run(["dataset", "verify", painted, b], capsys)
+    assert code == 1 and f"{b}: FAILED" in out and f"{painted}: OK" in out
+    code, out, _ = _run(["dataset", "verify", b, painted], capsys)     # order does not matter
+    assert code == 1 and f"{b}: FAILED" in out
+
+
+def test_verify_second_path_not_a_dataset(painted, tmp_path, capsys):
+    code, _, err = _run(["dataset", "verify", painted, tmp_path / "nothing"], capsys)
+    assert code == 2 and str(tmp_path / "nothing") in _one_line_error(err)
+
+
+def test_info_takes_every_path(painted, copy_of, capsys):
+    b = copy_of("b")
+    code, out, _ = _run(["dataset", "info", painted, b], capsys)
+    assert code == 0 and str(painted) in out and str(b) in out
+    code, out, _ = _run(["dataset", "info", painted, b, "--json"], capsys)
+    assert code == 0 and [d["root"] for d in json.loads(out)] == [str(painted), str(b)]
+    code, out, _ = _run(["dataset", "info", painted, "--json"], capsys)   # one path: one object, as before
+    assert code == 0 and json.loads(out)["root"] == str(painted)
+
+
+@pytest.mark.parametrize("content", ["[]", "null", '"x"', "{}", '{"name": "x"}', '{"config": []}'])
+@pytest.mark.parametrize("action", ["info", "verify", "diff"])
+def test_bad_dataset_json(painted, copy_of, capsys, content, action):
+    b = copy_of("b")
+    (b / "dataset.json").write_text(content)
+    code, _, err = _run(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
+    assert code == 2 and str(b / "dataset.json") in _one_line_error(err)
+
+
+@pytest.mark.parametrize("manifest", [{}, [], {"files": None}, {"files": [{"path": "x"}]},
+                                      {"files": [{"path": 3, "bytes": "1", "sha256": 1}]}],
+                         ids=["no-files", "list", "files-null", "record-keys", "record-types"])
+@pytest.mark.parametrize("action", ["info", "verify", "diff"])
+def test_bad_manifest(painted, copy_of, capsys, manifest, action):
+    b = copy_of("b")
+    (b / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = _run(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
+    assert "Traceback" not in err
+    if action == "verify":          # verify reports a damaged manifest as a failed dataset
+        assert code == 1 and f"{b}: FAILED" in out and "manifest.json" in out
+    else:
+        assert code == 2 and str(b / "manifest.json") in _one_line_error(err)
+
+
+def test_manifest_without_counts_info(copy_of, capsys):
+    b = copy_of("b")
+    manifest = json.loads((b / "manifest.json").read_text())
+    del manifest["counts"]
+    (b / "manifest.json").write_text(json.dumps(manifest))
+    code, _, err = _run(["dataset", "info", b], capsys)
+    assert code == 2 and str(b / "manifest.json") in _one_line_error(err)
+
+
+# ----------------------------------------------------------------------------- flags
+
+@pytest.fixture
+def no_render(monkeypatch):
+    calls = []
+    monkeypatch.setattr("dockfactory.generator.cli.run_render", lambda *a, **k: calls.append(a))
+    return calls
+
+
+@pytest.mark.parametrize("flags", [["--retries", "-1"], ["--recycle-after", "0"], ["--recycle-after", "-5"],
+                                   ["--workers", "0"], ["--workers", "-2"]])
+def test_render_flags(tmp_path, capsys, no_render, flags):
+    code, _, err = _run(["render", "smoke", "--out", tmp_path / "o", *flags], capsys)
+    assert code == 2 and flags[0] in _one_line_error(err)
+    assert no_render == [] and not (tmp_path / "o").exists()
+
+
+@pytest.fixture
+def no_pipeline(monkeypatch):
+    calls = []
+    monkeypatch.setattr("dockfactory.eval.cli.run_pipeline", lambda *a, **k: calls.append((a, k)) or 0)
+    return calls
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--train", "--weights", "w.pt"], "--weights"),
+    (["--epochs", "3"], "--epochs"),                       # --epochs without --train did nothing
+    (["--oracle-noise", "1", "--weights", "w.pt"], "--oracle-noise"),
+    (["--oracle-noise", "1", "--train"], "--oracle-noise"),
+    (["--oracle-noise", "-1"], "--oracle-noise"),
+    (["--oracle-noise", "nan"], "--oracle-noise"),
+    (["--workers", "0"], "--workers"),
+    (["--workers", "-1"], "--workers"),
+    (["--train", "--epochs", "0"], "--epochs"),
+])
+def test_run_flags(tmp_path, capsys, no_pipeline, flags, named):
+    code, _, err = _run(["run", "smoke", "--out", tmp_path / "w", *flags], capsys)
+    assert code == 2 and named in _one_line_error(err)
+    assert no_pipeline == [] and not (tmp_path / "w").exists()
+
+
+def test_run_missing_weights(tmp_path, capsys, no_pipeline):
+    code, _, err = _run(["run", "smoke", "--out", tmp_path / "w", "--weights", tmp_path / "nope.pt"], capsys)
+    assert code == 2 and "nope.pt" in _one_line_error(err)
+    assert no_pipeline == [] and not (tmp_path / "w").exists()
+
+
+def test_run_invalid_config_writes_nothing(tmp_config, tmp_path, capsys, no_pipeline):
+    path = tmp_config("[camera]\nmargin_px = nan\n")
+    code, _, err = _run(["run", path, "--out", tmp_path / "w"], capsys)
+    assert code == 2 and "margin_px" in _one_line_error(err)
+    assert no_pipeline == [] and not (tmp_path / "w").exists()
+
+
+def test_run_good_flags_reach_the_pipeline(tmp_path, capsys, no_pipeline):
+    code, _, _ = _run(["run", "smoke", "--out", tmp_path / "w", "--train", "--epochs", "2"], capsys)
+    assert code == 0 and len(no_pipeline) == 1 and no_pipeline[0][1]["train_epochs"] == 2
+
+
+@pytest.mark.parametrize("argv", [
+    ["train", "{d}", "--out", "{t}/r", "--threads", "-1"],
+    ["train", "{d}", "--out", "{t}/r", "--threads", "0"],
+    ["train", "{d}", "--out", "{t}/r", "--input-scale", "nan"],
+    ["train", "{d}", "--out", "{t}/r", "--input-scale", "0"],
+    ["train", "{d}", "--out", "{t}/r", "--seed", "-1"],
+    ["ablate", "{d}", "--out", "{t}/a", "--input-scale", "-1"],
+    ["ablate", "{d}", "--out", "{t}/a", "--conf", "1.5"],
+    ["detect", "{d}", "--out", "{t}/x.json", "--conf", "nan"],
+    ["detect", "{d}", "--out", "{t}/x.json", "--conf", "-0.1"],
+    ["detect", "{d}", "--out", "{t}/x.json", "--iou", "2"],
+    ["detect", "{d}", "--out", "{t}/x.json", "--threads", "-4"],
+    ["export-onnx", "--out", "{t}/m.onnx", "--height", "0"],
+    ["export-onnx", "--out", "{t}/m.onnx", "--width", "-64"],
+])
+def test_detector_flags(tmp_path, capsys, argv):
+    argv = [a.format(d=tmp_path / "no-dataset", t=tmp_path) for a in argv]
+    code, _, err = _run(argv, capsys)
+    assert code == 2 and argv[-2] in _one_line_error(err)
+    assert sorted(tmp_path.iterdir()) == []
