@@ -18,7 +18,8 @@ from dockfactory.eval.ablate import run_ablation
 from dockfactory.eval.detection_metrics import (
     evaluate_detections,
     format_report,
-    )
+)
+from dockfactory.generator.cli import int_at_least
 
 
 def _torch(threads: int | None):
@@ -29,24 +30,8 @@ def _torch(threads: int | None):
     return torch
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
-
-
-def _non_negative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return v
+_positive_int = int_at_least(1)
+_non_negative_int = int_at_least(0)
 
 
 def _float_in(low: float, high: float, low_open: bool = False):

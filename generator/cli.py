@@ -30,7 +30,7 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
-def _int_at_least(low: int):
+def int_at_least(low: int):
     """argparse type: an integer >= ``low`` (a negative count used to be accepted silently)."""
     def parse(text: str) -> int:
         try:
@@ -122,12 +122,12 @@ def add_subcommands(sub) -> None:
     r = sub.add_parser("render", help="render (the missing frames of) a dataset from a TOML config")
     r.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, paper, ideal, detector)")
     r.add_argument("--out", required=True, help="dataset directory")
-    r.add_argument("--workers", type=_int_at_least(1), default=1, help="render processes sharing the cores")
+    r.add_argument("--workers", type=int_at_least(1), default=1, help="render processes sharing the cores")
     r.add_argument("--shard", type=_shard, default=(1, 1), metavar="K/N",
                    help="render only shard K of N (frames with index %% N == K-1)")
     r.add_argument("--frames", help="comma-separated frame ids to render (default: all)")
-    r.add_argument("--retries", type=_int_at_least(0), default=2, help="retries of a frame whose worker crashed")
-    r.add_argument("--recycle-after", type=_int_at_least(1), default=100,
+    r.add_argument("--retries", type=int_at_least(0), default=2, help="retries of a frame whose worker crashed")
+    r.add_argument("--recycle-after", type=int_at_least(1), default=100,
                    help="restart a worker after this many frames")
     r.add_argument("--executor", choices=("local", "ray"), default="local",
                    help="local worker processes, or actors on a Ray cluster")

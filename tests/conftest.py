@@ -1,4 +1,5 @@
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -34,3 +35,22 @@ from hypothesis import settings  # noqa: E402
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
 settings.register_profile("explore", max_examples=500, derandomize=False)
 settings.load_profile(os.environ["HYPOTHESIS_PROFILE"])
+
+
+@pytest.fixture(scope="session")
+def painted_source(tmp_path_factory):
+    """A complete smoke dataset written without Blender (tests/pipeline_data.py): read it only."""
+    from pipeline_data import write_painted_dataset
+
+    from dockfactory.core.resources import shipped_config
+    root = tmp_path_factory.mktemp("painted") / "dataset"
+    write_painted_dataset(root, shipped_config("smoke"))
+    return root
+
+
+@pytest.fixture
+def painted(painted_source, tmp_path):
+    """A private copy of the painted smoke dataset, free to damage."""
+    root = tmp_path / "ds"
+    shutil.copytree(painted_source, root)
+    return root

@@ -10,12 +10,10 @@ import os
 import shutil
 
 import pytest
-from pipeline_data import write_painted_dataset
 
 from dockfactory.core import io as io_mod
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
-from dockfactory.core.resources import shipped_config
 from dockfactory.eval.cli import main
 
 
@@ -36,11 +34,9 @@ def _one_line_error(err: str) -> str:
     return lines[-1]
 
 
-@pytest.fixture(scope="module")
-def painted(tmp_path_factory):
-    root = tmp_path_factory.mktemp("cli-errors") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
-    return root
+@pytest.fixture
+def painted(painted_source):
+    return painted_source   # read only here: tests that damage a dataset take copy_of(...)
 
 
 @pytest.fixture

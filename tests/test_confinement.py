@@ -17,10 +17,8 @@ import shutil
 from pathlib import Path
 
 import pytest
-from pipeline_data import write_painted_dataset
 from test_exports import write_dataset
 
-from dockfactory.core.resources import shipped_config
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset import DatasetError
 
@@ -34,20 +32,6 @@ def export_source(tmp_path_factory):
 def export_ds(export_source, tmp_path):
     root = tmp_path / "ds"
     shutil.copytree(export_source, root)
-    return root
-
-
-@pytest.fixture(scope="module")
-def painted_source(tmp_path_factory):
-    root = tmp_path_factory.mktemp("confine-painted") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
-    return root
-
-
-@pytest.fixture
-def painted(painted_source, tmp_path):
-    root = tmp_path / "ds"
-    shutil.copytree(painted_source, root)
     return root
 
 

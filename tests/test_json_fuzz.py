@@ -15,11 +15,11 @@ from hypothesis import strategies as st
 from pipeline_data import write_painted_dataset
 
 from dockfactory.core.resources import shipped_config
+from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.cli import main
 from dockfactory.eval.dataset_access import open_dataset
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.eval.acceptance import AcceptanceSpec
 
 FUZZ = hsettings(max_examples=25, deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -31,6 +31,9 @@ json_values = st.recursive(
     max_leaves=12)
 
 REPLACEMENTS = (None, "x", "false", [], {}, math.nan, math.inf, True, -1, 0, 1e308, [1, 2])
+
+# hypothesis over every JSON input: ~16 s, in `make test` (CI), not in the fast lane
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")

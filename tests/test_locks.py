@@ -20,7 +20,6 @@ import sys
 from pathlib import Path
 
 import pytest
-from pipeline_data import write_painted_dataset
 from test_exports import write_dataset
 
 from dockfactory.core.config import load_config
@@ -31,20 +30,6 @@ from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.render_job import JobOptions, run_render
 
 DOCKFACTORY = str(Path(sys.executable).parent / "dockfactory")
-
-
-@pytest.fixture(scope="module")
-def painted_source(tmp_path_factory):
-    root = tmp_path_factory.mktemp("locks-painted") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
-    return root
-
-
-@pytest.fixture
-def painted(painted_source, tmp_path):
-    root = tmp_path / "ds"
-    shutil.copytree(painted_source, root)
-    return root
 
 
 @pytest.fixture(scope="module")
