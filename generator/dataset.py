@@ -131,6 +131,27 @@ def read_identity(root) -> dict | None:
         raise DatasetError(f"{path}: unreadable dataset identity ({exc})") from exc
 
 
+IDENTITY_KEYS = ("name", "version_id", "seed", "generator_version", "blender_version", "config")
+
+
+def load_identity(root, required: tuple[str, ...] = IDENTITY_KEYS) -> dict:
+    """dataset.json of ``root`` with the ``required`` keys (exports need only ``config``), its shape
+    checked; DatasetError naming the file otherwise."""
+    root = Path(root)
+    path = root / "dataset.json"
+    ident = read_identity(root)
+    if ident is None and not path.exists():
+        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    if not isinstance(ident, dict):   # also JSON null, which read_identity returns as None
+        raise DatasetError(f"{path}: not a dataset identity (expected a JSON object)")
+    missing = [k for k in required if k not in ident]
+    if missing:
+        raise DatasetError(f"{path}: not a dataset identity (no {missing[0]!r})")
+    if not isinstance(ident.get("config"), dict) or not isinstance(ident.get("version_id", ""), str):
+        raise DatasetError(f"{path}: not a dataset identity ('config' must be an object, 'version_id' text)")
+    return ident
+
+
 def prepare(root, cfg: Config, config_text: str) -> dict:
     """Create the dataset directory or check that it holds this very config.
 

@@ -20,6 +20,7 @@ from dockfactory.generator.dataset import (
     DatasetError,
     config_differences,
     dataset_lock,
+    load_identity,
     read_identity,
 )
 from dockfactory.generator.export_bop import export_bop
@@ -92,23 +93,6 @@ def load_manifest(root: Path) -> dict:
     return manifest
 
 
-IDENTITY_KEYS = ("name", "version_id", "seed", "generator_version", "blender_version", "config")
-
-
-def load_identity(root: Path) -> dict:
-    """dataset.json of ``root``, its shape checked; DatasetError naming the file otherwise."""
-    path = root / "dataset.json"
-    ident = read_identity(root)
-    if ident is None and not path.exists():
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
-    if not isinstance(ident, dict):   # also JSON null, which read_identity returns as None
-        raise DatasetError(f"{path}: not a dataset identity (expected a JSON object)")
-    missing = [k for k in IDENTITY_KEYS if k not in ident]
-    if missing:
-        raise DatasetError(f"{path}: not a dataset identity (no {missing[0]!r})")
-    if not isinstance(ident["config"], dict) or not isinstance(ident["version_id"], str):
-        raise DatasetError(f"{path}: not a dataset identity ('config' must be an object, 'version_id' text)")
-    return ident
 
 
 def outside_reason(rel) -> str:

@@ -18,7 +18,8 @@ import numpy as np
 
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import SECTIONS
-from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
+from dockfactory.generator.dataset import load_identity
+from dockfactory.generator.export_files import checked_labels, place_file, source_image
 
 OBJ_ID = {"A": 1, "B": 2}
 
@@ -68,7 +69,7 @@ def _xywh(box):
 
 def export_bop(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = read_dataset_identity(root)
+    ident = load_identity(root, required=("config",))
     labels = checked_labels(root, ident)   # ids and splits checked before any path is built
     cfg = ident["config"]
     sec = cfg["sections"]

@@ -40,7 +40,8 @@ import numpy as np
 from dockfactory.core.geometry import project_points, transform_points
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
-from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
+from dockfactory.generator.dataset import load_identity
+from dockfactory.generator.export_files import checked_labels, place_file, source_image
 from dockfactory.generator.labels import clip_polygon
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
@@ -187,7 +188,7 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
     root, out = Path(root), Path(out)
-    ident = read_dataset_identity(root)
+    ident = load_identity(root, required=("config",))
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)
     labels = checked_labels(root, ident)   # ids and splits checked before any path is built

@@ -15,21 +15,8 @@ from pathlib import Path
 
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.io import atomic_path
-from dockfactory.generator.dataset import DatasetError, check_frame_id, check_split
+from dockfactory.generator.dataset import DatasetError, check_frame_id, check_split, load_identity
 from dockfactory.generator.sampler import frame_plan
-
-
-def read_dataset_identity(root) -> dict:
-    path = Path(root) / "dataset.json"
-    try:
-        ident = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)") from None
-    except (OSError, ValueError) as exc:
-        raise DatasetError(f"{path}: unreadable dataset identity ({exc})") from None
-    if not isinstance(ident, dict) or not isinstance(ident.get("config"), dict):
-        raise DatasetError(f"{path}: not a dataset identity (no config)")
-    return ident
 
 
 def plan_splits(root, ident: dict) -> dict[str, str]:
@@ -42,7 +29,7 @@ def checked_labels(root, ident: dict | None = None, split: str | None = None) ->
     """The dataset's labels (optionally one split) in frame-id order, each checked against the
     plan before any path is built from it (DatasetError naming the file otherwise)."""
     root = Path(root)
-    ident = ident if ident is not None else read_dataset_identity(root)
+    ident = ident if ident is not None else load_identity(root, required=("config",))
     plan = plan_splits(root, ident)
     out = []
     for path in sorted((root / "labels").glob("*.json")):

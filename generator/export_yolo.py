@@ -22,7 +22,8 @@ from pathlib import Path
 
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator.export_files import checked_labels, place_file, read_dataset_identity, source_image
+from dockfactory.generator.dataset import load_identity
+from dockfactory.generator.export_files import checked_labels, place_file, source_image
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
@@ -64,7 +65,7 @@ def data_yaml(version_id: str, counts: dict[str, int]) -> str:
 
 def export_yolo(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = read_dataset_identity(root)
+    ident = load_identity(root, required=("config",))
     threshold = ident["config"]["labels"]["visible_threshold"]
     labels = checked_labels(root, ident)   # ids and splits checked before any path is built
     counts: dict[str, int] = {}
