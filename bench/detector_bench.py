@@ -118,10 +118,12 @@ def main(argv=None) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
     torch.set_num_threads(args.threads)
-    from dockfactory.detector.data import dataset_version, load_frames
+    from dockfactory.detector.data import load_frames
+    from dockfactory.generator.dataset_open import Dataset
+    dataset = Dataset.open(args.dataset)
     from dockfactory.detector.infer import sha256_of
-    test = load_frames(args.dataset, "test")
-    print(f"dataset {args.dataset} (version {dataset_version(args.dataset)}), {len(test)} test frames")
+    test = load_frames(dataset, "test")
+    print(f"dataset {args.dataset} (version {dataset.version_id}), {len(test)} test frames")
     print(f"weights {args.weights} (sha256 {sha256_of(args.weights)[:16]}...), torch {torch.__version__}, "
           f"{args.threads} threads, load average before: {os.getloadavg()[0]:.2f}")
     res = {"inference": bench_inference(args.weights, test[:args.images], args.rounds)}
@@ -131,7 +133,7 @@ def main(argv=None) -> int:
           f" per image, mean {inf['ms_per_image_mean']:.1f} [target <= {TARGETS['ms_per_image']:.0f}: "
           f"{ok(inf['ms_per_image_median'] <= TARGETS['ms_per_image'])}]  (network {inf['ms_network']:.1f}, "
           f"NMS {inf['ms_nms']:.1f}, refinement {inf['ms_refine']:.1f} ms; {inf['detections_per_image']:.1f} detections)")
-    res["training"] = bench_training(args.dataset, args.train_batches)
+    res["training"] = bench_training(dataset, args.train_batches)
     tr = res["training"]
     print(f"training throughput (n + SE, batch {tr['batch']} crops of {tr['crop']} px): {tr['images_per_s']:.1f} images/s")
     if not args.skip_accuracy:
@@ -143,9 +145,9 @@ def main(argv=None) -> int:
             format_report,
         )
         with tempfile.TemporaryDirectory() as tmp:
-            doc = detect_dataset(args.dataset, args.weights, Path(tmp) / "dets.json", split="test",
+            doc = detect_dataset(dataset, args.weights, Path(tmp) / "dets.json", split="test",
                                  conf_threshold=0.001, progress=False)
-        m = evaluate_detections(args.dataset, doc)
+        m = evaluate_detections(dataset, doc)
         res["accuracy"] = m
         ce = m["centre_error"]
         print(format_report(m))

@@ -1,4 +1,4 @@
-"""Training data from a dockfactory dataset directory: crops around the seam plus background crops.
+"""Training data from an opened dockfactory dataset: crops around the seam plus background crops.
 
 The network sees images at ``input_scale`` (0.5: a 1280 x 960 frame is seen at 640 x 480, markers
 6-25 px). Training uses ``crop x crop`` windows of the scaled frame: most are centred near a
@@ -20,13 +20,13 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Protocol
 
 import cv2
 import numpy as np
 import torch
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import load_labels
 
 
 @dataclass(frozen=True)
@@ -84,15 +84,16 @@ class Frame:
     visible: np.ndarray
 
 
-def dataset_version(root) -> str:
-    """``version_id`` of a dockfactory dataset directory (from DIR/dataset.json)."""
-    path = Path(root) / "dataset.json"
-    if not path.is_file():
-        raise DockfactoryError(f"{root}: not a dockfactory dataset (no dataset.json)")
-    try:
-        return str(json.loads(path.read_text())["version_id"])
-    except (KeyError, json.JSONDecodeError) as exc:
-        raise DockfactoryError(f"{path}: no version_id ({exc})") from None
+class FrameSource(Protocol):
+    """What the detector reads from a dataset: an opened dockfactory dataset
+    (``generator.dataset_open.Dataset``, the one contract every consumer goes through; the eval
+    layer opens it) or, in tests, ``detector.synthetic.SyntheticDataset``."""
+    root: Path
+
+    @property
+    def version_id(self) -> str: ...
+
+    def labels_of(self, split: str | None = None) -> list[dict]: ...
 
 
 def frame_from_label(root, label: dict) -> Frame:
@@ -107,14 +108,12 @@ def frame_from_label(root, label: dict) -> Frame:
         visible=np.array([m["visible_fraction"] for m in ms], dtype=np.float64))
 
 
-def load_frames(root, split: str | None) -> list[Frame]:
-    """Frames of ``split`` ('train', 'test', 'repeat' or None for all), in frame-id order."""
-    root = Path(root)
-    if not (root / "labels").is_dir():
-        raise DockfactoryError(f"{root}: no labels/ folder (not a dockfactory dataset?)")
-    frames = [frame_from_label(root, lab) for lab in load_labels(root, split)]
+def load_frames(source: FrameSource, split: str | None) -> list[Frame]:
+    """Frames of ``split`` ('train', 'test', 'repeat' or None for all) of an opened dataset, in
+    plan order."""
+    frames = [frame_from_label(source.root, lab) for lab in source.labels_of(split)]
     if not frames:
-        raise DockfactoryError(f"{root}: no frames in split {split!r}")
+        raise DockfactoryError(f"{source.root}: no frames in split {split!r}")
     return frames
 
 

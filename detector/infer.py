@@ -229,7 +229,8 @@ def drop_nested(dets: list[dict]) -> list[dict]:
 
 def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = MIN_SCORE,
                    iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True) -> dict:
-    """Run the detector over the frames of ``split`` and write the detections JSON atomically.
+    """Run the detector over the frames of ``split`` of the opened ``dataset`` (detector.data.FrameSource)
+    and write the detections JSON atomically.
 
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
     "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
@@ -237,8 +238,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     bbox_detector_px}``.
     """
 
-    from dockfactory.detector.data import dataset_version, load_frames, read_rgb
-    version = dataset_version(dataset)
+    from dockfactory.detector.data import load_frames, read_rgb
+    version = dataset.version_id
     frames = load_frames(dataset, split)
     det = MarkerDetector(weights, conf_threshold, iou_threshold, refine=refine)
     if det.meta["dataset_version"] != version and progress:
@@ -254,7 +255,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
             print(f"\rdetect {i + 1}/{len(frames)}  {1000 * np.mean(times):.0f} ms/image", end="", file=sys.stderr)
     if progress:
         print(file=sys.stderr)
-    doc = {"format": "dockfactory.detections/1", "dataset": str(dataset), "dataset_version": version,
+    doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
            "weights_dataset_version": det.meta["dataset_version"],
            "conf_threshold": conf_threshold, "iou_threshold": iou_threshold,

@@ -1,11 +1,15 @@
 """Tiny synthetic datasets in dockfactory's layout (no Blender): coloured discs in dark rings on noise.
 
-For tests and smoke runs of train/detect/eval. Discs are drawn with exact area coverage
+For the detector's own tests (library level: ``train``, ``detect_dataset``): they are not
+dockfactory datasets (no plan, no manifest), so ``Dataset.open`` and every command refuse them;
+``SyntheticDataset`` is their stand-in for an opened dataset (detector.data.FrameSource). Discs are drawn with exact area coverage
 (supersampled 8 x 8 per pixel) in the OpenCV pixel convention, so ``center_px`` and ``bbox_px``
 of the labels are exact up to the supersampling.
 """
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -51,14 +55,24 @@ def make_frame(rng: np.random.Generator, width: int, height: int, n_markers: int
     return img.clip(0, 255).round().astype(np.uint8), markers
 
 
+@dataclass(frozen=True)
+class SyntheticDataset:
+    """A synthetic dataset folder, read like an opened dataset (labels in frame-id order)."""
+    root: Path
+    version_id: str
+
+    def labels_of(self, split: str | None = None) -> list[dict]:
+        labels = [json.loads(p.read_text()) for p in sorted((self.root / "labels").glob("*.json"))]
+        return [lab for lab in labels if split is None or lab["spec"]["split"] == split]
+
+
 def write_synthetic_dataset(root, frames: int = 4, width: int = 128, height: int = 128, markers: int = 4,
-                            seed: int = 0, test_every: int = 0, r_range=(5.0, 9.0)) -> Path:
+                            seed: int = 0, test_every: int = 0, r_range=(5.0, 9.0)) -> SyntheticDataset:
     """A dataset folder ``root`` with ``frames`` frames; every ``test_every``-th frame is 'test'
-    (0: all 'train'). Returns ``root``."""
+    (0: all 'train')."""
     root = Path(root)
     version = f"synthetic-{seed}-{frames}-{width}x{height}-{markers}"
-    write_json_atomic(root / "dataset.json", {"format": "dockfactory.dataset/1", "version_id": version,
-                                              "config": {"labels": {"visible_threshold": 0.5}}})
+    write_json_atomic(root / "synthetic.json", {"format": "dockfactory.synthetic/1", "version_id": version})
     for i in range(frames):
         rng = np.random.default_rng([seed, i])
         img, ms = make_frame(rng, width, height, markers, r_range)
@@ -70,4 +84,4 @@ def write_synthetic_dataset(root, frames: int = 4, width: int = 128, height: int
             "frame_id": fid, "spec": {"frame_id": fid, "index": i, "split": split,
                                       "condition": "normal" if i % 3 else "low_light"},
             "image": {"width": width, "height": height}, "markers": ms})
-    return root
+    return SyntheticDataset(root, version)

@@ -43,7 +43,7 @@ from dockfactory.detector.checkpoint import (
 from dockfactory.detector.data import (
     CropDataset,
     DataConfig,
-    dataset_version,
+    FrameSource,
     load_frames,
 )
 from dockfactory.detector.loss import LossGains, YoloLoss
@@ -177,14 +177,14 @@ def _with(cfg: TrainConfig, **changes) -> TrainConfig:
     return TrainConfig(**{**{f: getattr(cfg, f) for f in cfg.__dataclass_fields__}, **changes})
 
 
-def _load_resume_checkpoint(last: Path, dataset, version: str) -> dict:
+def _load_resume_checkpoint(last: Path, dataset: FrameSource, version: str) -> dict:
     """The checkpoint to resume from; it must exist and come from the same dataset version."""
     if not last.is_file():
         raise CheckpointError(f"{last}: nothing to resume (no checkpoint)")
     ckpt = load_file(last, (CHECKPOINT_FORMAT,))
     if ckpt["dataset_version"] != version:
         raise CheckpointError(f"{last}: trained on dataset version {ckpt['dataset_version']}, "
-                              f"but {dataset} is version {version}")
+                              f"but {dataset.root} is version {version}")
     return ckpt
 
 
@@ -298,22 +298,22 @@ def _save_epoch(t: _Training, cfg: TrainConfig, epoch: int, version: str, datase
     """Write ``out/last.pt`` and ``out/history.json`` after ``epoch``; the checkpoint dict."""
     ckpt = {"format": CHECKPOINT_FORMAT, "model": t.model.state_dict(), "ema": t.ema.ema.state_dict(),
             "optimizer": t.optimizer.state_dict(), "epoch": epoch + 1, "updates": t.ema.updates,
-            "config": cfg.to_dict(), "dataset_version": version, "dataset_path": str(dataset),
+            "config": cfg.to_dict(), "dataset_version": version, "dataset_path": str(dataset.root),
             "history": history}
     save_atomic(ckpt, out / "last.pt")
     _write_json(out / "history.json", {"dataset_version": version, "config": cfg.to_dict(), "history": history})
     return ckpt
 
 
-def train(dataset, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, progress: bool = True,
+def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, progress: bool = True,
           max_batches: int | None = None, log=print) -> dict:
-    """Train on the train split of ``dataset``; checkpoints in ``out``. Returns a summary dict.
+    """Train on the train split of the opened ``dataset``; checkpoints in ``out``. Returns a summary dict.
 
     ``max_batches`` limits the batches per epoch (tests). With ``resume`` the run continues from
     ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the epoch count).
     """
     out = Path(out)
-    version = dataset_version(dataset)
+    version = dataset.version_id
     frames = load_frames(dataset, "train")
     last = out / "last.pt"
     ckpt = _load_resume_checkpoint(last, dataset, version) if resume else None

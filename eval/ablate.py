@@ -58,9 +58,10 @@ def _table_lines(runs: list[dict], attentions, scale: str) -> list[str]:
 
 
 def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True) -> dict:
-    """Train/evaluate every (attention, seed); ``make_config(attention, seed) -> TrainConfig``."""
+    """Train/evaluate every (attention, seed) on the opened ``dataset`` (generator.dataset_open.Dataset);
+    ``make_config(attention, seed) -> TrainConfig``."""
     from dockfactory.detector.attention import ATTENTIONS
-    from dockfactory.detector.data import dataset_version, load_frames
+    from dockfactory.detector.data import load_frames
     bad = [a for a in attentions if a not in ATTENTIONS]
     if bad or not attentions:
         raise ValueError(f"attention variants must be among {', '.join(ATTENTIONS)}, got {attentions}")
@@ -86,10 +87,10 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
     budget = (f"Budget per run: {cfg0.epochs} epochs x {n_train} train frames x {cfg0.data.crops_per_frame} crops "
               f"of {cfg0.data.crop} px (input scale {cfg0.data.input_scale}), batch {cfg0.batch_size}, from scratch; "
               f"seeds {list(seeds)} (mean ± sample std over seeds); test split {n_test} frames of dataset "
-              f"{dataset_version(dataset)}, COCOeval at score >= {conf}; total training wall time "
+              f"{dataset.version_id}, COCOeval at score >= {conf}; total training wall time "
               f"{wall / 60:.1f} min on this machine.")
     table = "\n".join(lines) + "\n\n" + budget
     write_text_atomic(out / "ablation.md", "# Attention ablation (paper table 2 layout)\n\n" + table + "\n")
-    write_json_atomic(out / "ablation.json", {"dataset_version": dataset_version(dataset), "runs": runs,
+    write_json_atomic(out / "ablation.json", {"dataset_version": dataset.version_id, "runs": runs,
                                               "config": cfg0.to_dict(), "budget": budget})
     return {"table": table, "runs": runs}

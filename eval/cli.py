@@ -18,13 +18,14 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import load_acceptance
-from dockfactory.eval.dataset_access import open_dataset, read_json_for
+from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
+from dockfactory.generator.dataset_open import Dataset
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 
@@ -62,7 +63,7 @@ def cmd_solve(args) -> int:
     check_oracle_noise(args.oracle_noise)
     if (args.detections is None) == (args.oracle_noise is None):
         raise DockfactoryError("give --detections DETS.json or --oracle-noise PX (exactly one)")
-    ds = open_dataset(args.dataset)
+    ds = Dataset.open(args.dataset)
     if args.detections:
         dets = read_json_for(args.detections, "detections", ds)
         poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score)
@@ -77,7 +78,7 @@ def cmd_solve(args) -> int:
 def cmd_evaluate(args) -> int:
     check_min_score(args.min_score)
     spec = load_acceptance(args.acceptance or default_acceptance())
-    ds = open_dataset(args.dataset)
+    ds = Dataset.open(args.dataset)   # every byte checked: the judge reads only an intact dataset
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {"detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])]})

@@ -1,48 +1,17 @@
-"""Read what evaluation needs from a dataset directory (identity, layout, labels)."""
+"""JSON files made for a dataset (poses, detections): read, matched to the dataset version, and
+their shapes checked. The dataset itself is read through ``Dataset.open`` (generator.dataset_open)."""
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
-from dockfactory.core.config import Config, config_from_dict
-from dockfactory.core.io import load_labels
 from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SECTIONS
-from dockfactory.generator.dataset import DatasetError, read_identity
+from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.dataset_open import Dataset
 
 
-@dataclass
-class EvalDataset:
-    root: Path
-    identity: dict
-    config: Config
-    labels: dict          # frame_id -> label
-
-    @property
-    def version_id(self) -> str:
-        return self.identity["version_id"]
-
-    def markers(self):
-        return self.config.markers_layout()
-
-    def frames(self, splits) -> list[str]:
-        return [fid for fid, lab in self.labels.items() if lab["spec"]["split"] in splits]
-
-
-def open_dataset(root) -> EvalDataset:
-    root = Path(root)
-    ident = read_identity(root)
-    if ident is None:
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
-    if not (root / "manifest.json").exists():
-        raise DatasetError(f"{root}: dataset is not complete (no manifest.json); finish rendering first")
-    cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
-    labels = {lab["frame_id"]: lab for lab in load_labels(root)}
-    return EvalDataset(root, ident, cfg, labels)
-
-
-def read_json_for(path, what: str, dataset: EvalDataset) -> dict:
+def read_json_for(path, what: str, dataset: Dataset) -> dict:
     """Load a JSON file made for ``dataset``; refuse one made for another dataset version and one
     of the wrong shape (``what``: "poses" or "detections"): a one-line DatasetError naming the
     file and the key."""

@@ -26,7 +26,6 @@ from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import load_labels
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.export_coco import coco_from_labels
 
@@ -110,22 +109,22 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
     return match
 
 
-def evaluate_detections(dataset, detections, split: str | None = None, recall_conf: float = MIN_SCORE) -> dict:
-    """All metrics for a detections JSON (path or dict) on ``dataset`` (its split by default)."""
+def evaluate_detections(ds, detections, split: str | None = None, recall_conf: float = MIN_SCORE) -> dict:
+    """All metrics for a detections JSON (path or dict) on the opened dataset ``ds``
+    (generator.dataset_open.Dataset; the detections' split by default): the labelled frames are
+    the dataset's planned frames, never a directory listing."""
     doc = json.loads(Path(detections).read_text()) if isinstance(detections, (str, Path)) else detections
     if "frames" not in doc:
         raise DockfactoryError("detections: no 'frames' (not a dockfactory detections file?)")
     split = split if split is not None else doc.get("split")
-    root = Path(dataset)
-    ident = json.loads((root / "dataset.json").read_text())
-    threshold = float(ident["config"]["labels"]["visible_threshold"])
-    labels = [lab for lab in load_labels(root, split) if lab["frame_id"] in doc["frames"]]
+    threshold = ds.config.labels.visible_threshold
+    labels = [lab for lab in ds.labels_of(split) if lab["frame_id"] in doc["frames"]]
     if not labels:
         raise DockfactoryError(f"no labelled frame of split {split!r} has detections")
     gt = coco_from_labels(labels, threshold)
     result = coco_map(gt, coco_results(doc["frames"], gt))
     result.update(centre_and_recall(labels, doc["frames"], threshold, recall_conf))
-    result.update({"frames": len(labels), "split": split, "dataset_version": ident["version_id"],
+    result.update({"frames": len(labels), "split": split, "dataset_version": ds.version_id,
                    "detections_dataset_version": doc.get("dataset_version"),
                    "weights_sha256": doc.get("weights_sha256")})
     return result

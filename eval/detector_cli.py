@@ -20,6 +20,7 @@ from dockfactory.eval.detection_metrics import (
     format_report,
 )
 from dockfactory.generator.cli import int_at_least
+from dockfactory.generator.dataset_open import Dataset
 
 
 def _torch(threads: int | None):
@@ -73,7 +74,7 @@ def cmd_train(args) -> int:
     _torch(args.threads)
     from dockfactory.detector.train import train
     cfg = _train_config(args, args.attention, args.seed)
-    summary = train(args.dataset, args.out, cfg, resume=args.resume, progress=not args.quiet)
+    summary = train(Dataset.open(args.dataset), args.out, cfg, resume=args.resume, progress=not args.quiet)
     h = summary["history"]
     print(f"trained {summary['epochs']} epochs on dataset {summary['dataset_version']} in {summary['seconds']} s "
           f"({h[-1]['images_per_s'] if h else float('nan')} img/s last epoch); weights: {summary['weights']}")
@@ -84,12 +85,13 @@ def cmd_detect(args) -> int:
     _torch(args.threads)
     from dockfactory.detector.infer import detect_dataset
     split = None if args.split == "all" else args.split
-    doc = detect_dataset(args.dataset, args.weights or shipped_weights(), args.out, split=split, conf_threshold=args.conf,
+    dataset = Dataset.open(args.dataset)
+    doc = detect_dataset(dataset, args.weights or shipped_weights(), args.out, split=split, conf_threshold=args.conf,
                          iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet)
     n = sum(len(v) for v in doc["frames"].values())
     print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
     if args.eval:
-        print(format_report(evaluate_detections(args.dataset, doc)))
+        print(format_report(evaluate_detections(dataset, doc)))
     return 0
 
 
@@ -97,7 +99,7 @@ def cmd_ablate(args) -> int:
     _torch(args.threads)
     attentions = [a.strip() for a in args.attention.split(",") if a.strip()]
     seeds = list(range(args.seeds))
-    result = run_ablation(args.dataset, args.out, attentions, seeds,
+    result = run_ablation(Dataset.open(args.dataset), args.out, attentions, seeds,
                           lambda att, seed: _train_config(args, att, seed), conf=args.conf,
                           progress=not args.quiet)
     print(result["table"])

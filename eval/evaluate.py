@@ -16,12 +16,12 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
-from dockfactory.eval.dataset_access import EvalDataset, read_json_for, validate_detections
+from dockfactory.eval.dataset_access import read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.sampler import frame_plan
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.solver import SolverError, crb_d_from_b
 
 METRICS_FORMAT = "dockfactory.metrics/1"
@@ -51,14 +51,14 @@ def _missing_row(spec, reason: str, category: str) -> dict:
             "pose_index": spec.pose_index, "ok": False, "reason": reason, "category": category}
 
 
-def evaluated_frames(ds: EvalDataset) -> list:
+def evaluated_frames(ds: Dataset) -> list:
     """The population the verdict is computed over: every frame the dataset's plan puts in the
     test split or the repeatability subset (FrameSpec, plan order), whether or not its label, its
     image or its pose exists. Never a directory listing: a frame that disappears is a failure."""
-    return [s for s in frame_plan(ds.config) if s.split in ("test", "repeat")]
+    return [s for s in ds.plan if s.split in ("test", "repeat")]
 
 
-def per_frame_rows(ds: EvalDataset, poses: dict, sigma_px: float, population=None, source="poses") -> list[dict]:
+def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, source="poses") -> list[dict]:
     """One row per frame: the ``population`` (FrameSpecs, default :func:`evaluated_frames`) first,
     then any other frame of the dataset the poses file holds (another split). A planned frame
     without a label or without a pose is a failed row with its reason; a pose for a frame the
@@ -152,7 +152,7 @@ def estimation_block(rows: list[dict]) -> dict:
     return rep
 
 
-def centre_noise_px(ds: EvalDataset, detections: dict | None, min_score: float) -> tuple[float, dict]:
+def centre_noise_px(ds: Dataset, detections: dict | None, min_score: float) -> tuple[float, dict]:
     """RMS per-axis error of detected centres matched to visible markers (test split)."""
     if detections is None:
         return float("nan"), {}
@@ -253,7 +253,7 @@ def criterion_passes(statistic: str, value, threshold) -> bool:
     return bool(value >= threshold) if statistic == "min" else bool(value <= threshold)
 
 
-def evaluate(ds: EvalDataset, poses_path, spec: AcceptanceSpec, detections_path=None,
+def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None,
              min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
     poses = read_json_for(poses_path, "poses", ds)
     detections = None
@@ -326,10 +326,10 @@ def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, m
     return curves
 
 
-def detection_block(ds: EvalDataset, detections: dict) -> dict:
+def detection_block(ds: Dataset, detections: dict) -> dict:
     """mAP50 and mAP50:95 (pycocotools) per class and overall, centre error, recall and
     precision-recall curves (test split)."""
-    r = evaluate_detections(ds.root, detections, split="test")
+    r = evaluate_detections(ds, detections, split="test")
     out = {k: v for k, v in r.items() if k not in ("mAP50", "mAP50_95", "per_class")}
     out.update({"map50": r["mAP50"], "map50_95": r["mAP50_95"],
                 "per_class": {n: {"map50": v["mAP50"], "map50_95": v["mAP50_95"]} for n, v in r["per_class"].items()}})

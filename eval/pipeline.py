@@ -1,7 +1,9 @@
 """``dockfactory run``: render -> detect -> solve -> evaluate -> report, resumable.
 
-Each stage records a key (a hash of its inputs) in WORKDIR/stages.json and is skipped when its
-key is unchanged and its outputs exist, so an interrupted run resumes where it stopped.
+Each stage records a key (a hash of its inputs) and the sha256 of its outputs in WORKDIR/stages.json
+and is skipped when its key is unchanged and its outputs still hold those bytes, so an interrupted
+run resumes where it stopped. After the render stage (run or skipped) the dataset is opened with
+every byte verified (``Dataset.open``): a damaged dataset stops the run, named.
 """
 from __future__ import annotations
 
@@ -17,25 +19,36 @@ from dockfactory.core.config import load_config
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.acceptance import load_acceptance
-from dockfactory.eval.dataset_access import open_dataset
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.dataset import identity
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits
 
 
 class Stages:
+    """WORKDIR/stages.json: per stage, the key of its inputs and the sha256 of its outputs. A stage
+    is current (skipped) only when its key is unchanged and every output still has the bytes it
+    was written with: an output edited or truncated since is made again, never trusted."""
+
     def __init__(self, workdir: Path):
         self.path = workdir / "stages.json"
         self.data = json.loads(self.path.read_text()) if self.path.exists() else {}
 
-    def current(self, name: str, key: str, outputs) -> bool:
-        return self.data.get(name, {}).get("key") == key and all(Path(o).exists() for o in outputs)
+    @staticmethod
+    def _hashes(outputs) -> dict[str, str]:
+        return {Path(o).name: sha256_file(o) for o in outputs}
 
-    def done(self, name: str, key: str, seconds: float) -> None:
-        self.data[name] = {"key": key, "seconds": seconds}
+    def current(self, name: str, key: str, outputs) -> bool:
+        rec = self.data.get(name, {})
+        if rec.get("key") != key or not all(Path(o).is_file() for o in outputs):
+            return False
+        return rec.get("sha256") == self._hashes(outputs)
+
+    def done(self, name: str, key: str, seconds: float, outputs) -> None:
+        self.data[name] = {"key": key, "seconds": seconds, "sha256": self._hashes(outputs)}
         write_json_atomic(self.path, self.data)
 
 
@@ -76,8 +89,8 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
         else:
             say(f"train: {cfg.epochs} epochs on the train split -> {run_dir}")
             t = time.monotonic()
-            train_detector(ds.root, run_dir, cfg, resume=(run_dir / "last.pt").exists())
-            stages.done("train", key, time.monotonic() - t)
+            train_detector(ds, run_dir, cfg, resume=(run_dir / "last.pt").exists())
+            stages.done("train", key, time.monotonic() - t, [run_dir / "weights.pt"])
         weights = run_dir / "weights.pt"
     weights = Path(weights) if weights else shipped_weights()
     if not weights.exists():
@@ -89,8 +102,8 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     else:
         say(f"detect: {weights.name} on every frame")
         t = time.monotonic()
-        detect_dataset(ds.root, weights, dets_path, split=None)
-        stages.done("detect", key, time.monotonic() - t)
+        detect_dataset(ds, weights, dets_path, split=None)
+        stages.done("detect", key, time.monotonic() - t, [dets_path])
     return weights, model_sha
 
 
@@ -110,7 +123,7 @@ def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages
     if not summary.complete:
         say("render incomplete: run the same command again")
         return None
-    stages.done("render", key, time.monotonic() - t)
+    stages.done("render", key, time.monotonic() - t, [data_dir / "manifest.json"])
     return version
 
 
@@ -131,7 +144,7 @@ def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, pose
     write_poses(poses_path, poses, dets_path)
     n_ok = sum(r["ok"] for r in poses["frames"].values())
     say(f"solve: {n_ok} of {len(poses['frames'])} frames solved")
-    stages.done("solve", key, time.monotonic() - t)
+    stages.done("solve", key, time.monotonic() - t, [poses_path])
     return src
 
 
@@ -146,7 +159,7 @@ def _evaluate_stage(ds, eval_dir: Path, poses_path: Path, spec, acceptance_path,
     t = time.monotonic()
     metrics, rows = evaluate(ds, poses_path, spec, dets_path, oracle_sigma_px=oracle_noise_px)
     write_outputs(eval_dir, metrics, rows)
-    stages.done("evaluate", key, time.monotonic() - t)
+    stages.done("evaluate", key, time.monotonic() - t, [eval_dir / "metrics.json", eval_dir / "frames.csv"])
     return metrics
 
 
@@ -176,7 +189,8 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     version = _render_stage(cfg, config_path, data_dir, workers, stages)   # 1. render
     if version is None:
         return 1
-    ds = open_dataset(data_dir)
+    # every byte checked before anything downstream is trusted, skipped stages included
+    ds = Dataset.open(data_dir)
 
     dets_path = workdir / "detections.json"   # 2. detect
     model_sha = None

@@ -17,8 +17,7 @@ import numpy as np
 from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
-from dockfactory.eval.dataset_access import (json_kind, read_json_file, validate_detections,
-                                             validate_poses)
+from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
 from dockfactory.eval.evaluate import criterion_passes
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.version import generator_version, package_version

@@ -16,7 +16,7 @@ import numpy as np
 
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
-from dockfactory.eval.dataset_access import EvalDataset
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.sampler import rng_for
 from dockfactory.solver import (
     AmbiguousIdentification,
@@ -79,7 +79,7 @@ def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=N
             "rejected_ids": rejected, "n_detections": int(len(cls))}
 
 
-def solve_dataset(ds: EvalDataset, splits=("test", "repeat"), detections: dict | None = None,
+def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``."""

@@ -54,6 +54,7 @@ class DatasetError(DockfactoryError):
 FRAME_ID_RE = re.compile(r"^\d{6}$|^rep\d{3}_\d{2}$")
 SPLITS = ("train", "val", "test", "repeat")
 LOCK_FILE = Path("logs") / LOCK_NAME    # inside the dataset, outside its content
+ROOT_FILES = ("dataset.json", "config.toml", "layout.json")   # written by prepare, listed in the manifest
 
 
 def check_frame_id(frame_id, where) -> str:
@@ -250,7 +251,7 @@ def write_manifest(root, cfg: Config) -> dict:
         meta_path = frame_paths(root, spec.frame_id)["meta"]
         files.append({"path": f"meta/{meta_path.name}", "bytes": meta_path.stat().st_size,
                       "sha256": sha256_file(meta_path)})
-    for name in ("dataset.json", "config.toml", "layout.json"):
+    for name in ROOT_FILES:
         files.append({"path": name, "bytes": (root / name).stat().st_size, "sha256": sha256_file(root / name)})
     counts = Counter((s.split, s.condition) for s in plan)
     manifest = {

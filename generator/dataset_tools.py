@@ -4,24 +4,22 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import config_from_dict
-from dockfactory.core.io import (
-    dead_writer,
-    is_temp_name,
-    remove_stale_temps,
-    sha256_file,
-    temp_name,
-    write_json_atomic,
-)
+from dockfactory.core.io import remove_stale_temps, sha256_file, temp_name, write_json_atomic
 from dockfactory.generator.dataset import (
     DatasetError,
     config_differences,
     dataset_lock,
     load_identity,
     read_identity,
+)
+from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CLI's and tests' entry)
+    VerifyReport,
+    content_files,
+    load_manifest,
+    verify,
 )
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
@@ -30,143 +28,8 @@ from dockfactory.generator.sampler import frame_plan
 
 EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
 
-NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this
-
-
-@dataclass
-class VerifyReport:
-    root: str
-    missing: list = field(default_factory=list)
-    corrupt: list = field(default_factory=list)      # (path, reason)
-    unexpected: list = field(default_factory=list)
-    unsafe: list = field(default_factory=list)       # (path, reason): outside the dataset, symlinks
-    ignored: list = field(default_factory=list)      # temporaries of dead writers (never content)
-    incomplete: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return not (self.missing or self.corrupt or self.unexpected or self.unsafe or self.incomplete)
-
-    def text(self) -> str:
-        lines = [f"{self.root}: {'OK: complete and intact' if self.ok else 'FAILED'}"]
-        if self.incomplete:
-            lines.append(f"  incomplete: {self.incomplete}")
-        lines += [f"  unsafe: {p} ({why})" for p, why in self.unsafe]
-        lines += [f"  missing: {p}" for p in self.missing]
-        lines += [f"  corrupt: {p} ({why})" for p, why in self.corrupt]
-        lines += [f"  unexpected: {p}" for p in self.unexpected]
-        lines += [f"  ignored: {p} (temporary file of a writer that died; never part of the dataset)"
-                  for p in self.ignored]
-        return "\n".join(lines)
-
-
-def content_files(root: Path) -> list[str]:
-    """Every file of the dataset's content (relative paths), excluding logs/ and exports/."""
-    out = []
-    for p in root.rglob("*"):
-        rel = p.relative_to(root)
-        if p.is_file() and rel.parts[0] not in NOT_CONTENT and rel.as_posix() != "manifest.json":
-            out.append(rel.as_posix())
-    return sorted(out)
-
-
-def load_manifest(root: Path) -> dict:
-    """manifest.json of ``root``, its shape checked (a ``files`` list of {path, bytes, sha256});
-    DatasetError naming the file otherwise."""
-    path = root / "manifest.json"
-    try:
-        manifest = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DatasetError(f"{root}: no manifest.json (dataset not complete: run its render command again)") from None
-    except (OSError, ValueError) as exc:
-        raise DatasetError(f"{path}: unreadable manifest ({exc})") from exc
-    files = manifest.get("files") if isinstance(manifest, dict) else None
-    if not isinstance(files, list):
-        raise DatasetError(f"{path}: unreadable manifest (expected an object with a 'files' list)")
-    for i, rec in enumerate(files):
-        if not (isinstance(rec, dict) and isinstance(rec.get("path"), str) and isinstance(rec.get("sha256"), str)
-                and isinstance(rec.get("bytes"), int) and not isinstance(rec.get("bytes"), bool)):
-            raise DatasetError(f"{path}: unreadable manifest (files[{i}] is not "
-                               f"{{path: text, bytes: integer, sha256: text}})")
-    return manifest
-
-
-
-
-def outside_reason(rel) -> str:
-    """Why manifest path ``rel`` does not name a file inside the dataset ("" when it does): it
-    must be a plain relative POSIX path, without ``..``, ``.`` or empty parts."""
-    if not isinstance(rel, str) or not rel:
-        return "not a path"
-    if "\\" in rel or "\x00" in rel:
-        return "outside the dataset (not a plain relative path)"
-    if rel.startswith("/") or (len(rel) > 1 and rel[1] == ":"):
-        return "outside the dataset (absolute path)"
-    if any(part in ("", ".", "..") for part in rel.split("/")):
-        return "outside the dataset (.. or empty parts)"
-    return ""
-
-
-def symlinks(root: Path) -> list[tuple[str, str]]:
-    """Every symlink inside the dataset (logs and exports included): (relative path, reason)."""
-    out = []
-    real_root = root.resolve()
-    for dirpath, dirnames, filenames in os.walk(root):   # never follows symlinked folders
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            if not p.is_symlink():
-                continue
-            target = os.readlink(p)
-            rel = p.relative_to(root).as_posix()
-            if not p.exists():
-                out.append((rel, f"dangling symlink to {target}"))
-            elif not p.resolve().is_relative_to(real_root):
-                out.append((rel, f"symlink to {target}, outside the dataset"))
-            else:
-                out.append((rel, f"symlink to {target}; a dataset holds files, not links"))
-    return sorted(out)
-
-
-def verify(root) -> VerifyReport:
-    root = Path(root)
-    report = VerifyReport(str(root))
-    load_identity(root)   # a dataset, with a readable identity
-    report.unsafe += symlinks(root)
-    try:
-        manifest = load_manifest(root)
-    except DatasetError as exc:
-        report.incomplete = str(exc)
-        return report
-    linked = {p for p, _ in report.unsafe}
-    listed = {}
-    for rec in manifest["files"]:
-        why = outside_reason(rec.get("path") if isinstance(rec, dict) else None)
-        if why:   # checked before the path is built: never read
-            report.unsafe.append((str(rec.get("path") if isinstance(rec, dict) else rec), why))
-            continue
-        listed[rec["path"]] = rec
-        path = root / rec["path"]
-        if any(p.is_symlink() for p in (path, *path.parents) if p != root and p.is_relative_to(root)):
-            continue   # the symlink (a file or one of its folders) is reported above, once
-        if not path.is_file():
-            report.missing.append(rec["path"])
-            continue
-        size = path.stat().st_size
-        if size != rec["bytes"]:
-            report.corrupt.append((rec["path"], f"{size} bytes, manifest says {rec['bytes']}"))
-        elif sha256_file(path) != rec["sha256"]:
-            report.corrupt.append((rec["path"], "sha256 differs from the manifest"))
-    for rel in content_files(root):
-        if rel in listed or rel in linked:
-            continue
-        if is_temp_name(Path(rel).name) and dead_writer(root / rel):
-            report.ignored.append(rel)
-        else:
-            report.unexpected.append(rel + (" (temporary file of a write in progress or of another host)"
-                                            if is_temp_name(Path(rel).name) else ""))
-    return report
 
 
 def info(root) -> dict:

@@ -18,8 +18,8 @@ import numpy as np
 
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import SECTIONS
-from dockfactory.generator.dataset import load_identity
-from dockfactory.generator.export_files import checked_labels, place_file, source_image
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.export_files import place_file, source_image
 
 OBJ_ID = {"A": 1, "B": 2}
 
@@ -69,8 +69,9 @@ def _xywh(box):
 
 def export_bop(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = load_identity(root, required=("config",))
-    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
+    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    ident = ds.identity
+    labels = ds.labels_of()
     cfg = ident["config"]
     sec = cfg["sections"]
     info = {}

@@ -40,8 +40,8 @@ import numpy as np
 from dockfactory.core.geometry import project_points, transform_points
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
-from dockfactory.generator.dataset import load_identity
-from dockfactory.generator.export_files import checked_labels, place_file, source_image
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.export_files import place_file, source_image
 from dockfactory.generator.labels import clip_polygon
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
@@ -188,10 +188,11 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
     root, out = Path(root), Path(out)
-    ident = load_identity(root, required=("config",))
+    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    ident = ds.identity
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)
-    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
+    labels = ds.labels_of()
     next_image, next_ann = 1, 1
     for split in SPLITS:
         split_labels = [lab for lab in labels if lab["spec"]["split"] == split]

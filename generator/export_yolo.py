@@ -22,8 +22,8 @@ from pathlib import Path
 
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator.dataset import load_identity
-from dockfactory.generator.export_files import checked_labels, place_file, source_image
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.export_files import place_file, source_image
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
@@ -65,9 +65,10 @@ def data_yaml(version_id: str, counts: dict[str, int]) -> str:
 
 def export_yolo(root, out) -> Path:
     root, out = Path(root), Path(out)
-    ident = load_identity(root, required=("config",))
+    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    ident = ds.identity
     threshold = ident["config"]["labels"]["visible_threshold"]
-    labels = checked_labels(root, ident)   # ids and splits checked before any path is built
+    labels = ds.labels_of()
     counts: dict[str, int] = {}
     for split in YOLO_SPLITS:
         (out / "images" / split).mkdir(parents=True, exist_ok=True)

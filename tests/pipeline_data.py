@@ -5,7 +5,7 @@ Everything but the render is the real code path: the config is loaded and planne
 (``frame_plan``, ``sample_frame``: real cameras, poses and focal lengths), the directory is prepared
 by ``generator.dataset.prepare`` (identity and version id of the config), each frame goes through
 ``generator.frame_output.finish_frame`` (sensor model, exact labels, PNG, meta, kept EXR) and the
-manifest is written by ``generator.dataset.write_manifest``. So ``open_dataset`` and
+manifest is written by ``generator.dataset.write_manifest``. So ``Dataset.open`` and
 ``run_pipeline`` take it for a rendered dataset of that config, and its render stage finds every
 frame done.
 
@@ -26,9 +26,10 @@ import numpy as np
 
 from dockfactory.core.config import Config, load_config
 from dockfactory.core.geometry import invert_transform, project_points, transform_points
+from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.dataset import prepare, write_manifest
+from dockfactory.generator.dataset import frame_files, prepare, write_manifest
 from dockfactory.generator.exr import RenderPasses, write_compact
 from dockfactory.generator.frame_output import finish_frame
 from dockfactory.generator.labels import section_silhouette
@@ -102,3 +103,17 @@ def write_painted_dataset(root, config_path) -> Config:
                          min_chroma=cfg.labels.min_chroma)
     write_manifest(root, cfg)
     return cfg
+
+
+def seal_hand_made(root, cfg: Config) -> None:
+    """Finish a dataset whose frames were written by hand (images/<id>.png and labels/<id>.json of
+    every planned frame, after ``prepare``): the meta records ``finish_frame`` would write, then the
+    manifest. The result is a complete dataset ``Dataset.open`` accepts."""
+    root = Path(root)
+    for spec in frame_plan(cfg):
+        files = {}
+        for kind, rel in frame_files(spec.frame_id, cfg.render.keep_exr).items():
+            path = root / rel
+            files[kind] = {"path": rel, "bytes": path.stat().st_size, "sha256": sha256_file(path)}
+        write_json_atomic(root / "meta" / f"{spec.frame_id}.json", {"frame_id": spec.frame_id, "files": files})
+    write_manifest(root, cfg)

@@ -24,10 +24,16 @@ from dockfactory.core.config import ConfigError
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec, FailureGate, load_acceptance
 from dockfactory.eval.cli import main
-from dockfactory.eval.dataset_access import open_dataset
-from dockfactory.eval.evaluate import (estimation_block, evaluate, failures_block, localization_block,
-                                       verdict, write_outputs)
+from dockfactory.eval.evaluate import (
+    estimation_block,
+    evaluate,
+    failures_block,
+    localization_block,
+    verdict,
+    write_outputs,
+)
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
+from dockfactory.generator.dataset_open import Dataset
 
 POSES_ONLY = "[localization]\nx = 5.0\ny = 5.0\nalpha = 0.1\n[estimation]\nx = 1.0\ny = 1.0\nalpha = 0.05\n"
 
@@ -39,7 +45,7 @@ def smoke(tmp_path_factory):
     """(dataset root, EvalDataset, exact oracle poses) of the shipped smoke config."""
     root = tmp_path_factory.mktemp("smoke") / "dataset"
     write_painted_dataset(root, shipped_config("smoke"))
-    ds = open_dataset(root)
+    ds = Dataset.open(root)
     return root, ds, solve_dataset(ds, oracle_sigma_px=0.0)
 
 
@@ -53,7 +59,7 @@ def six(tmp_path_factory):
     cfg.write_text(text)
     root = base / "dataset"
     write_painted_dataset(root, cfg)
-    ds = open_dataset(root)
+    ds = Dataset.open(root)
     assert sorted(ds.frames(("repeat",))) == [f"rep{p:03d}_{c:02d}" for p in range(2) for c in range(3)]
     return root, ds, solve_dataset(ds, oracle_sigma_px=0.0)
 

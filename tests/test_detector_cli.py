@@ -1,4 +1,5 @@
-"""The detector subcommands: torch-free --help, train -> detect (+ eval) -> export-onnx on synthetic data."""
+"""The detector subcommands: torch-free --help, train -> detect (+ eval) -> export-onnx on the painted
+smoke dataset (a complete dockfactory dataset: the commands open datasets through the contract)."""
 import json
 import os
 import subprocess
@@ -7,8 +8,6 @@ import sys
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
-
-from dockfactory.detector.synthetic import write_synthetic_dataset
 
 
 def test_help_is_torch_free(repo_root):
@@ -23,34 +22,36 @@ def test_help_is_torch_free(repo_root):
 
 
 @pytest.mark.slow   # trains, detects, exports and checks ONNX: about 10 s
-def test_train_detect_eval_export(tmp_path, capsys):
+def test_train_detect_eval_export(painted_source, tmp_path, capsys):
     from dockfactory.eval.cli import main
-    data = write_synthetic_dataset(tmp_path / "data", frames=6, width=128, height=96, markers=4, seed=5, test_every=3)
+    data = painted_source
     run = tmp_path / "run"
-    assert main(["train", str(data), "--out", str(run), "--epochs", "1", "--batch", "4", "--input-scale", "1.0",
-                 "--threads", "1", "--quiet"]) == 0
+    assert main(["train", str(data), "--out", str(run), "--epochs", "1", "--batch", "4", "--input-scale", "0.5",
+                 "--crops-per-frame", "1", "--threads", "1", "--quiet"]) == 0
     assert (run / "last.pt").is_file() and (run / "weights.pt").is_file()
-    assert main(["train", str(data), "--out", str(run), "--epochs", "2", "--batch", "4", "--input-scale", "1.0",
-                 "--threads", "1", "--quiet", "--resume"]) == 0
+    assert main(["train", str(data), "--out", str(run), "--epochs", "2", "--batch", "4", "--input-scale", "0.5",
+                 "--crops-per-frame", "1", "--threads", "1", "--quiet", "--resume"]) == 0
     assert json.loads((run / "history.json").read_text())["history"][-1]["epoch"] == 2
     dets = tmp_path / "dets.json"
     assert main(["detect", str(data), "--weights", str(run / "weights.pt"), "--out", str(dets), "--conf", "0.001",
                  "--threads", "1", "--quiet", "--eval"]) == 0
     doc = json.loads(dets.read_text())
     assert doc["dataset_version"] == json.loads((data / "dataset.json").read_text())["version_id"]
-    assert len(doc["weights_sha256"]) == 64 and set(doc["frames"]) == {"000002", "000005"}
+    test_ids = {json.loads(p.read_text())["frame_id"] for p in (data / "labels").glob("*.json")
+                if json.loads(p.read_text())["spec"]["split"] == "test"}
+    assert len(doc["weights_sha256"]) == 64 and set(doc["frames"]) == test_ids and test_ids
     for d in sum(doc["frames"].values(), []):
         assert {"class_id", "class_name", "score", "bbox_px", "center_px", "refine_quality"} <= set(d)
     assert "mAP50" in capsys.readouterr().out
     pytest.importorskip("onnxruntime")
     assert main(["export-onnx", "--weights", str(run / "weights.pt"), "--out", str(tmp_path / "m.onnx"),
-                 "--height", "96", "--width", "128", "--threads", "1"]) == 0
+                 "--height", "96", "--width", "128", "--threads", "1"]) == 0   # any size that is a multiple of 32
     assert "max |onnx - torch|" in capsys.readouterr().out
 
 
-def test_bad_weights_exit_2(tmp_path, capsys):
+def test_bad_weights_exit_2(painted_source, tmp_path, capsys):
     from dockfactory.eval.cli import main
-    data = write_synthetic_dataset(tmp_path / "data", frames=1, width=64, height=64, markers=2, seed=1, test_every=1)
+    data = painted_source
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"PK\x03\x04 truncated")
     assert main(["detect", str(data), "--weights", str(bad), "--out", str(tmp_path / "d.json"), "--quiet"]) == 2

@@ -3,7 +3,6 @@ import os
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-import json
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from dockfactory.detector.checkpoint import CheckpointError, load_file, load_mod
 from dockfactory.detector.data import CropDataset, DataConfig, load_frames
 from dockfactory.detector.infer import MarkerDetector
 from dockfactory.detector.model import ModelConfig
-from dockfactory.detector.synthetic import write_synthetic_dataset
+from dockfactory.detector.synthetic import SyntheticDataset, write_synthetic_dataset
 from dockfactory.detector.train import TrainConfig, train
 from dockfactory.eval.detection_metrics import match_frame
 
@@ -27,25 +26,25 @@ from dockfactory.eval.detection_metrics import match_frame
 def overfit_run(tmp_path_factory):
     """4 synthetic 128 x 128 frames with 4 markers each; n + SE trained for 200 steps on them."""
     torch.set_num_threads(min(2, os.cpu_count() or 1))
-    root = write_synthetic_dataset(tmp_path_factory.mktemp("syn") / "data", frames=4, seed=0)
+    data = write_synthetic_dataset(tmp_path_factory.mktemp("syn") / "data", frames=4, seed=0)
     cfg = TrainConfig(model=ModelConfig(scale="n", attention="se"),
                       data=DataConfig(input_scale=1.0, crop=128, crops_per_frame=1, background_fraction=0.0,
                                       augment=False),
                       epochs=200, batch_size=4, nbs=4, lr0=0.06, seed=0)
     run = tmp_path_factory.mktemp("run")
-    summary = train(root, run, cfg, progress=False, log=lambda *a: None)
-    return root, run, summary
+    summary = train(data, run, cfg, progress=False, log=lambda *a: None)
+    return data, run, summary
 
 
 @pytest.mark.slow   # the overfit run trains for 200 steps: about a minute on 2 cores
 def test_overfit_loss_falls_and_markers_found(overfit_run):
-    root, run, summary = overfit_run
+    data, run, summary = overfit_run
     total = [h["box"] + h["obj"] + h["cls"] for h in summary["history"]]
     assert np.mean(total[-10:]) < 0.35 * np.mean(total[:5])
     det = MarkerDetector(run / "weights.pt", conf_threshold=0.1)
     from dockfactory.detector.data import read_rgb
     found = errors = 0
-    for f in load_frames(root, "train"):
+    for f in load_frames(data, "train"):
         d = det.detect(read_rgb(f.image_path))
         m = match_frame(f.boxes, f.classes, [x["bbox_px"] for x in d], [x["score"] for x in d],
                         [x["class_id"] for x in d])
@@ -67,14 +66,14 @@ def test_weights_file_is_weights_only(overfit_run):
     assert ckpt["epoch"] == 200
 
 
-def _tiny(tmp_path, epochs, out, resume=False):
-    root = tmp_path / "data"
-    if not root.exists():
-        write_synthetic_dataset(root, frames=2, width=64, height=64, markers=2, seed=1)
+def _tiny(tmp_path, epochs, out, resume=False, version=None):
+    data = write_synthetic_dataset(tmp_path / "data", frames=2, width=64, height=64, markers=2, seed=1)
+    if version is not None:   # the same frames under another dataset version
+        data = SyntheticDataset(data.root, version)
     cfg = TrainConfig(model=ModelConfig(scale="n", attention="eca"),
                       data=DataConfig(input_scale=1.0, crop=64, crops_per_frame=1), epochs=epochs,
                       batch_size=2, nbs=2, warmup_epochs=1, seed=4, fit_anchors=False)
-    return train(root, tmp_path / out, cfg, resume=resume, progress=False, log=lambda *a: None)
+    return train(data, tmp_path / out, cfg, resume=resume, progress=False, log=lambda *a: None)
 
 
 @pytest.mark.slow   # three short trainings: several seconds
@@ -127,16 +126,13 @@ def test_corrupted_and_foreign_checkpoints_fail_cleanly(tmp_path):
 def test_resume_refuses_other_dataset(tmp_path):
     torch.set_num_threads(1)
     _tiny(tmp_path, 1, "run")
-    ident = json.loads((tmp_path / "data" / "dataset.json").read_text())
-    ident["version_id"] = "something-else"
-    (tmp_path / "data" / "dataset.json").write_text(json.dumps(ident))
     with pytest.raises(CheckpointError, match="dataset version"):
-        _tiny(tmp_path, 2, "run", resume=True)
+        _tiny(tmp_path, 2, "run", resume=True, version="something-else")
 
 
 def test_batches_are_deterministic_and_boxes_inside(tmp_path):
-    root = write_synthetic_dataset(tmp_path / "d", frames=3, width=160, height=128, markers=4, seed=2)
-    frames = load_frames(root, "train")
+    data = write_synthetic_dataset(tmp_path / "d", frames=3, width=160, height=128, markers=4, seed=2)
+    frames = load_frames(data, "train")
     ds = CropDataset(frames, DataConfig(input_scale=1.0, crop=96, crops_per_frame=2), seed=7)
     x1, t1 = ds.batch(0, 0, 4)
     x2, t2 = CropDataset(frames, DataConfig(input_scale=1.0, crop=96, crops_per_frame=2), seed=7).batch(0, 0, 4)
@@ -148,8 +144,8 @@ def test_batches_are_deterministic_and_boxes_inside(tmp_path):
 
 
 def test_crop_boxes_follow_markers_without_augmentation(tmp_path):
-    root = write_synthetic_dataset(tmp_path / "d", frames=1, width=128, height=128, markers=3, seed=3)
-    f = load_frames(root, "train")[0]
+    data = write_synthetic_dataset(tmp_path / "d", frames=1, width=128, height=128, markers=3, seed=3)
+    f = load_frames(data, "train")[0]
     ds = CropDataset([f], DataConfig(input_scale=1.0, crop=128, crops_per_frame=1, background_fraction=0.0,
                                      augment=False), seed=0)
     _, t = ds.batch(0, 0, 1)
@@ -174,12 +170,12 @@ def test_kmeans_anchors_and_bpr():
 
 def test_p2_model_trains_and_detects(tmp_path):
     torch.set_num_threads(1)
-    root = write_synthetic_dataset(tmp_path / "d", frames=4, width=96, height=96, markers=4, seed=6)
+    data = write_synthetic_dataset(tmp_path / "d", frames=4, width=96, height=96, markers=4, seed=6)
     cfg = TrainConfig(model=ModelConfig(scale="n", attention="cbam", p2=True,
                                         anchors=tuple(((4.0, 4.0),) * 3 for _ in range(4))),
                       data=DataConfig(input_scale=1.0, crop=96, crops_per_frame=1), epochs=1, batch_size=4, seed=0)
-    summary = train(root, tmp_path / "run", cfg, progress=False, log=lambda *a: None)
+    summary = train(data, tmp_path / "run", cfg, progress=False, log=lambda *a: None)
     assert len(summary["config"]["model"]["anchors"]) == 4          # k-means refit for 4 levels
     det = MarkerDetector(tmp_path / "run" / "weights.pt", conf_threshold=0.0)
     from dockfactory.detector.data import read_rgb
-    assert isinstance(det.detect(read_rgb(load_frames(root, "train")[0].image_path)), list)
+    assert isinstance(det.detect(read_rgb(load_frames(data, "train")[0].image_path)), list)

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from pipeline_data import seal_hand_made
 
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.geometry import (
@@ -26,7 +27,7 @@ from dockfactory.core.geometry import (
 from dockfactory.core.io import load_labels, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, marker_outline
 from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset import layout_record
+from dockfactory.generator.dataset import prepare
 from dockfactory.generator.export_coco import (
     KPT_OKS_SIGMAS,
     POLYGON_TOLERANCE_PX,
@@ -79,12 +80,10 @@ def index_and_image(frame, static, hide: dict, washed: set):
     return index, image
 
 
-def write_dataset(root):
-    cfg = config_from_dict(CONFIG)
+def write_dataset(root, config: dict = CONFIG):
+    cfg = config_from_dict(config)
     static = static_scene(cfg)
-    write_json_atomic(root / "dataset.json", {"format": "dockfactory.dataset/1", "version_id": "exports-test",
-                                              "name": "exports", "seed": 3, "config": cfg.to_dict()})
-    write_json_atomic(root / "layout.json", layout_record(cfg))
+    prepare(root, cfg, f"# the exports test config, as JSON: {json.dumps(config)}\n")
     for k, spec in enumerate(frame_plan(cfg)):
         frame = sample_frame(cfg, spec)
         if spec.frame_id == OUT_OF_IMAGE_FRAME:
@@ -96,7 +95,7 @@ def write_dataset(root):
         _, png = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
         write_bytes_atomic(root / "images" / f"{spec.frame_id}.png", png.tobytes())
         write_json_atomic(root / "labels" / f"{spec.frame_id}.json", label)
-    write_json_atomic(root / "manifest.json", {"files": []})   # "complete": the exporters' precondition
+    seal_hand_made(root, cfg)   # meta records and manifest: a complete dataset
     return root
 
 
@@ -349,11 +348,8 @@ def test_yolo_val_is_never_test_while_there_is_training_data():
 
 def test_empty_splits_leave_existing_empty_folders(tmp_path):
     from dockfactory.generator.export_yolo import export_yolo
-    root = tmp_path / "ds"
-    cfg = config_from_dict({**CONFIG, "dataset": {**CONFIG["dataset"], "frames": 0}})
-    write_json_atomic(root / "dataset.json", {"version_id": "x", "config": cfg.to_dict()})
-    (root / "labels").mkdir(parents=True)
-    out = export_yolo(root, tmp_path / "yolo")
+    root = write_dataset(tmp_path / "ds", {**CONFIG, "dataset": {**CONFIG["dataset"], "frames": 0}})
+    out = export_yolo(root, tmp_path / "yolo")   # the repeatability frames only: no YOLO split
     _, splits = ultralytics_dataset(out / "data.yaml")
     assert splits == {"train": [], "val": [], "test": []} and not list(out.glob("*.txt"))
 

@@ -17,9 +17,9 @@ from pipeline_data import write_painted_dataset
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.cli import main
-from dockfactory.eval.dataset_access import open_dataset
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.generator.dataset_open import Dataset
 
 FUZZ = hsettings(max_examples=25, deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -42,7 +42,7 @@ def world(tmp_path_factory):
     base = tmp_path_factory.mktemp("fuzz")
     root = base / "dataset"
     write_painted_dataset(root, shipped_config("smoke"))
-    ds = open_dataset(root)
+    ds = Dataset.open(root)
     frames = {}   # one frame with detections (the others: "no detections"), to keep the solver cheap
     for fid in ds.frames(("test", "repeat"))[:1]:
         frames[fid] = [{"class_id": m["class_id"], "center_px": m["outline_centroid_px"], "score": 0.9,

@@ -20,12 +20,12 @@ from pipeline_data import write_painted_dataset
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import default_acceptance, shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec, load_acceptance
-from dockfactory.eval.dataset_access import open_dataset
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
+from dockfactory.generator.dataset_open import Dataset
 
 TOL_MM, TOL_DEG, TOL_FOCAL_PX = 1e-3, 1e-3, 0.01
 COMPS = ("x", "y", "z", "alpha", "beta", "gamma")
@@ -46,7 +46,7 @@ def painted_root(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def ds(painted_root):
-    return open_dataset(painted_root)
+    return Dataset.open(painted_root)
 
 
 @pytest.fixture(scope="module")
@@ -227,7 +227,7 @@ def test_run_stage_on_a_complete_dataset(painted_root, tmp_path, monkeypatch, ca
     for name in ("poses.json", "eval/metrics.json", "eval/frames.csv", "eval/provenance.json",
                  "report.html", "report.md", "report.json", "stages.json"):
         assert (work / name).is_file(), name
-    ds = open_dataset(work / "dataset")
+    ds = Dataset.open(work / "dataset")
     _assert_exact(ds, _strict_json(work / "poses.json"))
     metrics = _strict_json(work / "eval" / "metrics.json")
     assert metrics["localization"]["n_solved"] == 4 and not metrics["acceptance"]["accepted"]

@@ -1,0 +1,259 @@
+"""Checking a dataset directory: its identity, its manifest against its plan, its files against its
+manifest. ``verify`` reports every problem; ``Dataset.open`` (generator.dataset_open) runs the same
+checks and refuses the dataset naming its first problems. With ``hash_bulk=False`` images and EXR
+are compared by size only (the small files, labels included, are always hashed).
+
+The chain of trust: dataset.json's config gives its version id (recomputed, so an edited config is
+caught) -> the config gives the frame plan -> the manifest must list exactly the plan's frames and
+files -> every file must match its manifest record (size, sha256) -> nothing else may sit among the
+content (a stray label+image pair, a symlink).
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dockfactory.core.config import Config, config_from_dict
+from dockfactory.core.io import dead_writer, is_temp_name, sha256_file
+from dockfactory.generator.dataset import (
+    DATASET_FORMAT,
+    ROOT_FILES,
+    DatasetError,
+    frame_files,
+    load_identity,
+)
+from dockfactory.generator.sampler import frame_plan
+from dockfactory.generator.version import dataset_version_id
+
+NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
+BULK_DIRS = ("images", "exr")      # the cheap check compares these by size only (sha256 in verify)
+
+
+@dataclass
+class VerifyReport:
+    root: str
+    missing: list = field(default_factory=list)
+    corrupt: list = field(default_factory=list)      # (path, reason)
+    unexpected: list = field(default_factory=list)
+    unsafe: list = field(default_factory=list)       # (path, reason): outside the dataset, symlinks
+    inconsistent: list = field(default_factory=list)  # (what, reason): identity, manifest and plan disagree
+    ignored: list = field(default_factory=list)      # temporaries of dead writers (never content)
+    incomplete: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not (self.missing or self.corrupt or self.unexpected or self.unsafe or self.inconsistent
+                    or self.incomplete)
+
+    def problems(self) -> list[str]:
+        """Every problem, one line each, the most telling first."""
+        out = [f"incomplete: {self.incomplete}"] if self.incomplete else []
+        out += [f"inconsistent: {p} ({why})" for p, why in self.inconsistent]
+        out += [f"unsafe: {p} ({why})" for p, why in self.unsafe]
+        out += [f"missing: {p}" for p in self.missing]
+        out += [f"corrupt: {p} ({why})" for p, why in self.corrupt]
+        out += [f"unexpected: {p}" for p in self.unexpected]
+        return out
+
+    def text(self) -> str:
+        lines = [f"{self.root}: {'OK: complete and intact' if self.ok else 'FAILED'}"]
+        lines += [f"  {p}" for p in self.problems()]
+        lines += [f"  ignored: {p} (temporary file of a writer that died; never part of the dataset)"
+                  for p in self.ignored]
+        return "\n".join(lines)
+
+    def refusal(self, shown: int = 3) -> str:
+        """One line refusing the dataset, naming its first problems."""
+        if self.incomplete and not (self.problems()[1:]):
+            return self.incomplete
+        probs = self.problems()
+        more = f"; and {len(probs) - shown} more" if len(probs) > shown else ""
+        return (f"{self.root}: damaged dataset, refused ({len(probs)} problem{'s' * (len(probs) != 1)}: "
+                f"{'; '.join(probs[:shown])}{more}); `dockfactory dataset verify {self.root}` lists them all")
+
+
+@dataclass
+class Checked:
+    """What the checks read on the way: the identity, its config and plan, the manifest."""
+    identity: dict
+    config: Config
+    plan: tuple
+    manifest: dict
+
+
+def content_files(root: Path) -> list[str]:
+    """Every file of the dataset's content (relative paths), excluding logs/ and exports/."""
+    out = []
+    for p in root.rglob("*"):
+        rel = p.relative_to(root)
+        if p.is_file() and rel.parts[0] not in NOT_CONTENT and rel.as_posix() != "manifest.json":
+            out.append(rel.as_posix())
+    return sorted(out)
+
+
+def load_manifest(root: Path) -> dict:
+    """manifest.json of ``root``, its shape checked (a ``files`` list of {path, bytes, sha256});
+    DatasetError naming the file otherwise."""
+    path = root / "manifest.json"
+    try:
+        manifest = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DatasetError(f"{root}: dataset is not complete (no manifest.json): run its render command "
+                           f"again to finish it") from None
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"{path}: unreadable manifest ({exc})") from exc
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(files, list):
+        raise DatasetError(f"{path}: unreadable manifest (expected an object with a 'files' list)")
+    for i, rec in enumerate(files):
+        if not (isinstance(rec, dict) and isinstance(rec.get("path"), str) and isinstance(rec.get("sha256"), str)
+                and isinstance(rec.get("bytes"), int) and not isinstance(rec.get("bytes"), bool)):
+            raise DatasetError(f"{path}: unreadable manifest (files[{i}] is not "
+                               f"{{path: text, bytes: integer, sha256: text}})")
+    return manifest
+
+
+def outside_reason(rel) -> str:
+    """Why manifest path ``rel`` does not name a file inside the dataset ("" when it does): it
+    must be a plain relative POSIX path, without ``..``, ``.`` or empty parts."""
+    if not isinstance(rel, str) or not rel:
+        return "not a path"
+    if "\\" in rel or "\x00" in rel:
+        return "outside the dataset (not a plain relative path)"
+    if rel.startswith("/") or (len(rel) > 1 and rel[1] == ":"):
+        return "outside the dataset (absolute path)"
+    if any(part in ("", ".", "..") for part in rel.split("/")):
+        return "outside the dataset (.. or empty parts)"
+    return ""
+
+
+def symlinks(root: Path) -> list[tuple[str, str]]:
+    """Every symlink inside the dataset (logs and exports included): (relative path, reason)."""
+    out = []
+    real_root = root.resolve()
+    for dirpath, dirnames, filenames in os.walk(root):   # never follows symlinked folders
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            if not p.is_symlink():
+                continue
+            target = os.readlink(p)
+            rel = p.relative_to(root).as_posix()
+            if not p.exists():
+                out.append((rel, f"dangling symlink to {target}"))
+            elif not p.resolve().is_relative_to(real_root):
+                out.append((rel, f"symlink to {target}, outside the dataset"))
+            else:
+                out.append((rel, f"symlink to {target}; a dataset holds files, not links"))
+    return sorted(out)
+
+
+def plan_files(cfg: Config, plan) -> set[str]:
+    """Every file a complete dataset of ``cfg`` holds (relative paths): each planned frame's own
+    files and meta record, and the identity, config and layout."""
+    out = set(ROOT_FILES)
+    for spec in plan:
+        out.update(frame_files(spec.frame_id, cfg.render.keep_exr).values())
+        out.add(f"meta/{spec.frame_id}.json")
+    return out
+
+
+def _check_identity(root: Path, ident: dict, report: VerifyReport) -> tuple[Config, tuple]:
+    """The identity's config and plan; an identity whose config does not give its version id (an
+    edited dataset.json) or of another format is inconsistent."""
+    where = root / "dataset.json"
+    if ident.get("format") != DATASET_FORMAT:
+        report.inconsistent.append(("dataset.json", f"format {ident.get('format')!r}, expected {DATASET_FORMAT!r} "
+                                                    f"(a dataset of another tool or version)"))
+    cfg = config_from_dict(ident["config"], str(where))
+    expected = dataset_version_id(cfg.canonical_json(), str(ident["blender_version"]),
+                                  str(ident["generator_version"]))
+    if expected != ident["version_id"]:
+        report.inconsistent.append(("dataset.json", f"its config and software give version {expected}, it says "
+                                                    f"{ident['version_id']} (edited after rendering?)"))
+    return cfg, frame_plan(cfg)
+
+
+def _check_manifest(ident: dict, cfg: Config, plan, manifest: dict, report: VerifyReport) -> None:
+    """The manifest must be this version's and list exactly the plan's frames and files."""
+    if manifest.get("version_id") != ident["version_id"]:
+        report.inconsistent.append(("manifest.json", f"version {manifest.get('version_id')!r}, dataset.json says "
+                                                     f"{ident['version_id']}"))
+    want = [{"frame_id": s.frame_id, "split": s.split, "condition": s.condition} for s in plan]
+    frames = manifest.get("frames")
+    if frames != want:
+        listed = {f.get("frame_id") for f in frames if isinstance(f, dict)} if isinstance(frames, list) else set()
+        gone = [w["frame_id"] for w in want if w["frame_id"] not in listed]
+        why = (f"frame {gone[0]} of the plan is not listed ({len(gone)} missing)" if gone else
+               f"{len(frames) if isinstance(frames, list) else 0} frames listed, the plan has {len(want)} "
+               f"(or their splits or conditions differ)")
+        report.inconsistent.append(("manifest.json", f"frames differ from the plan: {why}"))
+    listed_files = {rec["path"] for rec in manifest["files"]}
+    expected = plan_files(cfg, plan)
+    for rel in sorted(expected - listed_files)[:20]:
+        report.inconsistent.append((rel, "a file of the plan the manifest does not list"))
+    for rel in sorted(listed_files - expected)[:20]:
+        if not outside_reason(rel):   # paths outside are reported as unsafe
+            report.inconsistent.append((rel, "listed in the manifest, not a file of this dataset's plan"))
+
+
+def _check_files(root: Path, manifest: dict, report: VerifyReport, hash_bulk: bool) -> set[str]:
+    """Each manifest file against its record (size; sha256 of all, or of all but images/EXR);
+    returns the listed paths."""
+    listed = set()
+    for rec in manifest["files"]:
+        why = outside_reason(rec["path"])
+        if why:   # checked before the path is built: never read
+            report.unsafe.append((str(rec["path"]), why))
+            continue
+        listed.add(rec["path"])
+        path = root / rec["path"]
+        if any(p.is_symlink() for p in (path, *path.parents) if p != root and p.is_relative_to(root)):
+            continue   # the symlink (a file or one of its folders) is reported once, by symlinks()
+        if not path.is_file():
+            report.missing.append(rec["path"])
+            continue
+        size = path.stat().st_size
+        if size != rec["bytes"]:
+            report.corrupt.append((rec["path"], f"{size} bytes, manifest says {rec['bytes']}"))
+        elif (hash_bulk or rec["path"].split("/")[0] not in BULK_DIRS) and sha256_file(path) != rec["sha256"]:
+            report.corrupt.append((rec["path"], "sha256 differs from the manifest"))
+    return listed
+
+
+def _check_unlisted(root: Path, listed: set[str], report: VerifyReport) -> None:
+    linked = {p for p, _ in report.unsafe}
+    for rel in content_files(root):
+        if rel in listed or rel in linked:
+            continue
+        if is_temp_name(Path(rel).name) and dead_writer(root / rel):
+            report.ignored.append(rel)
+        else:
+            report.unexpected.append(rel + (" (temporary file of a write in progress or of another host)"
+                                            if is_temp_name(Path(rel).name) else ""))
+
+
+def inspect(root, hash_bulk: bool = True) -> tuple[VerifyReport, Checked | None]:
+    """Every check of the dataset at ``root`` (sha256 of images and EXR only with ``hash_bulk``):
+    the report, and what was read (None when the dataset is incomplete). A folder that is not a
+    dataset at all raises DatasetError."""
+    root = Path(root)
+    report = VerifyReport(str(root))
+    ident = load_identity(root)
+    report.unsafe += symlinks(root)
+    cfg, plan = _check_identity(root, ident, report)
+    try:
+        manifest = load_manifest(root)
+    except DatasetError as exc:
+        report.incomplete = str(exc)
+        return report, None
+    _check_manifest(ident, cfg, plan, manifest, report)
+    listed = _check_files(root, manifest, report, hash_bulk)
+    _check_unlisted(root, listed, report)
+    return report, Checked(ident, cfg, plan, manifest)
+
+
+def verify(root) -> VerifyReport:
+    """Every check, every byte hashed (``dockfactory dataset verify``)."""
+    return inspect(root, hash_bulk=True)[0]
