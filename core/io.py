@@ -216,13 +216,3 @@ def folder_lock(folder, what: str, lock_path=None):
                 os.ftruncate(fd, 0)
     finally:
         os.close(fd)   # releases the lock
-
-
-def load_labels(root, split: str | None = None) -> list[dict]:
-    """Labels of a dataset (optionally one split), in frame-id order."""
-    out = []
-    for path in sorted((Path(root) / "labels").glob("*.json")):
-        label = json.loads(path.read_text())
-        if split is None or label["spec"]["split"] == split:
-            out.append(label)
-    return out

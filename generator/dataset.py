@@ -20,7 +20,7 @@ from pathlib import Path
 
 from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan, static_scene
@@ -175,11 +175,18 @@ def prepare(root, cfg: Config, config_text: str) -> dict:
                            f"render into a new directory")
     else:
         return existing
+    # every payload is built (and JSON-encoded) before the first write: a failure leaves nothing
+    payloads = {"config.toml": config_text.encode("utf-8"),
+                "layout.json": _json_bytes(layout_record(cfg)),
+                "dataset.json": _json_bytes(ident)}   # last: the directory is now this dataset
     root.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(root / "config.toml", config_text)
-    write_json_atomic(root / "layout.json", layout_record(cfg))
-    write_json_atomic(root / "dataset.json", ident)   # last: the directory is now this dataset
+    for name, data in payloads.items():
+        write_bytes_atomic(root / name, data)
     return ident
+
+
+def _json_bytes(obj) -> bytes:
+    return (json.dumps(obj, indent=1, allow_nan=False) + "\n").encode("utf-8")
 
 
 def config_differences(a, b, prefix: str = "") -> list[str]:

@@ -19,6 +19,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
+from dockfactory.generator.dataset_check import inspect
 from dockfactory.generator.dataset_tools import export_complete, write_export
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.generator.progress import Progress
@@ -51,11 +52,12 @@ class JobSummary:
     failed: dict = field(default_factory=dict)
     seconds: float = 0.0
     complete: bool = False
+    damaged: list = field(default_factory=list)   # problems of a complete dataset (dataset_check)
     timings: list = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        return not self.failed
+        return not (self.failed or self.damaged)
 
     def text(self) -> str:
         lines = [f"dataset {self.root} (version {self.version_id})",
@@ -72,6 +74,10 @@ class JobSummary:
             lines.append(f"  FAILED {fid}: {why}")
         lines.append("  dataset complete: manifest.json written" if self.complete else
                      "  dataset incomplete: run the same command again to finish it")
+        if self.damaged:
+            lines.append(f"  but DAMAGED ({len(self.damaged)} problems; no export written; "
+                         f"`dockfactory dataset verify {self.root}` lists them all):")
+            lines += [f"    {p}" for p in self.damaged[:5]]
         return "\n".join(lines)
 
 
@@ -129,6 +135,11 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
     summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
+        # a file changed after its frame was finished (same size: frame_done cannot tell) or an
+        # unlisted one: the dataset is complete but not intact, and it is said (exit 1)
+        summary.damaged = inspect(root, hash_bulk=False)[0].problems()
+        if summary.damaged:
+            return summary
         for fmt in cfg.export.formats:
             if not export_complete(root, fmt):   # written once, when the dataset completes
                 write_export(root, fmt)          # (a partial export of a killed run is replaced)

@@ -24,10 +24,11 @@ from dockfactory.core.geometry import (
     project_points,
     transform_points,
 )
-from dockfactory.core.io import load_labels, write_bytes_atomic, write_json_atomic
+from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, marker_outline
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset import prepare
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_coco import (
     KPT_OKS_SIGMAS,
     POLYGON_TOLERANCE_PX,
@@ -113,7 +114,7 @@ def moved(dataset, tmp_path):
     point into the original folder."""
     dst = tmp_path / "elsewhere" / "exports"
     shutil.copytree(dataset / "exports", dst)
-    labels = {lab["frame_id"]: lab for lab in load_labels(dataset)}
+    labels = {lab["frame_id"]: lab for lab in Dataset.open(dataset).labels_of()}
     gone = dataset.with_name(dataset.name + "-gone")
     os.rename(dataset, gone)
     yield dst, labels
@@ -121,7 +122,7 @@ def moved(dataset, tmp_path):
 
 
 def test_synthetic_dataset_has_the_cases(dataset):
-    labels = load_labels(dataset)
+    labels = Dataset.open(dataset).labels_of()
     assert {lab["spec"]["split"] for lab in labels} == {"train", "val", "test", "repeat"}
     markers = [m for lab in labels for m in lab["markers"]]
     assert any(m["visible_pixels"] and not m["in_frame"] for m in markers)      # centre outside
@@ -212,7 +213,7 @@ def test_outline_is_the_labels_polygon(dataset):
     """The exporter's outline (before simplification) is exactly the one the label's box came from."""
     layout = read_layout(dataset)
     n = 0
-    for lab in load_labels(dataset):
+    for lab in Dataset.open(dataset).labels_of():
         for m in lab["markers"]:
             poly = outline_px(lab, layout[m["id"]])
             if m["bbox_px"] is None:

@@ -206,6 +206,23 @@ def test_render_does_not_take_a_partial_export_for_done(painted, no_render):
     assert dt.export_complete(painted, "coco") and dt.export_complete(painted, "yolo")
 
 
+def test_render_of_a_complete_but_edited_dataset_says_damaged(painted, no_render):
+    """A label edited in place (same size: frame_done cannot tell) after the dataset completed:
+    render finds every frame done but does not call the dataset fine (exit 1), names the file,
+    and writes no export from it."""
+    label = painted / "labels" / "000001.json"
+    text = label.read_text()
+    i = text.index('"x_mm": ') + len('"x_mm": ') + 1
+    digit = text[i] if text[i].isdigit() else text[i + 1]
+    k = text.index(digit, i)
+    label.write_text(text[:k] + str((int(digit) + 1) % 10) + text[k + 1:])
+    cfg, config_text = _smoke()
+    summary = run_render(cfg, painted, config_text, JobOptions(progress=False))
+    assert summary.complete and not summary.ok
+    assert any("labels/000001.json" in p and "sha256" in p for p in summary.damaged), summary.damaged
+    assert "DAMAGED" in summary.text() and not (painted / "exports").exists()
+
+
 def test_stale_temporary_export_folders_are_removed(export_ds):
     exports = export_ds / "exports"
     dead = exports / f".bop.tmp-{HOST}-{_dead_pid()}"
