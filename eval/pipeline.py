@@ -123,6 +123,8 @@ def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages
     if not summary.complete:
         say("render incomplete: run the same command again")
         return None
+    if not summary.ok:   # complete but damaged: never recorded as done; Dataset.open names it
+        return version
     stages.done("render", key, time.monotonic() - t, [data_dir / "manifest.json"])
     return version
 

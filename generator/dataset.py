@@ -95,7 +95,8 @@ def check_target(root) -> None:
     if root.exists() and not root.is_dir():
         raise DatasetError(f"{root}: not a directory; refusing to write a dataset there")
     if read_identity(root) is None and root.exists() and not _only_lock(root):
-        raise DatasetError(f"{root}: directory is not empty and holds no dataset.json; "
+        what = "a dataset.json that is not a dataset identity" if (root / "dataset.json").exists() else "no dataset.json"
+        raise DatasetError(f"{root}: directory is not empty and holds {what}; "
                            f"refusing to write a dataset into it")
 
 

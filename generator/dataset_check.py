@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.config import Config, config_from_dict
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import dead_writer, is_temp_name, sha256_file
 from dockfactory.generator.dataset import (
     DATASET_FORMAT,
@@ -236,13 +237,19 @@ def _check_unlisted(root: Path, listed: set[str], report: VerifyReport) -> None:
 
 def inspect(root, hash_bulk: bool = True) -> tuple[VerifyReport, Checked | None]:
     """Every check of the dataset at ``root`` (sha256 of images and EXR only with ``hash_bulk``):
-    the report, and what was read (None when the dataset is incomplete). A folder that is not a
-    dataset at all raises DatasetError."""
+    the report, and what was read (None when the dataset is incomplete or its identity damaged).
+    A folder without dataset.json is not a dataset at all: DatasetError."""
     root = Path(root)
     report = VerifyReport(str(root))
-    ident = load_identity(root)
+    if not (root / "dataset.json").exists():
+        load_identity(root)   # raises: not a dataset at all
     report.unsafe += symlinks(root)
-    cfg, plan = _check_identity(root, ident, report)
+    try:
+        ident = load_identity(root)
+        cfg, plan = _check_identity(root, ident, report)
+    except DockfactoryError as exc:   # a dataset whose identity is damaged: a problem, not bad input
+        report.corrupt.append(("dataset.json", str(exc)))
+        return report, None
     try:
         manifest = load_manifest(root)
     except DatasetError as exc:

@@ -158,7 +158,6 @@ def export(root, fmt: str) -> Path:
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
-    if read_identity(root) is None:
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
+    load_identity(root)   # a dataset (one-line error naming dataset.json otherwise)
     with dataset_lock(root, f"export {fmt}"):
         return write_export(root, fmt)

@@ -7,24 +7,38 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from dockfactory.core.config import config_from_dict
 from dockfactory.core.io import write_bytes_atomic
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.dataset import DatasetError, load_identity
+from dockfactory.generator.sampler import frame_plan
 
 COLORS = {"A": (60, 60, 255), "B": (255, 160, 40)}  # BGR
+
+
+def frame_files_to_show(root: Path, frame_id: str) -> tuple[Path, Path]:
+    """(label, image) paths of a planned frame of the dataset at ``root`` (finished or still being
+    rendered); DatasetError for a folder that is not a dataset, a frame id outside its plan, a
+    frame not rendered yet, or a file that is a symlink (a dataset's files live inside it)."""
+    ident = load_identity(root, required=("config",))
+    plan = {s.frame_id for s in frame_plan(config_from_dict(ident["config"], str(root / "dataset.json")))}
+    if frame_id not in plan:
+        raise DatasetError(f"{root}: no frame {frame_id!r} in this dataset's plan "
+                           f"(frame ids look like 000000 or rep000_00; {len(plan)} planned)")
+    label_path = root / "labels" / f"{frame_id}.json"
+    image_path = root / "images" / f"{frame_id}.png"
+    for path in (label_path, image_path):
+        if path.is_symlink() or path.parent.is_symlink():
+            raise DatasetError(f"{path}: is a symlink; a dataset's files live inside it")
+    if not label_path.is_file() or not image_path.is_file():
+        raise DatasetError(f"{root}: frame {frame_id} is not rendered yet (no label or no image)")
+    return label_path, image_path
 
 
 def draw_overlay(root, frame_id: str, out) -> str:
     """Draw frame ``frame_id`` of dataset ``root`` into the PNG ``out``; DatasetError (one line)
     for a folder that is not a dataset, a frame it does not have, or an unreadable label/image."""
     root = Path(root)
-    if not (root / "dataset.json").is_file():
-        raise DatasetError(f"{root}: not a dockfactory dataset (no dataset.json)")
-    label_path = root / "labels" / f"{frame_id}.json"
-    image_path = root / "images" / f"{frame_id}.png"
-    plain = frame_id and frame_id == Path(frame_id).name and not frame_id.startswith(".")
-    if not plain or not label_path.is_file() or not image_path.is_file():
-        raise DatasetError(f"{root}: no frame {frame_id!r} in this dataset (frame ids are the names "
-                           f"of its labels/*.json with an image, e.g. 000000 or rep000_00)")
+    label_path, image_path = frame_files_to_show(root, frame_id)
     try:
         label = json.loads(label_path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:

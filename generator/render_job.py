@@ -193,5 +193,5 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
         progress.close()
 
 
-def print_summary(summary: JobSummary, stream=sys.stderr) -> None:
-    print(summary.text(), file=stream)
+def print_summary(summary: JobSummary, stream=None) -> None:
+    print(summary.text(), file=stream if stream is not None else sys.stderr)

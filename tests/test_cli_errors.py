@@ -62,6 +62,22 @@ def test_show_unknown_frame_names_dataset_and_id(painted, tmp_path, capsys, fram
     assert not (tmp_path / "o.png").exists()
 
 
+def test_show_refuses_a_stray_frame_and_a_symlinked_image(copy_of, tmp_path, capsys):
+    """show reads a frame of the plan, inside the dataset: a stray label+image pair is not a frame,
+    and an image that is a symlink to outside is never read."""
+    painted = copy_of("s")
+    fid = _a_frame(painted)
+    shutil.copy(painted / "labels" / f"{fid}.json", painted / "labels" / "999999.json")
+    shutil.copy(painted / "images" / f"{fid}.png", painted / "images" / "999999.png")
+    code, _, err = _run(["show", painted, "999999", "--out", tmp_path / "o.png"], capsys)
+    assert code == 2 and "plan" in _one_line_error(err)
+    secret = tmp_path / "secret.png"
+    shutil.move(painted / "images" / f"{fid}.png", secret)
+    (painted / "images" / f"{fid}.png").symlink_to(secret)
+    code, _, err = _run(["show", painted, fid, "--out", tmp_path / "o.png"], capsys)
+    assert code == 2 and "symlink" in _one_line_error(err) and not (tmp_path / "o.png").exists()
+
+
 def test_show_not_a_dataset(tmp_path, capsys):
     code, _, err = _run(["show", tmp_path, "000000", "--out", tmp_path / "o.png"], capsys)
     assert code == 2 and str(tmp_path) in _one_line_error(err)
@@ -150,13 +166,26 @@ def test_info_takes_every_path(painted, copy_of, capsys):
     assert code == 0 and json.loads(out)["root"] == str(painted)
 
 
-@pytest.mark.parametrize("content", ["[]", "null", '"x"', "{}", '{"name": "x"}', '{"config": []}'])
-@pytest.mark.parametrize("action", ["info", "verify", "diff"])
+BAD_IDENTITIES = ["[]", "null", '"x"', "{}", '{"name": "x"}', '{"config": []}']
+
+
+@pytest.mark.parametrize("content", BAD_IDENTITIES)
+@pytest.mark.parametrize("action", ["info", "diff"])
 def test_bad_dataset_json(painted, copy_of, capsys, content, action):
     b = copy_of("b")
     (b / "dataset.json").write_text(content)
     code, _, err = _run(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
     assert code == 2 and str(b / "dataset.json") in _one_line_error(err)
+
+
+@pytest.mark.parametrize("content", BAD_IDENTITIES)
+def test_verify_calls_a_damaged_identity_damage(painted, copy_of, capsys, content):
+    """A dataset whose dataset.json is damaged is a FAILED dataset (exit 1, the file named), not
+    bad input: the folder is a dataset, its identity is what broke."""
+    b = copy_of("b")
+    (b / "dataset.json").write_text(content)
+    code, out, err = _run(["dataset", "verify", b], capsys)
+    assert code == 1 and "FAILED" in out and "corrupt: dataset.json" in out and not err
 
 
 @pytest.mark.parametrize("manifest", [{}, [], {"files": None}, {"files": [{"path": "x"}]},
