@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from dockfactory.core.config import Config, config_from_dict
@@ -21,12 +21,13 @@ from dockfactory.core.io import dead_writer, is_temp_name, sha256_file
 from dockfactory.generator.dataset import (
     DATASET_FORMAT,
     ROOT_FILES,
+    SPLITS,
     DatasetError,
     frame_files,
     load_identity,
 )
 from dockfactory.generator.sampler import frame_plan
-from dockfactory.generator.version import dataset_version_id
+from dockfactory.generator.version import dataset_version_id, generator_version
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
 BULK_DIRS = ("images", "exr")      # the cheap check compares these by size only (sha256 in verify)
@@ -161,35 +162,67 @@ def plan_files(cfg: Config, plan) -> set[str]:
 
 
 def _check_identity(root: Path, ident: dict, report: VerifyReport) -> tuple[Config, tuple]:
-    """The identity's config and plan; an identity whose config does not give its version id (an
-    edited dataset.json) or of another format is inconsistent."""
+    """The identity's config and plan. The version id is recomputed from the stored config (as
+    stored: a later config schema with more defaulted keys does not change it); one that differs
+    (an edited dataset.json) or another format is inconsistent."""
     where = root / "dataset.json"
     if ident.get("format") != DATASET_FORMAT:
         report.inconsistent.append(("dataset.json", f"format {ident.get('format')!r}, expected {DATASET_FORMAT!r} "
                                                     f"(a dataset of another tool or version)"))
-    cfg = config_from_dict(ident["config"], str(where))
-    expected = dataset_version_id(cfg.canonical_json(), str(ident["blender_version"]),
-                                  str(ident["generator_version"]))
+    canonical = json.dumps(ident["config"], sort_keys=True, separators=(",", ":"))
+    expected = dataset_version_id(canonical, str(ident["blender_version"]), str(ident["generator_version"]))
     if expected != ident["version_id"]:
         report.inconsistent.append(("dataset.json", f"its config and software give version {expected}, it says "
                                                     f"{ident['version_id']} (edited after rendering?)"))
+    cfg = config_from_dict(ident["config"], str(where))
     return cfg, frame_plan(cfg)
 
 
-def _check_manifest(ident: dict, cfg: Config, plan, manifest: dict, report: VerifyReport) -> None:
-    """The manifest must be this version's and list exactly the plan's frames and files."""
+def _manifest_frames(manifest: dict) -> list | None:
+    """The manifest's frame records when well formed ({frame_id, split, condition} texts), else None."""
+    frames = manifest.get("frames")
+    if not isinstance(frames, list):
+        return None
+    keys = ("frame_id", "split", "condition")
+    if not all(isinstance(f, dict) and set(f) == set(keys) and all(isinstance(f[k], str) for k in keys)
+               for f in frames):
+        return None
+    return frames
+
+
+def _frames_problem(frames: list | None, plan, exact: bool) -> str:
+    """Why the manifest's frames are not the plan's ("" when they are). ``exact``: splits and
+    conditions must match too (a dataset of this generator version; an older one keeps the splits
+    its own sampler drew, and only its frame ids are the config's)."""
+    if frames is None:
+        return "no well-formed 'frames' list ({frame_id, split, condition} each)"
+    ids = [f["frame_id"] for f in frames]
+    want = [s.frame_id for s in plan]
+    if ids != want:
+        gone = [fid for fid in want if fid not in set(ids)]
+        return (f"frame {gone[0]} of the plan is not listed ({len(gone)} missing)" if gone else
+                f"{len(ids)} frames listed, the plan has {len(want)}")
+    if exact:
+        bad = [f["frame_id"] for f, s in zip(frames, plan) if (f["split"], f["condition"]) != (s.split, s.condition)]
+        if bad:
+            return f"frame {bad[0]}: split or condition differ from the plan ({len(bad)} frames)"
+    if any(f["split"] not in SPLITS for f in frames):
+        return "a split that is not one of " + ", ".join(SPLITS)
+    return ""
+
+
+def _check_manifest(ident: dict, cfg: Config, plan, manifest: dict, report: VerifyReport) -> tuple:
+    """The manifest must be this version's and list exactly the plan's frames and files; returns
+    the plan with the manifest's splits and conditions (the same, for this generator version)."""
     if manifest.get("version_id") != ident["version_id"]:
         report.inconsistent.append(("manifest.json", f"version {manifest.get('version_id')!r}, dataset.json says "
                                                      f"{ident['version_id']}"))
-    want = [{"frame_id": s.frame_id, "split": s.split, "condition": s.condition} for s in plan]
-    frames = manifest.get("frames")
-    if frames != want:
-        listed = {f.get("frame_id") for f in frames if isinstance(f, dict)} if isinstance(frames, list) else set()
-        gone = [w["frame_id"] for w in want if w["frame_id"] not in listed]
-        why = (f"frame {gone[0]} of the plan is not listed ({len(gone)} missing)" if gone else
-               f"{len(frames) if isinstance(frames, list) else 0} frames listed, the plan has {len(want)} "
-               f"(or their splits or conditions differ)")
+    frames = _manifest_frames(manifest)
+    why = _frames_problem(frames, plan, exact=ident["generator_version"] == generator_version())
+    if why:
         report.inconsistent.append(("manifest.json", f"frames differ from the plan: {why}"))
+    else:
+        plan = tuple(replace(s, split=f["split"], condition=f["condition"]) for s, f in zip(plan, frames))
     listed_files = {rec["path"] for rec in manifest["files"]}
     expected = plan_files(cfg, plan)
     for rel in sorted(expected - listed_files)[:20]:
@@ -197,6 +230,7 @@ def _check_manifest(ident: dict, cfg: Config, plan, manifest: dict, report: Veri
     for rel in sorted(listed_files - expected)[:20]:
         if not outside_reason(rel):   # paths outside are reported as unsafe
             report.inconsistent.append((rel, "listed in the manifest, not a file of this dataset's plan"))
+    return plan
 
 
 def _check_files(root: Path, manifest: dict, report: VerifyReport, hash_bulk: bool) -> set[str]:
@@ -255,7 +289,7 @@ def inspect(root, hash_bulk: bool = True) -> tuple[VerifyReport, Checked | None]
     except DatasetError as exc:
         report.incomplete = str(exc)
         return report, None
-    _check_manifest(ident, cfg, plan, manifest, report)
+    plan = _check_manifest(ident, cfg, plan, manifest, report)
     listed = _check_files(root, manifest, report, hash_bulk)
     _check_unlisted(root, listed, report)
     return report, Checked(ident, cfg, plan, manifest)

@@ -73,3 +73,48 @@ def test_not_a_directory_and_incomplete(painted, tmp_path):
     (painted / "manifest.json").unlink()
     with pytest.raises(DatasetError, match="not complete"):
         Dataset.open(painted)
+
+
+def _rewrite_identity(root, edit) -> None:
+    """Apply ``edit`` to dataset.json as an older dockfactory would have written it (its version id
+    recomputed from the stored config), and re-seal the manifest's record of it."""
+    from dockfactory.core.io import sha256_file
+    from dockfactory.generator.version import dataset_version_id
+    path = root / "dataset.json"
+    ident = json.loads(path.read_text())
+    edit(ident)
+    canonical = json.dumps(ident["config"], sort_keys=True, separators=(",", ":"))
+    ident["version_id"] = dataset_version_id(canonical, ident["blender_version"], ident["generator_version"])
+    path.write_text(json.dumps(ident, indent=1) + "\n")
+    m = json.loads((root / "manifest.json").read_text())
+    m["version_id"] = ident["version_id"]
+    for rec in m["files"]:
+        if rec["path"] == "dataset.json":
+            rec.update(bytes=path.stat().st_size, sha256=sha256_file(path))
+    (root / "manifest.json").write_text(json.dumps(m))
+
+
+def test_a_dataset_of_an_older_generator_and_config_schema_still_opens(painted):
+    """Datasets outlive the code: one written by another generator version, whose stored config
+    lacks a key a later schema added with its default, opens (its frames are still its config's)."""
+    from dockfactory.core.config import config_from_dict
+    defaults = config_from_dict({}).to_dict()
+
+    def older(ident):
+        ident["generator_version"] = "0.0.1+oldsource0000"
+        section = next(k for k, v in ident["config"].items() if isinstance(v, dict)
+                       and any(v[f] == defaults[k].get(f) for f in v))
+        key = next(f for f, v in ident["config"][section].items() if v == defaults[section].get(f))
+        del ident["config"][section][key]
+    _rewrite_identity(painted, older)
+    ds = Dataset.open(painted)
+    assert ds.identity["generator_version"].startswith("0.0.1") and len(ds.labels_of()) == len(ds.plan)
+
+
+def test_this_generators_manifest_must_carry_the_plans_splits(painted):
+    m = json.loads((painted / "manifest.json").read_text())
+    f = next(f for f in m["frames"] if f["split"] == "train")
+    f["split"] = "test"
+    (painted / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match=f"frame {f['frame_id']}: split or condition differ"):
+        Dataset.open(painted)
