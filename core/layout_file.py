@@ -1,0 +1,86 @@
+"""Reading a marker layout file: the measured positions of the markers on a real pair of sections.
+
+The format is a dataset's ``layout.json`` (written by ``generator.dataset.layout_record``), so a
+rendered dataset's layout works as is and a measured one is written the same way::
+
+  {"markers": [{"id": "A0", "section": "A", "index": 0,
+                "center_mm": [x, y, z], "normal": [nx, ny, nz], "diameter_mm": 12.0}, ...]}
+
+Each marker's ``center_mm`` (the centre of its disc's top face) and unit ``normal`` are in its own
+section's frame (A: D, the frame at the centre of A's docking face, +X along A's axis toward B;
+B: B's frame, the same construction on B); other keys (``class_id``, ``class_name``,
+``pass_index``) are ignored. ``index`` counts the markers of a section from 0.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.layout import Marker
+from dockfactory.core.names import SECTIONS
+
+MAX_MARKERS = 1000
+
+
+class LayoutFileError(DockfactoryError):
+    """A layout file that cannot be used; the message names the file and the key."""
+
+
+def _numbers(value, path, key: str, n: int) -> tuple[float, ...]:
+    if (not isinstance(value, list) or len(value) != n
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise LayoutFileError(f"{path}: {key}: expected {n} finite numbers, got {value!r}"[:300])
+    return tuple(float(v) for v in value)
+
+
+def _marker(rec, path, i: int) -> Marker:
+    key = f"markers[{i}]"
+    if not isinstance(rec, dict):
+        raise LayoutFileError(f"{path}: {key}: expected an object")
+    for name in ("id", "section", "index", "center_mm", "normal", "diameter_mm"):
+        if name not in rec:
+            raise LayoutFileError(f"{path}: {key}.{name}: missing")
+    if not isinstance(rec["id"], str) or not rec["id"]:
+        raise LayoutFileError(f"{path}: {key}.id: expected a non-empty string")
+    if rec["section"] not in SECTIONS:
+        raise LayoutFileError(f"{path}: {key}.section: expected one of {', '.join(SECTIONS)}, got {rec['section']!r}")
+    if isinstance(rec["index"], bool) or not isinstance(rec["index"], int) or rec["index"] < 0:
+        raise LayoutFileError(f"{path}: {key}.index: expected an integer >= 0, got {rec['index']!r}")
+    normal = _numbers(rec["normal"], path, f"{key}.normal", 3)
+    norm = math.sqrt(sum(v * v for v in normal))
+    if not 0.99 < norm < 1.01:
+        raise LayoutFileError(f"{path}: {key}.normal: expected a unit vector, its length is {norm:.4g}")
+    d = rec["diameter_mm"]
+    if isinstance(d, bool) or not isinstance(d, (int, float)) or not (math.isfinite(d) and d > 0):
+        raise LayoutFileError(f"{path}: {key}.diameter_mm: expected a positive number, got {d!r}")
+    return Marker(rec["id"], rec["section"], rec["index"], _numbers(rec["center_mm"], path, f"{key}.center_mm", 3),
+                  tuple(v / norm for v in normal), float(d))
+
+
+def read_layout_file(path) -> tuple[Marker, ...]:
+    """The markers of layout file ``path`` (checked: one-line LayoutFileError otherwise)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise LayoutFileError(f"{path}: layout file not found") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise LayoutFileError(f"{path}: unreadable layout file ({type(exc).__name__})") from None
+    markers = data.get("markers") if isinstance(data, dict) else None
+    if not isinstance(markers, list) or not markers or len(markers) > MAX_MARKERS:
+        raise LayoutFileError(f"{path}: markers: expected a list of 1 to {MAX_MARKERS} marker objects")
+    out = tuple(_marker(rec, path, i) for i, rec in enumerate(markers))
+    ids = [m.id for m in out]
+    dup = next((m for m in ids if ids.count(m) > 1), None)
+    if dup is not None:
+        raise LayoutFileError(f"{path}: markers: id {dup!r} is used twice")
+    pairs = [(m.section, m.index) for m in out]
+    twice = next((p for p in pairs if pairs.count(p) > 1), None)
+    if twice is not None:
+        raise LayoutFileError(f"{path}: markers: section {twice[0]} index {twice[1]} is used twice")
+    for s in SECTIONS:
+        if sum(m.section == s for m in out) < 3:
+            raise LayoutFileError(f"{path}: markers: section {s} needs at least 3 markers to be measured")
+    return out

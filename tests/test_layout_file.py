@@ -1,0 +1,60 @@
+"""core.layout_file: a dataset's layout.json reads back as the config's markers; bad files are
+one-line errors naming the file and the key."""
+import json
+
+import pytest
+
+from dockfactory.core.layout_file import LayoutFileError, read_layout_file
+from dockfactory.generator.dataset_open import Dataset
+
+
+def test_a_datasets_layout_reads_back_as_its_markers(painted_source):
+    got = read_layout_file(painted_source / "layout.json")
+    want = Dataset.open(painted_source, full=False).markers()
+    assert [m.id for m in got] == [m.id for m in want]
+    for a, b in zip(got, want):
+        assert a.section == b.section and a.index == b.index and a.diameter_mm == b.diameter_mm
+        assert max(abs(u - v) for u, v in zip(a.center_mm, b.center_mm)) < 1e-12
+        assert max(abs(u - v) for u, v in zip(a.normal, b.normal)) < 1e-12
+
+
+def _write(tmp_path, edit):
+    from dockfactory.core.config import load_config
+    from dockfactory.core.resources import shipped_config
+    from dockfactory.generator.dataset import layout_record
+    rec = layout_record(load_config(shipped_config("smoke")))
+    edit(rec)
+    path = tmp_path / "layout.json"
+    path.write_text(json.dumps(rec))
+    return path
+
+
+@pytest.mark.parametrize("edit, where", [
+    (lambda r: r["markers"][0].update(normal=[0, 0, 2]), "markers[0].normal"),
+    (lambda r: r["markers"][1].update(center_mm=[1, 2]), "markers[1].center_mm"),
+    (lambda r: r["markers"][1].update(center_mm=[1, 2, float("nan")]), "markers[1].center_mm"),
+    (lambda r: r["markers"][2].update(section="C"), "markers[2].section"),
+    (lambda r: r["markers"][2].pop("diameter_mm"), "markers[2].diameter_mm"),
+    (lambda r: r["markers"][3].update(diameter_mm=-1), "markers[3].diameter_mm"),
+    (lambda r: r["markers"][3].update(index=True), "markers[3].index"),
+    (lambda r: r["markers"][4].update(id=r["markers"][0]["id"]), "used twice"),
+    (lambda r: r.update(markers=[m for m in r["markers"] if m["section"] == "A"]), "section B needs"),
+    (lambda r: r.update(markers={}), "markers: expected a list"),
+], ids=["normal-length", "centre-short", "centre-nan", "section", "no-diameter", "negative-diameter",
+        "bool-index", "duplicate-id", "no-B", "not-a-list"])
+def test_bad_layouts_are_one_line_errors(tmp_path, edit, where):
+    path = _write(tmp_path, edit)
+    with pytest.raises(LayoutFileError) as exc:
+        read_layout_file(path)
+    msg = str(exc.value)
+    assert str(path) in msg and where in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize("content", ["", "[]", "null", "{", "\xff"])
+def test_unreadable_layouts(tmp_path, content):
+    path = tmp_path / "layout.json"
+    path.write_bytes(content.encode("latin-1"))
+    with pytest.raises(LayoutFileError, match="layout"):
+        read_layout_file(path)
+    with pytest.raises(LayoutFileError, match="not found"):
+        read_layout_file(tmp_path / "nope.json")
