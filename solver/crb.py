@@ -6,7 +6,11 @@ has covariance >= sigma^2 (J^T J)^-1. Parameters are ordered as in :mod:`solver.
 
 - one section (7): ``(w, t, f)``, rotation vector w (rad, left perturbation in the camera
   frame), t (mm), f (px); ``focal_known=True`` drops f (6 parameters, calibrated camera);
-- joint (13): ``(w_A, t_A, w_B, t_B, f)``, one focal length shared by both sections.
+- joint (13): ``(w_A, t_A, w_B, t_B, f)``, one focal length shared by both sections;
+- joint with a camera model (:mod:`solver.camera_models`, ``camera_model`` and the true
+  ``coeffs``): (13 + e) over ``(w_A, t_A, w_B, t_B, f, *model.free)``;
+- a docking run (:func:`crb_sequence`): F frames, shared intrinsics, cam_from_a shared or one
+  per frame, one cam_from_b per frame, as :func:`solver.solve_sequence` estimates them.
 
 The bound on ``d_from_b``'s (X, Y, Z, alpha, beta, gamma) follows by first-order propagation
 (exact for the bound of a smooth function of the parameters) through
@@ -15,26 +19,37 @@ The bound on ``d_from_b``'s (X, Y, Z, alpha, beta, gamma) follows by first-order
 solves) and ``"independent"`` (each section solved on its own with its own focal: the bound for
 any single-section solver applied twice).
 
-A side branch of the solver: uses only the Jacobian and the covariance inverse of
+A side branch of the solver: uses only the Jacobians and the covariance inverse of
 :mod:`solver.refine` (the same ones the estimators use) and the input checks.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from dockfactory.core.distortion import coeffs_array
 from dockfactory.core.names import POSE_NAMES
+from dockfactory.solver.camera_models import (
+    EXTRA_NAMES,
+    MODELS,
+    PINHOLE,
+    Intrinsics,
+    check_model_name,
+)
 from dockfactory.solver.checks import as_points, as_principal_point
 from dockfactory.solver.errors import DegenerateGeometry, InvalidSolverInput
 from dockfactory.solver.refine import (
+    Block,
     d_from_b_jacobian,
     inverse_spd,
     joint_jacobian,
     residuals_and_jacobian,
+    stack_blocks,
 )
 
-__all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "DockingBound", "POSE_NAMES"]
+__all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "crb_sequence", "DockingBound",
+           "SequenceBound", "POSE_NAMES"]
 
 
 def _check_transform(name, value):
@@ -87,39 +102,90 @@ def _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_p
     return joint_jacobian(ja, jb)
 
 
+def _camera(camera_model, focal_px, principal_point, coeffs):
+    """(CameraModel, true Intrinsics) from the public arguments (checked)."""
+    model = MODELS[check_model_name(camera_model, allow_auto=False)]
+    if not (np.isfinite(focal_px) and focal_px > 0):
+        raise InvalidSolverInput(f"focal_px must be positive and finite, got {focal_px}")
+    try:
+        co = coeffs_array(coeffs)
+    except ValueError as exc:
+        raise InvalidSolverInput(f"coeffs: {exc}") from None
+    return model, Intrinsics(float(focal_px), as_principal_point(principal_point), co)
+
+
+def _blocks_jac(blocks, poses, intr, model):
+    """Jacobian of the stacked blocks at the true parameters (DegenerateGeometry when a point
+    is behind its camera)."""
+    _, jac, valid = stack_blocks(blocks, poses, intr, model)
+    if not valid:
+        raise DegenerateGeometry("points behind the camera: the bound is undefined")
+    return jac
+
+
 def crb_joint(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
-              sigma_px: float) -> np.ndarray:
-    """Bound on the covariance of (w_A, t_A, w_B, t_B, f): (13, 13).
+              sigma_px: float, camera_model: str = "pinhole", coeffs=None) -> np.ndarray:
+    """Bound on the covariance of (w_A, t_A, w_B, t_B, f[, *model.free]): (13 + e, 13 + e).
 
     ``points_a`` (Na, 3) mm in A's frame, ``points_b`` (Nb, 3) mm in B's frame,
-    ``cam_from_a``/``cam_from_b`` (4, 4) true poses, shared ``focal_px``.
+    ``cam_from_a``/``cam_from_b`` (4, 4) true poses, shared ``focal_px``; ``camera_model``
+    the estimated model (:data:`solver.camera_models.MODELS`) and ``coeffs`` the true lens
+    distortion (k1, k2, p1, p2, k3; None: none) at ``principal_point``.
     """
-    jac = _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point)
+    if camera_model == PINHOLE.name and coeffs is None:
+        jac = _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point)
+        return _inverse_information(jac, sigma_px)
+    model, intr = _camera(camera_model, focal_px, principal_point, coeffs)
+    ca = _check_transform("cam_from_a", cam_from_a)
+    cb = _check_transform("cam_from_b", cam_from_b)
+    blocks = (Block(as_points("points_a", points_a, 3), np.zeros((len(points_a), 2)), 0),
+              Block(as_points("points_b", points_b, 3), np.zeros((len(points_b), 2)), 1))
+    jac = _blocks_jac(blocks, ((ca[:3, :3], ca[:3, 3]), (cb[:3, :3], cb[:3, 3])), intr, model)
     return _inverse_information(jac, sigma_px)
 
 
 @dataclass(frozen=True)
 class DockingBound:
-    """Bound on d_from_b: ``covariance`` (6, 6) over POSE_NAMES, ``std`` dict name -> std."""
+    """Bound on d_from_b: ``covariance`` (6, 6) over POSE_NAMES, ``std`` dict name -> std;
+    ``intrinsics_std``: {"focal_px", "cx", ..., "p2"} bounds on the estimated intrinsics
+    (0.0 for the ones the model fixes; empty for the "independent" and "calibrated"
+    problems)."""
     covariance: np.ndarray
     std: dict
     problem: str
+    intrinsics_std: dict = field(default_factory=dict)
+
+
+def _intrinsics_std(cov_intr: np.ndarray, model) -> dict:
+    """{"focal_px", *EXTRA_NAMES}: std from the (1 + e, 1 + e) intrinsics block."""
+    sd = np.sqrt(np.diag(cov_intr))
+    out = {"focal_px": float(sd[0])}
+    out.update({n: 0.0 for n in EXTRA_NAMES})
+    out.update({n: float(v) for n, v in zip(model.free, sd[1:])})
+    return out
 
 
 def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
-                 sigma_px: float, problem: str = "joint") -> DockingBound:
+                 sigma_px: float, problem: str = "joint", camera_model: str = "pinhole",
+                 coeffs=None) -> DockingBound:
     """Bound on (X, Y, Z mm, alpha, beta, gamma deg) of ``d_from_b`` (see module docstring).
 
-    ``problem``: "joint" (13 parameters, shared focal), "independent" (7 + 7, a focal per
-    section) or "calibrated" (6 + 6, focal known). Returns a :class:`DockingBound`; X, Y, alpha
-    are ``std["x_mm"]``, ``std["y_mm"]``, ``std["alpha_deg"]``.
+    ``problem``: "joint" (13 parameters, shared focal; with ``camera_model`` and the true
+    ``coeffs``: 13 + e), "independent" (7 + 7, a focal per section) or "calibrated" (6 + 6,
+    focal known); the last two for the pinhole only. Returns a :class:`DockingBound`; X, Y,
+    alpha are ``std["x_mm"]``, ``std["y_mm"]``, ``std["alpha_deg"]``.
     """
     ca = _check_transform("cam_from_a", cam_from_a)
     cb = _check_transform("cam_from_b", cam_from_b)
     prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
+    intr_std = {}
     if problem == "joint":
-        cov13 = crb_joint(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px)
+        cov13 = crb_joint(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px,
+                          camera_model, coeffs)
         cov12 = cov13[:12, :12]
+        intr_std = _intrinsics_std(cov13[12:, 12:], MODELS[camera_model])
+    elif camera_model != PINHOLE.name or coeffs is not None:
+        raise InvalidSolverInput(f"problem {problem!r} is for the pinhole camera only")
     elif problem in ("independent", "calibrated"):
         known = problem == "calibrated"
         cov_a = crb_pnpf(points_a, ca, focal_px, principal_point, sigma_px, focal_known=known)
@@ -132,4 +198,47 @@ def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, pr
                                  f"got {problem!r}")
     cov6 = prop @ cov12 @ prop.T
     std = dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist()))
-    return DockingBound(cov6, std, problem)
+    return DockingBound(cov6, std, problem, intr_std)
+
+
+@dataclass(frozen=True)
+class SequenceBound:
+    """Bound for a docking run: ``frames`` (one :class:`DockingBound` per frame),
+    ``intrinsics_std`` (as in DockingBound) and ``covariance`` the full bound over
+    (poses..., f, *model.free)."""
+    frames: tuple
+    intrinsics_std: dict
+    covariance: np.ndarray
+
+
+def crb_sequence(points_a, cam_from_a, points_b, cams_from_b, focal_px: float,
+                 principal_point, sigma_px: float, camera_model: str = "pinhole", coeffs=None,
+                 share_cam_from_a: bool = True) -> SequenceBound:
+    """Bound for a docking run solved as :func:`solver.solve_sequence` does: ``cams_from_b``
+    (F, 4, 4) true camera-from-B poses, one fixed ``cam_from_a`` (4, 4) estimated once
+    (``share_cam_from_a``) or once per frame, shared intrinsics (``camera_model``, true
+    ``coeffs``). Every frame sees all of ``points_a`` (Na, 3) and ``points_b`` (Nb, 3)."""
+    model, intr = _camera(camera_model, focal_px, principal_point, coeffs)
+    ca = _check_transform("cam_from_a", cam_from_a)
+    cbs = [_check_transform(f"cams_from_b[{k}]", c) for k, c in enumerate(cams_from_b)]
+    pa, pb = as_points("points_a", points_a, 3), as_points("points_b", points_b, 3)
+    za, zb = np.zeros((len(pa), 2)), np.zeros((len(pb), 2))
+    pose_a = (ca[:3, :3], ca[:3, 3])
+    poses, blocks, pairs = [pose_a] if share_cam_from_a else [], [], []
+    for cb in cbs:
+        if not share_cam_from_a:
+            poses.append(pose_a)
+        ia = 0 if share_cam_from_a else len(poses) - 1
+        poses.append((cb[:3, :3], cb[:3, 3]))
+        blocks += [Block(pa, za, ia), Block(pb, zb, len(poses) - 1)]
+        pairs.append((ia, len(poses) - 1))
+    cov = _inverse_information(_blocks_jac(blocks, poses, intr, model), sigma_px)
+    frames = []
+    for (ia, ib), cb in zip(pairs, cbs):
+        prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
+        idx = np.r_[6 * ia:6 * ia + 6, 6 * ib:6 * ib + 6]
+        cov6 = prop @ cov[np.ix_(idx, idx)] @ prop.T
+        frames.append(DockingBound(cov6, dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist())),
+                                   "sequence"))
+    i0 = 6 * len(poses)
+    return SequenceBound(tuple(frames), _intrinsics_std(cov[i0:, i0:], model), cov)

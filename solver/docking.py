@@ -23,18 +23,24 @@ import numpy as np
 
 from dockfactory.core.geometry import pose_components
 from dockfactory.core.names import POSE_NAMES, SECTIONS
-from dockfactory.solver.checks import (
-    MIN_POINTS,
-    as_points,
-    as_principal_point,
-    check_correspondences,
-    check_sigma,
-    layout_arrays,
+from dockfactory.solver.camera_models import (
+    EXTRA_NAMES,
+    MODELS,
+    PINHOLE,
+    check_model_name,
+    project_normalized,
 )
+from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_sigma
 from dockfactory.solver.eccentricity import correct_eccentricity
-from dockfactory.solver.errors import InvalidSolverInput, TooFewPoints
+from dockfactory.solver.errors import InvalidSolverInput
 from dockfactory.solver.identify import identify_markers, parse_detections
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
+from dockfactory.solver.layout_points import (
+    LayoutArrays,
+    checked_correspondences,
+    section_arrays,
+)
+from dockfactory.solver.model_choice import ModelChoice
 from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
 from dockfactory.solver.ransac import ransac_docking
 from dockfactory.solver.suspects import leave_out_suspects
@@ -59,7 +65,14 @@ class DockingResult:
       out as suspect keeps its id and is not an inlier);
     - ``swapped`` (N,) bool: detections whose class label disagreed with the section of the
       marker they were identified as (all False for correspondences);
-    - ``cam_from_a``, ``cam_from_b`` (4, 4); ``sigma_px``: noise std used for the covariances.
+    - ``cam_from_a``, ``cam_from_b`` (4, 4); ``sigma_px``: noise std used for the covariances;
+    - ``camera_model``: the camera model fitted (chosen, for "auto"); ``intrinsics``: {"cx",
+      "cy" (px), "k1", "k2", "p1", "p2"} of that camera (fixed ones at the value assumed: the
+      given principal point, no distortion); ``intrinsics_std``: {"focal_px", "cx", ..., "p2"}
+      standard deviations (0.0 for the intrinsics the model keeps fixed);
+      ``covariance_params`` is then (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *free);
+      ``model_choice``: the automatic choice's tests (:class:`solver.model_choice.ModelChoice`)
+      or None.
     """
 
     d_from_b: np.ndarray
@@ -81,6 +94,10 @@ class DockingResult:
     cam_from_b: np.ndarray
     sigma_px: float
     iterations: int = field(default=0)
+    camera_model: str = PINHOLE.name
+    intrinsics: dict = field(default_factory=dict)
+    intrinsics_std: dict = field(default_factory=dict)
+    model_choice: ModelChoice | None = None
 
     def pose(self) -> dict:
         """{"x_mm": ..., ..., "gamma_deg": ...}."""
@@ -91,8 +108,10 @@ class DockingResult:
         """The result of the final joint fit, with the per-row identities and masks."""
         comp = pose_components(fit.d_from_b)
         std = dict(zip(POSE_NAMES, np.sqrt(np.diag(fit.covariance)).tolist()))
-        return cls(d_from_b=fit.d_from_b, focal_px=fit.focal_px, covariance=fit.covariance,
-                   std=std, covariance_params=fit.covariance_params,
+        intr, intr_std = _intrinsics_report(fit)
+        return cls(camera_model=fit.model, intrinsics=intr, intrinsics_std=intr_std,
+                   model_choice=fit.choice, d_from_b=fit.d_from_b, focal_px=fit.focal_px,
+                   covariance=fit.covariance, std=std, covariance_params=fit.covariance_params,
                    rmse_px={"A": fit.rmse_a, "B": fit.rmse_b}, marker_ids=marker_ids,
                    inliers=np.asarray(inliers, dtype=bool),
                    swapped=np.asarray(swapped, dtype=bool), cam_from_a=fit.cam_from_a,
@@ -100,47 +119,23 @@ class DockingResult:
                    iterations=fit.iterations, **comp)
 
 
-def _parse_correspondences(correspondences):
-    """(ids list (N,), points_2d (N, 2)) from a dict id -> (u, v) or a pair (ids, (N, 2))."""
-    if isinstance(correspondences, dict):
-        ids = [str(k) for k in correspondences]
-        uv = as_points("correspondences", [correspondences[k] for k in correspondences], 2) \
-            if ids else np.zeros((0, 2))
-        return ids, uv
-    try:
-        ids, uv = correspondences
-    except (TypeError, ValueError):
-        raise InvalidSolverInput("correspondences: expected a dict id -> (u, v) or a pair "
-                                 "(marker_ids (N,), points_2d (N, 2))") from None
-    ids = [str(i) for i in np.asarray(ids).reshape(-1)]
-    uv = as_points("correspondences points_2d", uv, 2)
-    if len(ids) != uv.shape[0]:
-        raise InvalidSolverInput(f"correspondences: {len(ids)} marker ids but {uv.shape[0]} "
-                                 "points: shapes do not match")
-    return ids, uv
-
-
-@dataclass(frozen=True)
-class _Layout:
-    """The layout as arrays: ``ids`` (M,), ``sections`` (M,), ``points`` (M, 3) mm in each
-    marker's section frame, ``index`` id -> row, ``by_id`` id -> Marker."""
-
-    ids: tuple
-    sections: tuple
-    points: np.ndarray
-    index: dict
-    by_id: dict
-
-    @classmethod
-    def of(cls, markers) -> _Layout:
-        ids, sections, pts = layout_arrays(markers)
-        return cls(ids, sections, pts, {mid: k for k, mid in enumerate(ids)},
-                   {m.id: m for m in markers})
+def _intrinsics_report(fit: JointFit):
+    """({name: value}, {name: std}) of a fit's intrinsics (empty when it has none); fixed
+    intrinsics have std 0.0."""
+    if fit.intrinsics is None:
+        return {}, {}
+    var = np.diag(fit.covariance_params)[12:]
+    std = {"focal_px": float(np.sqrt(var[0]))}
+    std.update({name: 0.0 for name in EXTRA_NAMES})
+    for k, name in enumerate(MODELS[fit.model].free, start=1):
+        std[name] = float(np.sqrt(var[k]))
+    return fit.intrinsics.values(), std
 
 
 def solve_docking(markers, principal_point, *, detections=None, correspondences=None,
                   boxes=None, refined=None, sigma_px: float | None = None,
                   robust: bool = False, rng: np.random.Generator | None = None,
+                  camera_model: str = PINHOLE.name,
                   options: DockingOptions = DEFAULT_DOCKING) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
 
@@ -162,6 +157,13 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
       (N, 2)). With ``robust=True`` (needs ``rng``, a numpy Generator), outliers are rejected
       by LO-RANSAC (``options.ransac``).
     ``sigma_px``: pixel noise std for the covariances; None estimates it from the residuals.
+    ``camera_model``: "pinhole" (the paper's camera: f only, principal point fixed at
+    ``principal_point``, no distortion), a model of :data:`solver.camera_models.MODELS`
+    ("k1", "k1k2", "pp_k1", "pp_k1_p": the pinhole fit first, then the model's extra
+    intrinsics refined from it with ``principal_point`` and no distortion as start) or "auto"
+    (the model the frame's data determine, ``options.model_choice``; see
+    :mod:`solver.model_choice`). Identification and RANSAC use the pinhole model; the final
+    fits, the suspect and eccentricity steps and the inlier re-check use the fitted camera.
 
     Every section needs at least 4 usable points. Returns a :class:`DockingResult`; raises a
     :class:`SolverError` subclass on bad input (InvalidSolverInput: shapes, NaN/inf, unknown or
@@ -170,9 +172,10 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     """
     if (detections is None) == (correspondences is None):
         raise InvalidSolverInput("give exactly one of detections= or correspondences=")
-    layout = _Layout.of(markers)
+    layout = LayoutArrays.of(markers)
     pp = as_principal_point(principal_point)
-    fitter = JointFitter(pp, check_sigma(sigma_px), options.refine)
+    fitter = JointFitter(pp, check_sigma(sigma_px), options.refine,
+                         check_model_name(camera_model), options.model_choice)
     if detections is not None:
         return _solve_detections(markers, layout, detections, boxes, refined, fitter, options)
     if boxes is not None or refined is not None:
@@ -185,7 +188,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                                   options)
 
 
-def _solve_detections(markers, layout: _Layout, detections, boxes, refined,
+def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
                       fitter: JointFitter, options: DockingOptions) -> DockingResult:
     """Identify, fit, leave out suspects, correct the eccentricity, refit."""
     n_det = len(parse_detections(detections)[0])
@@ -195,7 +198,7 @@ def _solve_detections(markers, layout: _Layout, detections, boxes, refined,
                              options.refine)
     ids = list(ident.marker_ids)
     used = np.array([i is not None for i in ids])
-    rows, p3, p2 = _section_arrays(layout, ids, used, ident.points_2d)
+    rows, p3, p2 = section_arrays(layout, ids, used, ident.points_2d)
     fit = fitter.fit(p3["A"], p2["A"], p3["B"], p2["B"])
     points = SectionPoints(rows, p3, p2, tuple(layout.by_id.get(i) for i in ids))
     fit, inliers = leave_out_suspects(fit, points, fitter, used.copy(), boxes, refined,
@@ -206,20 +209,13 @@ def _solve_detections(markers, layout: _Layout, detections, boxes, refined,
     return DockingResult.from_fit(fit, marker_ids, inliers, ident.swapped)
 
 
-def _solve_correspondences(layout: _Layout, correspondences, rng, fitter: JointFitter,
+def _solve_correspondences(layout: LayoutArrays, correspondences, rng, fitter: JointFitter,
                            options: DockingOptions) -> DockingResult:
     """Fit the given correspondences; with ``rng`` (robust) after LO-RANSAC, and with a final
     inlier check against the joint model."""
-    ids, uv = _parse_correspondences(correspondences)
-    unknown = sorted({i for i in ids if i not in layout.index})
-    if unknown:
-        raise InvalidSolverInput(f"correspondences: unknown marker ids {unknown[:10]}")
-    if len(set(ids)) != len(ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        raise InvalidSolverInput(f"correspondences: marker ids given more than once: "
-                                 f"{dup[:10]}")
+    ids, uv = checked_correspondences(layout, correspondences)
     inliers = np.ones(len(ids), dtype=bool)
-    rows, p3, p2 = _section_arrays(layout, ids, inliers, uv)
+    rows, p3, p2 = section_arrays(layout, ids, inliers, uv)
     start = None
     if rng is not None:
         pp = fitter.principal_point
@@ -238,22 +234,6 @@ def _solve_correspondences(layout: _Layout, correspondences, rng, fitter: JointF
     return DockingResult.from_fit(fit, marker_ids, inliers, np.zeros(len(ids), dtype=bool))
 
 
-def _section_arrays(layout: _Layout, ids, used, uv):
-    """Per section: input rows, points_3d (n, 3) mm and points_2d (n, 2) px of the rows with an
-    id and ``used``; TooFewPoints when a section has fewer than MIN_POINTS."""
-    rows = {s: [k for k, mid in enumerate(ids) if mid is not None and used[k]
-                and layout.sections[layout.index[mid]] == s] for s in SECTIONS}
-    p3, p2 = {}, {}
-    for s in SECTIONS:
-        if len(rows[s]) < MIN_POINTS:
-            raise TooFewPoints(f"section {s}: {len(rows[s])} usable points, at least "
-                               f"{MIN_POINTS} are needed")
-        p3[s], p2[s] = check_correspondences(
-            layout.points[[layout.index[ids[k]] for k in rows[s]]], uv[rows[s]],
-            what=f"section {s}")
-    return rows, p3, p2
-
-
 def _row_array(value, n, shape, name, dtype):
     """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection)."""
     if value is None:
@@ -270,7 +250,7 @@ def _row_array(value, n, shape, name, dtype):
     return arr
 
 
-def _recheck_inliers(fit: JointFit, layout: _Layout, ids, uv, fitter: JointFitter, thr,
+def _recheck_inliers(fit: JointFit, layout: LayoutArrays, ids, uv, fitter: JointFitter, thr,
                      inliers):
     """Re-classify every correspondence against the joint model (within ``thr`` px); refit
     once if the inlier set changed and each section keeps MIN_POINTS. (fit, inliers (N,))."""
@@ -283,7 +263,10 @@ def _recheck_inliers(fit: JointFit, layout: _Layout, ids, uv, fitter: JointFitte
         pc = cam[:3, :3] @ layout.points[layout.index[mid]] + cam[:3, 3]
         if pc[2] <= 0:
             continue
-        e = fit.focal_px * pc[:2] / pc[2] + fitter.principal_point - uv[k]
+        if fit.intrinsics is None or fit.model == PINHOLE.name:
+            e = fit.focal_px * pc[:2] / pc[2] + fitter.principal_point - uv[k]
+        else:
+            e = project_normalized(pc[None, :2] / pc[2], fit.intrinsics)[0] - uv[k]
         new[k] = float(e @ e) <= thr * thr
     rows = {s: [k for k in range(len(ids)) if new[k]
                 and layout.sections[layout.index[ids[k]]] == s] for s in SECTIONS}

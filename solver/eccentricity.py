@@ -21,10 +21,10 @@ from dockfactory.solver.outline import projected_outline
 __all__ = ["eccentricity_offset", "correct_eccentricity"]
 
 
-def eccentricity_offset(marker, cam_from_s, focal_px, pp) -> np.ndarray:
+def eccentricity_offset(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray:
     """(2,) px: centroid of the projected disc minus the projection of its centre (0 when the
-    disc is not entirely in front of the camera)."""
-    proj = projected_outline(marker, cam_from_s, focal_px, pp)
+    disc is not entirely in front of the camera); ``coeffs`` the lens distortion or None."""
+    proj = projected_outline(marker, cam_from_s, focal_px, pp, coeffs)
     if proj is None:
         return np.zeros(2)
     outline, centre = proj
@@ -39,12 +39,14 @@ def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitt
     """Refit with every inlier's centre moved by minus its predicted offset under ``fit``
     (``inliers`` (N,) bool per input row). ``points`` is not modified."""
     cams = fit.cams
-    pp = fitter.principal_point
+    pp, coeffs = (fitter.principal_point, None) if fit.intrinsics is None else \
+        (fit.intrinsics.principal_point, fit.intrinsics.coeffs)
     keep = {s: np.array([bool(inliers[k]) for k in points.rows[s]], dtype=bool)
             for s in SECTIONS}
     corrected = {}
     for s in SECTIONS:
-        off = np.array([eccentricity_offset(points.markers[k], cams[s], fit.focal_px, pp)
+        off = np.array([eccentricity_offset(points.markers[k], cams[s], fit.focal_px, pp,
+                                            coeffs)
                         for k in points.rows[s]]).reshape(-1, 2)
         corrected[s] = points.points_2d[s] - off
     return fitter.refit(fit, points, keep, points_2d=corrected)

@@ -6,18 +6,32 @@ parameters (:func:`solver.refine.refine_joint`) -> covariance sigma^2 (J^T J)^-1
 ``d_from_b = inv(cam_from_a) @ cam_from_b`` with the covariance of (X, Y, Z, alpha, beta, gamma)
 propagated to first order. Results travel as :class:`JointFit`; RANSAC, identification and the
 docking pipeline (suspects, eccentricity) all fit through :class:`JointFitter`.
+
+Camera models beyond the pinhole (:mod:`solver.camera_models`): :class:`JointFitter` with
+``camera_model`` other than "pinhole" fits the pinhole first (as above), then refines the
+model's extra intrinsics from it (:mod:`solver.model_fit`; "auto" chooses the model); a refit
+started from such a fit (``fit.start``) keeps its model and intrinsics.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dockfactory.solver.camera_models import PINHOLE, Intrinsics, camera_model
 from dockfactory.solver.errors import FocalNotObservable, NoValidCamera, SolverError
 from dockfactory.solver.estimate import estimate_pnpf
-from dockfactory.solver.options import RefineOptions
+from dockfactory.solver.model_choice import ModelChoice
+from dockfactory.solver.model_fit import (
+    ModelFit,
+    check_model_focal,
+    fit_camera_model,
+    refine_model,
+)
+from dockfactory.solver.options import DEFAULT_MODEL_CHOICE, ModelChoiceOptions, RefineOptions
 from dockfactory.solver.refine import (
     DEFAULT_REFINE,
+    Block,
     JointRefineResult,
     covariance_from_jacobian,
     d_from_b_jacobian,
@@ -27,16 +41,22 @@ from dockfactory.solver.refine import (
 )
 from dockfactory.solver.upnp import upnp
 
-__all__ = ["JointStart", "JointFit", "JointFitter", "SectionPoints", "fit_joint"]
+__all__ = ["JointStart", "JointFit", "JointFitter", "SectionPoints", "fit_joint",
+           "joint_fit_from_model"]
 
 
 @dataclass(frozen=True)
 class JointStart:
-    """Start of the joint LM: ``cam_from_a``, ``cam_from_b`` (4, 4), shared ``focal_px``."""
+    """Start of the joint LM: ``cam_from_a``, ``cam_from_b`` (4, 4), shared ``focal_px``;
+    optionally the camera ``model`` (a name) and its ``intrinsics`` of a previous fit (a refit
+    keeps them), and the automatic ``choice`` that selected that model."""
 
     cam_from_a: np.ndarray
     cam_from_b: np.ndarray
     focal_px: float
+    intrinsics: Intrinsics | None = None
+    model: str | None = None
+    choice: ModelChoice | None = None
 
     def params(self) -> tuple:
         """(R_A (3, 3), t_A (3,), R_B, t_B, f) as :func:`solver.refine.refine_joint` takes."""
@@ -51,7 +71,11 @@ class JointFit:
     ``cam_from_a``, ``cam_from_b``, ``d_from_b`` (4, 4); ``focal_px``; ``covariance`` (6, 6)
     over ``POSE_NAMES`` (X, Y, Z mm, alpha, beta, gamma deg); ``covariance_params`` (13, 13)
     over (w_A, t_A, w_B, t_B, f); ``sigma_px`` the noise std used; ``rmse_a``, ``rmse_b``
-    reprojection RMS per section (px, per point); LM ``iterations``.
+    reprojection RMS per section (px, per point); LM ``iterations``; ``model`` the camera
+    model's name, ``intrinsics`` (:class:`solver.camera_models.Intrinsics`; None only for a
+    bare :func:`fit_joint`: pinhole at the caller's principal point) and ``choice`` (the
+    automatic model choice, if any). With a model beyond the pinhole ``covariance_params`` is
+    (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *model.free).
     """
 
     cam_from_a: np.ndarray
@@ -64,6 +88,9 @@ class JointFit:
     rmse_a: float
     rmse_b: float
     iterations: int
+    model: str = PINHOLE.name
+    intrinsics: Intrinsics | None = None
+    choice: ModelChoice | None = None
 
     @property
     def cams(self) -> dict:
@@ -72,8 +99,9 @@ class JointFit:
 
     @property
     def start(self) -> JointStart:
-        """This fit as the start of another joint LM."""
-        return JointStart(self.cam_from_a, self.cam_from_b, self.focal_px)
+        """This fit as the start of another joint LM (same camera model and intrinsics)."""
+        return JointStart(self.cam_from_a, self.cam_from_b, self.focal_px, self.intrinsics,
+                          self.model, self.choice)
 
 
 @dataclass(frozen=True)
@@ -92,16 +120,43 @@ class SectionPoints:
 @dataclass(frozen=True)
 class JointFitter:
     """:func:`fit_joint` bound to one image: ``principal_point`` (2,) px, ``sigma_px`` (None:
-    estimated from the residuals) and the refinement ``options``."""
+    estimated from the residuals), the refinement ``options``, the ``camera_model`` (a name of
+    :data:`solver.camera_models.MODELS` or "auto") and the automatic choice's
+    ``choice_options``."""
 
     principal_point: np.ndarray
     sigma_px: float | None = None
     options: RefineOptions = DEFAULT_REFINE
+    camera_model: str = PINHOLE.name
+    choice_options: ModelChoiceOptions = DEFAULT_MODEL_CHOICE
 
     def fit(self, points_a, uv_a, points_b, uv_b, start: JointStart | None = None,
             accept_rmse: float | None = None) -> JointFit:
-        return fit_joint(points_a, uv_a, points_b, uv_b, self.principal_point, self.sigma_px,
-                         start, accept_rmse, self.options)
+        """Fit with the fitter's camera model, or with ``start``'s model when it has one."""
+        model = start.model if start is not None and start.model is not None else \
+            self.camera_model
+        if model == PINHOLE.name:
+            fit = fit_joint(points_a, uv_a, points_b, uv_b, self.principal_point, self.sigma_px,
+                            start, accept_rmse, self.options)
+            return replace(fit, intrinsics=Intrinsics.pinhole(fit.focal_px,
+                                                              self.principal_point),
+                           choice=None if start is None else start.choice)
+        blocks = (Block(points_a, uv_a, 0), Block(points_b, uv_b, 1))
+        if start is not None and start.intrinsics is not None:
+            mf = refine_model(blocks, _poses(start.cam_from_a, start.cam_from_b),
+                              start.intrinsics, camera_model(model), self.sigma_px, self.options)
+            mf = replace(mf, choice=start.choice)
+        else:
+            pin = fit_joint(points_a, uv_a, points_b, uv_b, self.principal_point,
+                            self.sigma_px, start, accept_rmse, self.options)
+            pin_mf = refine_model(blocks, _poses(pin.cam_from_a, pin.cam_from_b),
+                                  Intrinsics.pinhole(pin.focal_px, self.principal_point),
+                                  PINHOLE, self.sigma_px, self.options)
+            mf = fit_camera_model(blocks, pin_mf, model, self.sigma_px, self.options,
+                                  self.choice_options)
+        check_model_focal(mf, self.options)
+        na = 2 * points_a.shape[0]
+        return joint_fit_from_model(mf, slice(0, na), slice(na, None))
 
     def refit(self, fit: JointFit, points: SectionPoints, keep: dict,
               points_2d: dict | None = None) -> JointFit:
@@ -110,6 +165,37 @@ class JointFitter:
         p3, p2 = points.points_3d, points.points_2d if points_2d is None else points_2d
         return self.fit(p3["A"][keep["A"]], p2["A"][keep["A"]], p3["B"][keep["B"]],
                         p2["B"][keep["B"]], start=fit.start)
+
+
+def _poses(cam_from_a, cam_from_b) -> tuple:
+    return ((cam_from_a[:3, :3], cam_from_a[:3, 3]), (cam_from_b[:3, :3], cam_from_b[:3, 3]))
+
+
+def _transform(rot, t) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rot, t
+    return out
+
+
+def joint_fit_from_model(mf: ModelFit, rows_a: slice, rows_b: slice, pose_a: int = 0,
+                         pose_b: int = 1) -> JointFit:
+    """The :class:`JointFit` of one frame of a model fit: poses ``pose_a`` (camera from A) and
+    ``pose_b`` (camera from B), residual rows ``rows_a`` and ``rows_b`` of the fit's residual
+    vector. ``covariance_params`` is the frame's block (w_A, t_A, w_B, t_B, f, *free) of the
+    model fit's covariance."""
+    (ra, ta), (rb, tb) = mf.poses[pose_a], mf.poses[pose_b]
+    i0 = mf.focal_index
+    idx = np.r_[6 * pose_a:6 * pose_a + 6, 6 * pose_b:6 * pose_b + 6,
+                i0:mf.covariance.shape[0]]
+    cov = mf.covariance[np.ix_(idx, idx)]
+    prop = d_from_b_jacobian(ra, ta, rb, tb)
+    res = mf.refinement.residuals
+    res_a, res_b = res[rows_a], res[rows_b]
+    rmse_a, rmse_b = (float(np.sqrt(2.0 * (r @ r) / r.size)) for r in (res_a, res_b))
+    return JointFit(_transform(ra, ta), _transform(rb, tb), float(mf.intrinsics.focal_px),
+                    relative_pose(ra, ta, rb, tb), prop @ cov[:12, :12] @ prop.T, cov,
+                    mf.sigma_px, rmse_a, rmse_b, mf.refinement.iterations, mf.model.name,
+                    mf.intrinsics, mf.choice)
 
 
 def fit_joint(points_a, uv_a, points_b, uv_b, pp, sigma_px=None, start=None, accept_rmse=None,

@@ -9,7 +9,8 @@ object; every threshold and budget is a documented default defined only here:
   weak-perspective similarity), shared by RANSAC's and identification's hypotheses;
 - :class:`RansacOptions`: the robust layer (single section and docking);
 - :class:`IdentifyOptions`: marker identification (hypothesise and verify);
-- :class:`DockingOptions`: the docking pipeline (holds the three above).
+- :class:`ModelChoiceOptions`: the automatic camera-model choice (``camera_model="auto"``);
+- :class:`DockingOptions`: the docking pipeline (holds the four above).
 
 Invalid values raise :class:`solver.errors.InvalidSolverInput` when the object is built.
 """
@@ -21,7 +22,8 @@ from dataclasses import dataclass, field
 from dockfactory.solver.errors import InvalidSolverInput
 
 __all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
-           "DockingOptions", "DEFAULT_IDENTIFY", "DEFAULT_DOCKING"]
+           "ModelChoiceOptions", "DockingOptions", "DEFAULT_IDENTIFY", "DEFAULT_MODEL_CHOICE",
+           "DEFAULT_DOCKING"]
 
 
 def _positive(name: str, value, allow_none: bool = False) -> None:
@@ -216,10 +218,60 @@ class IdentifyOptions:
 
 
 @dataclass(frozen=True)
+class ModelChoiceOptions:
+    """Automatic choice of the camera model (:mod:`solver.model_choice`): a model richer than
+    the current one is taken only when the data determine it and it explains them better.
+
+    - ``lr_alpha``: false-alarm probability of the likelihood-ratio test of a richer model
+      against the current one (chi-square with the added parameters as degrees of freedom when
+      the pixel noise is known, F when it is estimated). 1e-3: with up to four richer models
+      tested on an ideal camera, fewer than 0.4 % of frames leave the pinhole by chance
+      (Bonferroni), so ideal data keep the paper's model (bench/camera_models.py: 199 of 200
+      ideal frames at 0.1 px). The price: a lens or offset whose effect is near the noise stays
+      undetected per frame (k1 = -0.05 moves the outermost markers of the default layout by
+      0.4-1.8 px, and is taken in 23 % of frames; k1 = -0.15, 1.2-5.5 px, in 87 %); a docking
+      run (:func:`solver.solve_sequence`) determines them;
+    - ``prior_pp_px``, ``prior_k1``, ``prior_k2``, ``prior_p``: half-width of the plausible
+      range of each extra intrinsic for a camera nobody calibrated (principal point within
+      +-50 px of the centre, |k1| <= 0.2, |k2| <= 0.1, |p1|, |p2| <= 2e-3: a little wider than
+      the ranges of configs/realistic.toml in issue 11, +-40 px, k1 in [-0.15, 0.05],
+      |k2| <= 0.05, |p| <= 1e-3);
+    - ``max_std_fraction``: a richer model is supported only when the standard deviation of
+      every parameter it adds is at most this fraction of its plausible half-range: 0.5 means
+      the data, not the prior, fix its sign and size. An ill-conditioned fit (a singular
+      information matrix) has infinite deviations and is never chosen;
+    - ``min_residual_dof``: with the noise estimated, a model needs at least this many residual
+      degrees of freedom (residuals minus parameters) for its F test (fewer: the noise
+      estimate is too poor to test anything).
+    """
+
+    lr_alpha: float = 1e-3
+    prior_pp_px: float = 50.0
+    prior_k1: float = 0.2
+    prior_k2: float = 0.1
+    prior_p: float = 2e-3
+    max_std_fraction: float = 0.5
+    min_residual_dof: int = 4
+
+    def __post_init__(self):
+        if not 0 < self.lr_alpha < 1:
+            raise InvalidSolverInput(f"lr_alpha must be in (0, 1), got {self.lr_alpha}")
+        for name in ("prior_pp_px", "prior_k1", "prior_k2", "prior_p", "max_std_fraction",
+                     "min_residual_dof"):
+            _positive(name, getattr(self, name))
+
+    def prior(self, name: str) -> float:
+        """Plausible half-range of an extra intrinsic (``camera_models.EXTRA_NAMES``)."""
+        return {"cx": self.prior_pp_px, "cy": self.prior_pp_px, "k1": self.prior_k1,
+                "k2": self.prior_k2, "p1": self.prior_p, "p2": self.prior_p}[name]
+
+
+@dataclass(frozen=True)
 class DockingOptions:
     """The docking pipeline (:func:`solver.solve_docking`).
 
-    - ``refine``, ``ransac``, ``identify``: options of the layers it calls;
+    - ``refine``, ``ransac``, ``identify``: options of the layers it calls; ``model_choice``:
+      the automatic camera-model choice (``camera_model="auto"``);
     - ``min_extent``: a detected box narrower or lower than this fraction of the outline the
       first fit predicts for its marker is a partly hidden marker (:mod:`solver.suspects`);
     - ``eccentricity``: correct detected centres (centroids of the disc's image) by their
@@ -229,6 +281,7 @@ class DockingOptions:
     refine: RefineOptions = field(default_factory=RefineOptions)
     ransac: RansacOptions = field(default_factory=RansacOptions)
     identify: IdentifyOptions = field(default_factory=IdentifyOptions)
+    model_choice: ModelChoiceOptions = field(default_factory=ModelChoiceOptions)
     min_extent: float = 0.85
     eccentricity: bool = True
 
@@ -238,4 +291,5 @@ class DockingOptions:
 
 
 DEFAULT_IDENTIFY = IdentifyOptions()
+DEFAULT_MODEL_CHOICE = ModelChoiceOptions()
 DEFAULT_DOCKING = DockingOptions()

@@ -11,7 +11,12 @@ LM loop (:func:`refine_pnpf`, :func:`refine_joint`) and the one covariance
 Parameters and their order (every covariance in the package uses it):
 - one section, 7 parameters: ``(w_x, w_y, w_z, t_x, t_y, t_z, f)``: ``w`` (rad) a left
   perturbation of the rotation, ``R <- exp([w]x) R`` (camera frame), ``t`` (mm), ``f`` (px);
-- two sections in one image, 13 parameters: ``(w_A, t_A, w_B, t_B, f)`` with one shared focal.
+- two sections in one image, 13 parameters: ``(w_A, t_A, w_B, t_B, f)`` with one shared focal;
+- any number of residual blocks (:class:`Block`: one section's points in one frame, each seen
+  from one of P poses) with a camera model (:mod:`solver.camera_models`):
+  ``(w_0, t_0, ..., w_{P-1}, t_{P-1}, f, *model.free)``, 6 P + 1 + e parameters
+  (:func:`refine_blocks`; the joint fit is its two-block pinhole case, a docking run with
+  shared intrinsics its 2F-block case).
 
 The covariance is ``sigma^2 (J^T J)^-1`` with J the Jacobian of the pixel residuals at the
 estimate; ``sigma`` (px) is the pixel noise if the caller knows it, else it is estimated from the
@@ -26,11 +31,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from dockfactory.core.geometry import euler_deg_from_rotation
+from dockfactory.solver.camera_models import (
+    PINHOLE,
+    CameraModel,
+    Intrinsics,
+    intrinsics_jacobian,
+)
 from dockfactory.solver.errors import NoValidCamera
 from dockfactory.solver.lie import so3_exp
 from dockfactory.solver.options import RefineOptions
 
 __all__ = ["residuals_and_jacobian", "joint_jacobian", "refine_pnpf", "refine_joint",
+           "model_residuals_and_jacobian", "Block", "stack_blocks", "refine_blocks",
+           "BlocksRefineResult",
            "covariance_from_jacobian", "inverse_spd",
            "d_from_b_jacobian", "relative_pose", "rel_focal_std", "RefineResult",
            "JointRefineResult", "DEFAULT_REFINE"]
@@ -45,9 +58,11 @@ def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.
 
     ``points_3d`` (N, 3) mm, ``points_2d`` (N, 2) px, ``pp`` (2,) px, ``rotation`` (3, 3),
     ``translation`` (3,) mm, ``focal`` px. Returns (r, J, z) with z (N,) the depths; J is None
-    when ``want_jacobian`` is False.
+    when ``want_jacobian`` is False. ``rotation`` (N, 3, 3) and ``translation`` (N, 3) give
+    every point its own pose (the columns are then each point's own pose parameters).
     """
-    a = points_3d @ rotation.T
+    a = points_3d @ rotation.T if rotation.ndim == 2 else \
+        np.einsum("nij,nj->ni", rotation, points_3d)
     pc = a + translation
     z = pc[:, 2]
     iz = 1.0 / z
@@ -78,6 +93,29 @@ def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.
     j[:, 0, 6] = xn
     j[:, 1, 6] = yn
     return r.reshape(-1), j.reshape(2 * n, 7), z
+
+
+def model_residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray,
+                                 intr: Intrinsics, model: CameraModel, rotation: np.ndarray,
+                                 translation: np.ndarray, want_jacobian: bool = True):
+    """Residuals (2N,) px and J (2N, 7 + e) over (w, t, f, *model.free) for a camera with
+    intrinsics ``intr`` (:class:`solver.camera_models.Intrinsics`); other arguments as in
+    :func:`residuals_and_jacobian`, which this is (same numbers) for the pinhole model without
+    distortion. Returns (r, J or None, z (N,) depths)."""
+    if model.n_extra == 0 and not intr.distorted:
+        return residuals_and_jacobian(points_3d, points_2d, intr.principal_point, rotation,
+                                      translation, intr.focal_px, want_jacobian)
+    # the pinhole Jacobian at f = 1, pp = 0: normalised coordinates and d(xn, yn)/d(w, t)
+    n = points_3d.shape[0]
+    rn, jn, z = residuals_and_jacobian(points_3d, np.zeros((n, 2)), np.zeros(2), rotation,
+                                       translation, 1.0, want_jacobian)
+    xn = rn.reshape(n, 2)
+    uv, j_xy, j_int = intrinsics_jacobian(xn, intr, model)
+    r = (uv - points_2d).reshape(-1)
+    if not want_jacobian:
+        return r, None, z
+    j_pose = np.einsum("nij,njk->nik", j_xy, jn.reshape(n, 2, 7)[:, :, :6])
+    return r, np.concatenate([j_pose, j_int], axis=2).reshape(2 * n, 6 + j_int.shape[2]), z
 
 
 def joint_jacobian(jac_a: np.ndarray, jac_b: np.ndarray) -> np.ndarray:
@@ -124,10 +162,10 @@ def inverse_spd(a: np.ndarray) -> np.ndarray:
     return ((vec / lam) @ vec.T) * s[:, None] * s[None, :]
 
 
-def rel_focal_std(cov: np.ndarray, focal: float) -> float:
-    """Standard deviation of the focal (the last parameter of ``cov`` (p, p)) over ``focal``;
-    inf when the variance is not finite and non-negative."""
-    v = cov[-1, -1]
+def rel_focal_std(cov: np.ndarray, focal: float, index: int = -1) -> float:
+    """Standard deviation of the focal (parameter ``index`` of ``cov`` (p, p), by default the
+    last) over ``focal``; inf when the variance is not finite and non-negative."""
+    v = cov[index, index]
     return float(np.sqrt(v)) / focal if np.isfinite(v) and v >= 0 else np.inf
 
 
@@ -255,35 +293,130 @@ class JointRefineResult:
     converged: bool
 
 
+@dataclass(frozen=True)
+class Block:
+    """One residual block: ``points_3d`` (n, 3) mm in a section's frame, their pixels
+    ``points_2d`` (n, 2), seen from pose number ``pose`` (camera from that section)."""
+
+    points_3d: np.ndarray
+    points_2d: np.ndarray
+    pose: int
+
+
+def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
+                 want_jacobian: bool = True):
+    """Residuals (M,) of every block in order and the Jacobian (M, 6 P + 1 + e) over
+    (w_0, t_0, ..., f, *model.free), ``poses`` a sequence of P (R (3, 3), t (3,)) pairs.
+    Returns (res, jac or None, valid): valid when every point is in front of its camera and
+    every residual is finite. Runs (more than two blocks) and camera models beyond the pinhole
+    are evaluated in one batch (:func:`_stack_batched`); the two-block pinhole case block by
+    block."""
+    if len(blocks) > 2 or model.n_extra or intr.distorted:
+        return _stack_batched(blocks, poses, intr, model, want_jacobian)
+    n_pose = 6 * len(poses)
+    m = sum(2 * b.points_3d.shape[0] for b in blocks)
+    jac = np.zeros((m, n_pose + model.n_intrinsics)) if want_jacobian else None
+    parts, row, valid = [], 0, True
+    for b in blocks:
+        rot, t = poses[b.pose]
+        r, j, z = model_residuals_and_jacobian(b.points_3d, b.points_2d, intr, model, rot, t,
+                                               want_jacobian)
+        parts.append(r)
+        valid = valid and bool(z.min() > 0.0)
+        if want_jacobian:
+            jac[row:row + r.size, 6 * b.pose:6 * b.pose + 6] = j[:, :6]
+            jac[row:row + r.size, n_pose:] = j[:, 6:]
+        row += r.size
+    res = np.concatenate(parts)
+    return res, jac, valid and bool(np.isfinite(res).all())
+
+
+def _stack_batched(blocks, poses, intr: Intrinsics, model: CameraModel, want_jacobian: bool):
+    """:func:`stack_blocks` with every point's pose gathered first: one evaluation of the
+    Jacobian for all blocks, its pose columns scattered to each point's pose."""
+    pose_of = np.concatenate([np.full(b.points_3d.shape[0], b.pose) for b in blocks])
+    rots = np.stack([np.asarray(rot) for rot, _ in poses])[pose_of]
+    ts = np.stack([np.asarray(t) for _, t in poses])[pose_of]
+    p3 = np.concatenate([b.points_3d for b in blocks])
+    p2 = np.concatenate([b.points_2d for b in blocks])
+    res, j, z = model_residuals_and_jacobian(p3, p2, intr, model, rots, ts, want_jacobian)
+    valid = bool(z.min() > 0.0) and bool(np.isfinite(res).all())
+    if not want_jacobian:
+        return res, None, valid
+    n, n_pose = p3.shape[0], 6 * len(poses)
+    jac = np.zeros((2 * n, n_pose + model.n_intrinsics))
+    rows = np.arange(2 * n).reshape(n, 2, 1)
+    cols = (6 * pose_of)[:, None, None] + np.arange(6)[None, None, :]
+    jac[rows, cols] = j[:, :6].reshape(n, 2, 6)
+    jac[:, n_pose:] = j[:, 6:]
+    return res, jac, valid
+
+
+@dataclass(frozen=True)
+class BlocksRefineResult:
+    """Refined ``poses`` (tuple of (R, t)), ``intrinsics``, ``model``, residuals (M,) px, J
+    (M, 6 P + 1 + e), iterations, converged."""
+
+    poses: tuple
+    intrinsics: Intrinsics
+    model: CameraModel
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    iterations: int
+    converged: bool
+
+    @property
+    def cost(self) -> float:
+        return float(self.residuals @ self.residuals)
+
+    @property
+    def focal_index(self) -> int:
+        """Column of the focal length in the Jacobian and covariance."""
+        return 6 * len(self.poses)
+
+
+def refine_blocks(blocks, poses, intr: Intrinsics, model: CameraModel = PINHOLE,
+                  options: RefineOptions = DEFAULT_REFINE) -> BlocksRefineResult:
+    """LM over (w_0, t_0, ..., w_{P-1}, t_{P-1}, f, *model.free): P poses (left perturbations
+    of their rotations), one camera shared by every block (:class:`Block`).
+
+    ``poses``: the start, P pairs (R (3, 3), t (3,) mm); ``intr``: the start intrinsics (the
+    model's fixed ones keep their values). Raises NoValidCamera as :func:`refine_pnpf`.
+    """
+    n_pose = 6 * len(poses)
+
+    def evaluate(st):
+        return stack_blocks(blocks, st[0], st[1], model)
+
+    def update(st, step):
+        intr_new = st[1].stepped(model, step[n_pose], step[n_pose + 1:])
+        if intr_new is None:
+            return None
+        return tuple((so3_exp(step[6 * k:6 * k + 3]) @ rot, t + step[6 * k + 3:6 * k + 6])
+                     for k, (rot, t) in enumerate(st[0])), intr_new
+
+    state = (tuple((np.array(rot, dtype=np.float64), np.array(t, dtype=np.float64))
+                   for rot, t in poses), intr)
+    state, res, jac, it, conv = _lm(evaluate, update, state, options)
+    return BlocksRefineResult(state[0], state[1], model, res, jac, it, conv)
+
+
 def refine_joint(points_a, uv_a, points_b, uv_b, pp, rot_a, t_a, rot_b, t_b, focal,
                  options: RefineOptions = DEFAULT_REFINE) -> JointRefineResult:
-    """LM over (w_A, t_A, w_B, t_B, f): both sections in one image, one shared focal length.
+    """LM over (w_A, t_A, w_B, t_B, f): both sections in one image, one shared focal length
+    (the two-block pinhole case of :func:`refine_blocks`).
 
     ``points_a`` (Na, 3) mm in A's frame with pixels ``uv_a`` (Na, 2); same for B; the initial
     cam_from_a = (rot_a, t_a), cam_from_b = (rot_b, t_b), ``focal`` px.
     """
     na = 2 * points_a.shape[0]
-
-    def evaluate(st):
-        ra_, ta_, rb_, tb_, f_ = st
-        res_a, ja, za = residuals_and_jacobian(points_a, uv_a, pp, ra_, ta_, f_)
-        res_b, jb, zb = residuals_and_jacobian(points_b, uv_b, pp, rb_, tb_, f_)
-        jac = joint_jacobian(ja, jb)
-        res = np.concatenate([res_a, res_b])
-        return res, jac, bool(min(za.min(), zb.min()) > 0.0) and np.isfinite(res).all()
-
-    def update(st, step):
-        f_new = st[4] + step[12]
-        if not f_new > 0.0:
-            return None
-        return (so3_exp(step[0:3]) @ st[0], st[1] + step[3:6], so3_exp(step[6:9]) @ st[2],
-                st[3] + step[9:12], f_new)
-
-    state = (np.array(rot_a, dtype=np.float64), np.array(t_a, dtype=np.float64),
-             np.array(rot_b, dtype=np.float64), np.array(t_b, dtype=np.float64), float(focal))
-    state, res, jac, it, conv = _lm(evaluate, update, state, options)
-    return JointRefineResult(state[0], state[1], state[2], state[3], float(state[4]),
-                             res[:na], res[na:], jac, it, conv)
+    blocks = (Block(points_a, uv_a, 0), Block(points_b, uv_b, 1))
+    br = refine_blocks(blocks, ((rot_a, t_a), (rot_b, t_b)),
+                       Intrinsics.pinhole(float(focal), pp), PINHOLE, options)
+    (ra, ta), (rb, tb) = br.poses
+    res = br.residuals
+    return JointRefineResult(ra, ta, rb, tb, float(br.intrinsics.focal_px), res[:na], res[na:],
+                             br.jacobian, br.iterations, br.converged)
 
 
 def relative_pose(rot_a, t_a, rot_b, t_b) -> np.ndarray:

@@ -35,10 +35,10 @@ from dockfactory.solver.outline import projected_outline
 __all__ = ["predicted_outline_box", "extent_ratio", "suspect_scores", "leave_out_suspects"]
 
 
-def predicted_outline_box(marker, cam_from_s, focal_px, pp) -> np.ndarray | None:
-    """(4,) [x0, y0, x1, y1] px of the marker's projected circle, or None when part of it is
-    behind the camera."""
-    proj = projected_outline(marker, cam_from_s, focal_px, pp)
+def predicted_outline_box(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray | None:
+    """(4,) [x0, y0, x1, y1] px of the marker's projected circle (``coeffs``: lens distortion
+    or None), or None when part of it is behind the camera."""
+    proj = projected_outline(marker, cam_from_s, focal_px, pp, coeffs)
     if proj is None:
         return None
     uv = proj[0]
@@ -53,7 +53,7 @@ def extent_ratio(box, predicted) -> float:
 
 
 def suspect_scores(fit: JointFit, points: SectionPoints, pp, boxes, refined,
-                   min_extent) -> dict:
+                   min_extent, coeffs=None) -> dict:
     """{section: (n,) float} 0 for a trusted point; 1 for an unrefined centre; 2 + shortfall
     for a box under ``min_extent`` of its predicted outline (partly hidden).
     ``boxes`` (N, 4) px or None, ``refined`` (N,) bool or None, per input row."""
@@ -66,7 +66,7 @@ def suspect_scores(fit: JointFit, points: SectionPoints, pp, boxes, refined,
                 sc[j] = 1.0
             marker = points.markers[k]
             if boxes is not None and marker is not None:
-                pred = predicted_outline_box(marker, cams[s], fit.focal_px, pp)
+                pred = predicted_outline_box(marker, cams[s], fit.focal_px, pp, coeffs)
                 if pred is not None:
                     r = extent_ratio(boxes[k], pred)
                     if r < min_extent:
@@ -81,7 +81,9 @@ def leave_out_suspects(fit: JointFit, points: SectionPoints, fitter: JointFitter
     keeps more than ``MIN_POINTS``; one refit. Returns (fit, inliers (N,) bool)."""
     if boxes is None and refined is None:
         return fit, inliers
-    scores = suspect_scores(fit, points, fitter.principal_point, boxes, refined, min_extent)
+    pp, coeffs = (fitter.principal_point, None) if fit.intrinsics is None else \
+        (fit.intrinsics.principal_point, fit.intrinsics.coeffs)
+    scores = suspect_scores(fit, points, pp, boxes, refined, min_extent, coeffs)
     keep = {s: np.ones(len(points.rows[s]), dtype=bool) for s in SECTIONS}
     inliers = inliers.copy()
     for s in SECTIONS:

@@ -57,3 +57,44 @@ def test_solver_modules_form_no_cycle():
 
     for mod in sorted(graph):
         visit(mod)
+
+
+# The solver's internal layer order (solver/__init__.py): a module imports only modules of its
+# own layer or below. Every module must be placed here, so a new one states its layer.
+LAYERS = {
+    # 0 base
+    "errors": 0, "options": 0, "checks": 0, "lie": 0, "outline": 0, "stats": 0,
+    "camera_models": 0, "model_choice": 0, "layout_points": 0, "synthetic": 0,
+    # 1 closed form
+    "upnp": 1,
+    # 2 refinement (the one LM, Jacobian, covariance) and the bounds on the same Jacobian
+    "refine": 2, "crb": 2,
+    # 3 estimators
+    "estimate": 3, "model_fit": 3, "joint": 3,
+    # 4 robust estimation and identification
+    "ransac": 4, "identify": 4,
+    # 5 entry points and the docking pipeline
+    "pnpf": 5, "docking": 5, "suspects": 5, "eccentricity": 5, "sequence": 5,
+}
+
+
+def test_solver_layer_order():
+    modules = {p.stem for p in SOLVER.glob("*.py")} - {"__init__"}
+    assert modules == set(LAYERS), f"place new modules in LAYERS: {sorted(modules ^ set(LAYERS))}"
+    for path in SOLVER.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        top, _ = _imports(path)
+        deps = {m.rsplit(".", 1)[1] for m in top if m.startswith("dockfactory.solver.")}
+        up = sorted(d for d in deps if LAYERS[d] > LAYERS[path.stem])
+        assert not up, f"{path.stem} (layer {LAYERS[path.stem]}) imports upward: {up}"
+
+
+def test_the_refinement_has_one_lm_loop():
+    """Every refinement (one section, two sections, residual blocks with a camera model) runs
+    the one Levenberg-Marquardt loop of solver/refine.py: only refine.py solves damped normal
+    equations (the closed form, upnp.py, solves its own linear systems)."""
+    for path in SOLVER.glob("*.py"):
+        if path.stem not in ("refine", "upnp"):
+            assert "linalg.solve" not in path.read_text(), path.name
+    assert "def refine_blocks(" in (SOLVER / "refine.py").read_text()

@@ -1,0 +1,119 @@
+"""Which camera model the data support: forward selection over nested models.
+
+Bottom layer of the solver (imports :mod:`solver.camera_models`, :mod:`solver.stats`,
+:mod:`solver.options`): pure logic on the summaries of fits already made
+(:class:`ModelFitSummary`), so that the per-frame and the per-sequence estimators choose the
+same way. Starting from the pinhole, every model that nests the current one (the current one
+with more parameters freed) is tested against it; a candidate is acceptable when
+
+1. its fit converged to a valid camera with an observable focal length;
+2. every parameter it adds is determined: standard deviation (from the same covariance the
+   estimate reports) at most ``max_std_fraction`` of the parameter's plausible half-range
+   (:class:`solver.options.ModelChoiceOptions`); an ill-conditioned fit has infinite ones;
+3. it explains the data significantly better: the likelihood-ratio statistic
+   (cost_current - cost_candidate) / sigma^2 exceeds the chi-square quantile 1 - ``lr_alpha``
+   with the added parameters as degrees of freedom when sigma is known; with sigma estimated,
+   the F statistic ((cost_current - cost_candidate) / q) / (cost_candidate / dof) exceeds its
+   F(q, dof) quantile (dof = residuals - parameters of the candidate).
+
+Of the acceptable candidates the one with the smallest p-value (in log space; ties: fewer
+parameters) becomes current, and the search repeats from it; it ends when none is acceptable.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dockfactory.solver.camera_models import PINHOLE, CameraModel
+from dockfactory.solver.options import DEFAULT_MODEL_CHOICE, ModelChoiceOptions
+from dockfactory.solver.stats import chi2_logsf, f_logsf
+
+__all__ = ["ModelFitSummary", "ModelTest", "ModelChoice", "choose_model"]
+
+
+@dataclass(frozen=True)
+class ModelFitSummary:
+    """What the choice needs of one model's fit: ``cost`` (sum of squared residuals, px^2),
+    ``n_residuals``, ``n_params``, ``extra_std`` (e,) standard deviations of the model's free
+    extras (order ``model.free``), ``ok`` (valid, converged, focal observable) and the reason
+    when it is not."""
+
+    model: CameraModel
+    cost: float
+    n_residuals: int
+    n_params: int
+    extra_std: np.ndarray
+    ok: bool = True
+    failure: str = ""
+
+
+@dataclass(frozen=True)
+class ModelTest:
+    """One candidate tested ``against`` the current model: the statistic (chi-square or F),
+    ``log_p`` (natural log of its p-value), ``std_fraction`` (largest std / prior half-range
+    of the added parameters), ``accepted`` and, when not, ``reason``."""
+
+    model: str
+    against: str
+    statistic: float
+    log_p: float
+    std_fraction: float
+    accepted: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The chosen model's name and every test made, in order."""
+
+    chosen: str
+    tests: tuple
+
+
+def _test(cand: ModelFitSummary, cur: ModelFitSummary, sigma_px, options) -> ModelTest:
+    """Test ``cand`` against the nested ``cur`` (see the module docstring)."""
+    name, against = cand.model.name, cur.model.name
+    if not cand.ok:
+        return ModelTest(name, against, math.nan, 0.0, math.inf, False, cand.failure)
+    added = [k for k, n in enumerate(cand.model.free) if n not in cur.model.free]
+    fracs = [cand.extra_std[k] / options.prior(cand.model.free[k]) for k in added]
+    frac = float(max(fracs)) if all(np.isfinite(fracs)) else math.inf
+    q = cand.n_params - cur.n_params
+    drop = max(cur.cost - cand.cost, 0.0)
+    if sigma_px is not None:
+        stat = drop / float(sigma_px) ** 2
+        log_p = chi2_logsf(stat, q)
+    else:
+        dof = cand.n_residuals - cand.n_params
+        if dof < options.min_residual_dof:
+            return ModelTest(name, against, math.nan, 0.0, frac, False,
+                             f"{dof} residual degrees of freedom: too few to test")
+        stat = (drop / q) / max(cand.cost / dof, 1e-300)
+        log_p = f_logsf(stat, q, dof)
+    if not frac <= options.max_std_fraction:
+        reason = f"not determined (std / plausible range {frac:.3g})"
+    elif not log_p <= math.log(options.lr_alpha):
+        reason = f"no significant improvement (p {math.exp(log_p):.3g})"
+    else:
+        reason = ""
+    return ModelTest(name, against, float(stat), float(log_p), frac, not reason, reason)
+
+
+def choose_model(summaries: dict, sigma_px: float | None,
+                 options: ModelChoiceOptions = DEFAULT_MODEL_CHOICE) -> ModelChoice:
+    """Forward selection from the pinhole over ``summaries`` (model name -> ModelFitSummary;
+    must hold "pinhole"); ``sigma_px`` the known pixel noise, or None (estimated). Returns a
+    :class:`ModelChoice`."""
+    current = summaries[PINHOLE.name]
+    tests = []
+    while True:
+        trials = [_test(s, current, sigma_px, options) for s in summaries.values()
+                  if s.model.nests(current.model)]
+        tests.extend(trials)
+        good = [t for t in trials if t.accepted]
+        if not good:
+            return ModelChoice(current.model.name, tuple(tests))
+        best = min(good, key=lambda t: (t.log_p, summaries[t.model].n_params))
+        current = summaries[best.model]

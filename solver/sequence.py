@@ -1,0 +1,201 @@
+"""``solve_sequence``: a docking run of one camera unit solved at once (self-calibration).
+
+A docking run is filmed by one camera whose pose and zoom stay fixed while B approaches A, and A
+is fixed in the world: every frame shares the camera's intrinsics (f, principal point,
+distortion) and, physically, the camera's pose relative to A. The run is solved as one
+least-squares problem (top layer of the solver, beside :mod:`solver.docking`):
+
+1. each frame is fitted on its own with the pinhole joint estimator (:func:`solver.fit_joint`,
+   closed form + LM) for a start;
+2. the starts are merged: one focal (the median), one cam_from_a (chordal mean of the rotations,
+   mean of the translations rescaled to that focal), each frame's cam_from_b rescaled likewise;
+3. the one LM (:func:`solver.refine.refine_blocks`) refines, over the 2F residual blocks, the
+   pinhole first and then the requested camera model (``"auto"``: the model the run's data
+   determine, :mod:`solver.model_choice`) with shared intrinsics, one cam_from_a for the run
+   (``share_cam_from_a``, the default; else one per frame) and one cam_from_b per frame.
+
+The covariance sigma^2 (J^T J)^-1 of every parameter comes from the same Jacobian; each frame's
+``d_from_b`` gets its covariance by first-order propagation from its block (with a shared
+cam_from_a the frames' errors are correlated through it: the per-frame covariances are
+marginals).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dockfactory.solver.camera_models import PINHOLE, Intrinsics, check_model_name
+from dockfactory.solver.checks import as_principal_point, check_sigma
+from dockfactory.solver.docking import DockingResult
+from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera, SolverError
+from dockfactory.solver.joint import fit_joint, joint_fit_from_model
+from dockfactory.solver.layout_points import (
+    LayoutArrays,
+    checked_correspondences,
+    section_arrays,
+)
+from dockfactory.solver.lie import project_to_so3
+from dockfactory.solver.model_choice import ModelChoice
+from dockfactory.solver.model_fit import (
+    ModelFit,
+    check_model_focal,
+    fit_camera_model,
+    refine_model,
+)
+from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
+from dockfactory.solver.refine import Block
+
+__all__ = ["SequenceResult", "solve_sequence"]
+
+
+@dataclass(frozen=True)
+class SequenceResult:
+    """Result of :func:`solve_sequence`.
+
+    - ``frames``: one :class:`solver.DockingResult` per input frame (pose of B in A, its
+      covariance (6, 6), the frame's ``covariance_params`` block over (w_A, t_A, w_B, t_B, f,
+      *free), reprojection RMS per section, and the run's shared intrinsics);
+    - ``camera_model`` (chosen for "auto"), ``focal_px``, ``intrinsics`` {"cx", "cy", "k1",
+      "k2", "p1", "p2"}, ``intrinsics_std`` {"focal_px", "cx", ...} (0.0 for fixed ones),
+      ``intrinsics_covariance`` (1 + e, 1 + e) over (f, *free);
+    - ``cam_from_a`` (4, 4): the shared camera pose (the first frame's when not shared);
+      ``share_cam_from_a``; ``sigma_px`` the noise std used; ``rmse_px`` the run's
+      reprojection RMS (px, per point); LM ``iterations``; ``model_choice`` (for "auto").
+    """
+
+    frames: tuple
+    camera_model: str
+    focal_px: float
+    intrinsics: dict
+    intrinsics_std: dict
+    intrinsics_covariance: np.ndarray
+    cam_from_a: np.ndarray
+    share_cam_from_a: bool
+    sigma_px: float
+    rmse_px: float
+    iterations: int
+    model_choice: ModelChoice | None = None
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """One frame's validated points: ``rows`` / ``p3`` / ``p2`` per section (as
+    :func:`solver.layout_points.section_arrays`), its marker ``ids`` (N,)."""
+
+    ids: tuple
+    rows: dict
+    p3: dict
+    p2: dict
+
+
+def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINHOLE.name,
+                   sigma_px: float | None = None, share_cam_from_a: bool = True,
+                   options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
+    """Poses of B in A for every frame of one docking run, with the camera's intrinsics
+    estimated once for the run (see the module docstring).
+
+    ``markers``: the layout (as :func:`solver.solve_docking`); ``principal_point`` (2,) px: the
+    assumed principal point (the image centre), the start of an estimated one; ``frames``: a
+    sequence of F >= 1 correspondences, each a dict marker id -> (u, v) px or a pair
+    (marker_ids (N,), points_2d (N, 2)), every section with at least 4 points per frame;
+    ``camera_model``: a name of :data:`solver.camera_models.MODELS` or "auto";
+    ``sigma_px``: the pixel noise std, or None (estimated from the residuals);
+    ``share_cam_from_a``: one camera pose relative to A for the whole run (the camera and A
+    are fixed) or one per frame. Returns a :class:`SequenceResult`; raises a SolverError
+    subclass (bad input, too few points, no valid camera, an unobservable focal).
+    """
+    layout = LayoutArrays.of(markers)
+    pp = as_principal_point(principal_point)
+    sigma = check_sigma(sigma_px)
+    model_name = check_model_name(camera_model)
+    parsed = _parse_frames(layout, frames)
+    pin = _pinhole_run(parsed, pp, sigma, bool(share_cam_from_a), options)
+    blocks = _blocks(parsed, bool(share_cam_from_a))
+    mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
+    check_model_focal(mf, options.refine)
+    return _result(mf, parsed, bool(share_cam_from_a))
+
+
+def _parse_frames(layout: LayoutArrays, frames) -> list:
+    """Validated :class:`_Frame` per input frame (InvalidSolverInput for an empty run)."""
+    try:
+        frames = list(frames)
+    except TypeError:
+        raise InvalidSolverInput("frames: expected a sequence of correspondences") from None
+    if not frames:
+        raise InvalidSolverInput("frames: a docking run needs at least one frame")
+    out = []
+    for k, corr in enumerate(frames):
+        try:
+            ids, uv = checked_correspondences(layout, corr)
+            rows, p3, p2 = section_arrays(layout, ids, np.ones(len(ids), dtype=bool), uv)
+        except SolverError as exc:
+            raise type(exc)(f"frame {k}: {exc}") from None
+        out.append(_Frame(tuple(ids), rows, p3, p2))
+    return out
+
+
+def _blocks(parsed, share: bool) -> tuple:
+    """Residual blocks A, B of every frame; poses: [A, B_0, B_1, ...] when shared, else
+    [A_0, B_0, A_1, B_1, ...]."""
+    out = []
+    for k, fr in enumerate(parsed):
+        ia, ib = _pose_indices(k, share)
+        out += [Block(fr.p3["A"], fr.p2["A"], ia), Block(fr.p3["B"], fr.p2["B"], ib)]
+    return tuple(out)
+
+
+def _pose_indices(k: int, share: bool) -> tuple:
+    return (0, k + 1) if share else (2 * k, 2 * k + 1)
+
+
+def _pinhole_run(parsed, pp, sigma, share: bool, options: DockingOptions) -> ModelFit:
+    """Per-frame pinhole fits merged into one start, refined as one pinhole run."""
+    fits = []
+    for fr in parsed:
+        try:
+            fits.append(fit_joint(fr.p3["A"], fr.p2["A"], fr.p3["B"], fr.p2["B"], pp, None,
+                                  options=options.refine))
+        except SolverError:
+            fits.append(None)
+    good = [k for k, f in enumerate(fits) if f is not None]
+    if not good:
+        raise NoValidCamera("no frame of the run has a valid pinhole start")
+    f0 = float(np.median([fits[k].focal_px for k in good]))
+    scale = {k: f0 / fits[k].focal_px for k in good}
+    rot_a = project_to_so3(sum(fits[k].cam_from_a[:3, :3] for k in good))
+    t_a = np.mean([fits[k].cam_from_a[:3, 3] * scale[k] for k in good], axis=0)
+    poses = [] if not share else [(rot_a, t_a)]
+    for k in range(len(parsed)):
+        src = min(good, key=lambda j: abs(j - k))       # nearest frame with a start
+        cb = fits[src].cam_from_b
+        if not share:
+            poses.append((rot_a, t_a))
+        poses.append((cb[:3, :3], cb[:3, 3] * scale[src]))
+    return refine_model(_blocks(parsed, share), poses, Intrinsics.pinhole(f0, pp), PINHOLE,
+                        sigma, options.refine)
+
+
+def _result(mf: ModelFit, parsed, share: bool) -> SequenceResult:
+    """Per-frame DockingResults and the run's intrinsics from the run's model fit."""
+    out, row = [], 0
+    for k, fr in enumerate(parsed):
+        na, nb = 2 * len(fr.rows["A"]), 2 * len(fr.rows["B"])
+        ia, ib = _pose_indices(k, share)
+        fit = joint_fit_from_model(mf, slice(row, row + na), slice(row + na, row + na + nb),
+                                   ia, ib)
+        row += na + nb
+        n = len(fr.ids)
+        out.append(DockingResult.from_fit(fit, fr.ids, np.ones(n, dtype=bool),
+                                          np.zeros(n, dtype=bool)))
+    i0 = mf.focal_index
+    res = mf.refinement.residuals
+    rot, t = mf.poses[0]
+    cam_a = np.eye(4)
+    cam_a[:3, :3], cam_a[:3, 3] = rot, t
+    return SequenceResult(tuple(out), mf.model.name, float(mf.intrinsics.focal_px),
+                          mf.intrinsics.values(), mf.intrinsics_std(),
+                          mf.covariance[i0:, i0:].copy(), cam_a, share, mf.sigma_px,
+                          float(np.sqrt(2.0 * (res @ res) / res.size)),
+                          mf.refinement.iterations, mf.choice)
