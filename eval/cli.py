@@ -21,6 +21,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
 from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
@@ -167,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_factory_commands(sub)
     add_eval_commands(sub)
     add_detector_commands(sub)
+    add_measure_command(sub)
     return p
 
 

@@ -64,19 +64,28 @@ def detection_arrays(dets: list[dict], min_score: float):
 
 
 def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
-              refined=None) -> dict:
+              refined=None, camera_model: str = "pinhole") -> dict:
     try:
         res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px,
-                            boxes=boxes, refined=refined)
+                            boxes=boxes, refined=refined, camera_model=camera_model)
     except SolverError as exc:
         return {"ok": False, "reason": str(exc), "category": failure_category(exc)}
+    return pose_record(res, int(len(cls)))
+
+
+def pose_record(res, n_detections: int) -> dict:
+    """The poses-file record of a solved frame (a solver.DockingResult)."""
     used = [i for i, ok in zip(res.marker_ids, res.inliers) if ok and i is not None]
     rejected = [i for i, ok in zip(res.marker_ids, res.inliers) if not ok and i is not None]
-    return {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),
-            "pose": res.pose(), "focal_px": res.focal_px,
-            "covariance": res.covariance.tolist(), "rmse_px": res.rmse_px, "marker_ids": used,
-            "n_markers": {"A": sum(i.startswith("A") for i in used), "B": sum(i.startswith("B") for i in used)},
-            "rejected_ids": rejected, "n_detections": int(len(cls))}
+    rec = {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),
+           "pose": res.pose(), "focal_px": res.focal_px,
+           "covariance": res.covariance.tolist(), "rmse_px": res.rmse_px, "marker_ids": used,
+           "n_markers": {"A": sum(i.startswith("A") for i in used), "B": sum(i.startswith("B") for i in used)},
+           "rejected_ids": rejected, "n_detections": n_detections}
+    if res.camera_model != "pinhole":
+        rec.update(camera_model=res.camera_model, intrinsics=dict(res.intrinsics),
+                   intrinsics_std=dict(res.intrinsics_std))
+    return rec
 
 
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,

@@ -1,0 +1,219 @@
+"""``dockfactory measure``: the pose of B in A from real images, without labels.
+
+PNG/JPEG images (files or folders) -> detector -> identification -> solve (the chosen camera
+model, per frame, or self-calibrated over the whole set as one docking run of one camera) ->
+OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT/overlays/.
+
+Every image given gets a record: a file that is missing or unreadable, or a frame without a pose,
+is reported with its reason and category, never dropped; the exit status is 1 when any image has
+no pose. The principal point assumed (and the start of an estimated one) is each image's centre.
+With ``--self-calibrate sequence`` the images are one camera unit (one docking run: the camera,
+its zoom and A fixed, B moving): each frame is identified on its own, then every identified frame
+is solved jointly with shared intrinsics (solver.solve_sequence).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.layout_file import read_layout_file
+from dockfactory.core.names import MIN_SCORE, POSE_NAMES
+from dockfactory.eval.measure_overlay import draw_measurement
+from dockfactory.eval.solve_frames import detection_arrays, failure_category, pose_record
+from dockfactory.solver import SolverError, solve_docking
+from dockfactory.solver.sequence import solve_sequence
+
+MEASURE_FORMAT = "dockfactory.measure/1"
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+SELF_CALIBRATE = ("frame", "sequence")
+
+
+@dataclass
+class Frame:
+    """One image on its way through measure: its record and what the overlay needs."""
+    index: int
+    path: Path
+    record: dict
+    image: np.ndarray | None = None
+    detections: list = field(default_factory=list)
+    principal_point: tuple = (0.0, 0.0)
+    used_points: dict = field(default_factory=dict)   # marker id -> (u, v) the frame's fit used
+
+
+def collect_images(items) -> list[Path]:
+    """The images named by ``items`` (files, or folders whose PNG/JPEG files are taken in name
+    order), each once; a path that does not exist stays in the list (reported per image)."""
+    out, seen = [], set()
+    for item in map(Path, items):
+        if item.is_dir():
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+            if not found:
+                raise DockfactoryError(f"{item}: no PNG or JPEG images in this folder")
+        else:
+            found = [item]
+        for p in found:
+            key = p.resolve()
+            if key not in seen:
+                seen.add(key)
+                out.append(p)
+    if not out:
+        raise DockfactoryError("measure: no images given")
+    return out
+
+
+def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -> str:
+    """The model: as given, else "auto" when self-calibrating, else the paper's "pinhole"."""
+    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
+        raise DockfactoryError(f"--self-calibrate: expected frame or sequence, got {self_calibrate!r}")
+    if camera_model is not None:
+        from dockfactory.solver.camera_models import MODELS
+        if camera_model not in (*MODELS, "auto"):
+            raise DockfactoryError(f"--camera-model: {camera_model!r} is not one of {', '.join((*MODELS, 'auto'))}")
+        return camera_model
+    return "auto" if self_calibrate else "pinhole"
+
+
+def read_image(path: Path) -> tuple[np.ndarray | None, dict | None]:
+    """(RGB image, None) or (None, failure record) for a missing or unreadable file."""
+    if not path.is_file():
+        return None, {"ok": False, "reason": f"{path}: no such image file", "category": "unreadable image"}
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        return None, {"ok": False, "reason": f"{path}: not a readable PNG or JPEG image",
+                      "category": "unreadable image"}
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None
+
+
+def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float) -> Frame:
+    """Detect and solve one image (its own camera model fit)."""
+    image, failed = read_image(path)
+    if failed is not None:
+        return Frame(index, path, failed)
+    h, w = image.shape[:2]
+    frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
+    t0 = time.perf_counter()
+    frame.detections = detector.detect(image)
+    t1 = time.perf_counter()
+    cls, uv, boxes, refined = detection_arrays(frame.detections, min_score)
+    try:
+        res = solve_docking(markers, frame.principal_point, detections=(cls, uv), boxes=boxes, refined=refined,
+                            camera_model=camera_model)
+        frame.record = {**pose_record(res, int(len(cls))), "camera_model": res.camera_model}
+        frame.used_points = {mid: (float(uv[k, 0]), float(uv[k, 1]))
+                             for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers)) if ok and mid}
+    except SolverError as exc:
+        frame.record = {"ok": False, "reason": str(exc), "category": failure_category(exc)}
+    t2 = time.perf_counter()
+    frame.record["image_size"] = [w, h]
+    frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
+    return frame
+
+
+def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str) -> dict:
+    """Solve the identified frames jointly (one camera unit); their records are replaced by the
+    joint ones. Returns the run's record (shared intrinsics or the reason it failed)."""
+    solved = [f for f in frames if f.record["ok"]]
+    if not solved:
+        return {"ok": False, "reason": "no frame was identified", "frames": 0}
+    sizes = {tuple(f.record["image_size"]) for f in solved}
+    if len(sizes) > 1:
+        raise DockfactoryError(f"--self-calibrate sequence: the images are one camera's, but their sizes differ "
+                               f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))})")
+    corr = [f.used_points for f in solved]
+    t0 = time.perf_counter()
+    try:
+        run = solve_sequence(markers, solved[0].principal_point, corr, camera_model=camera_model)
+    except SolverError as exc:
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc), "frames": len(solved)}
+    ms = 1000 * (time.perf_counter() - t0) / len(solved)
+    for f, res in zip(solved, run.frames):
+        timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
+        f.record = {**pose_record(res, f.record["n_detections"]), "camera_model": run.camera_model,
+                    "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
+                    "image_size": f.record["image_size"], "timing_ms": timing, "self_calibrated": "sequence"}
+    return {"ok": True, "frames": len(solved), "camera_model": run.camera_model, "focal_px": run.focal_px,
+            "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
+            "rmse_px": run.rmse_px, "sigma_px": run.sigma_px}
+
+
+CSV_FIELDS = (["image", "ok", "category", "reason"] + list(POSE_NAMES) + [f"std_{n}" for n in POSE_NAMES]
+              + ["focal_px", "camera_model", "cx", "cy", "k1", "k2", "p1", "p2", "rmse_px_a", "rmse_px_b",
+                 "n_detections", "detect_ms", "solve_ms"])
+
+
+def csv_text(frames: list[Frame]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, CSV_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for f in frames:
+        r = f.record
+        row = {"image": str(f.path), "ok": r["ok"], "category": r.get("category", ""), "reason": r.get("reason", "")}
+        if r["ok"]:
+            std = np.sqrt(np.diag(np.array(r["covariance"])))
+            row.update({n: r["pose"][n] for n in POSE_NAMES})
+            row.update({f"std_{n}": float(s) for n, s in zip(POSE_NAMES, std)})
+            row.update(focal_px=r["focal_px"], camera_model=r["camera_model"], rmse_px_a=r["rmse_px"]["A"],
+                       rmse_px_b=r["rmse_px"]["B"], n_detections=r["n_detections"])
+            row.update({k: v for k, v in r.get("intrinsics", {}).items() if k in CSV_FIELDS})
+        if "timing_ms" in r:
+            row.update(detect_ms=r["timing_ms"]["detect"], solve_ms=r["timing_ms"]["solve"])
+        w.writerow(row)
+    return buf.getvalue()
+
+
+def write_outputs(out: Path, frames: list[Frame], header: dict, markers) -> None:
+    """measurements.json, measurements.csv and the overlays (each written atomically)."""
+    for f in frames:
+        if f.image is not None:
+            draw_measurement(f.image, f.detections, f.record, markers,
+                             out / "overlays" / f"{f.index:05d}_{f.path.stem}.png")
+    records = [{"image": str(f.path), **f.record} for f in frames]
+    write_json_atomic(out / "measurements.json", {**header, "images": records}, indent=None)
+    write_text_atomic(out / "measurements.csv", csv_text(frames))
+
+
+def measure(images, layout_path, weights, out, camera_model: str | None = None,
+            self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None) -> dict:
+    """Measure every image (see the module docstring); returns the summary written to
+    OUT/measurements.json (without the per-image records)."""
+    from dockfactory.detector.infer import MarkerDetector
+    paths = collect_images(images)
+    markers = read_layout_file(layout_path)
+    model = resolve_camera_model(camera_model, self_calibrate)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "measure"):
+        detector = MarkerDetector(weights, conf_threshold=min_score)
+        t0 = time.perf_counter()
+        frames = []
+        per_frame = "pinhole" if self_calibrate == "sequence" else model   # the run fits the intrinsics
+        for i, p in enumerate(paths):
+            frames.append(measure_frame(detector, markers, i, p, per_frame, min_score))
+            if progress:
+                progress(i + 1, len(paths))
+        run = self_calibrate_sequence(frames, markers, model) if self_calibrate == "sequence" else None
+        wall = time.perf_counter() - t0
+        header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
+        write_outputs(out, frames, header, markers)
+    return header
+
+
+def _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run) -> dict:
+    n_ok = sum(f.record["ok"] for f in frames)
+    return {"format": MEASURE_FORMAT, "layout": str(layout_path), "layout_sha256": sha256_file(layout_path),
+            "weights": str(weights), "weights_sha256": sha256_file(weights), "camera_model": model,
+            "self_calibrate": self_calibrate, "min_score": min_score,
+            "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
+            "principal_point": "each image's centre ((W - 1) / 2, (H - 1) / 2), the start of an estimated one",
+            "images_total": len(paths), "images_with_pose": n_ok,
+            "failures": {c: sum(f.record.get("category") == c for f in frames if not f.record["ok"])
+                         for c in sorted({f.record.get("category") for f in frames if not f.record["ok"]})},
+            "sequence": run, "wall_s": round(wall, 3), "frames_per_s": round(len(paths) / max(wall, 1e-9), 2)}

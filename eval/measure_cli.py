@@ -1,0 +1,48 @@
+"""``dockfactory measure``: the command line of eval.measure (torch is imported inside the command)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import MIN_SCORE
+from dockfactory.core.resources import shipped_weights
+from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
+from dockfactory.eval.measure import SELF_CALIBRATE
+
+
+def cmd_measure(args) -> int:
+    weights = Path(args.weights) if args.weights else shipped_weights()
+    if not weights.is_file():
+        raise DockfactoryError(f"--weights: {weights}: no such file")
+    _torch(args.threads)
+    from dockfactory.eval.measure import measure
+
+    def progress(done, total):
+        if not args.quiet:
+            print(f"\rmeasure {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
+    s = measure(args.images, args.layout, weights, args.out, camera_model=args.camera_model,
+                self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress)
+    fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
+    print(f"{s['images_with_pose']} of {s['images_total']} images with a pose ({s['camera_model']} camera"
+          + (f", self-calibrated per {s['self_calibrate']}" if s["self_calibrate"] else "") + f"); "
+          f"{s['frames_per_s']} frames/s" + (f"; no pose: {fails}" if fails else "")
+          + f" -> {Path(args.out) / 'measurements.json'}")
+    return 0 if s["images_with_pose"] == s["images_total"] else 1
+
+
+def add_subcommand(sub) -> None:
+    m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
+    m.add_argument("images", nargs="+", help="PNG/JPEG files or folders of them")
+    m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
+    m.add_argument("--weights", help="detector weights (default: the shipped ones)")
+    m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
+                                          "(default: pinhole; auto with --self-calibrate)")
+    m.add_argument("--self-calibrate", choices=SELF_CALIBRATE,
+                   help="frame: choose the camera model per image; sequence: the images are one camera's "
+                        "docking run, solved with shared intrinsics")
+    m.add_argument("--min-score", type=_unit_float, default=MIN_SCORE)
+    m.add_argument("--threads", type=_positive_int, default=None)
+    m.add_argument("--quiet", action="store_true")
+    m.add_argument("--out", required=True, help="output folder")
+    m.set_defaults(func=cmd_measure)

@@ -1,0 +1,59 @@
+"""The overlay of one measured image: detections, the layout reprojected with the solved pose and
+camera (distortion included), and the pose in text."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from dockfactory.core.distortion import distort_normalized
+from dockfactory.core.geometry import transform_points
+from dockfactory.core.io import write_bytes_atomic
+
+DET_BGR = {0: (40, 40, 255), 1: (255, 140, 30)}     # detections: red for A, blue for B
+PROJ_BGR = (60, 230, 60)                             # reprojected layout markers
+
+
+def project_layout(record: dict, markers) -> np.ndarray:
+    """(N, 2) pixels of every layout marker centre under the record's pose and camera."""
+    cam_from_a = np.array(record["cam_from_a"])
+    a_from_b = np.array(record["d_from_b"])
+    pts = np.array([transform_points(cam_from_a if m.section == "A" else cam_from_a @ a_from_b,
+                                     np.array([m.center_mm]))[0] for m in markers])
+    intr = record.get("intrinsics") or {}
+    size = record["image_size"]
+    cx, cy = intr.get("cx", (size[0] - 1) / 2.0), intr.get("cy", (size[1] - 1) / 2.0)
+    coeffs = [intr.get(k, 0.0) for k in ("k1", "k2", "p1", "p2")]
+    xy = distort_normalized(pts[:, :2] / pts[:, 2:3], coeffs)
+    return xy * record["focal_px"] + [cx, cy]
+
+
+def _text_lines(record: dict, name: str) -> list[str]:
+    if not record["ok"]:
+        return [name, f"NO POSE ({record.get('category', '')}): {record.get('reason', '')}"[:110]]
+    p, cov = record["pose"], np.array(record["covariance"])
+    std = np.sqrt(np.diag(cov))
+    return [name, f"X {p['x_mm']:.2f} +- {std[0]:.2f} mm   Y {p['y_mm']:.2f} +- {std[1]:.2f} mm   "
+                  f"alpha {p['alpha_deg']:.3f} +- {std[3]:.3f} deg",
+            f"camera {record.get('camera_model', 'pinhole')}  f {record['focal_px']:.0f} px  "
+            f"rms A {record['rmse_px']['A']:.2f} B {record['rmse_px']['B']:.2f} px"]
+
+
+def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, markers, out) -> None:
+    """Write the overlay PNG ``out`` (atomically)."""
+    img = np.ascontiguousarray(image_rgb[..., ::-1])
+    scale = max(1, round(max(img.shape[:2]) / 640))
+    for d in detections:
+        c = tuple(int(round(v)) for v in d["center_px"])
+        cv2.circle(img, c, 6 * scale, DET_BGR.get(d["class_id"], (255, 255, 255)), scale, cv2.LINE_AA)
+    if record["ok"]:
+        for u, v in project_layout(record, markers):
+            if np.isfinite(u) and np.isfinite(v):
+                cv2.drawMarker(img, (int(round(u)), int(round(v))), PROJ_BGR, cv2.MARKER_CROSS, 10 * scale, scale)
+    for k, line in enumerate(_text_lines(record, str(out.stem))):
+        y = (18 + 20 * k) * scale
+        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (0, 0, 0), 3 * scale, cv2.LINE_AA)
+        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255), scale, cv2.LINE_AA)
+    ok, png = cv2.imencode(".png", img)
+    if not ok:
+        raise RuntimeError(f"{out}: PNG encoding failed")
+    write_bytes_atomic(out, png.tobytes())

@@ -1,0 +1,103 @@
+"""dockfactory measure: real-image entry point. On a painted 1280 x 960 dataset (tests/pipeline_data.py,
+no Blender) it gives the same poses as detect + solve on the same images; bad images are reported
+per image, never dropped; bad input is a one-line error (exit 2)."""
+import csv
+import json
+
+import pytest
+
+from dockfactory.eval.cli import main
+
+CONFIG = """
+[dataset]
+name = "measure-test"
+seed = 11
+frames = 4
+train_fraction = 0.5
+
+[conditions]
+normal = 1
+
+[repeatability]
+poses = 1
+captures = 2
+
+[image]
+width = 1280
+height = 960
+
+[render]
+keep_exr = false
+"""
+
+
+@pytest.fixture(scope="module")
+def big(tmp_path_factory):
+    from pipeline_data import write_painted_dataset
+    root = tmp_path_factory.mktemp("measure")
+    (root / "big.toml").write_text(CONFIG)
+    write_painted_dataset(root / "ds", root / "big.toml")
+    return root / "ds"
+
+
+def test_bad_input_is_one_line_exit_2(big, tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    cases = [([str(empty), "--layout", str(big / "layout.json")], "no PNG or JPEG"),
+             ([str(big / "images"), "--layout", str(tmp_path / "nope.json")], "layout file not found"),
+             ([str(big / "images"), "--layout", str(big / "layout.json"), "--camera-model", "fisheye"], "fisheye"),
+             ([str(big / "images"), "--layout", str(big / "layout.json"), "--weights", str(tmp_path / "w.pt")],
+              "no such file")]
+    for argv, words in cases:
+        assert main(["measure", *argv, "--out", str(tmp_path / "out"), "--quiet"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("dockfactory: error:") and words in err[0], err
+    assert not (tmp_path / "out" / "measurements.json").exists()
+
+
+def _poses(doc):
+    return {r["image"].rsplit("/", 1)[-1][:-4]: r for r in doc["images"]}
+
+
+@pytest.mark.slow   # detector on 6 images of 1280 x 960, three times (measure, detect, and two modes)
+def test_measure_gives_the_poses_of_detect_and_solve(big, tmp_path, capsys):
+    out = tmp_path / "m"
+    assert main(["measure", str(big / "images"), "--layout", str(big / "layout.json"), "--out", str(out),
+                 "--threads", "1", "--quiet"]) == 0
+    doc = json.loads((out / "measurements.json").read_text())
+    assert doc["images_total"] == doc["images_with_pose"] == 6
+    dets, poses = tmp_path / "d.json", tmp_path / "p.json"
+    assert main(["detect", str(big), "--split", "all", "--out", str(dets), "--threads", "1", "--quiet"]) == 0
+    assert main(["solve", str(big), "--detections", str(dets), "--split", "train,val,test,repeat",
+                 "--out", str(poses)]) == 0
+    solved = json.loads(poses.read_text())["frames"]
+    measured = _poses(doc)
+    assert set(measured) == set(solved)
+    for fid, rec in solved.items():
+        m = measured[fid]
+        assert m["ok"] and rec["ok"] and m["marker_ids"] == rec["marker_ids"]
+        for k, v in rec["pose"].items():
+            assert abs(m["pose"][k] - v) < 1e-9, (fid, k)
+        assert abs(m["focal_px"] - rec["focal_px"]) < 1e-6
+    rows = list(csv.DictReader((out / "measurements.csv").open()))
+    assert len(rows) == 6 and all(r["ok"] == "True" for r in rows)
+    assert len(list((out / "overlays").glob("*.png"))) == 6
+
+
+@pytest.mark.slow
+def test_bad_images_are_reported_not_dropped_and_self_calibration_runs(big, tmp_path, capsys):
+    broken = tmp_path / "broken.png"
+    broken.write_bytes(b"not a png")
+    images = sorted(str(p) for p in (big / "images").glob("*.png"))
+    out = tmp_path / "m"
+    rc = main(["measure", *images, str(broken), str(tmp_path / "missing.jpg"), "--layout", str(big / "layout.json"),
+               "--self-calibrate", "sequence", "--out", str(out), "--threads", "1", "--quiet"])
+    assert rc == 1   # two images have no pose
+    doc = json.loads((out / "measurements.json").read_text())
+    assert doc["images_total"] == 8 and doc["images_with_pose"] == 6
+    assert doc["failures"] == {"unreadable image": 2}
+    assert doc["sequence"]["ok"] and doc["sequence"]["frames"] == 6
+    recs = _poses(doc)
+    assert recs["broken"]["reason"].endswith("not a readable PNG or JPEG image")
+    assert all(r.get("self_calibrated") == "sequence" for r in doc["images"] if r["ok"])
+    assert len(list((out / "overlays").glob("*.png"))) == 6
