@@ -20,6 +20,7 @@ from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
+from dockfactory.eval.envelope import EnvelopeGrid
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
 from dockfactory.eval.pipeline import run_pipeline
@@ -80,7 +81,8 @@ def cmd_evaluate(args) -> int:
     check_min_score(args.min_score)
     spec = load_acceptance(args.acceptance or default_acceptance())
     ds = Dataset.open(args.dataset)   # every byte checked: the judge reads only an intact dataset
-    metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score)
+    metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score,
+                             envelope=EnvelopeGrid() if args.envelope else None)
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {"detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])]})
     for c in metrics["acceptance"]["criteria"]:
@@ -141,6 +143,9 @@ def add_eval_commands(sub) -> None:
     e.add_argument("--detections")
     e.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
     e.add_argument("--min-score", type=float, default=MIN_SCORE)
+    e.add_argument("--envelope", action="store_true",
+                   help="also sweep principal-point offset and k1 on the test geometry: which uncalibrated "
+                        "cameras pass (reported, not gated; about 0.5 s per test frame)")
     e.add_argument("--out", required=True)
     e.set_defaults(func=cmd_evaluate)
 

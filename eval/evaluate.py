@@ -18,6 +18,7 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
 from dockfactory.eval.dataset_access import read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
+from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.generator.dataset import DatasetError
@@ -254,7 +255,11 @@ def criterion_passes(statistic: str, value, threshold) -> bool:
 
 
 def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None,
-             min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None) -> tuple[dict, list[dict]]:
+             min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None,
+             envelope: EnvelopeGrid | None = None) -> tuple[dict, list[dict]]:
+    """Metrics and per-frame rows of a poses file on the opened dataset ``ds``; with ``envelope``
+    also the tolerance envelope of uncalibrated cameras (eval.envelope) at the measured centre
+    noise (reported, not gated)."""
     poses = read_json_for(poses_path, "poses", ds)
     detections = None
     if detections_path:   # mAP needs every detection's box and score
@@ -284,6 +289,8 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
         o_rows = per_frame_rows(ds, o_poses, sigma, [s for s in evaluated_frames(ds) if s.split == "test"])
         metrics["oracle"] = {"sigma_px": sigma, "localization": localization_block(o_rows),
                              "failures": failures_block(o_rows)}
+    if envelope is not None:
+        metrics["camera_envelope"] = camera_envelope(ds, spec, float(sigma), envelope)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows
 

@@ -19,6 +19,7 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
 from dockfactory.eval.evaluate import criterion_passes
+from dockfactory.eval.report_envelope import ENVELOPE_SCHEMA, html_envelope, plot_envelope
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.version import generator_version, package_version
 
@@ -263,6 +264,7 @@ METRICS_SCHEMA = {
     "detection?": {"map50?": "num?", "map50_95?": "num?",
                    "per_class?": ("map", {"map50?": "num?", "map50_95?": "num?"}),
                    "pr_curves?": ("map", ("list", ("list", "num")))},
+    "camera_envelope?": ENVELOPE_SCHEMA,
     "acceptance": {"accepted": "bool",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
                                          "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"})},
@@ -450,6 +452,16 @@ def _html_detection(det: dict | None) -> list[str]:
             + "</table>"]
 
 
+def _html_camera_envelope(env: dict | None) -> list[str]:
+    if env is None:
+        return []
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    png = plot_envelope(plt, env, _fig_png)
+    return html_envelope(env, _img(png, "tolerance envelope: gated statistics over principal point offset and k1"))
+
+
 def _html_figures(figs: dict[str, str], worst: list[tuple[str, str]]) -> list[str]:
     parts = ["<h2>Plots</h2>"]
     for title, b64 in figs.items():
@@ -520,8 +532,8 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     worst = gallery(dataset_root, rows, poses, detections)
     parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics)
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
-             + _html_detection(metrics.get("detection")) + _html_figures(figs, worst)
-             + [_html_provenance(provenance)])
+             + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
+             + _html_figures(figs, worst) + [_html_provenance(provenance)])
     write_text_atomic(out_html, _html_document(parts))
     loc, est = metrics["localization"], metrics["estimation"]
     summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,

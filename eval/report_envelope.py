@@ -1,0 +1,49 @@
+"""The report's "Which cameras pass" section: the tolerance envelope (eval.envelope) as contours of
+each gated localization statistic over (principal-point offset, k1), with its threshold line."""
+from __future__ import annotations
+
+import html
+
+import numpy as np
+
+# what the report reads of metrics["camera_envelope"] (see eval.report.check_schema)
+ENVELOPE_SCHEMA = {"pp_offsets_px": ("list", "num"), "k1": ("list", "num"), "directions": "int", "frames": "int",
+                   "sigma_px": "num", "statistic": "str", "thresholds": ("map", "num"),
+                   "values": ("map", ("list", ("list", "num?"))), "passes": ("list", ("list", "bool")),
+                   "verdict": "str"}
+
+
+def plot_envelope(plt, env: dict, fig_png) -> str:
+    """One panel per gated component: filled contours of the statistic, the threshold as a line."""
+    comps = list(env["values"])
+    fig, axes = plt.subplots(1, len(comps), figsize=(4.2 * len(comps), 3.6), squeeze=False)
+    k1, pp = np.array(env["k1"]), np.array(env["pp_offsets_px"])
+    for ax, c in zip(axes[0], comps):
+        v = np.array([[np.nan if x is None else x for x in row] for row in env["values"][c]], dtype=float)
+        thr = env["thresholds"][c]
+        top = np.nanmax(v) if np.isfinite(v).any() else thr
+        cs = ax.contourf(k1, pp, np.minimum(v, 2 * max(top, thr)), levels=12, cmap="viridis")
+        fig.colorbar(cs, ax=ax, shrink=0.85)
+        if np.nanmin(v) < thr < np.nanmax(v):
+            ax.contour(k1, pp, v, levels=[thr], colors="red", linewidths=2)
+        ax.set_title(f"{c} {env['statistic']} (limit {thr:g}, red)", fontsize=9)
+        ax.set_xlabel("k1")
+        ax.set_ylabel("principal point offset (px)")
+    fig.tight_layout()
+    return fig_png(fig)
+
+
+def html_envelope(env: dict, img_html: str) -> list[str]:
+    passes = np.array(env["passes"], dtype=bool)
+    head = "".join(f"<th>k1 {k:g}</th>" for k in env["k1"])
+    body = "".join("<tr><th>" + f"{m:g} px" + "</th>" + "".join(
+        f"<td class='{'pass' if ok else 'fail'}'>{'pass' if ok else 'fail'}</td>" for ok in row) + "</tr>"
+        for m, row in zip(env["pp_offsets_px"], passes))
+    return ["<h2>Which cameras pass without calibration</h2>",
+            f"<p>{html.escape(env['verdict'])}.</p>",
+            f"<p>The test geometry of this dataset ({env['frames']} frames), its marker centres projected through "
+            f"cameras whose principal point is off centre (worst of {env['directions']} directions) and with radial "
+            f"distortion k1, plus {env['sigma_px']:.3g} px of centre noise, solved as the paper does (pinhole, "
+            f"principal point at the image centre). Outside the passing cells a camera needs self-calibration "
+            f"(<code>dockfactory measure --self-calibrate</code>).</p>",
+            f"<table><tr><th>principal point offset</th>{head}</tr>{body}</table>", img_html]
