@@ -7,7 +7,9 @@ scene update, Cycles, EXR read, sensor model, labels, PNG/EXR/JSON writes, hashi
 per condition: seconds per image (wall time of the job divided by frames, and the worker's
 per-frame total), the Cycles part (bpy.ops.render.render, which includes writing the scratch
 EXR) and the overhead fraction = (per-frame total - Cycles) / Cycles. The first frame of each
-worker (scene build, kernel warm-up) is excluded from the per-frame figures.
+worker (scene build, kernel warm-up) is excluded from the per-frame figures. ``lens`` is the
+resampling of a real camera's render canvas (0 for the pinhole cameras of this bench; the camera
+model's own cost: bench/render_camera_model.py).
 """
 from __future__ import annotations
 
@@ -69,7 +71,7 @@ def main() -> int:
           f"frames={n} (first frame per worker excluded)")
     print("The worker finishes frame k (sensor model, labels, writes) while Cycles renders frame k+1, so a")
     print("frame's post-processing is hidden when Cycles leaves CPU idle; s/image is the throughput.")
-    print(f"{'condition':10s} {'n':>3s} {'cycles s':>9s} {'update':>7s} {'read':>6s} {'sensor+lab':>10s} "
+    print(f"{'condition':10s} {'n':>3s} {'cycles s':>9s} {'update':>7s} {'read':>6s} {'lens':>6s} {'sensor+lab':>10s} "
           f"{'write':>6s} {'post cpu':>9s} {'cycles cpu':>10s}")
     all_t = []
     for cond in CONDITIONS + ("ALL",):
@@ -79,7 +81,7 @@ def main() -> int:
         if not ts:
             continue
         med = lambda k: statistics.median(t[k] for t in ts)  # noqa: E731
-        print(f"{cond:10s} {len(ts):3d} {med('cycles'):9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} "
+        print(f"{cond:10s} {len(ts):3d} {med('cycles'):9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} {med('lens'):6.3f} "
               f"{med('sensor_labels'):10.3f} {med('encode_write'):6.3f} {med('post_cpu'):9.3f} {med('cycles_cpu'):10.2f}")
     steady = [t for i, t in enumerate(timings) if i >= args.workers]
     ends = sorted(t["finished_at"] for t in steady)

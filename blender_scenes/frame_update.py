@@ -48,13 +48,30 @@ def _apply_render_settings(scene, frame: FrameScene) -> None:
     c.denoising_prefilter = rs.denoise_prefilter.upper()
 
 
+PARKED_FOCUS_M = 10.0     # depth of field off: Blender's values, never read by the render
+PARKED_F_NUMBER = 2.8
+
+
 def _apply_camera(h: SceneHandles, cam) -> None:
+    """Pose, the render canvas (the overscan a distorted camera is resampled from: resolution and
+    principal point) with the unit's physical focal length, and depth of field; every value set
+    on every frame."""
     h.camera.matrix_world = Matrix(blender_world_from_camera(cam.cam_from_d_array(), MM).tolist())
-    intr = blender_camera_intrinsics(cam.focal_px, cam.principal_point, cam.width, cam.height)
+    ox, oy, wc, hc = cam.canvas()
+    render = h.scene.render
+    render.resolution_x, render.resolution_y = wc, hc
+    # the sensor grows with the canvas so that the lens (mm) and with it the aperture stay the unit's
+    pp = (cam.principal_point[0] - ox, cam.principal_point[1] - oy)
+    intr = blender_camera_intrinsics(cam.focal_px, pp, wc, hc, cam.sensor_width_mm * wc / cam.width)
     h.camera.data.lens = intr["lens_mm"]
     h.camera.data.sensor_width = intr["sensor_width_mm"]
     h.camera.data.shift_x = intr["shift_x"]
     h.camera.data.shift_y = intr["shift_y"]
+    dof = h.camera.data.dof
+    on = cam.f_number > 0
+    dof.use_dof = on
+    dof.focus_distance = cam.focus_distance_mm * MM if on else PARKED_FOCUS_M
+    dof.aperture_fstop = cam.f_number if on else PARKED_F_NUMBER
 
 
 def _apply_lights(h: SceneHandles, frame: FrameScene) -> None:

@@ -37,6 +37,15 @@ MAX_BOUNCES = 1024              # Blender's limit on light path bounces
 # 1000 km, far beyond any docking scene, and sums, spans and products of config values stay finite
 # (a [-1e308, 1e308] range passed and then overflowed numpy's uniform sampler).
 MAX_MAGNITUDE = 1e9
+# Camera units (issue 11): a dataset holds at most this many physical cameras; lens values beyond
+# these bounds are not camera lenses (and the distortion model folds over inside the image).
+MAX_CAMERA_UNITS = 100
+MAX_PRINCIPAL_OFFSET = 0.25     # |principal point offset| <= this share of the image side
+MAX_RADIAL = 1.0                # |k1|, |k2|, |k3|
+MAX_TANGENTIAL = 0.05           # |p1|, |p2|
+MAX_ABERRATION_PX = 5.0         # |lateral chromatic aberration| at the image corner
+F_NUMBER_LIMITS = (0.5, 64.0)
+SENSOR_WIDTH_LIMITS_MM = (1.0, 100.0)
 
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
 CHALLENGING = ("low_light", "occlusion", "glare")
@@ -87,6 +96,35 @@ class CameraConfig:
     lateral_jitter_mm: float = 30.0       # max |offset| of the look-at point in X and Y
     focal_px: Range = (1200.0, 3000.0)    # zoom range; capped per frame so markers fit
     margin_px: float = 48.0               # markers keep this far from the image border
+
+
+@dataclass(frozen=True)
+class CameraUnitsConfig:
+    """Physical cameras. Each unit draws its lens once from these ranges with the dataset seed
+    (README, "Camera units"); the defaults are one ideal pinhole unit."""
+    count: int = 1                                   # frames are assigned to units from the seed
+    principal_offset_x_px: Range = (0.0, 0.0)        # principal point - image centre
+    principal_offset_y_px: Range = (0.0, 0.0)
+    k1: Range = (0.0, 0.0)                           # Brown-Conrady radial (OpenCV's k1, k2, k3)
+    k2: Range = (0.0, 0.0)
+    k3: Range = (0.0, 0.0)
+    p1: Range = (0.0, 0.0)                           # tangential (OpenCV's p1, p2)
+    p2: Range = (0.0, 0.0)
+    aberration_red_px: Range = (0.0, 0.0)            # red vs green, radial shift at the image corner
+    aberration_blue_px: Range = (0.0, 0.0)           # blue vs green
+    sensor_width_mm: float = 36.0                    # sets the aperture (focal mm / f-number)
+    depth_of_field: bool = False                     # Cycles depth of field
+    f_number: Range = (2.8, 8.0)
+    focus_error_mm: Range = (0.0, 0.0)               # focus distance = aimed distance + error
+    jpeg: bool = False                               # JPEG-encode the delivered image
+    jpeg_quality: tuple[int, int] = (85, 95)
+
+
+@dataclass(frozen=True)
+class RunsConfig:
+    """Docking runs: per camera unit the camera's pose and zoom are fixed and B approaches A."""
+    frames_per_run: int = 0          # 0: no runs (every frame has its own camera and pose)
+    x_end_mm: Range = (1.0, 5.0)     # where a run ends; it starts at the top of [pose] x_mm
 
 
 @dataclass(frozen=True)
@@ -175,6 +213,8 @@ class Config:
     repeatability: RepeatabilityConfig = field(default_factory=RepeatabilityConfig)
     image: ImageConfig = field(default_factory=ImageConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    camera_units: CameraUnitsConfig = field(default_factory=CameraUnitsConfig)
+    runs: RunsConfig = field(default_factory=RunsConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     sections: SectionsConfig = field(default_factory=SectionsConfig)
     markers: MarkersConfig = field(default_factory=MarkersConfig)
@@ -323,7 +363,8 @@ def _check_at_most(source, table, key, value, limit, why: str) -> None:
 
 def validate(cfg: Config, source: str = "<config>") -> None:
     """Reject impossible configs before anything is rendered or written (no frame is sampled)."""
-    for check in (_validate_numbers, _validate_dataset, _validate_image_camera, _validate_pose_sections, _validate_markers,
+    for check in (_validate_numbers, _validate_dataset, _validate_image_camera, _validate_camera_units,
+                  _validate_lens_extras, _validate_runs, _validate_pose_sections, _validate_markers,
                   _validate_render, _validate_sensor, _validate_occlusion_glare, _validate_labels_export):
         check(cfg, source)
 
@@ -376,6 +417,59 @@ def _validate_image_camera(cfg: Config, source: str) -> None:
     if 2 * c.margin_px >= min(im.width, im.height):
         raise _err(source, "camera", "margin_px", f"{c.margin_px} leaves no room in a "
                    f"{im.width}x{im.height} image")
+
+
+def _check_symmetric(source, table, key, rng, limit, name: str) -> None:
+    """A range inside [-limit, limit] (``name`` is the named bound)."""
+    _check_range(source, table, key, rng)
+    if max(abs(rng[0]), abs(rng[1])) > limit:
+        raise _err(source, table, key, f"{list(rng)} is outside [-{limit:g}, {limit:g}] ({name})")
+
+
+def _validate_camera_units(cfg: Config, source: str) -> None:
+    """[camera_units]: count, principal point, distortion and aberration ranges."""
+    u, t = cfg.camera_units, "camera_units"
+    if not 1 <= u.count <= MAX_CAMERA_UNITS:
+        raise _err(source, t, "count", f"must be in [1, {MAX_CAMERA_UNITS}] (MAX_CAMERA_UNITS), got {u.count}")
+    for key, side in (("principal_offset_x_px", cfg.image.width), ("principal_offset_y_px", cfg.image.height)):
+        _check_symmetric(source, t, key, getattr(u, key), MAX_PRINCIPAL_OFFSET * side,
+                         f"MAX_PRINCIPAL_OFFSET: {MAX_PRINCIPAL_OFFSET:g} of the image side")
+    for key in ("k1", "k2", "k3"):
+        _check_symmetric(source, t, key, getattr(u, key), MAX_RADIAL, "MAX_RADIAL")
+    for key in ("p1", "p2"):
+        _check_symmetric(source, t, key, getattr(u, key), MAX_TANGENTIAL, "MAX_TANGENTIAL")
+    for key in ("aberration_red_px", "aberration_blue_px"):
+        _check_symmetric(source, t, key, getattr(u, key), MAX_ABERRATION_PX, "MAX_ABERRATION_PX")
+
+
+def _validate_lens_extras(cfg: Config, source: str) -> None:
+    """[camera_units]: sensor, depth of field and JPEG."""
+    u, t = cfg.camera_units, "camera_units"
+    lo, hi = SENSOR_WIDTH_LIMITS_MM
+    if not lo <= u.sensor_width_mm <= hi:
+        raise _err(source, t, "sensor_width_mm", f"must be in [{lo:g}, {hi:g}], got {u.sensor_width_mm}")
+    lens_mm = cfg.camera.focal_px[0] * u.sensor_width_mm / cfg.image.width
+    if lens_mm < 1.0:
+        raise _err(source, t, "sensor_width_mm", f"{u.sensor_width_mm:g} mm makes the smallest focal ({cfg.camera.focal_px[0]:g} "
+                   f"px) a {lens_mm:.2f} mm lens, below Blender's 1 mm")
+    _check_range(source, t, "f_number", u.f_number, *F_NUMBER_LIMITS)
+    _check_range(source, t, "focus_error_mm", u.focus_error_mm)
+    nearest = cfg.camera.distance_mm[0]
+    if u.focus_error_mm[0] <= -0.5 * nearest:
+        raise _err(source, t, "focus_error_mm", f"{u.focus_error_mm[0]} would focus at or nearer than half of "
+                   f"the nearest camera distance ({nearest:g} mm)")
+    _check_range(source, t, "jpeg_quality", u.jpeg_quality, 1, 100)
+
+
+def _validate_runs(cfg: Config, source: str) -> None:
+    r = cfg.runs
+    if r.frames_per_run == 1 or not 0 <= r.frames_per_run <= MAX_FRAMES:
+        raise _err(source, "runs", "frames_per_run", f"must be 0 (no runs) or in [2, {MAX_FRAMES}], "
+                   f"got {r.frames_per_run}")
+    _check_range(source, "runs", "x_end_mm", r.x_end_mm, lo=0.0)
+    if r.x_end_mm[1] >= cfg.pose.x_mm[1]:
+        raise _err(source, "runs", "x_end_mm", f"{r.x_end_mm[1]} must be below the top of [pose] x_mm "
+                   f"({cfg.pose.x_mm[1]}), where a run starts")
 
 
 def _validate_pose_sections(cfg: Config, source: str) -> None:

@@ -9,14 +9,18 @@ Conventions (see README, "Conventions"):
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
+
+from dockfactory.core.distortion import coeffs_array, distortion_jacobian, undistort_pixels
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rotation_from_euler_deg", "euler_deg_from_rotation",
     "make_transform", "invert_transform", "transform_points", "pose_components",
     "transform_from_pose_components", "intrinsics", "project_points",
     "look_at_cam_from_world", "BLENDER_CAM_FROM_CV_CAM", "blender_world_from_camera",
-    "blender_camera_intrinsics", "check_array", "polygon_area_centroid",
+    "blender_camera_intrinsics", "check_array", "polygon_area_centroid", "render_canvas",
 ]
 
 
@@ -182,8 +186,10 @@ def blender_camera_intrinsics(focal_px: float, principal_point, width: int, heig
     return {
         "lens_mm": float(focal_px) * sensor_width_mm / width,
         "sensor_width_mm": sensor_width_mm,
-        "shift_x": (c[0] + 0.5 - width / 2.0) / side,
-        "shift_y": -(c[1] + 0.5 - height / 2.0) / side,
+        # a positive shift moves Blender's view window right (up): the optical axis, and with
+        # it the principal point, lands left of (below) the image centre
+        "shift_x": -(c[0] + 0.5 - width / 2.0) / side,
+        "shift_y": (c[1] + 0.5 - height / 2.0) / side,
     }
 
 
@@ -200,3 +206,65 @@ def polygon_area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
     cx = ((x + xn) * cross).sum() / (6 * a)
     cy = ((y + yn) * cross).sum() / (6 * a)
     return abs(float(a)), np.array([cx, cy])
+
+
+# ----------------------------------------------------------------------------- render canvas
+
+CANVAS_MARGIN_PX = 2        # beyond the farthest source position: the bilinear taps, rounding
+CANVAS_MAX_SCALE = 2.0      # a canvas side is at most this many image sides
+CANVAS_BORDER_STEP_PX = 4.0  # spacing of the border points whose sources bound the canvas
+
+
+def _border_pixels(width: int, height: int, step: float) -> np.ndarray:
+    """Points (N, 2) along the edges of the image [-0.5, W - 0.5] x [-0.5, H - 0.5], corners included."""
+    xs = np.append(np.arange(-0.5, width - 0.5, step), width - 0.5)
+    ys = np.append(np.arange(-0.5, height - 0.5, step), height - 0.5)
+    return np.concatenate([np.stack([xs, np.full_like(xs, -0.5)], 1),
+                           np.stack([xs, np.full_like(xs, height - 0.5)], 1),
+                           np.stack([np.full_like(ys, -0.5), ys], 1),
+                           np.stack([np.full_like(ys, width - 0.5), ys], 1)])
+
+
+def _check_folds(lo, hi, focal_px: float, c: np.ndarray, coeffs) -> None:
+    """The distortion keeps a positive Jacobian over the canvas (no fold: one source per pixel)."""
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 33), np.linspace(lo[1], hi[1], 33))
+    xy = (np.stack([gx.ravel(), gy.ravel()], 1) - c) / focal_px
+    j, _ = distortion_jacobian(xy, coeffs)
+    if np.min(np.linalg.det(j)) <= 0.0:
+        raise ValueError("render canvas: the lens distortion folds over inside the image "
+                         "(coefficients too strong for this field of view)")
+
+
+@lru_cache(maxsize=64)
+def _canvas(width: int, height: int, focal_px: float, principal_point: tuple, coeffs: tuple,
+            scales: tuple) -> tuple[int, int, int, int]:
+    c = np.asarray(principal_point, dtype=np.float64)
+    src = undistort_pixels(_border_pixels(width, height, CANVAS_BORDER_STEP_PX), focal_px, c, coeffs)
+    pts = np.concatenate([c + (src - c) / s for s in scales])
+    lo = np.floor(pts.min(0)).astype(int) - CANVAS_MARGIN_PX
+    hi = np.ceil(pts.max(0)).astype(int) + CANVAS_MARGIN_PX
+    size = hi - lo + 1
+    if np.any(size > CANVAS_MAX_SCALE * np.array([width, height])):
+        raise ValueError(f"render canvas: {size[0]}x{size[1]} px for a {width}x{height} image is above "
+                         f"{CANVAS_MAX_SCALE:g} times its size (distortion too strong)")
+    _check_folds(lo, hi, focal_px, c, coeffs)
+    return int(lo[0]), int(lo[1]), int(size[0]), int(size[1])
+
+
+def render_canvas(width: int, height: int, focal_px: float, principal_point, coeffs,
+                  scales=(1.0, 1.0, 1.0)) -> tuple[int, int, int, int]:
+    """The pinhole render (overscan) a distorted ``width`` x ``height`` image is resampled from.
+
+    Delivered pixel p shows the pinhole image (focal ``focal_px``, ``principal_point``) at
+    ``pp + (undistort(p) - pp) / s`` for each channel scale ``s`` of ``scales``; the canvas is the
+    smallest pixel-aligned rectangle that holds every such position of the image's border (the
+    distortion maps the border to the border: a diffeomorphism, checked to have no fold) plus
+    CANVAS_MARGIN_PX. Returns (offset_x, offset_y, canvas_width, canvas_height): canvas pixel
+    (i, j) is pinhole pixel (i + offset_x, j + offset_y); its principal point is
+    ``principal_point - offset``. Raises ValueError for a lens that folds or needs over
+    CANVAS_MAX_SCALE times the image.
+    """
+    c = check_array("principal_point", principal_point, (2,))
+    k = tuple(float(v) for v in coeffs_array(coeffs))
+    return _canvas(int(width), int(height), float(focal_px), (float(c[0]), float(c[1])), k,
+                   tuple(float(s) for s in scales))

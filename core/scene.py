@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dockfactory.core.geometry import intrinsics
+from dockfactory.core.distortion import N_COEFFS
+from dockfactory.core.geometry import intrinsics, render_canvas
 from dockfactory.core.layout import Marker
 
 Mat4 = tuple[tuple[float, ...], ...]
@@ -40,10 +41,23 @@ class FrameSpec:
     condition: str    # one of generator.config.CONDITIONS
     pose_index: int   # repeatability: static pose number (main frames: -1)
     capture: int      # repeatability: capture number (main frames: -1)
+    unit: int = 0     # the camera unit that takes the frame
+    run: int = -1     # docking run of the frame ([runs]; -1: not in a run)
+    run_frame: int = -1  # its place in the run (0 = the start, B farthest from A)
+
+
+NO_DISTORTION = (0.0,) * N_COEFFS
 
 
 @dataclass(frozen=True)
 class CameraModel:
+    """A frame's camera: pinhole K and pose, plus its unit's lens (defaults: an ideal camera).
+
+    Delivered pixel p (OpenCV pixels) shows what the pinhole K sees at the undistorted position of
+    p (``core.distortion``, OpenCV's Brown-Conrady model, coefficients in OpenCV's order); channel
+    c of it at ``pp + (that - pp) / channel_scales()[c]`` (lateral chromatic aberration: the red
+    and blue images are magnified about the principal point against the green one).
+    """
     width: int
     height: int
     focal_px: float
@@ -51,9 +65,43 @@ class CameraModel:
     cam_from_d: Mat4
     look_at_mm: Vec3       # the point on the seam the camera was aimed at (D)
     distance_mm: float     # camera centre to look_at_mm
+    unit: int = 0                                    # camera unit id
+    distortion: tuple[float, ...] = NO_DISTORTION    # k1, k2, p1, p2, k3 (OpenCV order)
+    aberration_px: tuple[float, float] = (0.0, 0.0)  # red, blue: radial shift vs green at the farthest corner
+    f_number: float = 0.0                            # 0: no depth of field (a pinhole aperture)
+    focus_distance_mm: float = 0.0                   # along the optical axis
+    sensor_width_mm: float = 36.0                    # physical sensor: focal mm = focal_px * this / width
+    jpeg_quality: int = 0                            # 0: delivered without JPEG encoding
 
     def k(self) -> np.ndarray:
         return intrinsics(self.focal_px, self.principal_point)
+
+    def corner_radius_px(self) -> float:
+        """Distance from the principal point to the farthest image corner (pixel-corner frame)."""
+        cx, cy = self.principal_point
+        return float(max(np.hypot(x - cx, y - cy) for x in (-0.5, self.width - 0.5)
+                         for y in (-0.5, self.height - 0.5)))
+
+    def channel_scales(self) -> tuple[float, float, float]:
+        """Magnification of the red, green and blue images about the principal point (green = 1)."""
+        r = self.corner_radius_px()
+        return (1.0 + self.aberration_px[0] / r, 1.0, 1.0 + self.aberration_px[1] / r)
+
+    def is_pinhole(self) -> bool:
+        """No distortion and no aberration: the render is the delivered image (no resampling)."""
+        return not any(self.distortion) and not any(self.aberration_px)
+
+    def canvas(self) -> tuple[int, int, int, int]:
+        """(offset_x, offset_y, width, height) of the pinhole render that covers every delivered
+        pixel: render pixel (i, j) is pinhole pixel (i + offset_x, j + offset_y) of this camera
+        (``core.geometry.render_canvas``); (0, 0, width, height) for a pinhole camera."""
+        if self.is_pinhole():
+            return 0, 0, self.width, self.height
+        return render_canvas(self.width, self.height, self.focal_px, self.principal_point,
+                             self.distortion, self.channel_scales())
+
+    def focal_mm(self) -> float:
+        return self.focal_px * self.sensor_width_mm / self.width
 
     def cam_from_d_array(self) -> np.ndarray:
         return np.array(self.cam_from_d)

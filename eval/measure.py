@@ -29,6 +29,7 @@ from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.measure_overlay import draw_measurement
 from dockfactory.eval.solve_frames import detection_arrays, failure_category, pose_record
 from dockfactory.solver import SolverError, solve_docking
+from dockfactory.solver.camera_models import MODELS
 from dockfactory.solver.sequence import solve_sequence
 
 MEASURE_FORMAT = "dockfactory.measure/1"
@@ -74,7 +75,6 @@ def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
         raise DockfactoryError(f"--self-calibrate: expected frame or sequence, got {self_calibrate!r}")
     if camera_model is not None:
-        from dockfactory.solver.camera_models import MODELS
         if camera_model not in (*MODELS, "auto"):
             raise DockfactoryError(f"--camera-model: {camera_model!r} is not one of {', '.join((*MODELS, 'auto'))}")
         return camera_model

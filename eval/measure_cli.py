@@ -8,7 +8,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
-from dockfactory.eval.measure import SELF_CALIBRATE
+from dockfactory.eval.measure import SELF_CALIBRATE, measure
 
 
 def cmd_measure(args) -> int:
@@ -16,7 +16,6 @@ def cmd_measure(args) -> int:
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
     _torch(args.threads)
-    from dockfactory.eval.measure import measure
 
     def progress(done, total):
         if not args.quiet:

@@ -9,6 +9,11 @@ cam_R_w2c / cam_t_w2c use D as the world; model frames are the section frames (A
 frame); translations in mm. bbox_obj / bbox_visib are [x, y, w, h] in BOP's pixel frame (pixel
 corners), counted on pixel centres; px_count_all is the section's silhouette (its convex body and
 flange, unoccluded), px_count_visib the pixels of the section in the index pass.
+cam_K is the label's K (its principal point, + 0.5 for BOP's pixel corners). BOP has no place
+for lens distortion: scene_camera_lens.json beside scene_camera.json holds, per image id, the
+camera unit and its distortion coefficients in OpenCV's order (k1, k2, p1, p2, k3), which map
+the pinhole image of cam_K to the delivered one (undistort the images or keypoints with them
+before using cam_K as a pinhole camera).
 """
 from __future__ import annotations
 
@@ -67,6 +72,13 @@ def _xywh(box):
     return [round(x0 + 0.5), round(y0 + 0.5), round(x1 - x0), round(y1 - y0)]
 
 
+def lens_record(cam: dict) -> dict:
+    """A label camera's lens for the BOP sidecar (OpenCV's distortion model and order)."""
+    return {"camera_unit": cam.get("unit", 0), "dist_coeffs": cam.get("distortion", [0.0] * 5),
+            "dist_coeff_names": ["k1", "k2", "p1", "p2", "k3"], "model": "opencv",
+            "aberration_px": cam.get("aberration_px"), "depth_of_field": cam.get("depth_of_field")}
+
+
 def export_bop(root, out) -> Path:
     root, out = Path(root), Path(out)
     ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
@@ -90,7 +102,7 @@ def export_bop(root, out) -> Path:
     scenes: dict[str, dict] = {}
     for label in labels:
         split = label["spec"]["split"]
-        sc = scenes.setdefault(split, {"camera": {}, "gt": {}, "info": {}, "ids": {}})
+        sc = scenes.setdefault(split, {"camera": {}, "gt": {}, "info": {}, "ids": {}, "lens": {}})
         im = str(len(sc["ids"]))
         sc["ids"][im] = label["frame_id"]
         place_file(source_image(root, label["frame_id"]), out / split / "000000" / "rgb" / f"{int(im):06d}.png")
@@ -100,6 +112,7 @@ def export_bop(root, out) -> Path:
         cam_from_d = np.array(label["camera"]["cam_from_d"])
         sc["camera"][im] = {"cam_K": k.ravel().tolist(), "depth_scale": 1.0,
                             "cam_R_w2c": cam_from_d[:3, :3].ravel().tolist(), "cam_t_w2c": cam_from_d[:3, 3].tolist()}
+        sc["lens"][im] = lens_record(label["camera"])
         d_from_b = np.array(label["d_from_b"])
         gts, infos = [], []
         for srec in label["sections"]:
@@ -116,4 +129,5 @@ def export_bop(root, out) -> Path:
         write_json_atomic(d / "scene_gt.json", sc["gt"])
         write_json_atomic(d / "scene_gt_info.json", sc["info"])
         write_json_atomic(d / "frame_ids.json", sc["ids"])
+        write_json_atomic(d / "scene_camera_lens.json", sc["lens"])
     return out

@@ -27,6 +27,11 @@ Pixel conventions (stated again in each file's ``info``):
   top-left pixel): the label's ``center_px`` unchanged. Keypoint consumers (detectron2 and its
   forks, MMPose) add 0.5 when they load COCO keypoints, which gives the continuous centre.
 
+Cameras: each image record carries its camera unit (``camera_unit``), ``K`` (OpenCV pixels, with
+its principal point) and ``dist_coeffs`` (the unit's lens distortion, OpenCV's order k1, k2, p1,
+p2, k3; ``core.distortion.undistort_pixels`` undoes it); ``info.cameras`` lists every unit
+of the split with its distortion, chromatic aberration and principal point.
+
 ``info.kpt_oks_sigmas`` holds the OKS sigma of the ``centre`` keypoint for keypoint COCOeval
 (``COCOeval(gt, dt, 'keypoints')`` needs ``params.kpt_oks_sigmas`` set to it).
 """
@@ -37,12 +42,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dockfactory.core.geometry import project_points, transform_points
 from dockfactory.core.io import write_json_atomic
-from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
+from dockfactory.core.layout import CLASS_NAMES, Marker
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_files import place_file, source_image
-from dockfactory.generator.labels import clip_polygon
+from dockfactory.generator.labels import clip_polygon, marker_outline_px
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
 SPLITS = ("train", "val", "test", "repeat")
@@ -86,17 +90,17 @@ def read_layout(root) -> dict[str, Marker] | None:
 
 
 def outline_px(label: dict, marker: Marker) -> np.ndarray:
-    """The marker's projected outline clipped to the image, (M, 2) float64 OpenCV px.
+    """The marker's outline in the delivered image clipped to the image, (M, 2) float64 OpenCV px.
 
     The same computation as the label's ``bbox_px`` (generator.labels.frame_labels), on the
-    label's K, ``cam_from_d`` and ``d_from_b``; (0, 2) when the outline is not in front of the
-    camera or not in the image.
+    label's K, lens distortion, ``cam_from_d`` and ``d_from_b``; (0, 2) when the outline is not in
+    front of the camera or not in the image.
     """
     w, h = label["image"]["width"], label["image"]["height"]
+    cam = label["camera"]
     d_from_s = np.asarray(label["d_from_b"], dtype=np.float64) if marker.section == "B" else np.eye(4)
-    uv, z = project_points(np.asarray(label["camera"]["K"], dtype=np.float64),
-                           np.asarray(label["camera"]["cam_from_d"], dtype=np.float64),
-                           transform_points(d_from_s, marker_outline(marker)))
+    uv, z = marker_outline_px(marker, np.asarray(cam["K"], dtype=np.float64), cam.get("distortion"),
+                              np.asarray(cam["cam_from_d"], dtype=np.float64) @ d_from_s)
     if not np.all(z > 0):
         return np.zeros((0, 2))
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
@@ -168,14 +172,36 @@ def marker_annotation(label: dict, m: dict, visible_threshold: float, marker: Ma
             "marker_id": m["id"], "visible_fraction": m["visible_fraction"]}
 
 
+def camera_units_info(labels: list[dict]) -> dict:
+    """Per camera unit (id as a string): its lens as the labels record it."""
+    units = {}
+    for lab in labels:
+        if "camera" not in lab:
+            continue
+        cam = lab["camera"]
+        units.setdefault(str(cam.get("unit", 0)), {
+            "dist_coeffs": cam.get("distortion", [0.0] * 5), "dist_coeff_names": ["k1", "k2", "p1", "p2", "k3"],
+            "principal_point": cam["principal_point"], "aberration_px": cam.get("aberration_px"),
+            "depth_of_field": cam.get("depth_of_field"), "jpeg_quality": cam.get("jpeg_quality")})
+    return dict(sorted(units.items(), key=lambda kv: int(kv[0])))
+
+
+def _image_record(image_id: int, lab: dict) -> dict:
+    rec = {"id": image_id, "file_name": f"{lab['frame_id']}.png", "frame_id": lab["frame_id"],
+           "width": lab["image"]["width"], "height": lab["image"]["height"],
+           "condition": lab["spec"]["condition"], "split": lab["spec"]["split"]}
+    cam = lab.get("camera")
+    if cam is not None:
+        rec.update(camera_unit=cam.get("unit", 0), K=cam["K"], dist_coeffs=cam.get("distortion", [0.0] * 5))
+    return rec
+
+
 def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layout: dict | None = None,
                      first_image_id: int = 1, first_annotation_id: int = 1, info: dict | None = None) -> dict:
     """The COCO dict of ``labels``; ``layout`` (marker id -> Marker) gives the polygons."""
     images, annotations = [], []
     for image_id, lab in enumerate(labels, start=first_image_id):
-        images.append({"id": image_id, "file_name": f"{lab['frame_id']}.png", "frame_id": lab["frame_id"],
-                       "width": lab["image"]["width"], "height": lab["image"]["height"],
-                       "condition": lab["spec"]["condition"], "split": lab["spec"]["split"]})
+        images.append(_image_record(image_id, lab))
         for m in lab["markers"]:
             if not m.get("visible_pixels") or m["bbox_px"] is None:
                 continue
@@ -198,7 +224,8 @@ def export_coco(root, out) -> Path:
         split_labels = [lab for lab in labels if lab["spec"]["split"] == split]
         if not split_labels:
             continue
-        info = coco_info(version=str(ident.get("version_id", "")), dataset=ident.get("name", ""), split=split)
+        info = coco_info(version=str(ident.get("version_id", "")), dataset=ident.get("name", ""), split=split,
+                         cameras=camera_units_info(split_labels))
         coco = coco_from_labels(split_labels, threshold, layout=layout, first_image_id=next_image,
                                 first_annotation_id=next_ann, info=info)
         next_image += len(coco["images"])

@@ -1,8 +1,10 @@
 """Turn a finished render into a dataset frame (no bpy): PNG, optional EXR, label, meta.
 
 Files of frame ``<id>`` in a dataset directory:
-  images/<id>.png   8-bit sRGB after the camera model
-  exr/<id>.exr      optional: linear RGB (half), depth (mm), marker index pass
+  images/<id>.png   8-bit sRGB after the camera model (lens, sensor, and for a JPEG unit the
+                    decoded JPEG, losslessly)
+  exr/<id>.exr      optional: linear RGB (half), depth (mm), marker index pass, in the delivered
+                    (distorted) geometry
   meta/<id>.json    size and sha256 of this frame's files (not part of the label)
   labels/<id>.json  the exact label; written last, so its presence means the frame is complete
 Every file is written atomically.
@@ -24,8 +26,8 @@ from dockfactory.core.io import (
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
 from dockfactory.generator.exr import read_passes, write_compact
-from dockfactory.generator.labels import frame_labels
-from dockfactory.generator.sensor import apply_sensor
+from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
+from dockfactory.generator.sensor import apply_sensor, jpeg_round_trip, resample_passes
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
 # zlib strategies (1280x960: 49 ms, 1.36 MB vs 64 ms, 1.70 MB for the default strategy at level 1)
@@ -49,7 +51,12 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
     t1 = time.perf_counter()
+    outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)
+    passes = resample_passes(passes, frame.camera, outlines)   # the lens: distortion, chromatic aberration
+    t_lens = time.perf_counter()
     image, derived = apply_sensor(passes.rgb, frame.sensor)
+    if frame.camera.jpeg_quality:
+        image = jpeg_round_trip(image, frame.camera.jpeg_quality)
     label = frame_labels(frame, static, passes.index, visible_threshold, derived, image, min_chroma)
     t2 = time.perf_counter()
     ok, png = cv2.imencode(".png", image[..., ::-1], PNG_PARAMS)
@@ -67,6 +74,6 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     meta = {"frame_id": frame.spec.frame_id, "files": files}
     write_json_atomic(paths["meta"], meta)
     write_bytes_atomic(paths["label"], text)   # last: the commit point of the frame
-    timings = {**(timings or {}), "read_exr": t1 - t0, "sensor_labels": t2 - t1,
+    timings = {**(timings or {}), "read_exr": t1 - t0, "lens": t_lens - t1, "sensor_labels": t2 - t_lens,
                "encode_write": time.perf_counter() - t2}
     return {"meta": meta, "timings_s": timings}

@@ -2,23 +2,92 @@
 
 Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image spans
 [-0.5, W - 0.5] x [-0.5, H - 0.5]. Boxes are [x0, y0, x1, y1] in that continuous frame.
+
+Every position is in the delivered image: the pinhole projection (K) moved by the camera unit's
+lens distortion (``core.distortion``, OpenCV's model), analytically: centres, the dense marker
+outlines (and so boxes, areas and ``outline_centroid_px``), section silhouettes.
 """
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
+from dockfactory.core.distortion import COEFF_NAMES, coeffs_array, distort_pixels
 from dockfactory.core.geometry import (
     polygon_area_centroid,
     pose_components,
     project_points,
     transform_points,
 )
-from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
+from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, Marker, marker_outline
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene, to_dict
 
 LABEL_FORMAT = "dockfactory.label/1"
+DISTORTION_MODEL = ("opencv: Brown-Conrady on normalised coordinates, coefficients (k1, k2, p1, p2, k3) "
+                    "as cv2.projectPoints takes them")
+DENSIFY_PX = 1.0   # a region's outline is resampled to this spacing before it is distorted
+
+
+def image_px(uv: np.ndarray, k: np.ndarray, coeffs) -> np.ndarray:
+    """Delivered-image pixels (N, 2) of pinhole pixels ``uv`` (N, 2) of K (3, 3) with lens
+    distortion ``coeffs`` (OpenCV order); ``uv`` itself when there is no distortion."""
+    c = coeffs_array(coeffs)
+    if not np.any(c):
+        return uv
+    return distort_pixels(uv, float(k[0, 0]), k[:2, 2], c)
+
+
+def marker_outline_px(marker: Marker, k: np.ndarray, coeffs, cam_from_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The marker disc's edge in the delivered image: (uv (n, 2) px, depth (n,) mm), the dense
+    outline (``layout.OUTLINE_POINTS``) distorted point by point. NaN where behind the camera."""
+    uv, z = project_points(k, cam_from_s, marker_outline(marker))
+    return image_px(uv, k, coeffs), z
+
+
+def marker_pinhole_outlines(frame: FrameScene, static: StaticScene) -> list[tuple[int, np.ndarray]]:
+    """(pass index, outline (n, 2) in the camera's pinhole pixels) of every marker in front of the
+    camera: what the render canvas shows before the lens (``sensor.refine_marker_edges``)."""
+    cam = frame.camera
+    k, cam_from_d, d_from_b = cam.k(), cam.cam_from_d_array(), frame.d_from_b_array()
+    out = []
+    for m in static.markers:
+        uv, z = project_points(k, cam_from_d @ (d_from_b if m.section == "B" else np.eye(4)), marker_outline(m))
+        if np.all(z > 0):
+            out.append((m.pass_index, uv))
+    return out
+
+
+def densify(poly: np.ndarray, step: float) -> np.ndarray:
+    """The closed polygon (n, 2) with points added so no edge is longer than ``step``."""
+    nxt = np.roll(poly, -1, axis=0)
+    counts = np.maximum(1, np.ceil(np.hypot(*(nxt - poly).T) / step).astype(int))
+    t = np.concatenate([np.arange(c) / c for c in counts])
+    start = np.repeat(poly, counts, axis=0)
+    return start + t[:, None] * (np.repeat(nxt, counts, axis=0) - start)
+
+
+def distorted_region(uv: np.ndarray, cam) -> np.ndarray:
+    """The delivered-image outline (M, 2) of the convex pinhole region spanned by ``uv`` (N, 2):
+    its hull is clipped to the render canvas (which holds the source of every delivered pixel,
+    and where the distortion is one to one), densified to DENSIFY_PX and distorted."""
+    hull = uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()]
+    ox, oy, wc, hc = cam.canvas()
+    clipped = clip_polygon(hull, ox - 0.5, oy - 0.5, ox + wc - 0.5, oy + hc - 0.5)
+    if len(clipped) < 3:
+        return np.zeros((0, 2))
+    return image_px(densify(clipped, DENSIFY_PX), cam.k(), cam.distortion)
+
+
+def region_pixels(poly: np.ndarray, w: int, h: int) -> tuple[int, list[float] | None]:
+    """Pixel centres inside the (simple, not necessarily convex) polygon ``poly`` (N, 2) within a
+    w x h image: count and box."""
+    mask = np.zeros((h, w), np.uint8)
+    if len(poly) >= 3:
+        cv2.fillPoly(mask, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
+    count = int(cv2.countNonZero(mask))
+    x, y, bw, bh = cv2.boundingRect(mask)
+    return count, (None if count == 0 else [x - 0.5, y - 0.5, x + bw - 0.5, y + bh - 0.5])
 
 
 def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
@@ -126,14 +195,15 @@ def _projected_outline(outline_uv: np.ndarray, outline_z: np.ndarray, bounds) ->
     return full_area, outline_centroid, clipped
 
 
-def _marker_geometry(m, k: np.ndarray, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds) -> dict:
-    """The geometric part of a marker's label (projection, boxes, areas; no visibility)."""
+def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds) -> dict:
+    """The geometric part of a marker's label (projection, boxes, areas; no visibility), in the
+    delivered image (through the lens distortion ``coeffs``)."""
     d_from_s = d_from_b if m.section == "B" else np.eye(4)
     centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
     normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
-    uv, depth = project_points(k, cam_from_d, centre_d[None])
-    outline_uv, outline_z = project_points(k, cam_from_d, transform_points(d_from_s, marker_outline(m)))
-    centre = uv[0]
+    pinhole, depth = project_points(k, cam_from_d, centre_d[None])
+    centre = image_px(pinhole, k, coeffs)[0]
+    outline_uv, outline_z = marker_outline_px(m, k, coeffs, cam_from_d @ d_from_s)
     in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
     full_area, outline_centroid, clipped = _projected_outline(outline_uv, outline_z, bounds)
     area_in_frame = full_area if len(clipped) == len(outline_uv) and full_area > 0 else polygon_area_centroid(clipped)[0]
@@ -141,7 +211,7 @@ def _marker_geometry(m, k: np.ndarray, cam_from_d: np.ndarray, d_from_b: np.ndar
         "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
         "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
         "normal_d": normal_d.tolist(), "diameter_mm": m.diameter_mm,
-        "center_px": centre.tolist(), "depth_mm": float(depth[0]),
+        "center_px": centre.tolist(), "center_pinhole_px": pinhole[0].tolist(), "depth_mm": float(depth[0]),
         "outline_centroid_px": outline_centroid.tolist(),
         "bbox_px": _bbox(clipped) if len(clipped) else None,
         "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
@@ -173,7 +243,10 @@ def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d
     rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
     if np.all(pts[:, 2] > 0):
         uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
-        rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, cam.width, cam.height)
+        if any(cam.distortion):   # the image of the convex body is no longer convex
+            rec["pixels_all"], rec["bbox_obj_px"] = region_pixels(distorted_region(uv, cam), cam.width, cam.height)
+        else:
+            rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, cam.width, cam.height)
     if stats is not None:
         ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
         rec["pixels_visible"] = int(stats.counts[ids].sum())
@@ -193,6 +266,25 @@ def _sampled_record(frame: FrameScene) -> dict:
         "render_seed": frame.render_seed,
         "render": to_dict(frame.render),
     }
+
+
+def camera_record(cam) -> dict:
+    """The label's camera: K (its principal point), pose, and the unit's lens: distortion in
+    OpenCV's order, chromatic aberration, depth of field, JPEG quality, the render canvas."""
+    ox, oy, wc, hc = cam.canvas()
+    scales = cam.channel_scales()
+    dof = None if cam.f_number <= 0 else {
+        "f_number": cam.f_number, "focus_distance_mm": cam.focus_distance_mm, "focal_mm": cam.focal_mm(),
+        "aperture_mm": cam.focal_mm() / cam.f_number}
+    return {"K": cam.k().tolist(), "focal_px": cam.focal_px, "principal_point": list(cam.principal_point),
+            "cam_from_d": cam.cam_from_d_array().tolist(), "look_at_mm": list(cam.look_at_mm),
+            "distance_mm": cam.distance_mm, "unit": cam.unit, "distortion": list(cam.distortion),
+            "distortion_names": list(COEFF_NAMES), "distortion_model": DISTORTION_MODEL,
+            "aberration_px": {"red": cam.aberration_px[0], "blue": cam.aberration_px[1]},
+            "aberration_scale": {"red": scales[0], "blue": scales[2]},
+            "sensor_width_mm": cam.sensor_width_mm, "depth_of_field": dof,
+            "jpeg_quality": cam.jpeg_quality or None,
+            "render_canvas": {"offset_px": [ox, oy], "width": wc, "height": hc}}
 
 
 def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | None,
@@ -219,7 +311,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
     markers = []
     for m in static.markers:
-        rec = _marker_geometry(m, k, cam_from_d, d_from_b, bounds)
+        rec = _marker_geometry(m, k, cam.distortion, cam_from_d, d_from_b, bounds)
         if stats is not None:
             _add_marker_visibility(rec, m, stats, image, visible_threshold, min_chroma)
         markers.append(rec)
@@ -230,9 +322,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         "spec": to_dict(frame.spec),
         "conditions": [frame.spec.condition] + ([frame.glare_kind] if frame.glare_kind != "none" else []),
         "image": {"width": w, "height": h, "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel"},
-        "camera": {"K": k.tolist(), "focal_px": cam.focal_px, "principal_point": list(cam.principal_point),
-                   "cam_from_d": cam_from_d.tolist(),
-                   "look_at_mm": list(cam.look_at_mm), "distance_mm": cam.distance_mm},
+        "camera": camera_record(cam),
         "d_from_b": d_from_b.tolist(),
         "pose_b_in_d": pose_components(d_from_b),
         "markers": markers,

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import colorsys
 import dataclasses
+import itertools
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
+from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import (
     look_at_cam_from_world,
     make_transform,
@@ -43,6 +46,8 @@ from dockfactory.core.scene import (
 )
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
+# camera units and docking runs (their own streams: configs without them draw what they drew before)
+STREAM_UNITS, STREAM_UNIT_LENS, STREAM_UNIT_CAMERA, STREAM_RUN_PLAN, STREAM_RUN, STREAM_RUN_LOOK = range(5, 11)
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
 
 
@@ -67,44 +72,96 @@ def condition_counts(weights: dict[str, float], total: int) -> dict[str, int]:
     return counts
 
 
-def _split_members(cfg: Config, members: np.ndarray, ci: int) -> dict[str, np.ndarray]:
-    """Frame indices of one condition per split: test, then val carved from train.
+def _split_members(cfg: Config, members: np.ndarray, ci: int, stream: int = STREAM_PLAN) -> dict[str, np.ndarray]:
+    """Item indices (frames, or runs) of one condition per split: test, then val carved from train.
 
-    One permutation of the condition's frames decides everything: its first
-    round(train_fraction * n) frames are train + val, the rest test (so ``val_fraction`` never
-    moves a frame into or out of the test split); the first round(val_fraction * n_train) of
-    the train frames are val.
+    One permutation of the condition's items decides everything: its first
+    round(train_fraction * n) items are train + val, the rest test (so ``val_fraction`` never
+    moves an item into or out of the test split); the first round(val_fraction * n_train) of
+    the train items are val.
     """
     d = cfg.dataset
     n_train = int(np.floor(d.train_fraction * len(members) + 0.5))
     n_val = int(np.floor(d.val_fraction * n_train + 0.5))
-    order = rng_for(d.seed, STREAM_PLAN, 1 + ci).permutation(len(members))
+    order = rng_for(d.seed, stream, 1 + ci).permutation(len(members))
     return {"val": members[order[:n_val]], "train": members[order[n_val:n_train]],
             "test": members[order[n_train:]]}
 
 
+def _condition_groups(cfg: Config, n: int, stream: int) -> list[np.ndarray]:
+    """Members (sorted item indices) of each condition, in CONDITIONS order (exact counts)."""
+    counts = condition_counts(dataclasses.asdict(cfg.conditions), n)
+    perm = rng_for(cfg.dataset.seed, stream).permutation(n)
+    starts = np.cumsum([0] + [counts[c] for c in CONDITIONS])
+    return [np.sort(perm[starts[i]:starts[i + 1]]) for i in range(len(CONDITIONS))]
+
+
+def _stratified_splits(cfg: Config, groups: list[np.ndarray], n: int, stream: int) -> np.ndarray:
+    """Split of each of ``n`` items, drawn within each group (stratum) separately."""
+    split_of = np.empty(n, dtype=object)
+    for gi, members in enumerate(groups):
+        for split, idx in _split_members(cfg, members, gi, stream).items():
+            split_of[idx] = split
+    return split_of
+
+
+def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:
+    """Camera unit of each of ``n`` items (frames or runs): a seeded permutation dealt round robin,
+    so the units' counts differ by at most one. (n,) int."""
+    out = np.zeros(n, dtype=int)
+    if count > 1:
+        out[rng_for(seed, STREAM_UNITS, key).permutation(n)] = np.arange(n) % count
+    return out
+
+
+def repeat_unit(cfg: Config) -> int:
+    """The one camera unit that takes every repeatability capture."""
+    count = cfg.camera_units.count
+    return 0 if count == 1 else int(rng_for(cfg.dataset.seed, STREAM_UNITS, 2).integers(count))
+
+
+def run_count(cfg: Config) -> int:
+    """Docking runs of the main frames (0 without runs)."""
+    per = cfg.runs.frames_per_run
+    return 0 if per == 0 else -(-cfg.dataset.frames // per)
+
+
+def run_length(cfg: Config, run: int) -> int:
+    per = cfg.runs.frames_per_run
+    return min(per, cfg.dataset.frames - run * per)
+
+
+def _main_specs(cfg: Config) -> list[FrameSpec]:
+    """Main frames. Without runs every frame draws its condition, split (stratified by condition)
+    and unit. With runs every run does (frames i * per .. (i + 1) * per - 1 form run i; splits
+    stratified by camera unit, so each unit has runs in train and test) and its frames share them."""
+    seed, n, units = cfg.dataset.seed, cfg.dataset.frames, cfg.camera_units.count
+    per = cfg.runs.frames_per_run
+    items = n if per == 0 else run_count(cfg)
+    stream = STREAM_PLAN if per == 0 else STREAM_RUN_PLAN
+    groups = _condition_groups(cfg, items, stream)
+    condition = np.empty(items, dtype=object)
+    for cond, members in zip(CONDITIONS, groups):
+        condition[members] = cond
+    unit = balanced_units(seed, items, units, 0 if per == 0 else 1)
+    if per == 0:
+        split = _stratified_splits(cfg, groups, items, stream)
+        return [FrameSpec(f"{i:06d}", i, "main", str(split[i]), str(condition[i]), -1, -1, int(unit[i]))
+                for i in range(n)]
+    split = _stratified_splits(cfg, [np.flatnonzero(unit == u) for u in range(units)], items, stream)
+    return [FrameSpec(f"{i:06d}", i, "main", str(split[i // per]), str(condition[i // per]), -1, -1,
+                      int(unit[i // per]), i // per, i % per) for i in range(n)]
+
+
 def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
     """Every frame of the dataset: main frames (train/val/test, stratified by condition) then the
-    repeatability subset."""
-    seed, n = cfg.dataset.seed, cfg.dataset.frames
-    counts = condition_counts(dataclasses.asdict(cfg.conditions), n)
-    perm = rng_for(seed, STREAM_PLAN).permutation(n)
-    condition_of = np.empty(n, dtype=object)
-    split_of = np.empty(n, dtype=object)
-    start = 0
-    for ci, cond in enumerate(CONDITIONS):
-        members = np.sort(perm[start:start + counts[cond]])
-        start += counts[cond]
-        condition_of[members] = cond
-        for split, idx in _split_members(cfg, members, ci).items():
-            split_of[idx] = split
-    specs = [FrameSpec(f"{i:06d}", i, "main", str(split_of[i]), str(condition_of[i]), -1, -1)
-             for i in range(n)]
-    r = cfg.repeatability
+    repeatability subset (all on one camera unit)."""
+    specs = _main_specs(cfg)
+    n, r, unit = cfg.dataset.frames, cfg.repeatability, repeat_unit(cfg)
     for p in range(r.poses):
         for c in range(r.captures):
             specs.append(FrameSpec(f"rep{p:03d}_{c:02d}", n + p * r.captures + c, "repeat",
-                                   "repeat", r.condition, p, c))
+                                   "repeat", r.condition, p, c, unit))
     return tuple(specs)
 
 
@@ -139,45 +196,201 @@ def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
     return out
 
 
-def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndarray) -> float:
-    """Largest focal (px) that keeps every marker disc ``margin_px`` inside the image."""
+@dataclass(frozen=True)
+class UnitLens:
+    """The lens of one camera unit, drawn once from [camera_units] with the dataset seed."""
+    unit: int
+    principal_offset: tuple[float, float]   # principal point - image centre, px
+    distortion: tuple[float, ...]           # k1, k2, p1, p2, k3 (OpenCV order)
+    aberration_px: tuple[float, float]      # red, blue vs green at the farthest image corner
+    f_number: float                         # 0: no depth of field
+    focus_error_mm: float
+    jpeg_quality: int                       # 0: no JPEG encoding
+
+    def is_ideal(self) -> bool:
+        return not any(self.distortion) and not any(self.principal_offset)
+
+
+@lru_cache(maxsize=256)
+def unit_lens(cfg: Config, unit: int) -> UnitLens:
+    """Lens of camera unit ``unit``: a function of (config, seed, unit); every value is drawn, in a
+    fixed order, whether its feature is on or not."""
+    u = cfg.camera_units
+    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_LENS, unit)
+    offset = (_u(rng, u.principal_offset_x_px), _u(rng, u.principal_offset_y_px))
+    k1, k2, k3, p1, p2 = (_u(rng, getattr(u, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
+    aberration = (_u(rng, u.aberration_red_px), _u(rng, u.aberration_blue_px))
+    f_number, focus_error = _u(rng, u.f_number), _u(rng, u.focus_error_mm)
+    quality = int(rng.integers(u.jpeg_quality[0], u.jpeg_quality[1] + 1))
+    dof = u.depth_of_field
+    return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
+                    focus_error if dof else 0.0, quality if u.jpeg else 0)
+
+
+def principal_point(cfg: Config, lens: UnitLens) -> tuple[float, float]:
+    return ((cfg.image.width - 1) / 2.0 + lens.principal_offset[0],
+            (cfg.image.height - 1) / 2.0 + lens.principal_offset[1])
+
+
+def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndarray,
+                          lens: UnitLens | None = None) -> float:
+    """Largest focal (px) that keeps every marker disc ``margin_px`` inside the image, through the
+    unit's lens (principal point and distortion; pixel offsets from the principal point scale with
+    the focal, so the bound is closed-form)."""
     pc = transform_points(cam_from_d, points_d)
     z = pc[:, 2]
     if np.any(z <= 0):
         return 0.0
     r = cfg.markers.diameter_mm / 2.0
-    half_w = cfg.image.width / 2.0 - cfg.camera.margin_px
-    half_h = cfg.image.height / 2.0 - cfg.camera.margin_px
-    ext_x = (np.abs(pc[:, 0]) + r) / z
-    ext_y = (np.abs(pc[:, 1]) + r) / z
-    return float(min(half_w / ext_x.max(), half_h / ext_y.max()))
+    if lens is None or lens.is_ideal():
+        half_w = cfg.image.width / 2.0 - cfg.camera.margin_px
+        half_h = cfg.image.height / 2.0 - cfg.camera.margin_px
+        ext_x = (np.abs(pc[:, 0]) + r) / z
+        ext_y = (np.abs(pc[:, 1]) + r) / z
+        return float(min(half_w / ext_x.max(), half_h / ext_y.max()))
+    corners = np.concatenate([(pc[:, :2] + r * np.array(sign)) / z[:, None]
+                              for sign in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
+    xd = distort_normalized(corners, lens.distortion)
+    pp, size, margin = principal_point(cfg, lens), (cfg.image.width, cfg.image.height), cfg.camera.margin_px
+    caps = [np.inf]
+    for axis in (0, 1):
+        room_hi, room_lo = size[axis] - 0.5 - margin - pp[axis], pp[axis] + 0.5 - margin
+        if min(room_hi, room_lo) <= 0:
+            return 0.0
+        d = xd[:, axis]
+        caps += list(room_hi / d[d > 0]) + list(room_lo / -d[d < 0])
+    return float(min(caps))
 
 
-def sample_geometry(cfg: Config, rng: np.random.Generator):
-    """d_from_b, cam_from_d and the focal cap for one frame (consumes ``rng`` in a fixed order)."""
+def _sample_pose(cfg: Config, rng: np.random.Generator) -> np.ndarray:
     p = cfg.pose
-    d_from_b = transform_from_pose_components(_u(rng, p.x_mm), _u(rng, p.y_mm), _u(rng, p.z_mm),
-                                              _u(rng, p.alpha_deg), _u(rng, p.beta_deg),
-                                              _u(rng, p.gamma_deg))
+    return transform_from_pose_components(_u(rng, p.x_mm), _u(rng, p.y_mm), _u(rng, p.z_mm),
+                                          _u(rng, p.alpha_deg), _u(rng, p.beta_deg), _u(rng, p.gamma_deg))
+
+
+def _aim(cfg: Config, rng: np.random.Generator, b_x_mm: float):
+    """Camera pose from jitter, tilt, roll and distance drawn from ``rng`` (in that order), aimed
+    near the seam of B at axial gap ``b_x_mm``: (cam_from_d, eye, target)."""
     c = cfg.camera
     jx, jy = rng.uniform(-c.lateral_jitter_mm, c.lateral_jitter_mm, size=2)
     tx, ty = np.radians(rng.uniform(-c.tilt_deg, c.tilt_deg, size=2))
     roll = np.radians(rng.uniform(-c.roll_deg, c.roll_deg))
     distance = _u(rng, c.distance_mm)
-    target = np.array([d_from_b[0, 3] / 2.0 + jx, jy, cfg.sections.radius_mm])
+    target = np.array([b_x_mm / 2.0 + jx, jy, cfg.sections.radius_mm])
     eye = target + distance * (rot_y(ty) @ rot_x(tx) @ np.array([0.0, 0.0, 1.0]))
     cam_from_d = make_transform(rot_z(roll), np.zeros(3)) @ look_at_cam_from_world(eye, target)
-    f_cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static_scene(cfg), d_from_b))
+    return cam_from_d, eye, target
+
+
+def sample_geometry(cfg: Config, rng: np.random.Generator, lens: UnitLens | None = None):
+    """d_from_b, cam_from_d and the focal cap for one frame (consumes ``rng`` in a fixed order)."""
+    d_from_b = _sample_pose(cfg, rng)
+    cam_from_d, eye, target = _aim(cfg, rng, d_from_b[0, 3])
+    f_cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static_scene(cfg), d_from_b), lens)
     u_focal = float(rng.uniform())
     return d_from_b, cam_from_d, f_cap, u_focal, eye, target
 
 
+# ----------------------------------------------------------------------------- docking runs
+
+RUN_DRIFT = 0.8    # a run's drifting components start and end within this share of their half range
+RUN_WOBBLE = 0.2   # plus a slow sine of at most this share (together they stay inside the range)
+
+
+def _pose_box_corners(cfg: Config) -> list[np.ndarray]:
+    """d_from_b at the 64 corners of the poses a unit may see (runs and repeatability poses)."""
+    p = cfg.pose
+    xs = (min(cfg.runs.x_end_mm[0], p.x_mm[0]), p.x_mm[1])
+    return [transform_from_pose_components(*v) for v in itertools.product(
+        xs, p.y_mm, p.z_mm, p.alpha_deg, p.beta_deg, p.gamma_deg)]
+
+
+@lru_cache(maxsize=256)
+def unit_camera(cfg: Config, unit: int):
+    """With runs: the fixed camera of a unit, (cam_from_d, focal_px, eye, target). Its zoom fits
+    the markers at every corner of the pose ranges. Raises ConfigError (no source) if none fits."""
+    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_CAMERA, unit)
+    cam_from_d, eye, target = _aim(cfg, rng, (cfg.runs.x_end_mm[0] + cfg.pose.x_mm[1]) / 2.0)
+    static, lens = static_scene(cfg), unit_lens(cfg, unit)
+    cap = min(largest_fitting_focal(cfg, cam_from_d, markers_in_d(static, t), lens) for t in _pose_box_corners(cfg))
+    f_lo, f_hi = cfg.camera.focal_px[0], min(cfg.camera.focal_px[1], cap)
+    if f_hi < f_lo:
+        raise ConfigError(f"[camera] focal_px: camera unit {unit} cannot fit the markers of a whole docking run "
+                          f"at {f_lo:g} px (largest that fits: {cap:.0f} px)")
+    return cam_from_d, float(f_lo + rng.uniform() * (f_hi - f_lo)), eye, target
+
+
+@lru_cache(maxsize=4096)
+def _run_drift(cfg: Config, run: int) -> tuple:
+    """A run's end gap and, for Y, Z, alpha, beta, gamma: (start, end, wobble, cycles, phase)."""
+    rng = rng_for(cfg.dataset.seed, STREAM_RUN, run)
+    x_end = _u(rng, cfg.runs.x_end_mm)
+    comps = tuple((float(rng.uniform(-RUN_DRIFT, RUN_DRIFT)), float(rng.uniform(-RUN_DRIFT, RUN_DRIFT)),
+                   float(rng.uniform(-RUN_WOBBLE, RUN_WOBBLE)), float(rng.uniform(0.3, 1.5)),
+                   float(rng.uniform(0.0, 2 * np.pi))) for _ in range(5))
+    return x_end, comps
+
+
+def run_pose(cfg: Config, run: int, run_frame: int) -> np.ndarray:
+    """d_from_b of frame ``run_frame`` of docking run ``run``: frames evenly spaced in time t in
+    [0, 1]; X falls from the top of [pose] x_mm to the run's end gap with a smooth (cosine) speed
+    profile; Y, Z and the angles drift from a start to an end value with a slow sine on top,
+    inside their ranges."""
+    n = run_length(cfg, run)
+    t = run_frame / (n - 1) if n > 1 else 0.0
+    x_end, comps = _run_drift(cfg, run)
+    x = x_end + (cfg.pose.x_mm[1] - x_end) * 0.5 * (1.0 + np.cos(np.pi * t))
+    values = []
+    for (lo, hi), (a, b, wobble, cycles, phase) in zip(
+            (cfg.pose.y_mm, cfg.pose.z_mm, cfg.pose.alpha_deg, cfg.pose.beta_deg, cfg.pose.gamma_deg), comps):
+        v = (1 - t) * a + t * b + wobble * np.sin(2 * np.pi * cycles * t + phase)
+        values.append((lo + hi) / 2.0 + (hi - lo) / 2.0 * v)
+    return transform_from_pose_components(x, *values)
+
+
+# ----------------------------------------------------------------------------- feasibility
+
+def _check_lenses(cfg: Config, source: str) -> None:
+    """Every unit's lens is usable at the smallest focal (no fold, a bounded render canvas)."""
+    for unit in range(cfg.camera_units.count):
+        lens = unit_lens(cfg, unit)
+        cam = camera_model(cfg, lens, cfg.camera.focal_px[0], np.eye(4), np.zeros(3), np.array([0, 0, 1.0]))
+        try:
+            cam.canvas()
+        except ValueError as exc:
+            raise ConfigError(f"{source}: [camera_units] k1: camera unit {unit} (k1, k2, p1, p2, k3 = "
+                              f"{', '.join(f'{v:g}' for v in lens.distortion)}) at {cam.focal_px:g} px: "
+                              f"{exc}") from None
+
+
+def _check_runs_fit(cfg: Config, source: str) -> None:
+    """With runs: every unit's fixed camera fits its markers at every frame it takes."""
+    static = static_scene(cfg)
+    for spec in frame_plan(cfg):
+        try:
+            cam_from_d, focal, _, _ = unit_camera(cfg, spec.unit)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}; lower focal_px, raise distance_mm or narrow [pose]") from None
+        d_from_b = run_pose(cfg, spec.run, spec.run_frame) if spec.run >= 0 else \
+            _sample_pose(cfg, rng_for(cfg.dataset.seed, STREAM_REPEAT_GEOMETRY, spec.pose_index))
+        cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static, d_from_b), unit_lens(cfg, spec.unit))
+        if cap < focal:
+            raise ConfigError(f"{source}: [runs] frames_per_run: frame {spec.frame_id} of camera unit {spec.unit} "
+                              f"puts markers within {cfg.camera.margin_px:g} px of the border at the unit's "
+                              f"{focal:.0f} px (largest that fits: {cap:.0f} px); narrow [pose] or lower focal_px")
+
+
 def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
-    """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal."""
+    """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal (with
+    runs: at its unit's focal), or a unit's lens is unusable."""
+    _check_lenses(cfg, source)
+    if cfg.runs.frames_per_run > 0:
+        _check_runs_fit(cfg, source)
+        return
     worst = np.inf
     for spec in frame_plan(cfg):
         geo_rng, _ = _streams(cfg, spec)
-        worst = min(worst, sample_geometry(cfg, geo_rng)[2])
+        worst = min(worst, sample_geometry(cfg, geo_rng, unit_lens(cfg, spec.unit))[2])
     f_min = cfg.camera.focal_px[0]
     if worst < f_min:
         raise ConfigError(
@@ -379,23 +592,60 @@ def render_settings(cfg: Config) -> RenderSettings:
                           r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter)
 
 
-def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
-    """The full scene of one planned frame (pure and deterministic)."""
-    static = static_scene(cfg)
+def camera_model(cfg: Config, lens: UnitLens, focal_px: float, cam_from_d, eye, target) -> CameraModel:
+    """The frame's camera: pinhole K with the unit's principal point, plus the unit's lens."""
+    distance = float(np.linalg.norm(np.asarray(eye) - np.asarray(target)))
+    return CameraModel(cfg.image.width, cfg.image.height, float(focal_px), principal_point(cfg, lens),
+                       mat4(cam_from_d), vec(target), distance, lens.unit, lens.distortion, lens.aberration_px,
+                       lens.f_number, distance + lens.focus_error_mm if lens.f_number > 0 else 0.0,
+                       cfg.camera_units.sensor_width_mm, lens.jpeg_quality)
+
+
+def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
+    """Without runs: the frame's own pose and camera (geometry stream), its stage (appearance,
+    clutter: geometry stream; lights: look stream) and the look stream for the rest."""
     geo_rng, look_rng = _streams(cfg, spec)
-    d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg, geo_rng)
+    lens = unit_lens(cfg, spec.unit)
+    d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg, geo_rng, lens)
     f_lo, f_hi = cfg.camera.focal_px[0], min(cfg.camera.focal_px[1], f_cap)
     if f_hi < f_lo:
         raise ConfigError(f"[camera] focal_px: frame {spec.frame_id} cannot fit its markers at "
                           f"{f_lo:g} px (largest that fits: {f_cap:.0f} px)")
-    camera = CameraModel(cfg.image.width, cfg.image.height, float(f_lo + u_focal * (f_hi - f_lo)),
-                         ((cfg.image.width - 1) / 2.0, (cfg.image.height - 1) / 2.0), mat4(cam_from_d),
-                         vec(target), float(np.linalg.norm(eye - target)))
+    camera = camera_model(cfg, lens, f_lo + u_focal * (f_hi - f_lo), cam_from_d, eye, target)
     appearance = sample_appearance(geo_rng, spec.condition)
     clutter = sample_clutter(geo_rng, static.radius_mm)
+    lights = sample_lights(look_rng, target, spec.condition)
+    return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
 
+
+def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
+    """With runs: the unit's fixed camera; a main frame's pose from its run's trajectory and its
+    stage (appearance, clutter, lights) from the run's stream, so they hold for the whole run; a
+    repeatability pose's from the repeat streams as without runs."""
+    seed = cfg.dataset.seed
+    cam_from_d, focal, eye, target = unit_camera(cfg, spec.unit)
+    camera = camera_model(cfg, unit_lens(cfg, spec.unit), focal, cam_from_d, eye, target)
+    if spec.kind == "repeat":
+        stage_rng = rng_for(seed, STREAM_REPEAT_GEOMETRY, spec.pose_index)
+        look_rng = rng_for(seed, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture)
+        d_from_b = _sample_pose(cfg, stage_rng)
+        light_rng = look_rng
+    else:
+        stage_rng = light_rng = rng_for(seed, STREAM_RUN_LOOK, spec.run)
+        look_rng = rng_for(seed, STREAM_LOOK, spec.index)
+        d_from_b = run_pose(cfg, spec.run, spec.run_frame)
+    appearance = sample_appearance(stage_rng, spec.condition)
+    clutter = sample_clutter(stage_rng, static.radius_mm)
+    lights = sample_lights(light_rng, target, spec.condition)
+    return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
+
+
+def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
+    """The full scene of one planned frame (pure and deterministic)."""
+    static = static_scene(cfg)
+    shot = _run_shot if cfg.runs.frames_per_run > 0 else _single_shot
+    d_from_b, camera, eye, (appearance, clutter, lights), look_rng = shot(cfg, spec, static)
     cond = spec.condition
-    lights = sample_lights(look_rng, target, cond)
     props = list(clutter)
     glare_kind = "none"
     bloom = 0.0

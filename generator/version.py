@@ -24,7 +24,7 @@ def blender_version() -> str:
 # the modules whose code decides what a rendered dataset contains: every dockfactory module the
 # render worker process imports (tests/test_version.py checks the list against a real worker)
 OUTPUT_SOURCES = (
-    "dockfactory.core.config", "dockfactory.core.errors", "dockfactory.core.geometry",
+    "dockfactory.core.config", "dockfactory.core.distortion", "dockfactory.core.errors", "dockfactory.core.geometry",
     "dockfactory.core.io", "dockfactory.core.layout", "dockfactory.core.names", "dockfactory.core.scene",
     "dockfactory.generator.exr", "dockfactory.generator.frame_output", "dockfactory.generator.labels",
     "dockfactory.generator.render_worker", "dockfactory.generator.sampler",

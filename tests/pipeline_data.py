@@ -11,7 +11,9 @@ frame done.
 
 The render is replaced by :func:`painted_passes`: the section bodies (convex hull of their
 silhouettes, grey) and every marker disc that faces the camera (its exact projected outline, pure
-red for A, pure blue for B), painted far to near into the colour, depth and object-index passes.
+red for A, pure blue for B), painted far to near into the colour, depth and object-index passes
+of the pinhole render canvas (``CameraModel.canvas``: the image itself for a pinhole camera, the
+overscan a distorted one is resampled from, as Blender renders it).
 No occluders, glare or clutter are painted, so every front-facing marker is fully visible: the
 labels' ``visibility`` is 2 for them and their ``outline_centroid_px`` is exact, which is what the
 oracle feeds the solver.
@@ -25,7 +27,7 @@ import cv2
 import numpy as np
 
 from dockfactory.core.config import Config, load_config
-from dockfactory.core.geometry import invert_transform, project_points, transform_points
+from dockfactory.core.geometry import intrinsics, invert_transform, project_points, transform_points
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
@@ -42,18 +44,35 @@ SHIFT = 4   # cv2.fillPoly sub-pixel bits: vertices to 1/16 px
 
 
 def _fill(mask_shape, uv: np.ndarray) -> np.ndarray:
-    """Boolean (H, W) mask of the pixel centres inside polygon ``uv`` (N, 2) (OpenCV pixels)."""
+    """Boolean (H, W) mask of the pixel centres inside polygon ``uv`` (N, 2) (OpenCV pixels);
+    cv2.fillPoly also fills the pixels its edges cross, so the mask is about half a pixel fat."""
     mask = np.zeros(mask_shape, np.uint8)
     pts = np.round(uv * (1 << SHIFT)).astype(np.int32).reshape(-1, 1, 2)
     cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, SHIFT)
     return mask.astype(bool)
 
 
-def painted_passes(frame: FrameScene, static: StaticScene) -> RenderPasses:
-    """Colour (linear), depth (m, as Blender writes it) and object-index passes of ``frame``."""
+def fill_exact(mask_shape, uv: np.ndarray) -> np.ndarray:
+    """Boolean (H, W) mask of exactly the pixel centres inside polygon ``uv`` (N, 2): the exact
+    rasterisation a renderer that samples pixel centres produces."""
+    from matplotlib.path import Path as PolyPath
+    h, w = mask_shape
+    x0, y0 = np.clip(np.floor(uv.min(0)).astype(int), 0, [w, h])
+    x1, y1 = np.clip(np.ceil(uv.max(0)).astype(int) + 1, 0, [w, h])
+    mask = np.zeros(mask_shape, bool)
+    if x1 > x0 and y1 > y0:
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        inside = PolyPath(uv).contains_points(np.stack([xs.ravel(), ys.ravel()], 1))
+        mask[y0:y1, x0:x1] = inside.reshape(xs.shape)
+    return mask
+
+
+def painted_passes(frame: FrameScene, static: StaticScene, exact: bool = False) -> RenderPasses:
+    """Colour (linear), depth (m, as Blender writes it) and object-index passes of ``frame``'s
+    render canvas; ``exact``: markers rasterised exactly at pixel centres (``fill_exact``)."""
     cam = frame.camera
-    h, w = cam.height, cam.width
-    k = cam.k()
+    ox, oy, w, h = cam.canvas()
+    k = intrinsics(cam.focal_px, (cam.principal_point[0] - ox, cam.principal_point[1] - oy))
     cam_from_d = cam.cam_from_d_array()
     d_from_b = frame.d_from_b_array()
     eye_d = invert_transform(cam_from_d)[:3, 3]
@@ -84,12 +103,13 @@ def painted_passes(frame: FrameScene, static: StaticScene) -> RenderPasses:
         if np.all(z > 0):
             discs.append((float(z.mean()), m, uv))
     for z, m, uv in sorted(discs, key=lambda d: -d[0]):   # far to near
-        paint(_fill((h, w), uv), MARKER_RGB[m.section], z, m.pass_index)
+        paint((fill_exact if exact else _fill)((h, w), uv), MARKER_RGB[m.section], z, m.pass_index)
     return RenderPasses(rgb=rgb, depth_mm=depth, index=index)
 
 
-def write_painted_dataset(root, config_path) -> Config:
-    """A complete dataset of ``config_path`` in ``root`` (every planned frame, manifest)."""
+def write_painted_dataset(root, config_path, exact: bool = False) -> Config:
+    """A complete dataset of ``config_path`` in ``root`` (every planned frame, manifest);
+    ``exact``: see :func:`painted_passes`."""
     root = Path(root)
     cfg = load_config(config_path)
     prepare(root, cfg, Path(config_path).read_text())
@@ -98,7 +118,7 @@ def write_painted_dataset(root, config_path) -> Config:
         for spec in frame_plan(cfg):
             frame = sample_frame(cfg, spec)
             exr = Path(scratch) / f"{spec.frame_id}.exr"
-            write_compact(exr, painted_passes(frame, static))
+            write_compact(exr, painted_passes(frame, static, exact))
             finish_frame(frame, static, exr, root, cfg.render.keep_exr, cfg.labels.visible_threshold,
                          min_chroma=cfg.labels.min_chroma)
     write_manifest(root, cfg)
@@ -117,3 +137,90 @@ def seal_hand_made(root, cfg: Config) -> None:
             files[kind] = {"path": rel, "bytes": path.stat().st_size, "sha256": sha256_file(path)}
         write_json_atomic(root / "meta" / f"{spec.frame_id}.json", {"frame_id": spec.frame_id, "files": files})
     write_manifest(root, cfg)
+
+
+# A small camera-unit config (320 x 240): two units with a strong barrel lens, the principal point
+# off centre, tangential distortion, chromatic aberration and JPEG; large markers close to the
+# camera, so that most are 150 px or more (the label-vs-pixels tests of distorted frames:
+# tests/test_camera_units.py paints it, tests/test_render.py renders it).
+LENS_CHECK = """
+[dataset]
+name = "lens-check"
+seed = 5
+frames = 4
+[conditions]
+normal = 1
+low_light = 0
+occlusion = 0
+glare = 0
+[image]
+width = 320
+height = 240
+[camera]
+distance_mm = [600, 650]
+focal_px = [330, 345]
+margin_px = 10
+tilt_deg = 2
+lateral_jitter_mm = 10
+[pose]
+x_mm = [5, 40]
+[markers]
+diameter_mm = 30
+layout_a = [[45, -18], [100, -10], [62, 10], [125, 16], [44, 34], [98, 36]]
+layout_b = [[46, -14], [104, -20], [70, 4], [128, 22], [50, 32], [110, 40]]
+[camera_units]
+count = 2
+principal_offset_x_px = [-12, 12]
+principal_offset_y_px = [-10, 10]
+k1 = [-0.15, -0.1]
+k2 = [-0.05, 0.05]
+p1 = [-1e-3, 1e-3]
+p2 = [-1e-3, 1e-3]
+aberration_red_px = [-0.3, 0.3]
+aberration_blue_px = [-0.3, 0.3]
+jpeg = true
+[render]
+samples = 1
+keep_exr = true
+frame_timeout_s = 120
+"""
+
+
+def label_vs_index(root, cfg: Config, min_pixels: int = 150) -> dict:
+    """Every fully visible marker of a dataset with kept EXRs: its index-pass pixels against the
+    exact rasterisation (pixel centres) of the label's outline in the delivered image (K, lens
+    distortion), and the centroid of its index pixels against ``center_px`` and
+    ``outline_centroid_px`` for markers of ``min_pixels`` or more. Returns mismatched pixels,
+    outline pixels, markers compared and the centroid errors (px) as arrays."""
+    import json
+
+    from matplotlib.path import Path as PolyPath
+
+    from dockfactory.generator.exr import read_compact
+    from dockfactory.generator.labels import marker_outline_px
+    layout = {m.id: m for m in static_scene(cfg).markers}
+    out = {"mismatch": 0, "pixels": 0, "markers": 0, "centre_err": [], "centroid_err": []}
+    for label_path in sorted((Path(root) / "labels").glob("*.json")):
+        label = json.loads(label_path.read_text())
+        cam = label["camera"]
+        index = read_compact(Path(root) / "exr" / f"{label['frame_id']}.exr").index
+        for m in label["markers"]:
+            if not m["in_frame"] or m["visible_fraction"] < 0.9:
+                continue
+            cam_from_s = np.array(cam["cam_from_d"]) @ (np.array(label["d_from_b"]) if m["section"] == "B" else np.eye(4))
+            outline, _ = marker_outline_px(layout[m["id"]], np.array(cam["K"]), cam["distortion"], cam_from_s)
+            x0, y0 = np.floor(outline.min(0)).astype(int) - 2
+            x1, y1 = np.ceil(outline.max(0)).astype(int) + 3
+            if x0 < 0 or y0 < 0 or x1 > index.shape[1] or y1 > index.shape[0]:
+                continue
+            ys, xs = np.mgrid[y0:y1, x0:x1]
+            inside = PolyPath(outline).contains_points(np.stack([xs.ravel(), ys.ravel()], 1)).reshape(xs.shape)
+            out["mismatch"] += int((inside != (index[y0:y1, x0:x1] == m["pass_index"])).sum())
+            out["pixels"] += int(inside.sum())
+            out["markers"] += 1
+            yi, xi = np.nonzero(index == m["pass_index"])
+            if len(xi) >= min_pixels:
+                c = np.array([xi.mean(), yi.mean()])
+                out["centre_err"].append(float(np.linalg.norm(c - m["center_px"])))
+                out["centroid_err"].append(float(np.linalg.norm(c - m["outline_centroid_px"])))
+    return {k: np.array(v) if isinstance(v, list) else v for k, v in out.items()}

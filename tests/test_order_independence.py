@@ -260,3 +260,89 @@ def test_frames_after_a_worker_crash_equal_a_clean_run(smoke, single_run, tmp_pa
     assert (tmp_path / f"fault-crash-{lamp}").exists()
     got = {fid: frame_files(tmp_path / "ds", fid) for fid in ids}
     assert not differences(got, {fid: single_run[fid] for fid in ids})
+
+
+# --- the same for real cameras: distortion, chromatic aberration, depth of field, JPEG, runs -----
+
+LENS_SMOKE = """
+[dataset]
+name = "smoke-lens"
+seed = 7
+frames = 6
+train_fraction = 0.5
+[conditions]
+normal = 1
+low_light = 1
+occlusion = 1
+glare = 1
+[repeatability]
+poses = 1
+captures = 2
+[image]
+width = 320
+height = 240
+[camera]
+focal_px = [300, 750]
+margin_px = 12
+[camera_units]
+count = 2
+principal_offset_x_px = [-12, 12]
+principal_offset_y_px = [-10, 10]
+k1 = [-0.15, 0.05]
+k2 = [-0.05, 0.05]
+p1 = [-1e-3, 1e-3]
+p2 = [-1e-3, 1e-3]
+aberration_red_px = [-0.3, 0.3]
+aberration_blue_px = [-0.3, 0.3]
+sensor_width_mm = 8.8
+depth_of_field = true
+f_number = [2.8, 5.6]
+focus_error_mm = [-100, 100]
+jpeg = true
+[runs]
+frames_per_run = 2
+[render]
+samples = 1
+keep_exr = true
+frame_timeout_s = 120
+"""
+
+
+@pytest.fixture(scope="module")
+def lens_smoke(tmp_path_factory):
+    """(cfg, text, scenes, frame ids) of LENS_SMOKE, and its frames rendered by one job in plan order."""
+    d = tmp_path_factory.mktemp("lens-smoke")
+    (d / "cfg.toml").write_text(LENS_SMOKE)
+    cfg = load_config(d / "cfg.toml")
+    scenes = {s.frame_id: sample_frame(cfg, s) for s in frame_plan(cfg)}
+    assert {f.camera.unit for f in scenes.values()} == {0, 1}
+    assert all(f.camera.f_number > 0 and f.camera.jpeg_quality and not f.camera.is_pinhole() for f in scenes.values())
+    assert len({f.camera.canvas() for f in scenes.values()}) == 2   # the render size changes between units
+    summary = run_render(cfg, d / "ds", LENS_SMOKE, JobOptions(progress=False))
+    assert summary.ok and summary.complete, summary.text()
+    return (cfg, LENS_SMOKE, scenes, sorted(scenes)), all_frames(d / "ds", scenes)
+
+
+def test_lens_frames_blender_state_does_not_depend_on_earlier_frames(lens_smoke, tmp_path):
+    smoke, _ = lens_smoke
+    ids = smoke[3]
+    w = Worker(smoke, tmp_path)
+    try:
+        seen = {}
+        for fid in every_ordered_pair(ids):
+            digest = w.state(fid)["digest"]
+            assert seen.setdefault(fid, digest) == digest, fid
+    finally:
+        w.close()
+
+
+def test_lens_frames_shuffled_equal_the_ordered_run(lens_smoke, tmp_path):
+    """Distorted, aberrated, defocused, JPEG frames of two units (their canvases differ in size)
+    rendered in reverse plan order by one worker have the bytes of the ordered job."""
+    smoke, reference = lens_smoke
+    w = Worker(smoke, tmp_path)
+    try:
+        got = {fid: w.render(fid) for fid in reversed(smoke[3])}
+    finally:
+        w.close()
+    assert not differences(got, reference)
