@@ -22,8 +22,9 @@ from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.generator.draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
-from dockfactory.generator.sampler import frame_plan, static_scene
+from dockfactory.generator.sampler import frame_plan
 from dockfactory.generator.version import (
     blender_version,
     dataset_version_id,

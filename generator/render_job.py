@@ -21,9 +21,10 @@ from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
 from dockfactory.generator.dataset_check import inspect
 from dockfactory.generator.dataset_tools import export_complete, write_export
+from dockfactory.generator.draws import static_scene
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.generator.progress import Progress
-from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
+from dockfactory.generator.sampler import frame_plan, sample_frame
 
 
 @dataclass(frozen=True)

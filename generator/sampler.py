@@ -5,29 +5,20 @@ Every random choice comes from a ``numpy.random.Generator`` seeded with
 frame's look (light, noise, occluders) each draw from their own stream, so a frame is the same
 whatever the shard, worker count or render order, and the captures of a repeatability pose share
 their geometry while their lighting and noise differ.
+
+This module holds the frame plan and the per-frame sampling; the streams and the draws it shares
+are in ``generator.draws``, the camera units' lenses in ``generator.camera_units`` and the docking
+runs in ``generator.runs``.
 """
 from __future__ import annotations
 
 import colorsys
 import dataclasses
-import itertools
-from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
-from dockfactory.core.distortion import distort_normalized
-from dockfactory.core.geometry import (
-    look_at_cam_from_world,
-    make_transform,
-    rot_x,
-    rot_y,
-    rot_z,
-    transform_from_pose_components,
-    transform_points,
-)
-from dockfactory.core.layout import marker_points
+from dockfactory.core.geometry import make_transform, rot_x, rot_y
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -44,16 +35,33 @@ from dockfactory.core.scene import (
     mat4,
     vec,
 )
+from dockfactory.generator.camera_units import (
+    UnitLens,
+    balanced_units,
+    camera_model,
+    check_lenses,
+    largest_fitting_focal,
+    repeat_unit,
+    unit_lens,
+)
+from dockfactory.generator.draws import (
+    STREAM_GEOMETRY,
+    STREAM_LOOK,
+    STREAM_PLAN,
+    STREAM_REPEAT_GEOMETRY,
+    STREAM_REPEAT_LOOK,
+    STREAM_RUN_LOOK,
+    STREAM_RUN_PLAN,
+    aim_camera,
+    markers_in_d,
+    rng_for,
+    sample_pose,
+    static_scene,
+    uniform,
+)
+from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, unit_camera
 
-STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
-# camera units and docking runs (their own streams: configs without them draw what they drew before)
-STREAM_UNITS, STREAM_UNIT_LENS, STREAM_UNIT_CAMERA, STREAM_RUN_PLAN, STREAM_RUN, STREAM_RUN_LOOK = range(5, 11)
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
-
-
-def rng_for(seed: int, *keys: int) -> np.random.Generator:
-    """The Generator of one named stream of a dataset."""
-    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
 
 
 # ----------------------------------------------------------------------------- plan
@@ -105,32 +113,6 @@ def _stratified_splits(cfg: Config, groups: list[np.ndarray], n: int, stream: in
     return split_of
 
 
-def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:
-    """Camera unit of each of ``n`` items (frames or runs): a seeded permutation dealt round robin,
-    so the units' counts differ by at most one. (n,) int."""
-    out = np.zeros(n, dtype=int)
-    if count > 1:
-        out[rng_for(seed, STREAM_UNITS, key).permutation(n)] = np.arange(n) % count
-    return out
-
-
-def repeat_unit(cfg: Config) -> int:
-    """The one camera unit that takes every repeatability capture."""
-    count = cfg.camera_units.count
-    return 0 if count == 1 else int(rng_for(cfg.dataset.seed, STREAM_UNITS, 2).integers(count))
-
-
-def run_count(cfg: Config) -> int:
-    """Docking runs of the main frames (0 without runs)."""
-    per = cfg.runs.frames_per_run
-    return 0 if per == 0 else -(-cfg.dataset.frames // per)
-
-
-def run_length(cfg: Config, run: int) -> int:
-    per = cfg.runs.frames_per_run
-    return min(per, cfg.dataset.frames - run * per)
-
-
 def _main_specs(cfg: Config) -> list[FrameSpec]:
     """Main frames. Without runs every frame draws its condition, split (stratified by condition)
     and unit. With runs every run does (frames i * per .. (i + 1) * per - 1 form run i; splits
@@ -165,14 +147,6 @@ def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
     return tuple(specs)
 
 
-@lru_cache(maxsize=8)
-def static_scene(cfg: Config) -> StaticScene:
-    return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
-                       flange_width_mm=cfg.sections.flange_width_mm,
-                       flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(), max_occluders=cfg.occlusion.occluders[1],
-                       clutter_slots=CLUTTER_SLOTS)
-
-
 def _streams(cfg: Config, spec: FrameSpec) -> tuple[np.random.Generator, np.random.Generator]:
     s = cfg.dataset.seed
     if spec.kind == "repeat":
@@ -183,209 +157,23 @@ def _streams(cfg: Config, spec: FrameSpec) -> tuple[np.random.Generator, np.rand
 
 # ----------------------------------------------------------------------------- geometry
 
-def _u(rng, lo_hi) -> float:
-    return float(rng.uniform(lo_hi[0], lo_hi[1]))
-
-
-def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
-    """Marker centres (N, 3) in D, in layout order."""
-    pa = marker_points(static.markers)
-    is_b = np.array([m.section == "B" for m in static.markers])
-    out = pa.copy()
-    out[is_b] = transform_points(d_from_b, pa[is_b])
-    return out
-
-
-@dataclass(frozen=True)
-class UnitLens:
-    """The lens of one camera unit, drawn once from [camera_units] with the dataset seed."""
-    unit: int
-    principal_offset: tuple[float, float]   # principal point - image centre, px
-    distortion: tuple[float, ...]           # k1, k2, p1, p2, k3 (OpenCV order)
-    aberration_px: tuple[float, float]      # red, blue vs green at the farthest image corner
-    f_number: float                         # 0: no depth of field
-    focus_error_mm: float
-    jpeg_quality: int                       # 0: no JPEG encoding
-
-    def is_ideal(self) -> bool:
-        return not any(self.distortion) and not any(self.principal_offset)
-
-
-@lru_cache(maxsize=256)
-def unit_lens(cfg: Config, unit: int) -> UnitLens:
-    """Lens of camera unit ``unit``: a function of (config, seed, unit); every value is drawn, in a
-    fixed order, whether its feature is on or not."""
-    u = cfg.camera_units
-    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_LENS, unit)
-    offset = (_u(rng, u.principal_offset_x_px), _u(rng, u.principal_offset_y_px))
-    k1, k2, k3, p1, p2 = (_u(rng, getattr(u, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
-    aberration = (_u(rng, u.aberration_red_px), _u(rng, u.aberration_blue_px))
-    f_number, focus_error = _u(rng, u.f_number), _u(rng, u.focus_error_mm)
-    quality = int(rng.integers(u.jpeg_quality[0], u.jpeg_quality[1] + 1))
-    dof = u.depth_of_field
-    return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
-                    focus_error if dof else 0.0, quality if u.jpeg else 0)
-
-
-def principal_point(cfg: Config, lens: UnitLens) -> tuple[float, float]:
-    return ((cfg.image.width - 1) / 2.0 + lens.principal_offset[0],
-            (cfg.image.height - 1) / 2.0 + lens.principal_offset[1])
-
-
-def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndarray,
-                          lens: UnitLens | None = None) -> float:
-    """Largest focal (px) that keeps every marker disc ``margin_px`` inside the image, through the
-    unit's lens (principal point and distortion; pixel offsets from the principal point scale with
-    the focal, so the bound is closed-form)."""
-    pc = transform_points(cam_from_d, points_d)
-    z = pc[:, 2]
-    if np.any(z <= 0):
-        return 0.0
-    r = cfg.markers.diameter_mm / 2.0
-    if lens is None or lens.is_ideal():
-        half_w = cfg.image.width / 2.0 - cfg.camera.margin_px
-        half_h = cfg.image.height / 2.0 - cfg.camera.margin_px
-        ext_x = (np.abs(pc[:, 0]) + r) / z
-        ext_y = (np.abs(pc[:, 1]) + r) / z
-        return float(min(half_w / ext_x.max(), half_h / ext_y.max()))
-    corners = np.concatenate([(pc[:, :2] + r * np.array(sign)) / z[:, None]
-                              for sign in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
-    xd = distort_normalized(corners, lens.distortion)
-    pp, size, margin = principal_point(cfg, lens), (cfg.image.width, cfg.image.height), cfg.camera.margin_px
-    caps = [np.inf]
-    for axis in (0, 1):
-        room_hi, room_lo = size[axis] - 0.5 - margin - pp[axis], pp[axis] + 0.5 - margin
-        if min(room_hi, room_lo) <= 0:
-            return 0.0
-        d = xd[:, axis]
-        caps += list(room_hi / d[d > 0]) + list(room_lo / -d[d < 0])
-    return float(min(caps))
-
-
-def _sample_pose(cfg: Config, rng: np.random.Generator) -> np.ndarray:
-    p = cfg.pose
-    return transform_from_pose_components(_u(rng, p.x_mm), _u(rng, p.y_mm), _u(rng, p.z_mm),
-                                          _u(rng, p.alpha_deg), _u(rng, p.beta_deg), _u(rng, p.gamma_deg))
-
-
-def _aim(cfg: Config, rng: np.random.Generator, b_x_mm: float):
-    """Camera pose from jitter, tilt, roll and distance drawn from ``rng`` (in that order), aimed
-    near the seam of B at axial gap ``b_x_mm``: (cam_from_d, eye, target)."""
-    c = cfg.camera
-    jx, jy = rng.uniform(-c.lateral_jitter_mm, c.lateral_jitter_mm, size=2)
-    tx, ty = np.radians(rng.uniform(-c.tilt_deg, c.tilt_deg, size=2))
-    roll = np.radians(rng.uniform(-c.roll_deg, c.roll_deg))
-    distance = _u(rng, c.distance_mm)
-    target = np.array([b_x_mm / 2.0 + jx, jy, cfg.sections.radius_mm])
-    eye = target + distance * (rot_y(ty) @ rot_x(tx) @ np.array([0.0, 0.0, 1.0]))
-    cam_from_d = make_transform(rot_z(roll), np.zeros(3)) @ look_at_cam_from_world(eye, target)
-    return cam_from_d, eye, target
-
-
 def sample_geometry(cfg: Config, rng: np.random.Generator, lens: UnitLens | None = None):
     """d_from_b, cam_from_d and the focal cap for one frame (consumes ``rng`` in a fixed order)."""
-    d_from_b = _sample_pose(cfg, rng)
-    cam_from_d, eye, target = _aim(cfg, rng, d_from_b[0, 3])
+    d_from_b = sample_pose(cfg, rng)
+    cam_from_d, eye, target = aim_camera(cfg, rng, d_from_b[0, 3])
     f_cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static_scene(cfg), d_from_b), lens)
     u_focal = float(rng.uniform())
     return d_from_b, cam_from_d, f_cap, u_focal, eye, target
 
 
-# ----------------------------------------------------------------------------- docking runs
-
-RUN_DRIFT = 0.8    # a run's drifting components start and end within this share of their half range
-RUN_WOBBLE = 0.2   # plus a slow sine of at most this share (together they stay inside the range)
-
-
-def _pose_box_corners(cfg: Config) -> list[np.ndarray]:
-    """d_from_b at the 64 corners of the poses a unit may see (runs and repeatability poses)."""
-    p = cfg.pose
-    xs = (min(cfg.runs.x_end_mm[0], p.x_mm[0]), p.x_mm[1])
-    return [transform_from_pose_components(*v) for v in itertools.product(
-        xs, p.y_mm, p.z_mm, p.alpha_deg, p.beta_deg, p.gamma_deg)]
-
-
-@lru_cache(maxsize=256)
-def unit_camera(cfg: Config, unit: int):
-    """With runs: the fixed camera of a unit, (cam_from_d, focal_px, eye, target). Its zoom fits
-    the markers at every corner of the pose ranges. Raises ConfigError (no source) if none fits."""
-    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_CAMERA, unit)
-    cam_from_d, eye, target = _aim(cfg, rng, (cfg.runs.x_end_mm[0] + cfg.pose.x_mm[1]) / 2.0)
-    static, lens = static_scene(cfg), unit_lens(cfg, unit)
-    cap = min(largest_fitting_focal(cfg, cam_from_d, markers_in_d(static, t), lens) for t in _pose_box_corners(cfg))
-    f_lo, f_hi = cfg.camera.focal_px[0], min(cfg.camera.focal_px[1], cap)
-    if f_hi < f_lo:
-        raise ConfigError(f"[camera] focal_px: camera unit {unit} cannot fit the markers of a whole docking run "
-                          f"at {f_lo:g} px (largest that fits: {cap:.0f} px)")
-    return cam_from_d, float(f_lo + rng.uniform() * (f_hi - f_lo)), eye, target
-
-
-@lru_cache(maxsize=4096)
-def _run_drift(cfg: Config, run: int) -> tuple:
-    """A run's end gap and, for Y, Z, alpha, beta, gamma: (start, end, wobble, cycles, phase)."""
-    rng = rng_for(cfg.dataset.seed, STREAM_RUN, run)
-    x_end = _u(rng, cfg.runs.x_end_mm)
-    comps = tuple((float(rng.uniform(-RUN_DRIFT, RUN_DRIFT)), float(rng.uniform(-RUN_DRIFT, RUN_DRIFT)),
-                   float(rng.uniform(-RUN_WOBBLE, RUN_WOBBLE)), float(rng.uniform(0.3, 1.5)),
-                   float(rng.uniform(0.0, 2 * np.pi))) for _ in range(5))
-    return x_end, comps
-
-
-def run_pose(cfg: Config, run: int, run_frame: int) -> np.ndarray:
-    """d_from_b of frame ``run_frame`` of docking run ``run``: frames evenly spaced in time t in
-    [0, 1]; X falls from the top of [pose] x_mm to the run's end gap with a smooth (cosine) speed
-    profile; Y, Z and the angles drift from a start to an end value with a slow sine on top,
-    inside their ranges."""
-    n = run_length(cfg, run)
-    t = run_frame / (n - 1) if n > 1 else 0.0
-    x_end, comps = _run_drift(cfg, run)
-    x = x_end + (cfg.pose.x_mm[1] - x_end) * 0.5 * (1.0 + np.cos(np.pi * t))
-    values = []
-    for (lo, hi), (a, b, wobble, cycles, phase) in zip(
-            (cfg.pose.y_mm, cfg.pose.z_mm, cfg.pose.alpha_deg, cfg.pose.beta_deg, cfg.pose.gamma_deg), comps):
-        v = (1 - t) * a + t * b + wobble * np.sin(2 * np.pi * cycles * t + phase)
-        values.append((lo + hi) / 2.0 + (hi - lo) / 2.0 * v)
-    return transform_from_pose_components(x, *values)
-
-
 # ----------------------------------------------------------------------------- feasibility
-
-def _check_lenses(cfg: Config, source: str) -> None:
-    """Every unit's lens is usable at the smallest focal (no fold, a bounded render canvas)."""
-    for unit in range(cfg.camera_units.count):
-        lens = unit_lens(cfg, unit)
-        cam = camera_model(cfg, lens, cfg.camera.focal_px[0], np.eye(4), np.zeros(3), np.array([0, 0, 1.0]))
-        try:
-            cam.canvas()
-        except ValueError as exc:
-            raise ConfigError(f"{source}: [camera_units] k1: camera unit {unit} (k1, k2, p1, p2, k3 = "
-                              f"{', '.join(f'{v:g}' for v in lens.distortion)}) at {cam.focal_px:g} px: "
-                              f"{exc}") from None
-
-
-def _check_runs_fit(cfg: Config, source: str) -> None:
-    """With runs: every unit's fixed camera fits its markers at every frame it takes."""
-    static = static_scene(cfg)
-    for spec in frame_plan(cfg):
-        try:
-            cam_from_d, focal, _, _ = unit_camera(cfg, spec.unit)
-        except ConfigError as exc:
-            raise ConfigError(f"{source}: {exc}; lower focal_px, raise distance_mm or narrow [pose]") from None
-        d_from_b = run_pose(cfg, spec.run, spec.run_frame) if spec.run >= 0 else \
-            _sample_pose(cfg, rng_for(cfg.dataset.seed, STREAM_REPEAT_GEOMETRY, spec.pose_index))
-        cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static, d_from_b), unit_lens(cfg, spec.unit))
-        if cap < focal:
-            raise ConfigError(f"{source}: [runs] frames_per_run: frame {spec.frame_id} of camera unit {spec.unit} "
-                              f"puts markers within {cfg.camera.margin_px:g} px of the border at the unit's "
-                              f"{focal:.0f} px (largest that fits: {cap:.0f} px); narrow [pose] or lower focal_px")
-
 
 def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
     """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal (with
     runs: at its unit's focal), or a unit's lens is unusable."""
-    _check_lenses(cfg, source)
+    check_lenses(cfg, source)
     if cfg.runs.frames_per_run > 0:
-        _check_runs_fit(cfg, source)
+        check_runs_fit(cfg, frame_plan(cfg), source)
         return
     worst = np.inf
     for spec in frame_plan(cfg):
@@ -523,7 +311,7 @@ def sample_occluders(cfg: Config, rng, static: StaticScene, points_d, eye) -> tu
         else:  # hand-sized blob
             size = np.array([rng.uniform(80, 120), rng.uniform(60, 95), rng.uniform(30, 55)])
         half_width = size[1] / 2 + cfg.markers.diameter_mm / 2
-        gap = _u(rng, cfg.occlusion.gap_mm)
+        gap = uniform(rng, cfg.occlusion.gap_mm)
         shift_along = rng.uniform(-0.4, 0.4) * size[0] if kind in ("tool", "blob") else 0.0
         centre = marker + gap * ray + rng.uniform(-1.2, 1.2) * half_width * across + shift_along * axis
         rotation = np.stack([axis, across, np.cross(axis, across)], axis=1)
@@ -577,11 +365,11 @@ def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParam
     if condition == "ideal":
         return SensorParams(True, 0.0, 0.0, 1.0, 0.0, s.adc_bits, 0.0, 0.0, seed)
     if condition == "low_light":
-        ev, gain = _u(rng, s.low_light_ev), _u(rng, s.low_light_gain_ev)
+        ev, gain = uniform(rng, s.low_light_ev), uniform(rng, s.low_light_gain_ev)
     else:
-        ev, gain = _u(rng, s.exposure_ev), 0.0
-    return SensorParams(False, ev, gain, _u(rng, s.full_well_e), _u(rng, s.read_noise_e),
-                        s.adc_bits, _u(rng, s.vignetting), bloom, seed)
+        ev, gain = uniform(rng, s.exposure_ev), 0.0
+    return SensorParams(False, ev, gain, uniform(rng, s.full_well_e), uniform(rng, s.read_noise_e),
+                        s.adc_bits, uniform(rng, s.vignetting), bloom, seed)
 
 
 # ----------------------------------------------------------------------------- frame
@@ -590,15 +378,6 @@ def render_settings(cfg: Config) -> RenderSettings:
     r = cfg.render
     return RenderSettings(r.samples, r.denoise, r.max_bounces, r.adaptive_threshold,
                           r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter)
-
-
-def camera_model(cfg: Config, lens: UnitLens, focal_px: float, cam_from_d, eye, target) -> CameraModel:
-    """The frame's camera: pinhole K with the unit's principal point, plus the unit's lens."""
-    distance = float(np.linalg.norm(np.asarray(eye) - np.asarray(target)))
-    return CameraModel(cfg.image.width, cfg.image.height, float(focal_px), principal_point(cfg, lens),
-                       mat4(cam_from_d), vec(target), distance, lens.unit, lens.distortion, lens.aberration_px,
-                       lens.f_number, distance + lens.focus_error_mm if lens.f_number > 0 else 0.0,
-                       cfg.camera_units.sensor_width_mm, lens.jpeg_quality)
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
@@ -628,7 +407,7 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
     if spec.kind == "repeat":
         stage_rng = rng_for(seed, STREAM_REPEAT_GEOMETRY, spec.pose_index)
         look_rng = rng_for(seed, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture)
-        d_from_b = _sample_pose(cfg, stage_rng)
+        d_from_b = sample_pose(cfg, stage_rng)
         light_rng = look_rng
     else:
         stage_rng = light_rng = rng_for(seed, STREAM_RUN_LOOK, spec.run)
@@ -656,7 +435,7 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
         glare_props, glare_lights, rough = sample_glare(cfg, look_rng, glare_kind, static, camera, eye)
         props += glare_props
         lights = lights + glare_lights
-        bloom = _u(look_rng, cfg.glare.bloom)
+        bloom = uniform(look_rng, cfg.glare.bloom)
         if rough is not None:
             appearance = dataclasses.replace(appearance, roughness=rough,
                                              roughness_variation=min(appearance.roughness_variation, 0.05))

@@ -26,9 +26,9 @@ def blender_version() -> str:
 OUTPUT_SOURCES = (
     "dockfactory.core.config", "dockfactory.core.distortion", "dockfactory.core.errors", "dockfactory.core.geometry",
     "dockfactory.core.io", "dockfactory.core.layout", "dockfactory.core.names", "dockfactory.core.scene",
-    "dockfactory.generator.exr", "dockfactory.generator.frame_output", "dockfactory.generator.labels",
-    "dockfactory.generator.render_worker", "dockfactory.generator.sampler",
-    "dockfactory.generator.sensor",
+    "dockfactory.generator.camera_units", "dockfactory.generator.draws", "dockfactory.generator.exr",
+    "dockfactory.generator.frame_output", "dockfactory.generator.labels", "dockfactory.generator.render_worker",
+    "dockfactory.generator.runs", "dockfactory.generator.sampler", "dockfactory.generator.sensor",
     "dockfactory.blender_scenes.frame_update", "dockfactory.blender_scenes.materials",
     "dockfactory.blender_scenes.meshes", "dockfactory.blender_scenes.render",
     "dockfactory.blender_scenes.scene_builder",

@@ -22,16 +22,10 @@ from dockfactory.core.geometry import blender_camera_intrinsics, pose_components
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import CameraModel, to_dict
 from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.camera_units import largest_fitting_focal, unit_lens
+from dockfactory.generator.draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines
-from dockfactory.generator.sampler import (
-    check_focal_fits,
-    frame_plan,
-    largest_fitting_focal,
-    markers_in_d,
-    sample_frame,
-    static_scene,
-    unit_lens,
-)
+from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.generator.sensor import channel_maps, distortion_maps, jpeg_round_trip, resample_passes
 
 STRONG = (-0.15, -0.05, 1e-3, -1e-3, 0.0)

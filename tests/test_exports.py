@@ -29,6 +29,7 @@ from dockfactory.core.layout import CLASS_NAMES, marker_outline
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset import prepare
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.draws import static_scene
 from dockfactory.generator.export_coco import (
     KPT_OKS_SIGMAS,
     POLYGON_TOLERANCE_PX,
@@ -37,7 +38,7 @@ from dockfactory.generator.export_coco import (
 )
 from dockfactory.generator.export_yolo import data_yaml, parse_yolo_line
 from dockfactory.generator.labels import frame_labels
-from dockfactory.generator.sampler import frame_plan, sample_frame, static_scene
+from dockfactory.generator.sampler import frame_plan, sample_frame
 
 CONFIG = {"dataset": {"name": "exports", "seed": 3, "frames": 16, "train_fraction": 0.75, "val_fraction": 0.25},
           "conditions": {"normal": 1, "low_light": 1, "occlusion": 1, "glare": 1},

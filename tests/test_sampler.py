@@ -14,13 +14,8 @@ from dockfactory.core.layout import (
     marker_points,
 )
 from dockfactory.core.scene import FrameScene, from_dict, to_dict
-from dockfactory.generator.sampler import (
-    condition_counts,
-    frame_plan,
-    markers_in_d,
-    sample_frame,
-    static_scene,
-)
+from dockfactory.generator.draws import markers_in_d, static_scene
+from dockfactory.generator.sampler import condition_counts, frame_plan, sample_frame
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,78 @@
+"""The seeded streams of a dataset and the draws the frame sampler, the camera units and the
+docking runs share: the static scene, B's pose and the camera's aim.
+
+Every random choice comes from a ``numpy.random.Generator`` seeded with
+``SeedSequence([seed, stream, ...])``, one named stream per purpose (the ``STREAM_*`` ids below;
+an id once given keeps its meaning, so a dataset draws what it drew before).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from dockfactory.core.config import Config
+from dockfactory.core.geometry import (
+    look_at_cam_from_world,
+    make_transform,
+    rot_x,
+    rot_y,
+    rot_z,
+    transform_from_pose_components,
+    transform_points,
+)
+from dockfactory.core.layout import marker_points
+from dockfactory.core.scene import CLUTTER_SLOTS, StaticScene
+
+STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
+# camera units and docking runs (their own streams: configs without them draw what they drew before)
+STREAM_UNITS, STREAM_UNIT_LENS, STREAM_UNIT_CAMERA, STREAM_RUN_PLAN, STREAM_RUN, STREAM_RUN_LOOK = range(5, 11)
+
+
+def rng_for(seed: int, *keys: int) -> np.random.Generator:
+    """The Generator of one named stream of a dataset."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def uniform(rng, lo_hi) -> float:
+    """One uniform draw in the config range ``lo_hi`` = (lo, hi)."""
+    return float(rng.uniform(lo_hi[0], lo_hi[1]))
+
+
+@lru_cache(maxsize=8)
+def static_scene(cfg: Config) -> StaticScene:
+    return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
+                       flange_width_mm=cfg.sections.flange_width_mm,
+                       flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(),
+                       max_occluders=cfg.occlusion.occluders[1], clutter_slots=CLUTTER_SLOTS)
+
+
+def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
+    """Marker centres (N, 3) in D, in layout order."""
+    pa = marker_points(static.markers)
+    is_b = np.array([m.section == "B" for m in static.markers])
+    out = pa.copy()
+    out[is_b] = transform_points(d_from_b, pa[is_b])
+    return out
+
+
+def sample_pose(cfg: Config, rng: np.random.Generator) -> np.ndarray:
+    """d_from_b drawn from the [pose] ranges (X, Y, Z, alpha, beta, gamma, in that order)."""
+    p = cfg.pose
+    return transform_from_pose_components(uniform(rng, p.x_mm), uniform(rng, p.y_mm), uniform(rng, p.z_mm),
+                                          uniform(rng, p.alpha_deg), uniform(rng, p.beta_deg),
+                                          uniform(rng, p.gamma_deg))
+
+
+def aim_camera(cfg: Config, rng: np.random.Generator, b_x_mm: float):
+    """Camera pose from jitter, tilt, roll and distance drawn from ``rng`` (in that order), aimed
+    near the seam of B at axial gap ``b_x_mm``: (cam_from_d, eye, target)."""
+    c = cfg.camera
+    jx, jy = rng.uniform(-c.lateral_jitter_mm, c.lateral_jitter_mm, size=2)
+    tx, ty = np.radians(rng.uniform(-c.tilt_deg, c.tilt_deg, size=2))
+    roll = np.radians(rng.uniform(-c.roll_deg, c.roll_deg))
+    distance = uniform(rng, c.distance_mm)
+    target = np.array([b_x_mm / 2.0 + jx, jy, cfg.sections.radius_mm])
+    eye = target + distance * (rot_y(ty) @ rot_x(tx) @ np.array([0.0, 0.0, 1.0]))
+    cam_from_d = make_transform(rot_z(roll), np.zeros(3)) @ look_at_cam_from_world(eye, target)
+    return cam_from_d, eye, target
