@@ -16,6 +16,7 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
+from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.dataset_access import read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
@@ -256,10 +257,11 @@ def criterion_passes(statistic: str, value, threshold) -> bool:
 
 def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None,
              min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None,
-             envelope: EnvelopeGrid | None = None) -> tuple[dict, list[dict]]:
+             envelope: EnvelopeGrid | None = None, camera_models: bool = False) -> tuple[dict, list[dict]]:
     """Metrics and per-frame rows of a poses file on the opened dataset ``ds``; with ``envelope``
     also the tolerance envelope of uncalibrated cameras (eval.envelope) at the measured centre
-    noise (reported, not gated)."""
+    noise, with ``camera_models`` the test split solved with the pinhole and self-calibrated
+    camera models side by side (eval.camera_models_eval); both reported, not gated."""
     poses = read_json_for(poses_path, "poses", ds)
     detections = None
     if detections_path:   # mAP needs every detection's box and score
@@ -291,6 +293,8 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
                              "failures": failures_block(o_rows)}
     if envelope is not None:
         metrics["camera_envelope"] = camera_envelope(ds, spec, float(sigma), envelope)
+    if camera_models:
+        metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows
 

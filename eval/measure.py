@@ -27,14 +27,11 @@ from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, wri
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.measure_overlay import draw_measurement
-from dockfactory.eval.solve_frames import detection_arrays, failure_category, pose_record
-from dockfactory.solver import SolverError, solve_docking
+from dockfactory.eval.solve_frames import SELF_CALIBRATE, detection_arrays, solve_frame, solve_run
 from dockfactory.solver.camera_models import MODELS
-from dockfactory.solver.sequence import solve_sequence
 
 MEASURE_FORMAT = "dockfactory.measure/1"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-SELF_CALIBRATE = ("frame", "sequence")
 
 
 @dataclass
@@ -102,15 +99,10 @@ def measure_frame(detector, markers, index: int, path: Path, camera_model: str, 
     t0 = time.perf_counter()
     frame.detections = detector.detect(image)
     t1 = time.perf_counter()
-    cls, uv, boxes, refined = detection_arrays(frame.detections, min_score)
-    try:
-        res = solve_docking(markers, frame.principal_point, detections=(cls, uv), boxes=boxes, refined=refined,
-                            camera_model=camera_model)
-        frame.record = {**pose_record(res, int(len(cls))), "camera_model": res.camera_model}
-        frame.used_points = {mid: (float(uv[k, 0]), float(uv[k, 1]))
-                             for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers)) if ok and mid}
-    except SolverError as exc:
-        frame.record = {"ok": False, "reason": str(exc), "category": failure_category(exc)}
+    frame.record, frame.used_points = solve_frame(markers, frame.principal_point,
+                                                  detection_arrays(frame.detections, min_score), None, camera_model)
+    if frame.record["ok"]:
+        frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
@@ -127,21 +119,19 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str) -> 
     if len(sizes) > 1:
         raise DockfactoryError(f"--self-calibrate sequence: the images are one camera's, but their sizes differ "
                                f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))})")
-    corr = [f.used_points for f in solved]
     t0 = time.perf_counter()
-    try:
-        run = solve_sequence(markers, solved[0].principal_point, corr, camera_model=camera_model)
-    except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(exc), "frames": len(solved)}
+    keys = [str(f.index) for f in solved]
+    records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
+                        {str(f.index): f.used_points for f in solved}, None, camera_model)
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
-    for f, res in zip(solved, run.frames):
+    for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
-        f.record = {**pose_record(res, f.record["n_detections"]), "camera_model": run.camera_model,
-                    "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
-                    "image_size": f.record["image_size"], "timing_ms": timing, "self_calibrated": "sequence"}
-    return {"ok": True, "frames": len(solved), "camera_model": run.camera_model, "focal_px": run.focal_px,
-            "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
-            "rmse_px": run.rmse_px, "sigma_px": run.sigma_px}
+        f.record = {**records[str(f.index)], "image_size": f.record["image_size"], "timing_ms": timing}
+    first = records[keys[0]]
+    if not first["ok"]:
+        return {"ok": False, "reason": first["reason"], "category": first["category"], "frames": len(solved)}
+    return {"ok": True, "frames": len(solved), "camera_model": first["camera_model"], "focal_px": first["focal_px"],
+            "intrinsics": first["intrinsics"], "intrinsics_std": first["intrinsics_std"]}
 
 
 CSV_FIELDS = (["image", "ok", "category", "reason"] + list(POSE_NAMES) + [f"std_{n}" for n in POSE_NAMES]

@@ -8,7 +8,8 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
-from dockfactory.eval.measure import SELF_CALIBRATE, measure
+from dockfactory.eval.measure import measure
+from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
 def cmd_measure(args) -> int:

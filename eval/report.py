@@ -19,7 +19,13 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
 from dockfactory.eval.evaluate import criterion_passes
-from dockfactory.eval.report_envelope import ENVELOPE_SCHEMA, html_envelope, plot_envelope
+from dockfactory.eval.report_cameras import (
+    CAMERA_MODELS_SCHEMA,
+    ENVELOPE_SCHEMA,
+    html_camera_models,
+    html_envelope,
+    plot_envelope,
+)
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.version import generator_version, package_version
 
@@ -265,6 +271,7 @@ METRICS_SCHEMA = {
                    "per_class?": ("map", {"map50?": "num?", "map50_95?": "num?"}),
                    "pr_curves?": ("map", ("list", ("list", "num")))},
     "camera_envelope?": ENVELOPE_SCHEMA,
+    "camera_models?": CAMERA_MODELS_SCHEMA,
     "acceptance": {"accepted": "bool",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
                                          "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"})},
@@ -533,6 +540,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics)
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
+             + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
              + _html_figures(figs, worst) + [_html_provenance(provenance)])
     write_text_atomic(out_html, _html_document(parts))
     loc, est = metrics["localization"], metrics["estimation"]

@@ -17,13 +17,14 @@ import numpy as np
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.sampler import rng_for
+from dockfactory.generator.draws import rng_for
 from dockfactory.solver import (
     AmbiguousIdentification,
     SolverError,
     TooFewPoints,
     solve_docking,
 )
+from dockfactory.solver.sequence import solve_sequence
 
 POSES_FORMAT = "dockfactory.poses/1"
 ORACLE_STREAM = 101  # rng stream of the oracle's centre noise (see generator.sampler.rng_for)
@@ -65,12 +66,7 @@ def detection_arrays(dets: list[dict], min_score: float):
 
 def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
               refined=None, camera_model: str = "pinhole") -> dict:
-    try:
-        res = solve_docking(markers, principal_point, detections=(cls, uv), sigma_px=sigma_px,
-                            boxes=boxes, refined=refined, camera_model=camera_model)
-    except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}
-    return pose_record(res, int(len(cls)))
+    return solve_frame(markers, principal_point, (cls, uv, boxes, refined), sigma_px, camera_model)[0]
 
 
 def pose_record(res, n_detections: int) -> dict:
@@ -88,34 +84,92 @@ def pose_record(res, n_detections: int) -> dict:
     return rec
 
 
+SELF_CALIBRATE = ("frame", "sequence")
+
+
+def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_px, min_score: float):
+    """(class_ids, centres, boxes, refined) of a frame: its detections, or the oracle's noisy exact
+    centroids (seeded per frame); None when the detections file has no entry for it."""
+    label = ds.labels[fid]
+    if detections is not None:
+        dets = detections["frames"].get(fid)
+        return None if dets is None else detection_arrays(dets, min_score)
+    rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
+    cls, uv = oracle_detections(label, oracle_sigma_px, rng)
+    return cls, uv, None, None
+
+
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
-                  sigma_px: float | None = None) -> dict:
-    """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``."""
+                  sigma_px: float | None = None, camera_model: str = "pinhole",
+                  self_calibrate: str | None = None) -> dict:
+    """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
+    ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
+    "sequence" solves each docking run of the labels (one camera unit, one run) with shared
+    intrinsics, "frame" (or None) each frame alone."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
+    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
+        raise ValueError(f"self_calibrate must be one of {SELF_CALIBRATE}, got {self_calibrate!r}")
     markers = ds.markers()
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
-    frames = {}
+    sigma = sigma_px if sigma_px is not None or detections is not None else (oracle_sigma_px or None)
+    per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
+    frames, used = {}, {}
     for fid in ds.frames(splits):
-        label = ds.labels[fid]
-        if detections is not None:
-            dets = detections["frames"].get(fid)
-            if dets is None:
-                frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
-                continue
-            cls, uv, boxes, refined = detection_arrays(dets, min_score)
-            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px, boxes, refined)
-        else:
-            rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
-            cls, uv = oracle_detections(label, oracle_sigma_px, rng)
-            # the oracle knows its noise: the covariances use it unless told otherwise
-            frames[fid] = solve_one(markers, pp, cls, uv, sigma_px if sigma_px is not None else oracle_sigma_px or None)
+        centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
+        if centres is None:
+            frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
+            continue
+        frames[fid], used[fid] = solve_frame(markers, pp, centres, sigma, per_frame)
+    if self_calibrate == "sequence":
+        for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
+            frames.update(solve_run(markers, pp, group, frames, used, sigma, camera_model))
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
+            "camera_model": camera_model, "self_calibrate": self_calibrate,
             "splits": list(splits), "frames": frames}
+
+
+def solve_frame(markers, pp, centres, sigma, camera_model: str) -> tuple[dict, dict]:
+    """(poses record, marker id -> centre the fit used) of one frame."""
+    cls, uv, boxes, refined = centres
+    try:
+        res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
+                            camera_model=camera_model)
+    except SolverError as exc:
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}
+    used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers))
+            if ok and mid}
+    return pose_record(res, int(len(cls))), used
+
+
+def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
+    """The frames grouped by docking run (camera unit and run of their labels); a frame outside
+    any run (run -1, or a dataset without runs) is grouped with its unit's other such frames."""
+    groups: dict = {}
+    for fid in frame_ids:
+        spec = ds.labels[fid]["spec"]
+        groups.setdefault((spec.get("unit", 0), spec.get("run", -1)), []).append(fid)
+    return [groups[k] for k in sorted(groups)]
+
+
+def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str) -> dict:
+    """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
+    the joint solve fails, every frame of the run says why."""
+    try:
+        run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma)
+    except SolverError as exc:
+        return {f: {"ok": False, "reason": f"docking run solve: {exc}", "category": failure_category(exc)}
+                for f in group}
+    out = {}
+    for fid, res in zip(group, run.frames):
+        out[fid] = {**pose_record(res, frames[fid]["n_detections"]), "camera_model": run.camera_model,
+                    "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
+                    "self_calibrated": "sequence", "run_frames": len(group)}
+    return out
 
 
 def write_poses(path, poses: dict, detections_path=None) -> None:

@@ -1,0 +1,82 @@
+"""Solving a real camera's docking runs (issue 11): `solve --camera-model/--self-calibrate` on a
+painted dataset of one camera unit (principal point off centre, k1), and evaluate's camera-model
+block (pinhole beside self-calibration, intrinsics errors against the labels' truth)."""
+import json
+
+import numpy as np
+import pytest
+
+from dockfactory.eval.camera_models_eval import camera_models_block
+from dockfactory.generator.dataset_open import Dataset
+
+CONFIG = """
+[dataset]
+name = "one-unit-runs"
+seed = 21
+frames = 40
+train_fraction = 0.5
+[conditions]
+normal = 1
+[repeatability]
+poses = 1
+captures = 2
+[image]
+width = 1280
+height = 960
+[camera_units]
+count = 1
+principal_offset_x_px = [28, 32]
+principal_offset_y_px = [-26, -24]
+k1 = [-0.12, -0.1]
+[runs]
+frames_per_run = 20
+x_end_mm = [1.0, 5.0]
+[render]
+keep_exr = false
+"""
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    from pipeline_data import write_painted_dataset
+    root = tmp_path_factory.mktemp("runs")
+    (root / "c.toml").write_text(CONFIG)
+    write_painted_dataset(root / "ds", root / "c.toml")
+    return Dataset.open(root / "ds")
+
+
+@pytest.mark.slow   # 40 painted 1280 x 960 frames and three solves of a 20-frame run
+def test_self_calibration_recovers_the_camera_and_beats_the_pinhole(runs):
+    labels = runs.labels_of("test")
+    assert len(labels) == 20 and len({lab["spec"]["run"] for lab in labels}) == 1
+    truth = labels[0]["camera"]
+    offset = np.hypot(*(np.array(truth["principal_point"]) - [639.5, 479.5]))
+    block = camera_models_block(runs, None, 0.1)
+    pin, run = block["pinhole (paper)"], block["self-calibrated per docking run"]
+    # the pinhole assumes the centre and no distortion: its intrinsics error is the camera's defect
+    assert pin["intrinsics_error"]["pp_px"]["mean"] == pytest.approx(offset, abs=1e-9)
+    assert pin["intrinsics_error"]["k1"]["mean"] == pytest.approx(-truth["distortion"][0], abs=1e-12)
+    assert run["n_solved"] == pin["n_solved"] == 20 and run["models_chosen"] != {"pinhole": 20}
+    # one 20-frame run at 0.1 px: principal point to a few px, k1 to ~0.01 (solver bench: 3.4-4.2 px,
+    # 0.0073-0.0079 RMS over runs of 20 frames)
+    assert run["intrinsics_error"]["pp_px"]["rmse"] < 10.0
+    assert abs(run["intrinsics_error"]["k1"]["mean"]) < 0.02
+    assert abs(run["intrinsics_error"]["focal_pct"]["mean"]) < 1.0
+    assert run["pose"]["alpha"]["rmse"] < pin["pose"]["alpha"]["rmse"]
+    assert run["pose"]["y"]["rmse"] < pin["pose"]["y"]["rmse"]
+
+
+@pytest.mark.slow
+def test_solve_cli_self_calibrates_each_docking_run(runs, tmp_path, capsys):
+    from dockfactory.eval.cli import main
+    out = tmp_path / "p.json"
+    assert main(["solve", str(runs.root), "--oracle-noise", "0.1", "--self-calibrate", "sequence",
+                 "--split", "test", "--out", str(out)]) == 0
+    poses = json.loads(out.read_text())
+    recs = list(poses["frames"].values())
+    assert poses["self_calibrate"] == "sequence" and poses["camera_model"] == "auto"
+    assert all(r["ok"] and r["self_calibrated"] == "sequence" and r["run_frames"] == 20 for r in recs)
+    assert len({json.dumps(r["intrinsics"], sort_keys=True) for r in recs}) == 1   # shared by the run
+    assert main(["solve", str(runs.root), "--oracle-noise", "0.1", "--camera-model", "fisheye",
+                 "--out", str(tmp_path / "q.json")]) == 2
+    assert "fisheye" in capsys.readouterr().err
