@@ -16,9 +16,9 @@ import numpy as np
 from dockfactory.core.geometry import polygon_area_centroid
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
-from dockfactory.solver.outline import projected_outline
+from dockfactory.solver.outline import projected_outline, projected_outlines
 
-__all__ = ["eccentricity_offset", "correct_eccentricity"]
+__all__ = ["eccentricity_offset", "eccentricity_offsets", "correct_eccentricity"]
 
 
 def eccentricity_offset(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray:
@@ -34,6 +34,31 @@ def eccentricity_offset(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.nda
     return centroid - centre
 
 
+def _area_centroids(poly: np.ndarray):
+    """(area (m,), centroid (m, 2)) of m polygons (m, n, 2): ``polygon_area_centroid`` of each
+    (same arithmetic), area 0 where it is below 1e-12 (centroid then undefined)."""
+    x, y = poly[:, :, 0], poly[:, :, 1]
+    xn, yn = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
+    cross = x * yn - xn * y
+    a = cross.sum(axis=1) / 2.0
+    ok = np.abs(a) >= 1e-12
+    den = 6 * np.where(ok, a, 1.0)
+    cx = ((x + xn) * cross).sum(axis=1) / den
+    cy = ((y + yn) * cross).sum(axis=1) / den
+    return np.where(ok, np.abs(a), 0.0), np.stack([cx, cy], axis=1)
+
+
+def eccentricity_offsets(markers, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray:
+    """(m, 2) px: :func:`eccentricity_offset` of each of ``markers`` (all of one section frame
+    ``cam_from_s``), in one numpy pass."""
+    if len(markers) == 0:
+        return np.zeros((0, 2))
+    outline, centre, valid = projected_outlines(markers, cam_from_s, focal_px, pp, coeffs)
+    area, centroid = _area_centroids(outline)
+    ok = valid & (area > 0) & np.all(np.isfinite(centroid), axis=1)
+    return np.where(ok[:, None], centroid - centre, 0.0)
+
+
 def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitter,
                          inliers) -> JointFit:
     """Refit with every inlier's centre moved by minus its predicted offset under ``fit``
@@ -45,8 +70,7 @@ def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitt
             for s in SECTIONS}
     corrected = {}
     for s in SECTIONS:
-        off = np.array([eccentricity_offset(points.markers[k], cams[s], fit.focal_px, pp,
-                                            coeffs)
-                        for k in points.rows[s]]).reshape(-1, 2)
+        off = eccentricity_offsets([points.markers[k] for k in points.rows[s]], cams[s],
+                                   fit.focal_px, pp, coeffs)
         corrected[s] = points.points_2d[s] - off
     return fitter.refit(fit, points, keep, points_2d=corrected)

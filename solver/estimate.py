@@ -144,7 +144,7 @@ def check_focal_observable(focal_px: float, cov: np.ndarray, options: RefineOpti
 
 
 def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_focal=True,
-                  accept_rmse=None, rescue_below=None,
+                  accept_rmse=None, rescue_below=None, rescue: bool = True,
                   options: RefineOptions = DEFAULT_REFINE) -> PnPfEstimate:
     """Closed form + refinement on validated arrays ``p3`` (N, 3) mm, ``p2`` (N, 2) px, ``pp``
     (2,) px (see the module docstring).
@@ -152,7 +152,9 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
     ``accept_rmse`` (px): a fast-path RMS above it takes the slow path; with ``rescue_below``
     only when the fast RMS is below that (a near miss worth rescuing; far worse fits are wrong
     models, e.g. wrong marker assignments, not local minima). ``all_candidates``: skip the fast
-    path. ``check_focal``: raise FocalNotObservable for an unobservable focal.
+    path. ``check_focal``: raise FocalNotObservable for an unobservable focal. ``rescue=False``:
+    the fast path only, whatever its outcome (NoValidCamera when it gives no camera), for
+    callers that only need to know whether the cheap fit explains the points.
     """
     cands = [] if all_candidates else upnp(p3, p2, pp, checked=True, first_only=True)
     ref = None
@@ -163,7 +165,10 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
             ref = None
     near_miss = accept_rmse is not None and ref is not None and ref.rmse_px > accept_rmse and (
         rescue_below is None or ref.rmse_px <= rescue_below)
-    if ref is None or not ref.converged or near_miss or _focal_ran_off(ref, p2, pp, options):
+    if not rescue and ref is None:
+        raise NoValidCamera("the cheapest closed-form candidate gave no valid camera")
+    if rescue and (ref is None or not ref.converged or near_miss or
+                   _focal_ran_off(ref, p2, pp, options)):
         cands = upnp(p3, p2, pp, checked=True, sweep_above_px=0.0)
         ref = _slow_path(p3, p2, pp, cands, ref, accept_rmse, options)
     cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)

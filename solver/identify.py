@@ -12,7 +12,10 @@ Ids follow from the known layout:
 2. Verify (full perspective): the best-scoring hypotheses are fitted by the uncalibrated solver
    (UPnP + Levenberg-Marquardt) on their matches, all markers are re-projected, re-matched
    within a tight gate, and refitted. A verified hypothesis is the set of (marker, detection)
-   pairs it explains and its reprojection RMS.
+   pairs it explains and its reprojection RMS. Hypotheses that those verified already settle
+   (part of one; or contradicting one that explains every marker) are not verified, and
+   those contradicting one that explains the section well get no rescue of a failed fit
+   (see ``_identify_section``).
 3. Decide: the hypothesis explaining the most detections wins (ties: smaller RMS). If another
    verified hypothesis that gives some detection a different marker explains as many
    detections, the identification is ambiguous and SolverError is raised: the solver reports
@@ -62,7 +65,8 @@ __all__ = ["Identification", "identify_markers", "parse_detections"]
 class Identification:
     """Per detection (N rows, input order): ``marker_ids`` (id or None), ``points_2d`` (N, 2),
     ``class_ids`` (N,) int (0 = A, 1 = B, as given), ``swapped`` (N,) bool, ``inliers`` (N,)
-    bool (identified), ``rmse_px`` of the final joint fit."""
+    bool (identified), ``rmse_px`` of the final joint fit and ``start`` that fit (both poses
+    and the shared focal: the verified start of a joint fit of the identified detections)."""
 
     marker_ids: tuple
     points_2d: np.ndarray
@@ -70,6 +74,7 @@ class Identification:
     swapped: np.ndarray
     inliers: np.ndarray
     rmse_px: float
+    start: JointStart | None = None
 
 
 _CLASS_NAMES = {"A": 0, "B": 1, "REDA": 0, "BLUEB": 1, "0": 0, "1": 1}
@@ -150,18 +155,20 @@ def _similarity_hypotheses(w, z, anchor_idx, prior: FacingPrior, spacing_mm, max
     a, b, s = a[ok], b[ok], s[ok]
     proj = a[:, None] * w[None, :] + b[:, None]                # (H, M)
     dist = np.abs(proj[:, :, None] - z[None, None, :])         # (H, M, N)
-    dmin = dist.min(axis=2)
+    nearest = dist.argmin(axis=2)
+    dmin = np.take_along_axis(dist, nearest[:, :, None], axis=2)[:, :, 0]
     gate = gate_frac * spacing_mm * s
     hit = dmin <= gate[:, None]
-    score = hit.sum(axis=1) - 1e-3 * (dmin * hit).sum(axis=1) / np.maximum(gate, 1e-9)
+    n_hit = hit.sum(axis=1)
+    score = n_hit - 1e-3 * (dmin * hit).sum(axis=1) / np.maximum(gate, 1e-9)
     order = np.argsort(-score)[:max_keep * 8]
+    few = np.flatnonzero(n_hit[order] < 3)
+    if few.size:
+        order = order[:few[0]]                                # the rest explain too little
     out = []
     seen = set()
-    for h in order:
-        if hit[h].sum() < 3:
-            break
-        nearest = dist[h].argmin(axis=1)
-        key = tuple(int(nearest[k]) if hit[h, k] else -1 for k in range(m))
+    for key in np.where(hit[order], nearest[order], -1).tolist():
+        key = tuple(key)
         if key in seen:
             continue
         seen.add(key)
@@ -223,24 +230,42 @@ class _Search:
         return min(self.gate, self.max_gate_spacing * _min_spacing(proj))
 
 
-def _fit(p3, uv, pairs, pp, search: _Search):
+def _fit(p3, uv, pairs, pp, search: _Search, rescue: bool = True):
     ms = sorted(pairs)
     q3, q2 = check_correspondences(p3[ms], uv[[pairs[m] for m in ms]])
     est = estimate_pnpf(q3, q2, pp, check_focal=False, accept_rmse=search.max_rmse,
-                        rescue_below=search.rescue_below, options=search.refine)
+                        rescue_below=search.rescue_below, rescue=rescue, options=search.refine)
     return _Fit(est, pairs)
 
 
-def _fit_leaving_one_out(p3, uv, pairs, pp, search: _Search):
+class _Fits:
+    """The fits of one section's search, memoised by pair set (marker index -> detection
+    index) and rescue: a fit is a pure function of them, and the hypotheses of a search share
+    many (verification rounds of different seeds often meet at the same pairs)."""
+
+    def __init__(self, p3, uv, pp, search: _Search):
+        self.p3, self.uv, self.pp, self.search = p3, uv, pp, search
+        self._done = {}
+
+    def __call__(self, pairs, rescue: bool = True):
+        """:func:`_fit` of ``pairs``, or None when it fails."""
+        key = (frozenset(pairs.items()), rescue)
+        if key not in self._done:
+            try:
+                self._done[key] = _fit(self.p3, self.uv, pairs, self.pp, self.search, rescue)
+            except (SolverError, np.linalg.LinAlgError):
+                self._done[key] = None
+        return self._done[key]
+
+
+def _fit_leaving_one_out(pairs, fits: _Fits, search: _Search, rescue: bool):
     """Best fit (lowest RMS, at most ``max_rmse``) over the hypothesis without one of its pairs,
     or None: the loose similarity gate can pair a marker missing from the image with a stray
     detection, and that one wrong pair spoils the fit of all the others."""
     best = None
     for m in pairs:
-        sub = {k: d for k, d in pairs.items() if k != m}
-        try:
-            ref = _fit(p3, uv, sub, pp, search)
-        except (SolverError, np.linalg.LinAlgError):
+        ref = fits({k: d for k, d in pairs.items() if k != m}, rescue)
+        if ref is None:
             continue
         if ref.rmse_px <= search.max_rmse and (best is None or ref.rmse_px < best.rmse_px):
             best = ref
@@ -256,25 +281,27 @@ def _project(p3, ref, pp):
     return uv[:, 0] + 1j * uv[:, 1]
 
 
-def _verify(p3, uv, z, pairs, pp, search: _Search, rounds=3):
+def _verify(z, pairs, fits: _Fits, search: _Search, rescue: bool = True, rounds=3):
     """Fit, re-project, re-match within the gate, refit. Returns _Hyp or None.
 
     A hypothesis is kept only if its final fit explains ``min_matches`` or more detections
     with a reprojection RMS of at most ``max_rmse`` px (consistent with the pixel noise).
+    ``rescue=False``: every fit takes the estimator's fast path only (see
+    :func:`_identify_section`).
     """
     ref = None
     for rnd in range(rounds):
         if len(pairs) < search.min_matches:
             return None
-        ref = _try_fit(p3, uv, pairs, pp, search)
+        ref = fits(pairs, rescue)
         poor = ref is None or not ref.rmse_px <= search.max_rmse
         if search.leave_one_out and rnd == 0 and poor and len(pairs) > search.min_matches:
-            ref = _fit_leaving_one_out(p3, uv, pairs, pp, search)
+            ref = _fit_leaving_one_out(pairs, fits, search, rescue)
             if ref is not None:
                 pairs = ref.pairs
         if ref is None:
             return None
-        proj = _project(p3, ref, pp)
+        proj = _project(fits.p3, ref, fits.pp)
         if proj is None:
             return None
         new = _one_to_one(proj, z, search.match_gate(proj))
@@ -284,7 +311,7 @@ def _verify(p3, uv, z, pairs, pp, search: _Search, rounds=3):
     if ref is None or len(pairs) < search.min_matches:
         return None
     if pairs != ref.pairs:
-        ref = _try_fit(p3, uv, pairs, pp, search)
+        ref = fits(pairs, rescue)
         if ref is None:
             return None
     if not ref.rmse_px <= search.max_rmse:
@@ -294,27 +321,57 @@ def _verify(p3, uv, z, pairs, pp, search: _Search, rounds=3):
     return _Hyp(dict(pairs), ref.rmse_px, (cam, ref.focal_px))
 
 
-def _try_fit(p3, uv, pairs, pp, search: _Search):
-    """:func:`_fit`, or None when it fails."""
-    try:
-        return _fit(p3, uv, pairs, pp, search)
-    except (SolverError, np.linalg.LinAlgError):
-        return None
-
-
 def _min_spacing(p):
     d = np.abs(p[:, None] - p[None, :])
     d[np.eye(p.size, dtype=bool)] = np.inf
     return float(d.min())
 
 
+def _contradicting(pairs, hyps):
+    """The verified hypotheses of ``hyps`` that give a detection of the seed ``pairs`` another
+    marker than the seed does ({marker: detection} dicts)."""
+    out = []
+    for h in hyps:
+        marker_of = {d: m for m, d in h.pairs.items()}
+        if any(marker_of.get(d, m) != m for m, d in pairs.items()):
+            out.append(h)
+    return out
+
+
+def _settled(pairs, hyps, n_markers: int) -> bool:
+    """True when the verified hypotheses ``hyps`` leave nothing to learn from the seed ``pairs``:
+    one of them holds every pair of the seed (the seed is part of it: its fit re-projects onto
+    the same detections and verifies back to it), or one explains every marker of the section
+    and the seed gives one of its detections another marker (no hypothesis can explain more,
+    and one explaining as many with other identities would need the detections to repeat the
+    layout's pattern). A seed that only lets other detections serve some markers (a duplicate
+    or a stray detection next to a marker) is still verified: the better fit of the two is
+    kept."""
+    if any(all(h.pairs.get(m) == d for m, d in pairs.items()) for h in hyps):
+        return True
+    return any(len(h.pairs) == n_markers for h in _contradicting(pairs, hyps))
+
+
 def _identify_section(p3, uv, z, cls, section_class, pp, search: _Search):
-    """All verified hypotheses for one section, best first (most matches, then smallest RMS)."""
+    """All verified hypotheses for one section, best first (most matches, then smallest RMS).
+
+    Seeds are verified in the order of their similarity score, each fit once
+    (:class:`_Fits`). A seed that the hypotheses verified so far settle (:func:`_settled`) is
+    not verified; one that contradicts a hypothesis explaining the section well (``min(M, 5)``
+    markers, the test that also ends the search before the all-detection anchors) is verified
+    without the estimator's rescue of a failed cheap fit: the rescue is there for right
+    assignments whose cheap fit missed, and such a seed is almost always a wrong one. Measured
+    against verifying every seed with rescue (bench/solve_speed.py: 500 synthetic frames, 800
+    of the identification benchmark's harder kind, 330 real detector frames): the same
+    marker ids, swapped flags and inliers on every frame, identification about 18 times faster
+    (tests/test_solver_fast_paths.py keeps checking it)."""
     w = p3[:, 0] - 1j * p3[:, 1]
     spacing_mm = _min_spacing(w)
     labelled = np.flatnonzero(cls == section_class)
     hyps = []
     tried = set()
+    fits = _Fits(p3, uv, pp, search)
+    well = min(p3.shape[0], 5)
     for anchors in (labelled, np.arange(z.size)):
         if anchors.size < 2:
             continue
@@ -325,10 +382,13 @@ def _identify_section(p3, uv, z, cls, section_class, pp, search: _Search):
                 continue
             tried.add(key)
             pairs = {m: d for m, d in enumerate(key) if d >= 0}
-            h = _verify(p3, uv, z, pairs, pp, search)
+            if _settled(pairs, hyps, p3.shape[0]):
+                continue
+            rescue = not any(len(h.pairs) >= well for h in _contradicting(pairs, hyps))
+            h = _verify(z, pairs, fits, search, rescue)
             if h is not None and not any(h.pairs == g.pairs for g in hyps):
                 hyps.append(h)
-        if hyps and max(len(h.pairs) for h in hyps) >= min(p3.shape[0], 5):
+        if hyps and max(len(h.pairs) for h in hyps) >= well:
             break          # the labelled anchors already explain the section well
     hyps.sort(key=lambda h: (-len(h.pairs), h.rmse))
     return hyps
@@ -459,7 +519,8 @@ def _final_assignment(out: JointFit, ids, sections, pts, sel, cls, uv, z, pp,
     swapped = np.array([mid is not None and sections[ids.index(mid)] != "AB"[cls[k]]
                         for k, mid in enumerate(marker_ids)])
     rmse = max(out.rmse_a, out.rmse_b)
-    return Identification(tuple(marker_ids), uv, cls, swapped, inl, float(rmse))
+    return Identification(tuple(marker_ids), uv, cls, swapped, inl, float(rmse),
+                          JointStart(out.cam_from_a, out.cam_from_b, out.focal_px))
 
 
 def _hyp_init(ha, hb) -> JointStart:

@@ -66,33 +66,41 @@ def residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray, pp: np.
     pc = a + translation
     z = pc[:, 2]
     iz = 1.0 / z
-    xn = pc[:, 0] * iz
-    yn = pc[:, 1] * iz
-    n = points_3d.shape[0]
-    r = np.empty((n, 2))
-    r[:, 0] = focal * xn + (pp[0] - points_2d[:, 0])
-    r[:, 1] = focal * yn + (pp[1] - points_2d[:, 1])
+    xy = pc[:, :2] * iz[:, None]                              # normalised (xn, yn)
+    r = focal * xy + (pp - points_2d)
     if not want_jacobian:
         return r.reshape(-1), None, z
-    fz = focal * iz
-    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
-    j = np.empty((n, 2, 7))
-    # du/dpc = fz (1, 0, -xn), dv/dpc = fz (0, 1, -yn); du/dw = a x du/dpc
-    j[:, 0, 0] = -fz * ay * xn
-    j[:, 0, 1] = fz * (az + ax * xn)
-    j[:, 0, 2] = -fz * ay
-    j[:, 1, 0] = -fz * (ay * yn + az)
-    j[:, 1, 1] = fz * ax * yn
-    j[:, 1, 2] = fz * ax
-    j[:, 0, 3] = fz
-    j[:, 0, 4] = 0.0
-    j[:, 0, 5] = -fz * xn
-    j[:, 1, 3] = 0.0
-    j[:, 1, 4] = fz
-    j[:, 1, 5] = -fz * yn
-    j[:, 0, 6] = xn
-    j[:, 1, 6] = yn
-    return r.reshape(-1), j.reshape(2 * n, 7), z
+    return r.reshape(-1), _jacobian(a, xy, focal * iz), z
+
+
+# the u and v rows of one point's Jacobian are the columns 0-6 and 7-13 of a (N, 14) array; a
+# slice with a step picks one column of each row, so that every pair below is one numpy call
+_PAIR = {k: slice(k, k + 8 + d, 7 + d) for k, d in ((0, 1), (1, -1), (2, 0), (3, 1), (4, -1),
+                                                    (5, 0), (6, 0))}
+_MINUS_PLUS = np.array([-1.0, 1.0])
+
+
+def _jacobian(a, xy, fz):
+    """J (N, 14) viewed as (2N, 7) of :func:`residuals_and_jacobian` from a = R X (N, 3), the
+    normalised (xn, yn) (N, 2) and fz = f / z (N,). With du/dpc = fz (1, 0, -xn),
+    dv/dpc = fz (0, 1, -yn) and du/dw = a x du/dpc (left perturbation):
+    u row (-fz ay xn, fz (az + ax xn), -fz ay, fz, 0, -fz xn, xn),
+    v row (-fz (ay yn + az), fz ax yn, fz ax, 0, fz, -fz yn, yn)."""
+    n = a.shape[0]
+    j = np.empty((n, 14))
+    fzmp = fz[:, None] * _MINUS_PLUS                          # (-fz, fz)
+    np.multiply(a[:, 1::-1], fzmp, out=j[:, _PAIR[2]])        # (-fz ay, fz ax)
+    np.multiply(j[:, _PAIR[2]], xy, out=j[:, _PAIR[0]])      # (-fz ay xn, fz ax yn)
+    s = a[:, :2] * xy
+    s += a[:, 2:3]                                            # (az + ax xn, ay yn + az)
+    cols = j[:, _PAIR[1]]                                     # (u: w_y, v: w_x)
+    np.multiply(s, fzmp, out=cols)
+    np.negative(cols, out=cols)
+    j[:, _PAIR[3]] = fz[:, None]
+    j[:, _PAIR[4]] = 0.0
+    np.multiply(xy, fzmp[:, :1], out=j[:, _PAIR[5]])         # (-fz xn, -fz yn)
+    j[:, _PAIR[6]] = xy
+    return j.reshape(2 * n, 7)
 
 
 def model_residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray,
@@ -189,30 +197,32 @@ class RefineResult:
 def _lm(evaluate, update, state, options: RefineOptions):
     """Generic Levenberg-Marquardt (Marquardt scaling) on a residual function.
 
-    ``evaluate(state) -> (res, jac, valid)``; ``update(state, step) -> state`` (None when the
-    step leaves the valid region). Stopping rules: see :class:`RefineOptions`.
-    Returns (state, res, jac, iterations, converged).
+    ``evaluate(state, want_jacobian) -> (res, jac or None, valid)``; ``update(state, step) ->
+    state`` (None when the step leaves the valid region). Stopping rules: see
+    :class:`RefineOptions`. Trial steps are judged on their residuals alone; the Jacobian is
+    evaluated at the steps taken. Returns (state, res, jac, iterations, converged).
     """
-    res, jac, valid = evaluate(state)
+    res, jac, valid = evaluate(state, True)
     if not valid:
         raise NoValidCamera("refinement started from an invalid camera (points behind it)")
-    cost = float(res @ res)
+    cost = float(np.dot(res, res))
     lam = options.initial_damping
     it = 0
     converged = False
     for it in range(1, options.max_iterations + 1):
-        jtj = jac.T @ jac
-        g = jac.T @ res
+        jtj = np.dot(jac.T, jac)
+        g = np.dot(jac.T, res)
         d = jtj.diagonal().copy()
         d[d <= 0.0] = 1.0
         step, trial, lam = _damped_step(evaluate, update, state, jtj, g, d, cost, lam, options)
         if trial is None:
             converged = True   # no damped step decreases the cost: a minimum to precision
             break
-        new_state, res_n, jac_n, cost_n = trial
+        new_state, res_n, cost_n = trial
         tiny = float(np.max(np.abs(step) * np.sqrt(d))) < options.step_tol_px
         stagnant = cost - cost_n <= options.cost_rel_tol * cost
-        state, res, jac, cost = new_state, res_n, jac_n, cost_n
+        state, res, cost = new_state, res_n, cost_n
+        jac = evaluate(state, True)[1]
         lam = max(lam * 0.1, options.min_damping)
         if tiny or stagnant or cost < options.exact_cost_per_residual * res.size:
             converged = True
@@ -223,25 +233,25 @@ def _lm(evaluate, update, state, options: RefineOptions):
 
 
 def _damped_step(evaluate, update, state, jtj, g, d, cost, lam, options: RefineOptions):
-    """One LM iteration's search over the damping: (step, (state, res, jac, cost) or None,
+    """One LM iteration's search over the damping: (step, (state, res, cost) or None,
     damping). None when the model promises no decrease or no damped step decreases the cost."""
     for _ in range(options.damping_tries):
         a = jtj.copy()
-        a.flat[::a.shape[0] + 1] += lam * d
+        a.reshape(-1)[::a.shape[0] + 1] += lam * d
         try:
             step = np.linalg.solve(a, -g)
         except np.linalg.LinAlgError:
             lam *= 10.0
             continue
-        predicted = -float(g @ step) - 0.5 * float(step @ (jtj @ step))
+        predicted = -float(np.dot(g, step)) - 0.5 * float(np.dot(step, np.dot(jtj, step)))
         if predicted <= options.predicted_rel_tol * cost:
             break                 # the model promises nothing: at a minimum to precision
         new_state = update(state, step)
         if new_state is not None:
-            res_n, jac_n, valid_n = evaluate(new_state)
-            cost_n = float(res_n @ res_n)
+            res_n, _, valid_n = evaluate(new_state, False)
+            cost_n = float(np.dot(res_n, res_n))
             if valid_n and cost_n <= cost:
-                return step, (new_state, res_n, jac_n, cost_n), lam
+                return step, (new_state, res_n, cost_n), lam
         lam *= 10.0
     return None, None, lam
 
@@ -256,19 +266,20 @@ def refine_pnpf(points_3d, points_2d, pp, rotation, translation, focal,
     Jacobian still has 7 columns). Raises NoValidCamera if the start is not a valid camera or
     the cost diverges.
     """
-    def evaluate(st):
-        res, jac, z = residuals_and_jacobian(points_3d, points_2d, pp, st[0], st[1], st[2])
-        if fix_focal:
+    def evaluate(st, want_jacobian):
+        res, jac, z = residuals_and_jacobian(points_3d, points_2d, pp, st[0], st[1], st[2],
+                                             want_jacobian)
+        if fix_focal and jac is not None:
             jac = jac[:, :6]
         return res, jac, bool(z.min() > 0.0) and np.isfinite(res).all()
 
     def update(st, step):
         if fix_focal:
-            return so3_exp(step[:3]) @ st[0], st[1] + step[3:6], st[2]
+            return np.dot(so3_exp(step[:3]), st[0]), st[1] + step[3:6], st[2]
         f_new = st[2] + step[6]
         if not f_new > 0.0:
             return None
-        return so3_exp(step[:3]) @ st[0], st[1] + step[3:6], f_new
+        return np.dot(so3_exp(step[:3]), st[0]), st[1] + step[3:6], f_new
 
     state = (np.array(rotation, dtype=np.float64), np.array(translation, dtype=np.float64),
              float(focal))
@@ -317,10 +328,11 @@ def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
     m = sum(2 * b.points_3d.shape[0] for b in blocks)
     jac = np.zeros((m, n_pose + model.n_intrinsics)) if want_jacobian else None
     parts, row, valid = [], 0, True
+    pp, focal = intr.principal_point, intr.focal_px
     for b in blocks:
         rot, t = poses[b.pose]
-        r, j, z = model_residuals_and_jacobian(b.points_3d, b.points_2d, intr, model, rot, t,
-                                               want_jacobian)
+        r, j, z = residuals_and_jacobian(b.points_3d, b.points_2d, pp, rot, t, focal,
+                                         want_jacobian)
         parts.append(r)
         valid = valid and bool(z.min() > 0.0)
         if want_jacobian:
@@ -385,14 +397,15 @@ def refine_blocks(blocks, poses, intr: Intrinsics, model: CameraModel = PINHOLE,
     """
     n_pose = 6 * len(poses)
 
-    def evaluate(st):
-        return stack_blocks(blocks, st[0], st[1], model)
+    def evaluate(st, want_jacobian):
+        return stack_blocks(blocks, st[0], st[1], model, want_jacobian)
 
     def update(st, step):
         intr_new = st[1].stepped(model, step[n_pose], step[n_pose + 1:])
         if intr_new is None:
             return None
-        return tuple((so3_exp(step[6 * k:6 * k + 3]) @ rot, t + step[6 * k + 3:6 * k + 6])
+        return tuple((np.dot(so3_exp(step[6 * k:6 * k + 3]), rot),
+                      t + step[6 * k + 3:6 * k + 6])
                      for k, (rot, t) in enumerate(st[0])), intr_new
 
     state = (tuple((np.array(rot, dtype=np.float64), np.array(t, dtype=np.float64))

@@ -30,9 +30,10 @@ import numpy as np
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.checks import MIN_POINTS
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
-from dockfactory.solver.outline import projected_outline
+from dockfactory.solver.outline import projected_outline, projected_outlines
 
-__all__ = ["predicted_outline_box", "extent_ratio", "suspect_scores", "leave_out_suspects"]
+__all__ = ["predicted_outline_box", "predicted_outline_boxes", "extent_ratio",
+           "suspect_scores", "leave_out_suspects"]
 
 
 def predicted_outline_box(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray | None:
@@ -43,6 +44,16 @@ def predicted_outline_box(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.n
         return None
     uv = proj[0]
     return np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+
+
+def predicted_outline_boxes(markers, cam_from_s, focal_px, pp, coeffs=None):
+    """(boxes (m, 4) px, valid (m,) bool): :func:`predicted_outline_box` of each of ``markers``
+    (all of one section frame ``cam_from_s``) in one numpy pass; valid False where the box is
+    None."""
+    if len(markers) == 0:
+        return np.zeros((0, 4)), np.zeros(0, dtype=bool)
+    uv, _, valid = projected_outlines(markers, cam_from_s, focal_px, pp, coeffs)
+    return np.concatenate([uv.min(axis=1), uv.max(axis=1)], axis=1), valid
 
 
 def extent_ratio(box, predicted) -> float:
@@ -60,17 +71,18 @@ def suspect_scores(fit: JointFit, points: SectionPoints, pp, boxes, refined,
     cams = fit.cams
     scores = {}
     for s in SECTIONS:
-        sc = np.zeros(len(points.rows[s]))
-        for j, k in enumerate(points.rows[s]):
-            if refined is not None and not bool(refined[k]):
-                sc[j] = 1.0
-            marker = points.markers[k]
-            if boxes is not None and marker is not None:
-                pred = predicted_outline_box(marker, cams[s], fit.focal_px, pp, coeffs)
-                if pred is not None:
-                    r = extent_ratio(boxes[k], pred)
-                    if r < min_extent:
-                        sc[j] = 2.0 + (1.0 - r)
+        rows = points.rows[s]
+        sc = np.zeros(len(rows))
+        if refined is not None:
+            sc[[not bool(refined[k]) for k in rows]] = 1.0
+        with_marker = [j for j, k in enumerate(rows) if points.markers[k] is not None]
+        if boxes is not None and with_marker:
+            pred, valid = predicted_outline_boxes([points.markers[rows[j]] for j in with_marker],
+                                                  cams[s], fit.focal_px, pp, coeffs)
+            for j, box, ok in zip(with_marker, pred, valid):
+                r = extent_ratio(boxes[rows[j]], box) if ok else np.inf
+                if r < min_extent:
+                    sc[j] = 2.0 + (1.0 - r)
         scores[s] = sc
     return scores
 
