@@ -22,11 +22,10 @@ from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
 from dockfactory.eval.evaluate import evaluate, write_outputs
-from dockfactory.eval.measure import resolve_camera_model
 from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
 from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
-from dockfactory.eval.solve_frames import SELF_CALIBRATE, solve_dataset, write_poses
+from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
 from dockfactory.generator.dataset_open import Dataset
 

@@ -27,8 +27,7 @@ from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, wri
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.measure_overlay import draw_measurement
-from dockfactory.eval.solve_frames import SELF_CALIBRATE, detection_arrays, solve_frame, solve_run
-from dockfactory.solver.camera_models import MODELS
+from dockfactory.eval.solve_frames import detection_arrays, resolve_camera_model, solve_frame, solve_run
 
 MEASURE_FORMAT = "dockfactory.measure/1"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -65,17 +64,6 @@ def collect_images(items) -> list[Path]:
     if not out:
         raise DockfactoryError("measure: no images given")
     return out
-
-
-def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -> str:
-    """The model: as given, else "auto" when self-calibrating, else the paper's "pinhole"."""
-    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
-        raise DockfactoryError(f"--self-calibrate: expected frame or sequence, got {self_calibrate!r}")
-    if camera_model is not None:
-        if camera_model not in (*MODELS, "auto"):
-            raise DockfactoryError(f"--camera-model: {camera_model!r} is not one of {', '.join((*MODELS, 'auto'))}")
-        return camera_model
-    return "auto" if self_calibrate else "pinhole"
 
 
 def read_image(path: Path) -> tuple[np.ndarray | None, dict | None]:

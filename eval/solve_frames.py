@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.dataset_open import Dataset
@@ -24,6 +25,7 @@ from dockfactory.solver import (
     TooFewPoints,
     solve_docking,
 )
+from dockfactory.solver.camera_models import MODELS
 from dockfactory.solver.sequence import solve_sequence
 
 POSES_FORMAT = "dockfactory.poses/1"
@@ -85,6 +87,17 @@ def pose_record(res, n_detections: int) -> dict:
 
 
 SELF_CALIBRATE = ("frame", "sequence")
+
+
+def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -> str:
+    """The model: as given, else "auto" when self-calibrating, else the paper's "pinhole"."""
+    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
+        raise DockfactoryError(f"--self-calibrate: expected frame or sequence, got {self_calibrate!r}")
+    if camera_model is not None:
+        if camera_model not in (*MODELS, "auto"):
+            raise DockfactoryError(f"--camera-model: {camera_model!r} is not one of {', '.join((*MODELS, 'auto'))}")
+        return camera_model
+    return "auto" if self_calibrate else "pinhole"
 
 
 def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_px, min_score: float):
