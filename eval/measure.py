@@ -16,6 +16,8 @@ from __future__ import annotations
 import csv
 import io
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,9 +79,11 @@ def read_image(path: Path) -> tuple[np.ndarray | None, dict | None]:
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None
 
 
-def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float) -> Frame:
-    """Detect and solve one image (its own camera model fit)."""
-    image, failed = read_image(path)
+def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float,
+                  read=None) -> Frame:
+    """Detect and solve one image (its own camera model fit); ``read``: the (image, failure) of
+    :func:`read_image`, when already read."""
+    image, failed = read if read is not None else read_image(path)
     if failed is not None:
         return Frame(index, path, failed)
     h, w = image.shape[:2]
@@ -147,12 +151,47 @@ def csv_text(frames: list[Frame]) -> str:
     return buf.getvalue()
 
 
-def write_outputs(out: Path, frames: list[Frame], header: dict, markers) -> None:
-    """measurements.json, measurements.csv and the overlays (each written atomically)."""
+def overlay_path(out: Path, frame: Frame) -> Path:
+    return out / "overlays" / f"{frame.index:05d}_{frame.path.stem}.png"
+
+
+def measure_all(detector, markers, paths, model: str, min_score: float, out: Path, draw: bool, progress=None):
+    """Every image measured in order; the next image is read (decoded) while the current one is
+    detected, and with ``draw`` each overlay is written by a second thread meanwhile (at most a
+    few waiting: memory stays flat however many images)."""
+    frames, waiting = [], deque()
+    with ThreadPoolExecutor(max_workers=1) as reader, ThreadPoolExecutor(max_workers=1) as writer:
+        pending = reader.submit(read_image, paths[0])
+        for i, p in enumerate(paths):
+            read = pending.result()
+            if i + 1 < len(paths):
+                pending = reader.submit(read_image, paths[i + 1])
+            frame = measure_frame(detector, markers, i, p, model, min_score, read)
+            if draw and frame.image is not None:
+                waiting.append(writer.submit(draw_measurement, frame.image, frame.detections, frame.record,
+                                             markers, overlay_path(out, frame)))
+                while len(waiting) > 2:
+                    waiting.popleft().result()
+            frame.image = None
+            frames.append(frame)
+            if progress:
+                progress(i + 1, len(paths))
+        for w in waiting:
+            w.result()
+    return frames
+
+
+def draw_overlays(frames: list[Frame], markers, out: Path) -> None:
+    """The overlays of frames whose records changed after they were measured (a docking run's
+    joint solve): each image is read again rather than kept in memory."""
     for f in frames:
-        if f.image is not None:
-            draw_measurement(f.image, f.detections, f.record, markers,
-                             out / "overlays" / f"{f.index:05d}_{f.path.stem}.png")
+        image, failed = read_image(f.path)
+        if failed is None:
+            draw_measurement(image, f.detections, f.record, markers, overlay_path(out, f))
+
+
+def write_records(out: Path, frames: list[Frame], header: dict) -> None:
+    """measurements.json and measurements.csv (each written atomically)."""
     records = [{"image": str(f.path), **f.record} for f in frames]
     write_json_atomic(out / "measurements.json", {**header, "images": records}, indent=None)
     write_text_atomic(out / "measurements.csv", csv_text(frames))
@@ -161,26 +200,28 @@ def write_outputs(out: Path, frames: list[Frame], header: dict, markers) -> None
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
             self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None) -> dict:
     """Measure every image (see the module docstring); returns the summary written to
-    OUT/measurements.json (without the per-image records)."""
+    OUT/measurements.json (without the per-image records). ``frames_per_s`` counts everything
+    after the detector is loaded: reading, detection, solve, overlays."""
     from dockfactory.detector.infer import MarkerDetector
     paths = collect_images(images)
     markers = read_layout_file(layout_path)
     model = resolve_camera_model(camera_model, self_calibrate)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    sequence = self_calibrate == "sequence"
     with folder_lock(out, "measure"):
         detector = MarkerDetector(weights, conf_threshold=min_score)
         t0 = time.perf_counter()
-        frames = []
-        per_frame = "pinhole" if self_calibrate == "sequence" else model   # the run fits the intrinsics
-        for i, p in enumerate(paths):
-            frames.append(measure_frame(detector, markers, i, p, per_frame, min_score))
-            if progress:
-                progress(i + 1, len(paths))
-        run = self_calibrate_sequence(frames, markers, model) if self_calibrate == "sequence" else None
+        # per frame the pinhole when the run fits the intrinsics
+        frames = measure_all(detector, markers, paths, "pinhole" if sequence else model, min_score, out,
+                             draw=not sequence, progress=progress)
+        run = None
+        if sequence:
+            run = self_calibrate_sequence(frames, markers, model)
+            draw_overlays(frames, markers, out)
         wall = time.perf_counter() - t0
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
-        write_outputs(out, frames, header, markers)
+        write_records(out, frames, header)
     return header
 
 

@@ -53,7 +53,7 @@ def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, mark
         y = (18 + 20 * k) * scale
         cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (0, 0, 0), 3 * scale, cv2.LINE_AA)
         cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255), scale, cv2.LINE_AA)
-    ok, png = cv2.imencode(".png", img)
+    ok, png = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 1])   # fast: a live view
     if not ok:
         raise RuntimeError(f"{out}: PNG encoding failed")
     write_bytes_atomic(out, png.tobytes())
