@@ -103,10 +103,10 @@ def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -
 def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_px, min_score: float):
     """(class_ids, centres, boxes, refined) of a frame: its detections, or the oracle's noisy exact
     centroids (seeded per frame); None when the detections file has no entry for it."""
-    label = ds.labels[fid]
     if detections is not None:
         dets = detections["frames"].get(fid)
         return None if dets is None else detection_arrays(dets, min_score)
+    label = ds.labels[fid]   # the oracle reads the exact centroids
     rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
     cls, uv = oracle_detections(label, oracle_sigma_px, rng)
     return cls, uv, None, None

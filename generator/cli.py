@@ -94,8 +94,9 @@ def cmd_dataset(args) -> int:
             raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
                                    f"(known: {', '.join(dt.EXPORT_WRITERS)})")
         for root in args.dirs:
+            ds = dt.Dataset.open(root)   # every byte checked once for all its formats
             for fmt in formats:
-                print(dt.export(root, fmt))
+                print(dt.export(root, fmt, ds))
         return EXIT_OK
     raise DockfactoryError(f"unknown dataset action {args.action!r}")
 

@@ -76,7 +76,13 @@ class Dataset:
         report, checked = inspect(root, hash_bulk=full)
         if not report.ok:
             raise DatasetError(report.refusal())
-        return cls(root, checked.identity, checked.config, checked.plan, checked.manifest, full)
+        return cls.of_checked(root, checked, full)
+
+    @classmethod
+    def of_checked(cls, root, checked, full: bool) -> Dataset:
+        """The dataset a caller has just checked itself (``dataset_check.inspect`` with an OK
+        report): what it read, without checking again."""
+        return cls(Path(root), checked.identity, checked.config, checked.plan, checked.manifest, full)
 
     @property
     def version_id(self) -> str:

@@ -21,6 +21,7 @@ from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CL
     load_manifest,
     verify,
 )
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
 from dockfactory.generator.export_yolo import export_yolo
@@ -119,8 +120,9 @@ def export_complete(root, fmt: str) -> bool:
         return False
 
 
-def write_export(root, fmt: str) -> Path:
-    """:func:`export` for a caller that already holds the dataset lock (``render``)."""
+def write_export(root, fmt: str, ds: Dataset | None = None) -> Path:
+    """:func:`export` for a caller that already holds the dataset lock (``render``); ``ds``: the
+    dataset already opened (one check for several formats), else it is opened here."""
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
@@ -136,10 +138,10 @@ def write_export(root, fmt: str) -> Path:
     tmp = exports / temp_name(fmt)
     aside = exports / temp_name(f"{fmt}.old")
     try:
-        EXPORT_WRITERS[fmt](root, tmp)
+        ds = ds if ds is not None else Dataset.open(root)
+        EXPORT_WRITERS[fmt](ds, tmp)
         n_files = sum(1 for p in tmp.rglob("*") if p.is_file())
-        write_json_atomic(tmp / EXPORT_MARK, {"format": fmt, "version_id": (read_identity(root) or {}).get("version_id"),
-                                              "files": n_files})
+        write_json_atomic(tmp / EXPORT_MARK, {"format": fmt, "version_id": ds.version_id, "files": n_files})
         # old or new, never partial: the old export steps aside, the new one takes its name
         if final.exists():
             os.rename(final, aside)
@@ -151,7 +153,7 @@ def write_export(root, fmt: str) -> Path:
     return final
 
 
-def export(root, fmt: str) -> Path:
+def export(root, fmt: str, ds: Dataset | None = None) -> Path:
     """Write one export of a complete dataset as DIR/exports/<fmt>/: built aside, then swapped in
     by rename (an interrupted export leaves the old one, the new one or none, never a partial
     one), under the dataset's lock (a concurrent render or export is refused, naming it)."""
@@ -160,4 +162,4 @@ def export(root, fmt: str) -> Path:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     load_identity(root)   # a dataset (one-line error naming dataset.json otherwise)
     with dataset_lock(root, f"export {fmt}"):
-        return write_export(root, fmt)
+        return write_export(root, fmt, ds)

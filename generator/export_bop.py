@@ -80,8 +80,11 @@ def lens_record(cam: dict) -> dict:
 
 
 def export_bop(root, out) -> Path:
-    root, out = Path(root), Path(out)
-    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    out = Path(out)
+    # intact and complete (opened here, or by the caller that exports several formats): its
+    # frames are the plan's, ids and splits checked
+    ds = root if isinstance(root, Dataset) else Dataset.open(root)
+    root = ds.root
     ident = ds.identity
     labels = ds.labels_of()
     cfg = ident["config"]

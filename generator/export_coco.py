@@ -213,8 +213,11 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
 
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
-    root, out = Path(root), Path(out)
-    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    out = Path(out)
+    # intact and complete (opened here, or by the caller that exports several formats): its
+    # frames are the plan's, ids and splits checked
+    ds = root if isinstance(root, Dataset) else Dataset.open(root)
+    root = ds.root
     ident = ds.identity
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)

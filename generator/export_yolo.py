@@ -64,8 +64,11 @@ def data_yaml(version_id: str, counts: dict[str, int]) -> str:
 
 
 def export_yolo(root, out) -> Path:
-    root, out = Path(root), Path(out)
-    ds = Dataset.open(root)   # intact and complete; its frames are the plan's, ids and splits checked
+    out = Path(out)
+    # intact and complete (opened here, or by the caller that exports several formats): its
+    # frames are the plan's, ids and splits checked
+    ds = root if isinstance(root, Dataset) else Dataset.open(root)
+    root = ds.root
     ident = ds.identity
     threshold = ident["config"]["labels"]["visible_threshold"]
     labels = ds.labels_of()

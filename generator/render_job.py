@@ -20,6 +20,7 @@ from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
 from dockfactory.generator.dataset_check import inspect
+from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export_complete, write_export
 from dockfactory.generator.draws import static_scene
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
@@ -138,12 +139,14 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
         write_manifest(root, cfg)
         # a file changed after its frame was finished (same size: frame_done cannot tell) or an
         # unlisted one: the dataset is complete but not intact, and it is said (exit 1)
-        summary.damaged = inspect(root, hash_bulk=False)[0].problems()
+        report, checked = inspect(root, hash_bulk=False)   # the bytes were hashed as they were written
+        summary.damaged = report.problems()
         if summary.damaged:
             return summary
+        ds = Dataset.of_checked(root, checked, full=False)
         for fmt in cfg.export.formats:
             if not export_complete(root, fmt):   # written once, when the dataset completes
-                write_export(root, fmt)          # (a partial export of a killed run is replaced)
+                write_export(root, fmt, ds)      # (a partial export of a killed run is replaced)
     return summary
 
 

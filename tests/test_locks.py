@@ -252,10 +252,10 @@ def test_nested_export_of_one_dataset_does_not_crash(export_ds, monkeypatch):
     real = dt.EXPORT_WRITERS["bop"]
     refused = []
 
-    def writer(root, out):
-        result = real(root, out)
+    def writer(ds, out):   # the writers get the opened dataset
+        result = real(ds, out)
         try:
-            dt.export(root, "bop")
+            dt.export(ds.root, "bop")
         except DockfactoryError as exc:
             refused.append(str(exc))
         return result
