@@ -28,6 +28,9 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--camera-model")
     p.add_argument("--self-calibrate", choices=("frame", "sequence"))
+    p.add_argument("--backend", default="auto", choices=("auto", "torch", "onnx"))
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--overlay-size", type=float, default=0.5, help="0: no overlays")
     p.add_argument("--json")
     args = p.parse_args()
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
@@ -36,12 +39,13 @@ def main() -> None:
     import json
 
     from dockfactory.core.resources import shipped_weights
-    from dockfactory.eval.measure import measure
+    from dockfactory.eval.measure import MeasureOptions, measure
+    opts = MeasureOptions(args.backend, args.workers, args.overlay_size or None)
     print(f"load average before: {os.getloadavg()[0]:.2f}; torch threads {args.threads}")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         head = measure(args.images, args.layout, args.weights or shipped_weights(), tmp,
-                       camera_model=args.camera_model, self_calibrate=args.self_calibrate)
+                       camera_model=args.camera_model, self_calibrate=args.self_calibrate, options=opts)
         total = time.perf_counter() - t0
         with open(os.path.join(tmp, "measurements.json")) as fh:
             recs = json.load(fh)["images"]
@@ -50,9 +54,11 @@ def main() -> None:
     res = {"images": head["images_total"], "with_pose": head["images_with_pose"], "frames_per_s": head["frames_per_s"],
            "wall_s_including_model_load": round(total, 2), "detect_ms_median": statistics.median(det),
            "solve_ms_median": statistics.median(sol), "solve_ms_p90": sorted(sol)[int(0.9 * (len(sol) - 1))],
-           "camera_model": head["camera_model"], "self_calibrate": head["self_calibrate"]}
+           "camera_model": head["camera_model"], "self_calibrate": head["self_calibrate"],
+           "backend": head["backend"], "workers": head["workers"], "overlay_size": head["overlay_size"]}
     ok = lambda c: "met" if c else "NOT met"  # noqa: E731
-    print(f"{res['images']} images, {res['with_pose']} with a pose ({res['camera_model']} camera)")
+    print(f"{res['images']} images, {res['with_pose']} with a pose ({res['camera_model']} camera); backend "
+          f"{res['backend']}, {res['workers']} workers, overlays {res['overlay_size'] or 'off'}")
     print(f"end to end: {res['frames_per_s']:.2f} frames/s [target >= {TARGETS['frames_per_s']:.0f}: "
           f"{ok(res['frames_per_s'] >= TARGETS['frames_per_s'])}]")
     print(f"detection: median {res['detect_ms_median']:.1f} ms; identification + solve: median "

@@ -172,11 +172,17 @@ class MarkerDetector:
     """Loaded weights + inference settings. ``detect(image)`` -> list of detection dicts."""
 
     def __init__(self, weights, conf_threshold: float = MIN_SCORE, iou_threshold: float = NMS_IOU,
-                 max_det: int = 100, refine: bool = True):
+                 max_det: int = 100, refine: bool = True, backend: str = "torch"):
         from dockfactory.detector.checkpoint import load_model
+        from dockfactory.detector.onnx_runtime import OnnxNetwork, resolve_backend
         self.weights = Path(weights)
         self.model, self.meta = load_model(self.weights, fuse=True)
-        self.model = self.model.to(memory_format=torch.channels_last)  # about 25 % faster on CPU
+        self.backend = resolve_backend(backend)
+        if self.backend == "onnx":
+            self.network = OnnxNetwork(self.model)
+        else:
+            self.model = self.model.to(memory_format=torch.channels_last)  # about 25 % faster on CPU
+            self.network = self.model
         self.scale = float(self.meta["data_config"]["input_scale"])
         self.conf, self.iou, self.max_det, self.refine = conf_threshold, iou_threshold, max_det, refine
         self.names = CLASS_NAMES
@@ -185,9 +191,9 @@ class MarkerDetector:
         """Network detections ``(K, 6)`` [x0, y0, x1, y1, score, class] in image px (OpenCV)."""
         net, lb = letterbox(image, self.scale)
         x = torch.from_numpy(net).permute(2, 0, 1)[None].float().div_(255.0)
-        x = x.contiguous(memory_format=torch.channels_last)
+        x = x.contiguous(memory_format=torch.channels_last if self.backend == "torch" else torch.contiguous_format)
         with torch.inference_mode():
-            det = postprocess(self.model(x), self.conf, self.iou, self.max_det)[0].double().numpy()
+            det = postprocess(self.network(x), self.conf, self.iou, self.max_det)[0].double().numpy()
         det[:, :4] = lb.boxes_to_image(det[:, :4])
         return det, lb
 

@@ -16,8 +16,6 @@ from __future__ import annotations
 import csv
 import io
 import time
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +27,7 @@ from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, wri
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.measure_overlay import draw_measurement
+from dockfactory.eval.measure_pool import MeasurePool
 from dockfactory.eval.solve_frames import detection_arrays, resolve_camera_model, solve_frame, solve_run
 
 MEASURE_FORMAT = "dockfactory.measure/1"
@@ -79,11 +78,9 @@ def read_image(path: Path) -> tuple[np.ndarray | None, dict | None]:
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None
 
 
-def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float,
-                  read=None) -> Frame:
-    """Detect and solve one image (its own camera model fit); ``read``: the (image, failure) of
-    :func:`read_image`, when already read."""
-    image, failed = read if read is not None else read_image(path)
+def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float) -> Frame:
+    """Read, detect and solve one image (its own camera model fit)."""
+    image, failed = read_image(path)
     if failed is not None:
         return Frame(index, path, failed)
     h, w = image.shape[:2]
@@ -155,39 +152,63 @@ def overlay_path(out: Path, frame: Frame) -> Path:
     return out / "overlays" / f"{frame.index:05d}_{frame.path.stem}.png"
 
 
-def measure_all(detector, markers, paths, model: str, min_score: float, out: Path, draw: bool, progress=None):
-    """Every image measured in order; the next image is read (decoded) while the current one is
-    detected, and with ``draw`` each overlay is written by a second thread meanwhile (at most a
-    few waiting: memory stays flat however many images)."""
-    frames, waiting = [], deque()
-    with ThreadPoolExecutor(max_workers=1) as reader, ThreadPoolExecutor(max_workers=1) as writer:
-        pending = reader.submit(read_image, paths[0])
+@dataclass(frozen=True)
+class MeasureOptions:
+    """How measure runs: the detector's network ``backend`` (auto, torch or onnx), the frames in
+    flight at once (``workers``: each one thread reading, detecting, solving and drawing one image)
+    and the overlays' ``overlay_size`` (a fraction of the image's resolution; None: no overlays)."""
+    backend: str = "auto"
+    workers: int = 2
+    overlay_size: float | None = 0.5
+
+    def __post_init__(self):
+        if self.backend not in ("auto", "torch", "onnx"):
+            raise DockfactoryError(f"backend must be auto, torch or onnx, got {self.backend!r}")
+        if not 1 <= self.workers <= 16:
+            raise DockfactoryError(f"workers must be in [1, 16], got {self.workers}")
+        if self.overlay_size is not None and not 0.1 <= self.overlay_size <= 1:
+            raise DockfactoryError(f"overlay size must be in [0.1, 1], got {self.overlay_size}")
+
+
+def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_score: float, out: Path,
+                     size: float | None) -> Frame:
+    """Read, detect, solve and (with ``size``) draw one image; the image is not kept."""
+    frame = measure_frame(detector, markers, i, path, model, min_score)
+    if size is not None and frame.image is not None:
+        draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
+    frame.image = None
+    return frame
+
+
+def measure_all(weights, markers, paths, model: str, min_score: float, out: Path, size: float | None,
+                options: MeasureOptions, progress=None) -> tuple[list[Frame], float]:
+    """Every image measured, in input order: in this process with one worker, else by worker
+    processes (eval.measure_pool). Returns the frames and the wall time after the detector(s)
+    were loaded."""
+    if options.workers == 1:
+        from dockfactory.detector.infer import MarkerDetector
+        detector = MarkerDetector(weights, conf_threshold=min_score, backend=options.backend)
+        t0, frames = time.perf_counter(), []
         for i, p in enumerate(paths):
-            read = pending.result()
-            if i + 1 < len(paths):
-                pending = reader.submit(read_image, paths[i + 1])
-            frame = measure_frame(detector, markers, i, p, model, min_score, read)
-            if draw and frame.image is not None:
-                waiting.append(writer.submit(draw_measurement, frame.image, frame.detections, frame.record,
-                                             markers, overlay_path(out, frame)))
-                while len(waiting) > 2:
-                    waiting.popleft().result()
-            frame.image = None
-            frames.append(frame)
+            frames.append(measure_and_draw(detector, markers, i, p, model, min_score, out, size))
             if progress:
                 progress(i + 1, len(paths))
-        for w in waiting:
-            w.result()
-    return frames
+        return frames, time.perf_counter() - t0
+    from dockfactory.detector.checkpoint import load_model
+    load_model(weights, fuse=False)   # a bad weights file is named here, not in every worker
+    with MeasurePool(measure_and_draw, options.workers, weights, min_score, options.backend, markers, model, out, size) as pool:
+        t0 = time.perf_counter()
+        frames = pool.run(paths, progress)
+        return frames, time.perf_counter() - t0
 
 
-def draw_overlays(frames: list[Frame], markers, out: Path) -> None:
+def draw_overlays(frames: list[Frame], markers, out: Path, size: float) -> None:
     """The overlays of frames whose records changed after they were measured (a docking run's
     joint solve): each image is read again rather than kept in memory."""
     for f in frames:
         image, failed = read_image(f.path)
         if failed is None:
-            draw_measurement(image, f.detections, f.record, markers, overlay_path(out, f))
+            draw_measurement(image, f.detections, f.record, markers, overlay_path(out, f), size)
 
 
 def write_records(out: Path, frames: list[Frame], header: dict) -> None:
@@ -198,11 +219,12 @@ def write_records(out: Path, frames: list[Frame], header: dict) -> None:
 
 
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
-            self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None) -> dict:
+            self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None,
+            options: MeasureOptions = MeasureOptions()) -> dict:
     """Measure every image (see the module docstring); returns the summary written to
     OUT/measurements.json (without the per-image records). ``frames_per_s`` counts everything
     after the detector is loaded: reading, detection, solve, overlays."""
-    from dockfactory.detector.infer import MarkerDetector
+    from dockfactory.detector.onnx_runtime import resolve_backend
     paths = collect_images(images)
     markers = read_layout_file(layout_path)
     model = resolve_camera_model(camera_model, self_calibrate)
@@ -210,17 +232,19 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
     out.mkdir(parents=True, exist_ok=True)
     sequence = self_calibrate == "sequence"
     with folder_lock(out, "measure"):
-        detector = MarkerDetector(weights, conf_threshold=min_score)
-        t0 = time.perf_counter()
         # per frame the pinhole when the run fits the intrinsics
-        frames = measure_all(detector, markers, paths, "pinhole" if sequence else model, min_score, out,
-                             draw=not sequence, progress=progress)
+        frames, wall = measure_all(weights, markers, paths, "pinhole" if sequence else model, min_score, out,
+                                   None if sequence else options.overlay_size, options, progress)
         run = None
         if sequence:
+            t0 = time.perf_counter()
             run = self_calibrate_sequence(frames, markers, model)
-            draw_overlays(frames, markers, out)
-        wall = time.perf_counter() - t0
+            if options.overlay_size is not None:
+                draw_overlays(frames, markers, out, options.overlay_size)
+            wall += time.perf_counter() - t0
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
+        header.update(backend=resolve_backend(options.backend), workers=options.workers,
+                      overlay_size=options.overlay_size)
         write_records(out, frames, header)
     return header
 

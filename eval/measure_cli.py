@@ -8,7 +8,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
-from dockfactory.eval.measure import measure
+from dockfactory.eval.measure import MeasureOptions, measure
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -16,13 +16,14 @@ def cmd_measure(args) -> int:
     weights = Path(args.weights) if args.weights else shipped_weights()
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
+    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None)
     _torch(args.threads)
 
     def progress(done, total):
         if not args.quiet:
             print(f"\rmeasure {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
     s = measure(args.images, args.layout, weights, args.out, camera_model=args.camera_model,
-                self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress)
+                self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress, options=options)
     fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
     print(f"{s['images_with_pose']} of {s['images_total']} images with a pose ({s['camera_model']} camera"
           + (f", self-calibrated per {s['self_calibrate']}" if s["self_calibrate"] else "") + f"); "
@@ -42,7 +43,14 @@ def add_subcommand(sub) -> None:
                    help="frame: choose the camera model per image; sequence: the images are one camera's "
                         "docking run, solved with shared intrinsics")
     m.add_argument("--min-score", type=_unit_float, default=MIN_SCORE)
-    m.add_argument("--threads", type=_positive_int, default=None)
+    m.add_argument("--threads", type=_positive_int, default=None, help="torch threads with --workers 1")
+    m.add_argument("--workers", type=_positive_int, default=2,
+                   help="images measured at once, each by its own process (default 2: one per core)")
+    m.add_argument("--backend", choices=("auto", "torch", "onnx"), default="auto",
+                   help="the detector network's runtime (auto: ONNX Runtime when installed, about 2x faster)")
+    m.add_argument("--overlay-size", type=float, default=0.5,
+                   help="overlay PNG resolution as a fraction of the image's (default 0.5, a live view; "
+                        "1: full resolution; 0: no overlays)")
     m.add_argument("--quiet", action="store_true")
     m.add_argument("--out", required=True, help="output folder")
     m.set_defaults(func=cmd_measure)

@@ -38,17 +38,37 @@ def _text_lines(record: dict, name: str) -> list[str]:
             f"rms A {record['rmse_px']['A']:.2f} B {record['rmse_px']['B']:.2f} px"]
 
 
-def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, markers, out) -> None:
-    """Write the overlay PNG ``out`` (atomically)."""
-    img = np.ascontiguousarray(image_rgb[..., ::-1])
+def _shrunk(image_rgb: np.ndarray, size: float) -> np.ndarray:
+    """BGR copy of the image at ``size`` times its resolution (area-averaged; resized before the
+    channels are swapped: OpenCV resizes a channel-reversed view 30x slower)."""
+    h, w = image_rgb.shape[:2]
+    if size != 1:
+        image_rgb = cv2.resize(image_rgb, (max(1, round(w * size)), max(1, round(h * size))),
+                               interpolation=cv2.INTER_AREA)
+    return cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)
+
+
+def _at(uv, sx: float, sy: float) -> tuple[int, int]:
+    """Image px (OpenCV) -> the nearest pixel of the overlay scaled by (sx, sy)."""
+    return int(round((uv[0] + 0.5) * sx - 0.5)), int(round((uv[1] + 0.5) * sy - 0.5))
+
+
+def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, markers, out,
+                     size: float = 1.0) -> None:
+    """Write the overlay PNG ``out`` (atomically), ``size`` times the image's resolution
+    (0.5: a quarter of the pixels, four times faster to encode; a live view)."""
+    if not 0 < size <= 1:
+        raise ValueError(f"overlay size must be in (0, 1], got {size}")
+    img = _shrunk(image_rgb, size)
+    sx, sy = img.shape[1] / image_rgb.shape[1], img.shape[0] / image_rgb.shape[0]
     scale = max(1, round(max(img.shape[:2]) / 640))
     for d in detections:
-        c = tuple(int(round(v)) for v in d["center_px"])
-        cv2.circle(img, c, 6 * scale, DET_BGR.get(d["class_id"], (255, 255, 255)), scale, cv2.LINE_AA)
+        cv2.circle(img, _at(d["center_px"], sx, sy), 6 * scale, DET_BGR.get(d["class_id"], (255, 255, 255)),
+                   scale, cv2.LINE_AA)
     if record["ok"]:
         for u, v in project_layout(record, markers):
             if np.isfinite(u) and np.isfinite(v):
-                cv2.drawMarker(img, (int(round(u)), int(round(v))), PROJ_BGR, cv2.MARKER_CROSS, 10 * scale, scale)
+                cv2.drawMarker(img, _at((u, v), sx, sy), PROJ_BGR, cv2.MARKER_CROSS, 10 * scale, scale)
     for k, line in enumerate(_text_lines(record, str(out.stem))):
         y = (18 + 20 * k) * scale
         cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (0, 0, 0), 3 * scale, cv2.LINE_AA)
