@@ -31,7 +31,16 @@ detections with missing markers, spurious detections and swapped classes. (The b
 its throughput figure were removed with solver/batch.py: it was a second implementation of the
 closed form, LM and covariance used by no production path.)
 
-Run: python bench/solver_bench.py [--trials 500] [--seed 0]
+Single-section hard sets (issue 12): 10 markers within +-20 deg of the line facing the camera
+(near-planar), and 5 of a section's 7 markers (what occlusion leaves), sigma 0.1 / 0.3 / 1 px:
+refusals (SolverError), wrong minima (an RMS above that of the refinement started from the truth),
+solutions beyond 6 Cramer-Rao standard deviations in rotation or in-plane translation (t_x, t_y:
+the quantities these sets determine; "(all)": results whose focal is flagged determined, beyond 6
+in any of rotation, t, focal: the maximum likelihood itself strays that far when the bound's
+linearisation fails, e.g. f 4253 px for a true 1977 with an equal RMS from the truth), results flagged focal-undetermined,
+and RMS / bound of rotation, t_x, t_y and the focal.
+
+Run: python bench/solver_bench.py [--trials 500] [--seed 0] [--hard-trials 5000] [--hard-only]
 """
 from __future__ import annotations
 
@@ -42,6 +51,7 @@ import time
 import numpy as np
 
 from dockfactory.core.geometry import pose_components
+from dockfactory.core.layout import DEFAULT_LAYOUT_B, build_layout
 from dockfactory.solver import (
     SolverError,
     crb_d_from_b,
@@ -52,7 +62,7 @@ from dockfactory.solver import (
     upnp,
 )
 from dockfactory.solver.lie import rotation_angle_deg
-from dockfactory.solver.refine import relative_pose
+from dockfactory.solver.refine import refine_pnpf, relative_pose
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
@@ -327,6 +337,87 @@ def identification_trials(seed, n, sigma=0.5):
     return ok / n, wrong / n, raised / n, np.median(times) if times else float("nan")
 
 
+# ------------------------------------------------------------------------------------ hard sets
+
+HARD_KINDS = ("near-planar-10", "5-point")
+
+
+def hard_trial(kind: str, rng):
+    """(points (N, 3) mm, pixels (N, 2) noise-free, cam_from_d, focal, pp) of one hard set:
+    ``near-planar-10``: 10 markers of A within +-20 deg of the line facing the camera (axial
+    20-200 mm), the camera of a docking frame; ``5-point``: 5 of the default layout's 7 markers
+    of A (what occlusion leaves)."""
+    if kind == "near-planar-10":
+        pattern = tuple(zip(rng.uniform(20.0, 200.0, 10), rng.uniform(-20.0, 20.0, 10)))
+        markers = build_layout(pattern, DEFAULT_LAYOUT_B, radius_mm=300.0, diameter_mm=20.0)
+        sc = docking_scene(rng, markers=markers)
+        return sc.points_a, sc.uv_a, sc.cam_from_d, sc.focal_px, sc.principal_point
+    sc = docking_scene(rng)
+    keep = np.sort(rng.choice(len(sc.points_a), size=5, replace=False))
+    return sc.points_a[keep], sc.uv_a[keep], sc.cam_from_d, sc.focal_px, sc.principal_point
+
+
+def hard_errors(res, cam, f):
+    """rotation (deg), t_x, t_y, t_z (mm), focal (%) errors of a single-section result."""
+    return np.array([rotation_angle_deg(res.rotation, cam[:3, :3]), *(res.translation - cam[:3, 3]),
+                     100.0 * (res.focal_px / f - 1.0)])
+
+
+def hard_bound(p3, cam, f, pp, sigma):
+    cov = crb_pnpf(p3, cam, f, pp, sigma)
+    return np.array([np.degrees(np.sqrt(np.trace(cov[:3, :3]))), *np.sqrt(np.diag(cov)[3:6]),
+                     100.0 * np.sqrt(cov[6, 6]) / f])
+
+
+def _wrong_minimum(res, p3, uv, pp, cam, f) -> bool:
+    """The result's RMS is above (by 1e-6 relative) that of the refinement started from the truth:
+    the solver stopped in a local minimum, not at the maximum likelihood."""
+    try:
+        truth = refine_pnpf(p3, uv, pp, cam[:3, :3], cam[:3, 3], f)
+    except SolverError:
+        return False
+    return bool(res.rmse_px > truth.rmse_px * (1.0 + 1e-6) + 1e-12)
+
+
+def run_hard(kind: str, sigma: float, n: int, seed: int) -> dict:
+    """Refusals, solutions beyond 6 bound-sigmas in rotation or in-plane translation, and RMS /
+    bound of rotation, t_x, t_y (the determined quantities) over ``n`` seeded trials."""
+    rng = np.random.default_rng([seed, HARD_KINDS.index(kind), int(round(sigma * 1000))])
+    errs, bnds, refused, wild, wild_all, flagged, wrong = [], [], [], 0, 0, 0, 0
+    for _ in range(n):
+        p3, uv, cam, f, pp = hard_trial(kind, rng)
+        noisy = uv + sigma * rng.standard_normal(uv.shape)
+        b = hard_bound(p3, cam, f, pp, sigma)
+        try:
+            res = solve_pnpf(p3, noisy, pp)
+        except SolverError as exc:
+            refused.append(type(exc).__name__)
+            continue
+        e = hard_errors(res, cam, f)
+        flagged += not res.focal_determined
+        wild += bool(np.any(np.abs(e[:3]) > 6.0 * b[:3]))
+        wild_all += bool(res.focal_determined and np.any(np.abs(e) > 6.0 * b))
+        wrong += _wrong_minimum(res, p3, noisy, pp, cam, f)
+        errs.append(e)
+        bnds.append(b)
+    errs, bnds = np.array(errs), np.array(bnds)
+    rms = np.sqrt(np.mean(errs ** 2, axis=0)) / np.sqrt(np.mean(bnds ** 2, axis=0))
+    return {"kind": kind, "sigma": sigma, "trials": n, "refused": len(refused), "wild": wild, "wild_all": wild_all, "wrong": wrong,
+            "flagged": flagged, "ratio_rot": rms[0], "ratio_tx": rms[1], "ratio_ty": rms[2],
+            "ratio_f": rms[4], "why": sorted(set(refused))}
+
+
+def report_hard(rows) -> None:
+    print("\nsingle-section hard sets (solve_pnpf; targets: refused <= 1 %, 0 beyond 6 bound-sigmas, "
+          "RMS/bound of rotation, t_x, t_y <= 1.15)")
+    print(f"{'set':<16}{'sigma':>6}{'trials':>7}{'refused%':>9}{'wrong':>6}{'>6sig':>6}{'(all)':>6}{'flagged%':>9}"
+          f"{'rot/CRB':>8}{'tx/CRB':>8}{'ty/CRB':>8}{'f/CRB':>8}  refusals")
+    for r in rows:
+        print(f"{r['kind']:<16}{r['sigma']:>6}{r['trials']:>7}{100 * r['refused'] / r['trials']:>9.2f}"
+              f"{r['wrong']:>6}{r['wild']:>6}{r['wild_all']:>6}{100 * r['flagged'] / r['trials']:>9.2f}{r['ratio_rot']:>8.3f}{r['ratio_tx']:>8.3f}"
+              f"{r['ratio_ty']:>8.3f}{r['ratio_f']:>8.3f}  {', '.join(r['why'])}")
+
+
 # ------------------------------------------------------------------------------------ main
 
 def main(argv=None):
@@ -336,7 +427,13 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--outlier-trials", type=int, default=500)
     ap.add_argument("--ident-trials", type=int, default=200)
+    ap.add_argument("--hard-trials", type=int, default=5000, help="per hard set and sigma (0: skip)")
+    ap.add_argument("--hard-only", action="store_true", help="only the single-section hard sets")
     args = ap.parse_args(argv)
+    if args.hard_trials:
+        report_hard([run_hard(k, s, args.hard_trials, args.seed) for k in HARD_KINDS for s in (0.1, 0.3, 1.0)])
+    if args.hard_only:
+        return
 
     peers = {}
     for name, factory in (("sqpnp(true f)", _peer_cv2), ("pycolmap", _peer_pycolmap),

@@ -40,9 +40,12 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     if that gives no valid camera or the refinement fails; ``candidates`` holds the candidates
     that were computed (``all_candidates=True``: always every one).
 
-    Returns a :class:`PnPfResult`. Raises a :class:`SolverError` subclass: InvalidSolverInput
-    (shape mismatch, NaN/inf), TooFewPoints (fewer than 4 points), DegenerateGeometry
-    (collinear points), NoValidCamera (points behind the camera), FocalNotObservable.
+    Returns a :class:`PnPfResult`; a focal the points do not determine (near-planar,
+    fronto-parallel points at this noise) is returned with ``focal_determined=False`` and its
+    covariance, not refused: the rotation and the in-plane translation are still determined.
+    Raises a :class:`SolverError` subclass: InvalidSolverInput (shape mismatch, NaN/inf),
+    TooFewPoints (fewer than 4 points), DegenerateGeometry (collinear points), NoValidCamera
+    (no camera in front of the points fits).
     """
     sigma_px = check_sigma(sigma_px)
     p3, p2 = check_correspondences(points_3d, points_2d)

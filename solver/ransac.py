@@ -89,14 +89,14 @@ def ransac_pnpf(p3, p2, pp, rng: np.random.Generator, options: RansacOptions = D
     q3, q2 = p3[inl], p2[inl]
     if not refine:
         lo = refine_pnpf(q3, q2, pp, *model, refine_options)
-        return PnPfResult.from_refinement(lo, sigma_px, (), inl)
+        return PnPfResult.from_refinement(lo, sigma_px, (), inl, refine_options)
     ref = refine_best_candidate(q3, q2, pp, upnp(q3, q2, pp, checked=True), refine_options,
                                 max_tries=options.final_starts)
     # keep the LO model if the fresh closed form went elsewhere
     lo = refine_pnpf(q3, q2, pp, *model, refine_options)
     if float(lo.residuals @ lo.residuals) < float(ref.residuals @ ref.residuals):
         ref = lo
-    return PnPfResult.from_refinement(ref, sigma_px, (), inl)
+    return PnPfResult.from_refinement(ref, sigma_px, (), inl, refine_options)
 
 
 def _pnpf_consensus(p3, p2, pp, rng, options: RansacOptions, refine_options: RefineOptions):

@@ -13,6 +13,7 @@ from dockfactory.solver import (
     IdentifyOptions,
     InvalidSolverInput,
     NoConsensus,
+    NoValidCamera,
     RansacOptions,
     RefineOptions,
     SolverError,
@@ -236,12 +237,20 @@ def test_every_failure_is_a_typed_solver_error(scene):
         solve_pnpf(scene.points_a, scene.uv_a[:6], PP)
     with pytest.raises(InvalidSolverInput):
         solve_pnpf(scene.points_a, scene.uv_a, PP, robust=True)
-    # 5 near-planar points with 2 px noise: the focal is not determined
+    # 4 points with 2 px noise: the focal is often not determined; the pose is returned with
+    # the flag (issue 12: no needless refusals), never a FocalNotObservable
     rng = np.random.default_rng(3)
-    with pytest.raises(FocalNotObservable):
-        for _ in range(50):
-            sc = docking_scene(rng)
-            solve_pnpf(sc.points_a[:4], sc.uv_a[:4] + 2.0 * rng.standard_normal((4, 2)), PP)
+    flags = []
+    for _ in range(50):
+        sc = docking_scene(rng)
+        try:
+            flags.append(solve_pnpf(sc.points_a[:4], sc.uv_a[:4] + 2.0 * rng.standard_normal((4, 2)),
+                                    PP).focal_determined)
+        except FocalNotObservable:
+            pytest.fail("solve_pnpf refused an undetermined focal instead of flagging it")
+        except NoValidCamera:
+            pass
+    assert 5 <= flags.count(False) and 5 <= flags.count(True), flags
     # every point an outlier of every other: no consensus
     junk = np.random.default_rng(4).uniform(0, 900, (7, 2))
     with pytest.raises(NoConsensus):
