@@ -20,6 +20,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre import refine_centre
 from dockfactory.detector.data import resize_exact
+from dockfactory.detector.noise_card import centre_noise_px
 
 
 @dataclass(frozen=True)
@@ -178,6 +179,7 @@ class MarkerDetector:
         self.weights = Path(weights)
         self.model, self.meta = load_model(self.weights, fuse=True)
         self.backend = resolve_backend(backend)
+        self.centre_noise_px = centre_noise_px(self.weights)   # the weights' noise card, or None
         if self.backend == "onnx":
             self.network = OnnxNetwork(self.model)
         else:
@@ -263,7 +265,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
         print(file=sys.stderr)
     doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
-           "weights_dataset_version": det.meta["dataset_version"],
+           "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
            "conf_threshold": conf_threshold, "iou_threshold": iou_threshold,
            "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
            "timing": {"frames": len(frames), "mean_ms": round(1000 * float(np.mean(times)), 2),

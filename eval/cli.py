@@ -66,8 +66,10 @@ def cmd_solve(args) -> int:
     if (args.detections is None) == (args.oracle_noise is None):
         raise DockfactoryError("give --detections DETS.json or --oracle-noise PX (exactly one)")
     model = resolve_camera_model(args.camera_model, args.self_calibrate)
+    if args.sigma_floor is not None and not (math.isfinite(args.sigma_floor) and args.sigma_floor > 0):
+        raise DockfactoryError(f"--sigma-floor: must be a finite number of pixels > 0, got {args.sigma_floor}")
     ds = Dataset.open(args.dataset)
-    modes = {"camera_model": model, "self_calibrate": args.self_calibrate}
+    modes = {"camera_model": model, "self_calibrate": args.self_calibrate, "sigma_floor_px": args.sigma_floor}
     if args.detections:
         dets = read_json_for(args.detections, "detections", ds)
         poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score, **modes)
@@ -141,6 +143,9 @@ def add_eval_commands(sub) -> None:
                    help="frame: the model per frame; sequence: each docking run of the labels (one camera "
                         "unit) solved with shared intrinsics")
     s.add_argument("--min-score", type=float, default=MIN_SCORE)
+    s.add_argument("--sigma-floor", type=float, metavar="PX",
+                   help="the detector's centre noise measured on labelled frames (evaluate's "
+                        "centre_noise.used.value on another split): no frame's covariance assumes less")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_solve)
 

@@ -17,11 +17,13 @@ from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
 from dockfactory.eval.camera_models_eval import camera_models_block
+from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
 from dockfactory.eval.dataset_access import read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.eval.uncertainty import calibration_block, reported_std, standard_scores
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.solver import SolverError, crb_d_from_b
@@ -60,11 +62,14 @@ def evaluated_frames(ds: Dataset) -> list:
     return [s for s in ds.plan if s.split in ("test", "repeat")]
 
 
-def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, source="poses") -> list[dict]:
+def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, source="poses",
+                   sigma_by_condition: dict | None = None) -> list[dict]:
     """One row per frame: the ``population`` (FrameSpecs, default :func:`evaluated_frames`) first,
     then any other frame of the dataset the poses file holds (another split). A planned frame
     without a label or without a pose is a failed row with its reason; a pose for a frame the
-    dataset does not have is refused (``source``: the poses file, for the message)."""
+    dataset does not have is refused (``source``: the poses file, for the message). The bound
+    of a frame uses its condition's centre noise from ``sigma_by_condition`` when given, else
+    ``sigma_px``; its ``sigma_px`` column says which."""
     population = evaluated_frames(ds) if population is None else population
     planned = {s.frame_id for s in population}
     order = [s.frame_id for s in population] + [f for f in poses["frames"] if f not in planned]
@@ -93,18 +98,30 @@ def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, s
         for c in COMPONENTS:
             row[f"true_{c}"] = true[POSE_KEYS[c]]
         if row["ok"]:
-            err = pose_error(rec["pose"], true)
-            for c in COMPONENTS:
-                row[f"est_{c}"] = rec["pose"][POSE_KEYS[c]]
-                row[f"err_{c}"] = err[c]
-            row["focal_est"] = rec["focal_px"]
-            row["focal_err_pct"] = 100.0 * (rec["focal_px"] - row["focal_true"]) / row["focal_true"]
-            row["rmse_px_a"], row["rmse_px_b"] = rec["rmse_px"]["A"], rec["rmse_px"]["B"]
-            bound = frame_bound(lab, rec.get("marker_ids"), sigma_px)
-            for c in COMPONENTS:
-                row[f"crb_{c}"] = bound[c] if bound else None
+            sigma = (sigma_by_condition or {}).get(row["condition"], sigma_px)
+            row.update(_solved_fields(rec, lab, sigma, f"{source}: frames.{fid}.covariance"))
         rows.append(row)
     return rows
+
+
+def _solved_fields(rec: dict, lab: dict, sigma_px: float, where: str) -> dict:
+    """The columns of a solved frame: estimate, error, focal, reprojection RMS, the bound at
+    ``sigma_px`` and, when the record has a covariance, the reported std and z = error / std."""
+    true = lab["pose_b_in_d"]
+    err = pose_error(rec["pose"], true)
+    out = {"focal_est": rec["focal_px"],
+           "focal_err_pct": 100.0 * (rec["focal_px"] - lab["camera"]["focal_px"]) / lab["camera"]["focal_px"],
+           "rmse_px_a": rec["rmse_px"]["A"], "rmse_px_b": rec["rmse_px"]["B"], "sigma_px": sigma_px}
+    bound = frame_bound(lab, rec.get("marker_ids"), sigma_px)
+    std = reported_std(rec["covariance"], where) if rec.get("covariance") is not None else {}
+    z = standard_scores(err, std)
+    for c in COMPONENTS:
+        out[f"est_{c}"] = rec["pose"][POSE_KEYS[c]]
+        out[f"err_{c}"] = err[c]
+        out[f"crb_{c}"] = bound[c] if bound else None
+        out[f"std_{c}"] = std.get(c)
+        out[f"z_{c}"] = z[c]
+    return out
 
 
 def localization_block(rows: list[dict]) -> dict:
@@ -127,6 +144,7 @@ def localization_block(rows: list[dict]) -> dict:
             crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse,
                       "ratio": (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None}
     out["crb"] = crb
+    out["calibration"] = calibration_block(ok)
     return out
 
 
@@ -152,34 +170,6 @@ def estimation_block(rows: list[dict]) -> dict:
     rep["n_frames"] = len(rows)
     rep["n_solved"] = sum(r["ok"] for r in rows)
     return rep
-
-
-def centre_noise_px(ds: Dataset, detections: dict | None, min_score: float) -> tuple[float, dict]:
-    """RMS per-axis error of detected centres matched to visible markers (test split)."""
-    if detections is None:
-        return float("nan"), {}
-    errs, by_cond = [], defaultdict(list)
-    for fid in ds.frames(("test",)):
-        lab = ds.labels[fid]
-        dets = [d for d in detections["frames"].get(fid, []) if d.get("score", 1.0) >= min_score]
-        for m in lab["markers"]:
-            if m.get("visibility") != 2 or not m.get("legible", True):
-                continue
-            best = None
-            for d in dets:
-                if d["class_id"] != m["class_id"]:
-                    continue
-                e = np.subtract(d["center_px"], m["center_px"])
-                if np.hypot(*e) < m["diameter_mm"] and (best is None or np.hypot(*e) < np.hypot(*best)):
-                    best = e
-            if best is not None:
-                errs.append(best)
-                by_cond["normal" if lab["spec"]["condition"] in ("normal", "ideal") else "challenging"].append(np.hypot(*best))
-    if not errs:
-        return float("nan"), {}
-    e = np.array(errs)
-    sigma = float(np.sqrt(np.mean(e ** 2)))   # per-axis RMS
-    return sigma, {k: {"median_px": float(np.median(v)), "n": len(v)} for k, v in by_cond.items()}
 
 
 def _without_pose(block: dict) -> tuple[int, int | None]:
@@ -267,21 +257,20 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
     if detections_path:   # mAP needs every detection's box and score
         detections = validate_detections(read_json_for(detections_path, "detections", ds), detections_path,
                                          required=("bbox_px", "score"))
-    sigma, centre_by_cond = centre_noise_px(ds, detections, min_score)
-    if not np.isfinite(sigma):
-        # no detections to measure it from: the oracle noise the poses were made with (0 is a
-        # valid noise level), else 0.1 px
-        given = (oracle_sigma_px, poses.get("oracle_sigma_px"))
-        sigma = next((float(s) for s in given if s is not None), 0.1)
+    noise = centre_noise_block(ds, poses, detections, min_score) if detections is not None else None
+    used = used_sigma(noise, oracle_sigma_px, poses.get("oracle_sigma_px"))
+    sigma = used["value"]
     # the population is the plan: a frame without a pose (failed, absent from the poses file or
     # from the dataset) is a failure with its reason, never silently dropped
-    rows = per_frame_rows(ds, poses, sigma, source=str(poses_path))
+    rows = per_frame_rows(ds, poses, sigma, source=str(poses_path), sigma_by_condition=used["by_condition"])
     test = [r for r in rows if r["split"] == "test"]
     rep = [r for r in rows if r["split"] == "repeat"]
     metrics = {"format": METRICS_FORMAT, "dataset": {"root": str(ds.root), "version_id": ds.version_id,
                                                       "name": ds.identity["name"]},
                "poses": {"source": poses.get("source"), "path": str(poses_path)},
-               "centre_noise_px": sigma, "centre_error": centre_by_cond,
+               "centre_noise_px": sigma, "centre_noise": {**(noise or {}), "used": used},
+               "centre_error": {c: {"median_px": s["median_radial_px"], "n": s["n"]}
+                                for c, s in ((noise or {}).get("by_condition") or {}).items()},
                "localization": localization_block(test), "estimation": estimation_block(rep),
                "failures_test": failures_block(test), "failures_repeat": failures_block(rep)}
     if detections is not None:
@@ -351,7 +340,8 @@ def detection_block(ds: Dataset, detections: dict) -> dict:
 
 CSV_FIELDS = (["frame_id", "split", "condition", "pose_index", "ok", "category", "reason", "distance_mm",
                "focal_true", "focal_est", "focal_err_pct", "visible_a", "visible_b", "rmse_px_a", "rmse_px_b"]
-              + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS])
+              + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS] + ["sigma_px"]
+              + [f"{k}_{c}" for k in ("std", "z") for c in COMPONENTS])
 
 
 def json_safe(obj):

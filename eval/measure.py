@@ -26,9 +26,16 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, write_text_atomic
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
+from dockfactory.detector.noise_card import centre_noise_px
 from dockfactory.eval.measure_overlay import draw_measurement
 from dockfactory.eval.measure_pool import MeasurePool
-from dockfactory.eval.solve_frames import detection_arrays, resolve_camera_model, solve_frame, solve_run
+from dockfactory.eval.solve_frames import (
+    detection_arrays,
+    docking_options,
+    resolve_camera_model,
+    solve_frame,
+    solve_run,
+)
 
 MEASURE_FORMAT = "dockfactory.measure/1"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -89,7 +96,8 @@ def measure_frame(detector, markers, index: int, path: Path, camera_model: str, 
     frame.detections = detector.detect(image)
     t1 = time.perf_counter()
     frame.record, frame.used_points = solve_frame(markers, frame.principal_point,
-                                                  detection_arrays(frame.detections, min_score), None, camera_model)
+                                                  detection_arrays(frame.detections, min_score), None, camera_model,
+                                                  docking_options(detector.centre_noise_px))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
@@ -98,7 +106,7 @@ def measure_frame(detector, markers, index: int, path: Path, camera_model: str, 
     return frame
 
 
-def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str) -> dict:
+def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
     joint ones. Returns the run's record (shared intrinsics or the reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
@@ -111,7 +119,8 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str) -> 
     t0 = time.perf_counter()
     keys = [str(f.index) for f in solved]
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
-                        {str(f.index): f.used_points for f in solved}, None, camera_model)
+                        {str(f.index): f.used_points for f in solved}, None, camera_model,
+                        docking_options(sigma_floor_px))
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
@@ -238,13 +247,13 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         run = None
         if sequence:
             t0 = time.perf_counter()
-            run = self_calibrate_sequence(frames, markers, model)
+            run = self_calibrate_sequence(frames, markers, model, centre_noise_px(weights))
             if options.overlay_size is not None:
                 draw_overlays(frames, markers, out, options.overlay_size)
             wall += time.perf_counter() - t0
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
         header.update(backend=resolve_backend(options.backend), workers=options.workers,
-                      overlay_size=options.overlay_size)
+                      overlay_size=options.overlay_size, sigma_floor_px=centre_noise_px(weights))
         write_records(out, frames, header)
     return header
 

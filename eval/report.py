@@ -19,6 +19,15 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
 from dockfactory.eval.evaluate import criterion_passes
+from dockfactory.eval.report_calibration import (
+    CALIBRATION_SCHEMA,
+    CENTRE_NOISE_SCHEMA,
+    html_bound,
+    html_calibration,
+    html_centre_noise,
+    markdown_honesty,
+    plot_qq,
+)
 from dockfactory.eval.report_cameras import (
     CAMERA_MODELS_SCHEMA,
     ENVELOPE_SCHEMA,
@@ -257,16 +266,19 @@ METRICS_SCHEMA = {
     "dataset": {"root": "str", "version_id": "str", "name": "str"},
     "poses": {"source": "str?", "path": "str"},
     "centre_noise_px": "num?",
+    "centre_noise?": CENTRE_NOISE_SCHEMA,
     "localization": {"n_frames": "int", "n_solved": "int", "overall": _COMPS, "by_condition": ("map", _COMPS),
                      "focal_err_pct": _STATS, "reprojection_rmse_px": {"A": _STATS, "B": _STATS},
-                     "crb": ("map", {"bound_rms": "num?", "measured_rmse": "num?", "ratio": "num?"})},
+                     "crb": ("map", {"bound_rms": "num?", "measured_rmse": "num?", "ratio": "num?"}),
+                     "calibration?": CALIBRATION_SCHEMA},
     "estimation": {"n_frames": "int", "n_solved": "int",
                    "per_pose": ("list", {"pose": "str", "captures": "int"} | {c: "num?" for c in COMPONENTS}),
                    "pooled": {c: {"rmse": "num?", "mse": "num?"} for c in COMPONENTS}},
     "failures_test": {"count": "int", "frames": "int", "rate": "num?",
                       "by_condition": ("map", {"failed": "int", "frames": "int"}),
                       "list": ("list", {"frame_id": "str", "condition": "str", "reason": "str"})},
-    "oracle?": {"localization": {"overall": {c: {"rmse": "num?"} for c in COMPONENTS}}},
+    "oracle?": {"localization": {"overall": {c: {"rmse": "num?"} for c in COMPONENTS},
+                                 "calibration?": CALIBRATION_SCHEMA}},
     "detection?": {"map50?": "num?", "map50_95?": "num?",
                    "per_class?": ("map", {"map50?": "num?", "map50_95?": "num?"}),
                    "pr_curves?": ("map", ("list", ("list", "num")))},
@@ -415,16 +427,24 @@ def _html_localization(metrics: dict) -> list[str]:
     parts = ["<h2>Localization (test split)</h2>", _stats_table(loc["overall"], "all conditions")]
     for cond, block in loc["by_condition"].items():
         parts.append(_stats_table(block, f"condition: {cond}"))
-    parts.append("<h3>Measured against the Cramer-Rao bound</h3><table><tr><th>component</th><th>measured RMSE</th><th>bound (RMS)</th><th>ratio</th></tr>"
-                 + "".join(f"<tr><td>{c}</td><td>{_num(v['measured_rmse'])}</td><td>{_num(v['bound_rms'])}</td><td>{_num(v['ratio'], 3)}</td></tr>" for c, v in loc["crb"].items())
-                 + f"</table><p class='note'>Bound from each frame's exact geometry and the measured centre noise "
-                   f"({_num(metrics['centre_noise_px'], 3)} px per axis).</p>")
+    parts += html_centre_noise(metrics) + html_bound(metrics)
     if "oracle" in metrics:
         o = metrics["oracle"]["localization"]["overall"]
         parts.append("<h3>Oracle (exact centres + noise of the measured size): separates detector from solver error</h3><table>"
                      "<tr><th>component</th><th>RMSE pipeline</th><th>RMSE oracle</th></tr>"
                      + "".join(f"<tr><td>{c} ({UNITS[c]})</td><td>{_num(loc['overall'][c]['rmse'])}</td><td>{_num(o[c]['rmse'])}</td></tr>" for c in COMPONENTS) + "</table>")
     return parts
+
+
+def _html_calibration(metrics: dict, rows: list[dict]) -> list[str]:
+    """The covariance-calibration section with its QQ plot (eval.report_calibration)."""
+    if not metrics["localization"].get("calibration"):
+        return []
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    png = plot_qq(plt, rows, _fig_png)
+    return html_calibration(metrics, _img(png, "QQ plot of z = error / reported std") if png else None)
 
 
 def _html_estimation(est: dict) -> str:
@@ -537,7 +557,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     provenance = _report_provenance(metrics, prov, commands)
     figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
     worst = gallery(dataset_root, rows, poses, detections)
-    parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics)
+    parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics) + _html_calibration(metrics, rows)
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
              + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
@@ -547,8 +567,10 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,
                "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
                "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
-               "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()}}
+               "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()},
+               "centre_noise_used": (metrics.get("centre_noise") or {}).get("used"),
+               "covariance_calibration": (loc.get("calibration") or {}).get("overall")}
     out_html = Path(out_html)
     write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
-    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc))
+    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + markdown_honesty(metrics))
     return summary

@@ -12,6 +12,8 @@ Frames without a pose are kept with their reason: never dropped.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
@@ -21,11 +23,13 @@ from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.draws import rng_for
 from dockfactory.solver import (
     AmbiguousIdentification,
+    DockingOptions,
     SolverError,
     TooFewPoints,
     solve_docking,
 )
 from dockfactory.solver.camera_models import MODELS
+from dockfactory.solver.options import DEFAULT_DOCKING
 from dockfactory.solver.sequence import solve_sequence
 
 POSES_FORMAT = "dockfactory.poses/1"
@@ -115,11 +119,14 @@ def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_p
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None, camera_model: str = "pinhole",
-                  self_calibrate: str | None = None) -> dict:
+                  self_calibrate: str | None = None, sigma_floor_px: float | None = None) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
     ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
     "sequence" solves each docking run of the labels (one camera unit, one run) with shared
-    intrinsics, "frame" (or None) each frame alone."""
+    intrinsics, "frame" (or None) each frame alone. ``sigma_floor_px``: the detector's centre noise
+    measured on labelled frames, below which no frame's residual estimate of the noise is taken
+    (solver RefineOptions.sigma_floor_px; the covariance); default: the detections' own
+    ``centre_noise_px`` (detect copies it from the weights' noise card), if any."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
@@ -129,29 +136,40 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
     sigma = sigma_px if sigma_px is not None or detections is not None else (oracle_sigma_px or None)
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
+    if sigma_floor_px is None and detections is not None:
+        sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
+    options = docking_options(sigma_floor_px)
     frames, used = {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
         if centres is None:
             frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
             continue
-        frames[fid], used[fid] = solve_frame(markers, pp, centres, sigma, per_frame)
+        frames[fid], used[fid] = solve_frame(markers, pp, centres, sigma, per_frame, options)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
-            frames.update(solve_run(markers, pp, group, frames, used, sigma, camera_model))
+            frames.update(solve_run(markers, pp, group, frames, used, sigma, camera_model, options))
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
-            "camera_model": camera_model, "self_calibrate": self_calibrate,
+            "camera_model": camera_model, "self_calibrate": self_calibrate, "sigma_floor_px": sigma_floor_px,
             "splits": list(splits), "frames": frames}
 
 
-def solve_frame(markers, pp, centres, sigma, camera_model: str) -> tuple[dict, dict]:
+def docking_options(sigma_floor_px: float | None) -> DockingOptions:
+    """The solver's options with the detector's measured centre noise as the covariance's floor."""
+    if sigma_floor_px is None:
+        return DEFAULT_DOCKING
+    return replace(DEFAULT_DOCKING, refine=replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px)))
+
+
+def solve_frame(markers, pp, centres, sigma, camera_model: str,
+                options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict]:
     """(poses record, marker id -> centre the fit used) of one frame."""
     cls, uv, boxes, refined = centres
     try:
         res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
-                            camera_model=camera_model)
+                            camera_model=camera_model, options=options)
     except SolverError as exc:
         return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}
     used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers))
@@ -169,11 +187,13 @@ def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
     return [groups[k] for k in sorted(groups)]
 
 
-def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str) -> dict:
+def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str,
+              options: DockingOptions = DEFAULT_DOCKING) -> dict:
     """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
     the joint solve fails, every frame of the run says why."""
     try:
-        run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma)
+        run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma,
+                             options=options)
     except SolverError as exc:
         return {f: {"ok": False, "reason": f"docking run solve: {exc}", "category": failure_category(exc)}
                 for f in group}

@@ -69,7 +69,7 @@ class PnPfResult(CameraPose):
     def from_refinement(cls, ref: RefineResult, sigma_px, candidates, inliers,
                         options: RefineOptions = DEFAULT_REFINE) -> PnPfResult:
         """Package a refinement with its covariance (``sigma_px`` None: from the residuals)."""
-        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+        cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
         cam = np.eye(4)
         cam[:3, :3] = ref.rotation
         cam[:3, 3] = ref.translation
@@ -192,7 +192,7 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
             ref = None
         if rescue_below is None and (ref is None or _implausible(ref, sigma_px, accept_rmse, options)):
             ref = _subset_starts(p3, p2, pp, ref, options)
-    cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+    cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
     if check_focal:
         check_focal_observable(ref.focal_px, cov, options)
     return PnPfEstimate(ref, cov, sigma, tuple(cands), focal_is_determined(ref.focal_px, cov, options))
@@ -267,7 +267,7 @@ def _determined(ref: RefineResult, sigma_px, options: RefineOptions) -> bool:
     """The refinement's focal is determined: an undetermined one may be a wrong basin (5 points:
     the fast path's undetermined results were 100 bound-sigmas off in rotation), so the other
     starts are tried."""
-    cov, _ = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+    cov, _ = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
     return focal_is_determined(ref.focal_px, cov, options)
 
 

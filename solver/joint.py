@@ -253,7 +253,7 @@ def _refine_from_starts(data, starts, best, errors, options, stop_when_converged
 def _joint_fit_result(jr: JointRefineResult, sigma_px, options: RefineOptions) -> JointFit:
     """Covariances, observability check and ``d_from_b`` of a joint refinement."""
     res = np.concatenate([jr.residuals_a, jr.residuals_b])
-    cov13, sigma = covariance_from_jacobian(jr.jacobian, res, sigma_px)
+    cov13, sigma = covariance_from_jacobian(jr.jacobian, res, sigma_px, options.sigma_floor_px)
     rel = rel_focal_std(cov13, jr.focal_px)
     if not rel <= options.max_joint_focal_rel_std:
         raise FocalNotObservable(f"focal length is not observable from these points (relative "

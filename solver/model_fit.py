@@ -100,7 +100,7 @@ def refine_model(blocks, poses, intr: Intrinsics, model: CameraModel, sigma_px,
     """One LM for ``model`` from ``poses`` and ``intr``, with its covariance (``sigma_px``
     None: estimated from the residuals)."""
     ref = refine_blocks(blocks, poses, intr, model, options)
-    cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px)
+    cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
     return ModelFit(ref, cov, sigma)
 
 

@@ -76,6 +76,9 @@ class RefineOptions:
       an undetermined focal) is a suspected wrong minimum: with at most ``subset_max_points``
       points every 4-point subset's closed form is tried as a start (solver.estimate). Detector
       centres are good to a few tenths of a pixel; the wrong minima measured had 30-55 px.
+    Covariance (:func:`solver.refine.covariance_from_jacobian`):
+    - ``sigma_floor_px``: when the noise sigma is estimated from a fit's residuals, it is never
+      taken below this (the detector's centre noise measured on labelled frames); None: no floor.
     """
 
     max_iterations: int = 60
@@ -95,6 +98,7 @@ class RefineOptions:
     profile_iterations: int = 6
     plausible_rmse_px: float = 5.0
     subset_max_points: int = 7
+    sigma_floor_px: float | None = None
 
     def __post_init__(self):
         for name in ("max_iterations", "damping_tries", "max_focal_rel_std",
@@ -102,6 +106,7 @@ class RefineOptions:
                      "fallback_starts", "profile_focals", "profile_iterations", "plausible_rmse_px",
                      "subset_max_points"):
             _positive(name, getattr(self, name))
+        _positive("sigma_floor_px", self.sigma_floor_px, allow_none=True)
 
 
 @dataclass(frozen=True)

@@ -138,15 +138,30 @@ def joint_jacobian(jac_a: np.ndarray, jac_b: np.ndarray) -> np.ndarray:
     return jac
 
 
-def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: float | None):
-    """(cov (p, p), sigma used) = sigma^2 (J^T J)^-1; sigma estimated from residuals if None."""
+T_FACTOR_CAP = 3.0   # dof / (dof - 2) at dof = 3; below, a Student t's variance is infinite
+
+
+def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: float | None,
+                             floor_px: float | None = None):
+    """(cov (p, p), sigma used): sigma^2 (J^T J)^-1 with ``sigma_px`` when given.
+
+    Without it sigma is estimated from the residuals, s^2 = r.r / dof (dof = m - p), and the
+    covariance is s^2 dof / (dof - 2) (J^T J)^-1 (at most ``T_FACTOR_CAP`` s^2): the error over
+    a std from an estimated sigma is Student-t with dof degrees of freedom, whose variance is
+    dof / (dof - 2), so this makes z = error / std have RMS 1 (a docking frame has dof 5-15: the
+    std of X grows 1.08-1.29x). ``floor_px``: the centre noise measured on labelled data for
+    this detector; the estimate is never below it (the residuals of a frame underrate noise that
+    is correlated between markers, which moves the pose without showing in them)."""
     m, p = jac.shape
-    if sigma_px is None:
+    if sigma_px is not None:
+        sigma2 = scale2 = float(sigma_px) ** 2
+    else:
         dof = m - p
         sigma2 = float(residuals @ residuals) / dof if dof > 0 else float("inf")
-    else:
-        sigma2 = float(sigma_px) ** 2
-    return sigma2 * inverse_spd(jac.T @ jac), float(np.sqrt(sigma2))
+        scale2 = sigma2 * (min(dof / (dof - 2.0), T_FACTOR_CAP) if dof > 2 else T_FACTOR_CAP)
+        if floor_px is not None:
+            sigma2, scale2 = max(sigma2, floor_px ** 2), max(scale2, floor_px ** 2)
+    return scale2 * inverse_spd(jac.T @ jac), float(np.sqrt(sigma2))
 
 
 def inverse_spd(a: np.ndarray) -> np.ndarray:

@@ -93,7 +93,11 @@ def test_measure_gives_the_poses_of_detect_and_solve(big, tmp_path, capsys):
     assert main(["detect", str(big), "--split", "all", "--out", str(dets), "--threads", "1", "--quiet"]) == 0
     assert main(["solve", str(big), "--detections", str(dets), "--split", "train,val,test,repeat",
                  "--out", str(poses)]) == 0
-    solved = json.loads(poses.read_text())["frames"]
+    solved_doc = json.loads(poses.read_text())
+    # the shipped weights' noise card floors the covariance in detect + solve and in measure alike
+    assert solved_doc["sigma_floor_px"] == doc["sigma_floor_px"] == pytest.approx(0.0882)
+    assert json.loads(dets.read_text())["centre_noise_px"] == pytest.approx(0.0882)
+    solved = solved_doc["frames"]
     measured = _poses(doc)
     assert set(measured) == set(solved)
     for fid, rec in solved.items():

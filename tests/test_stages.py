@@ -197,7 +197,7 @@ def test_report_stage(ds, evaluated, tmp_path):
     assert text.startswith("<!DOCTYPE html>") and text.rstrip().endswith("</html>")
     assert "ACCEPTED" in text and "dockfactory run smoke" in text and ds.version_id in text
     assert "Oracle (exact centres" in text
-    assert text.count("<img") == 5 + 4       # five plots; the four test frames in the gallery
+    assert text.count("<img") == 5 + 1 + 4   # five plots, the QQ plot of z; the four test frames in the gallery
     assert "ACCEPTED" in out.with_suffix(".md").read_text()
     assert _strict_json(out.with_suffix(".json"))["verdict"] == "ACCEPTED"
 

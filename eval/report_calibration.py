@@ -1,0 +1,193 @@
+"""The report's honesty sections: the centre noise the bounds use (metrics["centre_noise"], see
+eval.centre_noise), measured error against the Cramer-Rao bound, and whether the solver's
+covariance describes its error (metrics["localization"]["calibration"], see eval.uncertainty):
+tables for the HTML report and its Markdown summary, and a QQ plot of z = error / reported std."""
+from __future__ import annotations
+
+import html
+from statistics import NormalDist
+
+import numpy as np
+
+from dockfactory.core.names import COMPONENTS, UNITS
+
+GATED = ("x", "y", "alpha")
+RATIO_RANGE = (0.9, 1.3)      # measured / bound outside it gets a note
+Z_RANGE = (0.85, 1.2)         # RMS z outside it gets a note (the issue's target band)
+WITHIN_RANGE = (0.92, 0.98)   # so does a fraction within 2 sigma outside this one
+QQ_LIMIT = 8.0                # |z| beyond it is drawn at the edge of the QQ plot
+
+_NOISE = {"n": "int", "rms_px": "num?", "robust_px": "num?"}
+CENTRE_NOISE_SCHEMA = {"used": {"name": "str", "value": "num", "n": "int", "source": "str",
+                                "by_condition?": ("map", "num")},
+                       "overall?": _NOISE, "by_condition?": ("map", _NOISE), "frames?": "int",
+                       "outside_gate?": "int", "gate?": {"radius_fraction": "num"}}
+_Z = {"n": "int", "rms_z": "num?", "within_2sigma": "num?", "robust_z?": "num?", "max_abs_z?": "num?"}
+CALIBRATION_SCHEMA = {"overall": {c: _Z for c in COMPONENTS}, "by_condition": ("map", {c: _Z for c in COMPONENTS}),
+                      "expected": {"rms_z": "num", "within_2sigma": "num"}, "without_std": "int"}
+
+
+def _f(v, fmt: str) -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def used_sigma_text(metrics: dict) -> str:
+    """One sentence: which centre noise the bounds and the oracle use (name, value, n)."""
+    cn = metrics.get("centre_noise")
+    if not cn:   # a metrics.json of an older evaluate
+        return (f"centre noise {_f(metrics.get('centre_noise_px'), '.3g')} px per axis (older metrics file: "
+                "not said how it was measured)")
+    u = cn["used"]
+    text = f"{u['name']} = {u['value']:.3g} px per axis over {u['n']} detections ({u['source']}"
+    if cn.get("gate"):
+        text += (f"; {cn.get('frames', 0)} solved frames, matched within {cn['gate']['radius_fraction']:g} x the "
+                 f"marker's apparent radius, {cn.get('outside_gate', 0)} used markers without a detection there")
+    text += ")"
+    if u.get("by_condition"):
+        text += "; each frame's bound uses its condition's RMS: " + ", ".join(
+            f"{c} {v:.3g} px" for c, v in u["by_condition"].items())
+    return text
+
+
+def _ratio_note(crb: dict, cn: dict | None) -> str:
+    low = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] < RATIO_RANGE[0]]
+    high = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] > RATIO_RANGE[1]]
+    notes = []
+    axis = ((cn or {}).get("overall") or {}).get("rms_axis_px")
+    if low:
+        notes.append(f"{', '.join(low)} below {RATIO_RANGE[0]}: smaller than the bound of isotropic, independent "
+                     "centre noise of this size, so the detector's noise is not that"
+                     + (f" (RMS x {axis[0]:.3g} px, y {axis[1]:.3g} px)" if axis else "") + ".")
+    if high:
+        notes.append(f"{', '.join(high)} above {RATIO_RANGE[1]}: the solver does not reach the bound.")
+    return " ".join(notes)
+
+
+def html_centre_noise(metrics: dict) -> list[str]:
+    """The centre noise used and its per-condition table (RMS and robust sigma)."""
+    cn = metrics.get("centre_noise") or {}
+    parts = [f"<p>Centre noise used by the bounds, the oracle and the camera sweeps: {html.escape(used_sigma_text(metrics))}.</p>"]
+    if cn.get("overall"):
+        rows = [("all", cn["overall"])] + list(cn.get("by_condition", {}).items())
+        parts.append("<table><tr><th>condition</th><th>detections</th><th>RMS (px)</th><th>robust 1.4826 MAD (px)</th>"
+                     "<th>RMS x / y (px)</th><th>mean x / y (px)</th></tr>" + "".join(
+                         f"<tr><td>{html.escape(c)}</td><td>{s['n']}</td><td>{_f(s['rms_px'], '.3g')}</td>"
+                         f"<td>{_f(s['robust_px'], '.3g')}</td><td>{_axes(s.get('rms_axis_px'))}</td>"
+                         f"<td>{_axes(s.get('mean_px'))}</td></tr>" for c, s in rows) + "</table>")
+    return parts
+
+
+def _axes(v) -> str:
+    return "-" if not v else f"{v[0]:.3g} / {v[1]:.3g}"
+
+
+def html_bound(metrics: dict) -> list[str]:
+    loc = metrics["localization"]
+    note = _ratio_note(loc["crb"], metrics.get("centre_noise"))
+    return ["<h3>Measured against the Cramer-Rao bound</h3><table><tr><th>component</th><th>measured RMSE</th>"
+            "<th>bound (RMS)</th><th>ratio</th></tr>"
+            + "".join(f"<tr><td>{c}</td><td>{_f(v['measured_rmse'], '.4g')}</td><td>{_f(v['bound_rms'], '.4g')}</td>"
+                      f"<td>{_f(v['ratio'], '.3g')}</td></tr>" for c, v in loc["crb"].items())
+            + "</table><p class='note'>Bound from each frame's exact geometry (the markers its fit used) and the "
+              f"centre noise above. {html.escape(note)}</p>"]
+
+
+def _z_cells(s: dict) -> str:
+    return (f"<td>{s['n']}</td><td>{_f(s['rms_z'], '.3g')}</td><td>{_f(s.get('robust_z'), '.3g')}</td>"
+            f"<td>{_f(s['within_2sigma'], '.1%')}</td><td>{_f(s.get('max_abs_z'), '.3g')}</td>")
+
+
+def html_calibration(metrics: dict, qq_img: str | None) -> list[str]:
+    """Is the reported covariance honest: z statistics per component, overall, per condition and
+    for the oracle; the QQ plot."""
+    cal = metrics["localization"].get("calibration")
+    if not cal:
+        return []
+    exp = cal["expected"]
+    head = ("<tr><th>frames</th><th>component</th><th>n</th><th>RMS z</th><th>robust z</th><th>within 2 sigma</th>"
+            "<th>max |z|</th></tr>")
+    rows = [f"<tr><td>all</td><td>{c}</td>{_z_cells(cal['overall'][c])}</tr>" for c in COMPONENTS]
+    rows += [f"<tr><td>{html.escape(k)}</td><td>{c}</td>{_z_cells(b[c])}</tr>"
+             for k, b in cal["by_condition"].items() for c in GATED]
+    o_cal = ((metrics.get("oracle") or {}).get("localization") or {}).get("calibration")
+    if o_cal:
+        rows += [f"<tr><td>oracle</td><td>{c}</td>{_z_cells(o_cal['overall'][c])}</tr>" for c in GATED]
+    parts = ["<h2>Is the reported covariance honest?</h2>",
+             f"<p>z = (estimate - truth) / std, the std from each pose record's covariance (same units: mm, deg). "
+             f"A covariance that describes the error gives RMS z {exp['rms_z']:g} and {exp['within_2sigma']:.1%} of "
+             f"frames within 2 sigma; RMS z above 1 means the reported std is too small. Solved frames without a "
+             f"usable std: {cal['without_std']}. The oracle rows (exact centroids plus noise the solver is told) "
+             "check the computation itself.</p>", f"<table>{head}{''.join(rows)}</table>",
+             f"<p><b>{html.escape(calibration_note(cal))}</b></p>" if calibration_note(cal) else ""]
+    if qq_img:
+        parts.append(qq_img)
+    return parts
+
+
+def calibration_note(cal: dict) -> str:
+    """Which gated components' reported std is too small or too large (empty when none)."""
+    small, large = [], []
+    for c in GATED:
+        s = cal["overall"][c]
+        if s["rms_z"] is None or s["within_2sigma"] is None:
+            continue
+        if s["rms_z"] > Z_RANGE[1] or s["within_2sigma"] < WITHIN_RANGE[0]:
+            small.append(f"{c} (RMS z {s['rms_z']:.2f}, {s['within_2sigma']:.0%} within 2 sigma)")
+        elif s["rms_z"] < Z_RANGE[0] or s["within_2sigma"] > WITHIN_RANGE[1]:
+            large.append(f"{c} (RMS z {s['rms_z']:.2f}, {s['within_2sigma']:.0%} within 2 sigma)")
+    notes = []
+    if small:
+        notes.append("Reported std too small (a gate on it accepts too much): " + ", ".join(small) + ".")
+    if large:
+        notes.append("Reported std too large (conservative): " + ", ".join(large) + ".")
+    return " ".join(notes)
+
+
+def plot_qq(plt, rows: list[dict], fig_png) -> str | None:
+    """QQ plot of z against standard normal quantiles for X, Y, alpha (None without z)."""
+    test = [r for r in rows if r["split"] == "test" and r["ok"]]
+    if not any(r.get("z_x") is not None for r in test):
+        return None
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.6))
+    for ax, c in zip(axes, GATED):
+        z = np.sort([r[f"z_{c}"] for r in test if r.get(f"z_{c}") is not None])
+        if z.size == 0:
+            continue
+        q = np.array([NormalDist().inv_cdf((i + 0.5) / z.size) for i in range(z.size)])
+        lim = max(3.0, min(QQ_LIMIT, float(np.abs(np.r_[z, q]).max()) * 1.05))
+        ax.scatter(q, np.clip(z, -lim, lim), s=10, c="#4477aa")
+        ax.plot([-lim, lim], [-lim, lim], "k--", lw=0.8, label="calibrated (z ~ N(0, 1))")
+        for y in (-2, 2):
+            ax.axhline(y, color="#999", lw=0.6, ls=":")
+        beyond = int(np.sum(np.abs(z) > lim))
+        ax.set_ylim(-lim, lim)
+        ax.set_title(f"{c}: RMS z {np.sqrt(np.mean(z ** 2)):.2f}, {np.mean(np.abs(z) <= 2):.0%} within 2 sigma"
+                     + (f" ({beyond} clipped)" if beyond else ""), fontsize=9)
+        ax.set_xlabel("standard normal quantile")
+        ax.set_ylabel(f"z of {c} (sorted)")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig_png(fig)
+
+
+def markdown_honesty(metrics: dict) -> str:
+    """The centre noise used, measured / bound and the z table, for report.md."""
+    loc = metrics["localization"]
+    md = ["", f"Centre noise used: {used_sigma_text(metrics)}.", "", "| component | measured RMSE | bound | ratio |",
+          "|---|---|---|---|"]
+    md += [f"| {c} ({UNITS[c]}) | {_f(v['measured_rmse'], '.4g')} | {_f(v['bound_rms'], '.4g')} | {_f(v['ratio'], '.3g')} |"
+           for c, v in loc["crb"].items() if c in GATED]
+    note = _ratio_note(loc["crb"], metrics.get("centre_noise"))
+    if note:
+        md += ["", note]
+    cal = loc.get("calibration")
+    if cal:
+        md += ["", f"Covariance calibration (z = error / reported std; calibrated: RMS z 1, "
+               f"{cal['expected']['within_2sigma']:.1%} within 2 sigma):", "",
+               "| frames | component | n | RMS z | within 2 sigma |", "|---|---|---|---|---|"]
+        scopes = [("all", cal["overall"])] + list(cal["by_condition"].items())
+        md += [f"| {k} | {c} | {b[c]['n']} | {_f(b[c]['rms_z'], '.3g')} | {_f(b[c]['within_2sigma'], '.1%')} |"
+               for k, b in scopes for c in GATED]
+        if calibration_note(cal):
+            md += ["", calibration_note(cal)]
+    return "\n".join(md) + "\n"
