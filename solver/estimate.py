@@ -192,6 +192,12 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
             ref = None
         if rescue_below is None and (ref is None or _implausible(ref, sigma_px, accept_rmse, options)):
             ref = _subset_starts(p3, p2, pp, ref, options)
+    elif rescue and p3.shape[0] <= options.few_points and (ref is None or (
+            accept_rmse is not None and ref.rmse_px > accept_rmse)):
+        # a few points (an identification hypothesis of an occluded section): the over-determined
+        # closed form is unstable there and a right hypothesis can land in a wrong basin far
+        # beyond any rescue (measured: 59.6 px RMS for 5 right pairs fitting to 0.07 px)
+        ref = _subset_starts(p3, p2, pp, ref, options)
     cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
     if check_focal:
         check_focal_observable(ref.focal_px, cov, options)
@@ -246,21 +252,34 @@ def _subset_starts(p3, p2, pp, best: RefineResult | None, options: RefineOptions
 
 
 def _best_subset_fit(p3, p2, pp, best: RefineResult | None, options: RefineOptions) -> RefineResult | None:
-    n = p3.shape[0]
+    """The closed-form candidates of every 4-point subset, ranked by their RMS over all the
+    points; the best ``options.subset_refines`` refined on all points (lowest RMS wins)."""
+    n, ranked = p3.shape[0], []
     for sub in itertools.combinations(range(n), 4):
         idx = list(sub)
         try:
             cands = upnp(p3[idx], p2[idx], pp, checked=True, sweep_above_px=0.0)
         except SolverError:
             continue
-        for cand in cands:
-            try:
-                r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, options)
-            except SolverError:
-                continue
-            if best is None or r.rmse_px < best.rmse_px:
-                best = r
+        ranked += [(_rms_on(p3, p2, pp, c), k, c) for k, c in enumerate(cands)]
+    ranked.sort(key=lambda t: (t[0], t[1]))
+    for _, _, cand in ranked[:options.subset_refines]:
+        try:
+            r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, options)
+        except SolverError:
+            continue
+        if best is None or r.rmse_px < best.rmse_px:
+            best = r
     return best
+
+
+def _rms_on(p3, p2, pp, cand) -> float:
+    """Reprojection RMS (px) of a closed-form candidate over all the points (inf if any is behind)."""
+    pc = p3 @ cand.rotation.T + cand.translation
+    if not np.all(pc[:, 2] > 0):
+        return float("inf")
+    uv = cand.focal_px * pc[:, :2] / pc[:, 2:3] + pp
+    return float(np.sqrt(np.mean(np.sum((uv - p2) ** 2, axis=1))))
 
 
 def _determined(ref: RefineResult, sigma_px, options: RefineOptions) -> bool:

@@ -75,7 +75,11 @@ class RefineOptions:
     - ``plausible_rmse_px``: without a known noise sigma, a slow-path fit with a larger RMS (or
       an undetermined focal) is a suspected wrong minimum: with at most ``subset_max_points``
       points every 4-point subset's closed form is tried as a start (solver.estimate). Detector
-      centres are good to a few tenths of a pixel; the wrong minima measured had 30-55 px.
+      centres are good to a few tenths of a pixel; the wrong minima measured had 30-55 px. The
+      subsets' candidates are ranked by their RMS over all points and the best
+      ``subset_refines`` refined. With at most ``few_points`` points the subsets are also tried
+      whenever the fast fit is above ``accept_rmse`` (identification hypotheses, which skip the
+      other rescues when far off).
     Covariance (:func:`solver.refine.covariance_from_jacobian`):
     - ``sigma_floor_px``: when the noise sigma is estimated from a fit's residuals, it is never
       taken below this (the detector's centre noise measured on labelled frames); None: no floor.
@@ -98,13 +102,15 @@ class RefineOptions:
     profile_iterations: int = 6
     plausible_rmse_px: float = 5.0
     subset_max_points: int = 7
+    subset_refines: int = 3
+    few_points: int = 5
     sigma_floor_px: float | None = None
 
     def __post_init__(self):
         for name in ("max_iterations", "damping_tries", "max_focal_rel_std",
                      "max_joint_focal_rel_std", "focal_runaway", "accept_rmse_sigmas",
                      "fallback_starts", "profile_focals", "profile_iterations", "plausible_rmse_px",
-                     "subset_max_points"):
+                     "subset_max_points", "subset_refines", "few_points"):
             _positive(name, getattr(self, name))
         _positive("sigma_floor_px", self.sigma_floor_px, allow_none=True)
 

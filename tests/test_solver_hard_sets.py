@@ -28,3 +28,23 @@ def test_hard_sets_are_solved_at_the_bound(kind, sigma):
         assert r[k] <= 1.25, (k, r)
     if kind == "near-planar-10" and sigma == 1.0:
         assert r["flagged"] >= 20, r             # the undetermined focal is said, not hidden
+
+
+# A real case (out/detector_run, configs/detector.toml 1c6b939ff88e2de6, frame 000177, occlusion):
+# the five fully visible red markers, rightly paired, as identification fits them; the cheapest
+# closed form lands at 59.6 px RMS (f 8786 px), beyond the identification's rescue, and the frame
+# was refused ("could not identify 4 or more markers"); the right basin fits to 0.07 px, f 2120 px
+# (true 2124).
+P3_177 = [[-47.0, 122.4277, 274.9772], [-88.0, 209.0922, 216.5213], [-62.0, -36.6827, 298.7564],
+          [-100.0, -159.5057, 255.2625], [-50.0, -240.3893, 181.1463]]
+UV_177 = [[466.3065, 266.1627], [408.8229, 153.9172], [448.1458, 499.6516], [399.776, 678.5941],
+          [478.3789, 779.0573]]
+
+
+def test_a_right_five_point_hypothesis_is_not_lost_to_a_wrong_basin():
+    from dockfactory.solver.estimate import estimate_pnpf
+    from dockfactory.solver.options import IdentifyOptions
+    o = IdentifyOptions()
+    est = estimate_pnpf(np.array(P3_177), np.array(UV_177), np.array([639.5, 479.5]), accept_rmse=o.max_rmse,
+                        rescue_below=o.rescue_rmse_factor * o.max_rmse)
+    assert est.rmse_px < 0.1 and abs(est.focal_px - 2124.1) < 20.0
