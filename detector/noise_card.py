@@ -14,7 +14,7 @@ import json
 import math
 from pathlib import Path
 
-from dockfactory.core.io import sha256_file
+from dockfactory.core.io import sha256_file, write_json_atomic
 
 NOISE_FORMAT = "dockfactory.centre_noise/1"
 
@@ -37,3 +37,15 @@ def centre_noise_px(weights) -> float | None:
     except (OSError, ValueError, KeyError, TypeError):
         return None
     return value if ok and math.isfinite(value) and value > 0 else None
+
+
+def write_noise_card(weights, centre_noise: float, details: dict) -> Path:
+    """Write ``<weights stem>.noise.json`` atomically: the measured ``centre_noise`` (px per axis)
+    of ``weights`` (named by sha256) and ``details`` (how, where and on how many detections)."""
+    if not (math.isfinite(centre_noise) and centre_noise > 0):
+        raise ValueError(f"centre noise must be a finite number of pixels > 0, got {centre_noise}")
+    card = noise_card_path(weights)
+    write_json_atomic(card, {"format": NOISE_FORMAT, "weights": Path(weights).name,
+                             "weights_sha256": sha256_file(weights), "centre_noise_px": float(centre_noise),
+                             **details})
+    return card

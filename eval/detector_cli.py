@@ -19,6 +19,7 @@ from dockfactory.eval.detection_metrics import (
     evaluate_detections,
     format_report,
 )
+from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.generator.cli import int_at_least
 from dockfactory.generator.dataset_open import Dataset
 
@@ -115,6 +116,16 @@ def cmd_export_onnx(args) -> int:
     return 0
 
 
+def cmd_noise_card(args) -> int:
+    _torch(args.threads)
+    weights = Path(args.weights) if args.weights else shipped_weights()
+    card = calibrate_noise_card(Dataset.open(args.dataset), weights, split=args.split, progress=not args.quiet)
+    print(f"centre noise {card['centre_noise_px']:.4f} px per axis (x {card['axis_px'][0]:.4f}, "
+          f"y {card['axis_px'][1]:.4f}) over {card['n']} used centres of {card['measured_on']['frames']} "
+          f"{args.split} frames -> {card['card']}")
+    return 0
+
+
 def _add_training_options(p) -> None:
     """Options shared by train and ablate."""
     p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
@@ -178,9 +189,22 @@ def _add_export_parser(subparsers) -> None:
     e.set_defaults(func=cmd_export_onnx)
 
 
+def _add_noise_card_parser(subparsers) -> None:
+    n = subparsers.add_parser("noise-card", help="measure the weights' centre noise on a labelled split and "
+                                                 "write their noise card (the floor of the solver's covariance)")
+    n.add_argument("dataset")
+    n.add_argument("--weights", help="default: the shipped weights (the card is written next to them)")
+    n.add_argument("--split", default="val", choices=("train", "val"),
+                   help="a split the evaluation does not judge (default val)")
+    n.add_argument("--threads", type=_positive_int)
+    n.add_argument("--quiet", action="store_true")
+    n.set_defaults(func=cmd_noise_card)
+
+
 def add_subcommands(subparsers) -> None:
-    """Register train, detect, ablate and export-onnx on ``subparsers`` (argparse)."""
+    """Register train, detect, ablate, export-onnx and noise-card on ``subparsers`` (argparse)."""
     _add_train_parser(subparsers)
     _add_detect_parser(subparsers)
     _add_ablate_parser(subparsers)
     _add_export_parser(subparsers)
+    _add_noise_card_parser(subparsers)

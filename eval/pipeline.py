@@ -20,6 +20,7 @@ from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.dataset import identity
@@ -90,6 +91,7 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
             say(f"train: {cfg.epochs} epochs on the train split -> {run_dir}")
             t = time.monotonic()
             train_detector(ds, run_dir, cfg, resume=(run_dir / "last.pt").exists())
+            _write_noise_card(ds, run_dir / "weights.pt")
             stages.done("train", key, time.monotonic() - t, [run_dir / "weights.pt"])
         weights = run_dir / "weights.pt"
     weights = Path(weights) if weights else shipped_weights()
@@ -105,6 +107,15 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
         detect_dataset(ds, weights, dets_path, split=None)
         stages.done("detect", key, time.monotonic() - t, [dets_path])
     return weights, model_sha
+
+
+def _write_noise_card(ds, weights: Path) -> None:
+    """The trained weights' noise card from the val split (the covariance's floor), if it has frames."""
+    if not ds.frames(("val",)):
+        say("train: no val frames, so no noise card: the solver's covariance has no floor")
+        return
+    card = calibrate_noise_card(ds, weights, "val")
+    say(f"train: centre noise {card['centre_noise_px']:.3f} px on {card['n']} val centres -> {card['card']}")
 
 
 def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages) -> str | None:

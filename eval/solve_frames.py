@@ -81,7 +81,8 @@ def pose_record(res, n_detections: int) -> dict:
     rejected = [i for i, ok in zip(res.marker_ids, res.inliers) if not ok and i is not None]
     rec = {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),
            "pose": res.pose(), "focal_px": res.focal_px,
-           "covariance": res.covariance.tolist(), "rmse_px": res.rmse_px, "marker_ids": used,
+           "covariance": res.covariance.tolist(), "sigma_px": float(res.sigma_px), "rmse_px": res.rmse_px,
+           "marker_ids": used,
            "n_markers": {"A": sum(i.startswith("A") for i in used), "B": sum(i.startswith("B") for i in used)},
            "rejected_ids": rejected, "n_detections": n_detections}
     if res.camera_model != "pinhole":

@@ -1,0 +1,42 @@
+"""Measure a detector's centre noise on a labelled split and write its noise card (the floor of
+the solver's covariance, detector.noise_card): detect the split, solve it, and take the RMS per
+axis of the centres the solver used against the exact image centroids (eval.centre_noise).
+
+Use a split the evaluation does not judge (val by default): the card then carries no
+information about the test frames.
+"""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import MIN_SCORE
+from dockfactory.detector.noise_card import write_noise_card
+from dockfactory.eval.centre_noise import centre_noise_block
+from dockfactory.eval.solve_frames import solve_dataset
+
+
+def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN_SCORE,
+                         progress: bool = False) -> dict:
+    """Detect and solve ``split`` of the opened dataset ``ds`` with ``weights``, write the card
+    next to the weights and return what it holds. DockfactoryError when the split has no frames
+    or no solved frame with a matched centre."""
+    from dockfactory.detector.infer import detect_dataset  # torch
+    if not ds.frames((split,)):
+        raise DockfactoryError(f"{ds.root}: no frames in the {split} split to measure the centre noise on")
+    with tempfile.TemporaryDirectory() as tmp:
+        dets = detect_dataset(ds, weights, Path(tmp) / "dets.json", split=split, conf_threshold=min_score,
+                              progress=progress)
+    poses = solve_dataset(ds, (split,), detections=dets, min_score=min_score)
+    block = centre_noise_block(ds, poses, dets, min_score, splits=(split,))
+    overall = block["overall"]
+    if not overall["n"]:
+        raise DockfactoryError(f"{ds.root}: no solved {split} frame with a matched centre: no noise to measure")
+    details = {"axis_px": overall["rms_axis_px"], "robust_px": overall["robust_px"], "n": overall["n"],
+               "outside_gate": block["outside_gate"],
+               "measured_on": {"dataset": str(ds.root), "dataset_version": ds.version_id, "split": split,
+                               "frames": block["frames"]},
+               "method": block["method"], "by_condition": block["by_condition"]}
+    card = write_noise_card(weights, overall["rms_px"], details)
+    return {"card": str(card), "centre_noise_px": overall["rms_px"], **details}

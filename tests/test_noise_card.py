@@ -1,0 +1,78 @@
+"""The detector's noise card (issue 12): measured on a labelled split, written next to the weights,
+named by their sha256, carried by detect into its detections and used by solve as the floor of the
+covariance. On a painted 1280 x 960 dataset (tests/pipeline_data.py, no Blender)."""
+import json
+import shutil
+
+import pytest
+
+from dockfactory.core.resources import shipped_weights
+from dockfactory.detector.noise_card import centre_noise_px, noise_card_path
+from dockfactory.eval.cli import main
+
+CONFIG = """
+[dataset]
+name = "noise-card-test"
+seed = 5
+frames = 6
+train_fraction = 0.7
+val_fraction = 0.5
+
+[conditions]
+normal = 1
+
+[repeatability]
+poses = 1
+captures = 2
+
+[image]
+width = 1280
+height = 960
+
+[render]
+keep_exr = false
+"""
+
+
+@pytest.fixture(scope="module")
+def painted(tmp_path_factory):
+    from pipeline_data import write_painted_dataset
+    root = tmp_path_factory.mktemp("noise")
+    (root / "c.toml").write_text(CONFIG)
+    write_painted_dataset(root / "ds", root / "c.toml")
+    return root / "ds"
+
+
+@pytest.mark.slow   # the detector on the val frames, detect and solve on the test frames
+def test_noise_card_is_measured_written_and_used(painted, tmp_path, capsys):
+    w = tmp_path / "w.pt"
+    shutil.copy(shipped_weights(), w)
+    assert main(["noise-card", str(painted), "--weights", str(w), "--quiet", "--threads", "1"]) == 0
+    card = json.loads(noise_card_path(w).read_text())
+    assert card["measured_on"]["split"] == "val" and card["measured_on"]["frames"] >= 2
+    assert card["n"] >= 10 and 0.0 < card["centre_noise_px"] < 1.0
+    assert centre_noise_px(w) == card["centre_noise_px"]
+    assert "px per axis" in capsys.readouterr().out
+    dets, poses = tmp_path / "d.json", tmp_path / "p.json"
+    assert main(["detect", str(painted), "--weights", str(w), "--out", str(dets), "--quiet", "--threads", "1"]) == 0
+    assert json.loads(dets.read_text())["centre_noise_px"] == card["centre_noise_px"]
+    assert main(["solve", str(painted), "--detections", str(dets), "--split", "test", "--out", str(poses)]) == 0
+    doc = json.loads(poses.read_text())
+    assert doc["sigma_floor_px"] == card["centre_noise_px"]
+    # a floor above the frame's own residual estimate is the sigma the covariance used
+    assert all(r["sigma_px"] >= card["centre_noise_px"] - 1e-12 for r in doc["frames"].values() if r["ok"])
+
+
+def test_noise_card_needs_frames_in_its_split(tmp_path):
+    from dockfactory.core.errors import DockfactoryError
+    from dockfactory.eval.noise_calibration import calibrate_noise_card
+
+    class NoVal:
+        root = tmp_path
+
+        @staticmethod
+        def frames(splits):
+            return []
+    with pytest.raises(DockfactoryError, match="no frames in the val split"):
+        calibrate_noise_card(NoVal(), shipped_weights())
+    assert not noise_card_path(tmp_path / "w.pt").exists()
