@@ -11,18 +11,40 @@ A marker is a red or blue disc inside a dark ring. Inside a window around the de
    w in [0, 1];
 4. w is restricted to the connected component (w > 0.5) holding the box centre, dilated by two
    pixels so that the soft edge pixels count;
-5. centre = coverage-weighted centroid; second moments give the ellipse of the disc
-   (for a uniform ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of
-   the pixel footprint), hence a refined outline box. The moments fall short of the true
-   outline by a few hundredths of a px per side (edge blur against the ring level; 0.041 px:
-   median over 1441 fully visible markers of every second train frame of configs/detector.toml,
-   dataset 2601360c1f4c4e22, 2 spp; 0.024 px on 1-spp renders): ``edge_bias_px`` adds it back.
+5. coverage-weighted centroid and second moments: a first ellipse of the disc (for a uniform
+   ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of the pixel
+   footprint), the window and the quality, the fallback centre and box;
+6. the centre: a least-squares fit of the projected disc to the score in a band around that
+   ellipse's edge (:func:`fit_disc_edge`): an ellipse (centre and shape), a blurred edge
+   (logistic profile of fitted width: the optics' and the pixel filter's blur), a disc level
+   that may vary linearly across the disc (shading) and a ring level. The refined outline box
+   is the moment box, half-extents 2 sqrt(var) + ``edge_bias_px``, around the fitted centre
+   (the fitted ellipse's own box falls 0.07-0.17 px per side inside the true outline on the
+   denoised renders of both bench scenes, the moment box 0.00-0.13: ``bench/centre_bias.py``).
+
+Why a fit and not the centroid (issue 12). The centroid integrates every pixel of the soft
+coverage, so whatever changes the level of the band just inside the edge unevenly around the disc
+moves it: the clipped coverage turns a shading gradient into an offset toward the brighter side
+(0.04-0.37 px for a 20 % gradient per radius, tests/test_centre_bias.py), and the renderer's
+denoiser (OpenImageDenoise at 2 samples per pixel) lowers that band by up to 0.2 of the contrast,
+unevenly: against the same frames rendered without it, it moved the centroid of BlueB discs by
+(+0.006, -0.014) px and of RedA discs by (-0.010, +0.012) px (bench/results/centre_bias/). The fit
+puts the edge where the profile is steepest and takes the disc level as a plane: the denoiser
+moves its BlueB centres by (+0.003, -0.001) px; on configs/detector.toml (1c6b939ff88e2de6) and
+configs/centre_scene_b.toml (68e5460f43855cf1) BlueB sits at (-0.002, +0.001) and (+0.006,
++0.001) px instead of (+0.015, -0.008) and (+0.024, -0.008). RedA discs come out of the denoiser
+shifted at the edge itself ((-0.015, +0.010) px for the fit, the same on both scenes within the
+errors): an image property no refinement can tell from the disc, left to the renders (see the
+bench's README). The fit also weighs each edge pixel by what it says about the centre: on a
+foreshortened disc the centroid gives the noisy top and bottom edge pixels the lever of the long
+axis (x scatter on discs flatter than 0.45: 0.122 px for the fit, 0.166 for the centroid).
 
 Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
 over the disc: noise and shading), and how well
 the segmented area matches the area of the ellipse that its own moments imply and the area of
 the detector's box (occluded or merged markers score low). Below ``min_quality`` the
-detector's box is kept and its centre returned.
+detector's box is kept and its centre returned. When the fit fails its checks
+(:func:`_fit_accepted`) the centroid and the moment box are returned.
 """
 from __future__ import annotations
 
@@ -76,7 +98,24 @@ PURITY_SHARE = 0.5  # pixels under this share of the disc's median purity are no
 MAX_SCORE_RATIO = 3.0  # pixels scoring this many times the disc's level (above the ring's) are not the disc
 
 
-EDGE_BIAS_PX = 0.041  # px added to the moment half-extents: median shortfall on train frames of configs/detector.toml
+EDGE_BIAS_PX = 0.041  # px added to the moment half-extents of the box (it moves no centre): median shortfall on train frames of configs/detector.toml
+
+
+@dataclass(frozen=True)
+class _Window:
+    """What one coverage pass measured in its window: the score ``s``, its purity ``pur``, the
+    pixel coordinates ``xs``, ``ys`` and the normalised radius ``rho`` of the pass's box (all
+    (h, w)), the first ellipse (centre (2,) px and covariance (2, 2) px^2 of the coverage), the
+    disc and ring levels of the score."""
+    s: np.ndarray
+    pur: np.ndarray
+    xs: np.ndarray
+    ys: np.ndarray
+    rho: np.ndarray
+    centre: np.ndarray
+    cov: np.ndarray
+    fg: float
+    bg: float
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
@@ -84,17 +123,26 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     """Refine one detection. ``image: (H, W, 3) uint8`` RGB at full resolution,
     ``box: (4,) [x0, y0, x1, y1]`` px (OpenCV convention).
 
-    Two passes: the window, the inner and ring masks of the first pass come from the detector's
-    box; when that box is a few tenths of the radius too small the ring mask lands on the disc
-    and the cut at 1.3 box radii clips it. The second pass repeats the measurement in the window
-    of the first refined ellipse (kept if it is refined too)."""
-    first = _refine_once(image, box, class_id, min_quality, edge_bias_px)
+    Two coverage passes, then the edge fit: the window, the inner and ring masks of the first
+    pass come from the detector's box; when that box is a few tenths of the radius too small the
+    ring mask lands on the disc and the cut at 1.3 box radii clips it. The second pass repeats
+    the measurement in the window of the first refined ellipse (kept if it is refined too).
+    :func:`fit_disc_edge` then fits the disc in the kept pass's window and gives the centre; the
+    box keeps the moment half-extents (plus ``edge_bias_px``) around it."""
+    first, win = _refine_once(image, box, class_id, min_quality, edge_bias_px)
     if not first.refined:
         return first
-    second = _refine_once(image, first.box, class_id, min_quality, edge_bias_px)
-    if not second.refined:
+    second, win2 = _refine_once(image, first.box, class_id, min_quality, edge_bias_px)
+    if second.refined:
+        first, win = second, win2
+    centre = fit_disc_edge(win)
+    if centre is None:
         return first
-    return Refined(center=second.center, box=second.box, quality=second.quality, refined=True)
+    h_img, w_img = image.shape[:2]
+    half = np.array([win.cov[0, 0], win.cov[1, 1]]) ** 0.5 * 2 + edge_bias_px
+    rbox = np.clip(np.concatenate([centre - half, centre + half]), -0.5,
+                   np.array([w_img, h_img, w_img, h_img]) - 0.5)
+    return Refined(center=centre, box=rbox, quality=first.quality, refined=True)
 
 
 def _checked_box(image: np.ndarray, box) -> np.ndarray:
@@ -181,7 +229,9 @@ def _quality(area: float, det: float, hw: float, hh: float, contrast: float) -> 
 
 
 def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
-                 edge_bias_px: float) -> Refined:
+                 edge_bias_px: float) -> tuple[Refined, _Window | None]:
+    """One coverage pass in the window of ``box``: (result, the window's measurements for the
+    edge fit; None unless refined)."""
     box = _checked_box(image, box)
     h_img, w_img = image.shape[:2]
     fallback = Refined(center=np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2]), box=box.copy(),
@@ -190,27 +240,180 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     hw, hh = max((box[2] - box[0]) / 2, 1.0), max((box[3] - box[1]) / 2, 1.0)
     win = _window(cx, cy, hw, hh, w_img, h_img)
     if win is None:
-        return fallback
+        return fallback, None
     x0, y0, x1, y1 = win
     s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
     ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
     coverage = _soft_coverage(s, pur, rho)
     if coverage is None:
-        return fallback
+        return fallback, None
     w, fg, bg, noise = coverage
     w = _disc_component(w, int(round(cy)) - y0, int(round(cx)) - x0)
     moments = None if w is None else _moments(w, xs, ys)
     if moments is None:
-        return fallback
+        return fallback, None
     area, mx, my, vxx, vyy, vxy = moments
     det = vxx * vyy - vxy ** 2
     if det <= 0:
-        return fallback
+        return fallback, None
     quality = _quality(area, det, hw, hh, (fg - bg) / noise)
     if quality < min_quality:
-        return Refined(center=fallback.center, box=fallback.box, quality=quality, refined=False)
+        return Refined(center=fallback.center, box=fallback.box, quality=quality, refined=False), None
     ex, ey = 2 * np.sqrt(vxx) + edge_bias_px, 2 * np.sqrt(vyy) + edge_bias_px
     rbox = np.array([mx - ex, my - ey, mx + ex, my + ey])
     rbox = np.clip(rbox, -0.5, np.array([w_img, h_img, w_img, h_img]) - 0.5)
-    return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True)
+    window = _Window(s=s, pur=pur, xs=xs, ys=ys, rho=rho, centre=np.array([mx, my]),
+                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg)
+    return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True), window
+
+
+def _usable(s: np.ndarray, pur: np.ndarray, rho: np.ndarray, fg: float, bg: float) -> np.ndarray:
+    """(h, w) bool: pixels that are disc, edge or ring, not an occluder: within 1.3 box radii, not
+    far redder (bluer) than the disc (``MAX_SCORE_RATIO``), not scoring like the disc while far
+    less pure than it (an orange occluder beside red)."""
+    w_raw = (s - bg) / (fg - bg)
+    inner = rho <= 0.5
+    p_disc = float(np.median(pur[inner])) if inner.any() else 0.0
+    impure = (pur < PURITY_SHARE * p_disc) & (w_raw > 0.5) if p_disc > 0 else np.zeros_like(inner)
+    return (rho <= 1.3) & (w_raw <= MAX_SCORE_RATIO) & ~impure
+
+
+# --- the edge fit -------------------------------------------------------------------------------
+
+# The band and the guard, checked on two scenes that differ in geometry (bench/centre_bias.py on
+# the main frames of configs/detector.toml, 1c6b939ff88e2de6: section radius 300 mm, 20 mm
+# markers, ~12 px radius; and configs/centre_scene_b.toml, 68e5460f43855cf1: 450 mm, 30 mm,
+# ~15 px), per-class mean (dx, dy) over every condition and RMS on normal frames, px:
+#   as set:        A: RedA (-0.009, +0.017) 0.098, BlueB (-0.002, +0.001) 0.098;
+#                  B: RedA (-0.016, +0.022) 0.086, BlueB (+0.006, +0.001) 0.094
+#   band in 1.5:   A: (-0.012, +0.011) 0.099, (-0.006, +0.007) 0.099; B: (-0.020, +0.015) 0.084, (+0.001, +0.007) 0.093
+#   band in 3.5:   A: (-0.006, +0.019) 0.098, (+0.000, -0.003) 0.098; B: (-0.012, +0.023) 0.087, (+0.009, -0.003) 0.095
+#   band out 0.6:  A: (-0.009, +0.017) 0.098, (-0.003, +0.002) 0.098; B: (-0.015, +0.022) 0.087, (+0.005, +0.003) 0.093
+#   band out 1.5:  A: (-0.009, +0.017) 0.099, (-0.002, +0.001) 0.098; B: (-0.016, +0.023) 0.086, (+0.008, -0.000) 0.096
+#   max shift 0.3: A: (-0.007, +0.017) 0.107, (-0.002, +0.001) 0.101; B: (-0.011, +0.022) 0.100, (+0.005, +0.001) 0.110
+#   max shift 1.0: A: (-0.010, +0.017) 0.106, (-0.002, +0.001) 0.098; B: (-0.012, +0.021) 0.086, (+0.005, +0.001) 0.094
+# 2.5 px inside takes in the whole edge band the denoiser of the renders reshapes (it lowers the
+# level up to 1.1 px inside the edge and raises a halo 1.5-2.4 px inside); a narrower band trades
+# BlueB's offset for RedA's. The RedA offset left (the same on both scenes) is the denoiser's shift
+# of red discs (bench/results/centre_bias/README.md), not the fit's.
+FIT_BAND_IN_PX = 2.5   # the fit uses the pixels from this far inside the first ellipse's edge ...
+FIT_BAND_OUT_PX = 1.0  # ... to this far outside it (the ring is 2.5 mm wide: 2.5-3 px here, < 1 px across flat discs)
+FIT_MAX_SHIFT_PX = 0.5  # a fitted centre farther than this from the coverage centroid is refused
+FIT_ITERATIONS = 8     # Levenberg-Marquardt steps at most; 4.6 on average, stopping below 0.002 px
+
+
+def fit_disc_edge(win: _Window | None) -> np.ndarray | None:
+    """Centre ``(2,) float64 px`` of the disc in the window ``win``, by least squares; None when
+    there is nothing to fit or the fit is refused.
+
+    Model of the score at pixel x (px): ``b + (f(x) - b) / (1 + exp(d(x) / sigma))`` with
+    d(x) the signed distance (px, > 0 outside) to the ellipse {x: (x - c)^T M (x - c) = 1} to first
+    order (Sampson: ``(q - 1) / (2 |M (x - c)|)``), sigma the edge width (blur of the optics and
+    the pixel filter), f(x) = f0 + f1 x + f2 y the disc level (shading across the disc) and b the
+    ring level. Parameters: c (2), M (3), log sigma, f0, f1, f2, b; Levenberg-Marquardt from the
+    coverage ellipse, over the usable pixels in a band around its edge."""
+    if win is None:
+        return None
+    m0 = _inverse_2x2(4 * win.cov)             # uniform ellipse: covariance = M^-1 / 4
+    dx, dy = win.xs - win.centre[0], win.ys - win.centre[1]
+    d0, _ = _sampson(dx, dy, m0[0, 0], m0[0, 1], m0[1, 1])
+    band = (d0 > -FIT_BAND_IN_PX) & (d0 < FIT_BAND_OUT_PX) & _usable(win.s, win.pur, win.rho, win.fg, win.bg)
+    if band.sum() < 20:
+        return None
+    p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
+    p = _levenberg_marquardt(p0, dx[band], dy[band], win.s[band].astype(np.float64))
+    if p is None or not _fit_accepted(p, m0):
+        return None
+    return win.centre + p[:2]
+
+
+def _inverse_2x2(m: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric 2 x 2 matrix (no LAPACK: its threads cost milliseconds per call on
+    a busy machine)."""
+    det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    return np.array([[m[1, 1], -m[0, 1]], [-m[1, 0], m[0, 0]]]) / det
+
+
+def _eigenvalues_2x2(m: np.ndarray) -> np.ndarray:
+    """Ascending eigenvalues of a symmetric 2 x 2 matrix."""
+    half_trace, diff = (m[0, 0] + m[1, 1]) / 2, (m[0, 0] - m[1, 1]) / 2
+    root = np.hypot(diff, m[0, 1])
+    return np.array([half_trace - root, half_trace + root])
+
+
+def _sampson(ex, ey, m11, m12, m22):
+    """(d, (gx, gy, gn)): first-order signed distance (px) of points (ex, ey) (px from the
+    centre) to the ellipse q = e^T M e = 1, and g = M e, |g|."""
+    gx, gy = m11 * ex + m12 * ey, m12 * ex + m22 * ey
+    gn = np.sqrt(gx * gx + gy * gy) + 1e-12
+    return (ex * gx + ey * gy - 1) / (2 * gn), (gx, gy, gn)
+
+
+def _edge_residual(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray):
+    """(residual s - model (n,), the intermediate values the Jacobian needs) of parameters ``p``
+    at pixels (x, y) (px from the coverage centroid)."""
+    ex, ey = x - p[0], y - p[1]
+    d, (gx, gy, gn) = _sampson(ex, ey, p[2], p[3], p[4])
+    sigma = np.exp(np.clip(p[5], -3.0, 2.0))       # 0.05-7.4 px
+    phi = 1.0 / (1.0 + np.exp(np.clip(d / sigma, -60.0, 60.0)))    # 1 inside, 0 outside
+    level = p[6] + p[7] * x + p[8] * y - p[9]
+    return s - (p[9] + level * phi), (ex, ey, d, gx, gy, gn, sigma, phi, level)
+
+
+def _edge_jacobian(p: np.ndarray, x: np.ndarray, y: np.ndarray, aux) -> np.ndarray:
+    """(10, n) derivatives of the model (exact, the Sampson distance's normaliser included)."""
+    ex, ey, d, gx, gy, gn, sigma, phi, level = aux
+    k = -level * phi * (1 - phi) / (sigma * gn)     # (d model / d d) / |g|
+    dh = d / gn
+    hx = (p[2] * gx + p[3] * gy) * dh               # d (M g)_x / |g|, d (M g)_y / |g|
+    hy = (p[3] * gx + p[4] * gy) * dh
+    j = np.empty((10, len(x)))
+    j[0] = k * (hx - gx)                            # e = x - c: d d / d c = -(g - d M g / |g|) / |g|
+    j[1] = k * (hy - gy)
+    j[2] = k * ex * (0.5 * ex - d * gx)             # d d / d m = (d q / d m) / (2 |g|) - d (d |g| / d m) / |g|
+    j[3] = k * (ex * ey - d * (gx * ey + gy * ex))
+    j[4] = k * ey * (0.5 * ey - d * gy)
+    j[5] = -k * gn * d if -3.0 < p[5] < 2.0 else 0.0  # d / d log sigma (0 where clipped)
+    j[6], j[7], j[8] = phi, phi * x, phi * y
+    j[9] = 1 - phi
+    return j
+
+
+def _levenberg_marquardt(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray | None:
+    """Least-squares parameters from ``p``; None when not finite."""
+    r, aux = _edge_residual(p, x, y, s)
+    cost, lam = float(r @ r), 1e-3
+    for _ in range(FIT_ITERATIONS):
+        j = _edge_jacobian(p, x, y, aux)
+        h, g = j @ j.T, j @ r
+        damp = np.diag(np.diag(h) + 1e-12)
+        for _ in range(8):
+            solved, step = cv2.solve(h + lam * damp, g, flags=cv2.DECOMP_CHOLESKY)  # no LAPACK threads
+            step = step.ravel()
+            if solved:
+                r_new, aux_new = _edge_residual(p + step, x, y, s)
+                cost_new = float(r_new @ r_new)
+                if cost_new < cost:
+                    break
+            lam *= 10.0
+        else:
+            break                                   # no step lowers the cost: converged
+        p, r, aux, cost, lam = p + step, r_new, aux_new, cost_new, max(lam / 10.0, 1e-7)
+        if abs(step[0]) + abs(step[1]) < 2e-3:          # px: far below the noise of a centre
+            break
+    return p if np.isfinite(p).all() else None
+
+
+def _fit_accepted(p: np.ndarray, m0: np.ndarray) -> bool:
+    """The fit is the disc: its centre within ``FIT_MAX_SHIFT_PX`` of the coverage centroid, its
+    axes within 0.8-1.25 times the coverage ellipse's, an edge width under 3 px (a sharper edge
+    than the model's floor of 0.05 px is fine: 2-spp renders have near-binary edge pixels) and a
+    disc above the ring."""
+    m = np.array([[p[2], p[3]], [p[3], p[4]]])
+    eig, eig0 = _eigenvalues_2x2(m), _eigenvalues_2x2(m0)
+    if eig[0] <= 0:
+        return False
+    axes_ok = bool(np.all((eig / eig0 > 0.64) & (eig / eig0 < 1.5625)))   # axis ratio 0.8-1.25
+    return (axes_ok and float(np.hypot(p[0], p[1])) < FIT_MAX_SHIFT_PX
+            and float(np.exp(p[5])) < 3.0 and p[6] > p[9])

@@ -1,5 +1,7 @@
 """The centre noise of a detector's weights, measured once on labelled frames: a sidecar JSON next
-to the weights (``<weights stem>.noise.json``) that names the weights by sha256.
+to the weights (``<weights stem>.noise.json``) that names the weights by sha256 and the centre
+refinement (detector/centre.py) by the sha256 of its source: either changing makes the card stale
+(ignored, so no floor) until it is measured again (``dockfactory noise-card``).
 
 The solver estimates each frame's noise from its residuals, but those underrate noise that is
 correlated between the markers of a frame (it moves the pose without showing in them): on the
@@ -10,13 +12,22 @@ detections it writes, ``solve`` and ``measure`` use it.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+from functools import lru_cache
 from pathlib import Path
 
 from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.detector import centre
 
 NOISE_FORMAT = "dockfactory.centre_noise/1"
+
+
+@lru_cache(maxsize=1)
+def refinement_sha256() -> str:
+    """sha256 of the centre refinement's source (detector/centre.py)."""
+    return hashlib.sha256(Path(centre.__file__).read_bytes()).hexdigest()
 
 
 def noise_card_path(weights) -> Path:
@@ -26,14 +37,16 @@ def noise_card_path(weights) -> Path:
 
 def centre_noise_px(weights) -> float | None:
     """The measured centre noise (px, per axis) of ``weights``, or None when no card is next to
-    them, or the card is for other weights (another sha256), or it is not a valid card."""
+    them, or the card is for other weights (another sha256) or another centre refinement, or it
+    is not a valid card."""
     card = noise_card_path(weights)
     if not card.is_file():
         return None
     try:
         doc = json.loads(card.read_text())
         value = float(doc["centre_noise_px"])
-        ok = doc.get("format") == NOISE_FORMAT and doc.get("weights_sha256") == sha256_file(weights)
+        ok = (doc.get("format") == NOISE_FORMAT and doc.get("weights_sha256") == sha256_file(weights)
+              and doc.get("refinement_sha256") == refinement_sha256())
     except (OSError, ValueError, KeyError, TypeError):
         return None
     return value if ok and math.isfinite(value) and value > 0 else None
@@ -46,6 +59,7 @@ def write_noise_card(weights, centre_noise: float, details: dict) -> Path:
         raise ValueError(f"centre noise must be a finite number of pixels > 0, got {centre_noise}")
     card = noise_card_path(weights)
     write_json_atomic(card, {"format": NOISE_FORMAT, "weights": Path(weights).name,
-                             "weights_sha256": sha256_file(weights), "centre_noise_px": float(centre_noise),
+                             "weights_sha256": sha256_file(weights), "refinement_sha256": refinement_sha256(),
+                             "centre_noise_px": float(centre_noise),
                              **details})
     return card

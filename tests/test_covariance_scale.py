@@ -58,13 +58,16 @@ def test_the_floor_option_raises_a_frames_std():
 
 
 def test_noise_card_names_its_weights(tmp_path):
-    assert centre_noise_px(shipped_weights()) == pytest.approx(0.0882)   # the shipped card
+    shipped = json.loads(noise_card_path(shipped_weights()).read_text())["centre_noise_px"]
+    # the shipped card is current: measured with these weights and this centre refinement
+    # (after an edit of detector/centre.py: dockfactory noise-card out/detector)
+    assert centre_noise_px(shipped_weights()) == shipped and 0.0 < shipped < 0.5
     w = tmp_path / "w.pt"
     shutil.copy(shipped_weights(), w)
     assert centre_noise_px(w) is None                                    # no card
     card = json.loads(noise_card_path(shipped_weights()).read_text())
     noise_card_path(w).write_text(json.dumps(card))
-    assert centre_noise_px(w) == pytest.approx(0.0882)                   # same bytes, same sha
+    assert centre_noise_px(w) == shipped                                 # same bytes, same sha
     w.write_bytes(w.read_bytes() + b"\0")
     assert centre_noise_px(w) is None                                    # other weights: not theirs
     noise_card_path(w).write_text("{not json")

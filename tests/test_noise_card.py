@@ -52,6 +52,10 @@ def test_noise_card_is_measured_written_and_used(painted, tmp_path, capsys):
     assert card["measured_on"]["split"] == "val" and card["measured_on"]["frames"] >= 2
     assert card["n"] >= 10 and 0.0 < card["centre_noise_px"] < 1.0
     assert centre_noise_px(w) == card["centre_noise_px"]
+    other = dict(card, refinement_sha256="0" * 64)      # measured with another centre refinement
+    noise_card_path(w).write_text(json.dumps(other))
+    assert centre_noise_px(w) is None
+    noise_card_path(w).write_text(json.dumps(card))
     assert "px per axis" in capsys.readouterr().out
     dets, poses = tmp_path / "d.json", tmp_path / "p.json"
     assert main(["detect", str(painted), "--weights", str(w), "--out", str(dets), "--quiet", "--threads", "1"]) == 0
