@@ -207,14 +207,7 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
 def _slow_path(p3, p2, pp, cands, fast, accept_rmse, options: RefineOptions) -> RefineResult:
     """Best of: the fast-path refinement (may be None), the best ``options.fallback_starts``
     candidates refined, and (when still unacceptable) the profile likelihood over f."""
-    best = None
-    for cand in cands[:options.fallback_starts]:
-        try:
-            r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, options)
-        except SolverError:
-            continue
-        if best is None or r.rmse_px < best.rmse_px:
-            best = r
+    best = _refine_lowest(p3, p2, pp, cands[:options.fallback_starts], None, options)
     if fast is not None and (best is None or fast.rmse_px <= best.rmse_px):
         best = fast
     if best is None or (accept_rmse is not None and best.rmse_px > accept_rmse) \
@@ -237,9 +230,10 @@ def _implausible(ref: RefineResult, sigma_px, accept_rmse, options: RefineOption
 def _subset_starts(p3, p2, pp, best: RefineResult | None, options: RefineOptions) -> RefineResult:
     """Last resort for a few points (at most ``options.subset_max_points``): the closed-form
     candidates of every 4-point subset (the minimal problem, where a near-planar 5-point set's
-    over-determined closed form is unstable), each refined on all points; the lowest RMS wins.
-    Measured: the 10 wrong minima (RMS 30-55 px, 100-240 bound-sigmas in rotation) of 1000
-    seeded 5-point sets at 1 px all end in the right basin (RMS 0.4-1.4 px), 14-31 ms each.
+    over-determined closed form is unstable), ranked by their RMS over all points, the best few
+    refined (:func:`_best_subset_fit`). Measured: the 10 wrong minima (RMS 30-55 px, 100-240
+    bound-sigmas in rotation) of 1000 seeded 5-point sets at 1 px all end in the right basin
+    (RMS 0.4-1.4 px).
     Raises NoValidCamera when neither ``best`` (None: the other starts gave no camera) nor any
     subset gives one."""
     n = p3.shape[0]
@@ -263,7 +257,12 @@ def _best_subset_fit(p3, p2, pp, best: RefineResult | None, options: RefineOptio
             continue
         ranked += [(_rms_on(p3, p2, pp, c), k, c) for k, c in enumerate(cands)]
     ranked.sort(key=lambda t: (t[0], t[1]))
-    for _, _, cand in ranked[:options.subset_refines]:
+    return _refine_lowest(p3, p2, pp, [c for _, _, c in ranked[:options.subset_refines]], best, options)
+
+
+def _refine_lowest(p3, p2, pp, cands, best: RefineResult | None, options: RefineOptions) -> RefineResult | None:
+    """Each candidate refined on all points; the lowest RMS of those and ``best`` (may be None)."""
+    for cand in cands:
         try:
             r = refine_pnpf(p3, p2, pp, cand.rotation, cand.translation, cand.focal_px, options)
         except SolverError:

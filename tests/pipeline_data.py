@@ -225,3 +225,12 @@ def label_vs_index(root, cfg: Config, min_pixels: int = 150) -> dict:
                 out["centre_err"].append(float(np.linalg.norm(c - m["center_px"])))
                 out["centroid_err"].append(float(np.linalg.norm(c - m["outline_centroid_px"])))
     return {k: np.array(v) if isinstance(v, list) else v for k, v in out.items()}
+
+
+def painted_from_text(tmp_path_factory, name: str, config_text: str) -> Path:
+    """A painted dataset of the config ``config_text`` in a fresh folder of ``tmp_path_factory``
+    (module fixtures of the tests that need real 1280 x 960 frames without Blender)."""
+    root = tmp_path_factory.mktemp(name)
+    (root / "c.toml").write_text(config_text)
+    write_painted_dataset(root / "ds", root / "c.toml")
+    return root / "ds"

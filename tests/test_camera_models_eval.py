@@ -38,11 +38,8 @@ keep_exr = false
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    from pipeline_data import write_painted_dataset
-    root = tmp_path_factory.mktemp("runs")
-    (root / "c.toml").write_text(CONFIG)
-    write_painted_dataset(root / "ds", root / "c.toml")
-    return Dataset.open(root / "ds")
+    from pipeline_data import painted_from_text
+    return Dataset.open(painted_from_text(tmp_path_factory, "runs", CONFIG))
 
 
 @pytest.mark.slow   # 40 painted 1280 x 960 frames and three solves of a 20-frame run

@@ -37,11 +37,8 @@ keep_exr = false
 
 @pytest.fixture(scope="module")
 def big(tmp_path_factory):
-    from pipeline_data import write_painted_dataset
-    root = tmp_path_factory.mktemp("measure")
-    (root / "big.toml").write_text(CONFIG)
-    write_painted_dataset(root / "ds", root / "big.toml")
-    return root / "ds"
+    from pipeline_data import painted_from_text
+    return painted_from_text(tmp_path_factory, "measure", CONFIG)
 
 
 def test_bad_input_is_one_line_exit_2(big, tmp_path, capsys):

@@ -36,11 +36,8 @@ keep_exr = false
 
 @pytest.fixture(scope="module")
 def painted(tmp_path_factory):
-    from pipeline_data import write_painted_dataset
-    root = tmp_path_factory.mktemp("noise")
-    (root / "c.toml").write_text(CONFIG)
-    write_painted_dataset(root / "ds", root / "c.toml")
-    return root / "ds"
+    from pipeline_data import painted_from_text
+    return painted_from_text(tmp_path_factory, "noise", CONFIG)
 
 
 @pytest.mark.slow   # the detector on the val frames, detect and solve on the test frames
