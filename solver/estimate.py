@@ -46,7 +46,9 @@ class PnPfResult(CameraPose):
     - ``focal_determined``: False when the focal's relative standard deviation is above
       ``RefineOptions.max_focal_rel_std`` (near-planar, fronto-parallel points at this noise:
       the focal and the depth trade off). Rotation and the in-plane translation stay determined
-      and the covariance says how well each parameter is known; gate on it, or on this flag.
+      and the covariance says how well each parameter is known; gate on it, or on this flag;
+    - ``focal_at_bound``: the estimate fell outside the ``focal_range_px`` given to
+      :func:`solver.solve_pnpf` and is the pose refined at the nearer bound (solver.focal_prior).
     """
 
     cam_from_world: np.ndarray
@@ -59,6 +61,7 @@ class PnPfResult(CameraPose):
     iterations: int = 0
     residuals_px: np.ndarray = field(default=None, repr=False)
     focal_determined: bool = True
+    focal_at_bound: bool = False
 
     @property
     def std(self) -> np.ndarray:

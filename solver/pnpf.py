@@ -15,6 +15,7 @@ from dockfactory.solver.checks import (
 )
 from dockfactory.solver.errors import InvalidSolverInput
 from dockfactory.solver.estimate import PnPfResult, estimate_pnpf
+from dockfactory.solver.focal_prior import apply_focal_range, check_focal_range
 from dockfactory.solver.options import RansacOptions, RefineOptions
 from dockfactory.solver.ransac import DEFAULT_RANSAC, ransac_pnpf
 from dockfactory.solver.refine import DEFAULT_REFINE
@@ -25,7 +26,8 @@ __all__ = ["PnPfResult", "solve_pnpf"]
 def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None = None,
                robust: bool = False, rng: np.random.Generator | None = None,
                all_candidates: bool = False, refine_options: RefineOptions = DEFAULT_REFINE,
-               ransac_options: RansacOptions = DEFAULT_RANSAC) -> PnPfResult:
+               ransac_options: RansacOptions = DEFAULT_RANSAC,
+               focal_range_px: tuple[float, float] | None = None) -> PnPfResult:
     """Pose and focal length from 3D-2D correspondences (UPnP closed form + Levenberg-Marquardt).
 
     ``points_3d``: (N, 3) float64, mm, N >= 4, in the world frame.
@@ -33,7 +35,9 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     (0, 0)). ``principal_point``: (2,) float64, pixels (e.g. ((W - 1) / 2, (H - 1) / 2)).
     ``sigma_px``: pixel noise std for the covariance; None estimates it from the residuals.
     ``robust``: reject outliers by LO-RANSAC (``ransac_options``); needs ``rng`` (a numpy
-    Generator) for its samples.
+    Generator) for its samples. ``focal_range_px``: the camera's known focal range (lo, hi) px
+    (its zoom range); an estimate outside it is refined at the nearer bound
+    (:mod:`solver.focal_prior`, ``focal_at_bound``).
 
     The closed form first tries the smallest determined null-space dimension only (K = 1 for
     N >= 6), refines it, and falls back to every candidate (K = 1, 2, 3, planar, focal sweep)
@@ -50,12 +54,18 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     sigma_px = check_sigma(sigma_px)
     p3, p2 = check_correspondences(points_3d, points_2d)
     pp = as_principal_point(principal_point)
+    focal_range = check_focal_range(focal_range_px)
     if robust:
         if not isinstance(rng, np.random.Generator):
             raise InvalidSolverInput("robust=True needs rng, a numpy.random.Generator "
                                      "(explicit seed)")
-        return ransac_pnpf(p3, p2, pp, rng, ransac_options, refine_options, sigma_px=sigma_px)
-    accept = None if sigma_px is None else refine_options.accept_rmse_sigmas * sigma_px
-    est = estimate_pnpf(p3, p2, pp, sigma_px=sigma_px, all_candidates=all_candidates,
-                        accept_rmse=accept, options=refine_options)
-    return est.result(np.ones(p3.shape[0], dtype=bool))
+        res = ransac_pnpf(p3, p2, pp, rng, ransac_options, refine_options, sigma_px=sigma_px)
+    else:
+        accept = None if sigma_px is None else refine_options.accept_rmse_sigmas * sigma_px
+        est = estimate_pnpf(p3, p2, pp, sigma_px=sigma_px, all_candidates=all_candidates,
+                            accept_rmse=accept, options=refine_options)
+        res = est.result(np.ones(p3.shape[0], dtype=bool))
+    if focal_range is None:
+        return res
+    keep = res.inliers
+    return apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, refine_options)

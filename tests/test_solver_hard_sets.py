@@ -48,3 +48,36 @@ def test_a_right_five_point_hypothesis_is_not_lost_to_a_wrong_basin():
     est = estimate_pnpf(np.array(P3_177), np.array(UV_177), np.array([639.5, 479.5]), accept_rmse=o.max_rmse,
                         rescue_below=o.rescue_rmse_factor * o.max_rmse)
     assert est.rmse_px < 0.1 and abs(est.focal_px - 2124.1) < 20.0
+
+
+def test_a_known_focal_range_pulls_an_affine_solution_back():
+    """A fronto-parallel plane at 0.5 px: the unconstrained estimate runs to f = 20900 px (true
+    1500, rotation 4.5 deg off); with the camera's zoom range it is refined at the bound, with a
+    finite covariance that carries the focal's uncertainty."""
+    from test_solver_upnp import PP, _scene
+
+    from dockfactory.solver import InvalidSolverInput, solve_pnpf
+    from dockfactory.solver.lie import rotation_angle_deg
+    pts, cam, uv = _scene(2, 10, "planar", 1500.0, 0.0)
+    uv = uv + np.random.default_rng(0).normal(0, 0.5, uv.shape)
+    free = solve_pnpf(pts, uv, PP)
+    held = solve_pnpf(pts, uv, PP, focal_range_px=(800.0, 2500.0))
+    assert free.focal_px > 2500.0 and not free.focal_at_bound
+    assert held.focal_px == 2500.0 and held.focal_at_bound and not held.focal_determined
+    assert np.all(np.isfinite(held.covariance)) and held.std[6] == pytest.approx(1700.0 / np.sqrt(12), rel=0.05)
+    err = rotation_angle_deg(held.rotation, cam[:3, :3])
+    assert err < 0.5 * rotation_angle_deg(free.rotation, cam[:3, :3])
+    assert err < 3.0 * np.degrees(np.sqrt(np.sum(held.std[:3] ** 2)))
+    inside = solve_pnpf(pts, uv, PP, focal_range_px=(800.0, 30000.0))
+    assert inside.focal_px == free.focal_px and not inside.focal_at_bound
+    for bad in ((2000.0, 1000.0), (0.0, 10.0), (1.0, float("inf")), "wide"):
+        with pytest.raises(InvalidSolverInput, match="focal_range_px"):
+            solve_pnpf(pts, uv, PP, focal_range_px=bad)
+
+
+@pytest.mark.slow
+def test_near_planar_sets_with_a_focal_range_stay_within_the_bound():
+    r = run_hard("near-planar-10", 0.3, 300, seed=12, focal_range=(1000.0, 4000.0))
+    assert r["refused"] == 0 and r["wild"] == 0, r      # rotation, t_x, t_y within 6 bound-sigmas
+    for k in ("ratio_rot", "ratio_tx", "ratio_ty"):
+        assert r[k] <= 1.15, (k, r)
