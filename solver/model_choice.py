@@ -9,7 +9,9 @@ with more parameters freed) is tested against it; a candidate is acceptable when
 1. its fit converged to a valid camera with an observable focal length;
 2. every parameter it adds is determined: standard deviation (from the same covariance the
    estimate reports) at most ``max_std_fraction`` of the parameter's plausible half-range
-   (:class:`solver.options.ModelChoiceOptions`); an ill-conditioned fit has infinite ones;
+   (:class:`solver.options.ModelChoiceOptions`); an ill-conditioned fit has infinite ones; and
+   it does not confound the parameters of a model it nests: none of their standard deviations
+   grows by more than ``max_std_inflation`` (p1, p2 against the principal point);
 3. it explains the data significantly better: the likelihood-ratio statistic
    (cost_current - cost_candidate) / sigma^2 exceeds the chi-square quantile 1 - ``lr_alpha``
    with the added parameters as degrees of freedom when sigma is known; with sigma estimated,
@@ -72,7 +74,7 @@ class ModelChoice:
     tests: tuple
 
 
-def _test(cand: ModelFitSummary, cur: ModelFitSummary, sigma_px, options) -> ModelTest:
+def _test(cand: ModelFitSummary, cur: ModelFitSummary, sigma_px, options, others=()) -> ModelTest:
     """Test ``cand`` against the nested ``cur`` (see the module docstring)."""
     name, against = cand.model.name, cur.model.name
     if not cand.ok:
@@ -80,6 +82,8 @@ def _test(cand: ModelFitSummary, cur: ModelFitSummary, sigma_px, options) -> Mod
     added = [k for k, n in enumerate(cand.model.free) if n not in cur.model.free]
     fracs = [cand.extra_std[k] / options.prior(cand.model.free[k]) for k in added]
     frac = float(max(fracs)) if all(np.isfinite(fracs)) else math.inf
+    inflation = max((_std_inflation(cand, s) for s in others if s.ok and cand.model.nests(s.model)),
+                    default=(1.0, ""))
     q = cand.n_params - cur.n_params
     drop = max(cur.cost - cand.cost, 0.0)
     if sigma_px is not None:
@@ -94,11 +98,24 @@ def _test(cand: ModelFitSummary, cur: ModelFitSummary, sigma_px, options) -> Mod
         log_p = f_logsf(stat, q, dof)
     if not frac <= options.max_std_fraction:
         reason = f"not determined (std / plausible range {frac:.3g})"
+    elif not inflation[0] <= options.max_std_inflation:
+        reason = f"confounded with {inflation[1]} (its std grows {inflation[0]:.3g}x)"
     elif not log_p <= math.log(options.lr_alpha):
         reason = f"no significant improvement (p {math.exp(log_p):.3g})"
     else:
         reason = ""
     return ModelTest(name, against, float(stat), float(log_p), frac, not reason, reason)
+
+
+def _std_inflation(cand: ModelFitSummary, sub: ModelFitSummary) -> tuple[float, str]:
+    """(largest factor by which the std of a parameter the nested model ``sub`` frees grows in
+    the candidate, that parameter): the candidate's other parameters trade off against it."""
+    worst = (1.0, "")
+    for j, name in enumerate(sub.model.free):
+        before, after = sub.extra_std[j], cand.extra_std[cand.model.free.index(name)]
+        if np.isfinite(before) and before > 0 and after / before > worst[0]:
+            worst = (float(after / before), name)
+    return worst
 
 
 def choose_model(summaries: dict, sigma_px: float | None,
@@ -109,7 +126,7 @@ def choose_model(summaries: dict, sigma_px: float | None,
     current = summaries[PINHOLE.name]
     tests = []
     while True:
-        trials = [_test(s, current, sigma_px, options) for s in summaries.values()
+        trials = [_test(s, current, sigma_px, options, summaries.values()) for s in summaries.values()
                   if s.model.nests(current.model)]
         tests.extend(trials)
         good = [t for t in trials if t.accepted]

@@ -253,6 +253,11 @@ class ModelChoiceOptions:
       +-50 px of the centre, |k1| <= 0.2, |k2| <= 0.1, |p1|, |p2| <= 2e-3: a little wider than
       the ranges of configs/realistic.toml in issue 11, +-40 px, k1 in [-0.15, 0.05],
       |k2| <= 0.05, |p| <= 1e-3);
+    - ``max_std_inflation``: a richer model is refused when a parameter of a model it nests sees
+      its standard deviation grow by more than this factor in it (its added parameters trade
+      off against that one: p1, p2 against the principal point over a docking run; measured on
+      realistic.toml d39025b20c0f7f1f: cx 1.96-2.0x, principal point 20 px off; on it and on the
+      strong-lens render e1c9f281d4e0fd03 1.5 keeps pp_k1 on all four runs);
     - ``max_std_fraction``: a richer model is supported only when the standard deviation of
       every parameter it adds is at most this fraction of its plausible half-range: 0.5 means
       the data, not the prior, fix its sign and size. An ill-conditioned fit (a singular
@@ -269,12 +274,13 @@ class ModelChoiceOptions:
     prior_p: float = 2e-3
     max_std_fraction: float = 0.5
     min_residual_dof: int = 4
+    max_std_inflation: float = 1.5
 
     def __post_init__(self):
         if not 0 < self.lr_alpha < 1:
             raise InvalidSolverInput(f"lr_alpha must be in (0, 1), got {self.lr_alpha}")
         for name in ("prior_pp_px", "prior_k1", "prior_k2", "prior_p", "max_std_fraction",
-                     "min_residual_dof"):
+                     "min_residual_dof", "max_std_inflation"):
             _positive(name, getattr(self, name))
 
     def prior(self, name: str) -> float:

@@ -326,3 +326,17 @@ def test_detections_path_uses_the_fitted_camera():
     # the projection helper the pipeline uses matches the synthetic camera
     assert np.allclose(project(sc.cam_from_d, sc.focal_px, sc.principal_point, sc.points_a,
                                sc.coeffs), sc.uv_a)
+
+
+def test_a_model_that_confounds_a_nested_models_parameters_is_refused():
+    """p1, p2 trade off against the principal point over a docking run: on a realistic.toml run
+    (d39025b20c0f7f1f, unit 0) pp_k1_p fitted 0.03 px^2 better than pp_k1 but put the principal
+    point 20 px off with cx's std grown 2x; refused, pp_k1 kept (3.7 px off). Checked on the
+    strong-lens render too (e1c9f281d4e0fd03: pp_k1 on both units)."""
+    base = {"pinhole": _summary("pinhole", 1000.0, 0.0), "pp_k1": _summary("pp_k1", 100.0, 0.002)}
+    rich = ModelFitSummary(MODELS["pp_k1_p"], 60.0, 28, 18, np.array([0.004, 0.004, 0.002, 1e-4, 1e-4]))
+    ch = choose_model(dict(base, pp_k1_p=rich), 0.1)
+    assert ch.chosen == "pp_k1"
+    assert any(t.model == "pp_k1_p" and "confounded with cx" in t.reason for t in ch.tests)
+    mild = ModelFitSummary(MODELS["pp_k1_p"], 60.0, 28, 18, np.array([0.0025, 0.0025, 0.002, 1e-4, 1e-4]))
+    assert choose_model(dict(base, pp_k1_p=mild), 0.1).chosen == "pp_k1_p"   # 1.25x: not confounded
