@@ -240,6 +240,7 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sequence = self_calibrate == "sequence"
+    floor = centre_noise_px(weights)   # hashes the weights: once
     with folder_lock(out, "measure"):
         # per frame the pinhole when the run fits the intrinsics
         frames, wall = measure_all(weights, markers, paths, "pinhole" if sequence else model, min_score, out,
@@ -247,13 +248,13 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         run = None
         if sequence:
             t0 = time.perf_counter()
-            run = self_calibrate_sequence(frames, markers, model, centre_noise_px(weights))
+            run = self_calibrate_sequence(frames, markers, model, floor)
             if options.overlay_size is not None:
                 draw_overlays(frames, markers, out, options.overlay_size)
             wall += time.perf_counter() - t0
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
         header.update(backend=resolve_backend(options.backend), workers=options.workers,
-                      overlay_size=options.overlay_size, sigma_floor_px=centre_noise_px(weights))
+                      overlay_size=options.overlay_size, sigma_floor_px=floor)
         write_records(out, frames, header)
     return header
 
