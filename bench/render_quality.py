@@ -1,9 +1,10 @@
 """Render settings: cost against image quality at the markers.
 
-    python bench/render_quality.py [--frames 6] [--variants 1spp,2spp,...]
+    python bench/render_quality.py [--frames 6] [--variants 1spp,2spp,...] [--keep DIR]
 
 Renders the same normal frames at 1280 x 960 with each variant and prints the Cycles cost
 (wall seconds and CPU seconds per frame; CPU seconds are not inflated by other load) and the
+per-frame total of the worker (Cycles + EXR read + sensor + labels + writes), and the
 error of a fixed, simple sub-pixel marker estimator (colour-weighted centroid of the marker's
 chroma above half its peak) against the exact outline centroid of each fully visible marker:
 median, 90th percentile and mean (bias) in px. The estimator's own floor shows in the
@@ -28,12 +29,19 @@ VARIANTS = {
     "1spp": {"samples": 1},
     "2spp": {"samples": 2},
     "2spp-1bounce": {"samples": 2, "max_bounces": 1},
+    "2spp-0bounce": {"samples": 2, "max_bounces": 0},
+    "3spp-0bounce": {"samples": 3, "max_bounces": 0},
     "adaptive4": {"samples": 4, "adaptive_threshold": 0.1, "adaptive_min_samples": 1},
     "1spp-filter1": {"samples": 1, "filter_width_px": 1.0},
     "1spp-prefast": {"samples": 1, "denoise_prefilter": "fast"},
     "1spp-preacc": {"samples": 1, "denoise_prefilter": "accurate"},
     "1spp-balanced": {"samples": 1, "denoise": "balanced"},
     "16spp-high": {"samples": 16, "denoise": "high", "max_bounces": 4},
+    "1spp-off": {"samples": 1, "denoise": "off"},
+    "2spp-off": {"samples": 2, "denoise": "off"},
+    "3spp-off": {"samples": 3, "denoise": "off"},
+    "4spp-off": {"samples": 4, "denoise": "off"},
+    "adaptive8-off": {"samples": 8, "denoise": "off", "adaptive_threshold": 0.05, "adaptive_min_samples": 1},
 }
 
 
@@ -62,9 +70,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=6)
     ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--keep", type=Path, default=None, help="keep each variant's dataset under this folder")
     args = ap.parse_args()
     print(f"render quality: {args.frames} normal frames at 1280x960 per variant")
-    print(f"{'variant':14s} {'wall s':>7s} {'cpu s':>7s} {'n':>4s} {'median px':>10s} {'p90 px':>7s} {'bias x':>7s} {'bias y':>7s}")
+    print(f"{'variant':14s} {'wall s':>7s} {'cpu s':>7s} {'total s':>7s} {'n':>4s} {'median px':>10s} {'p90 px':>7s} {'bias x':>7s} {'bias y':>7s}")
     for name in args.variants.split(","):
         render = {**VARIANTS[name], "keep_exr": False}
         data = {"dataset": {"name": "quality", "seed": 77, "frames": args.frames},
@@ -72,7 +81,7 @@ def main() -> int:
                 "render": render, "export": {"formats": []}}
         cfg = config_from_dict(data, "<bench>")
         with tempfile.TemporaryDirectory(prefix="render-quality-") as tmp:
-            root = Path(tmp) / "ds"
+            root = args.keep / name if args.keep else Path(tmp) / "ds"
             summary = run_render(cfg, root, json.dumps(data), JobOptions(progress=False))
             if not summary.ok:
                 print(summary.text())
@@ -82,8 +91,9 @@ def main() -> int:
         d = np.hypot(e[:, 0], e[:, 1])
         wall = statistics.median(r["cycles"] for r in rows)
         cpu = statistics.median(r["cycles_cpu"] for r in rows)
-        print(f"{name:14s} {wall:7.2f} {cpu:7.2f} {len(d):4d} {np.median(d):10.3f} {np.percentile(d, 90):7.3f} "
-              f"{e[:, 0].mean():+7.3f} {e[:, 1].mean():+7.3f}", flush=True)
+        total = statistics.median(r["total"] for r in rows)
+        print(f"{name:14s} {wall:7.2f} {cpu:7.2f} {total:7.2f} {len(d):4d} {np.median(d):10.3f} "
+              f"{np.percentile(d, 90):7.3f} {e[:, 0].mean():+7.3f} {e[:, 1].mean():+7.3f}", flush=True)
     return 0
 
 

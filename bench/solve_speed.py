@@ -22,9 +22,10 @@ Timing: wall time (perf_counter) per frame, each frame solved ``--repeats`` time
 kept: the cores are shared with other work), after a warm-up on the first five frames.
 OMP / MKL / OPENBLAS threads are set to 1 before numpy is imported: BLAS threads cost more
 than they give on these tiny matrices. Stages: ``identification`` (identify_markers), ``suspects``
-(leave_out_suspects, with its refit), ``eccentricity`` (correct_eccentricity, with its refit)
-are timed by wrapping the functions the pipeline calls; ``fit`` is the rest of the frame (input
-checks, the first joint fit, packaging of the result). The load average is printed before
+(leave_out_suspects, with its refit), ``eccentricity`` (eccentricity_corrected: the predicted
+offsets), ``disc noise`` (with_disc_noise: the covariance of the disc-shaped noise model) are
+timed by wrapping the functions the pipeline calls; ``fit`` is the rest of the frame (input
+checks, the first joint fit, the eccentricity refit, packaging of the result). The load average is printed before
 and after.
 
 Equivalence (before / after a change of the solver): ``--dump OUT.npz`` stores every frame's
@@ -55,7 +56,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_MS = 15.0
-STAGES = ("identification", "fit", "suspects", "eccentricity")
+STAGES = ("identification", "fit", "suspects", "eccentricity", "disc noise")
 
 
 def use_solver_source(src: Path) -> None:
@@ -191,7 +192,7 @@ class StageClock:
     """Wraps the pipeline's stage functions in :mod:`solver.docking` to time them."""
 
     NAMES = {"identify_markers": "identification", "leave_out_suspects": "suspects",
-             "correct_eccentricity": "eccentricity"}
+             "eccentricity_corrected": "eccentricity", "with_disc_noise": "disc noise"}
 
     def __init__(self):
         import dockfactory.solver.docking as docking

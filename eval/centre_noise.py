@@ -32,7 +32,7 @@ ROBUST_SCALE = 1.4826              # MAD -> std of a Gaussian
 MIN_CONDITION_DETECTIONS = 30      # a condition's own sigma needs this many detections
 
 __all__ = ["GATE_RADIUS_FRACTION", "FALLBACK_GATE_PX", "MIN_CONDITION_DETECTIONS", "gate_px",
-           "used_centre_errors", "noise_stats", "centre_noise_block", "condition_sigmas", "used_sigma",
+           "used_centre_matches", "used_centre_errors", "noise_stats", "centre_noise_block", "condition_sigmas", "used_sigma",
            "DEFAULT_SIGMA_PX"]
 
 
@@ -44,9 +44,10 @@ def gate_px(marker: dict) -> float:
     return GATE_RADIUS_FRACTION * math.sqrt(area / math.pi)
 
 
-def used_centre_errors(label: dict, dets: list[dict], marker_ids, min_score: float):
-    """(errors (k, 2) px, detected minus ``outline_centroid_px``, of the used markers matched
-    inside their gate; number of used markers without a detection inside it)."""
+def used_centre_matches(label: dict, dets: list[dict], marker_ids, min_score: float):
+    """([(label marker, error (2,) px)] of the used markers matched inside their gate, detected
+    minus ``outline_centroid_px``, nearest first; number of used markers without a detection
+    inside it)."""
     used = set(marker_ids or ())
     marks = [m for m in label["markers"] if m["id"] in used]
     dets = [d for d in dets if d.get("score", 1.0) >= min_score]
@@ -60,13 +61,20 @@ def used_centre_errors(label: dict, dets: list[dict], marker_ids, min_score: flo
                 if dist <= gate_px(m):
                     pairs.append((dist, i, j, e))
     pairs.sort(key=lambda p: p[0])
-    taken_m, taken_d, errors = set(), set(), []
+    taken_m, taken_d, matches = set(), set(), []
     for _, i, j, e in pairs:
         if i not in taken_m and j not in taken_d:
             taken_m.add(i)
             taken_d.add(j)
-            errors.append(e)
-    return np.array(errors, dtype=float).reshape(-1, 2), len(marks) - len(errors)
+            matches.append((marks[i], e))
+    return matches, len(marks) - len(matches)
+
+
+def used_centre_errors(label: dict, dets: list[dict], marker_ids, min_score: float):
+    """(errors (k, 2) px, detected minus ``outline_centroid_px``, of the used markers matched
+    inside their gate; number of used markers without a detection inside it)."""
+    matches, missed = used_centre_matches(label, dets, marker_ids, min_score)
+    return np.array([e for _, e in matches], dtype=float).reshape(-1, 2), missed
 
 
 def noise_stats(errors) -> dict:

@@ -18,6 +18,12 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
+from dockfactory.eval.centre_noise_disc import (
+    disc_noise_block,
+    disc_scales,
+    frame_noise_px,
+    label_noise_shapes,
+)
 from dockfactory.eval.dataset_access import read_json_for, validate_detections
 from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
@@ -31,22 +37,32 @@ from dockfactory.solver import SolverError, crb_d_from_b
 METRICS_FORMAT = "dockfactory.metrics/1"
 
 
-def frame_bound(label: dict, marker_ids, sigma_px: float) -> dict | None:
-    """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry."""
+def frame_bound(label: dict, marker_ids, sigma_px: float, disc_scale_px: float | None = None) -> dict | None:
+    """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry, and
+    ``sigma_px`` the per-axis centre noise it assumed (px, averaged over the points).
+
+    Isotropic noise of std ``sigma_px``; with ``disc_scale_px`` each marker's noise is shaped by
+    its disc's image (solver.disc_noise) at that scale (eval.centre_noise_disc), unless the label
+    lacks the disc geometry."""
     by_id = {m["id"]: m for m in label["markers"]}
     ids = [i for i in (marker_ids or []) if i in by_id] or [m["id"] for m in label["markers"] if m.get("visibility") == 2]
-    pa = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("A")]).reshape(-1, 3)
-    pb = np.array([by_id[i]["center_section_mm"] for i in ids if i.startswith("B")]).reshape(-1, 3)
+    marks = {s: [by_id[i] for i in ids if i.startswith(s)] for s in "AB"}
+    pa, pb = (np.array([m["center_section_mm"] for m in marks[s]]).reshape(-1, 3) for s in "AB")
     if len(pa) < 4 or len(pb) < 4 or not sigma_px > 0:
         return None
     cam_from_d = np.array(label["camera"]["cam_from_d"])
     cam_from_b = cam_from_d @ np.array(label["d_from_b"])
+    shapes = None
+    if disc_scale_px:
+        sa, sb = label_noise_shapes(label, marks["A"]), label_noise_shapes(label, marks["B"])
+        if sa is not None and sb is not None:
+            shapes, sigma_px = (sa, sb), frame_noise_px(np.concatenate([sa, sb]), disc_scale_px)
     try:
         b = crb_d_from_b(pa, cam_from_d, pb, cam_from_b, label["camera"]["focal_px"],
-                         label["camera"]["principal_point"], sigma_px)
+                         label["camera"]["principal_point"], sigma_px, noise_shapes=shapes)
     except SolverError:
         return None
-    return {c: b.std[POSE_KEYS[c]] for c in COMPONENTS}
+    return {**{c: b.std[POSE_KEYS[c]] for c in COMPONENTS}, "sigma_px": sigma_px}
 
 
 def _missing_row(spec, reason: str, category: str) -> dict:
@@ -63,13 +79,16 @@ def evaluated_frames(ds: Dataset) -> list:
 
 
 def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, source="poses",
-                   sigma_by_condition: dict | None = None) -> list[dict]:
+                   sigma_by_condition: dict | None = None, disc: dict | None = None) -> list[dict]:
     """One row per frame: the ``population`` (FrameSpecs, default :func:`evaluated_frames`) first,
     then any other frame of the dataset the poses file holds (another split). A planned frame
     without a label or without a pose is a failed row with its reason; a pose for a frame the
-    dataset does not have is refused (``source``: the poses file, for the message). The bound
-    of a frame uses its condition's centre noise from ``sigma_by_condition`` when given, else
-    ``sigma_px``; its ``sigma_px`` column says which."""
+    dataset does not have is refused (``source``: the poses file, for the message). The
+    isotropic bound of a frame (``crb_iso_*``) uses its condition's centre noise from
+    ``sigma_by_condition`` when given, else ``sigma_px``; its ``sigma_px`` column says which.
+    With ``disc`` (:func:`eval.centre_noise_disc.disc_scales`: "value", "by_condition") the
+    bound ``crb_*`` is that of the disc noise model at the condition's scale (``sigma_disc_px``:
+    the per-axis noise it assumed), else the isotropic one."""
     population = evaluated_frames(ds) if population is None else population
     planned = {s.frame_id for s in population}
     order = [s.frame_id for s in population] + [f for f in poses["frames"] if f not in planned]
@@ -99,26 +118,32 @@ def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, s
             row[f"true_{c}"] = true[POSE_KEYS[c]]
         if row["ok"]:
             sigma = (sigma_by_condition or {}).get(row["condition"], sigma_px)
-            row.update(_solved_fields(rec, lab, sigma, f"{source}: frames.{fid}.covariance"))
+            scale = disc["by_condition"].get(row["condition"], disc["value"]) if disc else None
+            row.update(_solved_fields(rec, lab, sigma, f"{source}: frames.{fid}.covariance", scale))
         rows.append(row)
     return rows
 
 
-def _solved_fields(rec: dict, lab: dict, sigma_px: float, where: str) -> dict:
-    """The columns of a solved frame: estimate, error, focal, reprojection RMS, the bound at
-    ``sigma_px`` and, when the record has a covariance, the reported std and z = error / std."""
+def _solved_fields(rec: dict, lab: dict, sigma_px: float, where: str, disc_scale_px=None) -> dict:
+    """The columns of a solved frame: estimate, error, focal, reprojection RMS, the isotropic
+    bound at ``sigma_px``, the bound (the disc model's at ``disc_scale_px`` when given, else the
+    isotropic one) and, when the record has a covariance, the reported std and z = error / std."""
     true = lab["pose_b_in_d"]
     err = pose_error(rec["pose"], true)
     out = {"focal_est": rec["focal_px"],
            "focal_err_pct": 100.0 * (rec["focal_px"] - lab["camera"]["focal_px"]) / lab["camera"]["focal_px"],
            "rmse_px_a": rec["rmse_px"]["A"], "rmse_px_b": rec["rmse_px"]["B"], "sigma_px": sigma_px}
-    bound = frame_bound(lab, rec.get("marker_ids"), sigma_px)
+    iso = frame_bound(lab, rec.get("marker_ids"), sigma_px)
+    bound = frame_bound(lab, rec.get("marker_ids"), sigma_px, disc_scale_px) if disc_scale_px else iso
+    if disc_scale_px and bound:
+        out["sigma_disc_px"] = bound["sigma_px"]
     std = reported_std(rec["covariance"], where) if rec.get("covariance") is not None else {}
     z = standard_scores(err, std)
     for c in COMPONENTS:
         out[f"est_{c}"] = rec["pose"][POSE_KEYS[c]]
         out[f"err_{c}"] = err[c]
         out[f"crb_{c}"] = bound[c] if bound else None
+        out[f"crb_iso_{c}"] = iso[c] if iso else None
         out[f"std_{c}"] = std.get(c)
         out[f"z_{c}"] = z[c]
     return out
@@ -135,17 +160,25 @@ def localization_block(rows: list[dict]) -> dict:
                            for cond, rs in sorted(by_cond.items())}
     out["focal_err_pct"] = error_stats([r["focal_err_pct"] for r in ok])
     out["reprojection_rmse_px"] = {s: error_stats([r[f"rmse_px_{s.lower()}"] for r in ok]) for s in "AB"}
-    crb = {}
-    for c in COMPONENTS:
-        b = [r[f"crb_{c}"] for r in ok if r.get(f"crb_{c}") is not None]
-        if b:
-            bound_rms = float(np.sqrt(np.mean(np.square(b))))
-            rmse = out["overall"][c]["rmse"]
-            crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse,
-                      "ratio": (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None}
-    out["crb"] = crb
+    out["crb"] = bound_ratios(ok, out["overall"], "crb")
+    if any(r.get("sigma_disc_px") is not None for r in ok):
+        out["crb_isotropic"] = bound_ratios(ok, out["overall"], "crb_iso")
     out["calibration"] = calibration_block(ok)
     return out
+
+
+def bound_ratios(ok: list[dict], overall: dict, prefix: str) -> dict:
+    """{component: bound_rms (RMS over the solved rows of column ``<prefix>_<c>``),
+    measured_rmse, ratio}."""
+    crb = {}
+    for c in COMPONENTS:
+        b = [r[f"{prefix}_{c}"] for r in ok if r.get(f"{prefix}_{c}") is not None]
+        if b:
+            bound_rms = float(np.sqrt(np.mean(np.square(b))))
+            rmse = overall[c]["rmse"]
+            crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse,
+                      "ratio": (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None}
+    return crb
 
 
 def failures_block(rows: list[dict]) -> dict:
@@ -260,15 +293,18 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
     noise = centre_noise_block(ds, poses, detections, min_score) if detections is not None else None
     used = used_sigma(noise, oracle_sigma_px, poses.get("oracle_sigma_px"))
     sigma = used["value"]
+    disc = disc_noise_block(ds, poses, detections, min_score) if detections is not None else None
     # the population is the plan: a frame without a pose (failed, absent from the poses file or
     # from the dataset) is a failure with its reason, never silently dropped
-    rows = per_frame_rows(ds, poses, sigma, source=str(poses_path), sigma_by_condition=used["by_condition"])
+    rows = per_frame_rows(ds, poses, sigma, source=str(poses_path), sigma_by_condition=used["by_condition"],
+                          disc=disc_scales(disc))
     test = [r for r in rows if r["split"] == "test"]
     rep = [r for r in rows if r["split"] == "repeat"]
     metrics = {"format": METRICS_FORMAT, "dataset": {"root": str(ds.root), "version_id": ds.version_id,
                                                       "name": ds.identity["name"]},
                "poses": {"source": poses.get("source"), "path": str(poses_path)},
-               "centre_noise_px": sigma, "centre_noise": {**(noise or {}), "used": used},
+               "centre_noise_px": sigma, "centre_noise": {**(noise or {}), "used": used,
+                                                           **({"disc_model": disc} if disc else {})},
                "centre_error": {c: {"median_px": s["median_radial_px"], "n": s["n"]}
                                 for c, s in ((noise or {}).get("by_condition") or {}).items()},
                "localization": localization_block(test), "estimation": estimation_block(rep),
@@ -341,7 +377,8 @@ def detection_block(ds: Dataset, detections: dict) -> dict:
 CSV_FIELDS = (["frame_id", "split", "condition", "pose_index", "ok", "category", "reason", "distance_mm",
                "focal_true", "focal_est", "focal_err_pct", "visible_a", "visible_b", "rmse_px_a", "rmse_px_b"]
               + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS] + ["sigma_px"]
-              + [f"{k}_{c}" for k in ("std", "z") for c in COMPONENTS])
+              + [f"{k}_{c}" for k in ("std", "z") for c in COMPONENTS]
+              + [f"crb_iso_{c}" for c in COMPONENTS] + ["sigma_disc_px"])
 
 
 def json_safe(obj):

@@ -52,15 +52,28 @@ def used_sigma_text(metrics: dict) -> str:
 def _ratio_note(crb: dict, cn: dict | None) -> str:
     low = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] < RATIO_RANGE[0]]
     high = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] > RATIO_RANGE[1]]
-    notes = []
+    notes = [disc_model_text(cn)] if disc_model_text(cn) else []
     axis = ((cn or {}).get("overall") or {}).get("rms_axis_px")
     if low:
-        notes.append(f"{', '.join(low)} below {RATIO_RANGE[0]}: smaller than the bound of isotropic, independent "
-                     "centre noise of this size, so the detector's noise is not that"
-                     + (f" (RMS x {axis[0]:.3g} px, y {axis[1]:.3g} px)" if axis else "") + ".")
+        model = ("the disc noise model" if (cn or {}).get("disc_model") else
+                 "isotropic, independent centre noise of this size")
+        notes.append(f"{', '.join(low)} below {RATIO_RANGE[0]}: smaller than the bound of {model}, so the "
+                     "detector's noise is not that" + (f" (RMS x {axis[0]:.3g} px, y {axis[1]:.3g} px)" if axis else "") + ".")
     if high:
         notes.append(f"{', '.join(high)} above {RATIO_RANGE[1]}: the solver does not reach the bound.")
     return " ".join(notes)
+
+
+def disc_model_text(cn: dict | None) -> str:
+    """One sentence on the disc noise model behind the bound (eval.centre_noise_disc), or ""."""
+    disc = ((cn or {}).get("disc_model") or {})
+    overall = disc.get("overall") or {}
+    if overall.get("fisher_px") is None:
+        return ""
+    return (f"Each centre's noise is shaped by its disc's image (solver.disc_noise) at the scale of the Fisher "
+            f"information of the used centres: {overall['fisher_px']:.3g} px for a round "
+            f"{disc['model']['reference_radius_px']:g} px disc (their RMS: {_f(overall.get('rms_px'), '.3g')} px; "
+            "gross errors raise the RMS, not the bound).")
 
 
 def html_centre_noise(metrics: dict) -> list[str]:

@@ -16,6 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from dockfactory.core.distortion import undistort_pixels
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
@@ -117,21 +118,45 @@ def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_p
     return cls, uv, None, None
 
 
+def true_camera_centres(label: dict, centres):
+    """(principal point (2,), centres) of a frame seen through its label's true camera: the
+    centres and boxes undistorted with the true K and coefficients (issue 11's reference solve:
+    "the same frames solved with the true intrinsics"; the focal length is still estimated)."""
+    cam = label["camera"]
+    pp, dist = tuple(cam["principal_point"]), cam.get("distortion") or [0.0] * 5
+
+    def ideal(uv):
+        return undistort_pixels(uv, cam["focal_px"], pp, dist)
+
+    cls, uv, boxes, refined = centres
+    if boxes is not None:
+        corners = ideal(boxes.reshape(-1, 2)).reshape(-1, 4)
+        boxes = np.concatenate([np.minimum(corners[:, :2], corners[:, 2:]),
+                                np.maximum(corners[:, :2], corners[:, 2:])], axis=1)
+    return pp, (cls, ideal(uv), boxes, refined)
+
+
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None, camera_model: str = "pinhole",
-                  self_calibrate: str | None = None, sigma_floor_px: float | None = None) -> dict:
+                  self_calibrate: str | None = None, sigma_floor_px: float | None = None,
+                  true_camera: bool = False) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
     ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
     "sequence" solves each docking run of the labels (one camera unit, one run) with shared
     intrinsics, "frame" (or None) each frame alone. ``sigma_floor_px``: the detector's centre noise
     measured on labelled frames, below which no frame's residual estimate of the noise is taken
     (solver RefineOptions.sigma_floor_px; the covariance); default: the detections' own
-    ``centre_noise_px`` (detect copies it from the weights' noise card), if any."""
+    ``centre_noise_px`` (detect copies it from the weights' noise card), if any. ``true_camera``:
+    each frame solved with its label's principal point and distortion (the reference of a
+    calibrated camera, :func:`true_camera_centres`; the pinhole model, per frame or per docking
+    run: a run is one camera unit, whose principal point its first frame's label gives)."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
         raise ValueError(f"self_calibrate must be one of {SELF_CALIBRATE}, got {self_calibrate!r}")
+    if true_camera and (self_calibrate == "frame" or camera_model != "pinhole"):
+        raise ValueError("true_camera solves with the labels' intrinsics: the pinhole model, per frame or per run")
     markers = ds.markers()
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
@@ -146,15 +171,17 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
         if centres is None:
             frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
             continue
-        frames[fid], used[fid] = solve_frame(markers, pp, centres, sigma, per_frame, options)
+        frame_pp, centres = true_camera_centres(ds.labels[fid], centres) if true_camera else (pp, centres)
+        frames[fid], used[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, options)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
-            frames.update(solve_run(markers, pp, group, frames, used, sigma, camera_model, options))
+            run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options))
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
             "camera_model": camera_model, "self_calibrate": self_calibrate, "sigma_floor_px": sigma_floor_px,
-            "splits": list(splits), "frames": frames}
+            "true_camera": bool(true_camera), "splits": list(splits), "frames": frames}
 
 
 def docking_options(sigma_floor_px: float | None) -> DockingOptions:

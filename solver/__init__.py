@@ -22,7 +22,8 @@ generator, detector or eval packages):
    ids -> layout ids);
 5. entry points and the docking pipeline: :func:`solve_pnpf`; :func:`solve_docking` (identify
    or RANSAC, joint fit, suspects :mod:`~solver.suspects`, eccentricity
-   :mod:`~solver.eccentricity`); :func:`solve_sequence` (a docking run with shared
+   :mod:`~solver.eccentricity`, the disc noise model of the covariance
+   :mod:`~solver.disc_noise`); :func:`solve_sequence` (a docking run with shared
    intrinsics: self-calibration, :mod:`~solver.sequence`).
 
 Options: :class:`RefineOptions`, :class:`RansacOptions`, :class:`IdentifyOptions`,

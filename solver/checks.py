@@ -16,8 +16,8 @@ from dockfactory.solver.errors import (
     TooFewPoints,
 )
 
-__all__ = ["as_points", "as_principal_point", "check_correspondences", "check_sigma",
-           "layout_arrays", "collinear_2d", "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL"]
+__all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
+           "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL"]
 
 MIN_POINTS = 4
 # Relative spread below which a point set counts as collinear (second principal axis / first).
@@ -35,6 +35,24 @@ def as_points(name: str, value, dim: int) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
         raise InvalidSolverInput(f"{name}: contains NaN or inf (rows {bad[:10].tolist()})")
+    return arr
+
+
+def as_point_covariances(name: str, value, n: int) -> np.ndarray:
+    """``value`` as (n, 2, 2) float64 symmetric positive definite matrices (one per point), or
+    InvalidSolverInput naming ``name``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidSolverInput(f"{name}: not a numeric array ({exc})") from None
+    if arr.shape != (n, 2, 2):
+        raise InvalidSolverInput(f"{name}: expected shape ({n}, 2, 2), got {arr.shape}")
+    det = arr[:, 0, 0] * arr[:, 1, 1] - arr[:, 0, 1] * arr[:, 1, 0]
+    ok = np.all(np.isfinite(arr), axis=(1, 2)) & (arr[:, 0, 0] > 0) & (det > 0) \
+        & (np.abs(arr[:, 0, 1] - arr[:, 1, 0]) <= 1e-9 * np.abs(arr[:, 0, 0] + arr[:, 1, 1]))
+    if not np.all(ok):
+        raise InvalidSolverInput(f"{name}: not symmetric positive definite (points "
+                                 f"{np.flatnonzero(~ok)[:10].tolist()})")
     return arr
 
 

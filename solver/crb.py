@@ -1,8 +1,12 @@
-"""Cramer-Rao lower bounds under isotropic Gaussian pixel noise (std ``sigma_px`` per coordinate).
+"""Cramer-Rao lower bounds under Gaussian pixel noise (std ``sigma_px`` per coordinate).
 
 For a model u = pi(theta) with i.i.d. N(0, sigma^2) noise on every pixel coordinate the Fisher
 information is J^T J / sigma^2 (J = d pi / d theta at the true theta), so every unbiased estimator
-has covariance >= sigma^2 (J^T J)^-1. Parameters are ordered as in :mod:`solver.refine`:
+has covariance >= sigma^2 (J^T J)^-1. With ``noise_shapes`` each point i has its own 2 x 2 noise
+covariance C_i = sigma^2 T_i / mean_j(tr T_j / 2) (``sigma_px`` stays the per-axis noise averaged
+over the points; T_i a relative shape, e.g. :func:`solver.disc_noise.noise_shapes` of the marker's
+disc) and the bound is (sum_i J_i^T C_i^-1 J_i)^-1 (J_i the point's two rows). Parameters are
+ordered as in :mod:`solver.refine`:
 
 - one section (7): ``(w, t, f)``, rotation vector w (rad, left perturbation in the camera
   frame), t (mm), f (px); ``focal_known=True`` drops f (6 parameters, calibrated camera);
@@ -37,7 +41,7 @@ from dockfactory.solver.camera_models import (
     Intrinsics,
     check_model_name,
 )
-from dockfactory.solver.checks import as_points, as_principal_point
+from dockfactory.solver.checks import as_point_covariances, as_points, as_principal_point
 from dockfactory.solver.errors import DegenerateGeometry, InvalidSolverInput
 from dockfactory.solver.refine import (
     Block,
@@ -73,27 +77,57 @@ def _jac(points_3d, cam_from_world, focal_px, principal_point):
     return jac
 
 
-def _inverse_information(jac, sigma_px):
+def _inverse_information(jac, sigma_px, noise_shapes=None, normalise: bool = True):
+    """sigma^2 (J^T J)^-1, or with ``noise_shapes`` (N, 2, 2) (rows of ``jac``: 2N interleaved
+    u, v) the inverse of sum_i J_i^T C_i^-1 J_i (module docstring; ``normalise`` False: the
+    shapes are already normalised, over a larger set of points, and C_i = sigma^2 T_i)."""
     if not (np.isfinite(sigma_px) and sigma_px >= 0):
         raise InvalidSolverInput(f"sigma_px must be finite and >= 0, got {sigma_px}")
-    inv = inverse_spd(jac.T @ jac)
+    if noise_shapes is None:
+        info, scale2 = jac.T @ jac, sigma_px ** 2
+    else:
+        t = as_point_covariances("noise_shapes", noise_shapes, jac.shape[0] // 2)
+        jr = jac.reshape(-1, 2, jac.shape[1])
+        info = np.einsum("nap,nab,nbq->pq", jr, np.linalg.inv(t), jr)
+        scale2 = sigma_px ** 2 / (_mean_axis_variance(t) if normalise else 1.0)
+    inv = inverse_spd(info)
     if not np.all(np.isfinite(inv)):
         raise DegenerateGeometry("Fisher information is singular: the parameters are not "
                                  "observable from these points (degenerate configuration)")
-    return sigma_px ** 2 * inv
+    return scale2 * inv
+
+
+def _mean_axis_variance(shapes: np.ndarray) -> float:
+    """mean_i tr(T_i) / 2 of (N, 2, 2) shapes."""
+    return float(np.trace(shapes, axis1=1, axis2=2).mean()) / 2.0
+
+
+def _pair(noise_shapes, n_a: int, n_b: int):
+    """(shapes_a (n_a, 2, 2), shapes_b (n_b, 2, 2)) checked and concatenated (None stays
+    None)."""
+    if noise_shapes is None:
+        return None
+    try:
+        shapes_a, shapes_b = noise_shapes
+    except (TypeError, ValueError):
+        raise InvalidSolverInput("noise_shapes: expected a pair (shapes_a (Na, 2, 2), "
+                                 "shapes_b (Nb, 2, 2))") from None
+    return np.concatenate([as_point_covariances("noise_shapes[0]", shapes_a, n_a),
+                           as_point_covariances("noise_shapes[1]", shapes_b, n_b)])
 
 
 def crb_pnpf(points_3d, cam_from_world, focal_px: float, principal_point, sigma_px: float,
-             focal_known: bool = False) -> np.ndarray:
+             focal_known: bool = False, noise_shapes=None) -> np.ndarray:
     """Bound on the covariance of (w, t, f) for one section: (7, 7) ((6, 6) if focal_known).
 
     ``points_3d``: (N, 3) float64, mm, world frame; ``cam_from_world``: (4, 4) true pose;
-    ``focal_px``: true focal (px); ``principal_point``: (2,) px; ``sigma_px``: noise std (px).
+    ``focal_px``: true focal (px); ``principal_point``: (2,) px; ``sigma_px``: noise std (px);
+    ``noise_shapes``: None (isotropic) or (N, 2, 2) relative noise shapes (module docstring).
     """
     jac = _jac(points_3d, cam_from_world, focal_px, principal_point)
     if focal_known:
         jac = jac[:, :6]
-    return _inverse_information(jac, sigma_px)
+    return _inverse_information(jac, sigma_px, noise_shapes)
 
 
 def _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point):
@@ -124,24 +158,27 @@ def _blocks_jac(blocks, poses, intr, model):
 
 
 def crb_joint(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
-              sigma_px: float, camera_model: str = "pinhole", coeffs=None) -> np.ndarray:
+              sigma_px: float, camera_model: str = "pinhole", coeffs=None,
+              noise_shapes=None) -> np.ndarray:
     """Bound on the covariance of (w_A, t_A, w_B, t_B, f[, *model.free]): (13 + e, 13 + e).
 
     ``points_a`` (Na, 3) mm in A's frame, ``points_b`` (Nb, 3) mm in B's frame,
     ``cam_from_a``/``cam_from_b`` (4, 4) true poses, shared ``focal_px``; ``camera_model``
     the estimated model (:data:`solver.camera_models.MODELS`) and ``coeffs`` the true lens
-    distortion (k1, k2, p1, p2, k3; None: none) at ``principal_point``.
+    distortion (k1, k2, p1, p2, k3; None: none) at ``principal_point``; ``noise_shapes``:
+    None (isotropic) or (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)) (module docstring).
     """
+    shapes = _pair(noise_shapes, len(points_a), len(points_b))
     if camera_model == PINHOLE.name and coeffs is None:
         jac = _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point)
-        return _inverse_information(jac, sigma_px)
+        return _inverse_information(jac, sigma_px, shapes)
     model, intr = _camera(camera_model, focal_px, principal_point, coeffs)
     ca = _check_transform("cam_from_a", cam_from_a)
     cb = _check_transform("cam_from_b", cam_from_b)
     blocks = (Block(as_points("points_a", points_a, 3), np.zeros((len(points_a), 2)), 0),
               Block(as_points("points_b", points_b, 3), np.zeros((len(points_b), 2)), 1))
     jac = _blocks_jac(blocks, ((ca[:3, :3], ca[:3, 3]), (cb[:3, :3], cb[:3, 3])), intr, model)
-    return _inverse_information(jac, sigma_px)
+    return _inverse_information(jac, sigma_px, shapes)
 
 
 @dataclass(frozen=True)
@@ -167,13 +204,17 @@ def _intrinsics_std(cov_intr: np.ndarray, model) -> dict:
 
 def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
                  sigma_px: float, problem: str = "joint", camera_model: str = "pinhole",
-                 coeffs=None) -> DockingBound:
+                 coeffs=None, noise_shapes=None) -> DockingBound:
     """Bound on (X, Y, Z mm, alpha, beta, gamma deg) of ``d_from_b`` (see module docstring).
 
     ``problem``: "joint" (13 parameters, shared focal; with ``camera_model`` and the true
     ``coeffs``: 13 + e), "independent" (7 + 7, a focal per section) or "calibrated" (6 + 6,
-    focal known); the last two for the pinhole only. Returns a :class:`DockingBound`; X, Y,
-    alpha are ``std["x_mm"]``, ``std["y_mm"]``, ``std["alpha_deg"]``.
+    focal known); the last two for the pinhole only. ``noise_shapes``: None (isotropic noise of
+    std ``sigma_px``) or (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)): per-point noise shapes,
+    ``sigma_px`` then the per-axis noise averaged over all the points (module docstring; the
+    "independent" and "calibrated" problems average over each section's points). Returns a
+    :class:`DockingBound`; X, Y, alpha are ``std["x_mm"]``, ``std["y_mm"]``,
+    ``std["alpha_deg"]``.
     """
     ca = _check_transform("cam_from_a", cam_from_a)
     cb = _check_transform("cam_from_b", cam_from_b)
@@ -181,24 +222,37 @@ def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, pr
     intr_std = {}
     if problem == "joint":
         cov13 = crb_joint(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px,
-                          camera_model, coeffs)
+                          camera_model, coeffs, noise_shapes)
         cov12 = cov13[:12, :12]
         intr_std = _intrinsics_std(cov13[12:, 12:], MODELS[camera_model])
     elif camera_model != PINHOLE.name or coeffs is not None:
         raise InvalidSolverInput(f"problem {problem!r} is for the pinhole camera only")
     elif problem in ("independent", "calibrated"):
-        known = problem == "calibrated"
-        cov_a = crb_pnpf(points_a, ca, focal_px, principal_point, sigma_px, focal_known=known)
-        cov_b = crb_pnpf(points_b, cb, focal_px, principal_point, sigma_px, focal_known=known)
-        cov12 = np.zeros((12, 12))
-        cov12[:6, :6] = cov_a[:6, :6]
-        cov12[6:, 6:] = cov_b[:6, :6]
+        cov12 = _independent(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px,
+                             problem == "calibrated", noise_shapes)
     else:
         raise InvalidSolverInput(f"problem must be 'joint', 'independent' or 'calibrated', "
                                  f"got {problem!r}")
     cov6 = prop @ cov12 @ prop.T
     std = dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist()))
     return DockingBound(cov6, std, problem, intr_std)
+
+
+def _independent(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px, known,
+                 noise_shapes) -> np.ndarray:
+    """(12, 12) bound over (w_A, t_A, w_B, t_B): each section solved on its own (own focal, or
+    ``known``); noise shapes normalised over both sections' points, as in the joint problem."""
+    shapes = _pair(noise_shapes, len(points_a), len(points_b))
+    if shapes is not None:
+        shapes = shapes / _mean_axis_variance(shapes)
+    cov12 = np.zeros((12, 12))
+    rows = {0: slice(0, len(points_a)), 1: slice(len(points_a), None)}
+    for k, (pts, cam) in enumerate(((points_a, ca), (points_b, cb))):
+        jac = _jac(pts, cam, focal_px, principal_point)
+        cov = _inverse_information(jac[:, :6] if known else jac, sigma_px,
+                                   None if shapes is None else shapes[rows[k]], normalise=False)
+        cov12[6 * k:6 * k + 6, 6 * k:6 * k + 6] = cov[:6, :6]
+    return cov12
 
 
 @dataclass(frozen=True)

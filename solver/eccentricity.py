@@ -18,7 +18,8 @@ from dockfactory.core.names import SECTIONS
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
 from dockfactory.solver.outline import projected_outline, projected_outlines
 
-__all__ = ["eccentricity_offset", "eccentricity_offsets", "correct_eccentricity"]
+__all__ = ["eccentricity_offset", "eccentricity_offsets", "eccentricity_corrected",
+           "section_keep", "correct_eccentricity"]
 
 
 def eccentricity_offset(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray:
@@ -59,18 +60,29 @@ def eccentricity_offsets(markers, cam_from_s, focal_px, pp, coeffs=None) -> np.n
     return np.where(ok[:, None], centroid - centre, 0.0)
 
 
-def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitter,
-                         inliers) -> JointFit:
-    """Refit with every inlier's centre moved by minus its predicted offset under ``fit``
-    (``inliers`` (N,) bool per input row). ``points`` is not modified."""
+def section_keep(points: SectionPoints, inliers) -> dict:
+    """{section: (n_s,) bool}: which of ``points``' rows are ``inliers`` (N,) per input row."""
+    return {s: np.array([bool(inliers[k]) for k in points.rows[s]], dtype=bool)
+            for s in SECTIONS}
+
+
+def eccentricity_corrected(fit: JointFit, points: SectionPoints, fitter: JointFitter) -> dict:
+    """{section: (n_s, 2) px}: every point's centre moved by minus its predicted offset under
+    ``fit``. ``points`` is not modified."""
     cams = fit.cams
     pp, coeffs = (fitter.principal_point, None) if fit.intrinsics is None else \
         (fit.intrinsics.principal_point, fit.intrinsics.coeffs)
-    keep = {s: np.array([bool(inliers[k]) for k in points.rows[s]], dtype=bool)
-            for s in SECTIONS}
     corrected = {}
     for s in SECTIONS:
         off = eccentricity_offsets([points.markers[k] for k in points.rows[s]], cams[s],
                                    fit.focal_px, pp, coeffs)
         corrected[s] = points.points_2d[s] - off
-    return fitter.refit(fit, points, keep, points_2d=corrected)
+    return corrected
+
+
+def correct_eccentricity(fit: JointFit, points: SectionPoints, fitter: JointFitter,
+                         inliers) -> JointFit:
+    """Refit with every inlier's centre moved by minus its predicted offset under ``fit``
+    (``inliers`` (N,) bool per input row). ``points`` is not modified."""
+    return fitter.refit(fit, points, section_keep(points, inliers),
+                        points_2d=eccentricity_corrected(fit, points, fitter))

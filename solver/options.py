@@ -299,6 +299,10 @@ class DockingOptions:
       first fit predicts for its marker is a partly hidden marker (:mod:`solver.suspects`);
     - ``eccentricity``: correct detected centres (centroids of the disc's image) by their
       predicted perspective offset and refit (:mod:`solver.eccentricity`).
+    - ``disc_noise``: when the noise is estimated from the residuals (no ``sigma_px``), the
+      covariance of a fit from detections models each centre's noise by the shape of its
+      disc's image (:mod:`solver.disc_noise`: larger along the ellipse's major axis); False:
+      isotropic.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
@@ -307,6 +311,7 @@ class DockingOptions:
     model_choice: ModelChoiceOptions = field(default_factory=ModelChoiceOptions)
     min_extent: float = 0.85
     eccentricity: bool = True
+    disc_noise: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.min_extent) and 0 < self.min_extent <= 1):

@@ -142,7 +142,7 @@ T_FACTOR_CAP = 3.0   # dof / (dof - 2) at dof = 3; below, a Student t's variance
 
 
 def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: float | None,
-                             floor_px: float | None = None):
+                             floor_px: float | None = None, point_cov: np.ndarray | None = None):
     """(cov (p, p), sigma used): sigma^2 (J^T J)^-1 with ``sigma_px`` when given.
 
     Without it sigma is estimated from the residuals, s^2 = r.r / dof (dof = m - p), and the
@@ -151,17 +151,38 @@ def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: f
     dof / (dof - 2), so this makes z = error / std have RMS 1 (a docking frame has dof 5-15: the
     std of X grows 1.08-1.29x). ``floor_px``: the centre noise measured on labelled data for
     this detector; the estimate is never below it (the residuals of a frame underrate noise that
-    is correlated between markers, which moves the pose without showing in them)."""
+    is correlated between markers, which moves the pose without showing in them).
+
+    ``point_cov`` (N, 2, 2), rows of ``jac`` = 2N interleaved (u, v): the relative shape T_i of
+    each point's noise covariance (e.g. :func:`solver.disc_noise.noise_shapes`; None: every
+    T_i = I, the isotropic case above, same numbers). The noise of point i is then k^2 T_i and
+    the covariance of the unweighted least-squares estimate is the sandwich
+    k^2 (J^T J)^-1 J^T T J (J^T J)^-1. k^2 is estimated without bias as r.r / tr((I - P) T)
+    (P = J (J^T J)^-1 J^T, so that tr((I - P) T) = m - p when T = I; Student-t factor as above
+    with dof = m - p); ``sigma_px`` and ``floor_px`` are per-axis noise averaged over the points,
+    k^2 mean(tr T_i) / 2, and the sigma returned is that average (px)."""
     m, p = jac.shape
+    inv = inverse_spd(jac.T @ jac)
+    mean_var, dof_eff, meat = 1.0, float(m - p), None
+    if point_cov is not None and np.all(np.isfinite(inv)):
+        t = np.asarray(point_cov, dtype=np.float64)
+        jr = jac.reshape(-1, 2, p)
+        meat = np.einsum("nap,nab,nbq->pq", jr, t, jr)
+        mean_var = float(np.trace(t, axis1=1, axis2=2).mean()) / 2.0
+        dof_eff = 2.0 * t.shape[0] * mean_var - float(np.sum(inv * meat))    # tr((I - P) T)
     if sigma_px is not None:
-        sigma2 = scale2 = float(sigma_px) ** 2
+        sigma2 = scale2 = float(sigma_px) ** 2 / mean_var
     else:
         dof = m - p
-        sigma2 = float(residuals @ residuals) / dof if dof > 0 else float("inf")
+        sigma2 = float(residuals @ residuals) / dof_eff if dof > 0 else float("inf")
         scale2 = sigma2 * (min(dof / (dof - 2.0), T_FACTOR_CAP) if dof > 2 else T_FACTOR_CAP)
         if floor_px is not None:
-            sigma2, scale2 = max(sigma2, floor_px ** 2), max(scale2, floor_px ** 2)
-    return scale2 * inverse_spd(jac.T @ jac), float(np.sqrt(sigma2))
+            floor2 = floor_px ** 2 / mean_var
+            sigma2, scale2 = max(sigma2, floor2), max(scale2, floor2)
+    sigma_used = float(np.sqrt(sigma2 * mean_var))
+    if meat is None:
+        return scale2 * inv, sigma_used
+    return scale2 * (inv @ meat @ inv), sigma_used
 
 
 def inverse_spd(a: np.ndarray) -> np.ndarray:

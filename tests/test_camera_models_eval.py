@@ -61,6 +61,19 @@ def test_self_calibration_recovers_the_camera_and_beats_the_pinhole(runs):
     assert abs(run["intrinsics_error"]["focal_pct"]["mean"]) < 1.0
     assert run["pose"]["alpha"]["rmse"] < pin["pose"]["alpha"]["rmse"]
     assert run["pose"]["y"]["rmse"] < pin["pose"]["y"]["rmse"]
+    # the references solve through the true camera: no principal point or k1 error of their own,
+    # and each solve's RMSE is divided by the reference solved the same way (alone or as a run)
+    for name in ("true intrinsics per frame (reference)", "true intrinsics per docking run (reference)"):
+        ref = block[name]
+        assert ref["n_solved"] == 20 and ref["models_chosen"] == {"pinhole": 20}
+        assert ref["intrinsics_error"]["pp_px"]["rmse"] == pytest.approx(0.0, abs=1e-9)
+        assert ref["intrinsics_error"]["k1"]["rmse"] == pytest.approx(0.0, abs=1e-12)
+        assert ref["rmse_over_reference"] == pytest.approx({"x": 1.0, "y": 1.0, "alpha": 1.0})
+    ref_run = block["true intrinsics per docking run (reference)"]["pose"]
+    for c in ("x", "y", "alpha"):
+        assert run["rmse_over_reference"][c] == pytest.approx(run["pose"][c]["rmse"] / ref_run[c]["rmse"])
+    # the pinhole's alpha pays for the camera's defects; the true camera does not
+    assert pin["rmse_over_reference"]["alpha"] > 2.0
 
 
 @pytest.mark.slow
@@ -77,3 +90,4 @@ def test_solve_cli_self_calibrates_each_docking_run(runs, tmp_path, capsys):
     assert main(["solve", str(runs.root), "--oracle-noise", "0.1", "--camera-model", "fisheye",
                  "--out", str(tmp_path / "q.json")]) == 2
     assert "fisheye" in capsys.readouterr().err
+

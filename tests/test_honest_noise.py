@@ -105,10 +105,14 @@ def test_the_bound_and_the_oracle_use_the_honest_sigma(evaluated):
     ds, poses, _, metrics, rows = evaluated
     test = [r for r in rows if r["split"] == "test"]
     sigma = metrics["centre_noise_px"]
+    disc = metrics["centre_noise"]["disc_model"]["overall"]["fisher_px"]   # the disc model's scale
     for r in test:
-        bound = frame_bound(ds.labels[r["frame_id"]], poses["frames"][r["frame_id"]]["marker_ids"], sigma)
+        ids = poses["frames"][r["frame_id"]]["marker_ids"]
+        bound = frame_bound(ds.labels[r["frame_id"]], ids, sigma)
+        shaped = frame_bound(ds.labels[r["frame_id"]], ids, sigma, disc)
         for c in ("x", "y", "alpha"):
-            assert r[f"crb_{c}"] == pytest.approx(bound[c], rel=1e-12)
+            assert r[f"crb_iso_{c}"] == pytest.approx(bound[c], rel=1e-12)
+            assert r[f"crb_{c}"] == pytest.approx(shaped[c], rel=1e-12)
     used = metrics["centre_noise"]["used"]
     sigma = metrics["centre_noise"]["overall"]["rms_px"]
     assert used["name"] == "rms_px" and used["value"] == sigma and used["n"] == 40
@@ -118,6 +122,8 @@ def test_the_bound_and_the_oracle_use_the_honest_sigma(evaluated):
     assert all(r["sigma_px"] == sigma for r in test)
     crb = metrics["localization"]["crb"]["x"]
     assert crb["bound_rms"] == pytest.approx(math.sqrt(np.mean([r["crb_x"] ** 2 for r in test])), rel=1e-12)
+    crb = metrics["localization"]["crb_isotropic"]["x"]
+    assert crb["bound_rms"] == pytest.approx(math.sqrt(np.mean([r["crb_iso_x"] ** 2 for r in test])), rel=1e-12)
 
 
 def test_gate_is_in_pixels_and_a_used_marker_without_a_detection_is_counted():

@@ -74,7 +74,7 @@ LAYERS = {
     # 4 robust estimation and identification
     "ransac": 4, "identify": 4,
     # 5 entry points and the docking pipeline
-    "pnpf": 5, "docking": 5, "suspects": 5, "eccentricity": 5, "sequence": 5,
+    "pnpf": 5, "docking": 5, "suspects": 5, "eccentricity": 5, "sequence": 5, "disc_noise": 5,
 }
 
 

@@ -1,0 +1,252 @@
+"""Centre noise shaped by the disc's image: the bound, the solver's covariance and the scale (issue 12).
+
+The detector's centres scatter more along the major axis of a disc's (squeezed) image than along
+its minor axis (solver.disc_noise). With such noise:
+- the Cramer-Rao bound with per-point noise shapes (solver.crb ``noise_shapes``) is the RMSE of the
+  efficient (weighted maximum-likelihood) estimator, Monte-Carlo within 10 %, while the isotropic
+  bound at the same per-axis noise is 20 % too large for Y (the issue's symptom);
+- the covariance of the solver's unweighted fit is the sandwich (covariance_from_jacobian with
+  ``point_cov``), and solve_docking's reported std gives RMS z within 0.88-1.12 over 240 frames
+  (isotropic: X and alpha above 1.1, Y below 0.92);
+- the bound's scale comes from the Fisher information of the whitened centre errors (a Student t
+  fit), which gross errors do not inflate the way they inflate the RMS.
+Tolerances: 400 Monte-Carlo draws give an RMS to 1 / sqrt(800) = 3.5 % (10 % is 2.8 standard
+errors); 240 frames give RMS z to 4.6 % (0.12 is 2.6 standard errors). Seeded throughout.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dockfactory.core.geometry import polygon_area_centroid, pose_components, transform_points
+from dockfactory.core.layout import marker_outline
+from dockfactory.eval.centre_noise_disc import frame_noise_px, label_noise_shapes, scale_stats
+from dockfactory.solver import DockingOptions, InvalidSolverInput, crb_d_from_b, solve_docking
+from dockfactory.solver.disc_noise import (
+    REFERENCE_RADIUS_PX,
+    disc_ellipses,
+    noise_shapes,
+    section_noise_shapes,
+)
+from dockfactory.solver.lie import so3_exp
+from dockfactory.solver.refine import (
+    covariance_from_jacobian,
+    d_from_b_jacobian,
+    joint_jacobian,
+    refine_joint,
+    relative_pose,
+    residuals_and_jacobian,
+)
+from dockfactory.solver.synthetic import default_layout, docking_scene
+
+LAYOUT = default_layout()
+KEYS = ("x_mm", "y_mm", "alpha_deg")
+SIGMA = 0.1          # px per axis, averaged over the points
+
+
+def _shapes(sc) -> tuple[np.ndarray, np.ndarray]:
+    return (section_noise_shapes([m for m in LAYOUT if m.section == "A"], sc.cam_from_d, sc.focal_px),
+            section_noise_shapes([m for m in LAYOUT if m.section == "B"], sc.cam_from_b, sc.focal_px))
+
+
+def _noise_cov(shapes: np.ndarray, sigma: float) -> np.ndarray:
+    """(N, 2, 2) px^2: shapes scaled to a per-axis noise ``sigma`` averaged over the points."""
+    return sigma ** 2 * shapes / (np.trace(shapes, axis1=1, axis2=2).mean() / 2.0)
+
+
+def _joint_jac(sc, uv_a, uv_b, state):
+    ra, ja, _ = residuals_and_jacobian(sc.points_a, uv_a, sc.principal_point, state[0], state[1], state[4])
+    rb, jb, _ = residuals_and_jacobian(sc.points_b, uv_b, sc.principal_point, state[2], state[3], state[4])
+    return np.concatenate([ra, rb]), joint_jacobian(ja, jb)
+
+
+def _weighted_fit(sc, uv_a, uv_b, cov_inv, iterations=4) -> dict:
+    """Gauss-Newton of the weighted (maximum-likelihood) cost from the truth: pose components."""
+    ca, cb = sc.cam_from_d, sc.cam_from_b
+    st = [ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3], sc.focal_px]
+    for _ in range(iterations):
+        r, j = _joint_jac(sc, uv_a, uv_b, st)
+        jr = j.reshape(-1, 2, 13)
+        h = np.einsum("nap,nab,nbq->pq", jr, cov_inv, jr)
+        d = np.linalg.solve(h, -np.einsum("nap,nab,nb->p", jr, cov_inv, r.reshape(-1, 2)))
+        st = [so3_exp(d[:3]) @ st[0], st[1] + d[3:6], so3_exp(d[6:9]) @ st[2], st[3] + d[9:12], st[4] + d[12]]
+    return pose_components(relative_pose(*st[:4]))
+
+
+@pytest.fixture(scope="module")
+def monte_carlo():
+    """One docking frame, 400 draws of disc-shaped noise: errors of the weighted fit and of the
+    solver's unweighted joint LM, the scene and its shapes."""
+    rng = np.random.default_rng(7)
+    sc = docking_scene(rng)
+    ta, tb = _shapes(sc)
+    cov = _noise_cov(np.concatenate([ta, tb]), SIGMA)
+    chol, cov_inv, na = np.linalg.cholesky(cov), np.linalg.inv(cov), len(ta)
+    truth = pose_components(sc.d_from_b)
+    ca, cb = sc.cam_from_d, sc.cam_from_b
+    weighted, plain = [], []
+    for _ in range(400):
+        z = np.einsum("nij,nj->ni", chol, rng.normal(size=(len(cov), 2)))
+        uv_a, uv_b = sc.uv_a + z[:na], sc.uv_b + z[na:]
+        est = _weighted_fit(sc, uv_a, uv_b, cov_inv)
+        weighted.append([est[k] - truth[k] for k in KEYS])
+        jr = refine_joint(sc.points_a, uv_a, sc.points_b, uv_b, sc.principal_point, ca[:3, :3], ca[:3, 3],
+                          cb[:3, :3], cb[:3, 3], sc.focal_px)
+        est = pose_components(relative_pose(jr.rotation_a, jr.translation_a, jr.rotation_b, jr.translation_b))
+        plain.append([est[k] - truth[k] for k in KEYS])
+    return sc, (ta, tb), np.sqrt(np.mean(np.square(weighted), axis=0)), np.sqrt(np.mean(np.square(plain), axis=0))
+
+
+def test_the_bound_with_disc_shaped_noise_is_the_rmse_of_the_efficient_estimator(monte_carlo):
+    sc, shapes, rmse_weighted, _ = monte_carlo
+    args = (sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px, sc.principal_point, SIGMA)
+    shaped = np.array([crb_d_from_b(*args, noise_shapes=shapes).std[k] for k in KEYS])
+    iso = np.array([crb_d_from_b(*args).std[k] for k in KEYS])
+    assert rmse_weighted / shaped == pytest.approx(np.ones(3), abs=0.10)
+    # the isotropic bound at the same per-axis noise overstates Y (measured 1.23x): the issue's
+    # measured / bound of 0.6 for Y; X and alpha it understates (0.92x)
+    assert iso[1] / shaped[1] > 1.15 and iso[0] < shaped[0] and iso[2] < shaped[2]
+    # the shapes' scale does not matter, only their form
+    scaled = crb_d_from_b(*args, noise_shapes=(5.0 * shapes[0], 5.0 * shapes[1])).std
+    assert [scaled[k] for k in KEYS] == pytest.approx(shaped.tolist(), rel=1e-9)
+
+
+def test_the_covariance_of_the_unweighted_fit_is_the_sandwich(monte_carlo):
+    sc, (ta, tb), _, rmse_plain = monte_carlo
+    ca, cb = sc.cam_from_d, sc.cam_from_b
+    _, jac = _joint_jac(sc, sc.uv_a, sc.uv_b, [ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3], sc.focal_px])
+    prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
+    zero = np.zeros(jac.shape[0])
+    cov, sigma = covariance_from_jacobian(jac, zero, SIGMA, point_cov=np.concatenate([ta, tb]))
+    std = np.sqrt(np.diag(prop @ cov[:12, :12] @ prop.T))[[0, 1, 3]]
+    assert sigma == pytest.approx(SIGMA, rel=1e-12)
+    assert rmse_plain / std == pytest.approx(np.ones(3), abs=0.10)
+    iso, _ = covariance_from_jacobian(jac, zero, SIGMA)
+    iso_std = np.sqrt(np.diag(prop @ iso[:12, :12] @ prop.T))[[0, 1, 3]]
+    assert rmse_plain[1] / iso_std[1] < 0.9 and rmse_plain[0] / iso_std[0] > 1.1
+
+
+def test_identity_shapes_give_the_isotropic_covariance_and_bound():
+    rng = np.random.default_rng(3)
+    jac, res = rng.normal(size=(28, 13)), rng.normal(0.0, 0.1, 28)
+    eye = np.tile(np.eye(2), (14, 1, 1))
+    for sigma, floor in ((None, None), (None, 0.5), (0.2, None)):
+        cov, s = covariance_from_jacobian(jac, res, sigma, floor)
+        for c in (1.0, 3.0):    # any multiple of I: sigma is per-axis noise, not the shapes' scale
+            cov_i, s_i = covariance_from_jacobian(jac, res, sigma, floor, point_cov=c * eye)
+            assert cov_i == pytest.approx(cov, rel=1e-9) and s_i == pytest.approx(s, rel=1e-12)
+    sc = docking_scene(np.random.default_rng(5))
+    args = (sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px, sc.principal_point, 0.1)
+    ones = (np.tile(np.eye(2), (len(sc.points_a), 1, 1)), np.tile(np.eye(2), (len(sc.points_b), 1, 1)))
+    for problem in ("joint", "independent", "calibrated"):
+        a = crb_d_from_b(*args, problem=problem).covariance
+        b = crb_d_from_b(*args, problem=problem, noise_shapes=ones).covariance
+        assert b == pytest.approx(a, rel=1e-9)
+
+
+def test_bad_noise_shapes_are_refused():
+    sc = docking_scene(np.random.default_rng(5))
+    args = (sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px, sc.principal_point, 0.1)
+    na, nb = len(sc.points_a), len(sc.points_b)
+    good = np.tile(np.eye(2), (nb, 1, 1))
+    for bad in (np.tile(np.eye(2), (na - 1, 1, 1)),                     # one short
+                np.tile([[1.0, 2.0], [2.0, 1.0]], (na, 1, 1)),         # not positive definite
+                np.tile([[1.0, 0.1], [0.0, 1.0]], (na, 1, 1)),         # not symmetric
+                np.full((na, 2, 2), np.nan)):
+        with pytest.raises(InvalidSolverInput, match="noise_shapes"):
+            crb_d_from_b(*args, noise_shapes=(bad, good))
+    with pytest.raises(InvalidSolverInput, match="pair"):
+        crb_d_from_b(*args, noise_shapes=good)
+
+
+def test_noise_shapes_follow_the_edge_fit_law():
+    # a round disc of the reference radius: T = I
+    assert noise_shapes(np.diag([REFERENCE_RADIUS_PX ** 2] * 2)[None])[0] == pytest.approx(np.eye(2), abs=1e-12)
+    # semi-axes 12 and 6 px, major axis at 30 deg: variance (10 / 12) x (0.5^-1.5, 1)
+    u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
+    v = np.array([-u[1], u[0]])
+    t = noise_shapes((144.0 * np.outer(u, u) + 36.0 * np.outer(v, v))[None])[0]
+    assert u @ t @ u == pytest.approx(10 / 12 * 0.5 ** -1.5, rel=1e-9)
+    assert v @ t @ v == pytest.approx(10 / 12, rel=1e-9) and u @ t @ v == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_disc_ellipses_match_the_projected_outline(seed):
+    """The first-order ellipse of a disc is the second moment of its projected outline (the
+    outline's points are at equal angles on the disc: their covariance is S / 2)."""
+    sc = docking_scene(np.random.default_rng(seed))
+    cams = {"A": sc.cam_from_d, "B": sc.cam_from_b}
+    for m in LAYOUT:
+        cam = cams[m.section]
+        pc = transform_points(cam, marker_outline(m, 64))
+        uv = sc.focal_px * pc[:, :2] / pc[:, 2:3]
+        s_outline = 2.0 * np.cov(uv.T, bias=True)
+        centre = transform_points(cam, np.asarray(m.center_mm)[None])
+        s = disc_ellipses(centre, np.asarray(m.normal)[None] @ cam[:3, :3].T, [m.diameter_mm], sc.focal_px)[0]
+        assert s == pytest.approx(s_outline, rel=0.02, abs=0.02 * np.trace(s_outline))
+
+
+def test_label_shapes_are_the_section_shapes():
+    """eval's shapes from a label's D-frame geometry equal the solver's from the layout."""
+    sc = docking_scene(np.random.default_rng(9))
+    cams = {"A": sc.cam_from_d, "B": sc.cam_from_b}
+    d_from = {"A": np.eye(4), "B": sc.d_from_b}
+    marks = [{"center_d_mm": transform_points(d_from[m.section], np.asarray(m.center_mm)[None])[0].tolist(),
+              "normal_d": (d_from[m.section][:3, :3] @ np.asarray(m.normal)).tolist(),
+              "diameter_mm": m.diameter_mm} for m in LAYOUT]
+    label = {"camera": {"cam_from_d": sc.cam_from_d.tolist(), "focal_px": sc.focal_px}}
+    expect = np.concatenate([section_noise_shapes([m], cams[m.section], sc.focal_px) for m in LAYOUT])
+    got = label_noise_shapes(label, marks)
+    assert got == pytest.approx(expect, rel=1e-9, abs=1e-12)
+    assert label_noise_shapes({"camera": label["camera"]}, [{"center_d_mm": [0, 0, 1]}]) is None
+    assert frame_noise_px(np.tile(4.0 * np.eye(2), (3, 1, 1)), 0.05) == pytest.approx(0.1)
+
+
+def test_the_bound_scale_is_the_core_not_the_gross_errors():
+    rng = np.random.default_rng(4)
+    core = rng.normal(0.0, 0.06, (800, 2))
+    gaussian = scale_stats(np.sum(core ** 2, axis=1))
+    assert gaussian["fisher_px"] == pytest.approx(0.06, rel=0.05)
+    assert gaussian["fisher_px"] == pytest.approx(gaussian["rms_px"], rel=0.05)
+    gross = np.vstack([core, rng.normal(0.0, 1.5, (8, 2))])     # 1 % of centres 2 px off
+    mixed = scale_stats(np.sum(gross ** 2, axis=1))
+    assert mixed["rms_px"] > 2.0 * 0.06                          # the RMS is theirs
+    assert mixed["fisher_px"] == pytest.approx(0.06, rel=0.10)   # the Fisher information is the core's
+    assert mixed["t_dof"] is not None and mixed["t_dof"] < 30
+    assert scale_stats(np.zeros(0))["fisher_px"] is None and scale_stats(np.zeros(3))["fisher_px"] == 0.0
+
+
+def _image_centroids(sc):
+    cams = {"A": sc.cam_from_d, "B": sc.cam_from_b}
+    out = []
+    for m in LAYOUT:
+        pc = transform_points(cams[m.section], marker_outline(m))
+        out.append(polygon_area_centroid(sc.focal_px * pc[:, :2] / pc[:, 2:3] + sc.principal_point)[1])
+    return np.array(out)
+
+
+def test_solve_docking_reports_an_honest_std_under_disc_shaped_noise():
+    """Detections at the exact image centroids + disc-shaped noise (0.1 px per axis averaged),
+    240 frames: RMS z of X, Y, alpha within 0.88-1.12 with the disc model (the default), off
+    without it; the pose itself does not depend on the option."""
+    rng = np.random.default_rng(21)
+    cls = np.array([0 if m.section == "A" else 1 for m in LAYOUT])
+    z = {True: [], False: []}
+    for _ in range(240):
+        sc = docking_scene(rng)
+        cams = {"A": sc.cam_from_d, "B": sc.cam_from_b}
+        shapes = np.concatenate([section_noise_shapes([m], cams[m.section], sc.focal_px) for m in LAYOUT])
+        chol = np.linalg.cholesky(_noise_cov(shapes, SIGMA))
+        uv = _image_centroids(sc) + np.einsum("nij,nj->ni", chol, rng.normal(size=(len(LAYOUT), 2)))
+        truth = pose_components(sc.d_from_b)
+        res = {d: solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv),
+                                options=DockingOptions(disc_noise=d)) for d in (True, False)}
+        assert res[True].x_mm == res[False].x_mm and res[True].alpha_deg == res[False].alpha_deg
+        for d, r in res.items():
+            z[d].append([(getattr(r, k) - truth[k]) / r.std[k] for k in KEYS])
+    rms = {d: np.sqrt(np.mean(np.square(v), axis=0)) for d, v in z.items()}
+    assert rms[True] == pytest.approx(np.ones(3), abs=0.12), rms[True]
+    # isotropic (measured 1.19 / 0.83 / 1.20): X and alpha too confident, Y too cautious
+    assert rms[False][0] > 1.1 and rms[False][2] > 1.1 and rms[False][1] < 0.92, rms[False]
