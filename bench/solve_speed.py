@@ -23,7 +23,8 @@ kept: the cores are shared with other work), after a warm-up on the first five f
 OMP / MKL / OPENBLAS threads are set to 1 before numpy is imported: BLAS threads cost more
 than they give on these tiny matrices. Stages: ``identification`` (identify_markers), ``suspects``
 (leave_out_suspects, with its refit), ``eccentricity`` (eccentricity_corrected: the predicted
-offsets), ``disc noise`` (with_disc_noise: the covariance of the disc-shaped noise model) are
+offsets), ``disc noise`` (with_disc_noise: the covariance of the disc-shaped noise model, when the
+robust refit is off), ``robust refit`` (robust_refit: the reweighted last fit and its covariance) are
 timed by wrapping the functions the pipeline calls; ``fit`` is the rest of the frame (input
 checks, the first joint fit, the eccentricity refit, packaging of the result). The load average is printed before
 and after.
@@ -56,7 +57,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_MS = 15.0
-STAGES = ("identification", "fit", "suspects", "eccentricity", "disc noise")
+STAGES = ("identification", "fit", "suspects", "eccentricity", "disc noise", "robust refit")
 
 
 def use_solver_source(src: Path) -> None:
@@ -192,7 +193,8 @@ class StageClock:
     """Wraps the pipeline's stage functions in :mod:`solver.docking` to time them."""
 
     NAMES = {"identify_markers": "identification", "leave_out_suspects": "suspects",
-             "eccentricity_corrected": "eccentricity", "with_disc_noise": "disc noise"}
+             "eccentricity_corrected": "eccentricity", "with_disc_noise": "disc noise",
+             "robust_refit": "robust refit"}
 
     def __init__(self):
         import dockfactory.solver.docking as docking

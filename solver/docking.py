@@ -13,8 +13,10 @@ The docking pipeline, top layer of the solver:
    with the covariance of (X, Y, Z, alpha, beta, gamma) propagated to first order;
 3. detections only: suspects left out (:mod:`solver.suspects`) and the perspective
    eccentricity of the detected centres corrected (:mod:`solver.eccentricity`), each refit
-   started from the previous fit; with the noise estimated from the residuals, the final
-   covariance models each centre's noise by its disc's image (:mod:`solver.disc_noise`).
+   started from the previous fit; with the noise estimated from the residuals, each centre's
+   noise is modelled by its disc's image (:mod:`solver.disc_noise`): the last fit is
+   reweighted with Student-t tails (a gross centre loses its pull) and its covariance follows
+   that model.
 Options: :class:`solver.options.DockingOptions`.
 """
 from __future__ import annotations
@@ -33,7 +35,7 @@ from dockfactory.solver.camera_models import (
     project_normalized,
 )
 from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_sigma
-from dockfactory.solver.disc_noise import with_disc_noise
+from dockfactory.solver.disc_noise import robust_refit, with_disc_noise
 from dockfactory.solver.eccentricity import eccentricity_corrected, section_keep
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera
 from dockfactory.solver.identify import identify_markers, parse_detections
@@ -193,8 +195,8 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
 
 def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
                       fitter: JointFitter, options: DockingOptions) -> DockingResult:
-    """Identify, fit, leave out suspects, correct the eccentricity, refit; the covariance of
-    the disc noise model (``options.disc_noise``)."""
+    """Identify, fit, leave out suspects, correct the eccentricity, refit; the robust refit and
+    the covariance of the disc noise model (``options.disc_noise``, ``options.robust``)."""
     n_det = len(parse_detections(detections)[0])
     boxes = _row_array(boxes, n_det, (4,), "boxes", float)
     refined = _row_array(refined, n_det, (), "refined", bool)
@@ -217,7 +219,7 @@ def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
         points_2d = eccentricity_corrected(fit, points, fitter)
         fit = fitter.refit(fit, points, keep, points_2d=points_2d)
     if options.disc_noise and fitter.sigma_px is None:
-        fit = with_disc_noise(fit, points, fitter, keep, points_2d)
+        fit = (robust_refit if options.robust else with_disc_noise)(fit, points, fitter, keep, points_2d)
     marker_ids = tuple(ids[k] if used[k] else None for k in range(len(ids)))
     return DockingResult.from_fit(fit, marker_ids, inliers, ident.swapped)
 

@@ -303,6 +303,10 @@ class DockingOptions:
       covariance of a fit from detections models each centre's noise by the shape of its
       disc's image (:mod:`solver.disc_noise`: larger along the ellipse's major axis); False:
       isotropic.
+    - ``robust`` (with ``disc_noise``): the last refit of a frame from detections is an
+      iteratively reweighted least squares under the disc noise model with Student-t tails
+      (:func:`solver.disc_noise.robust_refit`); False: unweighted, the disc model's covariance
+      only.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
@@ -312,6 +316,7 @@ class DockingOptions:
     min_extent: float = 0.85
     eccentricity: bool = True
     disc_noise: bool = True
+    robust: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.min_extent) and 0 < self.min_extent <= 1):

@@ -343,11 +343,14 @@ class JointRefineResult:
 @dataclass(frozen=True)
 class Block:
     """One residual block: ``points_3d`` (n, 3) mm in a section's frame, their pixels
-    ``points_2d`` (n, 2), seen from pose number ``pose`` (camera from that section)."""
+    ``points_2d`` (n, 2), seen from pose number ``pose`` (camera from that section).
+    ``sqrt_info`` (n, 2, 2) or None: each point's residual (and its Jacobian rows) is multiplied
+    by its matrix (a weighted, whitened least squares: W_i^(1/2) for information W_i)."""
 
     points_3d: np.ndarray
     points_2d: np.ndarray
     pose: int
+    sqrt_info: np.ndarray | None = None
 
 
 def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
@@ -369,6 +372,8 @@ def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
         rot, t = poses[b.pose]
         r, j, z = residuals_and_jacobian(b.points_3d, b.points_2d, pp, rot, t, focal,
                                          want_jacobian)
+        if b.sqrt_info is not None:
+            r, j = _whitened(b.sqrt_info, r, j)
         parts.append(r)
         valid = valid and bool(z.min() > 0.0)
         if want_jacobian:
@@ -377,6 +382,16 @@ def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
         row += r.size
     res = np.concatenate(parts)
     return res, jac, valid and bool(np.isfinite(res).all())
+
+
+def _whitened(sqrt_info: np.ndarray, r: np.ndarray, j: np.ndarray | None):
+    """(r, j) of n points (2n interleaved rows) with each point's rows multiplied by its
+    ``sqrt_info`` (n, 2, 2)."""
+    n = sqrt_info.shape[0]
+    r = np.einsum("nab,nb->na", sqrt_info, r.reshape(n, 2)).reshape(-1)
+    if j is not None:
+        j = np.einsum("nab,nbk->nak", sqrt_info, j.reshape(n, 2, -1)).reshape(2 * n, -1)
+    return r, j
 
 
 def _stack_batched(blocks, poses, intr: Intrinsics, model: CameraModel, want_jacobian: bool):
@@ -388,6 +403,10 @@ def _stack_batched(blocks, poses, intr: Intrinsics, model: CameraModel, want_jac
     p3 = np.concatenate([b.points_3d for b in blocks])
     p2 = np.concatenate([b.points_2d for b in blocks])
     res, j, z = model_residuals_and_jacobian(p3, p2, intr, model, rots, ts, want_jacobian)
+    if any(b.sqrt_info is not None for b in blocks):
+        info = np.concatenate([np.broadcast_to(np.eye(2), (b.points_3d.shape[0], 2, 2))
+                               if b.sqrt_info is None else b.sqrt_info for b in blocks])
+        res, j = _whitened(info, res, j)
     valid = bool(z.min() > 0.0) and bool(np.isfinite(res).all())
     if not want_jacobian:
         return res, None, valid

@@ -242,7 +242,7 @@ def test_solve_docking_reports_an_honest_std_under_disc_shaped_noise():
         uv = _image_centroids(sc) + np.einsum("nij,nj->ni", chol, rng.normal(size=(len(LAYOUT), 2)))
         truth = pose_components(sc.d_from_b)
         res = {d: solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv),
-                                options=DockingOptions(disc_noise=d)) for d in (True, False)}
+                                options=DockingOptions(disc_noise=d, robust=False)) for d in (True, False)}
         assert res[True].x_mm == res[False].x_mm and res[True].alpha_deg == res[False].alpha_deg
         for d, r in res.items():
             z[d].append([(getattr(r, k) - truth[k]) / r.std[k] for k in KEYS])
@@ -250,3 +250,69 @@ def test_solve_docking_reports_an_honest_std_under_disc_shaped_noise():
     assert rms[True] == pytest.approx(np.ones(3), abs=0.12), rms[True]
     # isotropic (measured 1.19 / 0.83 / 1.20): X and alpha too confident, Y too cautious
     assert rms[False][0] > 1.1 and rms[False][2] > 1.1 and rms[False][1] < 0.92, rms[False]
+
+
+def _disc_noise_frame(rng, sigma=SIGMA):
+    """(scene, class ids, detections = exact image centroids + disc-shaped Gaussian noise)."""
+    sc = docking_scene(rng)
+    cams = {"A": sc.cam_from_d, "B": sc.cam_from_b}
+    shapes = np.concatenate([section_noise_shapes([m], cams[m.section], sc.focal_px) for m in LAYOUT])
+    chol = np.linalg.cholesky(_noise_cov(shapes, sigma))
+    uv = _image_centroids(sc) + np.einsum("nij,nj->ni", chol, rng.normal(size=(len(LAYOUT), 2)))
+    return sc, np.array([0 if m.section == "A" else 1 for m in LAYOUT]), uv
+
+
+@pytest.mark.slow   # 2 x 160 synthetic frames through the whole docking pipeline
+def test_the_robust_refit_costs_nothing_on_clean_frames_and_keeps_an_honest_std():
+    """Disc-shaped Gaussian noise, no gross error: the reweighted fit's errors are those of the
+    unweighted fit (RMSE within 10 %) and its RMS z stays within 0.85-1.15."""
+    rng = np.random.default_rng(22)
+    err, z = {True: [], False: []}, []
+    for _ in range(160):
+        sc, cls, uv = _disc_noise_frame(rng)
+        truth = pose_components(sc.d_from_b)
+        for robust in (True, False):
+            r = solve_docking(LAYOUT, sc.principal_point, detections=(cls, uv), options=DockingOptions(robust=robust))
+            err[robust].append([getattr(r, k) - truth[k] for k in KEYS])
+            if robust:
+                z.append([(getattr(r, k) - truth[k]) / r.std[k] for k in KEYS])
+    rmse = {d: np.sqrt(np.mean(np.square(v), axis=0)) for d, v in err.items()}
+    assert rmse[True] == pytest.approx(rmse[False], rel=0.10)
+    rms_z = np.sqrt(np.mean(np.square(z), axis=0))
+    assert np.all((rms_z > 0.85) & (rms_z < 1.15)), rms_z
+
+
+@pytest.mark.slow
+def test_the_robust_refit_takes_the_pull_of_a_gross_centre():
+    """One centre per frame 1.5 px off (a partly hidden or glared disc that passed every other
+    rule), 100 frames: the unweighted fit's X and alpha errors grow several times over those of
+    an oracle that drops the bad centre; the reweighted fit, which is not told which one it is,
+    takes most of that back, and its std follows its errors."""
+    rng = np.random.default_rng(23)
+    err = {"dropped": [], "plain": [], "robust": []}
+    z = []
+    unweighted = DockingOptions(robust=False)
+    for _ in range(100):
+        sc, cls, uv = _disc_noise_frame(rng)
+        truth = pose_components(sc.d_from_b)
+        k = int(rng.integers(len(LAYOUT)))
+        a = rng.uniform(0, 2 * np.pi)
+        uv[k] += 1.5 * np.array([np.cos(a), np.sin(a)])
+        others = np.arange(len(LAYOUT)) != k
+        runs = (("dropped", cls[others], uv[others], unweighted), ("plain", cls, uv, unweighted),
+                ("robust", cls, uv, DockingOptions()))
+        for name, c, u, options in runs:
+            r = solve_docking(LAYOUT, sc.principal_point, detections=(c, u), options=options)
+            err[name].append([getattr(r, key) - truth[key] for key in KEYS])
+            if name == "robust":
+                z.append([(getattr(r, key) - truth[key]) / r.std[key] for key in KEYS])
+    rmse = {d: np.sqrt(np.mean(np.square(v), axis=0)) for d, v in err.items()}
+    rms_z = np.sqrt(np.mean(np.square(z), axis=0))
+    # measured: X / alpha RMSE dropped 0.39 mm / 0.025 deg, unweighted 1.05 / 0.067, reweighted
+    # 0.54 / 0.034 (a centre that alone fixes a direction of the pose, e.g. A5 at the end of the
+    # layout, cannot be told from the others: the oracle still beats the reweighting there);
+    # RMS z 0.90 / 1.04 / 0.95
+    assert np.all(rmse["plain"][[0, 2]] > 2.0 * rmse["dropped"][[0, 2]]), rmse
+    assert np.all(rmse["robust"][[0, 2]] < 0.6 * rmse["plain"][[0, 2]]), rmse
+    assert np.all(rmse["robust"][[0, 2]] < 1.5 * rmse["dropped"][[0, 2]]), rmse
+    assert np.all((rms_z > 0.8) & (rms_z < 1.2)), rms_z
