@@ -36,7 +36,6 @@ from dockfactory.solver.camera_models import Intrinsics, camera_model
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
 from dockfactory.solver.refine import (
-    T_FACTOR_CAP,
     Block,
     covariance_from_jacobian,
     d_from_b_jacobian,
@@ -44,6 +43,8 @@ from dockfactory.solver.refine import (
     refine_blocks,
     relative_pose,
     stack_blocks,
+    student_t_factor,
+    whitened,
 )
 
 __all__ = ["SHAPE_EXPONENT", "SIZE_EXPONENT", "REFERENCE_RADIUS_PX", "disc_ellipses",
@@ -145,10 +146,10 @@ def _stacked(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: di
     return tuple(blocks), poses, intr, camera_model(fit.model), np.concatenate(shapes)
 
 
-def t_weights(res: np.ndarray, jac: np.ndarray, shapes: np.ndarray, previous: np.ndarray | None = None,
+def t_weights(rho: np.ndarray, jw: np.ndarray, previous: np.ndarray | None = None,
               nu: float = ROBUST_NU) -> np.ndarray:
-    """(n,) Student-t weights (nu + 2) / (nu + q_i / s^2) of n points at residuals ``res`` (2n,)
-    with Jacobian ``jac`` (2n, p), whitened by each point's noise ``shapes``.
+    """(n,) Student-t weights (nu + 2) / (nu + q_i / s^2) of n points from their residuals
+    ``rho`` (n, 2) and Jacobian rows ``jw`` (n, 2, p), both whitened by each point's noise shape.
 
     First round (``previous`` None): q_i is point i's leave-one-out residual, rho_i^T (I -
     H_ii)^-1 rho_i (H the hat matrix of the whitened fit), and s^2 their median over that of a
@@ -156,11 +157,8 @@ def t_weights(res: np.ndarray, jac: np.ndarray, shapes: np.ndarray, previous: np
     leverage) still stands out, and so does not mask itself. Later rounds: q_i the whitened
     residual, s^2 = sum w_i q_i / (2n - p) with the previous weights (the scale step of the t
     likelihood's EM)."""
-    n, p = shapes.shape[0], jac.shape[1]
-    winv = np.linalg.inv(np.linalg.cholesky(shapes))
-    rho = np.einsum("nab,nb->na", winv, res.reshape(n, 2))
+    n, p = jw.shape[0], jw.shape[2]
     if previous is None:
-        jw = np.einsum("nab,nbp->nap", winv, jac.reshape(n, 2, p))
         h = np.eye(2) - np.einsum("nap,pq,nbq->nab", jw, inverse_spd(np.einsum("nap,naq->pq", jw, jw)), jw)
         q = np.einsum("na,nab,nb->n", rho, np.linalg.inv(h), rho)
         s2 = float(np.median(q)) / MEDIAN_CHI2_2
@@ -168,6 +166,14 @@ def t_weights(res: np.ndarray, jac: np.ndarray, shapes: np.ndarray, previous: np
         q = np.sum(rho * rho, axis=1)
         s2 = float(previous @ q) / max(2 * n - p, 1)
     return (nu + 2.0) / (nu + q / max(s2, 1e-300))
+
+
+def _whitened_residuals(blocks, poses, intr, model, winv: np.ndarray):
+    """(rho (n, 2), jw (n, 2, p), valid) of the unweighted blocks at (poses, intr), whitened by
+    ``winv`` (n, 2, 2): each point's inverse Cholesky factor of its noise shape."""
+    res, jac, valid = stack_blocks(blocks, poses, intr, model)
+    r, j = whitened(winv, res, jac)
+    return r.reshape(-1, 2), j.reshape(winv.shape[0], 2, -1), valid
 
 
 def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: dict,
@@ -191,20 +197,20 @@ def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep
     w = None
     try:
         for _ in range(ROBUST_ITERATIONS):
-            res, jac, valid = stack_blocks(blocks, poses, intr, model)
+            rho, jw, valid = _whitened_residuals(blocks, poses, intr, model, winv)
             if not valid:
                 return with_disc_noise(fit, points, fitter, keep, points_2d)
-            w = t_weights(res, jac, shapes, w)
+            w = t_weights(rho, jw, w)
             info = np.sqrt(w)[:, None, None] * winv
             weighted = tuple(replace(b, sqrt_info=info[sizes[k]:sizes[k + 1]]) for k, b in enumerate(blocks))
             ref = refine_blocks(weighted, poses, intr, model, fitter.options)
             poses, intr = ref.poses, ref.intrinsics
     except SolverError:
         return with_disc_noise(fit, points, fitter, keep, points_2d)
-    return _robust_result(fit, ref, blocks, shapes, w)
+    return _robust_result(fit, ref, blocks, shapes, winv, w)
 
 
-def _robust_result(fit: JointFit, ref, blocks, shapes, previous: np.ndarray) -> JointFit:
+def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarray) -> JointFit:
     """The JointFit of the robust refinement ``ref``. Its covariance is the sandwich of the
     weighted estimate under the disc noise model, k^2 A^-1 B A^-1 with A = sum w_i J_i^T T_i^-1
     J_i and B = sum w_i^2 J_i^T T_i^-1 J_i (the final weights), the scale k^2 = sum w_i q_i /
@@ -213,18 +219,15 @@ def _robust_result(fit: JointFit, ref, blocks, shapes, previous: np.ndarray) -> 
     the detector.toml test split, 1.05 / 1.07 / 1.02 on scene B, 0.90 / 1.04 / 0.95 on synthetic
     frames with one centre 1.5 px off (the unweighted residuals' scale: 0.45 / 0.61 / 0.51)."""
     (ra, ta), (rb, tb) = ref.poses
-    res, jac, _ = stack_blocks(blocks, ref.poses, ref.intrinsics, ref.model)
-    n, p = shapes.shape[0], jac.shape[1]
-    winv = np.linalg.inv(np.linalg.cholesky(shapes))
-    rw = np.einsum("nab,nb->na", winv, res.reshape(n, 2))
-    jw = np.einsum("nab,nbp->nap", winv, jac.reshape(n, 2, p))
-    w = t_weights(res, jac, shapes, previous)
+    rw, jw, _ = _whitened_residuals(blocks, ref.poses, ref.intrinsics, ref.model, winv)
+    w = t_weights(rw, jw, previous)
     a_inv = inverse_spd(np.einsum("n,nap,naq->pq", w, jw, jw))
     b = np.einsum("n,nap,naq->pq", w * w, jw, jw)
-    dof = 2 * n - p
-    k2 = float(w @ np.sum(rw * rw, axis=1)) / max(dof, 1) * (min(dof / (dof - 2.0), T_FACTOR_CAP) if dof > 2 else T_FACTOR_CAP)
+    dof = 2 * shapes.shape[0] - jw.shape[2]
+    k2 = float(w @ np.sum(rw * rw, axis=1)) / max(dof, 1) * student_t_factor(dof)
     cov = k2 * (a_inv @ b @ a_inv)
     sigma = float(np.sqrt(k2 * np.trace(shapes, axis1=1, axis2=2).mean() / 2.0))   # px, per axis
+    res, _, _ = stack_blocks(blocks, ref.poses, ref.intrinsics, ref.model, want_jacobian=False)
     na = 2 * blocks[0].points_3d.shape[0]
     rmse = [float(np.sqrt(2.0 * (r @ r) / max(r.size, 1))) for r in (res[:na], res[na:])]
     cam_a, cam_b = np.eye(4), np.eye(4)

@@ -44,7 +44,7 @@ from dockfactory.solver.options import RefineOptions
 __all__ = ["residuals_and_jacobian", "joint_jacobian", "refine_pnpf", "refine_joint",
            "model_residuals_and_jacobian", "Block", "stack_blocks", "refine_blocks",
            "BlocksRefineResult",
-           "covariance_from_jacobian", "inverse_spd",
+           "covariance_from_jacobian", "student_t_factor", "whitened", "inverse_spd",
            "d_from_b_jacobian", "relative_pose", "rel_focal_std", "RefineResult",
            "JointRefineResult", "DEFAULT_REFINE"]
 
@@ -175,7 +175,7 @@ def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: f
     else:
         dof = m - p
         sigma2 = float(residuals @ residuals) / dof_eff if dof > 0 else float("inf")
-        scale2 = sigma2 * (min(dof / (dof - 2.0), T_FACTOR_CAP) if dof > 2 else T_FACTOR_CAP)
+        scale2 = sigma2 * student_t_factor(dof)
         if floor_px is not None:
             floor2 = floor_px ** 2 / mean_var
             sigma2, scale2 = max(sigma2, floor2), max(scale2, floor2)
@@ -183,6 +183,12 @@ def covariance_from_jacobian(jac: np.ndarray, residuals: np.ndarray, sigma_px: f
     if meat is None:
         return scale2 * inv, sigma_used
     return scale2 * (inv @ meat @ inv), sigma_used
+
+
+def student_t_factor(dof: float) -> float:
+    """dof / (dof - 2), the variance of a Student t with ``dof`` degrees of freedom, capped at
+    ``T_FACTOR_CAP`` (the factor an estimated sigma's covariance takes)."""
+    return min(dof / (dof - 2.0), T_FACTOR_CAP) if dof > 2 else T_FACTOR_CAP
 
 
 def inverse_spd(a: np.ndarray) -> np.ndarray:
@@ -373,7 +379,7 @@ def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
         r, j, z = residuals_and_jacobian(b.points_3d, b.points_2d, pp, rot, t, focal,
                                          want_jacobian)
         if b.sqrt_info is not None:
-            r, j = _whitened(b.sqrt_info, r, j)
+            r, j = whitened(b.sqrt_info, r, j)
         parts.append(r)
         valid = valid and bool(z.min() > 0.0)
         if want_jacobian:
@@ -384,7 +390,7 @@ def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
     return res, jac, valid and bool(np.isfinite(res).all())
 
 
-def _whitened(sqrt_info: np.ndarray, r: np.ndarray, j: np.ndarray | None):
+def whitened(sqrt_info: np.ndarray, r: np.ndarray, j: np.ndarray | None):
     """(r, j) of n points (2n interleaved rows) with each point's rows multiplied by its
     ``sqrt_info`` (n, 2, 2)."""
     n = sqrt_info.shape[0]
@@ -406,7 +412,7 @@ def _stack_batched(blocks, poses, intr: Intrinsics, model: CameraModel, want_jac
     if any(b.sqrt_info is not None for b in blocks):
         info = np.concatenate([np.broadcast_to(np.eye(2), (b.points_3d.shape[0], 2, 2))
                                if b.sqrt_info is None else b.sqrt_info for b in blocks])
-        res, j = _whitened(info, res, j)
+        res, j = whitened(info, res, j)
     valid = bool(z.min() > 0.0) and bool(np.isfinite(res).all())
     if not want_jacobian:
         return res, None, valid
