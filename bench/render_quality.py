@@ -41,6 +41,18 @@ VARIANTS = {
     "2spp-off": {"samples": 2, "denoise": "off"},
     "3spp-off": {"samples": 3, "denoise": "off"},
     "4spp-off": {"samples": 4, "denoise": "off"},
+    "1spp-blue": {"samples": 1, "sampling_pattern": "blue_noise"},
+    "2spp-blue": {"samples": 2, "sampling_pattern": "blue_noise"},
+    "1spp-blue-off": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise"},
+    "2spp-blue-off": {"samples": 2, "denoise": "off", "sampling_pattern": "blue_noise"},
+    "1spp-blue-med3": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "median3"},
+    "1spp-blue-med5": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "median5"},
+    "1spp-med3": {"samples": 1, "denoise": "off", "post_filter": "median3"},
+    "2spp-blue-med3": {"samples": 2, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "median3"},
+    "1spp-blue-g05": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "gauss05"},
+    "1spp-blue-g07": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "gauss07"},
+    "1spp-blue-g10": {"samples": 1, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "gauss10"},
+    "2spp-blue-g05": {"samples": 2, "denoise": "off", "sampling_pattern": "blue_noise", "post_filter": "gauss05"},
     "adaptive8-off": {"samples": 8, "denoise": "off", "adaptive_threshold": 0.05, "adaptive_min_samples": 1},
 }
 

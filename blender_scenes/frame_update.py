@@ -46,6 +46,7 @@ def _apply_render_settings(scene, frame: FrameScene) -> None:
     c.use_denoising = rs.denoise != "off"
     c.denoising_quality = DENOISE_QUALITY.get(rs.denoise, PARKED_DENOISE_QUALITY)
     c.denoising_prefilter = rs.denoise_prefilter.upper()
+    c.sampling_pattern = rs.sampling_pattern.upper()
 
 
 PARKED_FOCUS_M = 10.0     # depth of field off: Blender's values, never read by the render

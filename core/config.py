@@ -163,6 +163,8 @@ class RenderConfig:
     adaptive_min_samples: int = 0    # with adaptive sampling; 0 = Cycles' automatic choice
     filter_width_px: float = 1.5     # Blackman-Harris pixel filter width
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
+    sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
+    post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
 
@@ -503,6 +505,10 @@ def _validate_markers(cfg: Config, source: str) -> None:
         raise _err(source, "markers", "layout_a/layout_b", "; ".join(problems))
 
 
+SAMPLING_PATTERNS = ("tabulated_sobol", "blue_noise")
+POST_FILTERS = ("off", "median3", "median5", "gauss05", "gauss07", "gauss10")
+
+
 def _validate_render(cfg: Config, source: str) -> None:
     rc = cfg.render
     _check_positive(source, "render", "samples", rc.samples)
@@ -517,6 +523,11 @@ def _validate_render(cfg: Config, source: str) -> None:
                    "Cycles' limit")
     if rc.denoise_prefilter not in ("none", "fast", "accurate"):
         raise _err(source, "render", "denoise_prefilter", f"{rc.denoise_prefilter!r} is not one of none, fast, accurate")
+    if rc.sampling_pattern not in SAMPLING_PATTERNS:
+        raise _err(source, "render", "sampling_pattern",
+                   f"{rc.sampling_pattern!r} is not one of {', '.join(SAMPLING_PATTERNS)}")
+    if rc.post_filter not in POST_FILTERS:
+        raise _err(source, "render", "post_filter", f"{rc.post_filter!r} is not one of {', '.join(POST_FILTERS)}")
     if not 0.01 <= rc.filter_width_px <= 10:
         raise _err(source, "render", "filter_width_px", f"must be in [0.01, 10], got {rc.filter_width_px}")
     _check_positive(source, "render", "frame_timeout_s", rc.frame_timeout_s)

@@ -172,6 +172,8 @@ class RenderSettings:
     adaptive_min_samples: int
     filter_width_px: float       # Blackman-Harris pixel filter width
     denoise_prefilter: str       # none | fast | accurate
+    sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise
+    post_filter: str = "off"     # off | median3 | median5 (generator.frame_output)
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from dockfactory.core.io import (
     sha256_bytes,
@@ -40,6 +42,17 @@ def frame_paths(root, frame_id: str) -> dict[str, Path]:
             "label": root / "labels" / f"{frame_id}.json", "meta": root / "meta" / f"{frame_id}.json"}
 
 
+def median_filtered(rgb: np.ndarray, post_filter: str) -> np.ndarray:
+    """The linear render through a per-channel median (``post_filter`` median3 / median5), or as it is
+    ("off"): a cheap remover of the isolated bright samples of a render without OpenImageDenoise."""
+    if post_filter == "off":
+        return rgb
+    if post_filter.startswith("gauss"):
+        sigma = int(post_filter[5:]) / 10
+        return cv2.GaussianBlur(np.ascontiguousarray(rgb, dtype=np.float32), (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    return cv2.medianBlur(np.ascontiguousarray(rgb, dtype=np.float32), int(post_filter[-1]))
+
+
 def label_text(label: dict) -> str:
     return json.dumps(label, indent=1, allow_nan=False) + "\n"
 
@@ -50,6 +63,7 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
+    passes = replace(passes, rgb=median_filtered(passes.rgb, frame.render.post_filter))
     t1 = time.perf_counter()
     outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)
     passes = resample_passes(passes, frame.camera, outlines)   # the lens: distortion, chromatic aberration

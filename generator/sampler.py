@@ -377,7 +377,7 @@ def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParam
 def render_settings(cfg: Config) -> RenderSettings:
     r = cfg.render
     return RenderSettings(r.samples, r.denoise, r.max_bounces, r.adaptive_threshold,
-                          r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter)
+                          r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter, r.sampling_pattern, r.post_filter)
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene):

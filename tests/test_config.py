@@ -31,6 +31,8 @@ def test_repo_configs_load(repo_root):
     ("[pose]\nx_mm = [150, 5]\n", "x_mm"),
     ("[dataset]\nframes = 'ten'\n", "frames"),
     ("[render]\ndenoise = 'magic'\n", "denoise"),
+    ("[render]\nsampling_pattern = 'sobol'\n", "sampling_pattern"),
+    ("[render]\npost_filter = 'median7'\n", "post_filter"),
     ("[markers]\nlayout_a = [[50, 0], [52, 1], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout"),
     ("[markers]\nlayout_a = [[5, 0], [60, 10], [100, 10], [120, 20], [140, -20], [160, 30]]\n", "layout_a[0]"),
     ("[dataset\nframes = 3\n", "TOML"),
