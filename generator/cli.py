@@ -12,6 +12,7 @@ from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config
 from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator import published
 from dockfactory.generator.dataset import identity
 from dockfactory.generator.overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
@@ -71,9 +72,14 @@ def cmd_dataset(args) -> int:
     if args.action == "verify":
         reports = []
         for root in args.dirs:
-            reports.append(dt.verify(root))
+            reports.append(published.verify_against(root, args.manifest, args.tolerance) if args.manifest
+                           else dt.verify(root))
             print(reports[-1].text())
         return EXIT_OK if all(r.ok for r in reports) else EXIT_FAILED
+    if args.action == "publish":
+        for root in args.dirs:
+            print(published.publish(root, args.out))
+        return EXIT_OK
     if args.action == "info":
         infos = [dt.info(root) for root in args.dirs]
         if args.json:
@@ -138,11 +144,17 @@ def add_subcommands(sub) -> None:
     r.set_defaults(func=cmd_render)
 
     d = sub.add_parser("dataset", help="verify, describe, compare or export datasets")
-    d.add_argument("action", choices=("verify", "info", "diff", "export"))
+    d.add_argument("action", choices=("verify", "info", "diff", "export", "publish"))
     d.add_argument("dirs", nargs="+", metavar="DIR", help="dataset directories (verify, info, export: "
                    "each of them; diff: exactly two)")
     d.add_argument("--format", default="coco,yolo,bop", help="export: coco, yolo, bop (comma-separated)")
     d.add_argument("--json", action="store_true", help="info/diff: print JSON")
+    d.add_argument("--manifest", help="verify: check a re-render (any subset of frames) against this published "
+                   "manifest.json and the image_tiles.npz beside it")
+    d.add_argument("--tolerance", type=float, default=published.DEFAULT_TOLERANCE,
+                   help=f"verify --manifest: largest tile-mean difference (8-bit levels) of an image that is not "
+                        f"byte for byte the published one (default {published.DEFAULT_TOLERANCE})")
+    d.add_argument("--out", help="publish: folder for the verified dataset's manifest.json and image_tiles.npz")
     d.set_defaults(func=cmd_dataset)
 
     c = sub.add_parser("check-config", help="validate a config and print its plan")

@@ -1,0 +1,117 @@
+"""A re-render checked against a published manifest (generator.published; issue 13).
+
+The published dataset is the painted smoke dataset (tests/pipeline_data.py, no Blender); a
+"re-render" is a copy of some of its frames without the manifest, as ``dockfactory render
+--frames`` leaves it, then damaged in the ways another machine or an edit would.
+"""
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from dockfactory.eval.cli import main
+from dockfactory.generator import published
+from dockfactory.generator.dataset import DatasetError
+
+
+@pytest.fixture
+def release(painted_source, tmp_path):
+    """(published folder with manifest.json + image_tiles.npz, a re-render of three frames)."""
+    pub = tmp_path / "pub"
+    published.publish(painted_source, pub)
+    sub = tmp_path / "rerender"
+    shutil.copytree(painted_source, sub)
+    (sub / "manifest.json").unlink()
+    ids = sorted(p.stem for p in (sub / "labels").glob("*.json"))
+    for fid in ids[3:]:
+        for rel in (f"labels/{fid}.json", f"images/{fid}.png", f"meta/{fid}.json"):
+            (sub / rel).unlink()
+    return pub, sub, ids[:3]
+
+
+def test_publish_copies_the_manifest_and_fingerprints_every_image(painted_source, tmp_path):
+    pub = tmp_path / "pub"
+    msg = published.publish(painted_source, pub)
+    assert (pub / "manifest.json").read_bytes() == (painted_source / "manifest.json").read_bytes()
+    manifest = json.loads((pub / "manifest.json").read_text())
+    with np.load(pub / published.TILES_NAME, allow_pickle=False) as z:
+        assert list(z["frame_ids"]) == [f["frame_id"] for f in manifest["frames"]]
+        img = cv2.imread(str(painted_source / "images" / f"{manifest['frames'][0]['frame_id']}.png"))
+        h, w = img.shape[:2]
+        assert z["tiles"].shape[1:] == (-(-h // 80), -(-w // 80), 3)
+        assert z["tiles"][0, 0, 0, 0] == pytest.approx(img[:80, :80, 0].mean(), abs=1e-3)
+    assert f"published {len(manifest['frames'])} frames" in msg
+
+
+def test_publish_refuses_a_damaged_dataset_and_writes_nothing(painted, tmp_path):
+    next((painted / "images").glob("*.png")).unlink()
+    with pytest.raises(DatasetError, match="missing: images/"):
+        published.publish(painted, tmp_path / "pub")
+    assert not (tmp_path / "pub").exists()
+
+
+def test_a_faithful_subset_passes_byte_for_byte(release):
+    pub, sub, ids = release
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok, rep.text()
+    assert (rep.frames, rep.labels_identical, rep.images_identical, rep.images_within) == (3, 3, 3, 0)
+
+
+def test_an_image_with_other_bits_passes_within_the_tolerance_and_fails_beyond(release):
+    pub, sub, ids = release
+    path = sub / "images" / f"{ids[0]}.png"
+    img = cv2.imread(str(path))
+    noise = np.random.default_rng(0).integers(-1, 2, img.shape)     # +-1 level: another CPU's bits
+    cv2.imwrite(str(path), np.clip(img.astype(int) + noise, 0, 255).astype(np.uint8))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok and (rep.images_identical, rep.images_within) == (2, 1), rep.text()
+    assert 0 < rep.max_tile_diff < 0.1
+    img[100:140, 200:240] = 0                                        # a changed region: not noise
+    cv2.imwrite(str(path), img)
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert not rep.ok
+    assert any(p.startswith(f"images/{ids[0]}.png: tile means differ") for p in rep.problems), rep.text()
+
+
+def test_an_edited_label_a_foreign_frame_and_another_version_fail(release):
+    pub, sub, ids = release
+    label = sub / "labels" / f"{ids[1]}.json"
+    label.write_text(label.read_text().replace("0", "1", 1))
+    shutil.copy(sub / "labels" / f"{ids[2]}.json", sub / "labels" / "999999.json")
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert f"labels/{ids[1]}.json: differs from the manifest" in rep.problems
+    assert "labels/999999.json: frame 999999 is not in the manifest" in rep.problems
+    ident = json.loads((sub / "dataset.json").read_text())
+    ident["version_id"] = "0" * 16
+    (sub / "dataset.json").write_text(json.dumps(ident))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert not rep.ok and "another config, generator or Blender" in rep.problems[0]
+
+
+def test_an_image_without_fingerprints_cannot_pass_on_tolerance(release):
+    pub, sub, ids = release
+    (pub / published.TILES_NAME).unlink()
+    path = sub / "images" / f"{ids[0]}.png"
+    img = cv2.imread(str(path))
+    img[0, 0, 0] ^= 1
+    cv2.imwrite(str(path), img)
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert not rep.ok and "no fingerprint to compare it with" in rep.problems[0]
+
+
+def test_cli_verify_manifest_exit_status(release, capsys):
+    pub, sub, ids = release
+    assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json")]) == 0
+    assert "3 frames checked: labels 3/3 byte for byte" in capsys.readouterr().out
+    (sub / "images" / f"{ids[0]}.png").write_bytes(b"not a png")
+    assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json")]) == 1
+    assert f"images/{ids[0]}.png: unreadable image" in capsys.readouterr().out
+
+
+def test_a_manifest_that_is_not_one_is_a_one_line_error(release, capsys):
+    pub, sub, ids = release
+    (pub / "manifest.json").write_text("[1, 2]")
+    with pytest.raises(DatasetError, match="not a published dataset manifest"):
+        published.verify_against(sub, pub / "manifest.json")
