@@ -72,7 +72,7 @@ def bench_inference(weights, frames, rounds: int) -> dict:
             "timed_passes": len(total)}
 
 
-def bench_training(dataset, batches: int) -> dict:
+def bench_training(dataset, batches: int, scale: str = "n") -> dict:
     import torch
 
     from dockfactory.detector.data import CropDataset, DataConfig, load_frames
@@ -83,7 +83,7 @@ def bench_training(dataset, batches: int) -> dict:
     frames = load_frames(dataset, "train")
     ds = CropDataset(frames, cfg, seed=0)
     bs = 16
-    model = build_model(ModelConfig(scale="n", attention="se")).to(memory_format=torch.channels_last).train()
+    model = build_model(ModelConfig(scale=scale, attention="se")).to(memory_format=torch.channels_last).train()
     opt = torch.optim.SGD(param_groups(model, 5e-4), lr=0.01, momentum=0.937, nesterov=True)
     ema = ModelEMA(model)
     loss_fn = YoloLoss(model.detect.anchors, (8, 16, 32), 2, cfg.crop)
@@ -101,7 +101,7 @@ def bench_training(dataset, batches: int) -> dict:
         opt.zero_grad()
         ema.update(model)
     dt = time.perf_counter() - t0
-    return {"images_per_s": batches * bs / dt, "batch": bs, "crop": cfg.crop, "batches": batches}
+    return {"images_per_s": batches * bs / dt, "batch": bs, "crop": cfg.crop, "batches": batches, "scale": scale}
 
 
 def main(argv=None) -> int:
@@ -112,6 +112,7 @@ def main(argv=None) -> int:
     p.add_argument("--images", type=int, default=10, help="frames timed (default 10)")
     p.add_argument("--rounds", type=int, default=3, help="passes over them (default 3)")
     p.add_argument("--train-batches", type=int, default=5)
+    p.add_argument("--train-scales", default="n", help="YOLOv5 scales whose training step is timed (n, s or n,s)")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--out", help="also write the figures to this JSON file")
     args = p.parse_args(argv)
@@ -133,9 +134,11 @@ def main(argv=None) -> int:
           f" per image, mean {inf['ms_per_image_mean']:.1f} [target <= {TARGETS['ms_per_image']:.0f}: "
           f"{ok(inf['ms_per_image_median'] <= TARGETS['ms_per_image'])}]  (network {inf['ms_network']:.1f}, "
           f"NMS {inf['ms_nms']:.1f}, refinement {inf['ms_refine']:.1f} ms; {inf['detections_per_image']:.1f} detections)")
-    res["training"] = bench_training(dataset, args.train_batches)
-    tr = res["training"]
-    print(f"training throughput (n + SE, batch {tr['batch']} crops of {tr['crop']} px): {tr['images_per_s']:.1f} images/s")
+    for scale in args.train_scales.split(","):
+        tr = bench_training(dataset, args.train_batches, scale)
+        res["training" if scale == "n" else f"training_{scale}"] = tr
+        print(f"training throughput ({scale} + SE, batch {tr['batch']} crops of {tr['crop']} px): "
+              f"{tr['images_per_s']:.1f} images/s")
     if not args.skip_accuracy:
         import tempfile
 

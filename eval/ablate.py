@@ -3,7 +3,10 @@ split, and write the paper's table 2 layout (mAP50 and mAP50:95, all and per cla
 and spread (sample standard deviation) over seeds and the budget stated.
 
 Runs live in ``OUT/<attention>_seed<k>/``; a finished run (weights.pt and metrics.json present) is
-not trained again, so an interrupted ablation continues where it stopped.
+not trained again, so an interrupted ablation continues where it stopped. With ``record_dir``
+every finished run's metrics are also written to ``RECORD/<attention>_seed<k>.json`` (a folder
+meant to be committed as each run lands), and a run recorded there for the same dataset version
+and training config is taken from the record, so the table survives the loss of ``OUT``.
 """
 from __future__ import annotations
 
@@ -57,9 +60,40 @@ def _table_lines(runs: list[dict], attentions, scale: str) -> list[str]:
     return lines
 
 
-def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True) -> dict:
+def _recorded(record_dir, name: str, dataset, cfg) -> dict | None:
+    """The record of run ``name`` in ``record_dir`` when it is of this dataset version and config."""
+    path = Path(record_dir) / f"{name}.json" if record_dir else None
+    if path is None or not path.is_file():
+        return None
+    rec = json.loads(path.read_text())
+    same = rec.get("dataset_version") == dataset.version_id and rec.get("config") == cfg.to_dict()
+    return rec if same else None
+
+
+def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress: bool, record_dir) -> dict:
+    """One (attention, seed) run: from the record folder, from OUT, or trained and evaluated now."""
+    name = f"{att}_seed{seed}"
+    rec = _recorded(record_dir, name, dataset, cfg)
+    if rec is not None:
+        return rec
+    run = out / name
+    metrics_path = run / "metrics.json"
+    if metrics_path.is_file() and (run / "weights.pt").is_file():
+        rec = json.loads(metrics_path.read_text())
+    else:
+        rec = _train_and_evaluate(dataset, run, att, seed, cfg, conf, progress)
+        rec.update(dataset_version=dataset.version_id, config=cfg.to_dict())
+        write_json_atomic(metrics_path, rec)
+    if record_dir:
+        Path(record_dir).mkdir(parents=True, exist_ok=True)
+        write_json_atomic(Path(record_dir) / f"{name}.json", rec)
+    return rec
+
+
+def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True,
+                 record_dir=None) -> dict:
     """Train/evaluate every (attention, seed) on the opened ``dataset`` (generator.dataset_open.Dataset);
-    ``make_config(attention, seed) -> TrainConfig``."""
+    ``make_config(attention, seed) -> TrainConfig``; ``record_dir``: see the module docstring."""
     from dockfactory.detector.attention import ATTENTIONS
     from dockfactory.detector.data import load_frames
     bad = [a for a in attentions if a not in ATTENTIONS]
@@ -71,14 +105,7 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
     runs = []
     for att in attentions:
         for seed in seeds:
-            run = out / f"{att}_seed{seed}"
-            metrics_path = run / "metrics.json"
-            if metrics_path.is_file() and (run / "weights.pt").is_file():
-                runs.append(json.loads(metrics_path.read_text()))
-                continue
-            rec = _train_and_evaluate(dataset, run, att, seed, make_config(att, seed), conf, progress)
-            write_json_atomic(metrics_path, rec)
-            runs.append(rec)
+            runs.append(_run_one(dataset, out, att, seed, make_config(att, seed), conf, progress, record_dir))
     cfg0 = make_config(attentions[0], seeds[0])
     n_train = len(load_frames(dataset, "train"))
     n_test = len(load_frames(dataset, "test"))

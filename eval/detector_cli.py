@@ -102,7 +102,7 @@ def cmd_ablate(args) -> int:
     seeds = list(range(args.seeds))
     result = run_ablation(Dataset.open(args.dataset), args.out, attentions, seeds,
                           lambda att, seed: _train_config(args, att, seed), conf=args.conf,
-                          progress=not args.quiet)
+                          progress=not args.quiet, record_dir=args.record)
     print(result["table"])
     print(f"written: {Path(args.out) / 'ablation.md'}, {Path(args.out) / 'ablation.json'}")
     return 0
@@ -174,6 +174,8 @@ def _add_ablate_parser(subparsers) -> None:
     a.add_argument("--seeds", type=_positive_int, default=1, help="number of seeds (0..S-1)")
     a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
     a.add_argument("--conf", type=_unit_float, default=0.001, help="score threshold for mAP")
+    a.add_argument("--record", help="also write each finished run's metrics to RECORD/<variant>_seed<k>.json and "
+                   "take runs recorded there (same dataset version and config) without training them again")
     _add_training_options(a)
     a.set_defaults(func=cmd_ablate)
 

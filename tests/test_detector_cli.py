@@ -56,3 +56,28 @@ def test_bad_weights_exit_2(painted_source, tmp_path, capsys):
     bad.write_bytes(b"PK\x03\x04 truncated")
     assert main(["detect", str(data), "--weights", str(bad), "--out", str(tmp_path / "d.json"), "--quiet"]) == 2
     assert "bad.pt" in capsys.readouterr().err
+
+
+@pytest.mark.slow   # one tiny training run: about 5 s
+def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, capsys, monkeypatch):
+    import shutil
+
+    from dockfactory.eval import ablate
+    from dockfactory.eval.cli import main
+    out, record = tmp_path / "runs", tmp_path / "record"
+    argv = ["ablate", str(painted_source), "--attention", "none", "--seeds", "1", "--epochs", "1", "--batch", "4",
+            "--crops-per-frame", "1", "--threads", "1", "--quiet", "--out", str(out), "--record", str(record)]
+    assert main(argv) == 0
+    rec = json.loads((record / "none_seed0.json").read_text())
+    assert rec["dataset_version"] == json.loads((painted_source / "dataset.json").read_text())["version_id"]
+    assert rec["config"]["epochs"] == 1 and 0 <= rec["mAP50"] <= 1
+    table = (out / "ablation.md").read_text()
+    shutil.rmtree(out)                     # the runs are gone (out/ of a past session) ...
+
+    def no_training(*a, **k):
+        raise AssertionError("trained again")
+    monkeypatch.setattr(ablate, "_train_and_evaluate", no_training)
+    assert main(argv) == 0                 # ... the committed record still gives the table
+    assert (out / "ablation.md").read_text().split("total training")[0] == table.split("total training")[0]
+    with pytest.raises(AssertionError, match="trained again"):   # another budget is another run
+        main([a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)])
