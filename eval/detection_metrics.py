@@ -132,6 +132,7 @@ def evaluate_detections(ds, detections, split: str | None = None, recall_conf: f
 
 def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 0.5, recall_conf: float = MIN_SCORE) -> dict:
     errs = {"normal": [], "challenging": []}
+    by_condition: dict[str, list] = {}
     seen = found = 0
     for lab in labels:
         ms = [m for m in lab["markers"] if m.get("visible_pixels") and m.get("bbox_px") is not None
@@ -148,6 +149,7 @@ def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 
             if d >= 0:
                 e = np.hypot(*(np.asarray(dets[d]["center_px"]) - np.asarray(m["center_px"])))
                 errs[group].append(float(e))
+                by_condition.setdefault(lab["spec"]["condition"], []).append(float(e))
         strong = match[(match >= 0)]
         seen += len(ms)
         found += int(sum(ds[d] >= recall_conf for d in strong))
@@ -159,6 +161,7 @@ def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 
         return {"n": int(len(v)), "median_px": float(np.median(v)), "mean_px": float(v.mean()),
                 "p90_px": float(np.percentile(v, 90))}
     return {"centre_error": {k: stats(v) for k, v in errs.items()},
+            "centre_error_by_condition": {k: stats(v) for k, v in sorted(by_condition.items())},
             "recall_visible50": found / seen if seen else float("nan"), "recall_markers": seen,
             "recall_conf": recall_conf}
 
@@ -168,7 +171,7 @@ def format_report(m: dict) -> str:
              "| class | mAP50 | mAP50:95 |", "| --- | --- | --- |",
              f"| all | {m['mAP50']:.4f} | {m['mAP50_95']:.4f} |"]
     lines += [f"| {k} | {v['mAP50']:.4f} | {v['mAP50_95']:.4f} |" for k, v in m["per_class"].items()]
-    for k, v in m["centre_error"].items():
+    for k, v in {**m["centre_error"], **m.get("centre_error_by_condition", {})}.items():
         lines.append(f"centre error {k}: median {v['median_px']:.4f} px, mean {v['mean_px']:.4f}, "
                      f"p90 {v['p90_px']:.4f} (n {v['n']})")
     lines.append(f"recall (visible fraction >= 0.5, score >= {m['recall_conf']}): {m['recall_visible50']:.4f} "

@@ -101,6 +101,10 @@ def test_centre_error_and_recall():
     r = centre_and_recall(labs, dets_from(labs, shift=0.25), 0.5)
     assert r["centre_error"]["normal"]["median_px"] == pytest.approx(0.25)
     assert r["centre_error"]["challenging"]["n"] == 2
+    by_cond = r["centre_error_by_condition"]      # the same errors, split by each frame's condition
+    conds = [lab["spec"]["condition"] for lab in labs]
+    assert set(by_cond) == set(conds) and sum(v["n"] for v in by_cond.values()) == 4
+    assert all(v["median_px"] == pytest.approx(0.25) for v in by_cond.values())
     assert r["recall_visible50"] == pytest.approx(1.0)
     r = centre_and_recall(labs, dets_from(labs, drop={("000000", 0)}), 0.5)
     assert r["recall_visible50"] == pytest.approx(0.75)
