@@ -1,0 +1,203 @@
+"""Assemble results/paper/ (issue 13): render figures, Table 1, both detectors' figures and their
+acceptance runs, against the paper's published numbers.
+
+    python bench/paper_results.py --dataset out/paper --out results/paper \\
+        [--table1 results/paper/table1] [--detector NAME=EVAL_DIR:BENCH_JSON:WEIGHTS ...]
+
+Inputs (every one optional except the dataset; a missing part is reported as missing, never
+invented):
+- the dataset's ``logs/timings.jsonl`` (render figures: frames, active wall time, s/frame,
+  frames/hour, peak RSS of a worker) and its ``manifest.json`` (version id, sha256);
+- ``--table1``: the ablation's run records (``dockfactory ablate ... --record DIR``);
+- ``--detector NAME=EVAL_DIR:BENCH_JSON:WEIGHTS``: a detector's acceptance run (the ``evaluate``
+  output folder with metrics.json), its ``bench/detector_bench.py --out`` figures and its weights.
+
+Writes ``OUT/metrics.json`` and ``OUT/report.md`` (atomically) and prints the README table.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from dockfactory.core.io import write_json_atomic, write_text_atomic
+
+PAPER_TABLE1 = {"none": (0.995, 0.770), "eca": (0.995, 0.825), "se": (0.995, 0.834), "a2": (0.995, 0.812)}
+PAPER_RANKING = ("se", "eca", "a2", "none")      # by mAP50:95, the paper's order
+PAPER_POSE = {"estimation": {"x": 0.856, "y": 0.877, "alpha": 0.048},
+              "localization": {"x": 0.794, "y": 0.776, "alpha": 0.869}}
+VARIANT_NAMES = {"none": "YOLOv5s", "se": "YOLOv5s + SE", "eca": "YOLOv5s + ECA", "cbam": "YOLOv5s + CBAM",
+                 "a2": "YOLOv5s + A2"}
+AXES = ("x", "y", "alpha")
+PAUSE_S = 300.0   # a gap between two finished frames longer than this is an interruption of the job
+
+
+def render_figures(rows: list[dict], pause_s: float = PAUSE_S) -> dict:
+    """Figures of a (possibly interrupted and resumed) render from its per-frame timing rows: the
+    active wall time counts each frame's gap to the previous one, or its own total after a pause."""
+    rows = sorted(rows, key=lambda r: r["finished_at"])
+    if not rows:
+        return {"frames": 0}
+    wall, segments = rows[0]["total"], 1
+    for prev, cur in zip(rows, rows[1:]):
+        gap = cur["finished_at"] - prev["finished_at"]
+        if gap > pause_s:
+            segments += 1
+            wall += cur["total"]
+        else:
+            wall += gap
+    totals = np.array([r["total"] for r in rows])
+    return {"frames": len(rows), "active_wall_s": round(float(wall), 1), "segments": segments,
+            "s_per_frame": round(float(wall / len(rows)), 3), "frames_per_hour": round(3600 * len(rows) / wall, 1),
+            "median_frame_total_s": round(float(np.median(totals)), 3),
+            "median_cycles_s": round(float(np.median([r["cycles"] for r in rows])), 3),
+            "peak_worker_rss_mb": round(max(r.get("rss_mb", 0.0) for r in rows), 1)}
+
+
+def table1(records: list[dict]) -> dict:
+    """Per attention variant: seeds, mean and sample std of mAP50 and mAP50:95 (all classes)."""
+    out = {}
+    for att in VARIANT_NAMES:
+        rs = sorted((r for r in records if r["attention"] == att), key=lambda r: r["seed"])
+        if not rs:
+            continue
+        row = {"seeds": [r["seed"] for r in rs]}
+        for key in ("mAP50", "mAP50_95"):
+            v = np.array([r[key] for r in rs], dtype=float)
+            row[key] = {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else None,
+                        "values": v.tolist()}
+        out[att] = row
+    return out
+
+
+def ranking_check(t1: dict, order=PAPER_RANKING, key: str = "mAP50_95") -> list[dict]:
+    """Each consecutive pair of the paper's ranking: our difference of means and that difference in
+    units of the pair's pooled seed std (how many standard deviations separate them)."""
+    out = []
+    for hi, lo in zip(order, order[1:]):
+        if hi not in t1 or lo not in t1:
+            continue
+        a, b = t1[hi][key], t1[lo][key]
+        diff = a["mean"] - b["mean"]
+        pooled = (float(np.sqrt((a["std"] ** 2 + b["std"] ** 2) / 2))
+                  if a["std"] is not None and b["std"] is not None else None)
+        out.append({"pair": f"{hi} > {lo}", "difference": diff, "pooled_std": pooled,
+                    "sigmas": diff / pooled if pooled else None, "holds": bool(diff > 0)})
+    return out
+
+
+def pose_figures(metrics: dict) -> dict:
+    """MSE and RMSE of X, Y, alpha for estimation (repeatability) and localization (test split),
+    with the Cramer-Rao bound's RMS beside localization."""
+    loc = metrics["localization"]["overall"]
+    est = metrics["estimation"]["pooled"]
+    crb = metrics["localization"].get("crb", {})
+    return {"localization": {a: {"mse": loc[a]["mse"], "rmse": loc[a]["rmse"],
+                                 "crb_rms": crb.get(a, {}).get("bound_rms")} for a in AXES},
+            "estimation": {a: {"mse": est[a]["mse"], "rmse": est[a]["rmse"]} for a in AXES},
+            "n_test": metrics["localization"]["n_frames"], "n_solved": metrics["localization"]["n_solved"],
+            "n_repeat": metrics["estimation"]["n_frames"]}
+
+
+def sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def detector_figures(eval_dir: Path, bench_json: Path, weights: Path) -> dict:
+    out: dict = {"weights": str(weights)}
+    if weights.is_file():
+        out.update(weights_sha256=sha256(weights), weights_bytes=weights.stat().st_size)
+    if bench_json.is_file():
+        b = json.loads(bench_json.read_text())
+        out["detection"] = {k: b[k] for k in ("mAP50", "mAP50_95", "per_class", "centre_error",
+                                               "centre_error_by_condition", "recall_visible50") if k in b}
+        out["inference_ms_per_image"] = b.get("inference", {}).get("ms_per_image_median")
+    metrics_path = eval_dir / "metrics.json"
+    if metrics_path.is_file():
+        m = json.loads(metrics_path.read_text())
+        out["pose"] = pose_figures(m)
+        acc = m.get("acceptance", {})
+        out["accepted"] = acc.get("accepted")
+        out["criteria"] = [{k: c.get(k) for k in ("name", "value", "threshold", "unit", "pass", "paper")}
+                           for c in acc.get("criteria", [])]
+    return out
+
+
+def _cell(x, fmt="{:.3f}") -> str:
+    return "—" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
+
+
+def readme_table(t1: dict, detectors: dict) -> str:
+    """The README's "Results on the paper's dataset" table (paper against ours)."""
+    lines = ["| figure | paper | ours |", "| --- | --- | --- |"]
+    for att, name in VARIANT_NAMES.items():
+        paper = PAPER_TABLE1.get(att)
+        ours = t1.get(att)
+        for i, key in enumerate(("mAP50", "mAP50_95")):
+            p = _cell(paper[i]) if paper else "not in the paper"
+            o = (f"{ours[key]['mean']:.3f} ± {_cell(ours[key]['std'])} ({len(ours['seeds'])} seeds)"
+                 if ours else "not run yet")
+            lines.append(f"| {name}: {key.replace('_', ':')} | {p} | {o} |")
+    pose = detectors.get("s_se", {}).get("pose")
+    for kind in ("estimation", "localization"):
+        for a in AXES:
+            unit = "deg" if a == "alpha" else "mm"
+            paper = PAPER_POSE[kind][a]
+            if pose:
+                f = pose[kind][a]
+                crb = f" (bound {_cell(f.get('crb_rms'))})" if kind == "localization" else ""
+                o = f"RMSE {f['rmse']:.3f} {unit}{crb}; MSE {f['mse']:.4f} {unit}²"
+            else:
+                o = "not run yet"
+            lines.append(f"| {kind} {a} (paper's \"MSE\", an RMS) | {paper} {unit} | {o} |")
+    return "\n".join(lines)
+
+
+def _git_commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dataset", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=Path("results/paper"))
+    ap.add_argument("--table1", type=Path)
+    ap.add_argument("--detector", action="append", default=[], metavar="NAME=EVAL_DIR:BENCH_JSON:WEIGHTS")
+    args = ap.parse_args(argv)
+    timings = args.dataset / "logs" / "timings.jsonl"
+    rows = [json.loads(line) for line in timings.read_text().splitlines() if line.strip()] if timings.is_file() else []
+    manifest = args.dataset / "manifest.json"
+    records = [json.loads(p.read_text()) for p in sorted(args.table1.glob("*.json"))] if args.table1 else []
+    t1 = table1(records)
+    detectors = {}
+    for spec in args.detector:
+        name, _, paths = spec.partition("=")
+        eval_dir, bench_json, weights = (Path(p) for p in paths.split(":"))
+        detectors[name] = detector_figures(eval_dir, bench_json, weights)
+    doc = {"commit": _git_commit(),
+           "dataset": {"path": str(args.dataset),
+                       "version_id": json.loads(manifest.read_text())["version_id"] if manifest.is_file() else None,
+                       "manifest_sha256": sha256(manifest) if manifest.is_file() else None,
+                       "complete": manifest.is_file()},
+           "render": render_figures(rows), "table1": t1, "ranking": ranking_check(t1), "detectors": detectors}
+    table = readme_table(t1, detectors)
+    write_json_atomic(args.out / "metrics.json", doc)
+    write_text_atomic(args.out / "report.md", "# The paper's dataset: results\n\n" + table + "\n")
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
