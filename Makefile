@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast venv clean-demo
+.PHONY: demo test test-fast venv clean-demo paper
 
 venv: $(STAMP)
 
@@ -30,6 +30,11 @@ test: $(STAMP)
 # everything that neither renders nor trains for long (pyproject.toml: markers): < 60 s on 2 cores
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 -m "not render and not slow"   # both cores (pytest-xdist)
+
+# issue 13, the paper at full scale: hours of rendering and training on 2 cores, resumable
+# (bench/paper.sh says what each step costs); results land in results/paper/
+paper: $(STAMP)
+	sh bench/paper.sh all
 
 clean-demo:
 	rm -rf out/quick

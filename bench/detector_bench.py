@@ -114,6 +114,7 @@ def main(argv=None) -> int:
     p.add_argument("--train-batches", type=int, default=5)
     p.add_argument("--train-scales", default="n", help="YOLOv5 scales whose training step is timed (n, s or n,s)")
     p.add_argument("--skip-accuracy", action="store_true")
+    p.add_argument("--split", default="test", choices=("test", "repeat"), help="split of the accuracy figures")
     p.add_argument("--out", help="also write the figures to this JSON file")
     args = p.parse_args(argv)
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
@@ -134,7 +135,7 @@ def main(argv=None) -> int:
           f" per image, mean {inf['ms_per_image_mean']:.1f} [target <= {TARGETS['ms_per_image']:.0f}: "
           f"{ok(inf['ms_per_image_median'] <= TARGETS['ms_per_image'])}]  (network {inf['ms_network']:.1f}, "
           f"NMS {inf['ms_nms']:.1f}, refinement {inf['ms_refine']:.1f} ms; {inf['detections_per_image']:.1f} detections)")
-    for scale in args.train_scales.split(","):
+    for scale in (args.train_scales.split(",") if args.train_batches > 0 else []):
         tr = bench_training(dataset, args.train_batches, scale)
         res["training" if scale == "n" else f"training_{scale}"] = tr
         print(f"training throughput ({scale} + SE, batch {tr['batch']} crops of {tr['crop']} px): "
@@ -148,7 +149,7 @@ def main(argv=None) -> int:
             format_report,
         )
         with tempfile.TemporaryDirectory() as tmp:
-            doc = detect_dataset(dataset, args.weights, Path(tmp) / "dets.json", split="test",
+            doc = detect_dataset(dataset, args.weights, Path(tmp) / "dets.json", split=args.split,
                                  conf_threshold=0.001, progress=False)
         m = evaluate_detections(dataset, doc)
         res["accuracy"] = m

@@ -112,15 +112,22 @@ def sha256(path) -> str:
     return h.hexdigest()
 
 
+DETECTION_KEYS = ("frames", "mAP50", "mAP50_95", "per_class", "centre_error", "centre_error_by_condition",
+                  "recall_visible50")
+
+
 def detector_figures(eval_dir: Path, bench_json: Path, weights: Path) -> dict:
+    """A detector's weights (sha256, size), detection figures on the test and repeat splits
+    (``BENCH_JSON`` and its ``_repeat`` sibling from bench/detector_bench.py) and acceptance run."""
     out: dict = {"weights": str(weights)}
     if weights.is_file():
         out.update(weights_sha256=sha256(weights), weights_bytes=weights.stat().st_size)
-    if bench_json.is_file():
-        b = json.loads(bench_json.read_text())
-        out["detection"] = {k: b[k] for k in ("mAP50", "mAP50_95", "per_class", "centre_error",
-                                               "centre_error_by_condition", "recall_visible50") if k in b}
-        out["inference_ms_per_image"] = b.get("inference", {}).get("ms_per_image_median")
+    for split, path in (("test", bench_json), ("repeat", bench_json.with_name(bench_json.stem + "_repeat.json"))):
+        if path.is_file():
+            b = json.loads(path.read_text())
+            acc = b.get("accuracy", {})
+            out.setdefault("detection", {})[split] = {k: acc[k] for k in DETECTION_KEYS if k in acc}
+            out.setdefault("inference_ms_per_image", b.get("inference", {}).get("ms_per_image_median"))
     metrics_path = eval_dir / "metrics.json"
     if metrics_path.is_file():
         m = json.loads(metrics_path.read_text())
