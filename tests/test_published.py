@@ -18,7 +18,7 @@ from dockfactory.generator.dataset import DatasetError
 
 @pytest.fixture
 def release(painted_source, tmp_path):
-    """(published folder with manifest.json + image_tiles.npz, a re-render of three frames)."""
+    """(published folder with manifest.json + fingerprints.npz, a re-render of three frames)."""
     pub = tmp_path / "pub"
     published.publish(painted_source, pub)
     sub = tmp_path / "rerender"
@@ -36,12 +36,13 @@ def test_publish_copies_the_manifest_and_fingerprints_every_image(painted_source
     msg = published.publish(painted_source, pub)
     assert (pub / "manifest.json").read_bytes() == (painted_source / "manifest.json").read_bytes()
     manifest = json.loads((pub / "manifest.json").read_text())
-    with np.load(pub / published.TILES_NAME, allow_pickle=False) as z:
+    with np.load(pub / published.FINGERPRINTS_NAME, allow_pickle=False) as z:
         assert list(z["frame_ids"]) == [f["frame_id"] for f in manifest["frames"]]
         img = cv2.imread(str(painted_source / "images" / f"{manifest['frames'][0]['frame_id']}.png"))
         h, w = img.shape[:2]
         assert z["tiles"].shape[1:] == (-(-h // 80), -(-w // 80), 3)
         assert z["tiles"][0, 0, 0, 0] == pytest.approx(img[:80, :80, 0].mean(), abs=1e-3)
+        assert len(z["label_geometry"]) == len(manifest["frames"]) and len(str(z["label_geometry"][0])) == 64
     assert f"published {len(manifest['frames'])} frames" in msg
 
 
@@ -59,6 +60,23 @@ def test_a_faithful_subset_passes_byte_for_byte(release):
     assert (rep.frames, rep.labels_identical, rep.images_identical, rep.images_within) == (3, 3, 3, 0)
 
 
+def test_a_label_whose_image_measurements_differ_passes_on_its_geometry(release):
+    pub, sub, ids = release
+    path = sub / "labels" / f"{ids[0]}.json"
+    label = json.loads(path.read_text())
+    measured = [m for m in label["markers"] if m.get("chroma") is not None]
+    assert measured
+    measured[0]["chroma"] += 0.004                      # another CPU's pixels: another chroma
+    label["derived"]["auto_exposure_scale"] *= 1.0001
+    path.write_text(json.dumps(label, indent=1) + "\n")
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok and (rep.labels_identical, rep.labels_geometry) == (2, 1), rep.text()
+    measured[0]["center_px"][0] += 0.001                # a geometric field: a real difference
+    path.write_text(json.dumps(label, indent=1) + "\n")
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert f"labels/{ids[0]}.json: differs from the manifest beyond its image measurements" in rep.problems
+
+
 def test_an_image_with_other_bits_passes_within_the_tolerance_and_fails_beyond(release):
     pub, sub, ids = release
     path = sub / "images" / f"{ids[0]}.png"
@@ -68,7 +86,7 @@ def test_an_image_with_other_bits_passes_within_the_tolerance_and_fails_beyond(r
     rep = published.verify_against(sub, pub / "manifest.json")
     assert rep.ok and (rep.images_identical, rep.images_within) == (2, 1), rep.text()
     assert 0 < rep.max_tile_diff < 0.1
-    img[100:140, 200:240] = 0                                        # a changed region: not noise
+    img[100:160, 200:260] = 0                                        # a changed region: not noise
     cv2.imwrite(str(path), img)
     rep = published.verify_against(sub, pub / "manifest.json")
     assert not rep.ok
@@ -81,7 +99,7 @@ def test_an_edited_label_a_foreign_frame_and_another_version_fail(release):
     label.write_text(label.read_text().replace("0", "1", 1))
     shutil.copy(sub / "labels" / f"{ids[2]}.json", sub / "labels" / "999999.json")
     rep = published.verify_against(sub, pub / "manifest.json")
-    assert f"labels/{ids[1]}.json: differs from the manifest" in rep.problems
+    assert f"labels/{ids[1]}.json: differs from the manifest beyond its image measurements" in rep.problems
     assert "labels/999999.json: frame 999999 is not in the manifest" in rep.problems
     ident = json.loads((sub / "dataset.json").read_text())
     ident["version_id"] = "0" * 16
@@ -92,7 +110,7 @@ def test_an_edited_label_a_foreign_frame_and_another_version_fail(release):
 
 def test_an_image_without_fingerprints_cannot_pass_on_tolerance(release):
     pub, sub, ids = release
-    (pub / published.TILES_NAME).unlink()
+    (pub / published.FINGERPRINTS_NAME).unlink()
     path = sub / "images" / f"{ids[0]}.png"
     img = cv2.imread(str(path))
     img[0, 0, 0] ^= 1
