@@ -13,7 +13,6 @@ little, and the refinement window with it.)
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import sys
 import tempfile
@@ -52,10 +51,6 @@ def largest_centre_change(doc_a: dict, doc_b: dict, min_score: float = 0.25) -> 
     return worst
 
 
-def _sha(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("weights", type=Path)
@@ -65,6 +60,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     import torch
     torch.set_num_threads(args.threads)
+    from dockfactory.core.io import sha256_file
     from dockfactory.generator.dataset_open import Dataset
     half_weights(args.weights, args.out)
     dataset = Dataset.open(args.dataset)
@@ -73,7 +69,7 @@ def main(argv=None) -> int:
     shift = max(largest_centre_change(d32, d16), largest_centre_change(d16, d32))
     for name, path, m in (("fp32", args.weights, m32), ("fp16", args.out, m16)):
         ce = {k: round(v["median_px"], 4) for k, v in m["centre_error_by_condition"].items()}
-        print(f"{name}: {path} {path.stat().st_size / 1e6:.2f} MB sha256 {_sha(path)}; mAP50 {m['mAP50']:.4f} "
+        print(f"{name}: {path} {path.stat().st_size / 1e6:.2f} MB sha256 {sha256_file(path)}; mAP50 {m['mAP50']:.4f} "
               f"mAP50:95 {m['mAP50_95']:.4f}; median centre error {ce}")
     medians = [(m32["centre_error_by_condition"][k]["median_px"], v["median_px"])
                for k, v in m16["centre_error_by_condition"].items()]

@@ -17,7 +17,6 @@ Writes ``OUT/metrics.json`` and ``OUT/report.md`` (atomically) and prints the RE
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import subprocess
 import sys
@@ -25,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.core.io import sha256_file, write_json_atomic, write_text_atomic
 
 PAPER_TABLE1 = {"none": (0.995, 0.770), "eca": (0.995, 0.825), "se": (0.995, 0.834), "a2": (0.995, 0.812)}
 PAPER_RANKING = ("se", "eca", "a2", "none")      # by mAP50:95, the paper's order
@@ -104,14 +103,6 @@ def pose_figures(metrics: dict) -> dict:
             "n_repeat": metrics["estimation"]["n_frames"]}
 
 
-def sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 DETECTION_KEYS = ("frames", "mAP50", "mAP50_95", "per_class", "centre_error", "centre_error_by_condition",
                   "recall_visible50")
 
@@ -121,7 +112,7 @@ def detector_figures(eval_dir: Path, bench_json: Path, weights: Path) -> dict:
     (``BENCH_JSON`` and its ``_repeat`` sibling from bench/detector_bench.py) and acceptance run."""
     out: dict = {"weights": str(weights)}
     if weights.is_file():
-        out.update(weights_sha256=sha256(weights), weights_bytes=weights.stat().st_size)
+        out.update(weights_sha256=sha256_file(weights), weights_bytes=weights.stat().st_size)
     for split, path in (("test", bench_json), ("repeat", bench_json.with_name(bench_json.stem + "_repeat.json"))):
         if path.is_file():
             b = json.loads(path.read_text())
@@ -196,7 +187,7 @@ def main(argv=None) -> int:
     doc = {"commit": _git_commit(),
            "dataset": {"path": str(args.dataset),
                        "version_id": json.loads(manifest.read_text())["version_id"] if manifest.is_file() else None,
-                       "manifest_sha256": sha256(manifest) if manifest.is_file() else None,
+                       "manifest_sha256": sha256_file(manifest) if manifest.is_file() else None,
                        "complete": manifest.is_file()},
            "render": render_figures(rows), "table1": t1, "ranking": ranking_check(t1), "detectors": detectors}
     table = readme_table(t1, detectors)
