@@ -160,6 +160,64 @@ def readme_table(t1: dict, detectors: dict) -> str:
     return "\n".join(lines)
 
 
+def render_section(dataset: dict, render: dict) -> list[str]:
+    """The dataset's identity and its render figures (wall time without the pauses between runs)."""
+    lines = ["## Dataset", "", f"- version id: `{dataset['version_id']}`"
+             f"{'' if dataset['complete'] else ' (no manifest yet: incomplete or not verified)'}",
+             f"- manifest sha256: `{dataset['manifest_sha256']}`"]
+    if render.get("frames"):
+        r = render
+        lines += [f"- render: {r['frames']} frames in {r['active_wall_s'] / 3600:.2f} h of active wall time "
+                  f"({r['segments']} runs), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
+                  f"median Cycles {r['median_cycles_s']:.2f} s/frame, peak worker RSS {r['peak_worker_rss_mb']:.0f} MB"]
+    return lines + [""]
+
+
+def ranking_section(ranking: list[dict]) -> list[str]:
+    """The paper's ranking (SE > ECA > A2 > plain, by mAP50:95), pair by pair, in pooled seed stds."""
+    if not ranking:
+        return []
+    lines = ["## The paper's ranking (mAP50:95)", "", "| pair | difference | pooled std | sigmas | holds |",
+             "| --- | --- | --- | --- | --- |"]
+    lines += [f"| {p['pair']} | {p['difference']:+.4f} | {_cell(p['pooled_std'], '{:.4f}')} | "
+              f"{_cell(p['sigmas'], '{:+.1f}')} | {'yes' if p['holds'] else 'no'} |" for p in ranking]
+    return lines + [""]
+
+
+def detector_section(name: str, d: dict) -> list[str]:
+    """One detector: its weights, detection figures per split and its acceptance run."""
+    lines = [f"## Detector {name}", "", f"- weights `{d['weights']}`: sha256 `{d.get('weights_sha256')}`, "
+             f"{d.get('weights_bytes', 0) / 1e6:.2f} MB",
+             f"- inference: {_cell(d.get('inference_ms_per_image'), '{:.1f}')} ms per 1280 x 960 image (median)"]
+    for split, det in d.get("detection", {}).items():
+        cond = ", ".join(f"{k} {v['median_px']:.3f}" for k, v in det.get("centre_error_by_condition", {}).items())
+        lines.append(f"- {split} split ({det.get('frames')} frames): mAP50 {_cell(det.get('mAP50'))}, "
+                     f"mAP50:95 {_cell(det.get('mAP50_95'))}; median centre error (px) {cond}")
+    if "accepted" in d:
+        lines += ["", f"Acceptance: **{'ACCEPTED' if d['accepted'] else 'REJECTED'}**", "",
+                  "| criterion | value | threshold | pass |", "| --- | --- | --- | --- |"]
+        lines += [f"| {c['name']} | {_cell(c['value'], '{:.4f}')} {c.get('unit') or ''} | "
+                  f"{_cell(c['threshold'], '{:.4f}')} | {'yes' if c['pass'] else 'no'} |" for c in d["criteria"]]
+    return lines + [""]
+
+
+def report_markdown(doc: dict, table: str) -> str:
+    """report.md: the paper-against-ours table, then the dataset, the ranking and each detector."""
+    lines = ["# The paper's dataset: results", "", f"Commit `{doc['commit']}`.", "", table, ""]
+    lines += render_section(doc["dataset"], doc["render"]) + ranking_section(doc["ranking"])
+    for name, d in doc["detectors"].items():
+        lines += detector_section(name, d)
+    return "\n".join(lines)
+
+
+def _version_id(manifest: Path, info: Path) -> str | None:
+    """The dataset's version id: from its manifest once published, else from dataset.json."""
+    for path in (manifest, info):
+        if path.is_file():
+            return json.loads(path.read_text())["version_id"]
+    return None
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
@@ -176,7 +234,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     timings = args.dataset / "logs" / "timings.jsonl"
     rows = [json.loads(line) for line in timings.read_text().splitlines() if line.strip()] if timings.is_file() else []
-    manifest = args.dataset / "manifest.json"
+    manifest, info = args.dataset / "manifest.json", args.dataset / "dataset.json"
     records = [json.loads(p.read_text()) for p in sorted(args.table1.glob("*.json"))] if args.table1 else []
     t1 = table1(records)
     detectors = {}
@@ -186,13 +244,13 @@ def main(argv=None) -> int:
         detectors[name] = detector_figures(eval_dir, bench_json, weights)
     doc = {"commit": _git_commit(),
            "dataset": {"path": str(args.dataset),
-                       "version_id": json.loads(manifest.read_text())["version_id"] if manifest.is_file() else None,
+                       "version_id": _version_id(manifest, info),
                        "manifest_sha256": sha256_file(manifest) if manifest.is_file() else None,
                        "complete": manifest.is_file()},
            "render": render_figures(rows), "table1": t1, "ranking": ranking_check(t1), "detectors": detectors}
     table = readme_table(t1, detectors)
     write_json_atomic(args.out / "metrics.json", doc)
-    write_text_atomic(args.out / "report.md", "# The paper's dataset: results\n\n" + table + "\n")
+    write_text_atomic(args.out / "report.md", report_markdown(doc, table))
     print(table)
     return 0
 

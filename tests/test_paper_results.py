@@ -60,3 +60,50 @@ def test_main_writes_what_it_has_and_marks_the_rest(tmp_path, capsys):
     assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — (1 seeds) |" in table
     assert "| YOLOv5s + ECA: mAP50 | 0.995 | not run yet |" in table
     assert "localization alpha" in capsys.readouterr().out
+
+
+def _eval_metrics(accepted=False):
+    axis = {"n": 10, "mse": 0.25, "rmse": 0.5}
+    return {"localization": {"n_frames": 10, "n_solved": 10, "overall": {a: axis for a in ("x", "y", "alpha")},
+                             "crb": {a: {"bound_rms": 0.4} for a in ("x", "y", "alpha")}},
+            "estimation": {"n_frames": 20, "pooled": {a: axis for a in ("x", "y", "alpha")}},
+            "acceptance": {"accepted": accepted, "criteria": [
+                {"name": "localization precision: x", "value": 0.5, "threshold": 0.3, "unit": "mm", "pass": False,
+                 "paper": 0.794}]}}
+
+
+def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    (ds / "dataset.json").write_text(json.dumps({"version_id": "abcd1234abcd1234"}))
+    det = tmp_path / "s_se"
+    det.mkdir()
+    (det / "metrics.json").write_text(json.dumps(_eval_metrics()))
+    acc = {"frames": 600, "mAP50": 0.99, "mAP50_95": 0.91,
+           "centre_error_by_condition": {"glare": {"median_px": 0.123}, "normal": {"median_px": 0.081}}}
+    (det / "detector.json").write_text(json.dumps({"accuracy": acc, "inference": {"ms_per_image_median": 210.4}}))
+    (det / "w.pt").write_bytes(b"0" * 2_000_000)
+    spec = f"s_se={det}:{det / 'detector.json'}:{det / 'w.pt'}"
+    assert main(["--dataset", str(ds), "--out", str(tmp_path / "out"), "--detector", spec]) == 0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "version id: `abcd1234abcd1234` (no manifest yet" in report       # from dataset.json
+    assert "2.00 MB" in report and "210.4 ms per 1280 x 960 image" in report
+    assert "test split (600 frames): mAP50 0.990, mAP50:95 0.910; median centre error (px) glare 0.123, " \
+           "normal 0.081" in report
+    assert "Acceptance: **REJECTED**" in report
+    assert "| localization precision: x | 0.5000 mm | 0.3000 | no |" in report
+    assert "| localization x (paper's \"MSE\", an RMS) | 0.794 mm | RMSE 0.500 mm (bound 0.400); " \
+           "MSE 0.2500 mm² |" in report
+
+
+def test_report_states_the_ranking_in_sigmas(tmp_path):
+    rec = tmp_path / "t1"
+    rec.mkdir()
+    for att, vals in (("se", (0.84, 0.85, 0.86)), ("eca", (0.82, 0.83, 0.84))):
+        for s, v in enumerate(vals):
+            (rec / f"{att}_seed{s}.json").write_text(json.dumps(_rec(att, s, 0.99, v)))
+    (tmp_path / "ds").mkdir()
+    assert main(["--dataset", str(tmp_path / "ds"), "--out", str(tmp_path / "out"), "--table1", str(rec)]) == 0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "| se > eca | +0.0200 | 0.0100 | +2.0 | yes |" in report
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± 0.010 (3 seeds) |" in report
