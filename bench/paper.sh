@@ -4,7 +4,7 @@
 # last epoch's checkpoint, ablate --record takes finished runs from results/paper/), so the whole
 # script can be run again after any interruption.
 #
-#   sh bench/paper.sh [render|publish|train|table1|accept|summary|all]
+#   sh bench/paper.sh [render|publish|train|train_s|train_n|accept|accept_s|accept_n|table1|summary|all]
 #
 # Cost on the 2-core machine of 2026-12-01: render ~5.3 s/frame (3,200 frames, ~4.7 h); YOLOv5s
 # training ~13.8 crops/s (2,160 steps of 16 crops: ~42 min a run), YOLOv5n ~28 crops/s.
@@ -27,8 +27,11 @@ publish() {
     $DF dataset publish "$DATA" --out "$RES"
 }
 
-train() {   # the paper's detector first (Table 1's SE, seed 0), then ours: same recipe and budget
+train_s() {  # the paper's detector (Table 1's SE, seed 0)
     $DF ablate "$DATA" --model s --attention se --seeds 1 $TRAIN --out "$RUNS/s" --record "$RES/table1"
+}
+
+train_n() {  # ours: same recipe and budget
     $DF ablate "$DATA" --model n --attention se --seeds 1 $TRAIN --out "$RUNS/n" --record "$RES/n_se"
 }
 
@@ -67,10 +70,14 @@ summary() {
 case "${1:-all}" in
     render) render ;;
     publish) publish ;;
-    train) train ;;
+    train) train_s; train_n ;;
+    train_s) train_s ;;
+    train_n) train_n ;;
     table1) table1 ;;
     accept) accept ;;
+    accept_s) accept_one s_se "$RUNS/s/se_seed0/weights.pt" ;;
+    accept_n) accept_one n_se "$RUNS/n/se_seed0/weights.pt" ;;
     summary) summary ;;
-    all) render; publish; train; accept; table1; summary ;;
-    *) echo "usage: sh bench/paper.sh [render|publish|train|table1|accept|summary|all]" >&2; exit 2 ;;
+    all) render; publish; train_s; train_n; accept; table1; summary ;;
+    *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|accept|accept_s|accept_n|table1|summary|all]" >&2; exit 2 ;;
 esac
