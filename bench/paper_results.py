@@ -167,8 +167,8 @@ def render_section(dataset: dict, render: dict) -> list[str]:
              f"- manifest sha256: `{dataset['manifest_sha256']}`"]
     if render.get("frames"):
         r = render
-        lines += [f"- render: {r['frames']} frames in {r['active_wall_s'] / 3600:.2f} h of active wall time "
-                  f"({r['segments']} runs), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
+        lines += [f"- render: {r['active_wall_s'] / 3600:.2f} h of active wall time "
+                  f"({r['segments']} stretches; pauses over {PAUSE_S / 60:.0f} min left out; timing rows of {r['frames']} frames), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
                   f"median Cycles {r['median_cycles_s']:.2f} s/frame, peak worker RSS {r['peak_worker_rss_mb']:.0f} MB"]
     return lines + [""]
 
@@ -186,8 +186,10 @@ def ranking_section(ranking: list[dict]) -> list[str]:
 
 def detector_section(name: str, d: dict) -> list[str]:
     """One detector: its weights, detection figures per split and its acceptance run."""
-    lines = [f"## Detector {name}", "", f"- weights `{d['weights']}`: sha256 `{d.get('weights_sha256')}`, "
-             f"{d.get('weights_bytes', 0) / 1e6:.2f} MB",
+    if "weights_sha256" not in d:
+        return [f"## Detector {name}", "", f"- weights `{d['weights']}`: not trained yet", ""]
+    lines = [f"## Detector {name}", "", f"- weights `{d['weights']}`: sha256 `{d['weights_sha256']}`, "
+             f"{d['weights_bytes'] / 1e6:.2f} MB",
              f"- inference: {_cell(d.get('inference_ms_per_image'), '{:.1f}')} ms per 1280 x 960 image (median)"]
     for split, det in d.get("detection", {}).items():
         cond = ", ".join(f"{k} {v['median_px']:.3f}" for k, v in det.get("centre_error_by_condition", {}).items())

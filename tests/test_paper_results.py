@@ -84,13 +84,15 @@ def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
     (det / "detector.json").write_text(json.dumps({"accuracy": acc, "inference": {"ms_per_image_median": 210.4}}))
     (det / "w.pt").write_bytes(b"0" * 2_000_000)
     spec = f"s_se={det}:{det / 'detector.json'}:{det / 'w.pt'}"
-    assert main(["--dataset", str(ds), "--out", str(tmp_path / "out"), "--detector", spec]) == 0
+    missing = f"n_se={tmp_path / 'n'}:{tmp_path / 'n' / 'detector.json'}:{tmp_path / 'n' / 'w.pt'}"
+    assert main(["--dataset", str(ds), "--out", str(tmp_path / "out"), "--detector", spec, "--detector", missing]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
     assert "version id: `abcd1234abcd1234` (no manifest yet" in report       # from dataset.json
     assert "2.00 MB" in report and "210.4 ms per 1280 x 960 image" in report
     assert "test split (600 frames): mAP50 0.990, mAP50:95 0.910; median centre error (px) glare 0.123, " \
            "normal 0.081" in report
     assert "Acceptance: **REJECTED**" in report
+    assert f"- weights `{tmp_path / 'n' / 'w.pt'}`: not trained yet" in report
     assert "| localization precision: x | 0.5000 mm | 0.3000 | no |" in report
     assert "| localization x (paper's \"MSE\", an RMS) | 0.794 mm | RMSE 0.500 mm (bound 0.400); " \
            "MSE 0.2500 mm² |" in report
