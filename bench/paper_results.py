@@ -168,7 +168,8 @@ def render_section(dataset: dict, render: dict) -> list[str]:
     if render.get("frames"):
         r = render
         lines += [f"- render: {r['active_wall_s'] / 3600:.2f} h of active wall time "
-                  f"({r['segments']} stretches; pauses over {PAUSE_S / 60:.0f} min left out; timing rows of {r['frames']} frames), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
+                  f"({r['segments']} stretches; pauses over {PAUSE_S / 60:.0f} min left out; timing rows of "
+                  f"{r['frames']} frames), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
                   f"median Cycles {r['median_cycles_s']:.2f} s/frame, peak worker RSS {r['peak_worker_rss_mb']:.0f} MB"]
     return lines + [""]
 
