@@ -56,10 +56,8 @@ accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run wit
     cp "$work/eval/metrics.json" "$RES/$name/metrics.json"
 }
 
-accept() {
-    accept_one s_se "$RUNS/s/se_seed0/weights.pt"
-    accept_one n_se "$RUNS/n/se_seed0/weights.pt"
-}
+accept_s() { accept_one s_se "$RUNS/s/se_seed0/weights.pt"; }
+accept_n() { accept_one n_se "$RUNS/n/se_seed0/weights.pt"; }
 
 summary() {
     $PY bench/paper_results.py --dataset "$DATA" --out "$RES" --table1 "$RES/table1" \
@@ -74,10 +72,10 @@ case "${1:-all}" in
     train_s) train_s ;;
     train_n) train_n ;;
     table1) table1 ;;
-    accept) accept ;;
-    accept_s) accept_one s_se "$RUNS/s/se_seed0/weights.pt" ;;
-    accept_n) accept_one n_se "$RUNS/n/se_seed0/weights.pt" ;;
+    accept) accept_s; accept_n ;;
+    accept_s) accept_s ;;
+    accept_n) accept_n ;;
     summary) summary ;;
-    all) render; publish; train_s; train_n; accept; table1; summary ;;
+    all) render; publish; train_s; train_n; accept_s; accept_n; table1; summary ;;
     *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|accept|accept_s|accept_n|table1|summary|all]" >&2; exit 2 ;;
 esac
