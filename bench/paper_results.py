@@ -67,11 +67,17 @@ def table1(records: list[dict]) -> dict:
             continue
         row = {"seeds": [r["seed"] for r in rs]}
         for key in ("mAP50", "mAP50_95"):
-            v = np.array([r[key] for r in rs], dtype=float)
-            row[key] = {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else None,
-                        "values": v.tolist()}
+            row[key] = _spread([r[key] for r in rs])
+            if all("yolov5" in r for r in rs):   # the same runs on YOLOv5's scale (eval/yolov5_ap.py)
+                row["yolov5_" + key] = _spread([r["yolov5"][key] for r in rs])
         out[att] = row
     return out
+
+
+def _spread(values) -> dict:
+    """Mean, sample std (None for one value) and the values."""
+    v = np.array(values, dtype=float)
+    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else None, "values": v.tolist()}
 
 
 def ranking_check(t1: dict, order=PAPER_RANKING, key: str = "mAP50_95") -> list[dict]:
@@ -103,8 +109,8 @@ def pose_figures(metrics: dict) -> dict:
             "n_repeat": metrics["estimation"]["n_frames"]}
 
 
-DETECTION_KEYS = ("frames", "mAP50", "mAP50_95", "per_class", "centre_error", "centre_error_by_condition",
-                  "recall_visible50")
+DETECTION_KEYS = ("frames", "mAP50", "mAP50_95", "yolov5", "per_class", "centre_error",
+                  "centre_error_by_condition", "recall_visible50")
 
 
 def detector_figures(eval_dir: Path, bench_json: Path, weights: Path) -> dict:
@@ -134,6 +140,10 @@ def _cell(x, fmt="{:.3f}") -> str:
     return "—" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
 
 
+def _mean_std(x: dict) -> str:
+    return f"{x['mean']:.3f} ± {_cell(x['std'])}"
+
+
 def readme_table(t1: dict, detectors: dict) -> str:
     """The README's "Results on the paper's dataset" table (paper against ours)."""
     lines = ["| figure | paper | ours |", "| --- | --- | --- |"]
@@ -142,8 +152,9 @@ def readme_table(t1: dict, detectors: dict) -> str:
         ours = t1.get(att)
         for i, key in enumerate(("mAP50", "mAP50_95")):
             p = _cell(paper[i]) if paper else "not in the paper"
-            o = (f"{ours[key]['mean']:.3f} ± {_cell(ours[key]['std'])} ({len(ours['seeds'])} seeds)"
-                 if ours else "not run yet")
+            o = (f"{_mean_std(ours[key])} COCO" + (f", {_mean_std(ours['yolov5_' + key])} YOLOv5's"
+                                                     if "yolov5_" + key in ours else "")
+                 + f" ({len(ours['seeds'])} seeds)" if ours else "not run yet")
             lines.append(f"| {name}: {key.replace('_', ':')} | {p} | {o} |")
     pose = detectors.get("s_se", {}).get("pose")
     for kind in ("estimation", "localization"):
@@ -194,8 +205,10 @@ def detector_section(name: str, d: dict) -> list[str]:
              f"- inference: {_cell(d.get('inference_ms_per_image'), '{:.1f}')} ms per 1280 x 960 image (median)"]
     for split, det in d.get("detection", {}).items():
         cond = ", ".join(f"{k} {v['median_px']:.3f}" for k, v in det.get("centre_error_by_condition", {}).items())
+        v5 = det.get("yolov5", {})
         lines.append(f"- {split} split ({det.get('frames')} frames): mAP50 {_cell(det.get('mAP50'))}, "
-                     f"mAP50:95 {_cell(det.get('mAP50_95'))}; median centre error (px) {cond}")
+                     f"mAP50:95 {_cell(det.get('mAP50_95'))} (COCO; YOLOv5's {_cell(v5.get('mAP50'))}, "
+                     f"{_cell(v5.get('mAP50_95'))}); median centre error (px) {cond}")
     if "accepted" in d:
         lines += ["", f"Acceptance: **{'ACCEPTED' if d['accepted'] else 'REJECTED'}**", "",
                   "| criterion | value | threshold | pass |", "| --- | --- | --- | --- |"]

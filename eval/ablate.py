@@ -41,7 +41,7 @@ def _train_and_evaluate(dataset, run: Path, att: str, seed: int, cfg, conf: floa
     m = evaluate_detections(dataset, doc)
     return {"attention": att, "seed": seed, "train_seconds": round(train_s, 1),
             "epochs": summary["epochs"], "images_per_s": summary["history"][-1]["images_per_s"],
-            "mAP50": m["mAP50"], "mAP50_95": m["mAP50_95"], "per_class": m["per_class"],
+            "mAP50": m["mAP50"], "mAP50_95": m["mAP50_95"], "per_class": m["per_class"], "yolov5": m["yolov5"],
             "centre_error": m["centre_error"], "recall_visible50": m["recall_visible50"]}
 
 
@@ -73,17 +73,34 @@ def _recorded(record_dir, name: str, dataset, cfg) -> dict | None:
 def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress: bool, record_dir) -> dict:
     """One (attention, seed) run: from the record folder, from OUT, or trained and evaluated now."""
     name = f"{att}_seed{seed}"
-    rec = _recorded(record_dir, name, dataset, cfg)
-    if rec is not None:
-        return rec
     run = out / name
+    rec = _recorded(record_dir, name, dataset, cfg)
+    if rec is not None and "yolov5" in rec:
+        return rec
+    if rec is not None:
+        return _save(_with_yolov5(rec, run, dataset), run, name, record_dir)
     metrics_path = run / "metrics.json"
     if metrics_path.is_file() and (run / "weights.pt").is_file():
-        rec = json.loads(metrics_path.read_text())
+        rec = _with_yolov5(json.loads(metrics_path.read_text()), run, dataset)
     else:
         rec = _train_and_evaluate(dataset, run, att, seed, cfg, conf, progress)
         rec.update(dataset_version=dataset.version_id, config=cfg.to_dict())
-        write_json_atomic(metrics_path, rec)
+    return _save(rec, run, name, record_dir)
+
+
+def _with_yolov5(rec: dict, run: Path, dataset) -> dict:
+    """A record made before YOLOv5's mAP was measured gets it from the run's saved test detections
+    (when they are still there)."""
+    dets = run / "dets_test.json"
+    if "yolov5" not in rec and dets.is_file():
+        rec = {**rec, "yolov5": evaluate_detections(dataset, dets)["yolov5"]}
+    return rec
+
+
+def _save(rec: dict, run: Path, name: str, record_dir) -> dict:
+    """Write the run's metrics.json (when its folder exists) and its record."""
+    if run.is_dir():
+        write_json_atomic(run / "metrics.json", rec)
     if record_dir:
         Path(record_dir).mkdir(parents=True, exist_ok=True)
         write_json_atomic(Path(record_dir) / f"{name}.json", rec)

@@ -8,6 +8,8 @@
   one detection of its class (greedy by falling score, box IoU >= 0.5); the error is the distance
   (px) between the detection's ``center_px`` and the label's exact projected centre. Reported for
   normal frames (conditions normal, ideal) and challenging ones (low_light, occlusion, glare).
+- The same mAP50 and mAP50:95 as YOLOv5's val.py computes them (``yolov5_ap``), under
+  ``"yolov5"``: its interpolation tops out at 0.995, the paper's figures are on that scale.
 - Recall of visible markers: the share of markers with visible fraction >= 0.5 matched by a
   detection with score >= ``recall_conf``.
 Markers whose label says ``legible`` false (colour washed out by glare or lost in the dark) are
@@ -27,6 +29,7 @@ from pycocotools.cocoeval import COCOeval
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
+from dockfactory.eval.yolov5_ap import yolov5_map
 from dockfactory.generator.export_coco import coco_from_labels
 
 COCO_SHIFT = 0.5
@@ -122,7 +125,9 @@ def evaluate_detections(ds, detections, split: str | None = None, recall_conf: f
     if not labels:
         raise DockfactoryError(f"no labelled frame of split {split!r} has detections")
     gt = coco_from_labels(labels, threshold)
-    result = coco_map(gt, coco_results(doc["frames"], gt))
+    rows = coco_results(doc["frames"], gt)
+    result = coco_map(gt, rows)
+    result["yolov5"] = yolov5_map(gt, rows)
     result.update(centre_and_recall(labels, doc["frames"], threshold, recall_conf))
     result.update({"frames": len(labels), "split": split, "dataset_version": ds.version_id,
                    "detections_dataset_version": doc.get("dataset_version"),
@@ -171,6 +176,9 @@ def format_report(m: dict) -> str:
              "| class | mAP50 | mAP50:95 |", "| --- | --- | --- |",
              f"| all | {m['mAP50']:.4f} | {m['mAP50_95']:.4f} |"]
     lines += [f"| {k} | {v['mAP50']:.4f} | {v['mAP50_95']:.4f} |" for k, v in m["per_class"].items()]
+    if "yolov5" in m:
+        lines.append(f"YOLOv5 val.py's mAP (tops out at 0.995): mAP50 {m['yolov5']['mAP50']:.4f}, "
+                     f"mAP50:95 {m['yolov5']['mAP50_95']:.4f}")
     for k, v in {**m["centre_error"], **m.get("centre_error_by_condition", {})}.items():
         lines.append(f"centre error {k}: median {v['median_px']:.4f} px, mean {v['mean_px']:.4f}, "
                      f"p90 {v['p90_px']:.4f} (n {v['n']})")

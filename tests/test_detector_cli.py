@@ -71,6 +71,11 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     rec = json.loads((record / "none_seed0.json").read_text())
     assert rec["dataset_version"] == json.loads((painted_source / "dataset.json").read_text())["version_id"]
     assert rec["config"]["epochs"] == 1 and 0 <= rec["mAP50"] <= 1
+    assert 0 <= rec["yolov5"]["mAP50"] <= 0.995 and set(rec["yolov5"]["per_class"]) == set(rec["per_class"])
+    older = {k: v for k, v in rec.items() if k != "yolov5"}    # a record made before YOLOv5's mAP ...
+    (record / "none_seed0.json").write_text(json.dumps(older))
+    assert main(argv) == 0                                      # ... gets it from the saved detections
+    assert json.loads((record / "none_seed0.json").read_text())["yolov5"] == rec["yolov5"]
     table = (out / "ablation.md").read_text()
     shutil.rmtree(out)                     # the runs are gone (out/ of a past session) ...
 

@@ -8,6 +8,7 @@ from dockfactory.eval.detection_metrics import (
     coco_results,
     match_frame,
 )
+from dockfactory.eval.yolov5_ap import correct_matrix, yolov5_map
 from dockfactory.generator.export_coco import coco_from_labels
 
 SIZE = 20.0
@@ -128,3 +129,60 @@ def test_illegible_markers_are_ignored():
     assert run_map(labs, dets)["mAP50_95"] == pytest.approx(1.0)
     r = centre_and_recall(labs, dets, 0.5)
     assert r["recall_visible50"] == pytest.approx(1.0) and r["recall_markers"] == 3
+
+
+# YOLOv5's mAP (eval/yolov5_ap.py): the same cases, against YOLOv5's interpolation
+def run_v5(labs, dets):
+    gt = coco_from_labels(labs, 0.5)
+    return yolov5_map(gt, coco_results(dets, gt))
+
+
+def many_labels(n=50):
+    """n frames with one marker of each class: 50 ground-truth boxes per class."""
+    return [{"frame_id": f"{i:06d}", "image": {"width": 200, "height": 100},
+             "spec": {"split": "test", "condition": "normal"},
+             "markers": [marker(0, 40.0, 30.0), marker(1, 120.0, 60.0)]} for i in range(n)]
+
+
+def test_yolov5_perfect_detections_give_its_ceiling():
+    m = run_v5(labels(), dets_from(labels()))
+    # the last trapezoid (recall 0.99 to 1.00) falls to the closing point (1, 0): 1 - 0.01 / 2
+    assert m["mAP50"] == pytest.approx(0.995) and m["mAP50_95"] == pytest.approx(0.995)
+
+
+def test_one_missed_box_caps_coco_but_not_yolov5():
+    labs = many_labels(100)
+    dets = dets_from(labs, drop={("000007", 1)})          # BlueB finds 99 of 100
+    coco, v5 = run_map(labs, dets), run_v5(labs, dets)
+    assert coco["per_class"]["BlueB"]["mAP50"] == pytest.approx(100 / 101)
+    assert v5["per_class"]["BlueB"]["mAP50"] == pytest.approx(0.995)
+    assert v5["per_class"]["RedA"]["mAP50"] == pytest.approx(0.995)
+
+
+def test_yolov5_half_recall_and_known_shift():
+    # BlueB finds 1 of 2: precision 1 up to recall 0.5, then the straight line to (1, 0): 0.75
+    m = run_v5(labels(), dets_from(labels(), drop={("000001", 1)}))
+    assert m["per_class"]["BlueB"]["mAP50"] == pytest.approx(0.75)
+    # every box at IoU 0.72 counts at the thresholds 0.50 ... 0.70: 5 of 10
+    m = run_v5(labels(), dets_from(labels(), shift=shift_for_iou(0.72)))
+    assert m["mAP50"] == pytest.approx(0.995) and m["mAP50_95"] == pytest.approx(0.995 * 0.5)
+
+
+def test_yolov5_counts_a_detection_on_an_ignored_marker():
+    labs = labels()
+    labs[0]["markers"].append(marker(0, 170.0, 30.0, vf=0.3))      # crowd in COCO, absent in YOLO
+    low = dets_from(labs)
+    low[labs[0]["frame_id"]][-1]["score"] = 0.5                     # below every true positive
+    assert run_v5(labs, low)["per_class"]["RedA"]["mAP50"] == pytest.approx(0.995)
+    high = dets_from(labs)
+    high[labs[0]["frame_id"]][-1]["score"] = 0.99                   # above them: precision drops
+    assert run_v5(labs, high)["per_class"]["RedA"]["mAP50"] < 0.9
+    assert run_map(labs, high)["mAP50"] == pytest.approx(1.0)       # COCO ignores it
+
+
+def test_yolov5_matching_takes_highest_iou_first():
+    gt = np.array([[0, 0, 10, 10]], float)
+    det = np.array([[2, 0, 12, 10], [0, 0, 10, 10]], float)        # IoU 0.67 and 1.0
+    c = correct_matrix(gt, [1], det, [1, 1])
+    assert c[:, 0].tolist() == [False, True]                        # the better box, whatever its score
+    assert not correct_matrix(gt, [0], det, [1, 1]).any()           # other class: nothing

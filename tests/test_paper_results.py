@@ -28,8 +28,9 @@ def test_render_figures_leave_the_pauses_out():
     assert two["peak_worker_rss_mb"] == 609.0
 
 
-def _rec(att, seed, m50, m5095):
-    return {"attention": att, "seed": seed, "mAP50": m50, "mAP50_95": m5095}
+def _rec(att, seed, m50, m5095, v5=None):
+    rec = {"attention": att, "seed": seed, "mAP50": m50, "mAP50_95": m5095}
+    return rec if v5 is None else {**rec, "yolov5": {"mAP50": v5[0], "mAP50_95": v5[1]}}
 
 
 def test_table1_means_stds_and_the_ranking_in_sigmas():
@@ -57,7 +58,7 @@ def test_main_writes_what_it_has_and_marks_the_rest(tmp_path, capsys):
     doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert doc["dataset"]["complete"] is False and doc["render"]["frames"] == 3
     table = (tmp_path / "out" / "report.md").read_text()
-    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — (1 seeds) |" in table
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — COCO (1 seeds) |" in table
     assert "| YOLOv5s + ECA: mAP50 | 0.995 | not run yet |" in table
     assert "localization alpha" in capsys.readouterr().out
 
@@ -79,7 +80,7 @@ def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
     det = tmp_path / "s_se"
     det.mkdir()
     (det / "metrics.json").write_text(json.dumps(_eval_metrics()))
-    acc = {"frames": 600, "mAP50": 0.99, "mAP50_95": 0.91,
+    acc = {"frames": 600, "mAP50": 0.99, "mAP50_95": 0.91, "yolov5": {"mAP50": 0.994, "mAP50_95": 0.92},
            "centre_error_by_condition": {"glare": {"median_px": 0.123}, "normal": {"median_px": 0.081}}}
     (det / "detector.json").write_text(json.dumps({"accuracy": acc, "inference": {"ms_per_image_median": 210.4}}))
     (det / "w.pt").write_bytes(b"0" * 2_000_000)
@@ -89,8 +90,8 @@ def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
     report = (tmp_path / "out" / "report.md").read_text()
     assert "version id: `abcd1234abcd1234` (no manifest yet" in report       # from dataset.json
     assert "2.00 MB" in report and "210.4 ms per 1280 x 960 image" in report
-    assert "test split (600 frames): mAP50 0.990, mAP50:95 0.910; median centre error (px) glare 0.123, " \
-           "normal 0.081" in report
+    assert "test split (600 frames): mAP50 0.990, mAP50:95 0.910 (COCO; YOLOv5's 0.994, 0.920); median " \
+           "centre error (px) glare 0.123, normal 0.081" in report
     assert "Acceptance: **REJECTED**" in report
     assert f"- weights `{tmp_path / 'n' / 'w.pt'}`: not trained yet" in report
     assert "| localization precision: x | 0.5000 mm | 0.3000 | no |" in report
@@ -103,9 +104,9 @@ def test_report_states_the_ranking_in_sigmas(tmp_path):
     rec.mkdir()
     for att, vals in (("se", (0.84, 0.85, 0.86)), ("eca", (0.82, 0.83, 0.84))):
         for s, v in enumerate(vals):
-            (rec / f"{att}_seed{s}.json").write_text(json.dumps(_rec(att, s, 0.99, v)))
+            (rec / f"{att}_seed{s}.json").write_text(json.dumps(_rec(att, s, 0.99, v, (0.995, v + 0.01))))
     (tmp_path / "ds").mkdir()
     assert main(["--dataset", str(tmp_path / "ds"), "--out", str(tmp_path / "out"), "--table1", str(rec)]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
     assert "| se > eca | +0.0200 | 0.0100 | +2.0 | yes |" in report
-    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± 0.010 (3 seeds) |" in report
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± 0.010 COCO, 0.860 ± 0.010 YOLOv5's (3 seeds) |" in report
