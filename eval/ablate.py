@@ -120,8 +120,8 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
         raise ValueError("need at least one seed")
     out = Path(out)
     runs = []
-    for att in attentions:
-        for seed in seeds:
+    for seed in seeds:          # seed by seed: an interrupted ablation has every variant's first seeds
+        for att in attentions:
             runs.append(_run_one(dataset, out, att, seed, make_config(att, seed), conf, progress, record_dir))
     cfg0 = make_config(attentions[0], seeds[0])
     n_train = len(load_frames(dataset, "train"))

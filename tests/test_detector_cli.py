@@ -86,3 +86,20 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     assert (out / "ablation.md").read_text().split("total training")[0] == table.split("total training")[0]
     with pytest.raises(AssertionError, match="trained again"):   # another budget is another run
         main([a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)])
+
+
+def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
+    """An ablation stopped part-way has the first seeds of every variant, not all seeds of the first."""
+    from dockfactory.detector.train import TrainConfig
+    from dockfactory.eval import ablate
+    from dockfactory.generator.dataset_open import Dataset
+    order = []
+
+    def fake_run(dataset, out, att, seed, cfg, conf, progress, record_dir):
+        order.append((att, seed))
+        return {"attention": att, "seed": seed, "train_seconds": 1.0, "mAP50": 1.0, "mAP50_95": 0.9,
+                "per_class": {"RedA": {"mAP50": 1.0, "mAP50_95": 0.9}}}
+    monkeypatch.setattr(ablate, "_run_one", fake_run)
+    ablate.run_ablation(Dataset.open(painted_source), tmp_path, ["none", "se"], [0, 1],
+                        lambda att, seed: TrainConfig(), progress=False)
+    assert order == [("none", 0), ("se", 0), ("none", 1), ("se", 1)]
