@@ -4,7 +4,7 @@
 # last epoch's checkpoint, ablate --record takes finished runs from results/paper/), so the whole
 # script can be run again after any interruption.
 #
-#   sh bench/paper.sh [render|publish|train|train_s|train_n|accept|accept_s|accept_n|table1|summary|all]
+#   sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|summary|all]
 #
 # Cost on the 2-core machine of 2026-12-01: render ~5.3 s/frame (3,200 frames, ~4.7 h); YOLOv5s
 # training ~13.8 crops/s (2,160 steps of 16 crops: ~42 min a run), YOLOv5n ~28 crops/s.
@@ -41,6 +41,10 @@ table1() {  # the five variants x three seeds (finished runs are taken from the 
     cp "$RUNS/s/ablation.md" "$RES/table1.md"
 }
 
+ship_s() {  # the paper's detector in fp16 beside the shipped n + SE (exits 1 if a quoted figure changes)
+    $PY bench/half_weights.py "$RUNS/s/se_seed0/weights.pt" models/yolov5s_se_markers.pt "$DATA" --threads 2
+}
+
 accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run with one detector
     name=$1 weights=$2 work="$RUNS/accept_$1"
     mkdir -p "$work" "$RES/$name"
@@ -56,12 +60,12 @@ accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run wit
     cp "$work/eval/metrics.json" "$RES/$name/metrics.json"
 }
 
-accept_s() { accept_one s_se "$RUNS/s/se_seed0/weights.pt"; }
+accept_s() { accept_one s_se models/yolov5s_se_markers.pt; }   # the shipped file (after ship_s)
 accept_n() { accept_one n_se "$RUNS/n/se_seed0/weights.pt"; }
 
 summary() {
     $PY bench/paper_results.py --dataset "$DATA" --out "$RES" --table1 "$RES/table1" \
-        --detector "s_se=$RES/s_se:$RES/s_se/detector.json:$RUNS/s/se_seed0/weights.pt" \
+        --detector "s_se=$RES/s_se:$RES/s_se/detector.json:models/yolov5s_se_markers.pt" \
         --detector "n_se=$RES/n_se:$RES/n_se/detector.json:$RUNS/n/se_seed0/weights.pt"
 }
 
@@ -71,11 +75,12 @@ case "${1:-all}" in
     train) train_s; train_n ;;
     train_s) train_s ;;
     train_n) train_n ;;
+    ship_s) ship_s ;;
     table1) table1 ;;
     accept) accept_s; accept_n ;;
     accept_s) accept_s ;;
     accept_n) accept_n ;;
     summary) summary ;;
-    all) render; publish; train_s; train_n; accept_s; accept_n; table1; summary ;;
-    *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|accept|accept_s|accept_n|table1|summary|all]" >&2; exit 2 ;;
+    all) render; publish; train_s; train_n; ship_s; accept_s; accept_n; table1; summary ;;
+    *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|summary|all]" >&2; exit 2 ;;
 esac
