@@ -104,6 +104,17 @@ def bench_training(dataset, batches: int, scale: str = "n") -> dict:
     return {"images_per_s": batches * bs / dt, "batch": bs, "crop": cfg.crop, "batches": batches, "scale": scale}
 
 
+def ok(good: bool) -> str:
+    return "ok" if good else "MISS"
+
+
+def _centre_check(stats: dict, group: str, target: float) -> str:
+    """``normal 0.0755 px [target <= 0.1: ok]``, or that the split has no such markers."""
+    if not stats["n"]:
+        return f"{group}: no markers in this split"
+    return f"{group} {stats['median_px']:.4f} px [target <= {target}: {ok(stats['median_px'] <= target)}]"
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", help="dataset directory with a test split (e.g. rendered from configs/detector.toml)")
@@ -130,7 +141,6 @@ def main(argv=None) -> int:
           f"{args.threads} threads, load average before: {os.getloadavg()[0]:.2f}")
     res = {"inference": bench_inference(args.weights, test[:args.images], args.rounds)}
     inf = res["inference"]
-    ok = lambda good: "ok" if good else "MISS"  # noqa: E731
     print(f"inference {inf['image_size']} (network {inf['network_input']}): median {inf['ms_per_image_median']:.1f} ms"
           f" per image, mean {inf['ms_per_image_mean']:.1f} [target <= {TARGETS['ms_per_image']:.0f}: "
           f"{ok(inf['ms_per_image_median'] <= TARGETS['ms_per_image'])}]  (network {inf['ms_network']:.1f}, "
@@ -157,9 +167,7 @@ def main(argv=None) -> int:
         print(format_report(m))
         print(f"mAP50 {m['mAP50']:.4f} [target >= {TARGETS['mAP50']}: {ok(m['mAP50'] >= TARGETS['mAP50'])}]  "
               f"mAP50:95 {m['mAP50_95']:.4f} [target >= {TARGETS['mAP50_95']}: {ok(m['mAP50_95'] >= TARGETS['mAP50_95'])}]")
-        print(f"median centre error normal {ce['normal']['median_px']:.4f} px [target <= 0.1: "
-              f"{ok(ce['normal']['median_px'] <= 0.1)}], challenging {ce['challenging']['median_px']:.4f} px "
-              f"[target <= 0.25: {ok(ce['challenging']['median_px'] <= 0.25)}]")
+        print("median centre error " + ", ".join(_centre_check(ce[k], k, t) for k, t in (("normal", 0.1), ("challenging", 0.25))))
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     if args.out:
         from dockfactory.core.io import write_json_atomic

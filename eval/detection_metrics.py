@@ -161,13 +161,13 @@ def centre_and_recall(labels: list[dict], frames_dets: dict, threshold: float = 
 
     def stats(v):
         v = np.asarray(v)
-        if len(v) == 0:
-            return {"n": 0, "median_px": float("nan"), "mean_px": float("nan"), "p90_px": float("nan")}
+        if len(v) == 0:     # no such markers (the repeat split has no challenging frames): no figure
+            return {"n": 0, "median_px": None, "mean_px": None, "p90_px": None}
         return {"n": int(len(v)), "median_px": float(np.median(v)), "mean_px": float(v.mean()),
                 "p90_px": float(np.percentile(v, 90))}
     return {"centre_error": {k: stats(v) for k, v in errs.items()},
             "centre_error_by_condition": {k: stats(v) for k, v in sorted(by_condition.items())},
-            "recall_visible50": found / seen if seen else float("nan"), "recall_markers": seen,
+            "recall_visible50": found / seen if seen else None, "recall_markers": seen,
             "recall_conf": recall_conf}
 
 
@@ -180,8 +180,11 @@ def format_report(m: dict) -> str:
         lines.append(f"YOLOv5 val.py's mAP (tops out at 0.995): mAP50 {m['yolov5']['mAP50']:.4f}, "
                      f"mAP50:95 {m['yolov5']['mAP50_95']:.4f}")
     for k, v in {**m["centre_error"], **m.get("centre_error_by_condition", {})}.items():
+        if not v["n"]:
+            lines.append(f"centre error {k}: no matched markers")
+            continue
         lines.append(f"centre error {k}: median {v['median_px']:.4f} px, mean {v['mean_px']:.4f}, "
                      f"p90 {v['p90_px']:.4f} (n {v['n']})")
-    lines.append(f"recall (visible fraction >= 0.5, score >= {m['recall_conf']}): {m['recall_visible50']:.4f} "
-                 f"of {m['recall_markers']}")
+    recall = "—" if m["recall_visible50"] is None else f"{m['recall_visible50']:.4f}"
+    lines.append(f"recall (visible fraction >= 0.5, score >= {m['recall_conf']}): {recall} of {m['recall_markers']}")
     return "\n".join(lines)

@@ -6,6 +6,7 @@ from dockfactory.eval.detection_metrics import (
     centre_and_recall,
     coco_map,
     coco_results,
+    format_report,
     match_frame,
 )
 from dockfactory.eval.yolov5_ap import correct_matrix, yolov5_map
@@ -186,3 +187,15 @@ def test_yolov5_matching_takes_highest_iou_first():
     c = correct_matrix(gt, [1], det, [1, 1])
     assert c[:, 0].tolist() == [False, True]                        # the better box, whatever its score
     assert not correct_matrix(gt, [0], det, [1, 1]).any()           # other class: nothing
+
+
+def test_a_split_without_challenging_frames_gives_no_figure_not_nan():
+    import json
+    labs = many_labels(3)                                          # normal frames only (like the repeat split)
+    r = centre_and_recall(labs, dets_from(labs), 0.5)
+    assert r["centre_error"]["challenging"] == {"n": 0, "median_px": None, "mean_px": None, "p90_px": None}
+    json.dumps(r, allow_nan=False)                                 # the results files refuse NaN
+    assert centre_and_recall([], {}, 0.5)["recall_visible50"] is None
+    report = format_report({**run_map(labs, dets_from(labs)), **r, "frames": 3, "split": "repeat",
+                            "dataset_version": "v"})
+    assert "centre error challenging: no matched markers" in report and "nan" not in report
