@@ -56,7 +56,7 @@ accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run wit
     $DF detect "$DATA" --weights "$weights" --split all --threads 2 --quiet --out "$work/detections.json"
     $DF solve "$DATA" --detections "$work/detections.json" --out "$work/poses.json"
     $DF evaluate "$DATA" --poses "$work/poses.json" --detections "$work/detections.json" --out "$work/eval" || [ $? -eq 1 ]   # 1: REJECTED, a result
-    $DF report "$work/eval" --out "$RES/$name"
+    $DF report "$work/eval" --out "$RES/$name/report.html"
     cp "$work/eval/metrics.json" "$RES/$name/metrics.json"
 }
 
