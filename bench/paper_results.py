@@ -154,7 +154,7 @@ def readme_table(t1: dict, detectors: dict) -> str:
             p = _cell(paper[i]) if paper else "not in the paper"
             o = (f"{_mean_std(ours[key])} COCO" + (f", {_mean_std(ours['yolov5_' + key])} YOLOv5's"
                                                      if "yolov5_" + key in ours else "")
-                 + f" ({len(ours['seeds'])} seeds)" if ours else "not run yet")
+                 + f" ({len(ours['seeds'])} seed{'s' if len(ours['seeds']) != 1 else ''})" if ours else "not run yet")
             lines.append(f"| {name}: {key.replace('_', ':')} | {p} | {o} |")
     pose = detectors.get("s_se", {}).get("pose")
     for kind in ("estimation", "localization"):

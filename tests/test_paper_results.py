@@ -58,7 +58,7 @@ def test_main_writes_what_it_has_and_marks_the_rest(tmp_path, capsys):
     doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert doc["dataset"]["complete"] is False and doc["render"]["frames"] == 3
     table = (tmp_path / "out" / "report.md").read_text()
-    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — COCO (1 seeds) |" in table
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — COCO (1 seed) |" in table
     assert "| YOLOv5s + ECA: mAP50 | 0.995 | not run yet |" in table
     assert "localization alpha" in capsys.readouterr().out
 
