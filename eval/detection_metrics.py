@@ -29,23 +29,12 @@ from pycocotools.cocoeval import COCOeval
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
+from dockfactory.eval.boxes import iou_matrix
 from dockfactory.eval.yolov5_ap import yolov5_map
 from dockfactory.generator.export_coco import coco_from_labels
 
 COCO_SHIFT = 0.5
 NORMAL_CONDITIONS = ("normal", "ideal")
-
-
-def _iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a: (N, 4)``, ``b: (M, 4)`` [x0, y0, x1, y1] -> ``(N, M)`` IoU."""
-    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
-    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
-    lt = np.maximum(a[:, None, :2], b[None, :, :2])
-    rb = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.clip(rb - lt, 0, None).prod(2)
-    area_a = np.prod(np.clip(a[:, 2:] - a[:, :2], 0, None), 1)
-    area_b = np.prod(np.clip(b[:, 2:] - b[:, :2], 0, None), 1)
-    return inter / np.maximum(area_a[:, None] + area_b[None] - inter, 1e-12)
 
 
 def coco_results(frames_dets: dict, coco_gt: dict) -> list[dict]:
@@ -102,7 +91,7 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
     match = np.full(len(gt_boxes), -1, dtype=np.int64)
     if len(gt_boxes) == 0 or len(det_boxes) == 0:
         return match
-    iou = _iou_matrix(det_boxes, gt_boxes)
+    iou = iou_matrix(det_boxes, gt_boxes)
     iou[det_classes[:, None] != gt_classes[None, :]] = -1
     for d in np.argsort(-det_scores, kind="stable"):
         cand = np.where(match == -1, iou[d], -1)

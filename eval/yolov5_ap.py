@@ -20,17 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from dockfactory.eval.boxes import iou_matrix
+
 IOU_THRESHOLDS = np.linspace(0.5, 0.95, 10)
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a: (N, 4)``, ``b: (M, 4)`` [x0, y0, x1, y1] -> ``(N, M)`` IoU."""
-    lt = np.maximum(a[:, None, :2], b[None, :, :2])
-    rb = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.clip(rb - lt, 0, None).prod(2)
-    area = lambda x: np.prod(np.clip(x[:, 2:] - x[:, :2], 0, None), 1)  # noqa: E731
-    return inter / np.maximum(area(a)[:, None] + area(b)[None] - inter, 1e-12)
 
 
 def correct_matrix(gt_boxes, gt_classes, det_boxes, det_classes) -> np.ndarray:
@@ -40,7 +33,7 @@ def correct_matrix(gt_boxes, gt_classes, det_boxes, det_classes) -> np.ndarray:
     correct = np.zeros((len(det_boxes), len(IOU_THRESHOLDS)), dtype=bool)
     if len(gt_boxes) == 0 or len(det_boxes) == 0:
         return correct
-    iou = _iou(gt_boxes, det_boxes)
+    iou = iou_matrix(gt_boxes, det_boxes)
     same = np.asarray(gt_classes).reshape(-1, 1) == np.asarray(det_classes).reshape(1, -1)
     for t, thr in enumerate(IOU_THRESHOLDS):
         g, d = np.nonzero((iou >= thr) & same)
