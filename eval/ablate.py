@@ -77,15 +77,12 @@ def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress
     rec = _recorded(record_dir, name, dataset, cfg)
     if rec is not None and "yolov5" in rec:
         return rec
-    if rec is not None:
-        return _save(_with_yolov5(rec, run, dataset), run, name, record_dir)
-    metrics_path = run / "metrics.json"
-    if metrics_path.is_file() and (run / "weights.pt").is_file():
-        rec = _with_yolov5(json.loads(metrics_path.read_text()), run, dataset)
-    else:
+    if rec is None and (run / "metrics.json").is_file() and (run / "weights.pt").is_file():
+        rec = json.loads((run / "metrics.json").read_text())
+    elif rec is None:
         rec = _train_and_evaluate(dataset, run, att, seed, cfg, conf, progress)
         rec.update(dataset_version=dataset.version_id, config=cfg.to_dict())
-    return _save(rec, run, name, record_dir)
+    return _save(_with_yolov5(rec, run, dataset), run, name, record_dir)
 
 
 def _with_yolov5(rec: dict, run: Path, dataset) -> dict:
