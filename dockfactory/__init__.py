@@ -6,7 +6,15 @@ One import root; the subpackages live in the repository's folders (package-dir m
 ``dockfactory.eval`` (eval/); shipped configs and weights are ``dockfactory.configs`` and
 ``dockfactory.models``. Layers: core <- generator, blender_scenes, solver, detector <- eval.
 """
+import os
 from importlib import metadata
+
+# numpy's OpenBLAS kernel, set before numpy loads it: label geometry is float64 matrix products,
+# and other kernels round the last bits otherwise, so a dataset is the same bytes on every x86-64
+# CPU only with one kernel (dockfactory.core.blas; tests/test_blas_pin.py holds it to the kernel
+# that made the published datasets: changing it changes labels, not the version id)
+LABEL_BLAS_CORE = "Prescott"
+os.environ["OPENBLAS_CORETYPE"] = LABEL_BLAS_CORE
 
 try:
     __version__ = metadata.version("dockfactory")

@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dockfactory.core.blas import check_label_blas
 from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
@@ -111,6 +112,7 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     t_start = time.monotonic()
     if opts.workers < 1:
         raise DockfactoryError(f"--workers must be >= 1, got {opts.workers}")
+    check_label_blas()   # the plan's geometry is computed here, in this process
     frames = select_frames(cfg, opts)
     # sample every scene up front: a bad frame fails before anything is written
     scenes = {s.frame_id: sample_frame(cfg, s) for s in frames}

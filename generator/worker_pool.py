@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from dockfactory.core.blas import pin_label_blas
+
 
 class WorkerDied(RuntimeError):
     """The worker process exited or stopped answering in time."""
@@ -34,6 +36,7 @@ class WorkerProcess:
         log = open(self.log_path, "ab")
         env = dict(os.environ if self.env is None else self.env)
         env.setdefault("PYTHONUNBUFFERED", "1")
+        pin_label_blas(env)   # the same label bytes on every x86-64 CPU (core.blas)
         # the installed package (no sys.path edits); the worker's cwd is the log folder, so no
         # folder of the caller's can shadow an import
         self.proc = subprocess.Popen([sys.executable, "-m", "dockfactory.generator.render_worker"],

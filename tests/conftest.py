@@ -4,6 +4,8 @@ from pathlib import Path
 
 import pytest
 
+import dockfactory  # noqa: F401  (first, before any test module loads numpy: core/blas.py)
+
 # the repository (configs, README); the code is imported as the installed `dockfactory` package
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -10,7 +10,8 @@ Two views of "what the worker imports":
   dockfactory.generator.render_worker`` in generator/worker_pool.py does) through its JSON-lines
   protocol: init, one rendered frame of the shipped smoke config, quit; then ``sys.modules`` is
   listed. This also catches a module imported lazily while rendering or post-processing.
-Package ``__init__`` modules are ignored (they hold no output-shaping code).
+Package ``__init__`` modules are ignored: they hold no output-shaping code, except the BLAS kernel
+that ``dockfactory/__init__.py`` pins, which tests/test_blas_pin.py holds to the published one.
 """
 import importlib.util
 import json

@@ -1,0 +1,98 @@
+"""Labels the same on every CPU: numpy's OpenBLAS kernel is pinned (core.blas; issue 13).
+
+The published paper dataset was rendered on a CPU whose OpenBLAS ran its SSE3 kernel; on an
+AVX2/AVX-512 machine the default kernel gave other last bits in every label's geometry, and
+``dataset verify --manifest`` refused the re-render. These tests check the pin where it is set
+(package import, every render worker), the refusal when it could not take effect, and, with
+Cycles, that a re-rendered published frame verifies on this machine.
+"""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from dockfactory.core import blas
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.generator import worker_pool
+from dockfactory.generator.render_job import JobOptions, run_render
+
+
+def _python(code: str, **env) -> subprocess.CompletedProcess:
+    full = {k: v for k, v in os.environ.items() if k != blas.ENV}
+    full.update(env)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=full, timeout=120)
+
+
+def _needs_openblas():
+    if blas.openblas_core() is None:
+        pytest.skip("numpy does not use OpenBLAS here: nothing to pin")
+
+
+def test_importing_dockfactory_before_numpy_runs_the_label_kernel():
+    _needs_openblas()
+    out = _python("import dockfactory, numpy\nfrom dockfactory.core.blas import openblas_core\nprint(openblas_core())")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == blas.LABEL_BLAS_CORE
+
+
+def test_numpy_loaded_first_with_another_kernel_is_refused_in_one_line():
+    _needs_openblas()
+    code = ("import numpy, dockfactory\nfrom dockfactory.core.blas import check_label_blas, openblas_core\n"
+            "print(openblas_core())\ncheck_label_blas()")
+    out = _python(code, OPENBLAS_CORETYPE="Core2")   # a kernel every x86-64 CPU runs, not the label one
+    if out.stdout.strip() != "Core2":
+        pytest.skip(f"OpenBLAS here cannot run the Core2 kernel ({out.stdout.strip()!r})")
+    assert out.returncode == 1
+    last = out.stderr.strip().splitlines()[-1]
+    assert "DockfactoryError" in last and "runs its Core2 kernel, not Prescott" in last
+
+
+def test_a_render_is_refused_before_anything_is_written(monkeypatch, repo_root, tmp_path):
+    from dockfactory.core.config import load_config
+    monkeypatch.setattr(blas, "openblas_core", lambda: "Haswell")
+    cfg = load_config(repo_root / "configs" / "smoke.toml")
+    root = tmp_path / "ds"
+    with pytest.raises(DockfactoryError, match="OpenBLAS runs its Haswell kernel"):
+        run_render(cfg, root, (repo_root / "configs" / "smoke.toml").read_text(), JobOptions())
+    assert not root.exists()
+
+
+def test_every_render_worker_gets_the_label_kernel_even_from_a_caller_env(monkeypatch, tmp_path):
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def popen(cmd, **kw):
+        seen.update(kw["env"])
+        raise Stop
+
+    monkeypatch.setattr(worker_pool.subprocess, "Popen", popen)
+    proc = worker_pool.WorkerProcess({"op": "init"}, tmp_path / "w.log", env={"PATH": "/bin", blas.ENV: "Haswell"})
+    with pytest.raises(Stop):
+        proc.start(1.0)
+    assert seen[blas.ENV] == blas.LABEL_BLAS_CORE and seen["PATH"] == "/bin"
+
+
+@pytest.mark.render
+def test_a_published_paper_frame_rerendered_here_verifies(repo_root, tmp_path):
+    """Frame 000001 of the published paper dataset (8e89fd1e76e6ba2b), rendered on this machine:
+    its label geometry equals the published one (byte for byte, image measurements aside) and its
+    image is within the published tolerance."""
+    out = tmp_path / "paper"
+    render = subprocess.run([sys.executable, "-m", "dockfactory", "render", "paper", "--out", str(out),
+                             "--frames", "000001", "--workers", "1", "--quiet"],
+                            capture_output=True, text=True, timeout=600)
+    assert render.returncode == 0, render.stderr
+    verify = subprocess.run([sys.executable, "-m", "dockfactory", "dataset", "verify", str(out), "--manifest",
+                             str(repo_root / "results" / "paper" / "manifest.json")],
+                            capture_output=True, text=True, timeout=300)
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+    assert "1 frames checked: labels" in verify.stdout
+
+
+def test_the_label_kernel_is_the_one_that_made_the_published_datasets():
+    # changing it changes every label's last bits without changing the version id (the constant
+    # lives in dockfactory/__init__.py, which the version's source hash does not cover)
+    assert blas.LABEL_BLAS_CORE == "Prescott"
