@@ -155,7 +155,8 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
       out, worst first, while each section keeps ``MIN_POINTS`` (they keep their id; ``inliers``
       False; see :mod:`solver.suspects`): ``boxes`` (N, 4) [x0, y0, x1, y1] px, the detected
       outlines (under ``options.min_extent`` of the predicted outline = partly hidden);
-      ``refined`` (N,) bool, False where the detector could not refine the centre. With
+      ``refined`` (N,) bool, False where the detector could not refine the centre (also used
+      by identification: a hypothesis explaining more refined detections wins). With
       ``options.eccentricity`` every centre is corrected by its predicted perspective offset
       and the pose refitted (see :mod:`solver.eccentricity`).
     - ``correspondences``: dict marker id -> (u, v), or a pair (marker_ids (N,), points_2d
@@ -201,7 +202,7 @@ def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
     boxes = _row_array(boxes, n_det, (4,), "boxes", float)
     refined = _row_array(refined, n_det, (), "refined", bool)
     ident = identify_markers(markers, fitter.principal_point, detections, options.identify,
-                             options.refine)
+                             options.refine, trusted=refined)
     ids = list(ident.marker_ids)
     used = np.array([i is not None for i in ids])
     rows, p3, p2 = section_arrays(layout, ids, used, ident.points_2d)
