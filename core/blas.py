@@ -16,9 +16,8 @@ import os
 import numpy  # noqa: F401  (loads its BLAS: openblas_core reads the loaded library)
 
 from dockfactory import LABEL_BLAS_CORE
+from dockfactory import LABEL_BLAS_ENV as ENV
 from dockfactory.core.errors import DockfactoryError
-
-ENV = "OPENBLAS_CORETYPE"
 
 
 def pin_label_blas(environ=os.environ) -> None:
