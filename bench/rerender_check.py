@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.generator.published import image_tiles
+from dockfactory.generator.fingerprints import image_tiles
 
 
 def compare_frame(a: Path, b: Path, fid: str) -> dict:

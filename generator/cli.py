@@ -150,11 +150,12 @@ def add_subcommands(sub) -> None:
     d.add_argument("--format", default="coco,yolo,bop", help="export: coco, yolo, bop (comma-separated)")
     d.add_argument("--json", action="store_true", help="info/diff: print JSON")
     d.add_argument("--manifest", help="verify: check a re-render (any subset of frames) against this published "
-                   "manifest.json and the image_tiles.npz beside it")
+                   "manifest.json and the fingerprints(_v2).npz beside it")
     d.add_argument("--tolerance", type=float, default=published.DEFAULT_TOLERANCE,
                    help=f"verify --manifest: largest tile-mean difference (8-bit levels) of an image that is not "
                         f"byte for byte the published one (default {published.DEFAULT_TOLERANCE})")
-    d.add_argument("--out", help="publish: folder for the verified dataset's manifest.json and image_tiles.npz")
+    d.add_argument("--out", help="publish: folder for the verified dataset's manifest.json and its "
+                   "fingerprints.npz, fingerprints_v2.npz")
     d.set_defaults(func=cmd_dataset)
 
     c = sub.add_parser("check-config", help="validate a config and print its plan")

@@ -1,0 +1,116 @@
+"""The fingerprint files published beside a dataset's manifest (``generator.published``).
+
+- ``fingerprints.npz`` (v1): per frame, the mean of every 80 x 80 px image tile per channel and
+  the label's geometry digest (``label_prints.label_geometry_sha256``);
+- ``fingerprints_v2.npz``: per frame, the label's core digest and its index-pass pixel counts
+  and boxes (``label_prints``), so that a label whose edge pixels went to a neighbour on another
+  CPU can be told from a label that differs.
+"""
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from dockfactory.core.io import write_bytes_atomic
+from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.label_prints import index_measurements, label_core_sha256, label_geometry_sha256
+
+TILE_PX = 80
+FINGERPRINTS_NAME = "fingerprints.npz"
+FINGERPRINTS_V2_NAME = "fingerprints_v2.npz"
+
+
+def image_tiles(image: np.ndarray, tile: int = TILE_PX) -> np.ndarray:
+    """Mean of every ``tile`` x ``tile`` block per channel (float32, (rows, cols, channels)); edge
+    blocks are the partial tiles that remain."""
+    h, w = image.shape[:2]
+    rows, cols = -(-h // tile), -(-w // tile)
+    img = image.reshape(h, w, -1).astype(np.float64)
+    out = np.empty((rows, cols, img.shape[2]), np.float32)
+    for i in range(rows):
+        for j in range(cols):
+            out[i, j] = img[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile].mean(axis=(0, 1))
+    return out
+
+
+def read_image_tiles(path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) if Path(path).is_file() else None
+    if image is None:
+        raise DatasetError(f"{path}: unreadable image")
+    return image_tiles(image)
+
+
+def write_fingerprints(root, out_path) -> int:
+    """Fingerprints of every frame of the complete dataset at ``root`` (ids from its manifest):
+    image tile means and label geometry digests, written atomically to ``out_path`` (npz:
+    ``frame_ids``, ``tiles``, ``label_geometry``); returns the count."""
+    root = Path(root)
+    manifest = json.loads((root / "manifest.json").read_text())
+    ids = [f["frame_id"] for f in manifest["frames"]]
+    tiles = np.stack([read_image_tiles(root / "images" / f"{fid}.png") for fid in ids])
+    geometry = [label_geometry_sha256((root / "labels" / f"{fid}.json").read_bytes()) for fid in ids]
+    out_path = Path(out_path)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, frame_ids=np.array(ids), tiles=tiles.astype(np.float32),
+                        label_geometry=np.array(geometry))
+    write_bytes_atomic(out_path, buf.getvalue())
+    return len(ids)
+
+
+def fingerprints_v2(frame_ids, label_texts) -> bytes:
+    """The npz bytes of fingerprint v2 of the labels ``label_texts`` (bytes, one per frame id):
+    ``frame_ids``, ``label_core`` (digests), ``index`` (index-pass numbers, one row per frame,
+    NaN-padded) and ``index_len`` (each row's length)."""
+    cores, rows = [], []
+    for text in label_texts:
+        cores.append(label_core_sha256(text))
+        rows.append(index_measurements(text))
+    index = np.full((len(rows), max((len(r) for r in rows), default=0)), np.nan)
+    for i, r in enumerate(rows):
+        index[i, :len(r)] = r
+    buf = io.BytesIO()
+    np.savez_compressed(buf, frame_ids=np.array(list(frame_ids)), label_core=np.array(cores), index=index,
+                        index_len=np.array([len(r) for r in rows], np.int64))
+    return buf.getvalue()
+
+
+def write_fingerprints_v2(root, out_path) -> int:
+    """Fingerprint v2 of every label of the complete dataset at ``root``, written atomically."""
+    root = Path(root)
+    ids = [f["frame_id"] for f in json.loads((root / "manifest.json").read_text())["frames"]]
+    texts = [(root / "labels" / f"{fid}.json").read_bytes() for fid in ids]
+    write_bytes_atomic(Path(out_path), fingerprints_v2(ids, texts))
+    return len(ids)
+
+
+def _read_npz(path: Path, read) -> dict | None:
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return read(z)
+    except (OSError, ValueError, KeyError) as exc:
+        raise DatasetError(f"{path}: not a fingerprint file ({type(exc).__name__}: {exc})") from None
+
+
+def _v1(z) -> dict:
+    return dict(zip((str(f) for f in z["frame_ids"]), zip(z["tiles"], (str(g) for g in z["label_geometry"]))))
+
+
+def _v2(z) -> dict:
+    rows = (row[:n] for row, n in zip(z["index"], z["index_len"]))
+    return dict(zip((str(f) for f in z["frame_ids"]), zip((str(c) for c in z["label_core"]), rows)))
+
+
+def read_fingerprints(path: Path) -> dict | None:
+    """v1 fingerprints: {frame_id: (tile means, label geometry sha256)}, None without the file."""
+    return _read_npz(Path(path), _v1)
+
+
+def read_fingerprints_v2(path: Path) -> dict | None:
+    """v2 fingerprints: {frame_id: (label core sha256, index measurements)}, None without the file."""
+    return _read_npz(Path(path), _v2)
