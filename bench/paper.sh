@@ -70,7 +70,7 @@ accept_s() { accept_one s_se models/yolov5s_se_markers.pt; }   # the shipped fil
 accept_n() { accept_one n_se "$RUNS/n/se_seed0/weights.pt"; }
 
 summary() {
-    $PY bench/paper_results.py --dataset "$DATA" --out "$RES" --table1 "$RES/table1" \
+    $PY bench/paper_results.py --dataset "$DATA" --out "$RES" --table1 "$RES/table1" --published "$RES/manifest.json" \
         --detector "s_se=$RES/s_se:$RES/s_se/detector.json:models/yolov5s_se_markers.pt" \
         --detector "n_se=$RES/n_se:$RES/n_se/detector.json:$RUNS/n/se_seed0/weights.pt"
 }

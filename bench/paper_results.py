@@ -8,6 +8,10 @@ Inputs (every one optional except the dataset; a missing part is reported as mis
 invented):
 - the dataset's ``logs/timings.jsonl`` (render figures: frames, active wall time, s/frame,
   frames/hour, peak RSS of a worker) and its ``manifest.json`` (version id, sha256);
+- ``--published``: the published manifest. When the dataset is a re-render of it (another
+  manifest: other image bits on another CPU, checked with ``dataset verify --manifest``), its
+  figures go to ``rerender`` and the published render's figures are kept from the previous
+  ``OUT/metrics.json`` (when that one was made on the published dataset);
 - ``--table1``: the ablation's run records (``dockfactory ablate ... --record DIR``);
 - ``--detector NAME=EVAL_DIR:BENCH_JSON:WEIGHTS``: a detector's acceptance run (the ``evaluate``
   output folder with metrics.json), its ``bench/detector_bench.py --out`` figures and its weights.
@@ -171,17 +175,25 @@ def readme_table(t1: dict, detectors: dict) -> str:
     return "\n".join(lines)
 
 
-def render_section(dataset: dict, render: dict) -> list[str]:
+def _render_line(what: str, r: dict) -> list[str]:
+    if not r.get("frames"):
+        return []
+    return [f"- {what}: {r['active_wall_s'] / 3600:.2f} h of active wall time "
+            f"({r['segments']} stretches; pauses over {PAUSE_S / 60:.0f} min left out; timing rows of "
+            f"{r['frames']} frames), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
+            f"median Cycles {r['median_cycles_s']:.2f} s/frame, peak worker RSS {r['peak_worker_rss_mb']:.0f} MB"]
+
+
+def render_section(dataset: dict, render: dict, rerender: dict | None = None) -> list[str]:
     """The dataset's identity and its render figures (wall time without the pauses between runs)."""
     lines = ["## Dataset", "", f"- version id: `{dataset['version_id']}`"
              f"{'' if dataset['complete'] else ' (no manifest yet: incomplete or not verified)'}",
              f"- manifest sha256: `{dataset['manifest_sha256']}`"]
-    if render.get("frames"):
-        r = render
-        lines += [f"- render: {r['active_wall_s'] / 3600:.2f} h of active wall time "
-                  f"({r['segments']} stretches; pauses over {PAUSE_S / 60:.0f} min left out; timing rows of "
-                  f"{r['frames']} frames), {r['s_per_frame']:.2f} s/frame, {r['frames_per_hour']:.0f} frames/hour, "
-                  f"median Cycles {r['median_cycles_s']:.2f} s/frame, peak worker RSS {r['peak_worker_rss_mb']:.0f} MB"]
+    if dataset.get("rerender_of"):
+        lines.append(f"- the figures below were measured on a re-render of the published dataset (manifest "
+                     f"sha256 `{dataset['rerender_of']}`), checked against it with `dataset verify --manifest`")
+    lines += _render_line("render (published)" if dataset.get("rerender_of") else "render", render)
+    lines += _render_line("re-render", rerender or {})
     return lines + [""]
 
 
@@ -220,7 +232,7 @@ def detector_section(name: str, d: dict) -> list[str]:
 def report_markdown(doc: dict, table: str) -> str:
     """report.md: the paper-against-ours table, then the dataset, the ranking and each detector."""
     lines = ["# The paper's dataset: results", "", f"Commit `{doc['commit']}`.", "", table, ""]
-    lines += render_section(doc["dataset"], doc["render"]) + ranking_section(doc["ranking"])
+    lines += render_section(doc["dataset"], doc["render"], doc.get("rerender")) + ranking_section(doc["ranking"])
     for name, d in doc["detectors"].items():
         lines += detector_section(name, d)
     return "\n".join(lines)
@@ -232,6 +244,23 @@ def _version_id(manifest: Path, info: Path) -> str | None:
         if path.is_file():
             return json.loads(path.read_text())["version_id"]
     return None
+
+
+def dataset_and_render(dataset: Path, rows: list[dict], published: Path | None, previous: dict) -> dict:
+    """{"dataset", "render"[, "rerender"]}: the dataset's identity and render figures; for a
+    re-render of ``published``, the published render's figures come from ``previous`` (the last
+    metrics.json), never from the re-render."""
+    manifest, info = dataset / "manifest.json", dataset / "dataset.json"
+    doc = {"dataset": {"path": str(dataset), "version_id": _version_id(manifest, info),
+                       "manifest_sha256": sha256_file(manifest) if manifest.is_file() else None,
+                       "complete": manifest.is_file()}}
+    pub_sha = sha256_file(published) if published and published.is_file() else None
+    if pub_sha is None or pub_sha == doc["dataset"]["manifest_sha256"]:
+        return doc | {"render": render_figures(rows)}
+    doc["dataset"]["rerender_of"] = pub_sha
+    prev = previous.get("dataset", {})
+    kept = previous.get("render", {}) if pub_sha in (prev.get("manifest_sha256"), prev.get("rerender_of")) else {}
+    return doc | {"render": kept, "rerender": render_figures(rows)}
 
 
 def _git_commit() -> str:
@@ -246,11 +275,12 @@ def main(argv=None) -> int:
     ap.add_argument("--dataset", type=Path, required=True)
     ap.add_argument("--out", type=Path, default=Path("results/paper"))
     ap.add_argument("--table1", type=Path)
+    ap.add_argument("--published", type=Path, help="the published manifest.json (see the module docstring)")
     ap.add_argument("--detector", action="append", default=[], metavar="NAME=EVAL_DIR:BENCH_JSON:WEIGHTS")
     args = ap.parse_args(argv)
     timings = args.dataset / "logs" / "timings.jsonl"
     rows = [json.loads(line) for line in timings.read_text().splitlines() if line.strip()] if timings.is_file() else []
-    manifest, info = args.dataset / "manifest.json", args.dataset / "dataset.json"
+    previous = json.loads((args.out / "metrics.json").read_text()) if (args.out / "metrics.json").is_file() else {}
     records = [json.loads(p.read_text()) for p in sorted(args.table1.glob("*.json"))] if args.table1 else []
     t1 = table1(records)
     detectors = {}
@@ -258,12 +288,8 @@ def main(argv=None) -> int:
         name, _, paths = spec.partition("=")
         eval_dir, bench_json, weights = (Path(p) for p in paths.split(":"))
         detectors[name] = detector_figures(eval_dir, bench_json, weights)
-    doc = {"commit": _git_commit(),
-           "dataset": {"path": str(args.dataset),
-                       "version_id": _version_id(manifest, info),
-                       "manifest_sha256": sha256_file(manifest) if manifest.is_file() else None,
-                       "complete": manifest.is_file()},
-           "render": render_figures(rows), "table1": t1, "ranking": ranking_check(t1), "detectors": detectors}
+    doc = {"commit": _git_commit(), **dataset_and_render(args.dataset, rows, args.published, previous),
+           "table1": t1, "ranking": ranking_check(t1), "detectors": detectors}
     table = readme_table(t1, detectors)
     write_json_atomic(args.out / "metrics.json", doc)
     write_text_atomic(args.out / "report.md", report_markdown(doc, table))

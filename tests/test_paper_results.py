@@ -8,6 +8,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from paper_results import main, ranking_check, render_figures, table1  # noqa: E402
 
+from dockfactory.core.io import sha256_file  # noqa: E402
+
 
 def _rows(starts_and_counts, step=5.0, total=4.5):
     rows = []
@@ -61,6 +63,34 @@ def test_main_writes_what_it_has_and_marks_the_rest(tmp_path, capsys):
     assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — COCO (1 seed) |" in table
     assert "| YOLOv5s + ECA: mAP50 | 0.995 | not run yet |" in table
     assert "localization alpha" in capsys.readouterr().out
+
+
+def test_a_rerender_keeps_the_published_render_figures(tmp_path):
+    ds = tmp_path / "ds"
+    (ds / "logs").mkdir(parents=True)
+    (ds / "logs" / "timings.jsonl").write_text("\n".join(json.dumps(r) for r in _rows([(0.0, 3)])) + "\n")
+    (ds / "manifest.json").write_text(json.dumps({"version_id": "v1", "other": "bits"}))
+    out = tmp_path / "out"
+    out.mkdir()
+    published = out / "manifest.json"
+    published.write_text(json.dumps({"version_id": "v1"}))
+    first = {"dataset": {"manifest_sha256": sha256_file(published)}, "render": render_figures(_rows([(0.0, 5)]))}
+    (out / "metrics.json").write_text(json.dumps(first))
+    assert main(["--dataset", str(ds), "--out", str(out), "--published", str(published)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["dataset"]["rerender_of"] == sha256_file(published) != doc["dataset"]["manifest_sha256"]
+    assert doc["render"] == first["render"] and doc["rerender"]["frames"] == 3
+    assert "re-render of the published dataset" in (out / "report.md").read_text()
+    assert main(["--dataset", str(ds), "--out", str(out), "--published", str(published)]) == 0
+    assert json.loads((out / "metrics.json").read_text())["render"] == first["render"]   # kept again
+    first["dataset"]["manifest_sha256"] = "0" * 64                              # made on another dataset
+    (out / "metrics.json").write_text(json.dumps(first))
+    assert main(["--dataset", str(ds), "--out", str(out), "--published", str(published)]) == 0
+    assert json.loads((out / "metrics.json").read_text())["render"] == {}
+    (ds / "manifest.json").write_bytes(published.read_bytes())                  # the published dataset itself
+    assert main(["--dataset", str(ds), "--out", str(out), "--published", str(published)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["render"]["frames"] == 3 and "rerender" not in doc and "rerender_of" not in doc["dataset"]
 
 
 def _eval_metrics(accepted=False):
