@@ -106,14 +106,16 @@ def section_noise_shapes(markers, cam_from_s, focal_px: float) -> np.ndarray:
 
 
 def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: dict,
-                    points_2d: dict | None = None) -> JointFit:
+                    points_2d: dict | None = None, extra_px2: dict | None = None) -> JointFit:
     """``fit`` with the covariance of the disc noise model (:func:`solver.refine.
     covariance_from_jacobian` with ``point_cov``: the sandwich of the unweighted fit, the scale
     estimated from the residuals as the fitter's options say): pose and intrinsics unchanged.
 
     ``points`` and ``keep`` ({section: (n_s,) bool}) are the points the fit used, ``points_2d``
-    their pixels if not ``points.points_2d`` (e.g. eccentricity-corrected). The fit is returned
-    as it is when a point falls behind the camera.
+    their pixels if not ``points.points_2d`` (e.g. eccentricity-corrected), ``extra_px2`` the
+    occlusion variances of every point (:func:`solver.suspects.occlusion_variances`, or None),
+    added to the disc noise (:func:`_with_occlusion`). The fit is returned as it is when a point
+    falls behind the camera.
 
     The detector's noise floor (``RefineOptions.sigma_floor_px``, the noise card) is not applied
     here: it is an RMS over every centre, gross errors included, while the scale of this model
@@ -122,6 +124,7 @@ def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, k
     with the floor 0.97 / 0.75 / 1.01 and 1.02 / 0.87 / 0.99, without 1.11 / 0.87 / 1.13 and
     1.15 / 0.99 / 1.09 (target 0.85-1.2: Y's std was 1.3x too cautious with it)."""
     blocks, poses, intr, model, shapes = _stacked(fit, points, fitter, keep, points_2d)
+    shapes = _with_occlusion(shapes, extra_px2, keep, blocks, poses, intr, model)
     res, jac, valid = stack_blocks(blocks, poses, intr, model)
     if not valid:
         return fit
@@ -146,6 +149,34 @@ def _stacked(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: di
     return tuple(blocks), poses, intr, camera_model(fit.model), np.concatenate(shapes)
 
 
+def _loo_q(rho: np.ndarray, jw: np.ndarray) -> np.ndarray:
+    """(n,) leave-one-out residuals rho_i^T (I - H_ii)^-1 rho_i of a whitened fit (see
+    :func:`t_weights`)."""
+    h = np.eye(2) - np.einsum("nap,pq,nbq->nab", jw, inverse_spd(np.einsum("nap,naq->pq", jw, jw)), jw)
+    return np.einsum("na,nab,nb->n", rho, np.linalg.inv(h), rho)
+
+
+def _with_occlusion(shapes: np.ndarray, extra_px2: dict | None, keep: dict, blocks, poses, intr,
+                    model) -> np.ndarray:
+    """``shapes`` (n, 2, 2) plus the extra variance ``extra_px2`` ({section: (n_s, 2, 2)} px^2
+    of every point, :func:`solver.suspects.occlusion_variances`; None: none) of the points
+    ``keep``, in the shapes' units: px^2 over the frame's noise scale k^2, the robust (median
+    leave-one-out) scale of the first round of :func:`t_weights` on the fit as it is."""
+    if extra_px2 is None:
+        return shapes
+    extra = np.concatenate([extra_px2[s][keep[s]] for s in SECTIONS])
+    if not np.any(extra):
+        return shapes
+    rho, jw, valid = _whitened_residuals(blocks, poses, intr, model,
+                                         np.linalg.inv(np.linalg.cholesky(shapes)))
+    if not valid:
+        return shapes
+    k2 = float(np.median(_loo_q(rho, jw))) / MEDIAN_CHI2_2
+    if not (np.isfinite(k2) and k2 > 0):
+        return shapes
+    return shapes + extra / k2
+
+
 def t_weights(rho: np.ndarray, jw: np.ndarray, previous: np.ndarray | None = None,
               nu: float = ROBUST_NU) -> np.ndarray:
     """(n,) Student-t weights (nu + 2) / (nu + q_i / s^2) of n points from their residuals
@@ -159,8 +190,7 @@ def t_weights(rho: np.ndarray, jw: np.ndarray, previous: np.ndarray | None = Non
     likelihood's EM)."""
     n, p = jw.shape[0], jw.shape[2]
     if previous is None:
-        h = np.eye(2) - np.einsum("nap,pq,nbq->nab", jw, inverse_spd(np.einsum("nap,naq->pq", jw, jw)), jw)
-        q = np.einsum("na,nab,nb->n", rho, np.linalg.inv(h), rho)
+        q = _loo_q(rho, jw)
         s2 = float(np.median(q)) / MEDIAN_CHI2_2
     else:
         q = np.sum(rho * rho, axis=1)
@@ -177,11 +207,13 @@ def _whitened_residuals(blocks, poses, intr, model, winv: np.ndarray):
 
 
 def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: dict,
-                 points_2d: dict | None = None) -> JointFit:
+                 points_2d: dict | None = None, extra_px2: dict | None = None) -> JointFit:
     """``fit`` refitted by iteratively reweighted least squares under the disc noise model with
     Student-t tails (:func:`t_weights`, ``ROBUST_ITERATIONS`` rounds): a centre far off what its
     disc's noise explains (a partly hidden or glared disc) loses its pull without a yes/no
-    decision about which one. Its covariance: :func:`_robust_result`. ``fit`` comes back with
+    decision about which one. ``extra_px2``: as in :func:`with_disc_noise`; with it the fit
+    weighted by that noise comes first, so that the first round's leave-one-out residuals are
+    those of the fit their hat matrix describes. Its covariance: :func:`_robust_result`. ``fit`` comes back with
     the disc noise covariance of the unweighted fit (:func:`with_disc_noise`) if a refit fails.
 
     Measured (the docking pipeline, detections of the shipped detector; unweighted -> reweighted):
@@ -191,26 +223,36 @@ def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep
     0.289 mm, alpha 0.0231 -> 0.0123 deg. A median-based scale (collapsing onto the good points
     of a dozen) and raw first-round residuals (a high-leverage gross centre masks itself) were
     tried first and did worse on the synthetic test (tests/test_disc_noise.py)."""
-    blocks, poses, intr, model, shapes = _stacked(fit, points, fitter, keep, points_2d)
+    blocks, poses, intr, model, base = _stacked(fit, points, fitter, keep, points_2d)
+    shapes = _with_occlusion(base, extra_px2, keep, blocks, poses, intr, model)
     winv = np.linalg.inv(np.linalg.cholesky(shapes))
     sizes = np.cumsum([0] + [b.points_3d.shape[0] for b in blocks])
     w = None
     try:
+        if shapes is not base:
+            # the residuals the first round's leave-one-out test reads must be those of the fit
+            # its hat matrix describes (the one weighted by the inflated noise): a partly hidden
+            # centre that the unweighted fit absorbed would otherwise show as large residuals of
+            # its section's good points, which the inflation has just given leverage near 1
+            whitened_blocks = tuple(replace(b, sqrt_info=winv[sizes[k]:sizes[k + 1]]) for k, b in enumerate(blocks))
+            ref = refine_blocks(whitened_blocks, poses, intr, model, fitter.options)
+            poses, intr = ref.poses, ref.intrinsics
         for _ in range(ROBUST_ITERATIONS):
             rho, jw, valid = _whitened_residuals(blocks, poses, intr, model, winv)
             if not valid:
-                return with_disc_noise(fit, points, fitter, keep, points_2d)
+                return with_disc_noise(fit, points, fitter, keep, points_2d, extra_px2)
             w = t_weights(rho, jw, w)
             info = np.sqrt(w)[:, None, None] * winv
             weighted = tuple(replace(b, sqrt_info=info[sizes[k]:sizes[k + 1]]) for k, b in enumerate(blocks))
             ref = refine_blocks(weighted, poses, intr, model, fitter.options)
             poses, intr = ref.poses, ref.intrinsics
     except SolverError:
-        return with_disc_noise(fit, points, fitter, keep, points_2d)
-    return _robust_result(fit, ref, blocks, shapes, winv, w)
+        return with_disc_noise(fit, points, fitter, keep, points_2d, extra_px2)
+    return _robust_result(fit, ref, blocks, shapes, winv, w, base)
 
 
-def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarray) -> JointFit:
+def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarray,
+                   base: np.ndarray | None = None) -> JointFit:
     """The JointFit of the robust refinement ``ref``. Its covariance is the sandwich of the
     weighted estimate under the disc noise model, k^2 A^-1 B A^-1 with A = sum w_i J_i^T T_i^-1
     J_i and B = sum w_i^2 J_i^T T_i^-1 J_i (the final weights), the scale k^2 = sum w_i q_i /
@@ -226,7 +268,8 @@ def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarra
     dof = 2 * shapes.shape[0] - jw.shape[2]
     k2 = float(w @ np.sum(rw * rw, axis=1)) / max(dof, 1) * student_t_factor(dof)
     cov = k2 * (a_inv @ b @ a_inv)
-    sigma = float(np.sqrt(k2 * np.trace(shapes, axis1=1, axis2=2).mean() / 2.0))   # px, per axis
+    base = shapes if base is None else base      # sigma: the disc noise, without occlusion
+    sigma = float(np.sqrt(k2 * np.trace(base, axis1=1, axis2=2).mean() / 2.0))   # px, per axis
     res, _, _ = stack_blocks(blocks, ref.poses, ref.intrinsics, ref.model, want_jacobian=False)
     na = 2 * blocks[0].points_3d.shape[0]
     rmse = [float(np.sqrt(2.0 * (r @ r) / max(r.size, 1))) for r in (res[:na], res[na:])]

@@ -14,7 +14,10 @@ The docking pipeline, top layer of the solver:
 3. detections only: suspects left out (:mod:`solver.suspects`) and the perspective
    eccentricity of the detected centres corrected (:mod:`solver.eccentricity`), each refit
    started from the previous fit; with the noise estimated from the residuals, each centre's
-   noise is modelled by its disc's image (:mod:`solver.disc_noise`): the last fit is
+   noise is modelled by its disc's image (:mod:`solver.disc_noise`), plus, for a kept centre
+   whose box is short of its predicted outline (a partly hidden disc that a section's
+   ``MIN_POINTS`` floor, or a box just above ``min_extent``, kept in the fit), the variance of
+   its occlusion bias (:func:`solver.suspects.occlusion_variances`): the last fit is
    reweighted with Student-t tails (a gross centre loses its pull) and its covariance follows
    that model.
 Options: :class:`solver.options.DockingOptions`.
@@ -48,7 +51,7 @@ from dockfactory.solver.layout_points import (
 from dockfactory.solver.model_choice import ModelChoice
 from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
 from dockfactory.solver.ransac import ransac_docking
-from dockfactory.solver.suspects import leave_out_suspects
+from dockfactory.solver.suspects import leave_out_suspects, occlusion_variances
 
 __all__ = ["DockingResult", "solve_docking"]
 
@@ -220,7 +223,12 @@ def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
         points_2d = eccentricity_corrected(fit, points, fitter)
         fit = fitter.refit(fit, points, keep, points_2d=points_2d)
     if options.disc_noise and fitter.sigma_px is None:
-        fit = (robust_refit if options.robust else with_disc_noise)(fit, points, fitter, keep, points_2d)
+        pp, coeffs = (fitter.principal_point, None) if fit.intrinsics is None else \
+            (fit.intrinsics.principal_point, fit.intrinsics.coeffs)
+        extra = occlusion_variances(fit, points, pp, boxes, options.occlusion_bias,
+                                    options.occlusion_margin_px, coeffs)
+        fit = (robust_refit if options.robust else with_disc_noise)(fit, points, fitter, keep, points_2d,
+                                                                     extra)
     marker_ids = tuple(ids[k] if used[k] else None for k in range(len(ids)))
     return DockingResult.from_fit(fit, marker_ids, inliers, ident.swapped)
 

@@ -307,6 +307,13 @@ class DockingOptions:
       iteratively reweighted least squares under the disc noise model with Student-t tails
       (:func:`solver.disc_noise.robust_refit`); False: unweighted, the disc model's covariance
       only.
+    - ``occlusion_bias``, ``occlusion_margin_px`` (with ``disc_noise``): a kept detection whose
+      box is shorter than its predicted outline by ``cut`` px along an axis (beyond
+      ``occlusion_margin_px``, the box noise of fully visible markers) sees only part of its
+      disc, and its centre is off by about ``occlusion_bias`` x (cut - margin) along that axis
+      (the centre of the visible part's box moves by cut / 2): that variance is added to the
+      point's noise in the last fit (:func:`solver.suspects.occlusion_variances`). 0 turns it
+      off.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
@@ -317,10 +324,16 @@ class DockingOptions:
     eccentricity: bool = True
     disc_noise: bool = True
     robust: bool = True
+    occlusion_bias: float = 0.5
+    occlusion_margin_px: float = 1.0
 
     def __post_init__(self):
         if not (math.isfinite(self.min_extent) and 0 < self.min_extent <= 1):
             raise InvalidSolverInput(f"min_extent must be in (0, 1], got {self.min_extent}")
+        for name in ("occlusion_bias", "occlusion_margin_px"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise InvalidSolverInput(f"{name} must be finite and >= 0, got {v}")
 
 
 DEFAULT_IDENTIFY = IdentifyOptions()

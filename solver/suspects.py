@@ -33,7 +33,7 @@ from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
 from dockfactory.solver.outline import projected_outline, projected_outlines
 
 __all__ = ["predicted_outline_box", "predicted_outline_boxes", "extent_ratio",
-           "suspect_scores", "leave_out_suspects"]
+           "suspect_scores", "leave_out_suspects", "occlusion_variances"]
 
 
 def predicted_outline_box(marker, cam_from_s, focal_px, pp, coeffs=None) -> np.ndarray | None:
@@ -107,3 +107,41 @@ def leave_out_suspects(fit: JointFit, points: SectionPoints, fitter: JointFitter
     if all(keep[s].all() for s in SECTIONS):
         return fit, inliers
     return fitter.refit(fit, points, keep), inliers
+
+
+def occlusion_variances(fit: JointFit, points: SectionPoints, pp, boxes, bias: float,
+                        margin_px: float, coeffs=None) -> dict | None:
+    """{section: (n_s, 2, 2) px^2} the extra centre variance of each point for a partly hidden
+    disc (diagonal: u, v), or None when there is none (no ``boxes``, ``bias`` 0 or no box short
+    of its outline).
+
+    A box shorter than the outline ``fit`` predicts for its marker by ``cut`` px along an axis
+    sees only part of the disc: the centre of the visible part's box is cut / 2 off the disc's
+    centre along that axis, and a centre refined on the visible edge (the occluder's edge taken
+    for the disc's) is about as far off (measured on the 781 test + val frames of out/paper: the
+    error along the cut is 0.46 x the cut, median of 45 occluded refined markers with a cut
+    over 1 px, 0.38-0.58 for 10-90 %). The variance added is (``bias`` x max(0, cut -
+    ``margin_px``))^2 per axis: ``margin_px`` is the box noise of fully visible markers (same
+    frames: the cut of 9447 fully visible refined markers has a robust std of 0.25 px in u and
+    v, 99.9th percentile 1.4 / 0.65 px). The cut is a difference of extents, so the pose error the
+    partly hidden centre itself puts into ``fit`` hardly moves it."""
+    if boxes is None or bias <= 0:
+        return None
+    cams, out, any_cut = fit.cams, {}, False
+    for s in SECTIONS:
+        rows = points.rows[s]
+        var = np.zeros((len(rows), 2, 2))
+        with_marker = [j for j, k in enumerate(rows) if points.markers[k] is not None]
+        if with_marker:
+            pred, valid = predicted_outline_boxes([points.markers[rows[j]] for j in with_marker],
+                                                  cams[s], fit.focal_px, pp, coeffs)
+            for j, box, ok in zip(with_marker, pred, valid):
+                if not ok:
+                    continue
+                det = boxes[rows[j]]
+                cut = (box[2:] - box[:2]) - (det[2:] - det[:2])
+                sd = bias * np.maximum(cut - margin_px, 0.0)
+                var[j] = np.diag(sd * sd)
+                any_cut = any_cut or bool(np.any(sd > 0))
+        out[s] = var
+    return out if any_cut else None
