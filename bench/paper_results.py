@@ -42,8 +42,11 @@ PAUSE_S = 300.0   # a gap between two finished frames longer than this is an int
 
 def render_figures(rows: list[dict], pause_s: float = PAUSE_S) -> dict:
     """Figures of a (possibly interrupted and resumed) render from its per-frame timing rows: the
-    active wall time counts each frame's gap to the previous one, or its own total after a pause."""
-    rows = sorted(rows, key=lambda r: r["finished_at"])
+    active wall time counts each frame's gap to the previous one, or its own total after a pause.
+    A frame rendered more than once (its first render deleted, e.g. made by older code) counts once,
+    by its last render; the time of the earlier ones is left out."""
+    last = {r.get("frame_id", i): r for i, r in enumerate(sorted(rows, key=lambda r: r["finished_at"]))}
+    rows = sorted(last.values(), key=lambda r: r["finished_at"])
     if not rows:
         return {"frames": 0}
     wall, segments = rows[0]["total"], 1

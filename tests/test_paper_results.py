@@ -30,6 +30,14 @@ def test_render_figures_leave_the_pauses_out():
     assert two["peak_worker_rss_mb"] == 609.0
 
 
+def test_a_frame_rendered_again_counts_once_by_its_last_render():
+    first = [{**r, "frame_id": f"{i:06d}"} for i, r in enumerate(_rows([(1000.0, 5)]))]     # then deleted
+    again = [{**r, "frame_id": f"{i:06d}"} for i, r in enumerate(_rows([(1030.0, 10)]))]
+    fig = render_figures(first + again)
+    assert fig["frames"] == 10 and fig["segments"] == 1
+    assert fig["active_wall_s"] == pytest.approx(4.5 + 9 * 5.0)      # the first five renders left out
+
+
 def _rec(att, seed, m50, m5095, v5=None):
     rec = {"attention": att, "seed": seed, "mAP50": m50, "mAP50_95": m5095}
     return rec if v5 is None else {**rec, "yolov5": {"mAP50": v5[0], "mAP50_95": v5[1]}}
