@@ -44,20 +44,26 @@ def read_image_tiles(path) -> np.ndarray:
     return image_tiles(image)
 
 
+def _manifest_frame_ids(root: Path) -> list[str]:
+    return [f["frame_id"] for f in json.loads((root / "manifest.json").read_text())["frames"]]
+
+
+def _npz_bytes(**arrays) -> bytes:
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
 def write_fingerprints(root, out_path) -> int:
     """Fingerprints of every frame of the complete dataset at ``root`` (ids from its manifest):
     image tile means and label geometry digests, written atomically to ``out_path`` (npz:
     ``frame_ids``, ``tiles``, ``label_geometry``); returns the count."""
     root = Path(root)
-    manifest = json.loads((root / "manifest.json").read_text())
-    ids = [f["frame_id"] for f in manifest["frames"]]
+    ids = _manifest_frame_ids(root)
     tiles = np.stack([read_image_tiles(root / "images" / f"{fid}.png") for fid in ids])
     geometry = [label_geometry_sha256((root / "labels" / f"{fid}.json").read_bytes()) for fid in ids]
-    out_path = Path(out_path)
-    buf = io.BytesIO()
-    np.savez_compressed(buf, frame_ids=np.array(ids), tiles=tiles.astype(np.float32),
-                        label_geometry=np.array(geometry))
-    write_bytes_atomic(out_path, buf.getvalue())
+    write_bytes_atomic(Path(out_path), _npz_bytes(frame_ids=np.array(ids), tiles=tiles.astype(np.float32),
+                                                  label_geometry=np.array(geometry)))
     return len(ids)
 
 
@@ -72,16 +78,14 @@ def fingerprints_v2(frame_ids, label_texts) -> bytes:
     index = np.full((len(rows), max((len(r) for r in rows), default=0)), np.nan)
     for i, r in enumerate(rows):
         index[i, :len(r)] = r
-    buf = io.BytesIO()
-    np.savez_compressed(buf, frame_ids=np.array(list(frame_ids)), label_core=np.array(cores), index=index,
-                        index_len=np.array([len(r) for r in rows], np.int64))
-    return buf.getvalue()
+    return _npz_bytes(frame_ids=np.array(list(frame_ids)), label_core=np.array(cores), index=index,
+                      index_len=np.array([len(r) for r in rows], np.int64))
 
 
 def write_fingerprints_v2(root, out_path) -> int:
     """Fingerprint v2 of every label of the complete dataset at ``root``, written atomically."""
     root = Path(root)
-    ids = [f["frame_id"] for f in json.loads((root / "manifest.json").read_text())["frames"]]
+    ids = _manifest_frame_ids(root)
     texts = [(root / "labels" / f"{fid}.json").read_bytes() for fid in ids]
     write_bytes_atomic(Path(out_path), fingerprints_v2(ids, texts))
     return len(ids)

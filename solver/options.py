@@ -312,8 +312,8 @@ class DockingOptions:
       ``occlusion_margin_px``, the box noise of fully visible markers) sees only part of its
       disc, and its centre is off by about ``occlusion_bias`` x (cut - margin) along that axis
       (the centre of the visible part's box moves by cut / 2): that variance is added to the
-      point's noise in the last fit (:func:`solver.suspects.occlusion_variances`). 0 turns it
-      off.
+      point's noise in the last fit (:func:`solver.suspects.occlusion_variances`).
+      ``occlusion_bias`` 0 turns it off.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
