@@ -77,22 +77,22 @@ def explain(label: dict, published: str) -> tuple[str, dict] | None:
     return None
 
 
-def compare(paths, pub: dict) -> tuple[dict, int]:
-    """({frame id: the label with the published v1 digest, or None}, frames unexplained), printing
-    each frame that differs."""
-    labels, unexplained = {}, 0
+def compare(paths, pub: dict) -> tuple[dict, int, int]:
+    """({frame id: the label with the published v1 digest, or None}, frames with it as re-rendered,
+    frames unexplained), printing each frame that differs."""
+    labels, same, unexplained = {}, 0, 0
     for path in paths:
         label = json.loads(path.read_text())
         if path.stem not in pub:
             print(f"{path.stem}: not a published frame")
             labels[path.stem], unexplained = None, unexplained + 1
         elif _digest(label) == pub[path.stem]:
-            labels[path.stem] = label
+            labels[path.stem], same = label, same + 1
         else:
             found = explain(label, pub[path.stem])
             print(f"{path.stem}: {found[0] if found else 'unexplained'}")
             labels[path.stem], unexplained = (found[1] if found else None), unexplained + (found is None)
-    return labels, unexplained
+    return labels, same, unexplained
 
 
 def derive_v2(labels: dict, ids: list, out: Path) -> None:
@@ -120,8 +120,7 @@ def main(argv=None) -> int:
     if args.frames:
         wanted = set(args.frames.split(","))
         paths = [p for p in paths if p.stem in wanted]
-    labels, unexplained = compare(paths, pub)
-    same = sum(1 for p in paths if labels.get(p.stem) is not None and _digest(json.loads(p.read_text())) == pub[p.stem])
+    labels, same, unexplained = compare(paths, pub)
     print(f"{len(paths)} labels: {same} with the published geometry, {len(paths) - same - unexplained} "
           f"explained by one index-pass pixel count, {unexplained} unexplained")
     if args.derive_v2:
