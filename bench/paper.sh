@@ -4,7 +4,7 @@
 # last epoch's checkpoint, ablate --record takes finished runs from results/paper/), so the whole
 # script can be run again after any interruption.
 #
-#   sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|summary|all]
+#   sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]
 #
 # Cost on the 2-core machine of 2026-12-01: render ~5.3 s/frame (3,200 frames, ~4.7 h; ~2.8 s/frame on an
 # AVX-512 machine, re-rendered there on 2026-12-01 and checked by `publish`); YOLOv5s
@@ -47,6 +47,13 @@ table1() {  # the five variants x three seeds (finished runs are taken from the 
     cp "$RUNS/s/ablation.md" "$RES/table1.md"
 }
 
+table1_collect() {  # the table of the runs finished so far, training nothing (safe beside a running
+                    # table1); a record made before a figure was measured gets it from the saved detections
+    $DF ablate "$DATA" --model s --attention none,se,eca,cbam,a2 --seeds 3 $TRAIN --out "$RUNS/s" \
+        --record "$RES/table1" --no-train
+    cp "$RUNS/s/ablation.md" "$RES/table1.md"
+}
+
 ship_s() {  # the paper's detector in fp16 beside the shipped n + SE (exits 1 if a quoted figure changes)
     $PY bench/half_weights.py "$RUNS/s/se_seed0/weights.pt" models/yolov5s_se_markers.pt "$DATA" --threads 2
 }
@@ -83,10 +90,11 @@ case "${1:-all}" in
     train_n) train_n ;;
     ship_s) ship_s ;;
     table1) table1 ;;
+    table1_collect) table1_collect ;;
     accept) accept_s; accept_n ;;
     accept_s) accept_s ;;
     accept_n) accept_n ;;
     summary) summary ;;
     all) render; publish; train_s; train_n; ship_s; accept_s; accept_n; table1; summary ;;
-    *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|summary|all]" >&2; exit 2 ;;
+    *) echo "usage: sh bench/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]" >&2; exit 2 ;;
 esac

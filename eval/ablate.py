@@ -6,7 +6,13 @@ Runs live in ``OUT/<attention>_seed<k>/``; a finished run (weights.pt and metric
 not trained again, so an interrupted ablation continues where it stopped. With ``record_dir``
 every finished run's metrics are also written to ``RECORD/<attention>_seed<k>.json`` (a folder
 meant to be committed as each run lands), and a run recorded there for the same dataset version
-and training config is taken from the record, so the table survives the loss of ``OUT``.
+and training config is taken from the record, so the table survives the loss of ``OUT``. A record
+made before a figure was measured (YOLOv5's mAP, the mAP of the network's own boxes) gets it from
+the run's saved test detections while they are there. ``train=False`` only collects: runs not
+finished yet are left out of the table (and nothing is trained), e.g. beside a running ablation.
+
+Two scores per run: the boxes our pipeline outputs (refined by the edge fit, ``detector.centre``)
+and the network's own boxes (``network_boxes``): the paper's Table 1 scores a network.
 """
 from __future__ import annotations
 
@@ -16,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.detection_metrics import evaluate_detections
 
@@ -42,18 +49,34 @@ def _train_and_evaluate(dataset, run: Path, att: str, seed: int, cfg, conf: floa
     return {"attention": att, "seed": seed, "train_seconds": round(train_s, 1),
             "epochs": summary["epochs"], "images_per_s": summary["history"][-1]["images_per_s"],
             "mAP50": m["mAP50"], "mAP50_95": m["mAP50_95"], "per_class": m["per_class"], "yolov5": m["yolov5"],
+            "network_boxes": m["network_boxes"],
             "centre_error": m["centre_error"], "recall_visible50": m["recall_visible50"]}
 
 
+def _network_cells(rs: list[dict]) -> list[str]:
+    """mAP50 and mAP50:95 of the network's own boxes over the runs that have them ("k of n"
+    when some lack them, "—" when none has them)."""
+    have = [r["network_boxes"] for r in rs if r.get("network_boxes")]
+    if not have:
+        return ["—", "—"]
+    note = "" if len(have) == len(rs) else f" ({len(have)} of {len(rs)})"
+    return [_fmt([n[k] for n in have]) + note for k in ("mAP50", "mAP50_95")]
+
+
 def _table_lines(runs: list[dict], attentions, scale: str) -> list[str]:
-    """Markdown rows of table 2: one per attention variant, mean ± std over its seeds."""
+    """Markdown rows of table 2: one per attention variant with a finished run, mean ± std over
+    its seeds."""
     classes = list(runs[0]["per_class"])
-    head = ["model", "mAP50 all", "mAP50:95 all"] + [f"{c} {k}" for c in classes for k in ("mAP50", "mAP50:95")]
+    head = (["model", "seeds", "mAP50 all", "mAP50:95 all", "network boxes mAP50", "network boxes mAP50:95"]
+            + [f"{c} {k}" for c in classes for k in ("mAP50", "mAP50:95")])
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for att in attentions:
         rs = [r for r in runs if r["attention"] == att]
+        if not rs:
+            continue
         cells = [f"YOLOv5{scale} {LABELS[att]}".replace("YOLOv5n YOLOv5", "YOLOv5n").replace(
-            "YOLOv5s YOLOv5", "YOLOv5s"), _fmt([r["mAP50"] for r in rs]), _fmt([r["mAP50_95"] for r in rs])]
+            "YOLOv5s YOLOv5", "YOLOv5s"), str(len(rs)), _fmt([r["mAP50"] for r in rs]),
+            _fmt([r["mAP50_95"] for r in rs])] + _network_cells(rs)
         for c in classes:
             cells += [_fmt([r["per_class"][c]["mAP50"] for r in rs]), _fmt([r["per_class"][c]["mAP50_95"] for r in rs])]
         lines.append("| " + " | ".join(cells) + " |")
@@ -70,28 +93,36 @@ def _recorded(record_dir, name: str, dataset, cfg) -> dict | None:
     return rec if same else None
 
 
-def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress: bool, record_dir) -> dict:
-    """One (attention, seed) run: from the record folder, from OUT, or trained and evaluated now."""
+LATER_FIGURES = ("yolov5", "network_boxes")    # figures older records may lack
+
+
+def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress: bool, record_dir,
+             train: bool = True) -> dict | None:
+    """One (attention, seed) run: from the record folder, from OUT, or trained and evaluated now
+    (None when it is not finished and ``train`` is False)."""
     name = f"{att}_seed{seed}"
     run = out / name
     rec = _recorded(record_dir, name, dataset, cfg)
-    if rec is not None and "yolov5" in rec:
+    if rec is not None and (all(k in rec for k in LATER_FIGURES) or not (run / "dets_test.json").is_file()):
         return rec
     if rec is None and (run / "metrics.json").is_file() and (run / "weights.pt").is_file():
         rec = json.loads((run / "metrics.json").read_text())
+    elif rec is None and not train:
+        return None
     elif rec is None:
         rec = _train_and_evaluate(dataset, run, att, seed, cfg, conf, progress)
         rec.update(dataset_version=dataset.version_id, config=cfg.to_dict())
-    return _save(_with_yolov5(rec, run, dataset), run, name, record_dir)
+    return _save(_with_later_figures(rec, run, dataset), run, name, record_dir)
 
 
-def _with_yolov5(rec: dict, run: Path, dataset) -> dict:
-    """A record made before YOLOv5's mAP was measured gets it from the run's saved test detections
-    (when they are still there)."""
+def _with_later_figures(rec: dict, run: Path, dataset) -> dict:
+    """A record made before a figure of ``LATER_FIGURES`` was measured gets it from the run's saved
+    test detections (when they are still there and carry what it needs)."""
     dets = run / "dets_test.json"
-    if "yolov5" not in rec and dets.is_file():
-        rec = {**rec, "yolov5": evaluate_detections(dataset, dets)["yolov5"]}
-    return rec
+    if all(k in rec for k in LATER_FIGURES) or not dets.is_file():
+        return rec
+    m = evaluate_detections(dataset, dets)
+    return {**rec, **{k: m[k] for k in LATER_FIGURES if k not in rec and k in m}}
 
 
 def _save(rec: dict, run: Path, name: str, record_dir) -> dict:
@@ -105,9 +136,10 @@ def _save(rec: dict, run: Path, name: str, record_dir) -> dict:
 
 
 def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True,
-                 record_dir=None) -> dict:
+                 record_dir=None, train: bool = True) -> dict:
     """Train/evaluate every (attention, seed) on the opened ``dataset`` (generator.dataset_open.Dataset);
-    ``make_config(attention, seed) -> TrainConfig``; ``record_dir``: see the module docstring."""
+    ``make_config(attention, seed) -> TrainConfig``; ``record_dir``, ``train``: see the module
+    docstring. ``DockfactoryError`` when no run is finished and ``train`` is False."""
     from dockfactory.detector.attention import ATTENTIONS
     from dockfactory.detector.data import load_frames
     bad = [a for a in attentions if a not in ATTENTIONS]
@@ -119,7 +151,12 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
     runs = []
     for seed in seeds:          # seed by seed: an interrupted ablation has every variant's first seeds
         for att in attentions:
-            runs.append(_run_one(dataset, out, att, seed, make_config(att, seed), conf, progress, record_dir))
+            runs.append(_run_one(dataset, out, att, seed, make_config(att, seed), conf, progress, record_dir,
+                                 train))
+    planned, runs = len(runs), [r for r in runs if r is not None]
+    if not runs:
+        raise DockfactoryError(f"ablate --no-train: no run of the ablation is finished in {out} or in the record "
+                               f"folder {record_dir}")
     cfg0 = make_config(attentions[0], seeds[0])
     n_train = len(load_frames(dataset, "train"))
     n_test = len(load_frames(dataset, "test"))
@@ -128,8 +165,8 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
     budget = (f"Budget per run: {cfg0.epochs} epochs x {n_train} train frames x {cfg0.data.crops_per_frame} crops "
               f"of {cfg0.data.crop} px (input scale {cfg0.data.input_scale}), batch {cfg0.batch_size}, from scratch; "
               f"seeds {list(seeds)} (mean ± sample std over seeds); test split {n_test} frames of dataset "
-              f"{dataset.version_id}, COCOeval at score >= {conf}; total training wall time "
-              f"{wall / 60:.1f} min on this machine.")
+              f"{dataset.version_id}, COCOeval at score >= {conf}; {len(runs)} of {planned} runs finished; "
+              f"total training wall time {wall / 60:.1f} min.")
     table = "\n".join(lines) + "\n\n" + budget
     write_text_atomic(out / "ablation.md", "# Attention ablation (paper table 2 layout)\n\n" + table + "\n")
     write_json_atomic(out / "ablation.json", {"dataset_version": dataset.version_id, "runs": runs,

@@ -10,6 +10,10 @@
   normal frames (conditions normal, ideal) and challenging ones (low_light, occlusion, glare).
 - The same mAP50 and mAP50:95 as YOLOv5's val.py computes them (``yolov5_ap``), under
   ``"yolov5"``: its interpolation tops out at 0.995, the paper's figures are on that scale.
+- The same two mAPs with the network's own boxes (``bbox_detector_px``, before the edge-fit
+  refinement of ``detector.centre``), under ``"network_boxes"``, when every detection has them:
+  the refined boxes are part of our pipeline, the network's are what a detector table such as
+  the paper's Table 1 scores.
 - Recall of visible markers: the share of markers with visible fraction >= 0.5 matched by a
   detection with score >= ``recall_conf``.
 Markers whose label says ``legible`` false (colour washed out by glare or lost in the dark) are
@@ -49,6 +53,17 @@ def coco_results(frames_dets: dict, coco_gt: dict) -> list[dict]:
             rows.append({"image_id": ids[fid], "category_id": int(d["class_id"]) + 1,
                          "bbox": [x0 + COCO_SHIFT, y0 + COCO_SHIFT, x1 - x0, y1 - y0], "score": float(d["score"])})
     return rows
+
+
+def network_boxes(frames_dets: dict) -> dict | None:
+    """``{frame_id: [det]}`` with each detection's box replaced by the network's own
+    (``bbox_detector_px``, before the edge-fit refinement), or None when a detection lacks it."""
+    out = {}
+    for fid, dets in frames_dets.items():
+        if any("bbox_detector_px" not in d for d in dets):
+            return None
+        out[fid] = [{**d, "bbox_px": d["bbox_detector_px"]} for d in dets]
+    return out
 
 
 def coco_map(coco_gt: dict, results: list[dict]) -> dict:
@@ -117,6 +132,10 @@ def evaluate_detections(ds, detections, split: str | None = None, recall_conf: f
     rows = coco_results(doc["frames"], gt)
     result = coco_map(gt, rows)
     result["yolov5"] = yolov5_map(gt, rows)
+    net = network_boxes(doc["frames"])
+    if net is not None:     # the network's boxes alone: what the paper's detector tables score
+        net_rows = coco_results(net, gt)
+        result["network_boxes"] = {**coco_map(gt, net_rows), "yolov5": yolov5_map(gt, net_rows)}
     result.update(centre_and_recall(labels, doc["frames"], threshold, recall_conf))
     result.update({"frames": len(labels), "split": split, "dataset_version": ds.version_id,
                    "detections_dataset_version": doc.get("dataset_version"),
@@ -168,6 +187,10 @@ def format_report(m: dict) -> str:
     if "yolov5" in m:
         lines.append(f"YOLOv5 val.py's mAP (tops out at 0.995): mAP50 {m['yolov5']['mAP50']:.4f}, "
                      f"mAP50:95 {m['yolov5']['mAP50_95']:.4f}")
+    if "network_boxes" in m:
+        nb = m["network_boxes"]
+        lines.append(f"the network's boxes, before refinement: mAP50 {nb['mAP50']:.4f}, mAP50:95 {nb['mAP50_95']:.4f} "
+                     f"(YOLOv5's {nb['yolov5']['mAP50']:.4f}, {nb['yolov5']['mAP50_95']:.4f})")
     for k, v in {**m["centre_error"], **m.get("centre_error_by_condition", {})}.items():
         if not v["n"]:
             lines.append(f"centre error {k}: no matched markers")

@@ -102,7 +102,7 @@ def cmd_ablate(args) -> int:
     seeds = list(range(args.seeds))
     result = run_ablation(Dataset.open(args.dataset), args.out, attentions, seeds,
                           lambda att, seed: _train_config(args, att, seed), conf=args.conf,
-                          progress=not args.quiet, record_dir=args.record)
+                          progress=not args.quiet, record_dir=args.record, train=not args.no_train)
     print(result["table"])
     print(f"written: {Path(args.out) / 'ablation.md'}, {Path(args.out) / 'ablation.json'}")
     return 0
@@ -176,6 +176,9 @@ def _add_ablate_parser(subparsers) -> None:
     a.add_argument("--conf", type=_unit_float, default=0.001, help="score threshold for mAP")
     a.add_argument("--record", help="also write each finished run's metrics to RECORD/<variant>_seed<k>.json and "
                    "take runs recorded there (same dataset version and config) without training them again")
+    a.add_argument("--no-train", action="store_true",
+                   help="train nothing: the table of the finished runs (records without a later figure get it "
+                        "from their saved detections), e.g. beside a running ablation")
     _add_training_options(a)
     a.set_defaults(func=cmd_ablate)
 

@@ -72,10 +72,14 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     assert rec["dataset_version"] == json.loads((painted_source / "dataset.json").read_text())["version_id"]
     assert rec["config"]["epochs"] == 1 and 0 <= rec["mAP50"] <= 1
     assert 0 <= rec["yolov5"]["mAP50"] <= 0.995 and set(rec["yolov5"]["per_class"]) == set(rec["per_class"])
-    older = {k: v for k, v in rec.items() if k != "yolov5"}    # a record made before YOLOv5's mAP ...
+    net = rec["network_boxes"]                                  # the network's boxes, before refinement
+    assert 0 <= net["mAP50_95"] <= net["mAP50"] <= 1 and set(net["per_class"]) == set(rec["per_class"])
+    older = {k: v for k, v in rec.items() if k not in ("yolov5", "network_boxes")}   # a record made earlier ...
     (record / "none_seed0.json").write_text(json.dumps(older))
-    assert main(argv) == 0                                      # ... gets it from the saved detections
-    assert json.loads((record / "none_seed0.json").read_text())["yolov5"] == rec["yolov5"]
+    assert main(argv + ["--no-train"]) == 0                     # ... gets them from the saved detections
+    now = json.loads((record / "none_seed0.json").read_text())
+    assert now["yolov5"] == rec["yolov5"] and now["network_boxes"] == net
+    assert "network boxes mAP50:95" in capsys.readouterr().out
     table = (out / "ablation.md").read_text()
     shutil.rmtree(out)                     # the runs are gone (out/ of a past session) ...
 
@@ -84,8 +88,11 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     monkeypatch.setattr(ablate, "_train_and_evaluate", no_training)
     assert main(argv) == 0                 # ... the committed record still gives the table
     assert (out / "ablation.md").read_text().split("total training")[0] == table.split("total training")[0]
+    other = [a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)]
     with pytest.raises(AssertionError, match="trained again"):   # another budget is another run
-        main([a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)])
+        main(other)
+    assert main(other + ["--no-train"]) == 2                     # ... which --no-train does not train
+    assert "no run of the ablation is finished" in capsys.readouterr().err
 
 
 def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
@@ -95,7 +102,7 @@ def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
     from dockfactory.generator.dataset_open import Dataset
     order = []
 
-    def fake_run(dataset, out, att, seed, cfg, conf, progress, record_dir):
+    def fake_run(dataset, out, att, seed, cfg, conf, progress, record_dir, train):
         order.append((att, seed))
         return {"attention": att, "seed": seed, "train_seconds": 1.0, "mAP50": 1.0, "mAP50_95": 0.9,
                 "per_class": {"RedA": {"mAP50": 1.0, "mAP50_95": 0.9}}}

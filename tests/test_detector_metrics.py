@@ -8,6 +8,7 @@ from dockfactory.eval.detection_metrics import (
     coco_results,
     format_report,
     match_frame,
+    network_boxes,
 )
 from dockfactory.eval.yolov5_ap import correct_matrix, yolov5_map
 from dockfactory.generator.export_coco import coco_from_labels
@@ -199,3 +200,36 @@ def test_a_split_without_challenging_frames_gives_no_figure_not_nan():
     report = format_report({**run_map(labs, dets_from(labs)), **r, "frames": 3, "split": "repeat",
                             "dataset_version": "v"})
     assert "centre error challenging: no matched markers" in report and "nan" not in report
+
+
+def with_network_boxes(dets, shift):
+    """Detections whose network box is the refined box moved right by ``shift`` px."""
+    return {f: [{**d, "bbox_detector_px": [d["bbox_px"][0] + shift, d["bbox_px"][1], d["bbox_px"][2] + shift,
+                                            d["bbox_px"][3]]} for d in ds] for f, ds in dets.items()}
+
+
+def test_network_boxes_replace_the_refined_ones_only_when_every_detection_has_them():
+    dets = with_network_boxes(dets_from(labels()), 1.0)
+    net = network_boxes(dets)
+    d0, n0 = dets["000000"][0], net["000000"][0]
+    assert n0["bbox_px"] == d0["bbox_detector_px"] and n0["center_px"] == d0["center_px"]
+    assert dets["000000"][0]["bbox_px"] != n0["bbox_px"]           # the input is not changed
+    dets["000001"][1].pop("bbox_detector_px")
+    assert network_boxes(dets) is None
+
+
+def test_evaluate_detections_scores_the_network_boxes_beside_the_refined_ones():
+    from types import SimpleNamespace
+
+    from dockfactory.eval.detection_metrics import evaluate_detections
+    labs = labels()
+    ds = SimpleNamespace(config=SimpleNamespace(labels=SimpleNamespace(visible_threshold=0.5)),
+                         labels_of=lambda split: labs, version_id="v")
+    doc = {"frames": with_network_boxes(dets_from(labs), shift_for_iou(0.83)), "split": "test"}
+    m = evaluate_detections(ds, doc)
+    assert m["mAP50_95"] == pytest.approx(1.0)                        # refined boxes: exact
+    assert m["network_boxes"]["mAP50"] == pytest.approx(1.0)
+    assert m["network_boxes"]["mAP50_95"] == pytest.approx(0.7)      # IoU 0.83: thresholds 0.50-0.80
+    assert 0 < m["network_boxes"]["yolov5"]["mAP50_95"] < m["yolov5"]["mAP50_95"]
+    assert "the network's boxes, before refinement: mAP50 1.0000, mAP50:95 0.7000" in format_report(m)
+    assert "network_boxes" not in evaluate_detections(ds, {"frames": dets_from(labs), "split": "test"})

@@ -38,9 +38,14 @@ def test_a_frame_rendered_again_counts_once_by_its_last_render():
     assert fig["active_wall_s"] == pytest.approx(4.5 + 9 * 5.0)      # the first five renders left out
 
 
-def _rec(att, seed, m50, m5095, v5=None):
+def _rec(att, seed, m50, m5095, v5=None, net=None):
     rec = {"attention": att, "seed": seed, "mAP50": m50, "mAP50_95": m5095}
-    return rec if v5 is None else {**rec, "yolov5": {"mAP50": v5[0], "mAP50_95": v5[1]}}
+    if v5 is not None:
+        rec["yolov5"] = {"mAP50": v5[0], "mAP50_95": v5[1]}
+    if net is not None:     # the network's own boxes, on both scales
+        rec["network_boxes"] = {"mAP50": net[0], "mAP50_95": net[1],
+                                "yolov5": {"mAP50": net[0] - 0.001, "mAP50_95": net[1] + 0.002}}
+    return rec
 
 
 def test_table1_means_stds_and_the_ranking_in_sigmas():
@@ -68,7 +73,7 @@ def test_main_writes_what_it_has_and_marks_the_rest(tmp_path, capsys):
     doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert doc["dataset"]["complete"] is False and doc["render"]["frames"] == 3
     table = (tmp_path / "out" / "report.md").read_text()
-    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± — COCO (1 seed) |" in table
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | refined 0.850 ± — COCO (1 seed) |" in table
     assert "| YOLOv5s + ECA: mAP50 | 0.995 | not run yet |" in table
     assert "localization alpha" in capsys.readouterr().out
 
@@ -146,5 +151,24 @@ def test_report_states_the_ranking_in_sigmas(tmp_path):
     (tmp_path / "ds").mkdir()
     assert main(["--dataset", str(tmp_path / "ds"), "--out", str(tmp_path / "out"), "--table1", str(rec)]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
-    assert "| se > eca | +0.0200 | 0.0100 | +2.0 | yes |" in report
-    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | 0.850 ± 0.010 COCO, 0.860 ± 0.010 YOLOv5's (3 seeds) |" in report
+    assert "| se > eca | +0.0200 | 0.0100 | +2.0 | +2.4 | yes |" in report     # t: 0.02 / (0.01 sqrt(2/3))
+    assert "| YOLOv5s + SE: mAP50:95 | 0.834 | refined 0.850 ± 0.010 COCO, 0.860 ± 0.010 YOLOv5's (3 seeds) |" in report
+    assert "network boxes" not in report                     # records without them: nothing invented
+
+
+def test_table1_and_the_ranking_on_the_network_boxes(tmp_path):
+    rec = tmp_path / "t1"
+    rec.mkdir()
+    for att, vals in (("se", (0.84, 0.85, 0.86)), ("eca", (0.82, 0.83, 0.84))):
+        for s, v in enumerate(vals):
+            net = (0.99, v - 0.03 if att == "se" else v)   # the networks' own boxes rank the other way
+            (rec / f"{att}_seed{s}.json").write_text(json.dumps(_rec(att, s, 0.99, v, (0.995, v + 0.01), net)))
+    (tmp_path / "ds").mkdir()
+    assert main(["--dataset", str(tmp_path / "ds"), "--out", str(tmp_path / "out"), "--table1", str(rec)]) == 0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert ("| YOLOv5s + SE: mAP50:95 | 0.834 | network boxes 0.820 ± 0.010 COCO, 0.822 ± 0.010 YOLOv5's; "
+            "refined 0.850 ± 0.010 COCO, 0.860 ± 0.010 YOLOv5's (3 seeds) |") in report
+    net = report.split("network's boxes, the paper's measure)")[1].split("##")[0]
+    assert "| se > eca | -0.0100 | 0.0100 | -1.0 | -1.2 | no |" in net      # 0.820 against 0.830
+    refined = report.split("the refined boxes our pipeline outputs)")[1]
+    assert "| se > eca | +0.0200 | 0.0100 | +2.0 | +2.4 | yes |" in refined
