@@ -471,12 +471,17 @@ def _html_failures(metrics: dict) -> list[str]:
 
 
 def _html_detection(det: dict | None) -> list[str]:
+    """The detection table: the boxes the pipeline outputs (refined by the edge fit), per class,
+    and the network's own boxes when the detections carry them."""
     if not (det and "map50" in det):
         return []
+    net = det.get("network_boxes")
+    net_row = (f"<tr><td>all, the network's own boxes (before the edge fit)</td><td>{_num(net.get('mAP50'))}</td>"
+               f"<td>{_num(net.get('mAP50_95'))}</td></tr>" if net else "")
     return ["<h2>Detection (test split)</h2><table><tr><th>class</th><th>mAP50</th><th>mAP50:95</th></tr>"
             + f"<tr><td>all</td><td>{_num(det['map50'])}</td><td>{_num(det['map50_95'])}</td></tr>"
             + "".join(f"<tr><td>{k}</td><td>{_num(v.get('map50'))}</td><td>{_num(v.get('map50_95'))}</td></tr>" for k, v in det.get("per_class", {}).items())
-            + "</table>"]
+            + net_row + "</table>"]
 
 
 def _html_camera_envelope(env: dict | None) -> list[str]:

@@ -153,3 +153,13 @@ def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
     m2 = json.loads((tmp_path / "ev2" / "metrics.json").read_text())
     failed = m2["failures_test"]["list"] + m2["failures_repeat"]["list"]
     assert any(f["frame_id"] == dropped and "no pose" in f["reason"] for f in failed)
+
+
+def test_the_report_shows_the_networks_own_boxes_beside_the_refined_ones():
+    from dockfactory.eval.report import _html_detection
+    det = {"map50": 0.995, "map50_95": 0.975, "per_class": {"RedA": {"map50": 1.0, "map50_95": 0.977}}}
+    plain = "".join(_html_detection(det))
+    assert "0.975" in plain and "network" not in plain          # detections without the network's boxes
+    det["network_boxes"] = {"mAP50": 0.99, "mAP50_95": 0.8329}
+    html_text = "".join(_html_detection(det))
+    assert "<td>all, the network's own boxes (before the edge fit)</td><td>0.99</td><td>0.8329</td>" in html_text
