@@ -106,13 +106,23 @@ def _run_one(dataset, out: Path, att: str, seed: int, cfg, conf: float, progress
     if rec is not None and (all(k in rec for k in LATER_FIGURES) or not (run / "dets_test.json").is_file()):
         return rec
     if rec is None and (run / "metrics.json").is_file() and (run / "weights.pt").is_file():
-        rec = json.loads((run / "metrics.json").read_text())
+        rec = _same_run(json.loads((run / "metrics.json").read_text()), run, dataset, cfg)
     elif rec is None and not train:
         return None
     elif rec is None:
         rec = _train_and_evaluate(dataset, run, att, seed, cfg, conf, progress)
         rec.update(dataset_version=dataset.version_id, config=cfg.to_dict())
     return _save(_with_later_figures(rec, run, dataset), run, name, record_dir)
+
+
+def _same_run(rec: dict, run: Path, dataset, cfg) -> dict:
+    """``rec`` (a finished run's metrics.json) when it is of this dataset version and training
+    config (a record without them is taken as it is); else a one-line error, never a silent reuse."""
+    if rec.get("dataset_version", dataset.version_id) != dataset.version_id or \
+            rec.get("config", cfg.to_dict()) != cfg.to_dict():
+        raise DockfactoryError(f"{run}: a finished run of another dataset version or training config; "
+                               "use another --out (or remove the run) to train this one")
+    return rec
 
 
 def _with_later_figures(rec: dict, run: Path, dataset) -> dict:

@@ -81,6 +81,11 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     assert now["yolov5"] == rec["yolov5"] and now["network_boxes"] == net
     assert "network boxes mAP50:95" in capsys.readouterr().out
     table = (out / "ablation.md").read_text()
+    other = [a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)]
+    shutil.rmtree(record)
+    assert main(other) == 2                # a finished run of another budget in OUT is not reused
+    assert "none_seed0: a finished run of another dataset version or training config" in capsys.readouterr().err
+    assert main(argv) == 0                 # the same budget takes it again (and records it)
     shutil.rmtree(out)                     # the runs are gone (out/ of a past session) ...
 
     def no_training(*a, **k):
@@ -88,7 +93,6 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
     monkeypatch.setattr(ablate, "_train_and_evaluate", no_training)
     assert main(argv) == 0                 # ... the committed record still gives the table
     assert (out / "ablation.md").read_text().split("total training")[0] == table.split("total training")[0]
-    other = [a if a != "1" or i != argv.index("--epochs") + 1 else "2" for i, a in enumerate(argv)]
     with pytest.raises(AssertionError, match="trained again"):   # another budget is another run
         main(other)
     assert main(other + ["--no-train"]) == 2                     # ... which --no-train does not train
