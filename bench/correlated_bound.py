@@ -14,9 +14,10 @@ evaluate run's ``crb_*``) and the prediction with the measured structure, both a
 
 Inputs: the acceptance run's folder (``detections.json``, ``poses.json``, ``eval/frames.csv``, as
 ``bench/paper.sh accept_s`` writes them). Centres: refined detections at score >= 0.25 matched
-within 3 px to a marker at least 99 % visible; only normal frames.
+within 3 px to a marker at least 99 % visible; frames of one condition (default normal).
 
 Run: python bench/correlated_bound.py DATASET RUN_DIR [--measure-split train] [--eval-split test]
+     [--condition normal]
 """
 from __future__ import annotations
 
@@ -61,13 +62,13 @@ def whitened_errors(label: dict, dets: list[dict]) -> dict:
     return out
 
 
-def measured_moments(root: Path, frames: dict, split: str) -> tuple[np.ndarray, int]:
+def measured_moments(root: Path, frames: dict, split: str, condition: str) -> tuple[np.ndarray, int]:
     """(28, 28) second moments of the whitened errors over (marker id, axis), pairwise over the
     frames where both are present, normalised to a mean diagonal of 1; the frame count."""
     total, count, n = np.zeros((28, 28)), np.zeros((28, 28)), 0
     for fid, dets in sorted(frames.items()):
         label = json.loads((root / "labels" / f"{fid}.json").read_text())
-        if label["spec"]["split"] != split or label["spec"]["condition"] != "normal":
+        if label["spec"]["split"] != split or label["spec"]["condition"] != condition:
             continue
         v = np.full(28, np.nan)
         for k, w in whitened_errors(label, dets).items():
@@ -112,14 +113,15 @@ def main() -> int:
     ap.add_argument("run", type=Path, help="acceptance run folder (detections.json, poses.json, eval/frames.csv)")
     ap.add_argument("--measure-split", default="train")
     ap.add_argument("--eval-split", default="test")
+    ap.add_argument("--condition", default="normal")
     args = ap.parse_args()
     dets = json.loads((args.run / "detections.json").read_text())["frames"]
     poses = json.loads((args.run / "poses.json").read_text())["frames"]
-    moments, n = measured_moments(args.dataset, dets, args.measure_split)
+    moments, n = measured_moments(args.dataset, dets, args.measure_split, args.condition)
     rows = [r for r in csv.DictReader((args.run / "eval" / "frames.csv").open())
-            if r["split"] == args.eval_split and r["condition"] == "normal" and r["ok"] == "True"]
+            if r["split"] == args.eval_split and r["condition"] == args.condition and r["ok"] == "True"]
     if not n or not rows:
-        raise SystemExit(f"{args.run}: no normal frames of split {args.measure_split!r} or {args.eval_split!r}")
+        raise SystemExit(f"{args.run}: no {args.condition} frames of split {args.measure_split!r} or {args.eval_split!r}")
     stats = []
     for r in rows:
         label = json.loads((args.dataset / "labels" / f"{r['frame_id']}.json").read_text())
@@ -128,7 +130,8 @@ def main() -> int:
                       for k, c in enumerate(POSE)])
     s = np.asarray(stats)
     rms = np.sqrt((s ** 2).mean(axis=0))  # (6, 5); columns 2-4 at unit scale: rescale to the run's
-    print(f"structure measured on {n} {args.measure_split} normal frames; {len(rows)} {args.eval_split} normal frames")
+    print(f"structure measured on {n} {args.measure_split} {args.condition} frames; "
+          f"{len(rows)} {args.eval_split} {args.condition} frames")
     print("bound: the run's (independent centres); fit: the solver's weighted fit under the measured structure;")
     print("bound*: the Cramer-Rao bound under the measured structure. Ratios: RMSE / each.")
     print(f"{'':6s} {'RMSE':>8s} {'bound':>8s} {'ratio':>6s} {'fit':>8s} {'ratio':>6s} {'bound*':>8s} {'ratio':>6s}")
