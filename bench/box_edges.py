@@ -15,18 +15,15 @@ import json
 from pathlib import Path
 
 import numpy as np
+from marker_match import nearest_marker
 
 MATCH_PX = 3.0
 
 
 def matched_outline(det: dict, markers: list[dict]) -> np.ndarray | None:
     """The label outline box of the nearest fully visible marker of the detection's class."""
-    centre, best = np.asarray(det["center_px"]), None
-    for m in markers:
-        d = float(np.hypot(*(centre - np.asarray(m["outline_centroid_px"]))))
-        if m["class_id"] == det["class_id"] and d < MATCH_PX and (best is None or d < best[0]):
-            best = (d, m)
-    return None if best is None else np.asarray(best[1]["bbox_px"])
+    hit = nearest_marker(det, markers, MATCH_PX)
+    return None if hit is None else np.asarray(hit[1]["bbox_px"])
 
 
 def edge_offsets(root: Path, frames: dict, split: str) -> tuple[np.ndarray, np.ndarray]:

@@ -27,6 +27,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from marker_match import nearest_marker
 
 from dockfactory.eval.centre_noise_disc import label_noise_shapes
 from dockfactory.solver.crb import _joint_jac
@@ -50,12 +51,7 @@ def whitened_errors(label: dict, dets: list[dict]) -> dict:
     for det in dets:
         if not det.get("refined") or det["score"] < 0.25:
             continue
-        centre, best = np.asarray(det["center_px"]), None
-        for m in markers:
-            err = centre - np.asarray(m["outline_centroid_px"])
-            if m["class_id"] == det["class_id"] and np.hypot(*err) < MATCH_PX and \
-                    (best is None or np.hypot(*err) < np.hypot(*best[0])):
-                best = (err, m)
+        best = nearest_marker(det, markers, MATCH_PX)
         shape = None if best is None else label_noise_shapes(label, [best[1]])
         if shape is not None and best[1]["id"] in SLOT:
             out[best[1]["id"]] = np.linalg.solve(sqrt_spd(shape[0]), best[0])

@@ -23,21 +23,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+from marker_match import nearest_marker
 
 MATCH_PX = 8.0
 MIN_SCORE = 0.25
-
-
-def nearest_marker(det: dict, markers: list[dict]):
-    """(centre error px, marker) of the nearest marker of the detection's class, or None."""
-    centre, best = np.asarray(det["center_px"]), None
-    for m in markers:
-        if m["class_id"] != det["class_id"]:
-            continue
-        err = centre - np.asarray(m["outline_centroid_px"])
-        if np.hypot(*err) < MATCH_PX and (best is None or np.hypot(*err) < np.hypot(*best[0])):
-            best = (err, m)
-    return best
 
 
 def frame_cuts(label: dict, dets: list[dict]):
@@ -46,7 +35,7 @@ def frame_cuts(label: dict, dets: list[dict]):
     for det in dets:
         if not det.get("refined") or det["score"] < MIN_SCORE:
             continue
-        hit = nearest_marker(det, markers)
+        hit = nearest_marker(det, markers, MATCH_PX)
         if hit is None:
             continue
         err, m = hit
