@@ -125,7 +125,7 @@ def pose_figures(metrics: dict) -> dict:
 
 
 DETECTION_KEYS = ("frames", "mAP50", "mAP50_95", "yolov5", "per_class", "centre_error",
-                  "centre_error_by_condition", "recall_visible50")
+                  "centre_error_by_condition", "recall_visible50", "network_boxes")
 
 
 def detector_figures(eval_dir: Path, bench_json: Path, weights: Path) -> dict:
@@ -229,6 +229,12 @@ def ranking_section(ranking: list[dict], boxes: str) -> list[str]:
     return lines + [""]
 
 
+def _map_figures(det: dict) -> str:
+    v5 = det.get("yolov5", {})
+    return (f"mAP50 {_cell(det.get('mAP50'))}, mAP50:95 {_cell(det.get('mAP50_95'))} "
+            f"(COCO; YOLOv5's {_cell(v5.get('mAP50'))}, {_cell(v5.get('mAP50_95'))})")
+
+
 def detector_section(name: str, d: dict) -> list[str]:
     """One detector: its weights, detection figures per split and its acceptance run."""
     if "weights_sha256" not in d:
@@ -238,10 +244,10 @@ def detector_section(name: str, d: dict) -> list[str]:
              f"- inference: {_cell(d.get('inference_ms_per_image'), '{:.1f}')} ms per 1280 x 960 image (median)"]
     for split, det in d.get("detection", {}).items():
         cond = ", ".join(f"{k} {v['median_px']:.3f}" for k, v in det.get("centre_error_by_condition", {}).items())
-        v5 = det.get("yolov5", {})
-        lines.append(f"- {split} split ({det.get('frames')} frames): mAP50 {_cell(det.get('mAP50'))}, "
-                     f"mAP50:95 {_cell(det.get('mAP50_95'))} (COCO; YOLOv5's {_cell(v5.get('mAP50'))}, "
-                     f"{_cell(v5.get('mAP50_95'))}); median centre error (px) {cond}")
+        net = f"{_map_figures(det['network_boxes'])} on the network's own boxes; refined boxes: " \
+            if "network_boxes" in det else ""
+        lines.append(f"- {split} split ({det.get('frames')} frames): {net}{_map_figures(det)}; "
+                     f"median centre error (px) {cond}")
     if "accepted" in d:
         lines += ["", f"Acceptance: **{'ACCEPTED' if d['accepted'] else 'REJECTED'}**", "",
                   "| criterion | value | threshold | pass |", "| --- | --- | --- | --- |"]

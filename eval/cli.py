@@ -88,7 +88,10 @@ def cmd_evaluate(args) -> int:
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score,
                              envelope=EnvelopeGrid() if args.envelope else None, camera_models=args.camera_models)
     write_outputs(args.out, metrics, rows)
-    write_json_atomic(Path(args.out) / "provenance.json", {"detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])]})
+    write_json_atomic(Path(args.out) / "provenance.json", {
+        "detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
+        # the weights the detections name: a report of a detector's run says which detector it judged
+        "model_sha256": metrics.get("detection", {}).get("weights_sha256") if args.detections else None})
     for c in metrics["acceptance"]["criteria"]:
         note = f" [{c['note']}]" if c.get("note") else ""
         print(f"{'PASS' if c['pass'] else 'FAIL'}  {c['name']}: {c['value']}{note} (threshold {c['threshold']} {c['unit']})")

@@ -381,7 +381,7 @@ def _optional_json(path, what: str, named_by: str):
 def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) -> dict:
     return {
         "dataset_version": metrics["dataset"]["version_id"], "dataset": metrics["dataset"]["root"],
-        "model_sha256": prov.get("model_sha256", "n/a (oracle or no detector)"),
+        "model_sha256": prov.get("model_sha256") or "n/a (oracle or no detector)",
         "code_version": git_describe(), "generator_version": generator_version(),
         "software": {p: package_version(p) for p in ("numpy", "torch", "bpy", "opencv-python-headless", "pycocotools", "matplotlib")},
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -182,6 +182,22 @@ def test_evaluate_on_mutated_detections(world, capsys, data):
           "--acceptance", str(world["spec"]), "--out", str(d / "fe_eval")], capsys, d / "fe_dets.json")
 
 
+def test_evaluate_records_the_weights_its_detections_name(world, capsys):
+    """A report of a detector's run names the weights (the detections' ``weights_sha256``) in its
+    provenance; a run without detections says it has none (it said so for both before)."""
+    d, sha = world["base"], "ab" * 32
+    _write(d / "fw_dets.json", {**world["dets"], "weights_sha256": sha})
+    for name, extra in (("fw", ["--detections", str(d / "fw_dets.json")]), ("fo", [])):
+        rc = main(["evaluate", str(world["root"]), "--poses", str(d / "poses.json"), *extra,
+                   "--acceptance", str(world["spec"]), "--out", str(d / f"{name}_eval")])
+        assert rc in (0, 1), capsys.readouterr().err
+        assert main(["report", str(d / f"{name}_eval"), "--out", str(d / f"{name}_r.html")]) in (0, 1)
+    assert json.loads((d / "fw_eval" / "provenance.json").read_text())["model_sha256"] == sha
+    assert sha in (d / "fw_r.html").read_text()
+    assert json.loads((d / "fo_eval" / "provenance.json").read_text())["model_sha256"] is None
+    assert "n/a (oracle or no detector)" in (d / "fo_r.html").read_text()
+
+
 # ----------------------------------------------------------------------------- report (metrics.json, provenance.json)
 
 def _eval_copy(world, name):

@@ -126,6 +126,8 @@ def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
     acc = {"frames": 600, "mAP50": 0.99, "mAP50_95": 0.91, "yolov5": {"mAP50": 0.994, "mAP50_95": 0.92},
            "centre_error_by_condition": {"glare": {"median_px": 0.123}, "normal": {"median_px": 0.081}}}
     (det / "detector.json").write_text(json.dumps({"accuracy": acc, "inference": {"ms_per_image_median": 210.4}}))
+    net = {"mAP50": 0.985, "mAP50_95": 0.832, "yolov5": {"mAP50": 0.99, "mAP50_95": 0.851}}
+    (det / "detector_repeat.json").write_text(json.dumps({"accuracy": {**acc, "frames": 200, "network_boxes": net}}))
     (det / "w.pt").write_bytes(b"0" * 2_000_000)
     spec = f"s_se={det}:{det / 'detector.json'}:{det / 'w.pt'}"
     missing = f"n_se={tmp_path / 'n'}:{tmp_path / 'n' / 'detector.json'}:{tmp_path / 'n' / 'w.pt'}"
@@ -135,6 +137,9 @@ def test_report_lists_each_detector_its_weights_figures_and_verdict(tmp_path):
     assert "2.00 MB" in report and "210.4 ms per 1280 x 960 image" in report
     assert "test split (600 frames): mAP50 0.990, mAP50:95 0.910 (COCO; YOLOv5's 0.994, 0.920); median " \
            "centre error (px) glare 0.123, normal 0.081" in report
+    assert "repeat split (200 frames): mAP50 0.985, mAP50:95 0.832 (COCO; YOLOv5's 0.990, 0.851) on the " \
+           "network's own boxes; refined boxes: mAP50 0.990, mAP50:95 0.910 (COCO; YOLOv5's 0.994, 0.920); " \
+           "median centre error (px) glare 0.123, normal 0.081" in report
     assert "Acceptance: **REJECTED**" in report
     assert f"- weights `{tmp_path / 'n' / 'w.pt'}`: not trained yet" in report
     assert "| localization precision: x | 0.5000 mm | 0.3000 | no |" in report
