@@ -203,6 +203,8 @@ def validate_detections(data, path, required: tuple[str, ...] = ()) -> dict:
     each with an integer ``class_id`` of a known class and a finite ``center_px``; ``score``,
     ``bbox_px`` and ``refined`` typed when present (and present when named in ``required``)."""
     check_object(data, path, "(top level)")
+    if data.get("weights_sha256") is not None:   # the detector a report names (provenance)
+        check_str(data["weights_sha256"], path, "weights_sha256")
     for fid, dets in _frames(data, path).items():
         key = f"frames.{fid}"
         for i, d in enumerate(check_list(dets, path, key)):

@@ -196,6 +196,10 @@ def test_evaluate_records_the_weights_its_detections_name(world, capsys):
     assert sha in (d / "fw_r.html").read_text()
     assert json.loads((d / "fo_eval" / "provenance.json").read_text())["model_sha256"] is None
     assert "n/a (oracle or no detector)" in (d / "fo_r.html").read_text()
+    # a weights digest that is not a string is refused when evaluate reads it, not later by report
+    _write(d / "fx_dets.json", {**world["dets"], "weights_sha256": 5})
+    _run(["evaluate", str(world["root"]), "--poses", str(d / "poses.json"), "--detections", str(d / "fx_dets.json"),
+          "--out", str(d / "fx_eval")], capsys, d / "fx_dets.json", allowed=(2,))
 
 
 # ----------------------------------------------------------------------------- report (metrics.json, provenance.json)
