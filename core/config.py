@@ -16,10 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core import layout as layout_mod
+from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
+from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
+from dockfactory.core.sensor_presets import PRESETS
 from dockfactory.core.names import MIN_CHROMA
 
 Range = tuple[float, float]
+Overrides = tuple[tuple[str, float], ...]   # a TOML table of name = number, sorted by name
 
 # Upper bounds of the counts and sizes a config may ask for; beyond them a config used to end in a
 # MemoryError traceback (frames = 1e12) or a hang (100 M repeat poses) after it passed validation.
@@ -118,6 +123,7 @@ class CameraUnitsConfig:
     focus_error_mm: Range = (0.0, 0.0)               # focus distance = aimed distance + error
     jpeg: bool = False                               # JPEG-encode the delivered image
     jpeg_quality: tuple[int, int] = (85, 95)
+    jpeg_subsampling: str = "420"                    # 420 (libjpeg's and most cameras' default) | 444
 
 
 @dataclass(frozen=True)
@@ -179,6 +185,21 @@ class SensorConfig:
     low_light_ev: Range = (-5.0, -3.0)       # several stops down
     low_light_gain_ev: Range = (0.5, 2.0)    # digital gain that partly makes up for it (net 1-4.5 EV darker)
     vignetting: Range = (0.0, 0.25)          # relative fall-off at the image corners
+    # A colour camera (core.camera_chain): with presets, EMVA 1288 sensors replace the model above
+    # (full_well_e, read_noise_e); each per-unit list gives unit u its item u % len(list).
+    presets: tuple[str, ...] = ()            # core.sensor_presets names; () keeps the model above
+    overrides: Overrides = ()                # [sensor.overrides]: preset figures replaced, key by key
+    cfa: tuple[str, ...] = ("none",)         # per unit: RGGB | BGGR | GRBG | GBRG | none (three-chip)
+    demosaic: tuple[str, ...] = ("bilinear",)  # per unit: bilinear | edge_aware | vng | mhc
+    crosstalk: Range = (0.0, 0.0)            # per unit: share of each channel's light in each other one
+    exposure_time_ms: Range = (10.0, 10.0)   # per frame (dark current)
+    wb_error: Range = (0.0, 0.0)             # per frame: relative error of the red and blue gains
+    colour_correction: bool = True           # the ISP's colour-correction matrix
+    tone: str = "srgb"                       # srgb | gamma22
+    denoise: str = "off"                     # off | bilateral (the ISP's, on the 8-bit image)
+    sharpen: Range = (0.0, 0.0)              # per unit: unsharp-mask amount
+    sharpen_sigma_px: float = 1.0
+    raw_output: bool = False                 # also write raw/<id>.png: the raw frame in DN, 16 bit
 
 
 @dataclass(frozen=True)
@@ -257,16 +278,26 @@ def _convert(value, hint, where: str):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
         return float(value)
+    if hint == Overrides:   # a TOML table, or the [[name, number], ...] pairs a stored config holds
+        if isinstance(value, list) and all(isinstance(v, list) and len(v) == 2 for v in value):
+            value = dict(value)
+        if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
+            raise ConfigError(f"{where}: expected a table of name = number, got {value!r}")
+        return tuple(sorted((k, _convert(v, float, f"{where}.{k}")) for k, v in value.items()))
     if hint is str:
         if not isinstance(value, str):
             raise ConfigError(f"{where}: expected a string, got {value!r}")
         return value
     if origin is tuple:
         args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            if isinstance(value, str) and args[0] is str:   # one name for a list of names
+                value = [value]
+            if not isinstance(value, (list, tuple)):
+                raise ConfigError(f"{where}: expected a list, got {value!r}")
+            return tuple(_convert(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{where}: expected a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
         return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
@@ -461,6 +492,8 @@ def _validate_lens_extras(cfg: Config, source: str) -> None:
         raise _err(source, t, "focus_error_mm", f"{u.focus_error_mm[0]} would focus at or nearer than half of "
                    f"the nearest camera distance ({nearest:g} mm)")
     _check_range(source, t, "jpeg_quality", u.jpeg_quality, 1, 100)
+    if u.jpeg_subsampling not in JPEG_SUBSAMPLING:
+        raise _err(source, t, "jpeg_subsampling", f"{u.jpeg_subsampling!r} is not one of {', '.join(JPEG_SUBSAMPLING)}")
 
 
 def _validate_runs(cfg: Config, source: str) -> None:
@@ -543,6 +576,43 @@ def _validate_sensor(cfg: Config, source: str) -> None:
     _check_range(source, "sensor", "low_light_ev", se.low_light_ev, lo=-12, hi=0)
     _check_range(source, "sensor", "low_light_gain_ev", se.low_light_gain_ev, lo=0, hi=12)
     _check_range(source, "sensor", "vignetting", se.vignetting, lo=0, hi=0.9)
+    _validate_colour_sensor(cfg, source)
+
+
+def _check_choices(source, table: str, key: str, values: tuple[str, ...], known: tuple[str, ...]) -> None:
+    if not values:
+        raise _err(source, table, key, "is empty")
+    for v in values:
+        if v not in known:
+            raise _err(source, table, key, f"{v!r} is not one of {', '.join(known)}")
+
+
+def _validate_colour_sensor(cfg: Config, source: str) -> None:
+    """[sensor]: presets, overrides and the ISP of a colour camera (core.camera_chain)."""
+    se, t = cfg.sensor, "sensor"
+    _check_choices(source, t, "cfa", se.cfa, CFA_CHOICES)
+    _check_choices(source, t, "demosaic", se.demosaic, DEMOSAICS)
+    _check_range(source, t, "crosstalk", se.crosstalk, lo=0.0, hi=0.3)
+    _check_range(source, t, "exposure_time_ms", se.exposure_time_ms, lo=0.0, hi=1e5)
+    _check_range(source, t, "wb_error", se.wb_error, lo=-0.5, hi=0.5)
+    _check_range(source, t, "sharpen", se.sharpen, lo=0.0, hi=5.0)
+    if not 0.1 <= se.sharpen_sigma_px <= 10:
+        raise _err(source, t, "sharpen_sigma_px", f"must be in [0.1, 10], got {se.sharpen_sigma_px}")
+    if se.tone not in TONE_CURVES:
+        raise _err(source, t, "tone", f"{se.tone!r} is not one of {', '.join(TONE_CURVES)}")
+    if se.denoise not in DENOISERS:
+        raise _err(source, t, "denoise", f"{se.denoise!r} is not one of {', '.join(DENOISERS)}")
+    if not se.presets:
+        for key in ("overrides", "raw_output"):
+            if getattr(se, key):
+                raise _err(source, t, key, "needs a sensor preset (presets = [...])")
+        if any(c != "none" for c in se.cfa):
+            raise _err(source, t, "cfa", "a colour filter array needs a sensor preset (presets = [...])")
+    for name in se.presets:
+        try:
+            configured_sensor(name, se.overrides, se.adc_bits)
+        except ValueError as exc:
+            raise _err(source, t, "presets" if name not in PRESETS else "overrides", str(exc)) from None
 
 
 def _check_kinds(source, table: str, kinds: tuple[str, ...], known: tuple[str, ...], what: str) -> None:

@@ -6,11 +6,13 @@ tuples named ``<to>_from_<from>``; ``.matrix()`` style helpers return numpy arra
 from __future__ import annotations
 
 import dataclasses
+import types
 import typing
 from dataclasses import dataclass
 
 import numpy as np
 
+from dockfactory.core.camera_chain import ColourChain
 from dockfactory.core.distortion import N_COEFFS
 from dockfactory.core.geometry import intrinsics, render_canvas
 from dockfactory.core.layout import Marker
@@ -72,6 +74,7 @@ class CameraModel:
     focus_distance_mm: float = 0.0                   # along the optical axis
     sensor_width_mm: float = 36.0                    # physical sensor: focal mm = focal_px * this / width
     jpeg_quality: int = 0                            # 0: delivered without JPEG encoding
+    jpeg_subsampling: str = "420"                    # chroma: 420 | 444
 
     def k(self) -> np.ndarray:
         return intrinsics(self.focal_px, self.principal_point)
@@ -150,7 +153,8 @@ class Appearance:
 
 @dataclass(frozen=True)
 class SensorParams:
-    """Inputs of generator.sensor.apply_sensor (see there)."""
+    """Inputs of generator.sensor.apply_sensor (see there); ``chain``: a colour camera
+    (core.camera_chain) in place of the three-chip noise model (full_well_e, read_noise_e)."""
     ideal: bool
     exposure_ev: float
     gain_ev: float
@@ -160,6 +164,7 @@ class SensorParams:
     vignetting: float
     bloom: float
     noise_seed: int
+    chain: ColourChain | None = None
 
 
 @dataclass(frozen=True)
@@ -236,6 +241,10 @@ def from_dict(cls, data):
 
 
 def _restore(hint, value):
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:   # X | None
+        if value is None:
+            return None
+        hint = next(a for a in typing.get_args(hint) if a is not type(None))
     if dataclasses.is_dataclass(hint):
         return from_dict(hint, value)
     if typing.get_origin(hint) is tuple:

@@ -18,7 +18,7 @@ import torch
 
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
-from dockfactory.detector.centre import refine_centre
+from dockfactory.detector.centre_camera import refine_centre_camera
 from dockfactory.detector.data import resize_exact
 from dockfactory.detector.noise_card import centre_noise_px
 
@@ -199,8 +199,11 @@ class MarkerDetector:
         det[:, :4] = lb.boxes_to_image(det[:, :4])
         return det, lb
 
-    def detect(self, image: np.ndarray) -> list[dict]:
-        """``image: (H, W, 3) uint8`` RGB -> detections sorted by falling score."""
+    def detect(self, image: np.ndarray, cfa: str | None = None, jpeg: bool = False) -> list[dict]:
+        """``image: (H, W, 3) uint8`` RGB -> detections sorted by falling score. What is known of
+        the camera steers the centre refinement (``detector.centre_camera``): ``cfa``, the Bayer
+        pattern of the camera whose demosaiced image this is (None: three-chip or unknown);
+        ``jpeg``, the image was JPEG-encoded."""
         det, _ = self.raw(image)
         out = []
         for x0, y0, x1, y1, score, cls in det:
@@ -208,7 +211,7 @@ class MarkerDetector:
             box = np.array([x0, y0, x1, y1])
             entry = {"class_id": c, "class_name": self.names[c], "score": round(float(score), 5)}
             if self.refine:
-                r = refine_centre(image, box, c)
+                r = refine_centre_camera(image, box, c, cfa, jpeg)
                 entry.update(bbox_px=[round(float(v), 4) for v in r.box],
                              center_px=[round(float(v), 4) for v in r.center],
                              refine_quality=round(float(r.quality), 4), refined=bool(r.refined),
@@ -236,14 +239,16 @@ def drop_nested(dets: list[dict]) -> list[dict]:
 
 
 def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = MIN_SCORE,
-                   iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True) -> dict:
+                   iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True,
+                   camera=None) -> dict:
     """Run the detector over the frames of ``split`` of the opened ``dataset`` (detector.data.FrameSource)
     and write the detections JSON atomically.
 
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
     "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
     each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined,
-    bbox_detector_px}``.
+    bbox_detector_px}``. ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the
+    camera that took it (what its maker knows; ``MarkerDetector.detect``), None: three-chip PNG.
     """
 
     from dockfactory.detector.data import load_frames, read_rgb
@@ -257,7 +262,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     for i, f in enumerate(frames):
         img = read_rgb(f.image_path)
         t = time.perf_counter()
-        results[f.frame_id] = det.detect(img)
+        cfa, jpeg = camera(f.frame_id) if camera is not None else (None, False)
+        results[f.frame_id] = det.detect(img, cfa=cfa, jpeg=jpeg)
         times.append(time.perf_counter() - t)
         if progress:
             print(f"\rdetect {i + 1}/{len(frames)}  {1000 * np.mean(times):.0f} ms/image", end="", file=sys.stderr)
@@ -266,7 +272,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
            "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
-           "conf_threshold": conf_threshold, "iou_threshold": iou_threshold,
+           "conf_threshold": conf_threshold, "iou_threshold": iou_threshold, "camera_told": camera is not None,
            "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
            "timing": {"frames": len(frames), "mean_ms": round(1000 * float(np.mean(times)), 2),
                       "median_ms": round(1000 * float(np.median(times)), 2)},

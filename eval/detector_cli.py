@@ -20,6 +20,7 @@ from dockfactory.eval.detection_metrics import (
     format_report,
 )
 from dockfactory.eval.noise_calibration import calibrate_noise_card
+from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.generator.cli import int_at_least
 from dockfactory.generator.dataset_open import Dataset
 
@@ -88,7 +89,8 @@ def cmd_detect(args) -> int:
     split = None if args.split == "all" else args.split
     dataset = Dataset.open(args.dataset)
     doc = detect_dataset(dataset, args.weights or shipped_weights(), args.out, split=split, conf_threshold=args.conf,
-                         iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet)
+                         iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet,
+                         camera=dataset_camera(dataset))
     n = sum(len(v) for v in doc["frames"].values())
     print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
     if args.eval:

@@ -29,6 +29,7 @@ from dockfactory.eval.detection_metrics import evaluate_detections, match_frame
 from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
 from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.eval.simulated_cameras import simulated_cameras_block
 from dockfactory.eval.uncertainty import calibration_block, reported_std, standard_scores
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
@@ -320,6 +321,7 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
         metrics["camera_envelope"] = camera_envelope(ds, spec, float(sigma), envelope)
     if camera_models:
         metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
+    metrics["simulated_cameras"] = simulated_cameras_block(ds, test)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows
 

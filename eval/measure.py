@@ -16,12 +16,15 @@ from __future__ import annotations
 import csv
 import io
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from dockfactory.core.camera_chain import develop_raw
+from dockfactory.core.cfa import PATTERNS
+from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, write_text_atomic
 from dockfactory.core.layout_file import read_layout_file
@@ -38,7 +41,7 @@ from dockfactory.eval.solve_frames import (
 )
 
 MEASURE_FORMAT = "dockfactory.measure/1"
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")   # a one-channel 16-bit PNG is a raw frame
 
 
 @dataclass
@@ -74,26 +77,71 @@ def collect_images(items) -> list[Path]:
     return out
 
 
-def read_image(path: Path) -> tuple[np.ndarray | None, dict | None]:
-    """(RGB image, None) or (None, failure record) for a missing or unreadable file."""
+@dataclass(frozen=True)
+class CameraInput:
+    """What the user knows of the camera behind the images. ``cfa``: its Bayer pattern (RGGB,
+    BGGR, GRBG, GBRG; None: a three-chip camera or unknown): the centre refinement then fits the
+    samples the sensor took, and raw frames can be read. A raw frame is a one-channel 16-bit PNG
+    of the mosaic in DN (BayerRG12 and the like): ``raw_black_dn`` is subtracted, ``raw_white_dn``
+    (None: the top code of the smallest bit depth that holds the frame's largest value) is full
+    scale, then grey-world white balance, ``demosaic`` and the sRGB curve."""
+    cfa: str | None = None
+    raw_black_dn: float = 0.0
+    raw_white_dn: float | None = None
+    demosaic: str = "mhc"
+
+    def __post_init__(self):
+        if self.cfa is not None and self.cfa not in PATTERNS:
+            raise DockfactoryError(f"--cfa: expected one of {', '.join(PATTERNS)}, got {self.cfa!r}")
+        if self.demosaic not in DEMOSAICS:
+            raise DockfactoryError(f"--demosaic: expected one of {', '.join(DEMOSAICS)}, got {self.demosaic!r}")
+        if not (np.isfinite(self.raw_black_dn) and 0 <= self.raw_black_dn < 65535):
+            raise DockfactoryError(f"--raw-black: expected a level in [0, 65535) DN, got {self.raw_black_dn}")
+        if self.raw_white_dn is not None and not (np.isfinite(self.raw_white_dn)
+                                                  and self.raw_black_dn < self.raw_white_dn <= 65535):
+            raise DockfactoryError(f"--raw-white: expected a level above --raw-black and at most 65535 DN, "
+                                   f"got {self.raw_white_dn}")
+
+    def develop(self, raw: np.ndarray) -> np.ndarray:
+        """A raw frame (H, W) uint16 as 8-bit sRGB (core.camera_chain.develop_raw)."""
+        white = self.raw_white_dn or float(2 ** max(8, int(raw.max()).bit_length()) - 1)
+        return develop_raw(raw, self.cfa, self.raw_black_dn, white, self.demosaic)
+
+
+def _unreadable(path: Path, why: str) -> tuple[None, dict]:
+    return None, {"ok": False, "reason": f"{path}: {why}", "category": "unreadable image"}
+
+
+def read_image(path: Path, camera: CameraInput = CameraInput()) -> tuple[np.ndarray | None, dict | None]:
+    """(RGB image, None) or (None, failure record) for a missing or unreadable file. A one-channel
+    16-bit PNG is a raw frame: developed with ``camera`` (its Bayer pattern is needed)."""
     if not path.is_file():
-        return None, {"ok": False, "reason": f"{path}: no such image file", "category": "unreadable image"}
+        return _unreadable(path, "no such image file")
+    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if data is None:
+        return _unreadable(path, "not a readable PNG or JPEG image")
+    if data.ndim == 2 and data.dtype == np.uint16:
+        if camera.cfa is None:
+            return _unreadable(path, "a raw frame (one 16-bit channel): give its Bayer pattern with --cfa")
+        if data.shape[0] % 2 or data.shape[1] % 2 or min(data.shape) < 4:
+            return _unreadable(path, f"a raw frame must have an even size of at least 4x4, got {data.shape[1]}x{data.shape[0]}")
+        return camera.develop(data), None
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
-        return None, {"ok": False, "reason": f"{path}: not a readable PNG or JPEG image",
-                      "category": "unreadable image"}
+        return _unreadable(path, "not a readable PNG or JPEG image")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None
 
 
-def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float) -> Frame:
+def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float,
+                  camera: CameraInput = CameraInput()) -> Frame:
     """Read, detect and solve one image (its own camera model fit)."""
-    image, failed = read_image(path)
+    image, failed = read_image(path, camera)
     if failed is not None:
         return Frame(index, path, failed)
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
     t0 = time.perf_counter()
-    frame.detections = detector.detect(image)
+    frame.detections = detector.detect(image, cfa=camera.cfa, jpeg=path.suffix.lower() in (".jpg", ".jpeg"))
     t1 = time.perf_counter()
     frame.record, frame.used_points = solve_frame(markers, frame.principal_point,
                                                   detection_arrays(frame.detections, min_score), None, camera_model,
@@ -169,6 +217,7 @@ class MeasureOptions:
     backend: str = "auto"
     workers: int = 2
     overlay_size: float | None = 0.5
+    camera: CameraInput = CameraInput()
 
     def __post_init__(self):
         if self.backend not in ("auto", "torch", "onnx"):
@@ -180,9 +229,9 @@ class MeasureOptions:
 
 
 def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_score: float, out: Path,
-                     size: float | None) -> Frame:
+                     size: float | None, camera: CameraInput = CameraInput()) -> Frame:
     """Read, detect, solve and (with ``size``) draw one image; the image is not kept."""
-    frame = measure_frame(detector, markers, i, path, model, min_score)
+    frame = measure_frame(detector, markers, i, path, model, min_score, camera)
     if size is not None and frame.image is not None:
         draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
     frame.image = None
@@ -199,23 +248,24 @@ def measure_all(weights, markers, paths, model: str, min_score: float, out: Path
         detector = MarkerDetector(weights, conf_threshold=min_score, backend=options.backend)
         t0, frames = time.perf_counter(), []
         for i, p in enumerate(paths):
-            frames.append(measure_and_draw(detector, markers, i, p, model, min_score, out, size))
+            frames.append(measure_and_draw(detector, markers, i, p, model, min_score, out, size, options.camera))
             if progress:
                 progress(i + 1, len(paths))
         return frames, time.perf_counter() - t0
     from dockfactory.detector.checkpoint import load_model
     load_model(weights, fuse=False)   # a bad weights file is named here, not in every worker
-    with MeasurePool(measure_and_draw, options.workers, weights, min_score, options.backend, markers, model, out, size) as pool:
+    with MeasurePool(measure_and_draw, options.workers, weights, min_score, options.backend, markers, model, out, size,
+                     options.camera) as pool:
         t0 = time.perf_counter()
         frames = pool.run(paths, progress)
         return frames, time.perf_counter() - t0
 
 
-def draw_overlays(frames: list[Frame], markers, out: Path, size: float) -> None:
+def draw_overlays(frames: list[Frame], markers, out: Path, size: float, camera: CameraInput = CameraInput()) -> None:
     """The overlays of frames whose records changed after they were measured (a docking run's
     joint solve): each image is read again rather than kept in memory."""
     for f in frames:
-        image, failed = read_image(f.path)
+        image, failed = read_image(f.path, camera)
         if failed is None:
             draw_measurement(image, f.detections, f.record, markers, overlay_path(out, f), size)
 
@@ -250,11 +300,11 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
             t0 = time.perf_counter()
             run = self_calibrate_sequence(frames, markers, model, floor)
             if options.overlay_size is not None:
-                draw_overlays(frames, markers, out, options.overlay_size)
+                draw_overlays(frames, markers, out, options.overlay_size, options.camera)
             wall += time.perf_counter() - t0
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
         header.update(backend=resolve_backend(options.backend), workers=options.workers,
-                      overlay_size=options.overlay_size, sigma_floor_px=floor)
+                      overlay_size=options.overlay_size, sigma_floor_px=floor, camera=asdict(options.camera))
         write_records(out, frames, header)
     return header
 

@@ -8,7 +8,9 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
-from dockfactory.eval.measure import MeasureOptions, measure
+from dockfactory.core.cfa import PATTERNS
+from dockfactory.core.demosaic import DEMOSAICS
+from dockfactory.eval.measure import CameraInput, MeasureOptions, measure
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -16,7 +18,8 @@ def cmd_measure(args) -> int:
     weights = Path(args.weights) if args.weights else shipped_weights()
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
-    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None)
+    camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
+    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera)
     _torch(args.threads)
 
     def progress(done, total):
@@ -51,6 +54,13 @@ def add_subcommand(sub) -> None:
     m.add_argument("--overlay-size", type=float, default=0.5,
                    help="overlay PNG resolution as a fraction of the image's (default 0.5, a live view; "
                         "1: full resolution; 0: no overlays)")
+    m.add_argument("--cfa", choices=PATTERNS,
+                   help="the camera's Bayer pattern: the centre refinement fits the sensor's own samples of a "
+                        "demosaiced image, and one-channel 16-bit PNGs are read as raw frames")
+    m.add_argument("--raw-black", type=float, default=0.0, help="raw frames: black level, DN (default 0)")
+    m.add_argument("--raw-white", type=float, default=None,
+                   help="raw frames: white level, DN (default: the top code of the frame's bit depth)")
+    m.add_argument("--demosaic", choices=DEMOSAICS, default="mhc", help="raw frames: demosaic (default mhc)")
     m.add_argument("--quiet", action="store_true")
     m.add_argument("--out", required=True, help="output folder")
     m.set_defaults(func=cmd_measure)

@@ -22,7 +22,7 @@ _STATE: dict = {}
 
 
 def _init_worker(task, weights, min_score: float, backend: str, markers, model: str, out: Path,
-                 size: float | None, barrier) -> None:
+                 size: float | None, camera, barrier) -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
         import torch
@@ -35,27 +35,30 @@ def _init_worker(task, weights, min_score: float, backend: str, markers, model: 
     except BaseException:
         barrier.abort()   # the parent stops waiting at once
         raise
-    _STATE.update(task=task, detector=detector, markers=markers, model=model, min_score=min_score, out=out, size=size)
+    _STATE.update(task=task, detector=detector, markers=markers, model=model, min_score=min_score, out=out, size=size,
+                  camera=camera)
     barrier.wait()
 
 
 def _work(index: int, path: Path):
     s = _STATE
-    return s["task"](s["detector"], s["markers"], index, path, s["model"], s["min_score"], s["out"], s["size"])
+    return s["task"](s["detector"], s["markers"], index, path, s["model"], s["min_score"], s["out"], s["size"],
+                     s["camera"])
 
 
 class MeasurePool:
     """``with MeasurePool(...) as pool: frames = pool.run(paths, progress)``; the constructor
     returns when every worker has loaded the detector. ``task(detector, markers, index, path,
-    model, min_score, out, size)`` (a module-level function) measures one image in a worker."""
+    model, min_score, out, size, camera)`` (a module-level function) measures one image in a worker."""
 
     def __init__(self, task, workers: int, weights, min_score: float, backend: str, markers, model: str, out: Path,
-                 size: float | None):
+                 size: float | None, camera=None):
         ctx = multiprocessing.get_context("spawn")
         barrier = ctx.Barrier(workers + 1)
         self.workers = workers
         self.executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                            initargs=(task, weights, min_score, backend, markers, model, out, size, barrier))
+                                            initargs=(task, weights, min_score, backend, markers, model, out, size, camera,
+                                                      barrier))
         for _ in range(workers):   # the pool starts its processes on demand: one no-op each
             self.executor.submit(int)
         try:

@@ -22,6 +22,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.report import build_report
+from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.dataset import identity
 from dockfactory.generator.dataset_open import Dataset
@@ -104,7 +105,7 @@ def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epoch
     else:
         say(f"detect: {weights.name} on every frame")
         t = time.monotonic()
-        detect_dataset(ds, weights, dets_path, split=None)
+        detect_dataset(ds, weights, dets_path, split=None, camera=dataset_camera(ds))
         stages.done("detect", key, time.monotonic() - t, [dets_path])
     return weights, model_sha
 

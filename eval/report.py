@@ -35,6 +35,8 @@ from dockfactory.eval.report_cameras import (
     html_envelope,
     plot_envelope,
 )
+from dockfactory.eval.simulated_cameras import BLOCK_SCHEMA as SIMULATED_CAMERAS_SCHEMA
+from dockfactory.eval.simulated_cameras import html_simulated_cameras, sensor_schema
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.version import generator_version, package_version
 
@@ -284,6 +286,7 @@ METRICS_SCHEMA = {
                    "pr_curves?": ("map", ("list", ("list", "num")))},
     "camera_envelope?": ENVELOPE_SCHEMA,
     "camera_models?": CAMERA_MODELS_SCHEMA,
+    "simulated_cameras?": SIMULATED_CAMERAS_SCHEMA,
     "acceptance": {"accepted": "bool",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
                                          "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"})},
@@ -539,6 +542,8 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
         if len(curve) != 2 or len(curve[0]) != len(curve[1]):
             raise DatasetError(f"{metrics_path}: detection.pr_curves.{name}: expected [recall list, precision list] "
                                "of equal length")
+    for i, unit in enumerate((metrics.get("simulated_cameras") or {}).get("units", [])):
+        check_schema(unit["sensor"], sensor_schema(unit["sensor"]), metrics_path, f"simulated_cameras.units[{i}].sensor")
     acc = metrics["acceptance"]
     verdict = checked_verdict(acc, metrics_path)
     rows = read_rows(eval_dir)
@@ -566,8 +571,16 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
              + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
+             + (html_simulated_cameras(metrics["simulated_cameras"]) if metrics.get("simulated_cameras") else [])
              + _html_figures(figs, worst) + [_html_provenance(provenance)])
     write_text_atomic(out_html, _html_document(parts))
+    return write_summary(out_html, metrics, verdict, provenance)
+
+
+def write_summary(out_html, metrics: dict, verdict: str, provenance: dict) -> dict:
+    """report.json (the figures a dashboard reads) and report.md (the verdict in a few lines)
+    beside ``out_html``; returns the summary."""
+    acc = metrics["acceptance"]
     loc, est = metrics["localization"], metrics["estimation"]
     summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,
                "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
@@ -577,5 +590,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
                "covariance_calibration": (loc.get("calibration") or {}).get("overall")}
     out_html = Path(out_html)
     write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
-    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + markdown_honesty(metrics))
+    cams = metrics.get("simulated_cameras")
+    simulated = f"\nGround truth: {cams['statement']} (per unit: report.html, \"What was simulated\").\n" if cams else ""
+    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + markdown_honesty(metrics))
     return summary

@@ -14,7 +14,9 @@ from dockfactory.core.config import Config, ConfigError
 from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.scene import CameraModel, mat4, vec
-from dockfactory.generator.draws import STREAM_UNIT_LENS, STREAM_UNITS, rng_for, uniform
+from dockfactory.core.camera_chain import configured_sensor
+from dockfactory.core.emva import EmvaSensor
+from dockfactory.generator.draws import STREAM_UNIT_LENS, STREAM_UNIT_SENSOR, STREAM_UNITS, rng_for, uniform
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,36 @@ def unit_lens(cfg: Config, unit: int) -> UnitLens:
     dof = u.depth_of_field
     return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
                     focus_error if dof else 0.0, quality if u.jpeg else 0)
+
+
+@dataclass(frozen=True)
+class UnitSensor:
+    """The colour sensor and ISP of one camera unit ([sensor] presets), drawn once with the
+    dataset seed: ``seed`` is the seed of its fixed patterns (DSNU, PRNU)."""
+    unit: int
+    preset: str
+    sensor: EmvaSensor
+    cfa: str
+    demosaic: str
+    crosstalk: float
+    sharpen: float
+    seed: int
+
+
+@lru_cache(maxsize=256)
+def unit_sensor(cfg: Config, unit: int) -> UnitSensor | None:
+    """Colour sensor of camera unit ``unit``: the per-unit lists' item ``unit % len``, the draws
+    from the unit's own stream (crosstalk, sharpening, pattern seed, in that order); None without
+    [sensor] presets (the three-chip noise model)."""
+    s = cfg.sensor
+    if not s.presets:
+        return None
+    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_SENSOR, unit)
+    crosstalk, sharpen = uniform(rng, s.crosstalk), uniform(rng, s.sharpen)
+    seed = int(rng.integers(2**62))
+    name = s.presets[unit % len(s.presets)]
+    return UnitSensor(unit, name, configured_sensor(name, s.overrides, s.adc_bits), s.cfa[unit % len(s.cfa)],
+                      s.demosaic[unit % len(s.demosaic)], crosstalk, sharpen, seed)
 
 
 def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:
@@ -104,7 +136,7 @@ def camera_model(cfg: Config, lens: UnitLens, focal_px: float, cam_from_d, eye, 
     return CameraModel(cfg.image.width, cfg.image.height, float(focal_px), principal_point(cfg, lens),
                        mat4(cam_from_d), vec(target), distance, lens.unit, lens.distortion, lens.aberration_px,
                        lens.f_number, distance + lens.focus_error_mm if lens.f_number > 0 else 0.0,
-                       cfg.camera_units.sensor_width_mm, lens.jpeg_quality)
+                       cfg.camera_units.sensor_width_mm, lens.jpeg_quality, cfg.camera_units.jpeg_subsampling)
 
 
 def check_lenses(cfg: Config, source: str) -> None:

@@ -208,25 +208,27 @@ def config_differences(a, b, prefix: str = "") -> list[str]:
     return out
 
 
-def frame_files(frame_id: str, keep_exr: bool) -> dict[str, str]:
+def frame_files(frame_id: str, keep_exr: bool, keep_raw: bool = False) -> dict[str, str]:
     """The files a frame's meta record vouches for: kind -> path relative to the dataset."""
     out = {"image": f"images/{frame_id}.png", "label": f"labels/{frame_id}.json"}
     if keep_exr:
         out["exr"] = f"exr/{frame_id}.exr"
+    if keep_raw:
+        out["raw"] = f"raw/{frame_id}.png"
     return out
 
 
-def frame_done(root, frame_id: str, keep_exr: bool) -> bool:
+def frame_done(root, frame_id: str, keep_exr: bool, keep_raw: bool = False) -> bool:
     """True when the frame's label (the commit point) and the files it vouches for exist. The meta
     record must name exactly the frame's own files (a record pointing elsewhere is not done)."""
     p = frame_paths(root, frame_id)
     if not (p["label"].is_file() and p["image"].is_file() and p["meta"].is_file()):
         return False
-    if keep_exr and not p["exr"].is_file():
+    if (keep_exr and not p["exr"].is_file()) or (keep_raw and not p["raw"].is_file()):
         return False
     try:
         meta = json.loads(p["meta"].read_text())
-        expected = frame_files(frame_id, keep_exr)
+        expected = frame_files(frame_id, keep_exr, keep_raw)
         if {k: r["path"] for k, r in meta["files"].items() if k in expected} != expected:
             return False
         for rec in meta["files"].values():
@@ -250,7 +252,7 @@ def write_manifest(root, cfg: Config) -> dict:
     for spec in plan:
         meta = json.loads(frame_paths(root, spec.frame_id)["meta"].read_text())
         frames.append({"frame_id": spec.frame_id, "split": spec.split, "condition": spec.condition})
-        own = set(frame_files(spec.frame_id, cfg.render.keep_exr).values())
+        own = set(frame_files(spec.frame_id, cfg.render.keep_exr, cfg.sensor.raw_output).values())
         stray = [r["path"] for r in meta["files"].values() if r["path"] not in own]
         if stray:
             raise DatasetError(f"{frame_paths(root, spec.frame_id)['meta']}: lists {stray[0]!r}, "

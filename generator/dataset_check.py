@@ -30,7 +30,7 @@ from dockfactory.generator.sampler import frame_plan
 from dockfactory.generator.version import dataset_version_id, generator_version
 
 NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
-BULK_DIRS = ("images", "exr")      # the cheap check compares these by size only (sha256 in verify)
+BULK_DIRS = ("images", "exr", "raw")      # the cheap check compares these by size only (sha256 in verify)
 
 
 @dataclass
@@ -156,7 +156,7 @@ def plan_files(cfg: Config, plan) -> set[str]:
     files and meta record, and the identity, config and layout."""
     out = set(ROOT_FILES)
     for spec in plan:
-        out.update(frame_files(spec.frame_id, cfg.render.keep_exr).values())
+        out.update(frame_files(spec.frame_id, cfg.render.keep_exr, cfg.sensor.raw_output).values())
         out.add(f"meta/{spec.frame_id}.json")
     return out
 

@@ -5,6 +5,9 @@ Files of frame ``<id>`` in a dataset directory:
                     decoded JPEG, losslessly)
   exr/<id>.exr      optional: linear RGB (half), depth (mm), marker index pass, in the delivered
                     (distorted) geometry
+  raw/<id>.png      optional ([sensor] raw_output): a colour camera's raw frame in DN, 16-bit PNG:
+                    one channel behind a CFA (the label's sensor.chain.cfa names the pattern; what a
+                    machine-vision camera delivers as BayerRG12), three for a three-chip sensor
   meta/<id>.json    size and sha256 of this frame's files (not part of the label)
   labels/<id>.json  the exact label; written last, so its presence means the frame is complete
 Every file is written atomically.
@@ -29,7 +32,7 @@ from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
 from dockfactory.generator.exr import read_passes, write_compact
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
-from dockfactory.generator.sensor import apply_sensor, jpeg_round_trip, resample_passes
+from dockfactory.generator.sensor import expose_frame, jpeg_round_trip, resample_passes
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
 # zlib strategies (1280x960: 49 ms, 1.36 MB vs 64 ms, 1.70 MB for the default strategy at level 1)
@@ -39,6 +42,7 @@ PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWR
 def frame_paths(root, frame_id: str) -> dict[str, Path]:
     root = Path(root)
     return {"image": root / "images" / f"{frame_id}.png", "exr": root / "exr" / f"{frame_id}.exr",
+            "raw": root / "raw" / f"{frame_id}.png",
             "label": root / "labels" / f"{frame_id}.json", "meta": root / "meta" / f"{frame_id}.json"}
 
 
@@ -57,8 +61,22 @@ def label_text(label: dict) -> str:
     return json.dumps(label, indent=1, allow_nan=False) + "\n"
 
 
+def encode_png(image: np.ndarray, what: str) -> bytes:
+    """PNG bytes of ``image``: (H, W, 3) uint8 RGB, or a uint16 raw frame ((H, W) or (H, W, 3))."""
+    data = image[..., ::-1] if image.ndim == 3 else image
+    ok, png = cv2.imencode(".png", np.ascontiguousarray(data), PNG_PARAMS)
+    if not ok:
+        raise RuntimeError(f"{what}: PNG encoding failed")
+    return png.tobytes()
+
+
+def _file_record(rel: str, data: bytes) -> dict:
+    return {"path": rel, "bytes": len(data), "sha256": sha256_bytes(data)}
+
+
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
-                 visible_threshold: float, timings: dict | None = None, min_chroma: float = MIN_CHROMA) -> dict:
+                 visible_threshold: float, timings: dict | None = None, min_chroma: float = MIN_CHROMA,
+                 keep_raw: bool = False) -> dict:
     """Write the frame's files from the render's scratch EXR; returns its meta record."""
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)
@@ -68,17 +86,20 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)
     passes = resample_passes(passes, frame.camera, outlines)   # the lens: distortion, chromatic aberration
     t_lens = time.perf_counter()
-    image, derived = apply_sensor(passes.rgb, frame.sensor)
+    image, raw, derived = expose_frame(passes.rgb, frame.sensor)
     if frame.camera.jpeg_quality:
-        image = jpeg_round_trip(image, frame.camera.jpeg_quality)
+        image = jpeg_round_trip(image, frame.camera.jpeg_quality, frame.camera.jpeg_subsampling)
     label = frame_labels(frame, static, passes.index, visible_threshold, derived, image, min_chroma)
     t2 = time.perf_counter()
-    ok, png = cv2.imencode(".png", image[..., ::-1], PNG_PARAMS)
-    if not ok:
-        raise RuntimeError(f"frame {frame.spec.frame_id}: PNG encoding failed")
-    png = png.tobytes()
+    png = encode_png(image, f"frame {frame.spec.frame_id}")
     write_bytes_atomic(paths["image"], png)
-    files = {"image": {"path": f"images/{paths['image'].name}", "bytes": len(png), "sha256": sha256_bytes(png)}}
+    files = {"image": _file_record(f"images/{paths['image'].name}", png)}
+    if keep_raw:
+        if raw is None:
+            raise RuntimeError(f"frame {frame.spec.frame_id}: raw output needs a colour camera ([sensor] presets)")
+        data = encode_png(raw, f"frame {frame.spec.frame_id} raw")
+        write_bytes_atomic(paths["raw"], data)
+        files["raw"] = _file_record(f"raw/{paths['raw'].name}", data)
     if keep_exr:
         write_compact(paths["exr"], passes)
         files["exr"] = {"path": f"exr/{paths['exr'].name}", "bytes": paths["exr"].stat().st_size,

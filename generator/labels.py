@@ -256,12 +256,21 @@ def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d
     return rec
 
 
+def sensor_record(sensor) -> dict:
+    """The label's sensor: the sampled parameters; a colour camera's chain (CFA, EMVA 1288 figures,
+    ISP) under "chain", absent for the three-chip model."""
+    out = to_dict(sensor)
+    if out.get("chain") is None:
+        out.pop("chain", None)
+    return out
+
+
 def _sampled_record(frame: FrameScene) -> dict:
     return {
         "lights": [to_dict(light) for light in frame.lights],
         "props": [to_dict(p) for p in frame.props],
         "appearance": to_dict(frame.appearance),
-        "sensor": to_dict(frame.sensor),
+        "sensor": sensor_record(frame.sensor),
         "glare_kind": frame.glare_kind,
         "render_seed": frame.render_seed,
         "render": to_dict(frame.render),
@@ -284,6 +293,7 @@ def camera_record(cam) -> dict:
             "aberration_scale": {"red": scales[0], "blue": scales[2]},
             "sensor_width_mm": cam.sensor_width_mm, "depth_of_field": dof,
             "jpeg_quality": cam.jpeg_quality or None,
+            **({"jpeg_subsampling": cam.jpeg_subsampling} if cam.jpeg_quality else {}),
             "render_canvas": {"offset_px": [ox, oy], "width": wc, "height": hc}}
 
 

@@ -128,7 +128,7 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
     stale_s = cfg.render.frame_timeout_s + 60.0
     remove_stale_temps(root, max_age_s=stale_s)  # left by a killed run
     summary = JobSummary(root=str(root), version_id=ident["version_id"], planned=len(frames))
-    todo = [s for s in frames if not frame_done(root, s.frame_id, cfg.render.keep_exr)]
+    todo = [s for s in frames if not frame_done(root, s.frame_id, cfg.render.keep_exr, cfg.sensor.raw_output)]
     summary.skipped = len(frames) - len(todo)
 
     if todo:
@@ -136,7 +136,8 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
     # temporaries of a killed worker (or of a killed earlier run whose writer had not yet exited
     # when this run started): removed before the dataset is declared complete
     remove_stale_temps(root, max_age_s=stale_s)
-    summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr) for s in frame_plan(cfg))
+    summary.complete = all(frame_done(root, s.frame_id, cfg.render.keep_exr, cfg.sensor.raw_output)
+                           for s in frame_plan(cfg))
     if summary.complete:
         write_manifest(root, cfg)
         # a file changed after its frame was finished (same size: frame_done cannot tell) or an
@@ -157,7 +158,8 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
     threads = opts.threads or max(1, cores() // n_workers)
     init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
             "height": cfg.image.height, "threads": threads, "root": str(root.resolve()),
-            "keep_exr": cfg.render.keep_exr, "visible_threshold": cfg.labels.visible_threshold,
+            "keep_exr": cfg.render.keep_exr, "keep_raw": cfg.sensor.raw_output,
+            "visible_threshold": cfg.labels.visible_threshold,
             "min_chroma": cfg.labels.min_chroma}
     log_dir = root / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -165,7 +167,7 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
         executor = RayExecutor(n_workers, threads, opts.ray_address, log_dir, opts.env)
     elif opts.executor == "local":
         executor = LocalExecutor(n_workers, log_dir, opts.env,
-                                 is_done=lambda fid: frame_done(root, fid, cfg.render.keep_exr))
+                                 is_done=lambda fid: frame_done(root, fid, cfg.render.keep_exr, cfg.sensor.raw_output))
     else:
         raise DockfactoryError(f"--executor must be local or ray, got {opts.executor!r}")
     frames = [to_dict(scenes[s.frame_id]) for s in todo]

@@ -180,7 +180,7 @@ class _Session:
         try:
             p0 = time.thread_time()
             done = finish_frame(frame, self.static, exr_path, init["root"], init["keep_exr"],
-                                init["visible_threshold"], timings, init["min_chroma"])
+                                init["visible_threshold"], timings, init["min_chroma"], init.get("keep_raw", False))
             done["timings_s"]["total"] = time.perf_counter() - t0
             # CPU seconds: the render's (whole process, all threads; it includes the previous
             # frame's post-processing that ran alongside) and this thread's

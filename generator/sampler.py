@@ -17,6 +17,7 @@ import dataclasses
 
 import numpy as np
 
+from dockfactory.core.camera_chain import ColourChain
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
 from dockfactory.core.scene import (
@@ -43,8 +44,10 @@ from dockfactory.generator.camera_units import (
     largest_fitting_focal,
     repeat_unit,
     unit_lens,
+    unit_sensor,
 )
 from dockfactory.generator.draws import (
+    STREAM_FRAME_ISP,
     STREAM_GEOMETRY,
     STREAM_LOOK,
     STREAM_PLAN,
@@ -359,7 +362,24 @@ def sample_glare(cfg: Config, rng, kind: str, static: StaticScene, cam: CameraMo
     return (), (light,), float(rng.uniform(0.08, 0.2))
 
 
-def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParams:
+def frame_chain(cfg: Config, spec: FrameSpec) -> ColourChain | None:
+    """The colour camera of a frame: its unit's sensor and ISP, and the frame's own draws (exposure
+    time, white-balance error of the red and blue gains) from its own stream; None without
+    [sensor] presets."""
+    unit = unit_sensor(cfg, spec.unit)
+    if unit is None:
+        return None
+    s = cfg.sensor
+    rng = rng_for(cfg.dataset.seed, STREAM_FRAME_ISP, spec.index)
+    exposure_s = uniform(rng, s.exposure_time_ms) / 1000.0
+    wb = (uniform(rng, s.wb_error), uniform(rng, s.wb_error))
+    return ColourChain(unit.cfa, unit.sensor, unit.seed, unit.crosstalk, exposure_s, unit.demosaic, wb,
+                       s.colour_correction, s.tone, s.denoise, unit.sharpen, s.sharpen_sigma_px)
+
+
+def sample_sensor(cfg: Config, rng, condition: str, bloom: float, chain: ColourChain | None = None) -> SensorParams:
+    """The frame's sensor parameters (the look stream's draws, in a fixed order whether or not a
+    colour ``chain`` replaces the three-chip noise model)."""
     s = cfg.sensor
     seed = int(rng.integers(2**62))
     if condition == "ideal":
@@ -369,7 +389,7 @@ def sample_sensor(cfg: Config, rng, condition: str, bloom: float) -> SensorParam
     else:
         ev, gain = uniform(rng, s.exposure_ev), 0.0
     return SensorParams(False, ev, gain, uniform(rng, s.full_well_e), uniform(rng, s.read_noise_e),
-                        s.adc_bits, uniform(rng, s.vignetting), bloom, seed)
+                        s.adc_bits, uniform(rng, s.vignetting), bloom, seed, chain)
 
 
 # ----------------------------------------------------------------------------- frame
@@ -439,7 +459,7 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
         if rough is not None:
             appearance = dataclasses.replace(appearance, roughness=rough,
                                              roughness_variation=min(appearance.roughness_variation, 0.05))
-    sensor = sample_sensor(cfg, look_rng, cond, bloom)
+    sensor = sample_sensor(cfg, look_rng, cond, bloom, frame_chain(cfg, spec))
     return FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
                       props=tuple(props), appearance=appearance, sensor=sensor,
                       glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),

@@ -8,8 +8,10 @@ linear radiance -> auto exposure (mean luminance of the central region to 0.18) 
 vignetting and veiling glare (an energy-conserving wide blur of part of the light) -> exposure
 offset (2^ev; several stops down in low light) -> sensor: electrons (full well at 1.0, clipped),
 shot noise, read noise -> ADC (``adc_bits``) -> digital gain (2^gain_ev) -> sRGB, 8 bit.
-Shot noise uses the Gaussian approximation N(e, e), accurate above a few electrons. Last, a unit
-with JPEG encoding delivers the JPEG-decoded image (``jpeg_round_trip``).
+Shot noise uses the Gaussian approximation N(e, e), accurate above a few electrons. A colour camera
+([sensor] presets: ``SensorParams.chain``) replaces the sensor part after the veiling glare with
+``core.camera_chain`` (CFA, EMVA 1288 sensor, ISP). Last, a unit with JPEG encoding delivers the
+JPEG-decoded image (``jpeg_round_trip``).
 """
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from dockfactory.core import isp
+from dockfactory.core.camera_chain import develop
 from dockfactory.core.distortion import distort_pixels, undistort_normalized
 from dockfactory.core.scene import CameraModel, SensorParams
 from dockfactory.generator.exr import RenderPasses
@@ -78,6 +82,28 @@ def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]
 
     ``linear``: (H, W, 3) float32 scene-linear render.
     """
+    image, _, derived = expose_frame(linear, p)
+    return image, derived
+
+
+def _exposed(img: np.ndarray, p: SensorParams, scale: float) -> np.ndarray:
+    """The lens and exposure part (in place): auto exposure x 2^ev, vignetting, veiling glare."""
+    img *= np.float32(scale * 2.0 ** p.exposure_ev)
+    if p.vignetting > 0:
+        img *= 1.0 - np.float32(p.vignetting) * _radius2(*img.shape[:2])
+    if p.bloom > 0:
+        img = veiling_glare(img, p.bloom)
+    return img
+
+
+def expose_frame(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, np.ndarray | None, dict]:
+    """(delivered 8-bit RGB (H, W, 3) uint8, raw frame in DN or None, derived values) of one frame.
+
+    ``linear``: (H, W, 3) float32 scene-linear render. A colour camera (``p.chain``) goes through
+    ``core.camera_chain.develop`` and returns its raw frame ((H, W) uint16 behind a CFA, (H, W, 3)
+    for a three-chip one); the three-chip noise model returns None. An ideal frame is noise-free
+    whatever the camera.
+    """
     if linear.ndim != 3 or linear.shape[2] != 3:
         raise ValueError(f"linear image must be (H, W, 3), got {linear.shape}")
     img = np.nan_to_num(np.array(linear, dtype=np.float32), copy=False, nan=0.0, posinf=0.0, neginf=0.0)
@@ -87,13 +113,12 @@ def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]
     if p.ideal:
         img *= np.float32(scale)
         idx = np.rint(np.clip(img, 0.0, 1.0) * (levels - 1)).astype(np.int32)
-        return lut[idx], {"auto_exposure_scale": scale}
-    img *= np.float32(scale * 2.0 ** p.exposure_ev)
-    if p.vignetting > 0:
-        img *= 1.0 - np.float32(p.vignetting) * _radius2(*img.shape[:2])
-    if p.bloom > 0:
-        img = veiling_glare(img, p.bloom)
+        return lut[idx], None, {"auto_exposure_scale": scale}
+    img = _exposed(img, p, scale)
     rng = np.random.default_rng(p.noise_seed)
+    if p.chain is not None:
+        image, raw = develop(img, p.chain, rng, p.gain_ev)
+        return image, raw, {"auto_exposure_scale": scale}
     electrons = np.clip(img, 0.0, 1.0, out=img)
     electrons *= np.float32(p.full_well_e)
     sigma = np.sqrt(electrons + np.float32(p.read_noise_e ** 2))
@@ -104,7 +129,7 @@ def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]
     if p.gain_ev != 0:
         dn = np.minimum(np.rint(dn * np.float32(2.0 ** p.gain_ev)), levels - 1)
     idx = dn.astype(np.int32)
-    return lut[idx], {"auto_exposure_scale": scale}
+    return lut[idx], None, {"auto_exposure_scale": scale}
 
 
 # ----------------------------------------------------------------------------- lens
@@ -268,10 +293,6 @@ def resample_passes(passes: RenderPasses, cam: CameraModel, outlines=()) -> Rend
     return RenderPasses(rgb=rgb, depth_mm=depth, index=index)
 
 
-def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
-    """``image`` (H, W, 3) uint8 RGB as a JPEG of ``quality`` decodes (OpenCV's libjpeg, 4:2:0)."""
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise RuntimeError("JPEG encoding failed")
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-
+def jpeg_round_trip(image: np.ndarray, quality: int, subsampling: str = "420") -> np.ndarray:
+    """``image`` (H, W, 3) uint8 RGB as a JPEG of ``quality`` decodes (``core.isp.jpeg_round_trip``)."""
+    return isp.jpeg_round_trip(image, quality, subsampling)

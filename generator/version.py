@@ -24,8 +24,10 @@ def blender_version() -> str:
 # the modules whose code decides what a rendered dataset contains: every dockfactory module the
 # render worker process imports (tests/test_version.py checks the list against a real worker)
 OUTPUT_SOURCES = (
-    "dockfactory.core.config", "dockfactory.core.distortion", "dockfactory.core.errors", "dockfactory.core.geometry",
-    "dockfactory.core.io", "dockfactory.core.layout", "dockfactory.core.names", "dockfactory.core.scene",
+    "dockfactory.core.camera_chain", "dockfactory.core.cfa", "dockfactory.core.config", "dockfactory.core.demosaic",
+    "dockfactory.core.distortion", "dockfactory.core.emva", "dockfactory.core.errors", "dockfactory.core.geometry",
+    "dockfactory.core.io", "dockfactory.core.isp", "dockfactory.core.layout", "dockfactory.core.names",
+    "dockfactory.core.scene", "dockfactory.core.sensor_presets",
     "dockfactory.generator.camera_units", "dockfactory.generator.draws", "dockfactory.generator.exr",
     "dockfactory.generator.frame_output", "dockfactory.generator.labels", "dockfactory.generator.render_worker",
     "dockfactory.generator.runs", "dockfactory.generator.sampler", "dockfactory.generator.sensor",

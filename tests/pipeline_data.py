@@ -121,7 +121,7 @@ def write_painted_dataset(root, config_path, exact: bool = False) -> Config:
             exr = Path(scratch) / f"{spec.frame_id}.exr"
             write_compact(exr, painted_passes(frame, static, exact))
             finish_frame(frame, static, exr, root, cfg.render.keep_exr, cfg.labels.visible_threshold,
-                         min_chroma=cfg.labels.min_chroma)
+                         min_chroma=cfg.labels.min_chroma, keep_raw=cfg.sensor.raw_output)
     write_manifest(root, cfg)
     return cfg
 

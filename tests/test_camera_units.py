@@ -22,7 +22,7 @@ from dockfactory.core.geometry import blender_camera_intrinsics, pose_components
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import CameraModel, to_dict
 from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.camera_units import largest_fitting_focal, unit_lens
+from dockfactory.generator.camera_units import largest_fitting_focal, unit_lens, unit_sensor
 from dockfactory.generator.draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
@@ -163,6 +163,10 @@ def test_realistic_config_has_the_issue_ranges():
     assert 2.8 <= dof["f_number"] <= 5.6 and dof["focus_distance_mm"] == pytest.approx(cam["distance_mm"] + lens.focus_error_mm)
     assert dof["focal_mm"] == pytest.approx(cam["focal_px"] * 8.8 / 1280) and dof["aperture_mm"] == pytest.approx(dof["focal_mm"] / dof["f_number"])
     assert 85 <= cam["jpeg_quality"] <= 95 and cam["render_canvas"]["width"] >= 1280 - 100
+    # a Bayer sensor with a published preset behind an ISP in each unit, one frame's chain in its label
+    assert [unit_sensor(cfg, u).preset for u in range(2)] == ["imx273", "imx174"]
+    assert frame.sensor.chain.cfa == ("RGGB", "BGGR")[spec.unit]
+    assert frame_labels(frame, static_scene(cfg), None, 0.5)["sampled"]["sensor"]["chain"]["cfa"] == frame.sensor.chain.cfa
 
 
 def test_focal_cap_through_the_lens_is_exact():

@@ -16,7 +16,7 @@ import typing
 import pytest
 
 from dockfactory.core import config as config_mod
-from dockfactory.core.config import Config, ConfigError, config_from_dict, load_config
+from dockfactory.core.config import Config, ConfigError, Overrides, config_from_dict, load_config
 from dockfactory.eval.cli import main
 
 
@@ -32,6 +32,8 @@ def _float_slots():
             hint, value = hints[f.name], getattr(default, f.name)
             if hint is float:
                 out.append((table.name, f.name, None))
+            elif hint == Overrides:                                 # a table of name = number
+                out.append((table.name, f.name, [{"dark_noise_e": 1.0}, "dark_noise_e"]))
             elif typing.get_origin(hint) is tuple:
                 args = typing.get_args(hint)
                 if float in args:                                   # a [min, max] range

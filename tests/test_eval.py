@@ -122,7 +122,7 @@ def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
     parser.feed((out / "report.html").read_text())
     text = " ".join(parser.text)
     for section in ("Verdict", "Localization", "Estimation", "Failures", "Plots", "Worst frames", "Provenance",
-                    "Cramer-Rao", "Oracle"):
+                    "Cramer-Rao", "Oracle", "What was simulated"):
         assert section in text, section
     assert len(parser.imgs) >= 5 and all(s.startswith("data:image/png;base64,") for s in parser.imgs)
     assert metrics["dataset"]["version_id"] in text

@@ -1,0 +1,251 @@
+"""Real colour cameras, side by side: the same frames through each sensor / ISP effect, then the
+shipped detector, the centre refinement and the pinhole solver; pose and centre errors per effect.
+
+    python bench/sensor_effects.py DATASET [DATASET ...] --out RESULTS.json
+                                   [--effects NAME,NAME] [--frames N] [--weights W.pt]
+                                   [--tell-cfa] [--tell-jpeg]
+    python bench/sensor_effects.py --compare RESULTS.json [RESULTS.json ...]
+
+Each DATASET must keep its linear renders (``[render] keep_exr = true``; the kept EXR is the
+delivered geometry before the sensor): bench/configs/sensor_scene_a.toml and sensor_scene_b.toml
+(two geometries, ideal pinhole lens, normal light, 48 test frames each). Every effect sends the
+frame's linear image through ``generator.sensor.expose_frame`` with the frame's own exposure,
+vignetting and noise seed (its label's sensor record) and the effect's colour chain, so the
+effects differ only in the camera. Geometry never changes: the errors are measured against the
+labels. The reference ("three-chip") is a three-chip sensor with the same EMVA 1288 preset, PNG
+output. Per effect and dataset: frames solved, X / Y / alpha RMSE, their ratio to the reference,
+RMS z (error / reported std), and the centre error of the detected markers against the labels'
+outline centroids (median length, mean dx / dy per class).
+
+Results land in RESULTS.json after each (dataset, effect) pair (resumable: finished pairs are
+skipped), and a markdown table is printed at the end.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from dockfactory.core.camera_chain import ColourChain, configured_sensor
+from dockfactory.core.io import write_json_atomic
+from dockfactory.core.resources import shipped_weights
+from dockfactory.core.scene import SensorParams, from_dict
+from dockfactory.eval.pose_metrics import pose_error
+from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame
+from dockfactory.eval.uncertainty import reported_std
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.exr import read_passes
+from dockfactory.generator.sensor import expose_frame, jpeg_round_trip
+
+PRESET = "imx273"
+UNIT_SEED = 26
+COMPONENTS = ("x", "y", "alpha")
+
+
+def chain(cfa="none", demosaic="bilinear", wb=(0.0, 0.0), **kw) -> ColourChain:
+    """The bench camera: preset PRESET at 12 bits, 10 ms, exact colour correction, sRGB."""
+    base = dict(cfa=cfa, sensor=configured_sensor(PRESET, (), 12), unit_seed=UNIT_SEED, crosstalk=0.02,
+                exposure_s=0.01, demosaic=demosaic, wb_error=wb, colour_correction=True, tone="srgb",
+                denoise="off", sharpen_amount=0.0, sharpen_sigma_px=1.0)
+    return ColourChain(**{**base, **kw})
+
+
+def wb_draw(index: int, limit: float) -> tuple[float, float]:
+    """The frame's white-balance error of the red and blue gains: uniform in [-limit, limit]."""
+    rng = np.random.default_rng([UNIT_SEED, 7, index])
+    return tuple(float(v) for v in rng.uniform(-limit, limit, 2))
+
+
+# name -> (chain builder (frame index -> ColourChain | None), optical blur sigma px, JPEG (q, subsampling))
+EFFECTS = {
+    "factory": (lambda i: None, 0.0, None),
+    "three-chip": (lambda i: chain(), 0.0, None),
+    "bayer-bilinear": (lambda i: chain("RGGB", "bilinear"), 0.0, None),
+    "bayer-edge_aware": (lambda i: chain("RGGB", "edge_aware"), 0.0, None),
+    "bayer-vng": (lambda i: chain("RGGB", "vng"), 0.0, None),
+    "bayer-mhc": (lambda i: chain("RGGB", "mhc"), 0.0, None),
+    "bayer-jpeg90": (lambda i: chain("RGGB", "bilinear"), 0.0, (90, "420")),
+    "three-chip-jpeg90": (lambda i: chain(), 0.0, (90, "420")),
+    "three-chip-jpeg70": (lambda i: chain(), 0.0, (70, "420")),
+    "blur1.2": (lambda i: chain(), 1.2, None),
+    "wb20": (lambda i: chain(wb=wb_draw(i, 0.2)), 0.0, None),
+    "bayer-wb20": (lambda i: chain("RGGB", "bilinear", wb=wb_draw(i, 0.2)), 0.0, None),
+    "bayer-sharpen": (lambda i: chain("RGGB", "bilinear", sharpen_amount=0.8), 0.0, None),
+}
+
+
+def delivered(passes_rgb: np.ndarray, label: dict, effect: str) -> np.ndarray:
+    """The frame as the effect's camera delivers it: (H, W, 3) uint8 RGB."""
+    build, blur, jpeg = EFFECTS[effect]
+    params = from_dict(SensorParams, {k: v for k, v in label["sampled"]["sensor"].items() if k != "chain"})
+    params = replace(params, chain=build(label["spec"]["index"]))
+    linear = passes_rgb
+    if blur > 0:
+        linear = cv2.GaussianBlur(np.ascontiguousarray(linear, dtype=np.float32), (0, 0), blur)
+    image, _, _ = expose_frame(linear, params)
+    return jpeg_round_trip(image, *jpeg) if jpeg else image
+
+
+def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float]]:
+    """(class, dx, dy) px of each fully visible, legible marker against the detection of its class
+    nearest to it (within its box): refined centre minus the label's outline centroid."""
+    out = []
+    for m in label["markers"]:
+        if m.get("visibility") != 2 or not m.get("legible", True):
+            continue
+        truth = np.array(m.get("outline_centroid_px") or m["center_px"])
+        x0, y0, x1, y1 = m["bbox_px"]
+        near = [d for d in dets if d["class_id"] == m["class_id"] and x0 <= d["center_px"][0] <= x1
+                and y0 <= d["center_px"][1] <= y1]
+        if near:
+            c = min(near, key=lambda d: np.hypot(*(np.array(d["center_px"]) - truth)))["center_px"]
+            out.append((m["class_id"], c[0] - truth[0], c[1] - truth[1]))
+    return out
+
+
+def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str | None, jpeg: bool) -> dict:
+    """Detect, refine (told the camera's Bayer pattern ``cfa`` and whether it wrote a JPEG), solve
+    one delivered image; errors against its label."""
+    label = ds.labels[fid]
+    h, w = image.shape[:2]
+    dets = detector.detect(image, cfa=cfa, jpeg=jpeg)
+    rec, _ = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
+                         "pinhole", docking_options(detector.centre_noise_px))
+    row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label)}
+    if rec["ok"]:
+        err = pose_error(rec["pose"], label["pose_b_in_d"])
+        std = reported_std(rec["covariance"])
+        row.update({f"err_{c}": err[c] for c in COMPONENTS})
+        row.update({f"z_{c}": (err[c] / std[c] if std.get(c) else None) for c in COMPONENTS})
+    return row
+
+
+def summary(rows: list[dict]) -> dict:
+    """RMSE and RMS z per component, centre error figures per class."""
+    ok = [r for r in rows if r["ok"]]
+    out = {"frames": len(rows), "solved": len(ok)}
+    for c in COMPONENTS:
+        e = np.array([r[f"err_{c}"] for r in ok])
+        z = np.array([r[f"z_{c}"] for r in ok if r[f"z_{c}"] is not None])
+        out[f"rmse_{c}"] = float(np.sqrt(np.mean(e ** 2))) if e.size else None
+        out[f"rms_z_{c}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else None
+    cen = np.array([c for r in rows for c in r["centres"]]).reshape(-1, 3)
+    out["centre_median_px"] = float(np.median(np.hypot(cen[:, 1], cen[:, 2]))) if len(cen) else None
+    out["centre_rms_px"] = float(np.sqrt(np.mean(cen[:, 1] ** 2 + cen[:, 2] ** 2))) if len(cen) else None
+    for cls, name in ((0, "A"), (1, "B")):
+        k = cen[cen[:, 0] == cls]
+        out[f"centre_mean_{name}"] = [float(k[:, 1].mean()), float(k[:, 2].mean())] if len(k) else None
+        out[f"markers_{name}"] = int(len(k))
+    return out
+
+
+def run_effect(detector, ds: Dataset, effect: str, frames: list[str], tell_cfa: bool, tell_jpeg: bool) -> dict:
+    t0 = time.perf_counter()
+    rows = []
+    jpeg = tell_jpeg and EFFECTS[effect][2] is not None
+    for fid in frames:
+        passes = read_passes(ds.root / "exr" / f"{fid}.exr")
+        cam = EFFECTS[effect][0](ds.labels[fid]["spec"]["index"])
+        cfa = cam.cfa if tell_cfa and cam is not None and cam.cfa != "none" else None
+        rows.append(measure_frame(detector, ds, fid, delivered(passes.rgb, ds.labels[fid], effect), cfa, jpeg))
+    return {**summary(rows), "seconds": round(time.perf_counter() - t0, 1), "rows": rows}
+
+
+def table(results: dict) -> str:
+    """Markdown: per dataset and effect, RMSE (ratio to three-chip) and RMS z."""
+    lines = ["| dataset | effect | solved | X mm (x) | Y mm (x) | alpha deg (x) | RMS z X / Y / alpha | "
+             "centre median px | mean A / B px |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for ds_name, effects in results["datasets"].items():
+        ref = effects.get("three-chip")
+        for name, s in effects.items():
+            cells = []
+            for c in COMPONENTS:
+                v = s[f"rmse_{c}"]
+                ratio = f" ({v / ref[f'rmse_{c}']:.2f})" if ref and v is not None else ""
+                cells.append(f"{v:.3f}{ratio}" if v is not None else "-")
+            z = " / ".join(f"{s[f'rms_z_{c}']:.2f}" if s[f"rms_z_{c}"] is not None else "-" for c in COMPONENTS)
+            mean = " / ".join(f"({m[0]:+.3f}, {m[1]:+.3f})" if m else "-"
+                              for m in (s["centre_mean_A"], s["centre_mean_B"]))
+            lines.append(f"| {ds_name} | {name} | {s['solved']}/{s['frames']} | {' | '.join(cells)} | {z} | "
+                         f"{s['centre_median_px']:.3f} | {mean} |")
+    return "\n".join(lines)
+
+
+TARGETS = {"bayer-bilinear": 1.5, "bayer-edge_aware": 1.5, "bayer-vng": 1.5, "bayer-mhc": 1.5, "bayer-jpeg90": 1.5,
+           "blur1.2": 1.5, "wb20": 1.2}
+
+
+def compare(paths: list[str]) -> str:
+    """Markdown: per scene and effect, X / Y / alpha RMSE over the three-chip reference of the same
+    run, in each results file side by side (e.g. the refinement before and after), and RMS z."""
+    runs = [(Path(p).stem, json.loads(Path(p).read_text())) for p in paths]
+    lines = ["| scene | effect | target | " + " | ".join(f"{n}: X / Y / alpha (x three-chip) | {n}: RMS z X / Y / alpha"
+                                                   for n, _ in runs) + " |",
+             "| --- | --- | --- | " + " | ".join("--- | ---" for _ in runs) + " |"]
+    scenes = list(runs[0][1]["datasets"])
+    for scene in scenes:
+        for effect in EFFECTS:
+            cells = []
+            for _, res in runs:
+                eff = res["datasets"].get(scene, {})
+                s, ref = eff.get(effect), eff.get("three-chip")
+                if s is None or ref is None:
+                    cells.append("- | -")
+                    continue
+                ratio = " / ".join(f"{s[f'rmse_{c}'] / ref[f'rmse_{c}']:.2f}" for c in COMPONENTS)
+                z = " / ".join(f"{s[f'rms_z_{c}']:.2f}" for c in COMPONENTS)
+                cells.append(f"{s['rmse_x']:.3f} / {s['rmse_y']:.3f} / {s['rmse_alpha']:.4f} ({ratio}) | {z}")
+            if any(c != "- | -" for c in cells):
+                target = f"<= {TARGETS[effect]}x" if effect in TARGETS else ""
+                lines.append(f"| {scene} | {effect} | {target} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("datasets", nargs="+", help="datasets (or, with --compare, results files)")
+    p.add_argument("--compare", action="store_true", help="print the results files side by side")
+    p.add_argument("--out")
+    p.add_argument("--effects", default=",".join(EFFECTS))
+    p.add_argument("--frames", type=int, default=0, help="first N test frames only (0: all)")
+    p.add_argument("--weights", default=None)
+    p.add_argument("--tell-cfa", action="store_true", help="give the refinement the camera's Bayer pattern")
+    p.add_argument("--tell-jpeg", action="store_true", help="tell the refinement which images were JPEG-encoded")
+    args = p.parse_args(argv)
+    if args.compare:
+        print(compare(args.datasets))
+        return 0
+    if not args.out:
+        p.error("--out is required")
+    import torch
+    torch.set_num_threads(2)
+    from dockfactory.detector.infer import MarkerDetector
+    detector = MarkerDetector(args.weights or shipped_weights())
+    out = Path(args.out)
+    results = json.loads(out.read_text()) if out.is_file() else {"datasets": {}}
+    results.update(weights=str(args.weights or shipped_weights()), preset=PRESET, tell_cfa=args.tell_cfa,
+                   tell_jpeg=args.tell_jpeg)
+    for root in args.datasets:
+        ds = Dataset.open(root, full=False)
+        frames = ds.frames("test")[: args.frames or None]
+        key = f"{ds.config.dataset.name}@{ds.version_id}"
+        for effect in args.effects.split(","):
+            if effect in results["datasets"].get(key, {}):
+                continue
+            res = run_effect(detector, ds, effect, frames, args.tell_cfa, args.tell_jpeg)
+            results["datasets"].setdefault(key, {})[effect] = res
+            write_json_atomic(out, results)
+            print(f"{key} {effect}: X {res['rmse_x']:.3f} Y {res['rmse_y']:.3f} alpha {res['rmse_alpha']:.4f} "
+                  f"({res['seconds']} s)", file=sys.stderr, flush=True)
+    print(table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

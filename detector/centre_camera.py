@@ -1,0 +1,90 @@
+"""Sub-pixel marker centre with what is known of the camera: its Bayer pattern, JPEG encoding.
+
+A Bayer sensor samples a red disc's colour at one pixel in four (blue too); every demosaic keeps
+those samples and interpolates the rest. The interpolated values misplace a sharp edge by a
+fraction of a pixel that depends on where the edge falls on the 2-pixel lattice of the samples, and
+``detector.centre.refine_centre``, which fits every pixel, inherits that error (a clean synthetic
+disc: about 0.13 px RMS against 0.005 px for a three-chip image, whatever the demosaic). Here the
+coverage passes are the same, but the edge fit (``centre.fit_disc_edge``) sees only the pixels
+where the sensor sampled the class's own colour, and fits that channel itself (linear) rather
+than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class channel's
+high-pass to the other channels it interpolates at those sites, which the score would subtract.
+The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
+
+A JPEG (4:2:0, as cameras write it) keeps the luma at full resolution and the chroma at half: the
+colour score, made of chroma, loses the edge, the luma keeps it. With ``jpeg`` (and no pattern)
+the edge fit takes the luma (linearised) as its data; the coverage passes still segment by
+colour, and the fit's band (2.5 px inside, 1 px outside the disc edge) stays on the disc and its
+dark ring, where the luma step is the disc's. With a pattern as well, the fit keeps the class's
+own channel at its own sites: on the sensor bench's two scenes the luma at those sites was no
+better overall (better alpha, worse X or Y; bench/results/sensor_effects/README.md).
+
+The module keeps ``detector/centre.py`` untouched: its sha256 names the refinement of the weights'
+noise cards (``detector.noise_card``).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from dockfactory.core.cfa import channel_map
+from dockfactory.detector import centre
+from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
+
+
+LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
+
+
+def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: bool):
+    """The coverage window ``win`` (a ``centre._Window``) with its score replaced by the fit's
+    data: the class's own channel, or with ``jpeg`` and no ``cfa`` the luma, linearised; NaN off
+    the class's own sites of a ``cfa`` sensor. Also the disc and ring levels of that data; None when either
+    level has no pixel or the disc is not above the ring. ValueError for an unknown pattern."""
+    y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
+    h, w = win.s.shape
+    c = CLASS_CHANNEL[class_id]
+    sub = image[y0:y0 + h, x0:x0 + w]
+    if jpeg and cfa is None:
+        luma = np.rint(sub.astype(np.float32) @ LUMA_WEIGHTS).astype(np.uint8)
+        level = centre._SRGB_TO_LINEAR[luma]
+    else:
+        level = centre._SRGB_TO_LINEAR[sub[..., c]]
+    sites = (np.ones(level.shape, bool) if cfa is None
+             else channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w] == c)
+    inner, ring = (win.rho <= 0.5) & sites, (win.rho >= 1.08) & (win.rho <= 1.22) & sites
+    if not inner.any() or not ring.any():
+        return None
+    fg, bg = float(np.percentile(level[inner], 25)), float(np.median(level[ring]))
+    if not fg > bg:   # the disc does not stand out in this evidence
+        return None
+    return replace(win, s=np.where(sites, level, np.float32(np.nan)), fg=fg, bg=bg)
+
+
+def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None = None, jpeg: bool = False,
+                         min_quality: float = 0.3, edge_bias_px: float = EDGE_BIAS_PX) -> Refined:
+    """``centre.refine_centre`` for an ``image`` (H, W, 3) uint8 RGB of a camera with Bayer
+    pattern ``cfa`` (RGGB, BGGR, GRBG, GBRG; None: three-chip or unknown) that was JPEG-encoded
+    (``jpeg``): the same coverage passes, quality and box, the centre from the edge fit on the
+    evidence the camera kept (see the module docstring); with neither, ``centre.refine_centre``
+    itself. ``box``: (4,) [x0, y0, x1, y1] px, OpenCV convention. ValueError for an unknown
+    pattern."""
+    if cfa is None and not jpeg:
+        return centre.refine_centre(image, box, class_id, min_quality, edge_bias_px)
+    if cfa is not None:
+        channel_map(cfa, 2, 2)   # an unknown pattern is refused before any work
+    first, win = centre._refine_once(image, box, class_id, min_quality, edge_bias_px)
+    if not first.refined:
+        return first
+    second, win2 = centre._refine_once(image, first.box, class_id, min_quality, edge_bias_px)
+    if second.refined:
+        first, win = second, win2
+    own = fit_evidence(image, win, class_id, cfa, jpeg)
+    fitted = None if own is None else centre.fit_disc_edge(own)
+    if fitted is None:
+        return first
+    h_img, w_img = image.shape[:2]
+    half = np.array([win.cov[0, 0], win.cov[1, 1]]) ** 0.5 * 2 + edge_bias_px
+    rbox = np.clip(np.concatenate([fitted - half, fitted + half]), -0.5,
+                   np.array([w_img, h_img, w_img, h_img]) - 0.5)
+    return Refined(center=fitted, box=rbox, quality=first.quality, refined=True)

@@ -1,0 +1,134 @@
+"""What the verdict was measured through: the simulated camera of every camera unit (lens, colour
+filter array and EMVA 1288 sensor, ISP, encoding) and the localization errors of each unit's test
+frames, so a report names the camera its figures hold for, with one row per unit (and preset).
+
+The block is built from the dataset's config (the same draws the factory made: ``unit_lens``,
+``unit_sensor``) and the evaluation's per-frame rows; it is reported, not gated.
+"""
+from __future__ import annotations
+
+import html
+
+import numpy as np
+
+from dockfactory.core.camera_chain import white_dn
+from dockfactory.eval.acceptance import UNITS
+from dockfactory.generator.camera_units import unit_lens, unit_sensor
+from dockfactory.generator.dataset_open import Dataset
+
+
+SHOWN = ("x", "y", "alpha")   # the components the paper's acceptance gates
+
+# what the report reads of metrics["simulated_cameras"] (eval.report.check_schema): the lens, and
+# a sensor record of the three-chip model or of a preset (checked by the record's own kind)
+LENS_SCHEMA = {"principal_offset_px": ("list", "num"), "k1": "num", "k2": "num", "aberration_px": ("list", "num"),
+               "f_number": "num?", "jpeg_quality": "num?", "jpeg_subsampling": "str?"}
+THREE_CHIP_SCHEMA = {"model": "str", "full_well_e": ("list", "num"), "read_noise_e": ("list", "num"), "adc_bits": "int"}
+PRESET_SCHEMA = {"model": "str", "preset": "str", "cfa": "str", "demosaic": "str", "saturation_e": "num",
+                 "dark_noise_e": "num", "gain_dn_per_e": "num", "adc_bits": "int", "crosstalk": "num",
+                 "isp": {"wb_error": ("list", "num"), "colour_correction": "bool", "tone": "str", "denoise": "str",
+                         "sharpen": "num"}}
+BLOCK_SCHEMA = {"statement": "str", "units": ("list", {"unit": "int", "lens": LENS_SCHEMA, "sensor": {"model": "str"},
+                                                        "test": {"frames": "int", "solved": "int", "x": "num?",
+                                                                 "y": "num?", "alpha": "num?"}})}
+
+
+def sensor_schema(sensor: dict) -> dict:
+    """The schema of a unit's sensor record: a preset's, or the three-chip model's."""
+    return PRESET_SCHEMA if isinstance(sensor, dict) and "preset" in sensor else THREE_CHIP_SCHEMA
+
+
+def _lens(cfg, unit: int) -> dict:
+    lens = unit_lens(cfg, unit)
+    return {"principal_offset_px": list(lens.principal_offset), "k1": lens.distortion[0], "k2": lens.distortion[1],
+            "aberration_px": list(lens.aberration_px), "f_number": lens.f_number or None,
+            "jpeg_quality": lens.jpeg_quality or None,
+            "jpeg_subsampling": cfg.camera_units.jpeg_subsampling if lens.jpeg_quality else None}
+
+
+def _sensor(cfg, unit: int) -> dict:
+    s = cfg.sensor
+    us = unit_sensor(cfg, unit)
+    if us is None:
+        return {"model": "three-chip noise model", "full_well_e": list(s.full_well_e),
+                "read_noise_e": list(s.read_noise_e), "adc_bits": s.adc_bits}
+    e = us.sensor
+    return {"model": f"EMVA 1288 preset {us.preset}", "preset": us.preset, "cfa": us.cfa, "demosaic": us.demosaic,
+            "saturation_e": e.saturation_e, "dark_noise_e": e.dark_noise_e, "gain_dn_per_e": e.gain_dn_per_e,
+            "quantum_efficiency": list(e.quantum_efficiency), "dsnu_dn": e.dsnu_dn, "prnu_pct": e.prnu_pct,
+            "adc_bits": e.adc_bits, "white_dn": white_dn(e), "crosstalk": us.crosstalk,
+            "isp": {"wb_error": list(s.wb_error), "colour_correction": s.colour_correction, "tone": s.tone,
+                    "denoise": s.denoise, "sharpen": us.sharpen}}
+
+
+def _unit_errors(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["ok"]]
+    out = {"frames": len(rows), "solved": len(ok)}
+    for c in SHOWN:
+        e = np.array([r[f"err_{c}"] for r in ok], dtype=float)
+        out[c] = float(np.sqrt(np.mean(e ** 2))) if e.size else None
+    return out
+
+
+def simulated_cameras_block(ds: Dataset, test_rows: list[dict]) -> dict:
+    """{"units": [{unit, lens, sensor, test errors (RMSE per component)}], "statement": one line}."""
+    cfg = ds.config
+    by_unit: dict[int, list] = {}
+    for r in test_rows:
+        by_unit.setdefault(int(ds.labels[r["frame_id"]]["spec"].get("unit", 0)) if r["frame_id"] in ds.labels
+                           else -1, []).append(r)
+    units = [{"unit": u, "lens": _lens(cfg, u), "sensor": _sensor(cfg, u), "test": _unit_errors(by_unit.get(u, []))}
+             for u in range(cfg.camera_units.count)]
+    kinds = sorted({u["sensor"]["model"] for u in units})
+    return {"units": units, "statement": "rendered ground truth through simulated cameras: " + "; ".join(kinds)}
+
+
+def _lens_text(lens: dict) -> str:
+    jpeg = f"JPEG q{lens['jpeg_quality']} {lens['jpeg_subsampling']}" if lens["jpeg_quality"] else "lossless PNG"
+    return (f"pp offset ({lens['principal_offset_px'][0]:+.1f}, {lens['principal_offset_px'][1]:+.1f}) px, "
+            f"k1 {lens['k1']:+.3f}, k2 {lens['k2']:+.3f}, CA {lens['aberration_px'][0]:+.2f} / "
+            f"{lens['aberration_px'][1]:+.2f} px" + (f", f/{lens['f_number']:.1f}" if lens["f_number"] else "")
+            + f"; {jpeg}")
+
+
+def _sensor_text(s: dict) -> str:
+    if "preset" not in s:
+        return (f"{s['model']}: full well {s['full_well_e'][0]:g}-{s['full_well_e'][1]:g} e-, read noise "
+                f"{s['read_noise_e'][0]:g}-{s['read_noise_e'][1]:g} e-, {s['adc_bits']} bit")
+    isp = s["isp"]
+    return (f"{s['model']}: {s['cfa']} ({s['demosaic']} demosaic), saturation {s['saturation_e']:.0f} e-, dark noise "
+            f"{s['dark_noise_e']:.2f} e-, K {s['gain_dn_per_e']:.3g} DN/e-, {s['adc_bits']} bit, crosstalk "
+            f"{s['crosstalk']:.3f}; ISP: white balance error {isp['wb_error'][0]:+.0%} to {isp['wb_error'][1]:+.0%}, "
+            f"{'colour correction, ' if isp['colour_correction'] else ''}{isp['tone']} tone, denoise {isp['denoise']}, "
+            f"sharpen {isp['sharpen']:.2f}")
+
+
+def html_simulated_cameras(block: dict) -> list[str]:
+    """The report section: what was simulated, per unit, and each unit's test errors."""
+    head = ("<tr><th>unit</th><th>lens and encoding</th><th>sensor and ISP</th><th>test frames solved</th>"
+            + "".join(f"<th>RMSE {c} ({UNITS[c]})</th>" for c in SHOWN) + "</tr>")
+    rows = []
+    for u in block["units"]:
+        t = u["test"]
+        cells = "".join(f"<td>{'-' if t[c] is None else f'{t[c]:.4g}'}</td>" for c in SHOWN)
+        rows.append(f"<tr><td>{u['unit']}</td><td>{html.escape(_lens_text(u['lens']))}</td>"
+                    f"<td>{html.escape(_sensor_text(u['sensor']))}</td><td>{t['solved']} of {t['frames']}</td>{cells}</tr>")
+    return ["<h2>What was simulated</h2>",
+            f"<p>The ground truth is rendered, not measured: {html.escape(block['statement'])}. The figures hold for "
+            "cameras like these; a camera with another sensor, ISP or encoding needs its own run.</p>",
+            f"<table>{head}{''.join(rows)}</table>"]
+
+
+def dataset_camera(ds: Dataset):
+    """frame id -> (Bayer pattern or None, JPEG-encoded?) of the unit that took the frame: what the
+    maker of a camera knows (its pixel format, its encoding), told to the detector's centre
+    refinement; None when every unit is a three-chip camera writing lossless images."""
+    cfg = ds.config
+    units = {}
+    for u in range(cfg.camera_units.count):
+        us = unit_sensor(cfg, u)
+        cfa = us.cfa if us is not None and us.cfa != "none" else None
+        units[u] = (cfa, bool(unit_lens(cfg, u).jpeg_quality))
+    if all(v == (None, False) for v in units.values()):
+        return None
+    return lambda fid: units[int(ds.labels[fid]["spec"].get("unit", 0))]
