@@ -158,9 +158,10 @@ def main(argv=None) -> int:
             evaluate_detections,
             format_report,
         )
-        with tempfile.TemporaryDirectory() as tmp:
+        from dockfactory.eval.simulated_cameras import dataset_camera
+        with tempfile.TemporaryDirectory() as tmp:   # told each frame's camera, as detect is
             doc = detect_dataset(dataset, args.weights, Path(tmp) / "dets.json", split=args.split,
-                                 conf_threshold=0.001, progress=False)
+                                 conf_threshold=0.001, progress=False, camera=dataset_camera(dataset))
         m = evaluate_detections(dataset, doc)
         res["accuracy"] = m
         ce = m["centre_error"]

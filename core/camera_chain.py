@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
+import cv2
 import numpy as np
 
 from dockfactory.core import isp
@@ -107,10 +108,10 @@ def sense(linear: np.ndarray, chain: ColourChain, rng: np.random.Generator) -> n
     if chain.cfa != "none":
         patterns = fixed_patterns(chain.sensor, chain.unit_seed, h, w)
         return expose(mosaic(cam, chain.cfa), chain.sensor, chain.exposure_s, rng, patterns)
-    planes = np.ascontiguousarray(np.moveaxis(cam, -1, 0)).reshape(3 * h, w)
+    planes = np.concatenate(cv2.split(cam), axis=0)                      # (3H, W): R, G, B sensors
     patterns = fixed_patterns(chain.sensor, chain.unit_seed, 3 * h, w)
     raw = expose(planes, chain.sensor, chain.exposure_s, rng, patterns)
-    return np.ascontiguousarray(np.moveaxis(raw.reshape(3, h, w), 0, -1))
+    return cv2.merge([raw[:h], raw[h:2 * h], raw[2 * h:]])
 
 
 def white_dn(sensor: EmvaSensor) -> float:

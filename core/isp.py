@@ -57,8 +57,7 @@ def colour_correct(rgb: np.ndarray, ccm: np.ndarray) -> np.ndarray:
     m = np.asarray(ccm, dtype=np.float32)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         raise ValueError(f"colour-correction matrix must be a finite (3, 3), got shape {m.shape}")
-    h, w = rgb.shape[:2]
-    return (rgb.reshape(-1, 3) @ m.T).reshape(h, w, 3)
+    return cv2.transform(np.ascontiguousarray(rgb, dtype=np.float32), m)
 
 
 @lru_cache(maxsize=4)

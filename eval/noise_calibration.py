@@ -14,6 +14,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.detector.noise_card import write_noise_card
 from dockfactory.eval.centre_noise import centre_noise_block
+from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset
 
 
@@ -21,13 +22,14 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
                          progress: bool = False) -> dict:
     """Detect and solve ``split`` of the opened dataset ``ds`` with ``weights``, write the card
     next to the weights and return what it holds. DockfactoryError when the split has no frames
-    or no solved frame with a matched centre."""
+    or no solved frame with a matched centre. The detector is told each frame's camera (Bayer pattern,
+    JPEG) as ``detect`` and ``run`` tell it."""
     from dockfactory.detector.infer import detect_dataset  # torch
     if not ds.frames((split,)):
         raise DockfactoryError(f"{ds.root}: no frames in the {split} split to measure the centre noise on")
     with tempfile.TemporaryDirectory() as tmp:
         dets = detect_dataset(ds, weights, Path(tmp) / "dets.json", split=split, conf_threshold=min_score,
-                              progress=progress)
+                              progress=progress, camera=dataset_camera(ds))
     poses = solve_dataset(ds, (split,), detections=dets, min_score=min_score)
     block = centre_noise_block(ds, poses, dets, min_score, splits=(split,))
     overall = block["overall"]

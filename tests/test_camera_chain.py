@@ -218,6 +218,7 @@ def colour_pair(tmp_path_factory):
 GEOMETRY = ("marker_id", "center_px", "outline_centroid_px", "bbox_px", "visibility", "pixels_visible", "pixels_all")
 
 
+@pytest.mark.slow   # a painted 1280 x 960 dataset through the colour chain
 def test_a_colour_dataset_keeps_its_labels_and_raw_frames(colour_pair):
     """Bayer frames, JPEG and raw output: the dataset verifies; every marker's geometric label is
     that of the three-chip dataset of the same config; each raw frame is a one-channel 16-bit PNG
@@ -245,6 +246,7 @@ def test_a_colour_dataset_keeps_its_labels_and_raw_frames(colour_pair):
             assert patch[sites == 0].mean() > 2 * patch[sites == 2].mean(), (fid, m["marker_id"])
 
 
+@pytest.mark.slow   # a painted 1280 x 960 dataset through the colour chain
 def test_the_report_names_the_simulated_cameras(colour_pair):
     from dockfactory.eval.simulated_cameras import html_simulated_cameras, simulated_cameras_block
     from dockfactory.generator.dataset_open import Dataset
@@ -259,6 +261,7 @@ def test_the_report_names_the_simulated_cameras(colour_pair):
         assert words in text, words
 
 
+@pytest.mark.slow   # a painted 1280 x 960 dataset through the colour chain
 def test_the_detector_is_told_each_frames_camera(colour_pair):
     """detect / run tell the centre refinement each frame's Bayer pattern and JPEG encoding (the
     camera's maker knows both); a three-chip PNG camera tells nothing."""
@@ -269,3 +272,34 @@ def test_the_detector_is_told_each_frames_camera(colour_pair):
     for fid in ds.frames():
         assert told(fid) == (ds.labels[fid]["sampled"]["sensor"]["chain"]["cfa"], True)
         assert plain_told(fid) == (None, True)
+
+
+@pytest.mark.slow   # a painted 1280 x 960 dataset through the colour chain
+def test_colour_frames_do_not_depend_on_the_order_they_are_made_in(colour_pair, tmp_path):
+    """The sensor stage's caches (fixed patterns, responses, maps) hold no state a frame can leak:
+    the frames made again in reverse order, in the same process, equal the dataset's byte for byte
+    (image, raw frame, label)."""
+    import tempfile
+    from pathlib import Path
+
+    from pipeline_data import painted_passes
+
+    from dockfactory.core.config import load_config
+    from dockfactory.generator.exr import write_compact
+    from dockfactory.generator.frame_output import finish_frame
+    colour = colour_pair[0]
+    cfg = load_config(colour.parent / "c.toml")
+    static = static_scene(cfg)
+    with tempfile.TemporaryDirectory() as scratch:
+        for spec in reversed(frame_plan(cfg)):
+            frame = sample_frame(cfg, spec)
+            exr = Path(scratch) / f"{spec.frame_id}.exr"
+            write_compact(exr, painted_passes(frame, static))
+            finish_frame(frame, static, exr, tmp_path, False, cfg.labels.visible_threshold,
+                         min_chroma=cfg.labels.min_chroma, keep_raw=True)
+    for spec in frame_plan(cfg):
+        for kind in ("images", "raw"):
+            assert (tmp_path / kind / f"{spec.frame_id}.png").read_bytes() == \
+                   (colour / kind / f"{spec.frame_id}.png").read_bytes(), (kind, spec.frame_id)
+        assert (tmp_path / "labels" / f"{spec.frame_id}.json").read_bytes() == \
+               (colour / "labels" / f"{spec.frame_id}.json").read_bytes()
