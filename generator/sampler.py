@@ -20,6 +20,7 @@ import numpy as np
 from dockfactory.core.camera_chain import ColourChain
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
+from dockfactory.core.layout import marker_points
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -62,6 +63,7 @@ from dockfactory.generator.draws import (
     static_scene,
     uniform,
 )
+from dockfactory.generator.motion import check_rolling, frame_motion
 from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, unit_camera
 
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
@@ -440,7 +442,8 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
 
 
 def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
-    """The full scene of one planned frame (pure and deterministic)."""
+    """The full scene of one planned frame (pure and deterministic); with [motion], ``d_from_b``
+    is B at mid-exposure and ``motion`` how it moves (``generator.motion``)."""
     static = static_scene(cfg)
     shot = _run_shot if cfg.runs.frames_per_run > 0 else _single_shot
     d_from_b, camera, eye, (appearance, clutter, lights), look_rng = shot(cfg, spec, static)
@@ -460,7 +463,9 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
             appearance = dataclasses.replace(appearance, roughness=rough,
                                              roughness_variation=min(appearance.roughness_variation, 0.05))
     sensor = sample_sensor(cfg, look_rng, cond, bloom, frame_chain(cfg, spec))
-    return FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
-                      props=tuple(props), appearance=appearance, sensor=sensor,
-                      glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
-                      render=render_settings(cfg))
+    frame = FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
+                       props=tuple(props), appearance=appearance, sensor=sensor,
+                       glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
+                       render=render_settings(cfg), motion=frame_motion(cfg, spec))
+    check_rolling(frame, marker_points(static.markers))
+    return frame
