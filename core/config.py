@@ -195,7 +195,7 @@ class SensorConfig:
     cfa: tuple[str, ...] = ("none",)         # per unit: RGGB | BGGR | GRBG | GBRG | none (three-chip)
     demosaic: tuple[str, ...] = ("bilinear",)  # per unit: bilinear | edge_aware | vng | mhc
     crosstalk: Range = (0.0, 0.0)            # per unit: share of each channel's light in each other one
-    exposure_time_ms: Range = (10.0, 10.0)   # per frame (dark current)
+    exposure_time_ms: Range = (10.0, 10.0)   # per frame (dark current; with [motion], the blur's exposure)
     wb_error: Range = (0.0, 0.0)             # per frame: relative error of the red and blue gains
     colour_correction: bool = True           # the ISP's colour-correction matrix
     tone: str = "srgb"                       # srgb | gamma22
