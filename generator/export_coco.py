@@ -107,7 +107,8 @@ def outline_px(label: dict, marker: Marker) -> np.ndarray:
         uv = image_px(pinhole, k, cam.get("distortion"))
     else:
         d_from_s = np.asarray(label["d_from_b"], dtype=np.float64) if marker.section == "B" else np.eye(4)
-        uv, z = marker_outline_px(marker, k, cam.get("distortion"), np.asarray(cam["cam_from_d"], dtype=np.float64) @ d_from_s)
+        cam_from_s = np.asarray(cam["cam_from_d"], dtype=np.float64) @ d_from_s
+        uv, z = marker_outline_px(marker, k, cam.get("distortion"), cam_from_s)
     if not np.all(z > 0):
         return np.zeros((0, 2))
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)

@@ -338,8 +338,10 @@ def _sampled_record(frame: FrameScene) -> dict:
 MOTION_POSE_TIME = ("d_from_b is B at the middle of the exposure (t = 0); B at t seconds is d_from_b with "
                     "velocity_d_mm_s * t added to its translation (B does not turn)")
 MOTION_ROW_TIME = ("row v of the render canvas (OpenCV rows, top = 0: the pinhole row less "
-                   "camera.render_canvas.offset_px[1]; a pinhole camera's image row) is exposed over [t(v) - exposure_ms / 2, t(v) + exposure_ms / 2] ms, t(v) = rolling_shutter_ms * "
-                   "((v + 1) / canvas_rows - 1/2); a point of B is labelled where its own row's t images it")
+                   "camera.render_canvas.offset_px[1]; a pinhole camera's image row) is exposed over "
+                   "[t(v) - exposure_ms / 2, t(v) + exposure_ms / 2] ms, t(v) = rolling_shutter_ms * "
+                   "((v + 1) / canvas_rows - 1/2); a point of B is labelled where its own row's t images it "
+                   "(center_d_mm and normal_d stay B's at t = 0)")
 MOTION_PIXELS = ("centres, outlines, boxes, areas and silhouettes are geometry: B at t = 0 (global shutter) or each "
                  "point at its row's t (rolling shutter); visible_pixels, visible_fraction and bbox_visible_px come "
                  "from the index pass, which samples each pixel at one instant of its exposure window (its expected "

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dockfactory.core.config import Config, ConfigError
-from dockfactory.core.geometry import transform_points
+from dockfactory.core.geometry import check_array, transform_points
 from dockfactory.core.scene import FrameScene, FrameSpec, MotionParams, vec
 from dockfactory.generator.draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, uniform
 
@@ -57,14 +57,15 @@ def row_time_s(rows, canvas_height: int, readout_s: float) -> np.ndarray:
     return readout_s * ((np.asarray(rows, dtype=np.float64) + 1.0) / canvas_height - 0.5)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MovingB:
     """Section B as a frame's camera sees it in motion.
 
     ``k``: (3, 3) pinhole K; ``cam_from_d``, ``d_from_b``: (4, 4), B at mid-exposure;
-    ``velocity_mm_s``: (3,) in D; ``exposure_s``, ``readout_s``: as ``MotionParams``;
+    ``velocity_mm_s``: (3,) in D; ``exposure_s``, ``readout_s`` (>= 0): as ``MotionParams``;
     ``row_offset``: pinhole row of canvas row 0 (canvas row = pinhole row - row_offset);
-    ``canvas_height``: rows the rolling shutter reads.
+    ``canvas_height`` (>= 1): rows the rolling shutter reads. Arrays are checked (shape, finite)
+    and stored as float64; bad values raise ValueError.
     """
     k: np.ndarray
     cam_from_d: np.ndarray
@@ -74,6 +75,14 @@ class MovingB:
     readout_s: float
     row_offset: float
     canvas_height: int
+
+    def __post_init__(self):
+        for name, shape in (("k", (3, 3)), ("cam_from_d", (4, 4)), ("d_from_b", (4, 4)), ("velocity_mm_s", (3,))):
+            object.__setattr__(self, name, check_array(name, getattr(self, name), shape))
+        timing_ok = self.exposure_s >= 0 and self.readout_s >= 0 and self.canvas_height >= 1
+        if not (timing_ok and np.isfinite(self.row_offset)):
+            raise ValueError(f"bad timing: exposure_s {self.exposure_s}, readout_s {self.readout_s}, "
+                             f"row_offset {self.row_offset}, canvas_height {self.canvas_height}")
 
     def project(self, points_b, offset_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where the canvas images points ``points_b`` (N, 3) mm of B's frame at ``offset_s`` from

@@ -63,6 +63,7 @@ from dockfactory.generator.draws import (
     static_scene,
     uniform,
 )
+from dockfactory.generator.labels import section_silhouette
 from dockfactory.generator.motion import check_rolling, frame_motion
 from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, unit_camera
 
@@ -467,5 +468,5 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
                        props=tuple(props), appearance=appearance, sensor=sensor,
                        glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
                        render=render_settings(cfg), motion=frame_motion(cfg, spec))
-    check_rolling(frame, marker_points(static.markers))
+    check_rolling(frame, np.vstack([marker_points(static.markers, "B"), section_silhouette(static, "B")]))
     return frame

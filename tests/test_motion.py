@@ -68,9 +68,12 @@ def test_motion_is_off_by_default_and_a_full_table_parses(tmp_config):
     ("[motion]\nenabled = true\nvelocity_mm_s = [300, 100]\n", "velocity_mm_s: min 300.0 > max 100.0"),
     ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20000]\n", "velocity_mm_s: [10.0, 20000.0] is outside"),
     ("[motion]\nenabled = true\nvelocity_mm_s = [10, nan]\n", "velocity_mm_s[1]: must be a finite number"),
-    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nvelocity_y_mm_s = [1]\n", "velocity_y_mm_s: expected 2 values"),
-    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nrolling_shutter_ms = -1\n", "rolling_shutter_ms: must be in [0, 1000]"),
-    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nrolling_shutter_ms = 5000\n", "rolling_shutter_ms: must be in"),
+    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nvelocity_y_mm_s = [1]\n",
+     "velocity_y_mm_s: expected 2 values"),
+    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nrolling_shutter_ms = -1\n",
+     "rolling_shutter_ms: must be in [0, 1000]"),
+    ("[motion]\nenabled = true\nvelocity_mm_s = [10, 20]\nrolling_shutter_ms = 5000\n",
+     "rolling_shutter_ms: must be in"),
     ("[motion]\nvelocity_mm_s = [10, 20]\n", "velocity_mm_s: is set but [motion] enabled is false"),
     ("[motion]\nrolling_shutter_ms = 20\n", "rolling_shutter_ms: is set but [motion] enabled is false"),
     ("[motion]\nenabled = true\n", "enabled: B never moves"),
@@ -176,8 +179,9 @@ def test_the_label_holds_b_at_mid_exposure_and_the_shutter_ends():
         assert label["d_from_b"] == d_from_b.tolist()
         rec = label["motion"]
         assert rec["shutter"] == "global" and rec["velocity_d_mm_s"] == list(m.velocity_mm_s)
-        np.testing.assert_allclose(np.array(rec["d_from_b_open"])[:3, 3], d_from_b[:3, 3] - np.array(m.velocity_mm_s) * half_s)
-        np.testing.assert_allclose(np.array(rec["d_from_b_close"])[:3, 3], d_from_b[:3, 3] + np.array(m.velocity_mm_s) * half_s)
+        step = np.array(m.velocity_mm_s) * half_s
+        np.testing.assert_allclose(np.array(rec["d_from_b_open"])[:3, 3], d_from_b[:3, 3] - step)
+        np.testing.assert_allclose(np.array(rec["d_from_b_close"])[:3, 3], d_from_b[:3, 3] + step)
         assert "mid" in rec["pose_time"] and "index pass" in rec["pixels"]
 
 
@@ -192,7 +196,8 @@ def test_a_global_shutter_labels_the_static_geometry_of_b_at_mid_exposure():
         assert moving.pop("motion") and "motion" not in still
         for m in moving["markers"]:
             extra = {k: m.pop(k, None) for k in ("time_ms", "blur_px", "bbox_swept_px")}
-            assert (extra["time_ms"] == 0.0) == (m["section"] == "B") and (extra["blur_px"] is None) == (m["section"] == "A")
+            assert (extra["time_ms"] == 0.0) == (m["section"] == "B")
+            assert (extra["blur_px"] is None) == (m["section"] == "A")
         assert moving == still
 
 
@@ -318,7 +323,8 @@ def test_the_fixed_point_satisfies_its_equation(vy, vx, readout_ms, row):
     mb = MovingB(k, cam_from_d, d_from_b, np.array([vx, vy, 0.0]), 0.01, readout_ms / 1000.0, 0.0, 960)
     point = np.array([[0.0, (row - 480) / 1500 * 1500, 0.0]])
     uv, z, t = mb.project(point)
-    want = k @ (mb.cam_from_d @ MotionParams((vx, vy, 0.0), 10.0).d_from_b_at(d_from_b, t[0]) @ np.append(point[0], 1))[:3]
+    d_from_b_t = MotionParams((vx, vy, 0.0), 10.0).d_from_b_at(d_from_b, t[0])
+    want = k @ (mb.cam_from_d @ d_from_b_t @ np.append(point[0], 1))[:3]
     np.testing.assert_allclose(uv[0], want[:2] / want[2], atol=1e-6)
     np.testing.assert_allclose(t[0], row_time_s(uv[0, 1], 960, mb.readout_s), atol=1e-9)
 

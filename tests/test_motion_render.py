@@ -176,7 +176,8 @@ scene, b_root = renderer.handles.scene, renderer.handles.b_root
 out = {"b": sorted(o.name for o in b_root.children_recursive), "at": {}}
 for frame_no, sub in ((0, 0.5), (1, 0.0), (1, 0.5)):
     scene.frame_set(frame_no, subframe=sub)
-    out["at"][str(frame_no + sub)] = {o.name: list(o.matrix_world.translation) for o in scene.objects if o.type == "MESH"}
+    out["at"][str(frame_no + sub)] = {o.name: list(o.matrix_world.translation)
+                                      for o in scene.objects if o.type == "MESH"}
 print("RESULT " + json.dumps(out))
 """
 
