@@ -176,11 +176,18 @@ def sample_geometry(cfg: Config, rng: np.random.Generator, lens: UnitLens | None
 
 def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
     """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal (with
-    runs: at its unit's focal), or a unit's lens is unusable."""
+    runs: at its unit's focal), a unit's lens is unusable, or (with a rolling shutter) some
+    frame's B moves too fast for it (``generator.motion.check_rolling``)."""
     check_lenses(cfg, source)
     if cfg.runs.frames_per_run > 0:
         check_runs_fit(cfg, frame_plan(cfg), source)
-        return
+    else:
+        _check_single_shot_focal(cfg, source)
+    check_rolling_fits(cfg, source)
+
+
+def _check_single_shot_focal(cfg: Config, source: str) -> None:
+    """Without runs: every frame fits its markers at the smallest focal of [camera] focal_px."""
     worst = np.inf
     for spec in frame_plan(cfg):
         geo_rng, _ = _streams(cfg, spec)
@@ -192,6 +199,18 @@ def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
             f"{cfg.camera.margin_px:g} px inside a {cfg.image.width}x{cfg.image.height} image "
             f"for every frame (largest focal that fits the worst frame: {worst:.0f} px); lower "
             f"focal_px, raise distance_mm or reduce margin_px")
+
+
+def check_rolling_fits(cfg: Config, source: str = "<config>") -> None:
+    """With [motion] and a rolling shutter, sample every frame (sample_frame checks the rolling
+    shutter) and raise its ConfigError naming ``source``; nothing to do otherwise."""
+    if not (cfg.motion.enabled and cfg.motion.rolling_shutter_ms > 0):
+        return
+    for spec in frame_plan(cfg):
+        try:
+            sample_frame(cfg, spec)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
 
 
 # ----------------------------------------------------------------------------- look

@@ -90,10 +90,24 @@ def test_bad_motion_tables_fail_in_one_line_naming_file_table_and_key(tmp_config
 
 
 def test_a_rolling_shutter_too_slow_for_b_is_refused_when_the_frame_is_sampled():
+    from dockfactory.generator.sampler import check_focal_fits
     cfg = motion_cfg(frames=2, rolling_ms=1000.0, motion={"velocity_y_mm_s": [5000.0, 5000.0]},
                      image={"width": 320, "height": 240}, camera={"focal_px": [300.0, 700.0], "margin_px": 10.0})
     with pytest.raises(ConfigError, match=r"^\[motion\] rolling_shutter_ms: frame 00000\d: B's image crosses rows"):
         sample_frame(cfg, frame_plan(cfg)[0])
+    with pytest.raises(ConfigError, match=r"^cfg.toml: \[motion\] rolling_shutter_ms: frame 00000\d: "):
+        check_focal_fits(cfg, "cfg.toml")    # check-config, render and run
+    check_focal_fits(motion_cfg(frames=2, rolling_ms=30.0), "cfg.toml")
+
+
+def test_runs_and_repeatability_frames_move_too():
+    cfg = motion_cfg(frames=6, rolling_ms=20.0, runs={"frames_per_run": 3}, repeatability={"poses": 1, "captures": 2},
+                     camera_units={"count": 2, "k1": [-0.1, 0.0]})
+    static = static_scene(cfg)
+    for spec in frame_plan(cfg):
+        frame = sample_frame(cfg, spec)
+        assert frame.motion is not None and frame.motion.readout_ms == 20.0
+        assert "motion" in frame_labels(frame, static, None, 0.5)
 
 
 # ----------------------------------------------------------------------------- motion off
