@@ -171,6 +171,7 @@ def _apply_motion(h: SceneHandles, frame: FrameScene) -> None:
     moving = m is not None and m.moves()
     rolling = moving and m.readout_ms > 0
     scene.frame_current = MOTION_FRAME if moving else PARKED_FRAME
+    scene.frame_subframe = 0.0
     render.use_motion_blur = moving
     render.motion_blur_position = "CENTER"
     render.motion_blur_shutter = 1.0 if moving else PARKED_SHUTTER
