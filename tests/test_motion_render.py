@@ -43,6 +43,7 @@ CONFIG = {
 CHROMA_TOL_PX = 0.25     # blue-excess centroid vs the label's outline centroid, every checked marker
 INDEX_MEDIAN_TOL_PX = 0.4   # index-pass centroid (one random instant per pixel): median over markers
 INDEX_MAX_TOL_PX = 1.0      # ... and worst marker
+BLUR_SEEN = 0.4          # the index pixels reach at least this share of the blur beyond the disc's box
 MIN_MISS_PX = 1.0        # the wrong timing (shutter open or close; a global shutter's labels for the
                          # rolling frame) must miss the measured centroid by more than this
 
@@ -130,9 +131,10 @@ def centroid_at(frame, static, marker_id: str, t_s: float) -> np.ndarray:
 
 @pytest.mark.parametrize("kind", ["global", "rolling"])
 def test_blurred_markers_centre_on_their_labels(setup, rendered, kind):
-    """Per isolated marker of B: the blue excess centroid within CHROMA_TOL_PX of the label; B at
-    shutter open or close (and, for the rolling frame, B at mid-exposure for every row) misses it
-    by more than MIN_MISS_PX; the index pass's centroid within the looser index tolerances."""
+    """Per isolated marker of B: the index pass spreads beyond the disc's box along the blur (the
+    render did blur); the blue excess centroid within CHROMA_TOL_PX of the label; B at shutter
+    open or close (and, for the rolling frame, B at mid-exposure for every row) misses it by more
+    than MIN_MISS_PX; the index pass's centroid within the looser index tolerances."""
     cfg, frames = setup
     root, _, _ = rendered
     frame, static = frames[kind], static_scene(cfg)
@@ -146,10 +148,13 @@ def test_blurred_markers_centre_on_their_labels(setup, rendered, kind):
         ys, xs = np.nonzero(passes.index == m["pass_index"])
         index_err.append(float(np.hypot(*(np.array([xs.mean(), ys.mean()]) - want))))
         miss = [float(np.hypot(*(got - centroid_at(frame, static, m["id"], t)))) for t in (-half_s, 0.0, half_s)]
+        (bx0, by0, bx1, by1), (vx0, vy0, vx1, vy1) = m["bbox_px"], m["bbox_visible_px"]
         rows.append({"id": m["id"], "err": float(np.hypot(*(got - want))), "open": miss[0], "mid": miss[1],
-                     "close": miss[2], "blur": float(np.hypot(*m["blur_px"])), "time_ms": m["time_ms"]})
+                     "close": miss[2], "blur": float(np.abs(m["blur_px"]).sum()), "time_ms": m["time_ms"],
+                     "spread": (vx1 - vx0) - (bx1 - bx0) + (vy1 - vy0) - (by1 - by0)})
     print(kind, rows, "index-pass errors px:", index_err)
     assert len(rows) >= 3, rows
+    assert all(r["spread"] >= BLUR_SEEN * r["blur"] for r in rows), rows    # Cycles blurred B
     assert all(r["err"] <= CHROMA_TOL_PX for r in rows), rows
     assert all(min(r["open"], r["close"]) > MIN_MISS_PX for r in rows), rows
     if kind == "rolling":
