@@ -21,6 +21,12 @@ DENOISE_QUALITY = {"fast": "FAST", "balanced": "BALANCED", "high": "HIGH"}
 # it had it.
 PARKED_DENOISE_QUALITY = "HIGH"
 PARKED_COLOR = (0.5, 0.5, 0.5)
+# Timing of a frame without motion: Blender's own defaults, never read by a render without motion
+# blur. A moving frame is rendered at MOTION_FRAME with the shutter open for exactly one scene
+# frame, MOTION_FPS / fps_base frames per second making that frame last the shutter's time.
+PARKED_FRAME, PARKED_FPS, PARKED_FPS_BASE, PARKED_SHUTTER, PARKED_ROLLING_DURATION = 1, 24, 1.0, 0.5, 0.1
+MOTION_FRAME, MOTION_FPS = 1, 1000
+MOTION_ACTION = "B_motion"
 
 
 def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
@@ -129,11 +135,61 @@ def _apply_props(h: SceneHandles, frame: FrameScene) -> None:
             mats.set_diffuse(h.prop_materials[key], color=color)
 
 
+def _clear_b_motion(h: SceneHandles) -> None:
+    """Remove B's keyframes and their action (what a moving frame leaves behind)."""
+    h.b_root.animation_data_clear()
+    action = bpy.data.actions.get(MOTION_ACTION)
+    if action is not None:
+        bpy.data.actions.remove(action)
+
+
+def _key_b_motion(h: SceneHandles, d_from_b_open, d_from_b_close, frames: tuple[float, float]) -> None:
+    """Keyframe B's root (the parent of every object of section B: body, flange, band, cradles,
+    markers and their rings) at ``frames`` (shutter open, close) with B's translation there,
+    interpolated linearly (Blender 5 layered action: one slot, one keyframe strip)."""
+    action = bpy.data.actions.new(MOTION_ACTION)
+    slot = action.slots.new(id_type="OBJECT", name=h.b_root.name)
+    channels = action.layers.new("motion").strips.new(type="KEYFRAME").channelbag(slot, ensure=True)
+    for axis in range(3):
+        curve = channels.fcurves.new("location", index=axis)
+        for frame_no, d_from_b in zip(frames, (d_from_b_open, d_from_b_close)):
+            key = curve.keyframe_points.insert(frame_no, float(d_from_b[axis, 3]) * MM)
+            key.interpolation = "LINEAR"
+    anim = h.b_root.animation_data_create()
+    anim.action = action
+    anim.action_slot = slot
+
+
+def _apply_motion(h: SceneHandles, frame: FrameScene) -> None:
+    """B at mid-exposure, and when it moves during the exposure Cycles' motion blur: the shutter
+    is one scene frame centred on MOTION_FRAME, B keyed at its open and close, with a rolling
+    shutter (top row first) the exposure's share of it per row. Every value set on every frame;
+    keyframes of an earlier frame are removed."""
+    scene, render, m = h.scene, h.scene.render, frame.motion
+    _clear_b_motion(h)
+    h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
+    moving = m is not None and m.moves()
+    rolling = moving and m.readout_ms > 0
+    scene.frame_current = MOTION_FRAME if moving else PARKED_FRAME
+    scene.frame_subframe = 0.0
+    render.use_motion_blur = moving
+    render.motion_blur_position = "CENTER"
+    render.motion_blur_shutter = 1.0 if moving else PARKED_SHUTTER
+    render.fps = MOTION_FPS if moving else PARKED_FPS
+    render.fps_base = m.shutter_ms() if moving else PARKED_FPS_BASE   # one frame = the shutter's ms
+    scene.cycles.rolling_shutter_type = "TOP" if rolling else "NONE"
+    scene.cycles.rolling_shutter_duration = m.exposure_ms / m.shutter_ms() if rolling else PARKED_ROLLING_DURATION
+    if moving:
+        half_s = m.shutter_ms() / 2000.0
+        _key_b_motion(h, m.d_from_b_at(frame.d_from_b, -half_s), m.d_from_b_at(frame.d_from_b, half_s),
+                      (MOTION_FRAME - 0.5, MOTION_FRAME + 0.5))
+
+
 def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     """Set the scene to ``frame``: every property this changes is set on every frame, so the
     scene afterwards depends on ``frame`` alone (:func:`scene_state`), whatever came before."""
     _apply_render_settings(h.scene, frame)
-    h.b_root.matrix_world = _blender_matrix(frame.d_from_b)
+    _apply_motion(h, frame)
     _apply_camera(h, frame.camera)
     _apply_lights(h, frame)
     _apply_appearance(h, frame.appearance)
@@ -214,7 +270,7 @@ def scene_state(h: SceneHandles) -> dict:
     _rna_values(scene, "scene", out)
     for vl in scene.view_layers:
         _rna_values(vl, f"view_layer[{vl.name}]", out)
-    for kind in ("objects", "lights", "cameras", "meshes", "worlds", "materials"):
+    for kind in ("objects", "lights", "cameras", "meshes", "worlds", "materials", "actions"):
         for block in getattr(bpy.data, kind):
             _rna_values(block, f"{kind}[{block.name}]", out)
             if getattr(block, "node_tree", None) is not None:

@@ -51,6 +51,9 @@ MAX_TANGENTIAL = 0.05           # |p1|, |p2|
 MAX_ABERRATION_PX = 5.0         # |lateral chromatic aberration| at the image corner
 F_NUMBER_LIMITS = (0.5, 64.0)
 SENSOR_WIDTH_LIMITS_MM = (1.0, 100.0)
+# [motion]: B's speed (10 m/s: far beyond any docking approach) and a frame's readout time
+MAX_SPEED_MM_S = 10_000.0
+MAX_READOUT_MS = 1_000.0
 
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
 CHALLENGING = ("low_light", "occlusion", "glare")
@@ -192,7 +195,7 @@ class SensorConfig:
     cfa: tuple[str, ...] = ("none",)         # per unit: RGGB | BGGR | GRBG | GBRG | none (three-chip)
     demosaic: tuple[str, ...] = ("bilinear",)  # per unit: bilinear | edge_aware | vng | mhc
     crosstalk: Range = (0.0, 0.0)            # per unit: share of each channel's light in each other one
-    exposure_time_ms: Range = (10.0, 10.0)   # per frame (dark current)
+    exposure_time_ms: Range = (10.0, 10.0)   # per frame (dark current; with [motion], the blur's exposure)
     wb_error: Range = (0.0, 0.0)             # per frame: relative error of the red and blue gains
     colour_correction: bool = True           # the ISP's colour-correction matrix
     tone: str = "srgb"                       # srgb | gamma22
@@ -200,6 +203,18 @@ class SensorConfig:
     sharpen: Range = (0.0, 0.0)              # per unit: unsharp-mask amount
     sharpen_sigma_px: float = 1.0
     raw_output: bool = False                 # also write raw/<id>.png: the raw frame in DN, 16 bit
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Section B moving during the exposure: motion blur and a rolling shutter (docs/motion.md).
+    Off by default: without it a config samples, labels and renders what it did before. The
+    exposure is the frame's [sensor] exposure_time_ms draw."""
+    enabled: bool = False
+    velocity_mm_s: Range = (0.0, 0.0)      # per frame: closing speed toward A (B's velocity along -X of D)
+    velocity_y_mm_s: Range = (0.0, 0.0)    # per frame: B's vertical velocity (+Y of D)
+    velocity_z_mm_s: Range = (0.0, 0.0)    # per frame: B's velocity toward the camera side (+Z of D)
+    rolling_shutter_ms: float = 0.0        # readout of a whole frame, top row first; 0 = global shutter
 
 
 @dataclass(frozen=True)
@@ -243,6 +258,7 @@ class Config:
     markers: MarkersConfig = field(default_factory=MarkersConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
     occlusion: OcclusionConfig = field(default_factory=OcclusionConfig)
     glare: GlareConfig = field(default_factory=GlareConfig)
     labels: LabelsConfig = field(default_factory=LabelsConfig)
@@ -398,7 +414,8 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     """Reject impossible configs before anything is rendered or written (no frame is sampled)."""
     for check in (_validate_numbers, _validate_dataset, _validate_image_camera, _validate_camera_units,
                   _validate_lens_extras, _validate_runs, _validate_pose_sections, _validate_markers,
-                  _validate_render, _validate_sensor, _validate_occlusion_glare, _validate_labels_export):
+                  _validate_render, _validate_sensor, _validate_motion, _validate_occlusion_glare,
+                  _validate_labels_export):
         check(cfg, source)
 
 
@@ -613,6 +630,28 @@ def _validate_colour_sensor(cfg: Config, source: str) -> None:
             configured_sensor(name, se.overrides, se.adc_bits)
         except ValueError as exc:
             raise _err(source, t, "presets" if name not in PRESETS else "overrides", str(exc)) from None
+
+
+def _validate_motion(cfg: Config, source: str) -> None:
+    """[motion]: speeds within MAX_SPEED_MM_S, a readout within MAX_READOUT_MS, nothing set while it
+    is off, and something that moves during the exposure while it is on."""
+    mo, t = cfg.motion, "motion"
+    speeds = ("velocity_mm_s", "velocity_y_mm_s", "velocity_z_mm_s")
+    for key in speeds:
+        _check_symmetric(source, t, key, getattr(mo, key), MAX_SPEED_MM_S, "MAX_SPEED_MM_S")
+    if not 0.0 <= mo.rolling_shutter_ms <= MAX_READOUT_MS:
+        raise _err(source, t, "rolling_shutter_ms", f"must be in [0, {MAX_READOUT_MS:g}] (MAX_READOUT_MS), "
+                   f"got {mo.rolling_shutter_ms}")
+    if not mo.enabled:
+        for key in speeds + ("rolling_shutter_ms",):
+            if getattr(mo, key) != getattr(MotionConfig, key):
+                raise _err(source, t, key, "is set but [motion] enabled is false")
+        return
+    if all(getattr(mo, key) == (0.0, 0.0) for key in speeds):
+        raise _err(source, t, "enabled", "B never moves: every velocity range is [0, 0]")
+    if cfg.sensor.exposure_time_ms[1] == 0 and mo.rolling_shutter_ms == 0:
+        raise _err(source, t, "enabled", "nothing moves during the exposure: [sensor] exposure_time_ms is "
+                   "[0, 0] and rolling_shutter_ms is 0")
 
 
 def _check_kinds(source, table: str, kinds: tuple[str, ...], known: tuple[str, ...], what: str) -> None:

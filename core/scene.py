@@ -18,6 +18,7 @@ from dockfactory.core.geometry import intrinsics, render_canvas
 from dockfactory.core.layout import Marker
 
 Mat4 = tuple[tuple[float, ...], ...]
+OMIT_IF_NONE = "omit_if_none"   # field metadata: to_dict leaves the field out while it is None
 Vec3 = tuple[float, float, float]
 
 
@@ -182,6 +183,39 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class MotionParams:
+    """Section B's motion during a frame's exposure ([motion]; docs/motion.md, generator/motion.py).
+
+    Time t (s) runs from the middle of the exposure (t = 0: the frame's ``d_from_b``). B moves at
+    the constant ``velocity_mm_s`` (a vector in D) and does not turn: B at t is ``d_from_b`` with
+    ``velocity_mm_s * t`` added to its translation. Every image row is exposed for
+    ``exposure_ms``; with a rolling shutter (``readout_ms`` > 0) row v of the render canvas
+    (OpenCV rows, top = 0, of a canvas H rows high) is exposed centred at
+    t(v) = readout * ((v + 1) / H - 1/2), as Cycles' rolling shutter exposes it (top row first).
+    """
+    velocity_mm_s: Vec3
+    exposure_ms: float
+    readout_ms: float = 0.0
+
+    def shutter_ms(self) -> float:
+        """Shutter open to close: the first row's exposure start to the last row's end."""
+        return self.exposure_ms + self.readout_ms
+
+    def moves(self) -> bool:
+        """B moves while the shutter is open (the render needs motion blur)."""
+        return self.shutter_ms() > 0 and any(v != 0 for v in self.velocity_mm_s)
+
+    def d_from_b_at(self, d_from_b, t_s: float) -> np.ndarray:
+        """B at ``t_s`` seconds from mid-exposure: ``d_from_b`` (4, 4), B at mid-exposure, with
+        ``velocity_mm_s * t_s`` added to its translation; (4, 4)."""
+        out = np.array(d_from_b, dtype=np.float64)
+        if out.shape != (4, 4):
+            raise ValueError(f"expected a (4, 4) transform, got {out.shape}")
+        out[:3, 3] += np.asarray(self.velocity_mm_s, dtype=np.float64) * float(t_s)
+        return out
+
+
+@dataclass(frozen=True)
 class StaticScene:
     """What stays the same for a whole dataset (built once per render worker)."""
     radius_mm: float
@@ -205,6 +239,8 @@ class FrameScene:
     glare_kind: str                  # "none" | "lamp_in_view" | "specular"
     render_seed: int
     render: RenderSettings
+    # B's motion during the exposure; None: B stands still (and to_dict leaves the key out)
+    motion: MotionParams | None = dataclasses.field(default=None, metadata={OMIT_IF_NONE: True})
 
     def d_from_b_array(self) -> np.ndarray:
         return np.array(self.d_from_b)
@@ -226,8 +262,13 @@ def floor_y_mm(radius_mm: float) -> float:
 
 
 def to_dict(obj) -> dict:
-    """JSON-able dict of a scene dataclass (tuples become lists)."""
-    return dataclasses.asdict(obj)
+    """JSON-able dict of a scene dataclass (tuples become lists); its fields marked OMIT_IF_NONE
+    are left out while they are None (:func:`from_dict` restores their default)."""
+    out = dataclasses.asdict(obj)
+    for f in dataclasses.fields(obj):
+        if f.metadata.get(OMIT_IF_NONE) and out[f.name] is None:
+            del out[f.name]
+    return out
 
 
 def from_dict(cls, data):

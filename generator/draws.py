@@ -29,6 +29,8 @@ STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT
 STREAM_UNITS, STREAM_UNIT_LENS, STREAM_UNIT_CAMERA, STREAM_RUN_PLAN, STREAM_RUN, STREAM_RUN_LOOK = range(5, 11)
 # colour sensors: per unit (STREAM_UNIT_SENSOR), per frame (STREAM_FRAME_ISP: white balance, exposure time)
 STREAM_UNIT_SENSOR, STREAM_FRAME_ISP = 11, 12
+# motion ([motion]): per frame, B's velocity during the exposure
+STREAM_FRAME_MOTION = 13
 
 
 def rng_for(seed: int, *keys: int) -> np.random.Generator:

@@ -43,10 +43,11 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.io import write_json_atomic
-from dockfactory.core.layout import CLASS_NAMES, Marker
+from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_files import place_file, source_image
-from dockfactory.generator.labels import clip_polygon, marker_outline_px
+from dockfactory.generator.labels import clip_polygon, image_px, marker_outline_px
+from dockfactory.generator.motion import label_rolling_view
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
 SPLITS = ("train", "val", "test", "repeat")
@@ -93,14 +94,21 @@ def outline_px(label: dict, marker: Marker) -> np.ndarray:
     """The marker's outline in the delivered image clipped to the image, (M, 2) float64 OpenCV px.
 
     The same computation as the label's ``bbox_px`` (generator.labels.frame_labels), on the
-    label's K, lens distortion, ``cam_from_d`` and ``d_from_b``; (0, 2) when the outline is not in
+    label's K, lens distortion, ``cam_from_d`` and ``d_from_b`` (a marker of B under a rolling
+    shutter: at its points' row times, ``generator.motion``); (0, 2) when the outline is not in
     front of the camera or not in the image.
     """
     w, h = label["image"]["width"], label["image"]["height"]
     cam = label["camera"]
-    d_from_s = np.asarray(label["d_from_b"], dtype=np.float64) if marker.section == "B" else np.eye(4)
-    uv, z = marker_outline_px(marker, np.asarray(cam["K"], dtype=np.float64), cam.get("distortion"),
-                              np.asarray(cam["cam_from_d"], dtype=np.float64) @ d_from_s)
+    k = np.asarray(cam["K"], dtype=np.float64)
+    rolling = label_rolling_view(label) if marker.section == "B" else None
+    if rolling is not None:
+        pinhole, z, _ = rolling.project(marker_outline(marker))
+        uv = image_px(pinhole, k, cam.get("distortion"))
+    else:
+        d_from_s = np.asarray(label["d_from_b"], dtype=np.float64) if marker.section == "B" else np.eye(4)
+        cam_from_s = np.asarray(cam["cam_from_d"], dtype=np.float64) @ d_from_s
+        uv, z = marker_outline_px(marker, k, cam.get("distortion"), cam_from_s)
     if not np.all(z > 0):
         return np.zeros((0, 2))
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)

@@ -6,6 +6,12 @@ Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image
 Every position is in the delivered image: the pinhole projection (K) moved by the camera unit's
 lens distortion (``core.distortion``, OpenCV's model), analytically: centres, the dense marker
 outlines (and so boxes, areas and ``outline_centroid_px``), section silhouettes.
+
+With [motion] (``generator.motion``, docs/motion.md) ``d_from_b`` is B at mid-exposure. A global
+shutter's labels are B's at mid-exposure; a rolling shutter's place every point of B (centres,
+outline points, silhouette points) where its own row's exposure time images it. The index pass
+samples every pixel at one instant of its exposure window, so visibility and the visible box
+come from a sample of the blurred marker; ``bbox_swept_px`` bounds the blur.
 """
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ from dockfactory.core.geometry import (
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, Marker, marker_outline
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene, to_dict
+from dockfactory.generator.motion import MovingB, exposure_offsets, moving_b, rolling_view
 
 LABEL_FORMAT = "dockfactory.label/1"
 DISTORTION_MODEL = ("opencv: Brown-Conrady on normalised coordinates, coefficients (k1, k2, p1, p2, k3) "
@@ -47,12 +54,21 @@ def marker_outline_px(marker: Marker, k: np.ndarray, coeffs, cam_from_s: np.ndar
 
 def marker_pinhole_outlines(frame: FrameScene, static: StaticScene) -> list[tuple[int, np.ndarray]]:
     """(pass index, outline (n, 2) in the camera's pinhole pixels) of every marker in front of the
-    camera: what the render canvas shows before the lens (``sensor.refine_marker_edges``)."""
+    camera: what the render canvas shows before the lens (``sensor.refine_marker_edges``). While B
+    moves, B's markers under a rolling shutter with no exposure time have their row-time outline,
+    and blurred ones (exposure time > 0) none: their index-pass edges are the ones Cycles sampled."""
     cam = frame.camera
     k, cam_from_d, d_from_b = cam.k(), cam.cam_from_d_array(), frame.d_from_b_array()
+    rolling = rolling_view(frame)
+    blurred = frame.motion is not None and frame.motion.moves() and frame.motion.exposure_ms > 0
     out = []
     for m in static.markers:
-        uv, z = project_points(k, cam_from_d @ (d_from_b if m.section == "B" else np.eye(4)), marker_outline(m))
+        if m.section == "B" and blurred:
+            continue
+        if m.section == "B" and rolling is not None:
+            uv, z, _ = rolling.project(marker_outline(m))
+        else:
+            uv, z = project_points(k, cam_from_d @ (d_from_b if m.section == "B" else np.eye(4)), marker_outline(m))
         if np.all(z > 0):
             out.append((m.pass_index, uv))
     return out
@@ -195,15 +211,22 @@ def _projected_outline(outline_uv: np.ndarray, outline_z: np.ndarray, bounds) ->
     return full_area, outline_centroid, clipped
 
 
-def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds) -> dict:
+def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds,
+                     rolling: MovingB | None = None) -> dict:
     """The geometric part of a marker's label (projection, boxes, areas; no visibility), in the
-    delivered image (through the lens distortion ``coeffs``)."""
+    delivered image (through the lens distortion ``coeffs``); a marker of B under the rolling
+    shutter ``rolling`` with every point at its own row's time."""
     d_from_s = d_from_b if m.section == "B" else np.eye(4)
     centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
     normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
-    pinhole, depth = project_points(k, cam_from_d, centre_d[None])
+    if rolling is not None and m.section == "B":
+        pinhole, depth, _ = rolling.project(np.array([m.center_mm]))
+        outline_pinhole, outline_z, _ = rolling.project(marker_outline(m))
+        outline_uv = image_px(outline_pinhole, k, coeffs)
+    else:
+        pinhole, depth = project_points(k, cam_from_d, centre_d[None])
+        outline_uv, outline_z = marker_outline_px(m, k, coeffs, cam_from_d @ d_from_s)
     centre = image_px(pinhole, k, coeffs)[0]
-    outline_uv, outline_z = marker_outline_px(m, k, coeffs, cam_from_d @ d_from_s)
     in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
     full_area, outline_centroid, clipped = _projected_outline(outline_uv, outline_z, bounds)
     area_in_frame = full_area if len(clipped) == len(outline_uv) and full_area > 0 else polygon_area_centroid(clipped)[0]
@@ -217,6 +240,29 @@ def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b:
         "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
         "in_frame": in_frame, "area_px": full_area, "area_in_frame_px": area_in_frame,
     }
+
+
+def _clamped_box(points: np.ndarray, bounds) -> list[float] | None:
+    """The box of ``points`` (N, 2) clamped to ``bounds``; None when it misses them or a point is NaN."""
+    if not np.all(np.isfinite(points)):
+        return None
+    x0, y0, x1, y1 = _bbox(points)
+    box = [max(x0, bounds[0]), max(y0, bounds[1]), min(x1, bounds[2]), min(y1, bounds[3])]
+    return box if box[0] <= box[2] and box[1] <= box[3] else None
+
+
+def _add_marker_motion(rec: dict, m, mb: MovingB, coeffs, bounds) -> None:
+    """Add a moving B marker's ``time_ms`` (its centre's exposure centre, from mid-exposure),
+    ``blur_px`` (its centre's image path from the start to the end of that exposure) and
+    ``bbox_swept_px`` (the box its outline sweeps over the exposure, within the image) to ``rec``."""
+    offsets = exposure_offsets(mb)
+    centre, outline = np.array([m.center_mm]), marker_outline(m)
+    _, _, t = mb.project(centre)
+    ends = [image_px(mb.project(centre, off)[0], mb.k, coeffs)[0] for off in (offsets[0], offsets[-1])]
+    swept = np.concatenate([image_px(mb.project(outline, off)[0], mb.k, coeffs) for off in offsets])
+    rec["time_ms"] = float(t[0]) * 1000.0
+    rec["blur_px"] = (ends[1] - ends[0]).tolist()
+    rec["bbox_swept_px"] = _clamped_box(swept, bounds)
 
 
 def _add_marker_visibility(rec: dict, m, stats: IndexStats, image: np.ndarray | None,
@@ -235,14 +281,26 @@ def _add_marker_visibility(rec: dict, m, stats: IndexStats, image: np.ndarray | 
         rec["legible"] = chroma is not None and chroma >= min_chroma
 
 
-def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
-                   stats: IndexStats | None) -> dict:
-    """A section's label: silhouette pixels and box, and with the index pass its visible part."""
+def _silhouette_uv(static: StaticScene, sec: str, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
+                   rolling: MovingB | None) -> np.ndarray | None:
+    """The section's silhouette points (M, 2) in pinhole pixels (B's at their row times under the
+    rolling shutter ``rolling``); None when part of it is behind the camera."""
+    if rolling is not None and sec == "B":
+        uv, z, _ = rolling.project(section_silhouette(static, sec))
+        return uv if np.all(z > 0) else None
     d_from_s = d_from_b if sec == "B" else np.eye(4)
     pts = transform_points(cam_from_d @ d_from_s, section_silhouette(static, sec))
+    if not np.all(pts[:, 2] > 0):
+        return None
+    return pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
+
+
+def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
+                   stats: IndexStats | None, rolling: MovingB | None = None) -> dict:
+    """A section's label: silhouette pixels and box, and with the index pass its visible part."""
+    uv = _silhouette_uv(static, sec, cam, cam_from_d, d_from_b, rolling)
     rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
-    if np.all(pts[:, 2] > 0):
-        uv = pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
+    if uv is not None:
         if any(cam.distortion):   # the image of the convex body is no longer convex
             rec["pixels_all"], rec["bbox_obj_px"] = region_pixels(distorted_region(uv, cam), cam.width, cam.height)
         else:
@@ -277,6 +335,33 @@ def _sampled_record(frame: FrameScene) -> dict:
     }
 
 
+MOTION_POSE_TIME = ("d_from_b is B at the middle of the exposure (t = 0); B at t seconds is d_from_b with "
+                    "velocity_d_mm_s * t added to its translation (B does not turn)")
+MOTION_ROW_TIME = ("row v of the render canvas (OpenCV rows, top = 0: the pinhole row less "
+                   "camera.render_canvas.offset_px[1]; a pinhole camera's image row) is exposed over "
+                   "[t(v) - exposure_ms / 2, t(v) + exposure_ms / 2] ms, t(v) = rolling_shutter_ms * "
+                   "((v + 1) / canvas_rows - 1/2); a point of B is labelled where its own row's t images it "
+                   "(center_d_mm and normal_d stay B's at t = 0)")
+MOTION_PIXELS = ("centres, outlines, boxes, areas and silhouettes are geometry: B at t = 0 (global shutter) or each "
+                 "point at its row's t (rolling shutter); visible_pixels, visible_fraction and bbox_visible_px come "
+                 "from the index pass, which samples each pixel at one instant of its exposure window (its expected "
+                 "pixel count is the marker's area); bbox_swept_px bounds a B marker's outline over its exposure")
+
+
+def motion_record(frame: FrameScene, mb: MovingB) -> dict:
+    """The label's motion: B's velocity, the shutter timing, B at shutter open and close, and what
+    the labels mean under blur and a rolling shutter (MOTION_POSE_TIME, MOTION_ROW_TIME, MOTION_PIXELS)."""
+    m = frame.motion
+    half_s = m.shutter_ms() / 2000.0
+    d_from_b = frame.d_from_b_array()
+    return {"velocity_d_mm_s": list(m.velocity_mm_s), "exposure_ms": m.exposure_ms,
+            "rolling_shutter_ms": m.readout_ms, "shutter": "rolling_top_first" if m.readout_ms > 0 else "global",
+            "shutter_ms": m.shutter_ms(), "canvas_rows": mb.canvas_height,
+            "d_from_b_open": m.d_from_b_at(d_from_b, -half_s).tolist(),
+            "d_from_b_close": m.d_from_b_at(d_from_b, half_s).tolist(),
+            "pose_time": MOTION_POSE_TIME, "row_time": MOTION_ROW_TIME, "pixels": MOTION_PIXELS}
+
+
 def camera_record(cam) -> dict:
     """The label's camera: K (its principal point), pose, and the unit's lens: distortion in
     OpenCV's order, chromatic aberration, depth of field, JPEG quality, the render canvas."""
@@ -307,6 +392,8 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
     ``image``: (H, W, 3) uint8 RGB final image; with the index pass it gives each marker's
     ``chroma`` and ``legible`` (chroma >= ``min_chroma``: the disc's colour is not washed out by
     glare or lost in the dark). Geometric visibility stays in ``visibility``.
+    A frame with motion also has ``motion`` (:func:`motion_record`) and, per marker of B, its
+    ``time_ms``, ``blur_px`` and ``bbox_swept_px``; without motion the label has none of them.
     """
     cam = frame.camera
     w, h = cam.width, cam.height
@@ -319,13 +406,16 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
             raise ValueError(f"index pass is {index.shape}, expected {(h, w)}")
         stats = IndexStats(index)
     bounds = (-0.5, -0.5, w - 0.5, h - 0.5)
+    mb, rolling = moving_b(frame), rolling_view(frame)
     markers = []
     for m in static.markers:
-        rec = _marker_geometry(m, k, cam.distortion, cam_from_d, d_from_b, bounds)
+        rec = _marker_geometry(m, k, cam.distortion, cam_from_d, d_from_b, bounds, rolling)
+        if mb is not None and m.section == "B":
+            _add_marker_motion(rec, m, mb, cam.distortion, bounds)
         if stats is not None:
             _add_marker_visibility(rec, m, stats, image, visible_threshold, min_chroma)
         markers.append(rec)
-    sections = [_section_label(sec, static, cam, cam_from_d, d_from_b, stats) for sec in SECTIONS]
+    sections = [_section_label(sec, static, cam, cam_from_d, d_from_b, stats, rolling) for sec in SECTIONS]
     return {
         "format": LABEL_FORMAT,
         "frame_id": frame.spec.frame_id,
@@ -335,6 +425,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
         "camera": camera_record(cam),
         "d_from_b": d_from_b.tolist(),
         "pose_b_in_d": pose_components(d_from_b),
+        **({"motion": motion_record(frame, mb)} if mb is not None else {}),
         "markers": markers,
         "sections": sections,
         "sampled": _sampled_record(frame),

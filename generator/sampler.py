@@ -20,6 +20,7 @@ import numpy as np
 from dockfactory.core.camera_chain import ColourChain
 from dockfactory.core.config import CONDITIONS, Config, ConfigError
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
+from dockfactory.core.layout import marker_points
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -62,6 +63,8 @@ from dockfactory.generator.draws import (
     static_scene,
     uniform,
 )
+from dockfactory.generator.labels import section_silhouette
+from dockfactory.generator.motion import check_rolling, frame_motion
 from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, unit_camera
 
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
@@ -173,11 +176,18 @@ def sample_geometry(cfg: Config, rng: np.random.Generator, lens: UnitLens | None
 
 def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
     """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal (with
-    runs: at its unit's focal), or a unit's lens is unusable."""
+    runs: at its unit's focal), a unit's lens is unusable, or (with a rolling shutter) some
+    frame's B moves too fast for it (``generator.motion.check_rolling``)."""
     check_lenses(cfg, source)
     if cfg.runs.frames_per_run > 0:
         check_runs_fit(cfg, frame_plan(cfg), source)
-        return
+    else:
+        _check_single_shot_focal(cfg, source)
+    check_rolling_fits(cfg, source)
+
+
+def _check_single_shot_focal(cfg: Config, source: str) -> None:
+    """Without runs: every frame fits its markers at the smallest focal of [camera] focal_px."""
     worst = np.inf
     for spec in frame_plan(cfg):
         geo_rng, _ = _streams(cfg, spec)
@@ -189,6 +199,18 @@ def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
             f"{cfg.camera.margin_px:g} px inside a {cfg.image.width}x{cfg.image.height} image "
             f"for every frame (largest focal that fits the worst frame: {worst:.0f} px); lower "
             f"focal_px, raise distance_mm or reduce margin_px")
+
+
+def check_rolling_fits(cfg: Config, source: str = "<config>") -> None:
+    """With [motion] and a rolling shutter, sample every frame (sample_frame checks the rolling
+    shutter) and raise its ConfigError naming ``source``; nothing to do otherwise."""
+    if not (cfg.motion.enabled and cfg.motion.rolling_shutter_ms > 0):
+        return
+    for spec in frame_plan(cfg):
+        try:
+            sample_frame(cfg, spec)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
 
 
 # ----------------------------------------------------------------------------- look
@@ -440,7 +462,8 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
 
 
 def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
-    """The full scene of one planned frame (pure and deterministic)."""
+    """The full scene of one planned frame (pure and deterministic); with [motion], ``d_from_b``
+    is B at mid-exposure and ``motion`` how it moves (``generator.motion``)."""
     static = static_scene(cfg)
     shot = _run_shot if cfg.runs.frames_per_run > 0 else _single_shot
     d_from_b, camera, eye, (appearance, clutter, lights), look_rng = shot(cfg, spec, static)
@@ -460,7 +483,9 @@ def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
             appearance = dataclasses.replace(appearance, roughness=rough,
                                              roughness_variation=min(appearance.roughness_variation, 0.05))
     sensor = sample_sensor(cfg, look_rng, cond, bloom, frame_chain(cfg, spec))
-    return FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
-                      props=tuple(props), appearance=appearance, sensor=sensor,
-                      glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
-                      render=render_settings(cfg))
+    frame = FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
+                       props=tuple(props), appearance=appearance, sensor=sensor,
+                       glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
+                       render=render_settings(cfg), motion=frame_motion(cfg, spec))
+    check_rolling(frame, np.vstack([marker_points(static.markers, "B"), section_silhouette(static, "B")]))
+    return frame

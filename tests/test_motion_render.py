@@ -1,0 +1,212 @@
+"""[motion] through Cycles (docs/motion.md): two 320 x 240 frames of B moving at 1.5 m/s for a
+10 ms exposure (about 6 px of blur), one with a global shutter, one with a 20 ms rolling shutter.
+
+The blurred markers are measured on the linear render with a neutral stage (grey paint, rings,
+floor, walls and world, white lights, no props): there every path carries equal red, green and
+blue, so a pixel's blue excess b - (r + g) / 2 is the blue marker's coverage of it, time-averaged
+over its exposure and filtered by the (symmetric) pixel filter. Its centroid must be the label's
+outline centroid: B at mid-exposure (global shutter) or at each point's row time (rolling
+shutter). The index pass, one sample per pixel at a random instant, must agree more loosely.
+
+Beside the render: B's keyframes move every object of section B and nothing of A, and a frame
+without motion after moving ones leaves the Blender state of that frame alone.
+"""
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from dockfactory.core.config import config_from_dict
+from dockfactory.core.scene import mat4, to_dict
+from dockfactory.generator.draws import static_scene
+from dockfactory.generator.exr import read_compact
+from dockfactory.generator.frame_output import frame_paths
+from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.generator.worker_pool import WorkerProcess
+
+pytestmark = pytest.mark.render
+
+TIMEOUT_S = 300
+ROLLING_MS = 20.0
+CONFIG = {
+    "dataset": {"name": "motion-check", "seed": 11, "frames": 2},
+    "conditions": {"normal": 0, "low_light": 0, "occlusion": 0, "glare": 0, "ideal": 1},
+    "image": {"width": 320, "height": 240},
+    "camera": {"focal_px": [300, 750], "margin_px": 12},
+    "render": {"samples": 32, "denoise": "off", "keep_exr": True, "frame_timeout_s": TIMEOUT_S},
+    "sensor": {"exposure_time_ms": [10.0, 10.0]},
+    "motion": {"enabled": True, "velocity_mm_s": [1500.0, 1500.0], "velocity_y_mm_s": [300.0, 300.0]},
+}
+CHROMA_TOL_PX = 0.25     # blue-excess centroid vs the label's outline centroid, every checked marker
+INDEX_MEDIAN_TOL_PX = 0.4   # index-pass centroid (one random instant per pixel): median over markers
+INDEX_MAX_TOL_PX = 1.0      # ... and worst marker
+BLUR_SEEN = 0.4          # the index pixels reach at least this share of the blur beyond the disc's box
+MIN_MISS_PX = 1.0        # the wrong timing (shutter open or close; a global shutter's labels for the
+                         # rolling frame) must miss the measured centroid by more than this
+
+
+def neutral(frame):
+    """The frame on a neutral stage (no colour but the markers'), without props."""
+    grey = (0.5, 0.5, 0.5)
+    look = dataclasses.replace(frame.appearance, section_color_a=grey, section_color_b=grey, grime=0.0,
+                               ring_color=(0.03, 0.03, 0.03), floor_color=(0.25, 0.25, 0.25), wall_color=grey,
+                               world_color=(1.0, 1.0, 1.0))
+    return dataclasses.replace(frame, appearance=look, props=())
+
+
+@pytest.fixture(scope="module")
+def setup():
+    cfg = config_from_dict(CONFIG, "motion-check")
+    plan = frame_plan(cfg)
+    glob = neutral(sample_frame(cfg, plan[0]))
+    rolling = neutral(sample_frame(cfg, plan[1]))
+    rolling = dataclasses.replace(rolling, motion=dataclasses.replace(rolling.motion, readout_ms=ROLLING_MS))
+    assert glob.motion.readout_ms == 0 and glob.motion.exposure_ms == 10.0
+    return cfg, {"global": glob, "rolling": rolling}
+
+
+def start_worker(cfg, root):
+    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
+            "height": cfg.image.height, "threads": 2, "root": str(root), "keep_exr": True,
+            "visible_threshold": cfg.labels.visible_threshold, "min_chroma": cfg.labels.min_chroma}
+    proc = WorkerProcess(init, root / "logs" / "worker.log")
+    proc.start(TIMEOUT_S)
+    return proc
+
+
+@pytest.fixture(scope="module")
+def rendered(setup, tmp_path_factory):
+    """Both frames rendered by one worker; the state digests of the static version of the first
+    frame before and after them."""
+    cfg, frames = setup
+    root = tmp_path_factory.mktemp("motion") / "ds"
+    still = dataclasses.replace(frames["global"], motion=None)
+    proc = start_worker(cfg, root)
+    try:
+        digest = lambda f: proc.request({"op": "state", "frame": to_dict(f)}, TIMEOUT_S)["digest"]   # noqa: E731
+        before = digest(still), digest(frames["global"])
+        for frame in frames.values():
+            reply = proc.request({"op": "render", "frame": to_dict(frame)}, TIMEOUT_S)
+            assert reply.get("ok"), reply
+        after = digest(still), digest(frames["global"])
+    finally:
+        proc.close()
+    return root, before, after
+
+
+def blue_excess_centroid(rgb: np.ndarray, box, margin: int = 2) -> np.ndarray:
+    """Centroid (x, y) px of b - (r + g) / 2 over the pixels of ``box`` (OpenCV px) widened by ``margin``."""
+    x0, y0 = int(np.floor(box[0] + 0.5)) - margin, int(np.floor(box[1] + 0.5)) - margin
+    x1, y1 = int(np.ceil(box[2] - 0.5)) + margin, int(np.ceil(box[3] - 0.5)) + margin
+    sub = rgb[y0:y1 + 1, x0:x1 + 1].astype(np.float64)
+    w = sub[..., 2] - (sub[..., 0] + sub[..., 1]) / 2
+    ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    return np.array([(w * xs).sum(), (w * ys).sum()]) / w.sum()
+
+
+def isolated_b_markers(label: dict, margin: float = 4.0) -> list[dict]:
+    """B markers of 20 px^2 or more whose swept box, widened by ``margin``, touches no other marker's."""
+    boxes = {m["id"]: m.get("bbox_swept_px") or m["bbox_px"] for m in label["markers"]}
+    out = []
+    for m in label["markers"]:
+        b = boxes[m["id"]]
+        if m["section"] != "B" or m["area_px"] < 20 or not m["in_frame"]:
+            continue
+        g = (b[0] - margin, b[1] - margin, b[2] + margin, b[3] + margin)
+        if all(o[2] < g[0] or o[0] > g[2] or o[3] < g[1] or o[1] > g[3] for k, o in boxes.items() if k != m["id"]):
+            out.append(m)
+    return out
+
+
+def centroid_at(frame, static, marker_id: str, t_s: float) -> np.ndarray:
+    """The marker's outline centroid with all of B at time ``t_s`` (a wrong timing to rule out)."""
+    from dockfactory.generator.labels import frame_labels
+    moved = dataclasses.replace(frame, motion=None, d_from_b=mat4(frame.motion.d_from_b_at(frame.d_from_b, t_s)))
+    rec = next(m for m in frame_labels(moved, static, None, 0.5)["markers"] if m["id"] == marker_id)
+    return np.array(rec["outline_centroid_px"])
+
+
+@pytest.mark.parametrize("kind", ["global", "rolling"])
+def test_blurred_markers_centre_on_their_labels(setup, rendered, kind):
+    """Per isolated marker of B: the index pass spreads beyond the disc's box along the blur (the
+    render did blur); the blue excess centroid within CHROMA_TOL_PX of the label; B at shutter
+    open or close (and, for the rolling frame, B at mid-exposure for every row) misses it by more
+    than MIN_MISS_PX; the index pass's centroid within the looser index tolerances."""
+    cfg, frames = setup
+    root, _, _ = rendered
+    frame, static = frames[kind], static_scene(cfg)
+    label = json.loads(frame_paths(root, frame.spec.frame_id)["label"].read_text())
+    passes = read_compact(frame_paths(root, frame.spec.frame_id)["exr"])
+    half_s = frame.motion.shutter_ms() / 2000.0
+    rows, index_err = [], []
+    for m in isolated_b_markers(label):
+        want = np.array(m["outline_centroid_px"])
+        got = blue_excess_centroid(passes.rgb, m["bbox_swept_px"])
+        ys, xs = np.nonzero(passes.index == m["pass_index"])
+        index_err.append(float(np.hypot(*(np.array([xs.mean(), ys.mean()]) - want))))
+        miss = [float(np.hypot(*(got - centroid_at(frame, static, m["id"], t)))) for t in (-half_s, 0.0, half_s)]
+        (bx0, by0, bx1, by1), (vx0, vy0, vx1, vy1) = m["bbox_px"], m["bbox_visible_px"]
+        rows.append({"id": m["id"], "err": float(np.hypot(*(got - want))), "open": miss[0], "mid": miss[1],
+                     "close": miss[2], "blur": float(np.abs(m["blur_px"]).sum()), "time_ms": m["time_ms"],
+                     "spread": (vx1 - vx0) - (bx1 - bx0) + (vy1 - vy0) - (by1 - by0)})
+    print(kind, rows, "index-pass errors px:", index_err)
+    assert len(rows) >= 3, rows
+    assert all(r["spread"] >= BLUR_SEEN * r["blur"] for r in rows), rows    # Cycles blurred B
+    assert all(r["err"] <= CHROMA_TOL_PX for r in rows), rows
+    assert all(min(r["open"], r["close"]) > MIN_MISS_PX for r in rows), rows
+    if kind == "rolling":
+        assert max(r["mid"] for r in rows) > MIN_MISS_PX, rows
+    assert np.median(index_err) <= INDEX_MEDIAN_TOL_PX and max(index_err) <= INDEX_MAX_TOL_PX, index_err
+
+
+def test_a_static_frame_after_moving_ones_has_its_own_blender_state(rendered):
+    _, before, after = rendered
+    assert before[0] == after[0]     # the frame without motion
+    assert before[1] == after[1]     # the moving frame
+    assert before[0] != before[1]
+
+
+B_OBJECTS_SCRIPT = """
+import json, sys
+import dockfactory
+from dockfactory.core.scene import FrameScene, StaticScene, from_dict
+from dockfactory.blender_scenes.render import BlenderRenderer
+req = json.loads(sys.stdin.read())
+renderer = BlenderRenderer(from_dict(StaticScene, req["static"]), 320, 240, 1, req["exr"])
+renderer.state(from_dict(FrameScene, req["frame"]))
+scene, b_root = renderer.handles.scene, renderer.handles.b_root
+out = {"b": sorted(o.name for o in b_root.children_recursive), "at": {}}
+for frame_no, sub in ((0, 0.5), (1, 0.0), (1, 0.5)):
+    scene.frame_set(frame_no, subframe=sub)
+    out["at"][str(frame_no + sub)] = {o.name: list(o.matrix_world.translation)
+                                      for o in scene.objects if o.type == "MESH"}
+print("RESULT " + json.dumps(out))
+"""
+
+
+def test_b_keyframes_move_every_object_of_b_and_nothing_of_a(setup, tmp_path):
+    cfg, frames = setup
+    frame = frames["global"]
+    req = {"static": to_dict(static_scene(cfg)), "frame": to_dict(frame), "exr": str(tmp_path / "x.exr")}
+    run = subprocess.run([sys.executable, "-c", B_OBJECTS_SCRIPT], input=json.dumps(req), capture_output=True,
+                         text=True, timeout=TIMEOUT_S)
+    assert run.returncode == 0, run.stderr[-2000:]
+    out = json.loads(next(line for line in run.stdout.splitlines() if line.startswith("RESULT "))[7:])
+    b = set(out["b"])
+    assert {f"marker_{m.id}" for m in static_scene(cfg).markers if m.section == "B"} <= b
+    assert {f"ring_{m.id}" for m in static_scene(cfg).markers if m.section == "B"} <= b
+    assert {"section_B", "flange_B", "band_B"} <= b
+    shutter_s = frame.motion.shutter_ms() / 1000.0
+    step_m = np.array(frame.motion.velocity_mm_s) * shutter_s / 1000.0
+    opened, mid, closed = (out["at"][k] for k in ("0.5", "1.0", "1.5"))
+    for name in mid:
+        travel = np.array(closed[name]) - np.array(opened[name])
+        halves = np.array(mid[name]) - np.array(opened[name])
+        if name in b:
+            np.testing.assert_allclose(travel, step_m, atol=1e-6, err_msg=name)
+            np.testing.assert_allclose(halves, step_m / 2, atol=1e-6, err_msg=name)
+        else:
+            assert not travel.any(), name
