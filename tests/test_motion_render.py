@@ -11,8 +11,9 @@ shutter); its second moment along the blur must exceed the still disc's (the lab
 by the blur's L^2 / 12, which pins the blur length to the exposure. The index pass, one sample
 per pixel at a random instant, must agree more loosely.
 
-Beside the render: B's keyframes move every object of section B and nothing of A, and a frame
-without motion after moving ones leaves the Blender state of that frame alone.
+Beside them: a frame without motion rendered after moving ones has the bytes it has alone (and
+the Blender state a render reads is the frame's alone), and B's keyframes move every object of
+section B and nothing of A.
 """
 import dataclasses
 import json
@@ -82,14 +83,20 @@ def start_worker(cfg, root):
     return proc
 
 
+def still_frame(frame):
+    """``frame`` without motion, under its own id."""
+    return dataclasses.replace(frame, motion=None, spec=dataclasses.replace(frame.spec, frame_id="still"))
+
+
 @pytest.fixture(scope="module")
 def rendered(setup, tmp_path_factory):
-    """The dataset folder holding both frames, rendered by one worker."""
+    """The dataset folder holding both moving frames, and the still version of the first one
+    rendered after them by the same worker."""
     cfg, frames = setup
     root = tmp_path_factory.mktemp("motion") / "ds"
     proc = start_worker(cfg, root)
     try:
-        for frame in frames.values():
+        for frame in (*frames.values(), still_frame(frames["global"])):
             reply = proc.request({"op": "render", "frame": to_dict(frame)}, TIMEOUT_S)
             assert reply.get("ok"), reply
     finally:
@@ -211,6 +218,20 @@ def test_a_static_frame_after_moving_ones_has_its_own_blender_state(setup, tmp_p
     assert got[0] == got[2] == got[4]                  # the still frame, after nothing or a moving frame
     assert got[1] == got[5] == got[7] and got[3] == got[6]
     assert len({got[0], got[1], got[3]}) == 3
+
+
+def test_a_still_frame_after_moving_ones_renders_the_bytes_it_renders_alone(setup, rendered, tmp_path):
+    cfg, frames = setup
+    still = still_frame(frames["global"])
+    proc = start_worker(cfg, tmp_path / "ds")
+    try:
+        reply = proc.request({"op": "render", "frame": to_dict(still)}, TIMEOUT_S)
+        assert reply.get("ok"), reply
+    finally:
+        proc.close()
+    for kind in ("image", "exr", "label"):
+        alone, after = frame_paths(tmp_path / "ds", "still")[kind], frame_paths(rendered, "still")[kind]
+        assert alone.read_bytes() == after.read_bytes(), kind
 
 
 B_OBJECTS_SCRIPT = """
