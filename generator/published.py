@@ -4,7 +4,9 @@ Anyone can re-render any subset of a published dataset (``dockfactory render CON
 --frames ...`` or ``--shard K/N``) and check it against the published ``manifest.json`` (every
 file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
 
-- the re-render must carry the published version id (same config, generator and Blender);
+- the re-render must carry the published version id (same config, generator and Blender), or
+  differ from it only by the generator: the same config (resolved with today's defaults) and
+  Blender, whose frames a newer generator must reproduce (said in a note);
 - every re-rendered frame must be a frame of the manifest; its label must match byte for byte
   or, where Cycles on another CPU gives other bits (``generator.label_prints``):
   - v1 (``fingerprints.npz``): everything but the two measurements a label takes from the
@@ -27,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dockfactory.core.config import config_from_dict
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic
 from dockfactory.generator.dataset import FRAME_ID_RE, DatasetError, load_identity
 from dockfactory.generator.dataset_check import verify
@@ -67,6 +71,7 @@ class PublishedReport:
     max_tile_diff: float = 0.0
     tolerance: float = DEFAULT_TOLERANCE
     problems: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -80,7 +85,7 @@ class PublishedReport:
                        f"{self.labels_geometry} with the same geometry (image measurements differ), {index}"
                        f"images {self.images_identical} byte for byte, {self.images_within} within "
                        f"{self.tolerance} levels (max tile-mean difference {self.max_tile_diff:.3f})"]
-        return "\n".join(lines + [f"  {p}" for p in self.problems])
+        return "\n".join(lines + [f"  note: {n}" for n in self.notes] + [f"  {p}" for p in self.problems])
 
 
 @dataclass
@@ -166,6 +171,21 @@ def _check_image(root: Path, fid: str, pub: _Published, rep: PublishedReport) ->
                             f"(tolerance {rep.tolerance})")
 
 
+def _version_difference(ident: dict, manifest: dict) -> str | None:
+    """Why a re-render's version differs from the manifest's in a way that makes its frames
+    incomparable (another config, resolved with today's defaults, or another Blender); None when
+    only the generator differs."""
+    software = manifest.get("software") or {}
+    if ident.get("blender_version") != software.get("blender"):
+        return f"another Blender: {ident.get('blender_version')}, published {software.get('blender')}"
+    try:
+        same = (config_from_dict(ident["config"]).canonical_json()
+                == config_from_dict(manifest["config"]).canonical_json())
+    except (DockfactoryError, KeyError, TypeError):
+        same = False
+    return None if same else "another config"
+
+
 def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) -> PublishedReport:
     """Check the (partial) dataset at ``root`` against a published manifest (module docstring)."""
     root, manifest_path = Path(root), Path(manifest_path)
@@ -173,9 +193,14 @@ def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) ->
     rep = PublishedReport(str(root), str(manifest_path), tolerance=tolerance)
     ident = load_identity(root)
     if ident["version_id"] != pub.manifest["version_id"]:
-        rep.problems.append(f"dataset.json: version {ident['version_id']}, the manifest's is "
-                            f"{pub.manifest['version_id']} (another config, generator or Blender)")
-        return rep
+        why = _version_difference(ident, pub.manifest)
+        if why is not None:
+            rep.problems.append(f"dataset.json: version {ident['version_id']}, the manifest's is "
+                                f"{pub.manifest['version_id']} ({why})")
+            return rep
+        rep.notes.append(f"generator {ident.get('generator_version')}, the manifest's "
+                         f"{pub.manifest['software'].get('generator')}: the same config and Blender, so the "
+                         f"frames are compared as they are (a newer generator must reproduce them)")
     for name in EXACT_ROOT_FILES:
         if not _same_bytes(root / name, pub.records.get(name)):
             rep.problems.append(f"{name}: differs from the manifest")

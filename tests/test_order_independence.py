@@ -44,8 +44,8 @@ def smoke(repo_root):
 
 
 def frame_files(root: Path, fid: str) -> dict[str, bytes]:
-    """The bytes of one frame's image, EXR, label and meta."""
-    return {kind: p.read_bytes() for kind, p in frame_paths(root, fid).items()}
+    """The bytes of one frame's image, EXR, label and meta (and raw frame, where the config keeps one)."""
+    return {kind: p.read_bytes() for kind, p in frame_paths(root, fid).items() if kind != "raw" or p.exists()}
 
 
 def all_frames(root: Path, scenes) -> dict[str, dict[str, bytes]]:

@@ -106,10 +106,20 @@ def test_an_edited_label_a_foreign_frame_and_another_version_fail(release):
         in rep.problems
     assert "labels/999999.json: frame 999999 is not in the manifest" in rep.problems
     ident = json.loads((sub / "dataset.json").read_text())
-    ident["version_id"] = "0" * 16
+    # another generator alone (same config and Blender): the frames are still compared, and the
+    # edited label still fails; another Blender or another config: refused before any frame
+    ident.update(version_id="0" * 16, generator_version="9.9.9+0000000000000000")
     (sub / "dataset.json").write_text(json.dumps(ident))
     rep = published.verify_against(sub, pub / "manifest.json")
-    assert not rep.ok and "another config, generator or Blender" in rep.problems[0]
+    assert rep.frames == len(ids) and "generator 9.9.9+0000000000000000" in rep.notes[0]
+    assert f"labels/{ids[1]}.json: differs from the manifest beyond its image and index-pass measurements" \
+        in rep.problems
+    for key, value, why in (("blender_version", "4.2.0", "another Blender: 4.2.0"),
+                            ("config", {**ident["config"], "dataset": {**ident["config"]["dataset"], "seed": 1}},
+                             "another config")):
+        (sub / "dataset.json").write_text(json.dumps({**ident, key: value}))
+        rep = published.verify_against(sub, pub / "manifest.json")
+        assert not rep.ok and rep.frames == 0 and why in rep.problems[0], rep.problems
 
 
 def test_an_image_without_fingerprints_cannot_pass_on_tolerance(release):
