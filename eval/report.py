@@ -591,6 +591,7 @@ def write_summary(out_html, metrics: dict, verdict: str, provenance: dict) -> di
     out_html = Path(out_html)
     write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
     cams = metrics.get("simulated_cameras")
-    simulated = f"\nGround truth: {cams['statement']} (per unit: report.html, \"What was simulated\").\n" if cams else ""
+    simulated = (f"\nGround truth: rendered, not measured, through simulated cameras ({cams['statement']}; per unit: "
+                 f"report.html, \"What was simulated\").\n" if cams else "")
     write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + markdown_honesty(metrics))
     return summary

@@ -71,7 +71,8 @@ def _unit_errors(rows: list[dict]) -> dict:
 
 
 def simulated_cameras_block(ds: Dataset, test_rows: list[dict]) -> dict:
-    """{"units": [{unit, lens, sensor, test errors (RMSE per component)}], "statement": one line}."""
+    """{"units": [{unit, lens, sensor, test errors (RMSE per component)}], "statement": the sensor
+    models of the units, in one line}."""
     cfg = ds.config
     by_unit: dict[int, list] = {}
     for r in test_rows:
@@ -80,7 +81,7 @@ def simulated_cameras_block(ds: Dataset, test_rows: list[dict]) -> dict:
     units = [{"unit": u, "lens": _lens(cfg, u), "sensor": _sensor(cfg, u), "test": _unit_errors(by_unit.get(u, []))}
              for u in range(cfg.camera_units.count)]
     kinds = sorted({u["sensor"]["model"] for u in units})
-    return {"units": units, "statement": "rendered ground truth through simulated cameras: " + "; ".join(kinds)}
+    return {"units": units, "statement": "; ".join(kinds)}
 
 
 def _lens_text(lens: dict) -> str:
@@ -114,7 +115,8 @@ def html_simulated_cameras(block: dict) -> list[str]:
         rows.append(f"<tr><td>{u['unit']}</td><td>{html.escape(_lens_text(u['lens']))}</td>"
                     f"<td>{html.escape(_sensor_text(u['sensor']))}</td><td>{t['solved']} of {t['frames']}</td>{cells}</tr>")
     return ["<h2>What was simulated</h2>",
-            f"<p>The ground truth is rendered, not measured: {html.escape(block['statement'])}. The figures hold for "
+            f"<p>The ground truth is rendered, not measured, through simulated cameras "
+            f"({html.escape(block['statement'])}). The figures hold for "
             "cameras like these; a camera with another sensor, ISP or encoding needs its own run.</p>",
             f"<table>{head}{''.join(rows)}</table>"]
 
