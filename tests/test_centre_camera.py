@@ -83,3 +83,22 @@ def test_a_three_chip_image_is_unchanged_in_quality():
     image = srgb8(disc(31.7, 32.2, COLOURS[1]))
     r = refine_centre_camera(image, np.array([19.7, 20.2, 43.7, 44.2]), 1, "GRBG")
     assert np.hypot(*(r.center - (31.7, 32.2))) < 0.02
+
+
+@pytest.mark.parametrize("class_id", (0, 1))
+def test_a_jpeg_is_fitted_on_its_luma(class_id):
+    """A three-chip image through JPEG q90 4:2:0 (chroma at half resolution): the fit on the luma
+    halves the plain refinement's error on a noisy synthetic disc (measured RMS 0.025-0.034 px
+    against 0.052; asserted: luma <= 0.75 x plain and <= 0.045 px)."""
+    from dockfactory.core.isp import jpeg_round_trip
+    rng = np.random.default_rng(3)
+    plain, luma = [], []
+    for _ in range(24):
+        cx, cy = 32 + rng.uniform(-1, 1), 32 + rng.uniform(-1, 1)
+        lin = disc(cx, cy, COLOURS[class_id])
+        image = jpeg_round_trip(srgb8(lin + rng.normal(0, 0.004, lin.shape).astype(np.float32)), 90)
+        box = np.array([cx - 12, cy - 12, cx + 12, cy + 12])
+        plain.append(refine_centre(image, box, class_id).center - (cx, cy))
+        luma.append(refine_centre_camera(image, box, class_id, None, True).center - (cx, cy))
+    rms = [float(np.sqrt((np.array(v) ** 2).sum(axis=1).mean())) for v in (plain, luma)]
+    assert rms[1] <= 0.75 * rms[0] and rms[1] <= 0.045, rms
