@@ -82,9 +82,10 @@ class CameraInput:
     """What the user knows of the camera behind the images. ``cfa``: its Bayer pattern (RGGB,
     BGGR, GRBG, GBRG; None: a three-chip camera or unknown): the centre refinement then fits the
     samples the sensor took, and raw frames can be read. A raw frame is a one-channel 16-bit PNG
-    of the mosaic in DN (BayerRG12 and the like): ``raw_black_dn`` is subtracted, ``raw_white_dn``
-    (None: the top code of the smallest bit depth that holds the frame's largest value) is full
-    scale, then grey-world white balance, ``demosaic`` and the sRGB curve."""
+    of the mosaic in DN (BayerRG12 and the like): ``raw_black_dn`` is subtracted, ``raw_white_dn`` is
+    full scale (the sensor's white level: a 16-bit PNG does not say its ADC depth, and a level
+    guessed from each frame's brightest pixel would develop a dark frame brighter; None: raw
+    frames are refused), then grey-world white balance, ``demosaic`` and the sRGB curve."""
     cfa: str | None = None
     raw_black_dn: float = 0.0
     raw_white_dn: float | None = None
@@ -104,8 +105,7 @@ class CameraInput:
 
     def develop(self, raw: np.ndarray) -> np.ndarray:
         """A raw frame (H, W) uint16 as 8-bit sRGB (core.camera_chain.develop_raw)."""
-        white = self.raw_white_dn or float(2 ** max(8, int(raw.max()).bit_length()) - 1)
-        return develop_raw(raw, self.cfa, self.raw_black_dn, white, self.demosaic)
+        return develop_raw(raw, self.cfa, self.raw_black_dn, self.raw_white_dn, self.demosaic)
 
 
 def _unreadable(path: Path, why: str) -> tuple[None, dict]:
@@ -123,6 +123,9 @@ def read_image(path: Path, camera: CameraInput = CameraInput()) -> tuple[np.ndar
     if data.ndim == 2 and data.dtype == np.uint16:
         if camera.cfa is None:
             return _unreadable(path, "a raw frame (one 16-bit channel): give its Bayer pattern with --cfa")
+        if camera.raw_white_dn is None:
+            return _unreadable(path, "a raw frame: give the sensor's white level with --raw-white "
+                                     "(e.g. 4095 for 12 bit)")
         if data.shape[0] % 2 or data.shape[1] % 2 or min(data.shape) < 4:
             return _unreadable(path, f"a raw frame must have an even size of at least 4x4, got {data.shape[1]}x{data.shape[0]}")
         return camera.develop(data), None

@@ -59,7 +59,7 @@ def add_subcommand(sub) -> None:
                         "demosaiced image, and one-channel 16-bit PNGs are read as raw frames")
     m.add_argument("--raw-black", type=float, default=0.0, help="raw frames: black level, DN (default 0)")
     m.add_argument("--raw-white", type=float, default=None,
-                   help="raw frames: white level, DN (default: the top code of the frame's bit depth)")
+                   help="raw frames: the sensor's white level, DN (needed: e.g. 4095 for 12 bit)")
     m.add_argument("--demosaic", choices=DEMOSAICS, default="mhc", help="raw frames: demosaic (default mhc)")
     m.add_argument("--quiet", action="store_true")
     m.add_argument("--out", required=True, help="output folder")

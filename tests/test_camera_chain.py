@@ -22,7 +22,7 @@ from dockfactory.core.camera_chain import (
     white_balance_gains,
     white_dn,
 )
-from dockfactory.core.cfa import PATTERNS
+from dockfactory.core.cfa import PATTERNS, channel_map
 from dockfactory.core.config import ConfigError, config_from_dict
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.emva import photon_transfer
@@ -237,7 +237,7 @@ def test_a_colour_dataset_keeps_its_labels_and_raw_frames(colour_pair):
         assert lab["camera"]["jpeg_subsampling"] == "444"
         raw = cv2.imread(str(ds.root / "raw" / f"{fid}.png"), cv2.IMREAD_UNCHANGED)
         assert raw.dtype == np.uint16 and raw.shape == (lab["image"]["height"], lab["image"]["width"])
-        cmap = np.asarray(__import__("dockfactory.core.cfa", fromlist=["channel_map"]).channel_map(chain["cfa"], *raw.shape))
+        cmap = channel_map(chain["cfa"], *raw.shape)
         for m in lab["markers"]:
             if m["visibility"] != 2 or m["class_id"] != 0:
                 continue

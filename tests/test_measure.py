@@ -147,7 +147,8 @@ def test_raw_frames_are_developed_and_measured(big, tmp_path, capsys):
     world, demosaic, sRGB) and measured, the centres fitted on the sensor's own samples; their
     poses agree with the 8-bit images' within 4 of their reported standard deviations (the mosaic
     keeps a quarter of each colour's samples). Without --cfa each raw frame is
-    reported (unreadable, with the reason), never dropped."""
+    reported (unreadable, with the reason), never dropped; so is one without --raw-white (a PNG does
+    not say its ADC depth)."""
     raw_dir = tmp_path / "raw"
     raw_dir.mkdir()
     images = sorted((big / "images").glob("*.png"))[:3]
@@ -157,7 +158,8 @@ def test_raw_frames_are_developed_and_measured(big, tmp_path, capsys):
     common = ["--layout", str(big / "layout.json"), "--workers", "1", "--threads", "1", "--overlay-size", "0",
               "--quiet"]
     assert main(["measure", *map(str, images), "--out", str(ref), *common]) == 0
-    assert main(["measure", str(raw_dir), "--cfa", "RGGB", "--raw-black", "64", "--out", str(out), *common]) == 0
+    assert main(["measure", str(raw_dir), "--cfa", "RGGB", "--raw-black", "64", "--raw-white", "4095", "--out",
+                 str(out), *common]) == 0
     doc, ref_doc = json.loads((out / "measurements.json").read_text()), json.loads((ref / "measurements.json").read_text())
     assert doc["camera"]["cfa"] == "RGGB" and doc["camera"]["raw_black_dn"] == 64
     for fid, rec in _poses(ref_doc).items():
@@ -170,3 +172,6 @@ def test_raw_frames_are_developed_and_measured(big, tmp_path, capsys):
     assert main(["measure", str(raw_dir), "--out", str(bare), *common]) == 1
     recs = json.loads((bare / "measurements.json").read_text())["images"]
     assert len(recs) == 3 and all("give its Bayer pattern with --cfa" in r["reason"] for r in recs)
+    assert main(["measure", str(raw_dir), "--cfa", "RGGB", "--out", str(bare), *common]) == 1
+    recs = json.loads((bare / "measurements.json").read_text())["images"]
+    assert len(recs) == 3 and all("white level with --raw-white" in r["reason"] for r in recs)
