@@ -10,6 +10,12 @@ Each marker's ``center_mm`` (the centre of its disc's top face) and unit ``norma
 section's frame (A: D, the frame at the centre of A's docking face, +X along A's axis toward B;
 B: B's frame, the same construction on B); other keys (``class_id``, ``class_name``,
 ``pass_index``) are ignored. ``index`` counts the markers of a section from 0.
+
+A layout is refused (LayoutFileError, one line naming the file, key and value) unless every
+number is finite and of a docking section's size, each section's markers lie on its side of the
+seam (A at x <= 0, B at x >= 0: swapped section labels are caught), and each section passes the
+checks a config's layout passes (``core.layout.layout_problems``: at least 6 markers, no
+overlapping discs, not coplanar, no symmetry that makes two markers interchangeable).
 """
 from __future__ import annotations
 
@@ -18,10 +24,12 @@ import math
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.layout import Marker
+from dockfactory.core.layout import Marker, layout_problems
 from dockfactory.core.names import SECTIONS
 
 MAX_MARKERS = 1000
+MAX_COORDINATE_MM = 1.0e5   # 100 m: a docking section is metres across, never more
+MAX_DIAMETER_MM = 1.0e3
 
 
 class LayoutFileError(DockfactoryError):
@@ -53,10 +61,26 @@ def _marker(rec, path, i: int) -> Marker:
     if not 0.99 < norm < 1.01:
         raise LayoutFileError(f"{path}: {key}.normal: expected a unit vector, its length is {norm:.4g}")
     d = rec["diameter_mm"]
-    if isinstance(d, bool) or not isinstance(d, (int, float)) or not (math.isfinite(d) and d > 0):
-        raise LayoutFileError(f"{path}: {key}.diameter_mm: expected a positive number, got {d!r}")
-    return Marker(rec["id"], rec["section"], rec["index"], _numbers(rec["center_mm"], path, f"{key}.center_mm", 3),
-                  tuple(v / norm for v in normal), float(d))
+    if isinstance(d, bool) or not isinstance(d, (int, float)) or not (math.isfinite(d) and 0 < d <= MAX_DIAMETER_MM):
+        raise LayoutFileError(f"{path}: {key}.diameter_mm: expected a number in (0, {MAX_DIAMETER_MM:g}] mm, got {d!r}")
+    centre = _numbers(rec["center_mm"], path, f"{key}.center_mm", 3)
+    if max(abs(v) for v in centre) > MAX_COORDINATE_MM:
+        raise LayoutFileError(f"{path}: {key}.center_mm: {list(centre)} is beyond {MAX_COORDINATE_MM:g} mm "
+                              "of its section's frame (millimetres expected)")
+    return Marker(rec["id"], rec["section"], rec["index"], centre, tuple(v / norm for v in normal), float(d))
+
+
+def _wrong_side(markers) -> str | None:
+    """Why the markers do not sit on their sections, or None. By the frames' construction A's
+    body lies at x < 0 of D (+X points from A toward B) and B's at x > 0 of B's frame, so a
+    marker on the wrong side means the layout's section labels (or its axis) are swapped."""
+    for m in markers:
+        if (m.center_mm[0] > 0) if m.section == "A" else (m.center_mm[0] < 0):
+            want = "x <= 0 (A's body lies behind its docking face)" if m.section == "A" else \
+                "x >= 0 (B's body lies beyond its docking face)"
+            return (f"marker {m.id} of section {m.section} is at x = {m.center_mm[0]:g} mm, expected {want}: "
+                    "are sections A and B swapped?")
+    return None
 
 
 def read_layout_file(path) -> tuple[Marker, ...]:
@@ -80,7 +104,8 @@ def read_layout_file(path) -> tuple[Marker, ...]:
     twice = next((p for p in pairs if pairs.count(p) > 1), None)
     if twice is not None:
         raise LayoutFileError(f"{path}: markers: section {twice[0]} index {twice[1]} is used twice")
-    for s in SECTIONS:
-        if sum(m.section == s for m in out) < 3:
-            raise LayoutFileError(f"{path}: markers: section {s} needs at least 3 markers to be measured")
+    problems = [p for p in [_wrong_side(out)] if p] or layout_problems(out)
+    if problems:
+        raise LayoutFileError(f"{path}: markers: {problems[0]}"
+                              + (f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""))
     return out

@@ -3,7 +3,9 @@
 Thresholds apply to the components named in each table (x, y, z in mm; alpha, beta, gamma in deg);
 components not named are reported but not gated: leaving a component out is the one way to ungate
 it. A threshold that is given must be a finite number > 0 (NaN, inf, zero and negative values are
-refused, never read as "not gated"); detection minima are in (0, 1]; ``[failures] max_rate`` is in
+refused, never read as "not gated"). A table that is given must gate at least one component, or
+say ``gated = false`` (and then name no threshold): an empty ``[estimation]`` table, or one with
+only a statistic, would otherwise switch the gate off without a word. Detection minima are in (0, 1]; ``[failures] max_rate`` is in
 [0, 1] and its ``conditions`` are names from ``core.config.CONDITIONS`` (case matters: "Normal" is
 refused), at least one, each once. With ``statistic = "rmse"`` (the default) a
 threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
@@ -26,6 +28,7 @@ from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (
 @dataclass(frozen=True)
 class Gate:
     statistic: str = "rmse"
+    gated: bool = True     # false: the table is reported only (it must then name no threshold)
     x: float = -1.0        # -1: not gated (the default of a component a spec leaves out)
     y: float = -1.0
     z: float = -1.0
@@ -33,7 +36,10 @@ class Gate:
     beta: float = -1.0
     gamma: float = -1.0
 
-    def gated(self) -> dict[str, float]:
+    def thresholds(self) -> dict[str, float]:
+        """Component -> threshold of every gated component (none when ``gated`` is false)."""
+        if not self.gated:
+            return {}
         return {c: getattr(self, c) for c in COMPONENTS if getattr(self, c) != -1.0}
 
 
@@ -91,6 +97,24 @@ def _bad(source: str, table: str, key: str, msg: str) -> ConfigError:
     return ConfigError(f"{source}: [{table}] {key}: {msg}")
 
 
+def _check_gates_something(source: str, name: str, gate: Gate, data: dict) -> None:
+    """A table given in the file gates a component, or says ``gated = false`` and names none."""
+    named = [c for c in COMPONENTS if c in data.get(name, {})]
+    if gate.gated and name in data and not named:
+        raise _bad(source, name, "thresholds", f"the table gates nothing (no {', '.join(COMPONENTS)}); give a "
+                   "threshold, or write gated = false to report the table without gating it")
+    if not gate.gated and named:
+        raise _bad(source, name, "gated", f"false, yet the table gives thresholds for {', '.join(named)}")
+
+
+def ungated_components(spec: AcceptanceSpec) -> list[str]:
+    """What the spec reports without gating: pose components and detection minima it leaves out."""
+    out = [f"{name}: {c}" for name in ("estimation", "localization")
+           for c in COMPONENTS if c not in getattr(spec, name).thresholds()]
+    out += [f"detection: {m[:-4]}" for m in ("map50_min", "map50_95_min") if getattr(spec.detection, m) == -1.0]
+    return out
+
+
 def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
     """Refuse a spec that would switch a gate off by accident. ``data``: the TOML tables as read
     (a component the file names must carry a real threshold; one it leaves out is not gated)."""
@@ -99,6 +123,7 @@ def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
         if gate.statistic not in ("rmse", "mse"):
             raise _bad(source, name, "statistic", f"{gate.statistic!r} is not rmse or mse")
         given = data.get(name, {})
+        _check_gates_something(source, name, gate, data)
         for c in COMPONENTS:
             if c in given:
                 v = getattr(gate, c)

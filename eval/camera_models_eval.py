@@ -13,7 +13,7 @@ import numpy as np
 
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.pose_metrics import error_stats, pose_error
-from dockfactory.eval.solve_frames import solve_dataset
+from dockfactory.eval.solve_frames import has_docking_runs, solve_dataset
 
 # (name, camera model, self-calibration, solved through the labels' true camera)
 MODES = (("pinhole (paper)", "pinhole", None, False), ("self-calibrated per frame", "auto", "frame", False),
@@ -59,9 +59,13 @@ def mode_block(ds, poses: dict) -> dict:
 
 
 def camera_models_block(ds, detections: dict | None, sigma_px: float, min_score: float = MIN_SCORE) -> dict:
-    """Per mode (MODES): its solve of the test split and the block of :func:`mode_block`."""
+    """Per mode (MODES): its solve of the test split and the block of :func:`mode_block`; the
+    per-docking-run modes only for a dataset with docking runs (without, no frames share a camera)."""
     out = {}
+    runs = has_docking_runs(ds)
     for name, model, calib, true_camera in MODES:
+        if calib == "sequence" and not runs:
+            continue
         src = {"detections": detections, "min_score": min_score} if detections is not None else \
               {"oracle_sigma_px": float(sigma_px)}
         poses = solve_dataset(ds, ("test",), camera_model=model, self_calibrate=calib,

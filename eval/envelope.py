@@ -79,7 +79,7 @@ def camera_envelope(ds, spec: AcceptanceSpec, sigma_px: float, grid: EnvelopeGri
     labels = ds.labels_of("test")
     pick = np.unique(np.linspace(0, len(labels) - 1, min(grid.max_frames, len(labels))).round().astype(int))
     frames = [g for g in (_frame_geometry(labels[i]) for i in pick) if g is not None]
-    gated = spec.localization.gated()
+    gated = spec.localization.thresholds()
     markers = ds.markers()
     angles = np.deg2rad(45.0 + 360.0 * np.arange(grid.directions) / grid.directions)
     rmse = {c: np.zeros((len(grid.pp_offsets_px), len(grid.k1))) for c in gated}
@@ -97,7 +97,7 @@ def camera_envelope(ds, spec: AcceptanceSpec, sigma_px: float, grid: EnvelopeGri
 
 
 def _envelope_record(grid: EnvelopeGrid, frames, sigma_px: float, spec: AcceptanceSpec, rmse: dict) -> dict:
-    gated = spec.localization.gated()
+    gated = spec.localization.thresholds()
     statistic = spec.localization.statistic
     value = {c: (r ** 2 if statistic == "mse" else r) for c, r in rmse.items()}
     passes = np.ones((len(grid.pp_offsets_px), len(grid.k1)), dtype=bool)

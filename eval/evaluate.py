@@ -15,7 +15,7 @@ import numpy as np
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
-from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec
+from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, ungated_components
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
 from dockfactory.eval.centre_noise_disc import (
@@ -228,14 +228,15 @@ def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
     - The failure rate covers the test frames and the repeatability captures of the listed
       conditions; over zero such frames it has no value and fails.
     Every criterion passes exactly when its value is not None and within its threshold, so the
-    rows a report prints determine the verdict.
+    rows a report prints determine the verdict. ``ungated`` lists what the spec reports without
+    gating (acceptance.ungated_components), so a reader sees what the verdict does not cover.
     """
     criteria = []
     for block, gate, label, what in (("estimation", spec.estimation, "estimation precision (repeatability)", "captures"),
                                      ("localization", spec.localization, "localization precision (accuracy)", "test frames")):
         blk = metrics[block]
         lacking, n = _without_pose(blk)
-        for c, thr in gate.gated().items():
+        for c, thr in gate.thresholds().items():
             stat = (blk["pooled"] if block == "estimation" else blk["overall"])[c][gate.statistic]
             note = ""
             if lacking:
@@ -266,7 +267,8 @@ def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
                      "unit": "", "note": f"{n_fail} of {n} test frames and repeatability captures" if n else
                      "no test frame or repeatability capture of these conditions",
                      "pass": criterion_passes("max", rate, spec.failures.max_rate), "paper": None})
-    return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria}
+    return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria,
+            "ungated": ungated_components(spec)}
 
 
 def criterion_passes(statistic: str, value, threshold) -> bool:

@@ -289,7 +289,8 @@ METRICS_SCHEMA = {
     "simulated_cameras?": SIMULATED_CAMERAS_SCHEMA,
     "acceptance": {"accepted": "bool",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
-                                         "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"})},
+                                         "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"}),
+                   "ungated?": ("list", "str")},
 }
 PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model_sha256?": "str?"}
 
@@ -419,7 +420,7 @@ def _html_verdict(metrics: dict, acc: dict, verdict: str) -> list[str]:
             f"poses from <b>{html.escape(str(metrics['poses']['source']))}</b>; test frames {loc['n_frames']} "
             f"(solved {loc['n_solved']}); repeatability captures {metrics['estimation']['n_frames']}.</p>",
             "<h2>Verdict</h2><table><tr><th>criterion</th><th>statistic</th><th>ours</th><th>threshold</th><th>paper</th><th>result</th></tr>",
-            _criteria_rows(acc), "</table>",
+            _criteria_rows(acc), "</table>", _ungated_line(acc, "html"),
             "<p class='note'>Estimation precision = pooled spread of repeated estimates of one static pose; localization precision = "
             "error against exact ground truth (test split). RMSE in mm / deg, MSE in mm^2 / deg^2. The paper's localization alpha "
             "figure (0.869 deg) contradicts its own 0.1 deg criterion and is suspect.</p>"]
@@ -524,11 +525,21 @@ def _html_document(parts: list[str]) -> str:
             f"<style>{css}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
 
 
+def _ungated_line(acc: dict, fmt: str) -> str:
+    """What the verdict does not cover (reported, not gated); empty when the spec gates all."""
+    ungated = acc.get("ungated") or []
+    if not ungated:
+        return ""
+    text = "Not gated (reported only): " + ", ".join(ungated) + "."
+    return f"<p class='note'>{html.escape(text)}</p>" if fmt == "html" else text + "\n"
+
+
 def _summary_markdown(verdict: str, acc: dict) -> str:
     md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
     md += [f"| {c['name']} | {_num(c['value'])} {c['unit']}{' (' + c['note'] + ')' if c.get('note') else ''} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
            f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
-    return "\n".join(md) + "\n"
+    ungated = _ungated_line(acc, "md")
+    return "\n".join(md) + "\n" + (f"\n{ungated}" if ungated else "")
 
 
 def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
@@ -582,7 +593,8 @@ def write_summary(out_html, metrics: dict, verdict: str, provenance: dict) -> di
     beside ``out_html``; returns the summary."""
     acc = metrics["acceptance"]
     loc, est = metrics["localization"], metrics["estimation"]
-    summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"], "provenance": provenance,
+    summary = {"verdict": verdict, "accepted": acc["accepted"], "criteria": acc["criteria"],
+               "ungated": acc.get("ungated", []), "provenance": provenance,
                "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
                "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
                "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()},

@@ -157,6 +157,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
         raise ValueError(f"self_calibrate must be one of {SELF_CALIBRATE}, got {self_calibrate!r}")
     if true_camera and (self_calibrate == "frame" or camera_model != "pinhole"):
         raise ValueError("true_camera solves with the labels' intrinsics: the pinhole model, per frame or per run")
+    if self_calibrate == "sequence":
+        require_docking_runs(ds)
     markers = ds.markers()
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
@@ -205,9 +207,25 @@ def solve_frame(markers, pp, centres, sigma, camera_model: str,
     return pose_record(res, int(len(cls))), used
 
 
+def has_docking_runs(ds: Dataset) -> bool:
+    """Whether the dataset's frames share cameras: with ``[runs]`` each camera unit keeps one fixed
+    camera (pose, zoom, lens) for all its frames; without, every frame draws its own camera."""
+    return ds.config.runs.frames_per_run > 0
+
+
+def require_docking_runs(ds: Dataset) -> None:
+    """DockfactoryError unless the dataset has docking runs: solving frames that do not share a
+    camera with shared intrinsics gives one focal length for many and a confident wrong pose."""
+    if not has_docking_runs(ds):
+        raise DockfactoryError(f"--self-calibrate sequence: dataset {ds.root} has no docking runs "
+                               "([runs] frames_per_run = 0): its frames do not share a camera; "
+                               "use --self-calibrate frame")
+
+
 def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
-    """The frames grouped by docking run (camera unit and run of their labels); a frame outside
-    any run (run -1, or a dataset without runs) is grouped with its unit's other such frames."""
+    """The frames of a dataset with docking runs grouped by run (camera unit and run of their
+    labels); a frame outside any run (a repeatability capture, run -1) is grouped with its unit's
+    other such frames: the unit's camera is fixed. ``require_docking_runs`` first."""
     groups: dict = {}
     for fid in frame_ids:
         spec = ds.labels[fid]["spec"]

@@ -22,7 +22,7 @@ from pipeline_data import write_painted_dataset
 
 from dockfactory.core.config import ConfigError
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval.acceptance import AcceptanceSpec, FailureGate, load_acceptance
+from dockfactory.eval.acceptance import AcceptanceSpec, FailureGate, load_acceptance, ungated_components
 from dockfactory.eval.cli import main
 from dockfactory.eval.evaluate import (
     estimation_block,
@@ -268,7 +268,7 @@ def test_finding3_a_nan_threshold_cannot_accept_a_250_mm_error(smoke, tmp_path, 
     for rec in poses["frames"].values():
         rec["pose"]["x_mm"] += 250.0
     spec = tmp_path / "nan.toml"
-    spec.write_text("[localization]\nx = nan\n[estimation]\n[failures]\nmax_rate = 1.0\n")
+    spec.write_text("[localization]\nx = nan\n[estimation]\ngated = false\n[failures]\nmax_rate = 1.0\n")
     rc, out, err = _cli_evaluate(root, poses, tmp_path, spec, capsys)
     assert rc == 2 and "ACCEPTED" not in out
     assert err.startswith("dockfactory: error: ") and str(spec) in err and "[localization] x" in err
@@ -276,10 +276,31 @@ def test_finding3_a_nan_threshold_cannot_accept_a_250_mm_error(smoke, tmp_path, 
 
 def test_finding3_leaving_a_component_out_is_the_way_to_ungate_it(tmp_path):
     p = tmp_path / "spec.toml"
-    p.write_text("[localization]\nx = 2.5\n[estimation]\n[detection]\n[failures]\nmax_rate = 0\n")
+    p.write_text("[localization]\nx = 2.5\n[estimation]\ngated = false\n[detection]\n[failures]\nmax_rate = 0\n")
     s = load_acceptance(p)
-    assert s.localization.gated() == {"x": 2.5} and s.estimation.gated() == {}
+    assert s.localization.thresholds() == {"x": 2.5} and s.estimation.thresholds() == {}
     assert s.detection.map50_min == -1.0 and s.failures.max_rate == 0.0   # zero failures allowed
+    assert ungated_components(s) == ["estimation: x", "estimation: y", "estimation: z", "estimation: alpha",
+                                     "estimation: beta", "estimation: gamma", "localization: y", "localization: z",
+                                     "localization: alpha", "localization: beta", "localization: gamma",
+                                     "detection: map50", "detection: map50_95"]
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[estimation]\n", "[estimation] thresholds: the table gates nothing"),
+    ('[estimation]\nstatistic = "mse"\n', "[estimation] thresholds: the table gates nothing"),
+    ("[localization]\n", "[localization] thresholds: the table gates nothing"),
+    ("[estimation]\ngated = false\nx = 1.0\n", "[estimation] gated: false, yet the table gives thresholds for x"),
+    ('[estimation]\ngated = "no"\n', "[estimation] gated"),
+])
+def test_a_table_that_gates_nothing_must_say_so(tmp_path, text, key):
+    """An empty [estimation] table (or one with a statistic alone) switched the gate off without a
+    word: ACCEPTED where the same poses are otherwise REJECTED. Now it must say gated = false."""
+    p = tmp_path / "spec.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as exc:
+        load_acceptance(p)
+    assert key in str(exc.value) and str(p) in str(exc.value) and "\n" not in str(exc.value)
 
 
 @pytest.mark.parametrize("conditions,expect", [

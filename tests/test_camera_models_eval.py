@@ -91,3 +91,24 @@ def test_solve_cli_self_calibrates_each_docking_run(runs, tmp_path, capsys):
                  "--out", str(tmp_path / "q.json")]) == 2
     assert "fisheye" in capsys.readouterr().err
 
+
+
+def test_sequence_self_calibration_refuses_frames_that_share_no_camera(painted_source, tmp_path, capsys):
+    """Without docking runs every frame draws its own camera (focal lengths hundreds of px apart):
+    one shared focal for all of them gave X errors of tens of mm with a reported std near 1 mm.
+    `solve --self-calibrate sequence` refuses in one line; evaluate's camera-model block leaves
+    the per-run modes out."""
+    from dockfactory.eval.cli import main
+    ds = Dataset.open(painted_source)
+    assert ds.config.runs.frames_per_run == 0
+    focals = {round(lab["camera"]["focal_px"]) for lab in ds.labels_of("test")}
+    assert len(focals) > 1   # the frames truly do not share a camera
+    out = tmp_path / "p.json"
+    code = main(["solve", str(painted_source), "--oracle-noise", "0.1", "--self-calibrate", "sequence",
+                 "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no docking runs" in err[0] and str(painted_source) in err[0], err
+    assert not out.exists()
+    block = camera_models_block(ds, None, 0.1)
+    assert not any(b["self_calibrate"] == "sequence" for b in block.values())
+    assert {"pinhole (paper)", "self-calibrated per frame", "true intrinsics per frame (reference)"} <= set(block)

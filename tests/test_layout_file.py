@@ -18,6 +18,17 @@ def test_a_datasets_layout_reads_back_as_its_markers(painted_source):
         assert max(abs(u - v) for u, v in zip(a.normal, b.normal)) < 1e-12
 
 
+def _first_of_each(markers, n: int) -> list:
+    return [m for m in markers if m["index"] < n]
+
+
+def _swap_sections(markers) -> None:
+    """A and B's labels exchanged (ids too), positions kept: what a hand-edited layout gets wrong."""
+    for m in markers:
+        m["section"] = "B" if m["section"] == "A" else "A"
+        m["id"] = m["section"] + str(m["index"])
+
+
 def _write(tmp_path, edit):
     from dockfactory.core.config import load_config
     from dockfactory.core.resources import shipped_config
@@ -38,10 +49,16 @@ def _write(tmp_path, edit):
     (lambda r: r["markers"][3].update(diameter_mm=-1), "markers[3].diameter_mm"),
     (lambda r: r["markers"][3].update(index=True), "markers[3].index"),
     (lambda r: r["markers"][4].update(id=r["markers"][0]["id"]), "used twice"),
-    (lambda r: r.update(markers=[m for m in r["markers"] if m["section"] == "A"]), "section B needs"),
+    (lambda r: r.update(markers=[m for m in r["markers"] if m["section"] == "A"]), "section B: 0 markers"),
     (lambda r: r.update(markers={}), "markers: expected a list"),
+    (lambda r: r.update(markers=_first_of_each(r["markers"], 4)), "section A: 4 markers, at least 6 needed"),
+    (lambda r: r["markers"][5].update(center_mm=[-1e30, 0, 0]), "markers[5].center_mm"),
+    (lambda r: r["markers"][5].update(diameter_mm=1e30), "markers[5].diameter_mm"),
+    (lambda r: _swap_sections(r["markers"]), "are sections A and B swapped"),
+    (lambda r: r["markers"][1].update(center_mm=r["markers"][0]["center_mm"]), "apart"),
 ], ids=["normal-length", "centre-short", "centre-nan", "section", "no-diameter", "negative-diameter",
-        "bool-index", "duplicate-id", "no-B", "not-a-list"])
+        "bool-index", "duplicate-id", "no-B", "not-a-list", "four-per-section", "huge-coordinate",
+        "huge-diameter", "swapped-sections", "overlapping"])
 def test_bad_layouts_are_one_line_errors(tmp_path, edit, where):
     path = _write(tmp_path, edit)
     with pytest.raises(LayoutFileError) as exc:
