@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import zipfile
 from pathlib import Path
 
 import cv2
@@ -97,15 +98,20 @@ def _read_npz(path: Path, read) -> dict | None:
     try:
         with np.load(path, allow_pickle=False) as z:
             return read(z)
-    except (OSError, ValueError, KeyError) as exc:
-        raise DatasetError(f"{path}: not a fingerprint file ({type(exc).__name__}: {exc})") from None
+    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as exc:
+        raise DatasetError(f"{path}: not a fingerprint file ({type(exc).__name__}: {exc})"[:300]) from None
 
 
 def _v1(z) -> dict:
+    ids, tiles, geometry = z["frame_ids"], z["tiles"], z["label_geometry"]
+    if tiles.ndim != 4 or not len(ids) == len(tiles) == len(geometry):
+        raise ValueError(f"tiles of shape {tiles.shape} for {len(ids)} frames (frames, rows, cols, channels expected)")
     return dict(zip((str(f) for f in z["frame_ids"]), zip(z["tiles"], (str(g) for g in z["label_geometry"]))))
 
 
 def _v2(z) -> dict:
+    if z["index"].ndim != 2 or not len(z["frame_ids"]) == len(z["label_core"]) == len(z["index"]) == len(z["index_len"]):
+        raise ValueError("frame_ids, label_core, index and index_len do not line up")
     rows = (row[:n] for row, n in zip(z["index"], z["index_len"]))
     return dict(zip((str(f) for f in z["frame_ids"]), zip((str(c) for c in z["label_core"]), rows)))
 

@@ -16,7 +16,9 @@ file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
     boxes read from Cycles' index pass must match byte for byte, and those counts and box edges
     must be within ``INDEX_TOLERANCE_PX`` of the published ones;
 - its image must match byte for byte or its fingerprint (the mean of every 80 x 80 px tile per
-  channel, in 8-bit levels) must be within ``tolerance`` levels of the published one;
+  channel, in 8-bit levels) must be within ``tolerance`` levels of the published one, and its
+  markers must show where the label (whose geometry matched) says, in their colour
+  (``generator.marker_check``: an erased, moved or recoloured marker barely moves a tile mean);
 - the config and layout files must match byte for byte.
 
 Frames of the manifest that were not re-rendered are not checked (a subset is the point).
@@ -24,9 +26,11 @@ Frames of the manifest that were not re-rendered are not checked (a subset is th
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from dockfactory.core.config import config_from_dict
@@ -39,10 +43,11 @@ from dockfactory.generator.fingerprints import (
     FINGERPRINTS_V2_NAME,
     read_fingerprints,
     read_fingerprints_v2,
-    read_image_tiles,
+    image_tiles,
     write_fingerprints,
     write_fingerprints_v2,
 )
+from dockfactory.generator.marker_check import marker_problems
 from dockfactory.generator.label_prints import (
     INDEX_TOLERANCE_PX,
     index_difference,
@@ -68,6 +73,7 @@ class PublishedReport:
     max_index_diff: float = 0.0
     images_identical: int = 0
     images_within: int = 0
+    markers_checked: int = 0
     max_tile_diff: float = 0.0
     tolerance: float = DEFAULT_TOLERANCE
     problems: list = field(default_factory=list)
@@ -84,7 +90,8 @@ class PublishedReport:
         lines = [head, f"  {self.frames} frames checked: labels {self.labels_identical}/{self.frames} byte for byte, "
                        f"{self.labels_geometry} with the same geometry (image measurements differ), {index}"
                        f"images {self.images_identical} byte for byte, {self.images_within} within "
-                       f"{self.tolerance} levels (max tile-mean difference {self.max_tile_diff:.3f})"]
+                       f"{self.tolerance} levels (max tile-mean difference {self.max_tile_diff:.3f}) "
+                       f"with their markers where the labels say ({self.markers_checked} markers judged)"]
         return "\n".join(lines + [f"  note: {n}" for n in self.notes] + [f"  {p}" for p in self.problems])
 
 
@@ -97,15 +104,38 @@ class _Published:
 
 
 def _load_published(manifest_path: Path) -> _Published:
-    """The manifest, its records and the fingerprint files beside it (None where absent)."""
+    """The manifest, its records and the fingerprint files beside it (None where absent);
+    DatasetError naming the file and key when the manifest is not one a publish writes."""
     try:
-        manifest = json.loads(manifest_path.read_text())
-        records = {r["path"]: r for r in manifest["files"]}
-        manifest["version_id"], manifest["frames"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DatasetError(f"{manifest_path}: not a published dataset manifest ({type(exc).__name__}: {exc})") from None
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise DatasetError(f"{manifest_path}: not a published dataset manifest ({type(exc).__name__})") from None
+    problem = _manifest_problem(manifest)
+    if problem:
+        raise DatasetError(f"{manifest_path}: not a published dataset manifest: {problem}"[:400])
+    records = {r["path"]: r for r in manifest["files"]}
     return _Published(manifest, records, read_fingerprints(manifest_path.with_name(FINGERPRINTS_NAME)),
                       read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V2_NAME)))
+
+
+def _manifest_problem(manifest) -> str | None:
+    """Why ``manifest`` (parsed JSON) lacks what verify reads, or None."""
+    if not isinstance(manifest, dict):
+        return "expected a JSON object"
+    if not isinstance(manifest.get("version_id"), str):
+        return f"version_id: expected a string, got {manifest.get('version_id')!r}"
+    for key, fields in (("files", (("path", str), ("bytes", int), ("sha256", str))), ("frames", (("frame_id", str),))):
+        items = manifest.get(key)
+        if not isinstance(items, list):
+            return f"{key}: expected a list"
+        for i, rec in enumerate(items):
+            for name, kind in fields:
+                value = rec.get(name) if isinstance(rec, dict) else None
+                if not isinstance(value, kind) or isinstance(value, bool):
+                    return f"{key}[{i}].{name}: expected {kind.__name__}, got {value!r}"
+    if not isinstance(manifest.get("software", {}), dict):
+        return "software: expected an object"
+    return None
 
 
 def _rerendered_frames(root: Path) -> list[str]:
@@ -158,17 +188,32 @@ def _check_image(root: Path, fid: str, pub: _Published, rep: PublishedReport) ->
     if pub.prints is None or fid not in pub.prints:
         rep.problems.append(f"images/{fid}.png: differs from the manifest and no fingerprint to compare it with")
         return
-    try:
-        diff = float(np.abs(read_image_tiles(path) - pub.prints[fid][0]).max())
-    except DatasetError as exc:
-        rep.problems.append(str(exc))
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) if path.is_file() else None
+    if image is None or image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        rep.problems.append(f"{path}: unreadable image (8-bit RGB PNG expected)")
         return
+    tiles = pub.prints[fid][0]
+    diff = float(np.abs(image_tiles(image) - tiles).max()) if image_tiles(image).shape == tiles.shape else math.inf
     rep.max_tile_diff = max(rep.max_tile_diff, diff)
-    if diff <= rep.tolerance:
-        rep.images_within += 1
-    else:
+    if diff > rep.tolerance:
         rep.problems.append(f"images/{fid}.png: tile means differ by up to {diff:.3f} levels "
                             f"(tolerance {rep.tolerance})")
+        return
+    judged, markers = marker_problems(image[..., ::-1], _label_json(root / "labels" / f"{fid}.json"),
+                                      f"images/{fid}.png")
+    rep.markers_checked += judged
+    if markers:
+        rep.problems.extend(markers)
+    else:
+        rep.images_within += 1
+
+
+def _label_json(path: Path) -> dict:
+    try:
+        label = json.loads(path.read_bytes())
+    except (OSError, ValueError, RecursionError):
+        return {}
+    return label if isinstance(label, dict) else {}
 
 
 def _version_difference(ident: dict, manifest: dict) -> str | None:
@@ -189,6 +234,9 @@ def _version_difference(ident: dict, manifest: dict) -> str | None:
 def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) -> PublishedReport:
     """Check the (partial) dataset at ``root`` against a published manifest (module docstring)."""
     root, manifest_path = Path(root), Path(manifest_path)
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not (math.isfinite(tolerance)
+                                                                                      and tolerance > 0):
+        raise DatasetError(f"--tolerance: expected a finite number of levels > 0, got {tolerance!r}")
     pub = _load_published(manifest_path)
     rep = PublishedReport(str(root), str(manifest_path), tolerance=tolerance)
     ident = load_identity(root)
@@ -199,7 +247,7 @@ def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) ->
                                 f"{pub.manifest['version_id']} ({why})")
             return rep
         rep.notes.append(f"generator {ident.get('generator_version')}, the manifest's "
-                         f"{pub.manifest['software'].get('generator')}: the same config and Blender, so the "
+                         f"{pub.manifest.get('software', {}).get('generator')}: the same config and Blender, so the "
                          f"frames are compared as they are (a newer generator must reproduce them)")
     for name in EXACT_ROOT_FILES:
         if not _same_bytes(root / name, pub.records.get(name)):

@@ -225,3 +225,123 @@ def test_index_difference_is_none_for_another_structure():
     assert index_difference(a, np.array([11.0, 0.5, np.nan])) == 1.0
     assert index_difference(a, np.array([10.0, 1.5, 3.0])) is None
     assert index_difference(a, a[:2]) is None
+
+
+# the markers themselves (generator/marker_check.py): a tile mean barely moves when a marker is
+# erased, moved or recoloured; the check compares each marker's colour with its verified label
+
+def _checked_markers(sub, fid):
+    from dockfactory.generator.marker_check import MIN_PIXELS
+    label = json.loads((sub / "labels" / f"{fid}.json").read_text())
+    return [m for m in label["markers"] if m.get("legible") and (m.get("visible_pixels") or 0) >= MIN_PIXELS
+            and m.get("visible_fraction", 0) >= 0.99]
+
+
+def _box_slices(m, pad: int = 2):
+    x0, y0, x1, y1 = m["bbox_visible_px"]
+    return slice(int(y0 + 0.5) - pad, int(y1 + 0.5) + pad), slice(int(x0 + 0.5) - pad, int(x1 + 0.5) + pad)
+
+
+def _rewrite(path, edit) -> None:
+    img = cv2.imread(str(path))
+    edit(img)
+    cv2.imwrite(str(path), img)
+
+
+def test_erased_markers_fail_though_the_tile_means_barely_move(release):
+    pub, sub, ids = release
+    markers = _checked_markers(sub, ids[0])
+    assert len(markers) >= 3
+    path = sub / "images" / f"{ids[0]}.png"
+
+    def erase(img):
+        for m in markers[:3]:
+            ys, xs = _box_slices(m)
+            border = np.concatenate([img[ys.start - 1, xs], img[ys.stop, xs]])
+            img[ys, xs] = np.median(border, axis=0).astype(np.uint8)   # painted over with its surroundings
+    _rewrite(path, erase)
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.max_tile_diff < published.DEFAULT_TOLERANCE, rep.text()    # the tiles cannot see it
+    erased = [p for p in rep.problems if "erased, recoloured or moved" in p]
+    assert not rep.ok and len(erased) == 3, rep.text()
+    assert all(f"marker {m['id']}:" in " ".join(erased) for m in markers[:3])
+
+
+def test_a_recoloured_or_moved_marker_fails_and_noise_passes_with_markers_checked(release):
+    pub, sub, ids = release
+    path = sub / "images" / f"{ids[1]}.png"
+    original = cv2.imread(str(path))
+    noise = np.random.default_rng(1).integers(-2, 3, original.shape)   # another CPU's bits, +-2 levels
+    cv2.imwrite(str(path), np.clip(original.astype(int) + noise, 0, 255).astype(np.uint8))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok and rep.markers_checked == len(_checked_markers(sub, ids[1])) >= 1, rep.text()
+    m = max(_checked_markers(sub, ids[1]), key=lambda m: m["visible_pixels"])
+    ys, xs = _box_slices(m, pad=0)
+
+    def recolour(img):
+        img[ys, xs] = img[ys, xs][..., ::-1]          # red and blue exchanged on the marker's box
+    cv2.imwrite(str(path), original)
+    _rewrite(path, recolour)
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert any(f"marker {m['id']}:" in p for p in rep.problems), rep.text()
+
+    def move(img):
+        ys2, xs2 = _box_slices(m, pad=6)
+        img[ys2, xs2] = np.roll(original[ys2, xs2], 4, axis=1)   # the disc moved 4 px to the right
+    cv2.imwrite(str(path), original)
+    _rewrite(path, move)
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert any(f"marker {m['id']}: its colour's centroid is" in p for p in rep.problems), rep.text()
+
+
+@pytest.mark.parametrize("tolerance", [float("nan"), -1.0, 0.0, float("inf")])
+def test_a_tolerance_must_be_finite_and_positive(release, capsys, tolerance):
+    pub, sub, ids = release
+    with pytest.raises(DatasetError, match="--tolerance: expected a finite number"):
+        published.verify_against(sub, pub / "manifest.json", tolerance)
+    assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json"),
+                 "--tolerance", str(tolerance)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--tolerance" in err[0]
+
+
+def _forge(pub, edit):
+    manifest = json.loads((pub / "manifest.json").read_text())
+    edit(manifest)
+    (pub / "manifest.json").write_text(json.dumps(manifest))
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda m: m.update(frames="000000"), "frames: expected a list"),
+    (lambda m: m.update(frames=[1, 2]), "frames[0].frame_id"),
+    (lambda m: m["frames"][0].pop("frame_id"), "frames[0].frame_id"),
+    (lambda m: m["files"][0].pop("bytes"), "files[0].bytes"),
+    (lambda m: m["files"][1].update(sha256=None), "files[1].sha256"),
+    (lambda m: m.update(version_id=7), "version_id"),
+    (lambda m: m.update(software=[]), "software"),
+])
+def test_a_forged_manifest_is_a_one_line_error(release, capsys, edit, key):
+    pub, sub, ids = release
+    _forge(pub, edit)
+    assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0] and key in err[0] and "manifest.json" in err[0], err
+
+
+@pytest.mark.parametrize("damage", ["truncated", "wrong-shape", "short-ids"])
+def test_a_forged_fingerprint_file_is_a_one_line_error(release, capsys, damage):
+    pub, sub, ids = release
+    path = pub / published.FINGERPRINTS_NAME
+    if damage == "truncated":
+        path.write_bytes(path.read_bytes()[:200])
+    else:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        if damage == "wrong-shape":
+            arrays["tiles"] = arrays["tiles"][:, 0]
+        else:
+            arrays["frame_ids"] = arrays["frame_ids"][:1]
+        np.savez(path.with_suffix(""), **arrays)
+    assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a fingerprint file" in err[0] and published.FINGERPRINTS_NAME in err[0], err
