@@ -27,7 +27,8 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout import Marker, layout_problems
 from dockfactory.core.names import SECTIONS
 
-MAX_MARKERS = 1000
+MAX_MARKERS_PER_SECTION = 32   # identification's time grows about as markers^5 (bench/solve_memory.py)
+MAX_MARKERS = 2 * MAX_MARKERS_PER_SECTION
 MAX_COORDINATE_MM = 1.0e5   # 100 m: a docking section is metres across, never more
 MAX_DIAMETER_MM = 1.0e3
 
@@ -104,6 +105,11 @@ def read_layout_file(path) -> tuple[Marker, ...]:
     twice = next((p for p in pairs if pairs.count(p) > 1), None)
     if twice is not None:
         raise LayoutFileError(f"{path}: markers: section {twice[0]} index {twice[1]} is used twice")
+    for sec in SECTIONS:
+        n = sum(m.section == sec for m in out)
+        if n > MAX_MARKERS_PER_SECTION:
+            raise LayoutFileError(f"{path}: markers: section {sec} has {n} markers, at most {MAX_MARKERS_PER_SECTION} "
+                                  "per section can be identified")
     problems = [p for p in [_wrong_side(out)] if p] or layout_problems(out)
     if problems:
         raise LayoutFileError(f"{path}: markers: {problems[0]}"

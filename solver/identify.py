@@ -36,6 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dockfactory.core.layout_file import MAX_MARKERS_PER_SECTION
 from dockfactory.solver.checks import (
     as_points,
     as_principal_point,
@@ -131,44 +132,35 @@ class _Hyp:
         return any(d in inv_a and inv_a[d] != m for m, d in other.pairs.items())
 
 
+DETECTIONS_SPARE = 16
+HYPOTHESIS_BLOCK = 1 << 21   # (hypothesis, marker, detection) distances held at once: 32 MB
+
+
 def _similarity_hypotheses(w, z, anchor_idx, prior: FacingPrior, spacing_mm, max_keep):
     """Score the similarities through every pair of anchor detections and ordered pair of
     markers (``w`` (M,) complex marker coordinates X - iY, ``z`` (N,) complex pixels); return
-    up to ``max_keep`` distinct match keys (per marker: detection index or -1), best first."""
-    scale_range, max_roll_rad = prior.scale_range, np.radians(prior.max_roll_deg)
-    gate_frac = prior.loose_gate
-    m = w.size
-    ii, jj = np.triu_indices(anchor_idx.size, 1)
-    di, dj = anchor_idx[ii], anchor_idx[jj]
-    mi, mj = np.nonzero(~np.eye(m, dtype=bool))
-    zi = z[di][:, None]
-    zj = z[dj][:, None]
-    wi = w[mi][None, :]
-    wj = w[mj][None, :]
-    a = (zj - zi) / (wj - wi)                                  # (P, Q)
-    b = zi - a * wi
-    a = a.ravel()
-    b = b.ravel()
-    s = np.abs(a)
-    ok = (s >= scale_range[0]) & (s <= scale_range[1]) & (np.abs(np.angle(a)) <= max_roll_rad)
-    if not ok.any():
+    up to ``max_keep`` distinct match keys (per marker: detection index or -1), best first.
+    Computed in blocks of hypotheses, so memory stays bounded by ``HYPOTHESIS_BLOCK`` distances
+    plus a few numbers per hypothesis, whatever the counts (the result does not depend on it)."""
+    a, b = _plausible_similarities(w, z, anchor_idx, prior)
+    if a.size == 0:
         return []
-    a, b, s = a[ok], b[ok], s[ok]
-    proj = a[:, None] * w[None, :] + b[:, None]                # (H, M)
-    dist = np.abs(proj[:, :, None] - z[None, None, :])         # (H, M, N)
-    nearest = dist.argmin(axis=2)
-    dmin = np.take_along_axis(dist, nearest[:, :, None], axis=2)[:, :, 0]
-    gate = gate_frac * spacing_mm * s
-    hit = dmin <= gate[:, None]
-    n_hit = hit.sum(axis=1)
-    score = n_hit - 1e-3 * (dmin * hit).sum(axis=1) / np.maximum(gate, 1e-9)
+    s = np.abs(a)
+    gate = prior.loose_gate * spacing_mm * s
+    score, n_hit = np.empty(a.size), np.empty(a.size, dtype=np.int64)
+    step = max(1, HYPOTHESIS_BLOCK // max(1, w.size * z.size))
+    for k in range(0, a.size, step):
+        nearest, dmin, hit = _matches(a[k:k + step], b[k:k + step], w, z, gate[k:k + step])
+        n_hit[k:k + step] = hit.sum(axis=1)
+        score[k:k + step] = n_hit[k:k + step] - 1e-3 * (dmin * hit).sum(axis=1) / np.maximum(gate[k:k + step], 1e-9)
     order = np.argsort(-score)[:max_keep * 8]
     few = np.flatnonzero(n_hit[order] < 3)
     if few.size:
         order = order[:few[0]]                                # the rest explain too little
+    nearest, _, hit = _matches(a[order], b[order], w, z, gate[order])
     out = []
     seen = set()
-    for key in np.where(hit[order], nearest[order], -1).tolist():
+    for key in np.where(hit, nearest, -1).tolist():
         key = tuple(key)
         if key in seen:
             continue
@@ -177,6 +169,40 @@ def _similarity_hypotheses(w, z, anchor_idx, prior: FacingPrior, spacing_mm, max
         if len(out) >= max_keep:
             break
     return out
+
+
+def _plausible_similarities(w, z, anchor_idx, prior: FacingPrior):
+    """(a, b) (H,) complex: the similarities z = a w + b mapping an ordered pair of markers onto
+    a pair of anchor detections, within the prior's scale range and roll; in the order of
+    (anchor pair, marker pair), computed one block of anchor pairs at a time."""
+    scale_range, max_roll_rad = prior.scale_range, np.radians(prior.max_roll_deg)
+    ii, jj = np.triu_indices(anchor_idx.size, 1)
+    mi, mj = np.nonzero(~np.eye(w.size, dtype=bool))
+    wi, wj = w[mi][None, :], w[mj][None, :]
+    step = max(1, HYPOTHESIS_BLOCK // max(1, mi.size))
+    a_out, b_out = [], []
+    for k in range(0, ii.size, step):
+        zi, zj = z[anchor_idx[ii[k:k + step]]][:, None], z[anchor_idx[jj[k:k + step]]][:, None]
+        a = ((zj - zi) / (wj - wi))                           # (P, Q)
+        b = (zi - a * wi).ravel()
+        a = a.ravel()
+        s = np.abs(a)
+        ok = (s >= scale_range[0]) & (s <= scale_range[1]) & (np.abs(np.angle(a)) <= max_roll_rad)
+        a_out.append(a[ok])
+        b_out.append(b[ok])
+    if not a_out:
+        return np.empty(0, complex), np.empty(0, complex)
+    return np.concatenate(a_out), np.concatenate(b_out)
+
+
+def _matches(a, b, w, z, gate):
+    """For hypotheses (a, b) (H,): each marker's nearest detection (H, M), its distance and
+    whether it lies within the hypothesis's ``gate`` (H,)."""
+    proj = a[:, None] * w[None, :] + b[:, None]                # (H, M)
+    dist = np.abs(proj[:, :, None] - z[None, None, :])         # (H, M, N)
+    nearest = dist.argmin(axis=2)
+    dmin = np.take_along_axis(dist, nearest[:, :, None], axis=2)[:, :, 0]
+    return nearest, dmin, dmin <= gate[:, None]
 
 
 def _one_to_one(proj, z, gate):
@@ -442,6 +468,7 @@ def identify_markers(markers, principal_point, detections,
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)
     cls, uv = parse_detections(detections)
+    check_identification_size(sections, len(cls))
     search = replace(_Search.from_options(options, refine_options), trusted=_trusted_rows(trusted, len(cls)))
     try:
         return _search(ids, sections, pts, pp, cls, uv, search)
@@ -452,6 +479,30 @@ def identify_markers(markers, principal_point, detections,
             return _search(ids, sections, pts, pp, cls, uv, replace(search, leave_one_out=True))
         except SolverError:
             raise first from None
+
+
+def max_detections(n_markers: int) -> int:
+    """Most detections one frame may bring for a layout of ``n_markers``: two per marker (a
+    duplicate each) and DETECTIONS_SPARE strays; beyond, the detector's output is not a picture
+    of the layout (non-maximum suppression off, a wrong class map) and the search's time, which
+    grows about as detections^2, would be unbounded."""
+    return 2 * n_markers + DETECTIONS_SPARE
+
+
+def check_identification_size(sections, n_detections: int) -> None:
+    """InvalidSolverInput when the layout has more than MAX_MARKERS_PER_SECTION markers in a
+    section or the frame more than :func:`max_detections`: the limits that bound the time and
+    memory of identification (bench/solve_memory.py)."""
+    for s in ("A", "B"):
+        n = sum(sec == s for sec in sections)
+        if n > MAX_MARKERS_PER_SECTION:
+            raise InvalidSolverInput(f"markers: section {s} has {n} markers, at most {MAX_MARKERS_PER_SECTION} "
+                                     "per section can be identified")
+    limit = max_detections(len(sections))
+    if n_detections > limit:
+        raise InvalidSolverInput(f"detections: {n_detections} for a layout of {len(sections)} markers, at most "
+                                 f"{limit} (2 per marker + {DETECTIONS_SPARE}): is the detector's non-maximum "
+                                 "suppression off?")
 
 
 def _trusted_rows(trusted, n: int) -> frozenset | None:

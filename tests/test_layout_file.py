@@ -75,3 +75,14 @@ def test_unreadable_layouts(tmp_path, content):
         read_layout_file(path)
     with pytest.raises(LayoutFileError, match="not found"):
         read_layout_file(tmp_path / "nope.json")
+
+
+def test_a_layout_beyond_the_identification_limit_is_refused(tmp_path):
+    from dockfactory.core.layout_file import MAX_MARKERS_PER_SECTION
+    n = MAX_MARKERS_PER_SECTION + 1
+    markers = [{"id": f"{s}{i}", "section": s, "index": i, "center_mm": [(-1 if s == "A" else 1) * (20 + 30 * i), 0, 300],
+                "normal": [0, 0, 1], "diameter_mm": 12.0} for s, count in (("A", n), ("B", 6)) for i in range(count)]
+    path = tmp_path / "layout.json"
+    path.write_text(json.dumps({"markers": markers}))
+    with pytest.raises(LayoutFileError, match=f"section A has {n} markers, at most {MAX_MARKERS_PER_SECTION} per section"):
+        read_layout_file(path)

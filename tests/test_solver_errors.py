@@ -307,3 +307,66 @@ def test_correspondences_never_give_a_silently_wrong_pose():
             continue
         assert abs(r.x_mm - pose_components(sc.d_from_b)["x_mm"]) < 20.0, seed
     assert refused <= 6
+
+
+# bounded identification: named limits on the layout and the detections, memory in blocks
+
+def _big_layout(per_section: int):
+    from dockfactory.core.layout import build_layout
+    rng = np.random.default_rng(1)
+
+    def pattern():
+        pts = []
+        while len(pts) < per_section:
+            s, phi = rng.uniform(20, 200), rng.uniform(-60, 60)
+            if all(np.hypot(s - a, (phi - b) * 5.2) > 32 for a, b in pts):
+                pts.append((s, phi))
+        return pts
+    return build_layout(pattern(), pattern(), 300.0, 12.0)
+
+
+def test_identification_refuses_a_layout_beyond_its_limit():
+    from dockfactory.core.layout_file import MAX_MARKERS_PER_SECTION
+    markers = _big_layout(MAX_MARKERS_PER_SECTION + 1)
+    sc = docking_scene(np.random.default_rng(2), markers=_big_layout(MAX_MARKERS_PER_SECTION + 1))
+    dets = (np.r_[np.zeros(len(sc.uv_a), int), np.ones(len(sc.uv_b), int)], np.vstack([sc.uv_a, sc.uv_b]))
+    with pytest.raises(InvalidSolverInput, match=f"section A has {MAX_MARKERS_PER_SECTION + 1} markers, at most"):
+        solve_docking(markers, sc.principal_point, detections=dets, sigma_px=0.2)
+
+
+def test_twenty_copies_of_each_detection_are_refused_not_a_memory_error():
+    """One frame's detections duplicated 20 times raised MemoryError (the hypotheses' distances
+    grew as detections^3); now the count is refused in one line naming the limit."""
+    from dockfactory.solver.identify import max_detections
+    sc = docking_scene(np.random.default_rng(3))
+    markers = default_layout()
+    uv = np.repeat(np.vstack([sc.uv_a, sc.uv_b]), 20, axis=0)
+    cls = np.repeat(np.r_[np.zeros(len(sc.uv_a), int), np.ones(len(sc.uv_b), int)], 20)
+    with pytest.raises(InvalidSolverInput, match=f"{len(uv)} for a layout of {len(markers)} markers, at most "
+                                                 f"{max_detections(len(markers))}"):
+        solve_docking(markers, sc.principal_point, detections=(cls, uv), sigma_px=0.2)
+    # at the limit (two copies of each, plus strays) it still identifies every marker
+    n = max_detections(len(markers))
+    uv2 = np.repeat(np.vstack([sc.uv_a, sc.uv_b]), 2, axis=0) + np.random.default_rng(4).normal(0, 0.2, (2 * len(cls) // 20, 2))
+    cls2 = np.repeat(cls[::20], 2)
+    stray = np.random.default_rng(5).uniform([0, 0], [1280, 960], (n - len(uv2), 2))
+    res = solve_docking(markers, sc.principal_point, sigma_px=0.2,
+                        detections=(np.r_[cls2, np.zeros(len(stray), int)], np.vstack([uv2, stray])))
+    assert len({m for m in res.marker_ids if m}) == len(markers)
+
+
+def test_hypotheses_in_blocks_are_the_hypotheses_at_once(monkeypatch):
+    """The block size bounds memory only: a block of 64 distances gives the same keys."""
+    from dockfactory.solver import identify
+    from dockfactory.solver.options import DEFAULT_IDENTIFY
+    rng = np.random.default_rng(6)
+    sc = docking_scene(rng)
+    uv = np.vstack([sc.uv_a, sc.uv_b, rng.uniform([0, 0], [1280, 960], (3, 2))]) + rng.normal(0, 0.4, (17, 2))
+    z = uv[:, 0] + 1j * uv[:, 1]
+    w = sc.points_a[:, 0] - 1j * sc.points_a[:, 1]
+    spacing = identify._min_spacing(w)
+    anchors = np.arange(z.size)
+    at_once = identify._similarity_hypotheses(w, z, anchors, DEFAULT_IDENTIFY.prior, spacing, 8)
+    monkeypatch.setattr(identify, "HYPOTHESIS_BLOCK", 64)
+    assert identify._similarity_hypotheses(w, z, anchors, DEFAULT_IDENTIFY.prior, spacing, 8) == at_once
+    assert len(at_once) == 8
