@@ -11,6 +11,7 @@ corrupted or not ours raises :class:`CheckpointError` (a ValueError) with the pa
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import torch
@@ -47,10 +48,11 @@ def load_file(path, expect: tuple[str, ...] = (CHECKPOINT_FORMAT, WEIGHTS_FORMAT
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint file")
     try:
-        obj = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():   # torch's advice on pickle protocols is not the user's business
+            warnings.simplefilter("ignore")
+            obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated zip, bad pickle, foreign classes ...
-        raise CheckpointError(f"{path}: not a readable checkpoint (truncated or corrupted file?): "
-                              f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from None
+        raise CheckpointError(f"{path}: {_unreadable_reason(path, exc)}") from None
     if not isinstance(obj, dict) or obj.get("format") not in expect:
         found = obj.get("format") if isinstance(obj, dict) else type(obj).__name__
         raise CheckpointError(f"{path}: not a dockfactory detector file (format {found!r}; "
@@ -61,6 +63,38 @@ def load_file(path, expect: tuple[str, ...] = (CHECKPOINT_FORMAT, WEIGHTS_FORMAT
     if missing:
         raise CheckpointError(f"{path}: checkpoint lacks {', '.join(missing)}")
     return obj
+
+
+def _unreadable_reason(path: Path, exc: Exception) -> str:
+    """Why torch could not load ``path`` with weights only, in our words (torch's own message
+    suggests loading with weights_only=False, which would run whatever code the file holds:
+    never do that with a file you did not make)."""
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head[:2] != b"PK":
+        return ("not a torch weights file (a torch file is a zip archive; this one starts with "
+                f"{head!r}: an ONNX model, a pickle or another format?)")
+    if "weights_only" in str(exc) or "Unsupported global" in str(exc):
+        return ("holds Python objects other than tensors and plain values; dockfactory loads weights as "
+                "tensors only and refuses it (loading such objects can run code)")
+    return f"not a readable checkpoint (truncated or corrupted?): {type(exc).__name__}"
+
+
+def _state_dict_problem(state: dict, model) -> str | None:
+    """Why ``state`` does not fit ``model``, in one line; None when it fits."""
+    if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
+                                              for k, v in state.items()):
+        return "state_dict: expected names mapped to tensors"
+    want = model.state_dict()
+    missing, unexpected = sorted(set(want) - set(state)), sorted(set(state) - set(want))
+    shapes = [k for k in want if k in state and tuple(state[k].shape) != tuple(want[k].shape)]
+    if not (missing or unexpected or shapes):
+        return None
+    parts = [f"{len(missing)} missing (first {missing[0]})" if missing else "",
+             f"{len(unexpected)} unexpected (first {unexpected[0]})" if unexpected else "",
+             f"{len(shapes)} of another shape (first {shapes[0]}: {tuple(state[shapes[0]].shape)} in the file, "
+             f"{tuple(want[shapes[0]].shape)} in the model)" if shapes else ""]
+    return "weights do not fit the model its config describes: " + "; ".join(p for p in parts if p)
 
 
 def weights_from_checkpoint(ckpt: dict, half: bool = True) -> dict:
@@ -87,10 +121,10 @@ def load_model(path, fuse: bool = True):
     except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: bad config in checkpoint: {exc}") from None
     model = build_model(mcfg)
-    try:
-        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
-    except RuntimeError as exc:
-        raise CheckpointError(f"{path}: weights do not fit the model: {str(exc).splitlines()[0]}") from None
+    problem = _state_dict_problem(obj["state_dict"], model)
+    if problem:
+        raise CheckpointError(f"{path}: {problem}")
+    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
     model.eval()
     if fuse:
         model.fuse()

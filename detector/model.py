@@ -38,6 +38,9 @@ DEFAULT_ANCHORS = (((10, 13), (16, 30), (33, 23)), ((30, 61), (62, 45), (59, 119
 DEFAULT_ANCHORS_P2 = (((5, 6), (8, 14), (15, 11)),) + DEFAULT_ANCHORS
 
 
+MAX_CLASSES = 1000   # a head beyond this is no marker detector (and would take gigabytes)
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """What defines the network. ``anchors``: per level 3 (w, h) pairs in input px."""
@@ -52,8 +55,9 @@ class ModelConfig:
             raise ValueError(f"model scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
         if self.attention not in ATTENTIONS:
             raise ValueError(f"attention must be one of {', '.join(ATTENTIONS)}, got {self.attention!r}")
-        if self.num_classes < 1:
-            raise ValueError(f"num_classes must be >= 1, got {self.num_classes}")
+        if isinstance(self.num_classes, bool) or not isinstance(self.num_classes, int) \
+                or not 1 <= self.num_classes <= MAX_CLASSES:
+            raise ValueError(f"num_classes must be an integer in [1, {MAX_CLASSES}], got {self.num_classes!r}")
         levels = 4 if self.p2 else 3
         a = torch.as_tensor(self.anchors, dtype=torch.float64) if self.anchors else None
         if a is None or a.shape != (levels, 3, 2) or not bool((a > 0).all()):

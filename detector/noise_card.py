@@ -28,6 +28,7 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.detector import centre
 
 NOISE_FORMAT = "dockfactory.centre_noise/1"
+MAX_CARD_NOISE_PX = 100.0   # px: a larger figure is no detector's (equal to solver.checks.MAX_SIGMA_PX, tested)
 
 
 @lru_cache(maxsize=1)
@@ -55,7 +56,7 @@ def centre_noise_px(weights) -> float | None:
               and doc.get("refinement_sha256") == refinement_sha256())
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return value if ok and math.isfinite(value) and value > 0 else None
+    return value if ok and math.isfinite(value) and 0 < value <= MAX_CARD_NOISE_PX else None
 
 
 def write_noise_card(weights, centre_noise: float, details: dict) -> Path:

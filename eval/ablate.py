@@ -154,9 +154,10 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
     from dockfactory.detector.data import load_frames
     bad = [a for a in attentions if a not in ATTENTIONS]
     if bad or not attentions:
-        raise ValueError(f"attention variants must be among {', '.join(ATTENTIONS)}, got {attentions}")
+        raise DockfactoryError(f"--attention: variants must be among {', '.join(ATTENTIONS)}, got "
+                               f"{','.join(attentions) or 'none'}")
     if not seeds:
-        raise ValueError("need at least one seed")
+        raise DockfactoryError("--seeds: need at least one seed")
     out = Path(out)
     runs = []
     for seed in seeds:          # seed by seed: an interrupted ablation has every variant's first seeds

@@ -21,6 +21,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
+from dockfactory.solver.checks import MAX_SIGMA_PX
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
 from dockfactory.eval.pipeline import run_pipeline
@@ -66,8 +67,9 @@ def cmd_solve(args) -> int:
     if (args.detections is None) == (args.oracle_noise is None):
         raise DockfactoryError("give --detections DETS.json or --oracle-noise PX (exactly one)")
     model = resolve_camera_model(args.camera_model, args.self_calibrate)
-    if args.sigma_floor is not None and not (math.isfinite(args.sigma_floor) and args.sigma_floor > 0):
-        raise DockfactoryError(f"--sigma-floor: must be a finite number of pixels > 0, got {args.sigma_floor}")
+    if args.sigma_floor is not None and not (math.isfinite(args.sigma_floor) and 0 < args.sigma_floor <= MAX_SIGMA_PX):
+        raise DockfactoryError(f"--sigma-floor: must be a number of pixels in (0, {MAX_SIGMA_PX:g}], "
+                               f"got {args.sigma_floor}")
     ds = Dataset.open(args.dataset)
     modes = {"camera_model": model, "self_calibrate": args.self_calibrate, "sigma_floor_px": args.sigma_floor}
     if args.detections:

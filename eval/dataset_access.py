@@ -9,6 +9,11 @@ from pathlib import Path
 from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SECTIONS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.solver.checks import MAX_SIGMA_PX
+
+
+MAX_POSE_MM = 1.0e6      # 1 km: no docking pose or camera is further away
+MAX_FOCAL_PX = 1.0e7
 
 
 def read_json_for(path, what: str, dataset: Dataset) -> dict:
@@ -137,9 +142,12 @@ def check_numbers(value, path, key: str, length: int) -> list:
     return value
 
 
-def check_matrix(value, path, key: str, rows: int, cols: int) -> list:
+def check_matrix(value, path, key: str, rows: int, cols: int, bound: float | None = None) -> list:
+    """A ``rows`` x ``cols`` list of finite numbers, each within +-``bound`` when given."""
     for i, row in enumerate(check_list(value, path, key, rows)):
-        check_numbers(row, path, f"{key}[{i}]", cols)
+        for j, v in enumerate(check_numbers(row, path, f"{key}[{i}]", cols)):
+            if bound is not None and abs(v) > bound:
+                _bad(path, f"{key}[{i}][{j}]", f"must be within +-{bound:g}, got {v}")
     return value
 
 
@@ -155,8 +163,9 @@ def _frames(data: dict, path) -> dict:
 
 def validate_poses(data, path) -> dict:
     """Check the shape of a poses file (see dockfactory.eval.solve_frames): what evaluate and report
-    read is present, typed (``ok`` a JSON boolean: ``"false"`` is refused, never taken as solved)
-    and finite."""
+    read is present, typed (``ok`` a JSON boolean: ``"false"`` is refused, never taken as solved),
+    finite and of a physical size (translations within MAX_POSE_MM, angles within 360 deg, focal
+    lengths within MAX_FOCAL_PX: a 1e200 mm pose overflowed the report's statistics)."""
     check_object(data, path, "(top level)")
     if data.get("source") is not None:
         check_str(data["source"], path, "source")
@@ -182,8 +191,11 @@ def validate_poses(data, path) -> dict:
         for name in POSE_NAMES:
             if name not in pose:
                 _bad(path, f"{key}.pose.{name}", "missing")
-            check_number(pose[name], path, f"{key}.pose.{name}")
-        check_number(rec["focal_px"], path, f"{key}.focal_px", positive=True)
+            bound = MAX_POSE_MM if name.endswith("_mm") else 360.0
+            check_number(pose[name], path, f"{key}.pose.{name}", -bound, bound)
+        check_number(rec["focal_px"], path, f"{key}.focal_px", hi=MAX_FOCAL_PX, positive=True)
+        if rec.get("covariance") is not None:
+            check_matrix(rec["covariance"], path, f"{key}.covariance", 6, 6, MAX_POSE_MM ** 2)
         rmse = check_object(rec["rmse_px"], path, f"{key}.rmse_px")
         for s in SECTIONS:
             if s not in rmse:
@@ -191,7 +203,7 @@ def validate_poses(data, path) -> dict:
             check_number(rmse[s], path, f"{key}.rmse_px.{s}", lo=0.0)
         for k in ("d_from_b", "cam_from_a"):
             if rec.get(k) is not None:
-                check_matrix(rec[k], path, f"{key}.{k}", 4, 4)
+                check_matrix(rec[k], path, f"{key}.{k}", 4, 4, MAX_POSE_MM)
         if rec.get("marker_ids") is not None:
             for i, m in enumerate(check_list(rec["marker_ids"], path, f"{key}.marker_ids")):
                 check_str(m, path, f"{key}.marker_ids[{i}]")
@@ -205,6 +217,8 @@ def validate_detections(data, path, required: tuple[str, ...] = ()) -> dict:
     check_object(data, path, "(top level)")
     if data.get("weights_sha256") is not None:   # the detector a report names (provenance)
         check_str(data["weights_sha256"], path, "weights_sha256")
+    if data.get("centre_noise_px") is not None:   # the weights' noise card: the covariance floor
+        check_number(data["centre_noise_px"], path, "centre_noise_px", hi=MAX_SIGMA_PX, positive=True)
     for fid, dets in _frames(data, path).items():
         key = f"frames.{fid}"
         for i, d in enumerate(check_list(dets, path, key)):
@@ -217,8 +231,9 @@ def validate_detections(data, path, required: tuple[str, ...] = ()) -> dict:
             check_numbers(d["center_px"], path, f"{k}.center_px", 2)
             if "score" in d:
                 check_number(d["score"], path, f"{k}.score", 0.0, 1.0)
-            if "bbox_px" in d:
-                check_numbers(d["bbox_px"], path, f"{k}.bbox_px", 4)
+            for box in ("bbox_px", "bbox_detector_px"):
+                if box in d:
+                    check_numbers(d[box], path, f"{k}.{box}", 4)
             if "refined" in d:
                 check_bool(d["refined"], path, f"{k}.refined")
     return data

@@ -103,6 +103,21 @@ def read_rows(eval_dir: Path) -> list[dict]:
     return rows
 
 
+def check_rows_match(rows: list[dict], metrics: dict, path) -> None:
+    """DatasetError unless the per-frame table has one row per frame the metrics count (test
+    frames and repeatability captures) and as many solved test frames: a table cut down (to its
+    header, say) must not pass for the evaluation it came with."""
+    loc, est = metrics["localization"], metrics["estimation"]
+    test = [r for r in rows if r["split"] == "test"]
+    counts = {"test frames": (len(test), loc["n_frames"]),
+              "repeatability captures": (len(rows) - len(test), est["n_frames"]),
+              "solved test frames": (sum(r["ok"] for r in test), loc["n_solved"])}
+    for what, (have, want) in counts.items():
+        if have != want:
+            raise DatasetError(f"{path}: {have} {what}, the metrics beside it count {want}: "
+                               "the table does not belong to this evaluation (re-run dockfactory evaluate)")
+
+
 def _plot_error_histograms(plt, test: list[dict]) -> str:
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     for ax, c in zip(axes, GATED):
@@ -558,6 +573,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     acc = metrics["acceptance"]
     verdict = checked_verdict(acc, metrics_path)
     rows = read_rows(eval_dir)
+    check_rows_match(rows, metrics, eval_dir / "frames.csv")
     prov_path = eval_dir / "provenance.json"
     prov = read_json_file(prov_path, "provenance") if prov_path.exists() else {}
     check_schema(prov, PROVENANCE_SCHEMA, prov_path)

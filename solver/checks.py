@@ -17,9 +17,13 @@ from dockfactory.solver.errors import (
 )
 
 __all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
-           "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL"]
+           "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL",
+           "MAX_SIGMA_PX"]
 
 MIN_POINTS = 4
+# Largest centre noise (px) the solver takes: a centre known no better than this gives no pose, and
+# squares of larger numbers would overflow the covariances.
+MAX_SIGMA_PX = 100.0
 # Relative spread below which a point set counts as collinear (second principal axis / first).
 COLLINEAR_TOL = 1e-6
 
@@ -70,12 +74,15 @@ def as_principal_point(value) -> np.ndarray:
 
 
 def check_sigma(sigma_px) -> float | None:
-    """The pixel noise std: None (estimate it from the residuals) or a positive finite float."""
+    """The pixel noise std: None (estimate it from the residuals) or a float in (0, MAX_SIGMA_PX]."""
     if sigma_px is None:
         return None
-    s = float(sigma_px)
-    if not np.isfinite(s) or s <= 0:
-        raise InvalidSolverInput(f"sigma_px must be positive and finite, got {sigma_px}")
+    try:
+        s = float(sigma_px)
+    except (TypeError, ValueError):
+        raise InvalidSolverInput(f"sigma_px must be a number of pixels, got {sigma_px!r}") from None
+    if not np.isfinite(s) or s <= 0 or s > MAX_SIGMA_PX:
+        raise InvalidSolverInput(f"sigma_px must be in (0, {MAX_SIGMA_PX:g}] px, got {sigma_px}")
     return s
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from dockfactory.solver.checks import check_sigma
 from dockfactory.solver.errors import InvalidSolverInput
 
 __all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
@@ -112,7 +113,8 @@ class RefineOptions:
                      "fallback_starts", "profile_focals", "profile_iterations", "plausible_rmse_px",
                      "subset_max_points", "subset_refines", "few_points"):
             _positive(name, getattr(self, name))
-        _positive("sigma_floor_px", self.sigma_floor_px, allow_none=True)
+        if self.sigma_floor_px is not None:
+            check_sigma(self.sigma_floor_px)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,118 @@
+"""Numbers at the edge of what a float holds, and values of the wrong type, in the files and flags
+a user gives: one line and exit 2, never OverflowError or TypeError (a centre-noise floor of
+1e308 squared overflowed the covariances)."""
+import json
+
+import numpy as np
+import pytest
+
+from dockfactory.eval.cli import main
+from dockfactory.generator.dataset_open import Dataset
+
+
+def _run(argv, capsys):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _one_line(err: str) -> str:
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def _label_detections(ds: Dataset) -> dict:
+    """Detections made from the labels (exact centres), as `dockfactory detect` writes them."""
+    frames = {}
+    for fid in ds.frames(("test",)):
+        lab = ds.labels[fid]
+        frames[fid] = [{"class_id": m["class_id"], "center_px": m["outline_centroid_px"], "score": 0.9,
+                        "bbox_px": m["bbox_px"], "bbox_detector_px": m["bbox_px"], "refined": True}
+                       for m in lab["markers"] if m.get("visibility") == 2]
+    return {"dataset_version": ds.version_id, "frames": frames}
+
+
+@pytest.mark.parametrize("value", ["1e308", "1e200", "101", "-1", "nan", "inf", "0"])
+def test_sigma_floor_flag_out_of_range(painted_source, tmp_path, capsys, value):
+    code, _, err = _run(["solve", painted_source, "--oracle-noise", "0.1", "--sigma-floor", value,
+                         "--out", tmp_path / "p.json"], capsys)
+    assert code == 2 and "--sigma-floor" in _one_line(err)
+    assert not (tmp_path / "p.json").exists()
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda d: d.update(centre_noise_px=1e308), "centre_noise_px"),
+    (lambda d: d.update(centre_noise_px="abc"), "centre_noise_px"),
+    (lambda d: d.update(centre_noise_px=[1]), "centre_noise_px"),
+    (lambda d: d.update(centre_noise_px=-0.1), "centre_noise_px"),
+    (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px="x"), "bbox_detector_px"),
+    (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px=[1, 2, 3, float("nan")]),
+     "bbox_detector_px"),
+])
+def test_detections_with_impossible_numbers(painted_source, tmp_path, capsys, edit, key):
+    dets = _label_detections(Dataset.open(painted_source))
+    edit(dets)
+    path = tmp_path / "dets.json"
+    path.write_text(json.dumps(dets))
+    assert _run(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p0.json"], capsys)[0] == 0
+    for argv in (["solve", painted_source, "--detections", path, "--out", tmp_path / "p.json"],
+                 ["evaluate", painted_source, "--poses", tmp_path / "p0.json", "--detections", path,
+                  "--out", tmp_path / "eval"]):
+        code, _, err = _run(argv, capsys)
+        line = _one_line(err)
+        assert code == 2 and str(path) in line and key in line, line
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_the_label_detections_themselves_solve(painted_source, tmp_path, capsys):
+    """The fixture's detections are valid: the refusals above come from the edits alone."""
+    dets = _label_detections(Dataset.open(painted_source))
+    dets["centre_noise_px"] = 0.05
+    path = tmp_path / "dets.json"
+    path.write_text(json.dumps(dets))
+    code, _, err = _run(["solve", painted_source, "--detections", path, "--out", tmp_path / "p.json"], capsys)
+    poses = json.loads((tmp_path / "p.json").read_text())
+    assert code == 0 and poses["sigma_floor_px"] == 0.05
+    assert any(r["ok"] for r in poses["frames"].values()) and np.isfinite(
+        [r["pose"]["x_mm"] for r in poses["frames"].values() if r["ok"]]).all()
+
+
+def _solved(painted_source, tmp_path, capsys) -> dict:
+    assert _run(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p.json"], capsys)[0] == 0
+    return json.loads((tmp_path / "p.json").read_text())
+
+
+@pytest.mark.parametrize("field, value, key", [
+    ("x_mm", 1e200, "pose.x_mm"), ("alpha_deg", 1e5, "pose.alpha_deg"), ("focal_px", 1e300, "focal_px"),
+])
+def test_poses_of_impossible_size_are_refused_before_any_statistic(painted_source, tmp_path, capsys, field,
+                                                                    value, key):
+    """A pose of 1e200 mm overflowed the report's histograms (IndexError deep in numpy)."""
+    poses = _solved(painted_source, tmp_path, capsys)
+    rec = next(r for r in poses["frames"].values() if r["ok"])
+    (rec["pose"] if field in rec["pose"] else rec)[field] = value
+    (tmp_path / "big.json").write_text(json.dumps(poses))
+    code, out, err = _run(["evaluate", painted_source, "--poses", tmp_path / "big.json", "--out", tmp_path / "ev"],
+                          capsys)
+    line = _one_line(err)
+    assert code == 2 and key in line and "big.json" in line and "ACCEPTED" not in out, line
+
+
+def test_report_refuses_a_frames_table_cut_to_its_header(painted_source, tmp_path, capsys):
+    _solved(painted_source, tmp_path, capsys)
+    spec = tmp_path / "spec.toml"
+    spec.write_text("[localization]\nx = 1000\n[estimation]\nx = 1000\n[failures]\nmax_rate = 1.0\n")
+    code, out, _ = _run(["evaluate", painted_source, "--poses", tmp_path / "p.json", "--acceptance", spec,
+                         "--out", tmp_path / "ev"], capsys)
+    assert code == 0 and "ACCEPTED" in out
+    assert _run(["report", tmp_path / "ev", "--out", tmp_path / "r.html"], capsys)[0] == 0
+    table = tmp_path / "ev" / "frames.csv"
+    table.write_text(table.read_text().splitlines()[0] + "\n")
+    code, out, err = _run(["report", tmp_path / "ev", "--out", tmp_path / "r2.html"], capsys)
+    line = _one_line(err)
+    assert code == 2 and "frames.csv" in line and "0 test frames" in line and "ACCEPTED" not in out, line
+    assert not (tmp_path / "r2.html").exists()
