@@ -53,7 +53,7 @@ def test_bad_input_is_one_line_exit_2(big, tmp_path, capsys):
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--weights", str(tmp_path / "w.pt")],
               "no such file"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--weights", str(tmp_path / "junk.pt")],
-              "not a readable checkpoint"),
+              "not a torch weights file"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--overlay-size", "3"], "overlay size"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--workers", "40"], "workers")]
     for argv, words in cases:
