@@ -104,7 +104,7 @@ def _read_npz(path: Path, read) -> dict | None:
 
 def _v1(z) -> dict:
     ids, tiles, geometry = z["frame_ids"], z["tiles"], z["label_geometry"]
-    if tiles.ndim != 4 or not len(ids) == len(tiles) == len(geometry):
+    if tiles.ndim != 4 or tiles.dtype.kind != "f" or not len(ids) == len(tiles) == len(geometry):
         raise ValueError(f"tiles of shape {tiles.shape} for {len(ids)} frames (frames, rows, cols, channels expected)")
     return dict(zip((str(f) for f in z["frame_ids"]), zip(z["tiles"], (str(g) for g in z["label_geometry"]))))
 
@@ -112,6 +112,8 @@ def _v1(z) -> dict:
 def _v2(z) -> dict:
     if z["index"].ndim != 2 or not len(z["frame_ids"]) == len(z["label_core"]) == len(z["index"]) == len(z["index_len"]):
         raise ValueError("frame_ids, label_core, index and index_len do not line up")
+    if z["index_len"].dtype.kind not in "iu" or z["index"].dtype.kind != "f":
+        raise ValueError(f"index_len of {z['index_len'].dtype}, index of {z['index'].dtype} (integers, floats expected)")
     rows = (row[:n] for row, n in zip(z["index"], z["index_len"]))
     return dict(zip((str(f) for f in z["frame_ids"]), zip((str(c) for c in z["label_core"]), rows)))
 
