@@ -26,6 +26,7 @@ from pathlib import Path
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout import Marker, layout_problems
 from dockfactory.core.names import SECTIONS
+from dockfactory.core.user_files import check_regular_file
 
 MAX_MARKERS_PER_SECTION = 32   # identification's time grows about as markers^5 (bench/solve_memory.py)
 MAX_MARKERS = 2 * MAX_MARKERS_PER_SECTION
@@ -87,6 +88,7 @@ def _wrong_side(markers) -> str | None:
 def read_layout_file(path) -> tuple[Marker, ...]:
     """The markers of layout file ``path`` (checked: one-line LayoutFileError otherwise)."""
     path = Path(path)
+    check_regular_file(path, "layout")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -6,6 +6,7 @@ from importlib import resources
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.user_files import check_regular_file
 
 WEIGHTS_NAME = "yolov5n_se_markers.pt"   # the shipped detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
@@ -58,6 +59,7 @@ def resolve_config(arg: str | Path) -> Path:
     path = Path(arg)
     if path.is_dir():
         raise DockfactoryError(f"{arg}: is a folder, not a config file (give the .toml file)")
+    check_regular_file(path, "config")
     if path.is_file():
         _check_text(path)
         return path

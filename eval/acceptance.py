@@ -23,6 +23,7 @@ from pathlib import Path
 
 from dockfactory.core.config import CONDITIONS, ConfigError, build_dataclass
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
+from dockfactory.core.user_files import check_regular_file
 
 
 @dataclass(frozen=True)
@@ -79,6 +80,7 @@ class AcceptanceSpec:
 
 def load_acceptance(path) -> AcceptanceSpec:
     path = Path(path)
+    check_regular_file(path, "acceptance spec")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:

@@ -12,6 +12,7 @@ import math
 import sys
 from pathlib import Path
 
+from dockfactory import __version__
 from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic
@@ -189,6 +190,7 @@ def add_eval_commands(sub) -> None:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
                                 "for uncalibrated monocular docking of cylindrical sections.")
+    p.add_argument("--version", action="version", version=f"dockfactory {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     add_factory_commands(sub)
     add_eval_commands(sub)

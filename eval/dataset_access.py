@@ -10,6 +10,7 @@ from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SECTIONS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.solver.checks import MAX_SIGMA_PX
+from dockfactory.core.user_files import check_regular_file
 
 
 MAX_POSE_MM = 1.0e6      # 1 km: no docking pose or camera is further away
@@ -43,6 +44,7 @@ def read_json_file(path, what: str):
     """The parsed JSON of ``path``; a DatasetError naming the file when it is missing, unreadable
     or not JSON."""
     path = Path(path)
+    check_regular_file(path, what)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections import Counter
 from pathlib import Path
@@ -67,44 +68,48 @@ def cmd_render(args) -> int:
     return EXIT_OK if summary.ok else EXIT_FAILED
 
 
-def cmd_dataset(args) -> int:
-    """Every DIR is taken: verify/info/export run on each (in order), diff needs exactly two."""
-    if args.action == "verify":
-        reports = []
-        for root in args.dirs:
-            reports.append(published.verify_against(root, args.manifest, args.tolerance) if args.manifest
-                           else dt.verify(root))
-            print(reports[-1].text())
-        return EXIT_OK if all(r.ok for r in reports) else EXIT_FAILED
-    if args.action == "publish":
-        for root in args.dirs:
-            print(published.publish(root, args.out))
-        return EXIT_OK
-    if args.action == "info":
-        infos = [dt.info(root) for root in args.dirs]
-        if args.json:
-            print(json.dumps(infos[0] if len(infos) == 1 else infos, indent=1))
-        else:
-            print("\n".join(dt.info_text(d) for d in infos))
-        return EXIT_OK
-    if args.action == "diff":
-        if len(args.dirs) != 2:
-            raise DockfactoryError(f"dataset diff needs two directories DIR_A DIR_B, got {len(args.dirs)}")
-        d = dt.diff(*args.dirs)
-        print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, *args.dirs))
-        return EXIT_OK
-    if args.action == "export":
-        formats = [f.strip() for f in args.format.split(",")]
-        unknown = [f for f in formats if f not in dt.EXPORT_WRITERS]
-        if unknown:
-            raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
-                                   f"(known: {', '.join(dt.EXPORT_WRITERS)})")
-        for root in args.dirs:
-            ds = dt.Dataset.open(root)   # every byte checked once for all its formats
-            for fmt in formats:
-                print(dt.export(root, fmt, ds))
-        return EXIT_OK
-    raise DockfactoryError(f"unknown dataset action {args.action!r}")
+def cmd_verify(args) -> int:
+    """Each DIR verified (every byte), or checked against a published manifest."""
+    reports = []
+    for root in args.dirs:
+        reports.append(published.verify_against(root, args.manifest, args.tolerance) if args.manifest
+                       else dt.verify(root))
+        print(reports[-1].text())
+    return EXIT_OK if all(r.ok for r in reports) else EXIT_FAILED
+
+
+def cmd_publish(args) -> int:
+    for root in args.dirs:
+        print(published.publish(root, args.out))
+    return EXIT_OK
+
+
+def cmd_info(args) -> int:
+    infos = [dt.info(root) for root in args.dirs]
+    if args.json:
+        print(json.dumps(infos[0] if len(infos) == 1 else infos, indent=1))
+    else:
+        print("\n".join(dt.info_text(d) for d in infos))
+    return EXIT_OK
+
+
+def cmd_diff(args) -> int:
+    d = dt.diff(args.dir_a, args.dir_b)
+    print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, args.dir_a, args.dir_b))
+    return EXIT_OK
+
+
+def cmd_export(args) -> int:
+    formats = [f.strip() for f in args.format.split(",")]
+    unknown = [f for f in formats if f not in dt.EXPORT_WRITERS]
+    if unknown:
+        raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
+                               f"(known: {', '.join(dt.EXPORT_WRITERS)})")
+    for root in args.dirs:
+        ds = dt.Dataset.open(root)   # every byte checked once for all its formats
+        for fmt in formats:
+            print(dt.export(root, fmt, ds))
+    return EXIT_OK
 
 
 def cmd_check(args) -> int:
@@ -121,6 +126,48 @@ def cmd_show(args) -> int:
     out = draw_overlay(args.dataset, args.frame_id, args.out)
     print(out)
     return EXIT_OK
+
+
+def tolerance_levels(text: str) -> float:
+    """argparse type of ``--tolerance``: a finite number of 8-bit levels > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of levels > 0, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number of levels > 0, got {text!r}")
+    return v
+
+
+def _add_dataset_actions(d) -> None:
+    """``dataset verify | info | diff | export | publish``, each its own parser: a flag of one
+    action given to another is an error, not silently ignored."""
+    acts = d.add_subparsers(dest="action", required=True, metavar="ACTION")
+    v = acts.add_parser("verify", help="check every byte of each dataset, or a re-render against a published one")
+    v.add_argument("dirs", nargs="+", metavar="DIR", help="dataset directories")
+    v.add_argument("--manifest", help="check a re-render (any subset of frames) against this published "
+                   "manifest.json and the fingerprints(_v2).npz beside it")
+    v.add_argument("--tolerance", type=tolerance_levels, default=published.DEFAULT_TOLERANCE,
+                   help=f"with --manifest: largest tile-mean difference (8-bit levels) of an image that is not "
+                        f"byte for byte the published one (default {published.DEFAULT_TOLERANCE})")
+    v.set_defaults(func=cmd_verify)
+    i = acts.add_parser("info", help="what each dataset holds (version, frames, splits, cameras)")
+    i.add_argument("dirs", nargs="+", metavar="DIR")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=cmd_info)
+    f = acts.add_parser("diff", help="compare two datasets' manifests")
+    f.add_argument("dir_a", metavar="DIR_A")
+    f.add_argument("dir_b", metavar="DIR_B")
+    f.add_argument("--json", action="store_true", help="print JSON")
+    f.set_defaults(func=cmd_diff)
+    e = acts.add_parser("export", help="write COCO, YOLO or BOP files of each dataset (under its exports/)")
+    e.add_argument("dirs", nargs="+", metavar="DIR")
+    e.add_argument("--format", default="coco,yolo,bop", help="coco, yolo, bop (comma-separated)")
+    e.set_defaults(func=cmd_export)
+    p = acts.add_parser("publish", help="verify a complete dataset and write its manifest and fingerprints")
+    p.add_argument("dirs", nargs="+", metavar="DIR")
+    p.add_argument("--out", required=True, help="folder for manifest.json, fingerprints.npz, fingerprints_v2.npz")
+    p.set_defaults(func=cmd_publish)
 
 
 def add_subcommands(sub) -> None:
@@ -143,20 +190,9 @@ def add_subcommands(sub) -> None:
     r.add_argument("--quiet", action="store_true", help="no progress display")
     r.set_defaults(func=cmd_render)
 
-    d = sub.add_parser("dataset", help="verify, describe, compare or export datasets")
-    d.add_argument("action", choices=("verify", "info", "diff", "export", "publish"))
-    d.add_argument("dirs", nargs="+", metavar="DIR", help="dataset directories (verify, info, export: "
-                   "each of them; diff: exactly two)")
-    d.add_argument("--format", default="coco,yolo,bop", help="export: coco, yolo, bop (comma-separated)")
-    d.add_argument("--json", action="store_true", help="info/diff: print JSON")
-    d.add_argument("--manifest", help="verify: check a re-render (any subset of frames) against this published "
-                   "manifest.json and the fingerprints(_v2).npz beside it")
-    d.add_argument("--tolerance", type=float, default=published.DEFAULT_TOLERANCE,
-                   help=f"verify --manifest: largest tile-mean difference (8-bit levels) of an image that is not "
-                        f"byte for byte the published one (default {published.DEFAULT_TOLERANCE})")
-    d.add_argument("--out", help="publish: folder for the verified dataset's manifest.json and its "
-                   "fingerprints.npz, fingerprints_v2.npz")
-    d.set_defaults(func=cmd_dataset)
+    _add_dataset_actions(sub.add_parser("dataset", help="verify, describe, compare, export or publish datasets",
+                                        description="One action per sub-command; each has its own flags "
+                                                    "(dockfactory dataset ACTION --help)."))
 
     c = sub.add_parser("check-config", help="validate a config and print its plan")
     c.add_argument("config")

@@ -36,6 +36,7 @@ import numpy as np
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic
+from dockfactory.core.user_files import check_regular_file
 from dockfactory.generator.dataset import FRAME_ID_RE, DatasetError, load_identity
 from dockfactory.generator.dataset_check import verify
 from dockfactory.generator.fingerprints import (
@@ -106,6 +107,7 @@ class _Published:
 def _load_published(manifest_path: Path) -> _Published:
     """The manifest, its records and the fingerprint files beside it (None where absent);
     DatasetError naming the file and key when the manifest is not one a publish writes."""
+    check_regular_file(manifest_path, "manifest")
     try:
         manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:

@@ -116,3 +116,22 @@ def test_report_refuses_a_frames_table_cut_to_its_header(painted_source, tmp_pat
     line = _one_line(err)
     assert code == 2 and "frames.csv" in line and "0 test frames" in line and "ACCEPTED" not in out, line
     assert not (tmp_path / "r2.html").exists()
+
+
+def test_a_fifo_or_a_folder_given_as_a_file_is_refused_without_opening_it(painted_source, tmp_path, capsys):
+    """Opening a fifo blocks until someone writes to it: `verify --manifest FIFO` hung."""
+    import os
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    _solved(painted_source, tmp_path, capsys)
+    for given in (fifo, tmp_path):
+        kind = "fifo" if given == fifo else "folder"
+        for argv in (["dataset", "verify", painted_source, "--manifest", given],
+                     ["solve", painted_source, "--detections", given, "--out", tmp_path / "q.json"],
+                     ["evaluate", painted_source, "--poses", given, "--out", tmp_path / "ev"],
+                     ["evaluate", painted_source, "--poses", tmp_path / "p.json", "--acceptance", given,
+                      "--out", tmp_path / "ev"],
+                     ["check-config", given]):
+            code, _, err = _run(argv, capsys)
+            line = _one_line(err)
+            assert code == 2 and f"is a {kind}" in line and str(given) in line, (argv, line)

@@ -1,0 +1,41 @@
+"""Command-line conventions a user expects: ``--version``; each ``dataset`` action its own parser,
+help and flags (a flag of another action is an error, not silently ignored)."""
+import pytest
+
+from dockfactory import __version__
+from dockfactory.eval.cli import main
+
+
+def _exit(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([str(a) for a in argv])
+    return exc.value.code, capsys.readouterr()
+
+
+def test_version(capsys):
+    code, out = _exit(["--version"], capsys)
+    assert code == 0 and out.out.strip() == f"dockfactory {__version__}"
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["dataset", "info", "D", "--manifest", "m.json"], "unrecognized arguments: --manifest"),
+    (["dataset", "export", "D", "--json"], "unrecognized arguments: --json"),
+    (["dataset", "verify", "D", "--format", "coco"], "unrecognized arguments: --format"),
+    (["dataset", "diff", "A"], "required: DIR_B"),
+    (["dataset", "diff", "A", "B", "C"], "unrecognized arguments: C"),
+    (["dataset", "publish", "D"], "required: --out"),
+    (["dataset", "nope", "D"], "invalid choice: 'nope'"),
+])
+def test_each_dataset_action_takes_only_its_own_flags(capsys, argv, words):
+    code, out = _exit(argv, capsys)
+    assert code == 2 and words in out.err, out.err
+
+
+@pytest.mark.parametrize("action, flag", [("verify", "--manifest"), ("info", "--json"), ("diff", "DIR_B"),
+                                          ("export", "--format"), ("publish", "--out")])
+def test_each_dataset_action_has_its_own_help(capsys, action, flag):
+    code, out = _exit(["dataset", action, "--help"], capsys)
+    assert code == 0 and f"dockfactory dataset {action}" in out.out and flag in out.out
+    others = {"verify": "--manifest", "info": "--json", "export": "--format", "publish": "--out"}
+    others = {a: f for a, f in others.items() if not (action == "diff" and f == "--json")}   # diff has --json too
+    assert all(f not in out.out for a, f in others.items() if a != action and f != flag)
