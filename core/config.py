@@ -65,8 +65,8 @@ class ConfigError(DockfactoryError):
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    name: str = "dockfactory"
-    seed: int = 0
+    name: str = "dockfactory"    # a label for people; not part of any draw
+    seed: int = 0                # every random draw of the dataset derives from it
     frames: int = 50             # main frames (train + val + test); the repeatability subset is extra
     train_fraction: float = 0.8  # share of each condition's frames outside the test split
     val_fraction: float = 0.1    # share of each condition's train frames held out as the val split
@@ -75,25 +75,25 @@ class DatasetConfig:
 @dataclass(frozen=True)
 class ConditionsConfig:
     """Relative weights of the frame conditions; counts are exact (largest remainder)."""
-    normal: float = 2.0
-    low_light: float = 1.0 / 3.0
-    occlusion: float = 1.0 / 3.0
-    glare: float = 1.0 / 3.0
-    ideal: float = 0.0
+    normal: float = 2.0          # ordinary workshop light
+    low_light: float = 1.0 / 3.0  # several stops under exposed, with digital gain ([sensor] low_light_ev)
+    occlusion: float = 1.0 / 3.0  # cables, bars, tools or blobs in front of markers ([occlusion])
+    glare: float = 1.0 / 3.0      # a lamp in view or specular highlights ([glare])
+    ideal: float = 0.0            # no noise, blur or clutter: the solver's own precision
 
 
 @dataclass(frozen=True)
 class RepeatabilityConfig:
     """Static poses captured several times with new lighting and noise (estimation precision)."""
-    poses: int = 0
-    captures: int = 10
-    condition: str = "normal"
+    poses: int = 0               # static poses (0: no repeatability subset)
+    captures: int = 10           # captures of each pose
+    condition: str = "normal"    # the condition every capture is taken under
 
 
 @dataclass(frozen=True)
 class ImageConfig:
-    width: int = 1280
-    height: int = 960
+    width: int = 1280            # pixels
+    height: int = 960            # pixels
 
 
 @dataclass(frozen=True)
@@ -112,20 +112,20 @@ class CameraUnitsConfig:
     (README, "Camera units"); the defaults are one ideal pinhole unit."""
     count: int = 1                                   # frames are assigned to units from the seed
     principal_offset_x_px: Range = (0.0, 0.0)        # principal point - image centre
-    principal_offset_y_px: Range = (0.0, 0.0)
+    principal_offset_y_px: Range = (0.0, 0.0)        # (rows; the x one in columns)
     k1: Range = (0.0, 0.0)                           # Brown-Conrady radial (OpenCV's k1, k2, k3)
-    k2: Range = (0.0, 0.0)
-    k3: Range = (0.0, 0.0)
+    k2: Range = (0.0, 0.0)                           # radial, 4th order
+    k3: Range = (0.0, 0.0)                           # radial, 6th order
     p1: Range = (0.0, 0.0)                           # tangential (OpenCV's p1, p2)
-    p2: Range = (0.0, 0.0)
+    p2: Range = (0.0, 0.0)                           # tangential, second coefficient
     aberration_red_px: Range = (0.0, 0.0)            # red vs green, radial shift at the image corner
     aberration_blue_px: Range = (0.0, 0.0)           # blue vs green
     sensor_width_mm: float = 36.0                    # sets the aperture (focal mm / f-number)
     depth_of_field: bool = False                     # Cycles depth of field
-    f_number: Range = (2.8, 8.0)
+    f_number: Range = (2.8, 8.0)                     # aperture with depth_of_field
     focus_error_mm: Range = (0.0, 0.0)               # focus distance = aimed distance + error
     jpeg: bool = False                               # JPEG-encode the delivered image
-    jpeg_quality: tuple[int, int] = (85, 95)
+    jpeg_quality: tuple[int, int] = (85, 95)         # [min, max] JPEG quality per frame, 1-100
     jpeg_subsampling: str = "420"                    # 420 (libjpeg's and most cameras' default) | 444
 
 
@@ -139,35 +139,35 @@ class RunsConfig:
 @dataclass(frozen=True)
 class PoseConfig:
     """Pose of B relative to A (``d_from_b``)."""
-    x_mm: Range = (5.0, 150.0)
-    y_mm: Range = (-15.0, 15.0)
-    z_mm: Range = (-15.0, 15.0)
-    alpha_deg: Range = (-1.5, 1.5)
-    beta_deg: Range = (-1.5, 1.5)
-    gamma_deg: Range = (-5.0, 5.0)
+    x_mm: Range = (5.0, 150.0)       # axial gap (D's +X: from A toward B)
+    y_mm: Range = (-15.0, 15.0)      # vertical offset (+Y up)
+    z_mm: Range = (-15.0, 15.0)      # offset toward the camera side (+Z)
+    alpha_deg: Range = (-1.5, 1.5)   # rotation about Z: the misalignment the camera sees
+    beta_deg: Range = (-1.5, 1.5)    # rotation about Y
+    gamma_deg: Range = (-5.0, 5.0)   # roll about the docking axis
 
 
 @dataclass(frozen=True)
 class SectionsConfig:
-    radius_mm: float = 300.0
-    length_mm: float = 1200.0
+    radius_mm: float = 300.0        # outer radius of both cylinders
+    length_mm: float = 1200.0       # length of each section
     flange_width_mm: float = 20.0   # flange at each docking face: axial width
     flange_height_mm: float = 8.0   # and radial height
 
 
 @dataclass(frozen=True)
 class MarkersConfig:
-    diameter_mm: float = 20.0
-    raise_mm: float = 1.0
-    layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # (s_mm, phi_deg)
-    layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B
+    diameter_mm: float = 20.0       # of each coloured disc
+    raise_mm: float = 1.0           # height of the disc's top face above the surface
+    layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # A's markers: (s_mm from the docking face, phi_deg about the axis, 0 = toward +Z)
+    layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B  # B's, the same way
 
 
 @dataclass(frozen=True)
 class RenderConfig:
     samples: int = 1                # 1 meets 2 s/frame at 1280x960 on 2 cores; 2 gives cleaner edges
     denoise: str = "fast"           # off | fast | balanced | high (OpenImageDenoise quality)
-    max_bounces: int = 2
+    max_bounces: int = 2            # light path bounces of Cycles
     adaptive_threshold: float = 0.0  # > 0: adaptive sampling up to `samples` (noise threshold)
     adaptive_min_samples: int = 0    # with adaptive sampling; 0 = Cycles' automatic choice
     filter_width_px: float = 1.5     # Blackman-Harris pixel filter width
@@ -182,8 +182,8 @@ class RenderConfig:
 class SensorConfig:
     """Camera model applied to the linear render (see generator/sensor.py)."""
     full_well_e: Range = (8000.0, 20000.0)  # electrons at linear 1.0 after auto exposure
-    read_noise_e: Range = (2.0, 6.0)
-    adc_bits: int = 12
+    read_noise_e: Range = (2.0, 6.0)         # electrons, per frame
+    adc_bits: int = 12                       # 8-16: the raw frame's depth
     exposure_ev: Range = (-0.4, 0.3)         # normal frames, around auto exposure
     low_light_ev: Range = (-5.0, -3.0)       # several stops down
     low_light_gain_ev: Range = (0.5, 2.0)    # digital gain that partly makes up for it (net 1-4.5 EV darker)
@@ -201,7 +201,7 @@ class SensorConfig:
     tone: str = "srgb"                       # srgb | gamma22
     denoise: str = "off"                     # off | bilateral (the ISP's, on the 8-bit image)
     sharpen: Range = (0.0, 0.0)              # per unit: unsharp-mask amount
-    sharpen_sigma_px: float = 1.0
+    sharpen_sigma_px: float = 1.0            # the unsharp mask's Gaussian
     raw_output: bool = False                 # also write raw/<id>.png: the raw frame in DN, 16 bit
 
 
@@ -210,7 +210,7 @@ class MotionConfig:
     """Section B moving during the exposure: motion blur and a rolling shutter (docs/motion.md).
     Off by default: without it a config samples, labels and renders what it did before. The
     exposure is the frame's [sensor] exposure_time_ms draw."""
-    enabled: bool = False
+    enabled: bool = False                  # true: B moves during the exposure
     velocity_mm_s: Range = (0.0, 0.0)      # per frame: closing speed toward A (B's velocity along -X of D)
     velocity_y_mm_s: Range = (0.0, 0.0)    # per frame: B's vertical velocity (+Y of D)
     velocity_z_mm_s: Range = (0.0, 0.0)    # per frame: B's velocity toward the camera side (+Z of D)
@@ -219,15 +219,15 @@ class MotionConfig:
 
 @dataclass(frozen=True)
 class OcclusionConfig:
-    occluders: tuple[int, int] = (1, 3)
-    kinds: tuple[str, ...] = ("cable", "bar", "tool", "blob")
+    occluders: tuple[int, int] = (1, 3)   # [min, max] occluders in an occlusion frame
+    kinds: tuple[str, ...] = ("cable", "bar", "tool", "blob")  # the shapes drawn from
     gap_mm: Range = (60.0, 400.0)   # distance of the occluder in front of the marker it covers
 
 
 @dataclass(frozen=True)
 class GlareConfig:
-    kinds: tuple[str, ...] = ("lamp_in_view", "specular")
-    bloom: Range = (0.02, 0.08)
+    kinds: tuple[str, ...] = ("lamp_in_view", "specular")  # the glare sources drawn from
+    bloom: Range = (0.02, 0.08)     # veiling glare: share of the light the lens scatters into a wide halo
 
 
 @dataclass(frozen=True)

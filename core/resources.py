@@ -57,14 +57,14 @@ def resolve_config(arg: str | Path) -> Path:
     folder). DockfactoryError (one line) for a folder, a file that is not UTF-8 text, or no
     such config."""
     path = Path(arg)
-    if path.is_dir():
-        raise DockfactoryError(f"{arg}: is a folder, not a config file (give the .toml file)")
-    check_regular_file(path, "config")
     if path.is_file():
         _check_text(path)
         return path
     known = shipped_configs()
     stem = path.name[:-5] if path.name.endswith(".toml") else path.name
     if stem in known and path.parent in (Path("."), Path("configs")):
-        return shipped_config(stem)
+        return shipped_config(stem)   # a name (even beside a folder of that name, e.g. detector/)
+    if path.is_dir():
+        raise DockfactoryError(f"{arg}: is a folder, not a config file (give the .toml file)")
+    check_regular_file(path, "config")
     raise DockfactoryError(f"{arg}: no such config file (shipped configs: {', '.join(known)})")

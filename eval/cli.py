@@ -13,15 +13,15 @@ import sys
 from pathlib import Path
 
 from dockfactory import __version__
-from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import write_json_atomic
+from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
+from dockfactory.generator.cli import add_set_flag, load_checked
 from dockfactory.solver.checks import MAX_SIGMA_PX
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
@@ -130,8 +130,12 @@ def cmd_run(args) -> int:
     _check_run_flags(args)
     config = resolve_config(args.config)
     acceptance = args.acceptance or default_acceptance()
-    load_config(config)          # a bad config or spec is refused before the work folder is made
+    _, text = load_checked(config, args.sets)   # a bad config or spec is refused before the work folder is made
     load_acceptance(acceptance)
+    if args.sets:   # the resolved config is what runs: written into the work folder
+        config = Path(args.out) / "config_resolved.toml"
+        config.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(config, text)
     return run_pipeline(config, args.out, acceptance, weights=args.weights, train=args.train,
                         oracle_noise_px=args.oracle_noise, workers=args.workers, train_epochs=args.epochs)
 
@@ -184,6 +188,7 @@ def add_eval_commands(sub) -> None:
     u.add_argument("--epochs", type=int, default=None, help="with --train: training epochs")
     u.add_argument("--oracle-noise", type=float, metavar="PX", help="skip the detector: exact centres + noise")
     u.add_argument("--workers", type=int, default=1, help="render processes (>= 1)")
+    add_set_flag(u)
     u.set_defaults(func=cmd_run)
 
 

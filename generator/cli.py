@@ -9,7 +9,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from dockfactory.core.config import load_config
+from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config
 from dockfactory.generator import dataset_tools as dt
@@ -46,16 +46,24 @@ def int_at_least(low: int):
     return parse
 
 
-def _load(path):
-    """Load a config and check it is feasible (every planned frame fits its markers): the check
-    samples every frame's geometry, so it runs here (render, check-config), not on every load."""
-    cfg = load_config(resolve_config(path))
+def load_checked(path, sets=()):
+    """(config, its text) of ``path`` with ``--set`` overrides ``sets``, checked feasible (every
+    planned frame fits its markers): the check samples every frame's geometry, so it runs here
+    (render, run, check-config), not on every load."""
+    cfg, text = load_config_text(resolve_config(path), sets)
     check_focal_fits(cfg, str(path))
-    return cfg, resolve_config(path).read_text(encoding="utf-8")
+    return cfg, text
+
+
+def add_set_flag(parser) -> None:
+    """``--set TABLE.KEY=VALUE`` (repeatable) on a command that reads a config."""
+    parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="sets",
+                        help="override a config key (repeatable), e.g. --set dataset.frames=10; validated like "
+                             "the file and part of the dataset's version id")
 
 
 def cmd_render(args) -> int:
-    cfg, text = _load(args.config)
+    cfg, text = load_checked(args.config, args.sets)
     frame_ids = tuple(args.frames.split(",")) if args.frames else None
     opts = JobOptions(workers=args.workers, shard=args.shard, frame_ids=frame_ids,
                       retries=args.retries, recycle_after=args.recycle_after,
@@ -113,8 +121,15 @@ def cmd_export(args) -> int:
 
 
 def cmd_check(args) -> int:
-
-    cfg, _ = _load(args.config)
+    if args.defaults:
+        print(defaults_toml(), end="")
+        return EXIT_OK
+    if args.config is None:
+        raise DockfactoryError("check-config needs a CONFIG (or --defaults)")
+    cfg, _ = load_checked(args.config, args.sets)
+    if args.resolved:
+        print(to_toml(cfg.to_dict()), end="")
+        return EXIT_OK
     plan = frame_plan(cfg)
     print(f"{args.config}: valid; dataset version {identity(cfg)['version_id']}, {len(plan)} frames")
     for (split, cond), n in sorted(Counter((s.split, s.condition) for s in plan).items()):
@@ -188,14 +203,18 @@ def add_subcommands(sub) -> None:
     r.add_argument("--ray-address", default=None,
                    help="Ray cluster address (default: start a local Ray instance)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
+    add_set_flag(r)
     r.set_defaults(func=cmd_render)
 
     _add_dataset_actions(sub.add_parser("dataset", help="verify, describe, compare, export or publish datasets",
                                         description="One action per sub-command; each has its own flags "
                                                     "(dockfactory dataset ACTION --help)."))
 
-    c = sub.add_parser("check-config", help="validate a config and print its plan")
-    c.add_argument("config")
+    c = sub.add_parser("check-config", help="validate a config and print its plan (or its resolved TOML, or the defaults)")
+    c.add_argument("config", nargs="?", help="TOML config file or a shipped config's name")
+    c.add_argument("--resolved", action="store_true", help="print the resolved config (every key) as TOML")
+    c.add_argument("--defaults", action="store_true", help="print every key with its default, type and meaning")
+    add_set_flag(c)
     c.set_defaults(func=cmd_check)
 
     s = sub.add_parser("show", help="draw a frame's labels over its image (PNG)")
