@@ -21,7 +21,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
-from dockfactory.generator.cli import add_set_flag, load_checked
+from dockfactory.generator.cli import add_set_flag, load_checked, output_path
 from dockfactory.solver.checks import MAX_SIGMA_PX
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
@@ -201,7 +201,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_eval_commands(sub)
     add_detector_commands(sub)
     add_measure_command(sub)
+    for parser in _all_parsers(sub):
+        for action in parser._actions:
+            if action.dest == "out" and action.type is None:
+                action.type = output_path
     return p
+
+
+def _all_parsers(sub) -> list:
+    """Every parser below ``sub`` (nested sub-commands included)."""
+    out = []
+    for parser in sub.choices.values():
+        out.append(parser)
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                out += _all_parsers(action)
+    return out
 
 
 def main(argv=None) -> int:

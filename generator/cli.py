@@ -46,6 +46,16 @@ def int_at_least(low: int):
     return parse
 
 
+def output_path(text: str) -> str:
+    """argparse type of every ``--out``: a non-empty path (an empty one named the current folder's
+    parent deep inside a writer)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path, got an empty one")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError("a path cannot hold a NUL character")
+    return text
+
+
 def load_checked(path, sets=()):
     """(config, its text) of ``path`` with ``--set`` overrides ``sets``, checked feasible (every
     planned frame fits its markers): the check samples every frame's geometry, so it runs here

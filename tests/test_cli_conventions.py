@@ -39,3 +39,20 @@ def test_each_dataset_action_has_its_own_help(capsys, action, flag):
     others = {"verify": "--manifest", "info": "--json", "export": "--format", "publish": "--out"}
     others = {a: f for a, f in others.items() if not (action == "diff" and f == "--json")}   # diff has --json too
     assert all(f not in out.out for a, f in others.items() if a != action and f != flag)
+
+
+def _out_commands():
+    import argparse
+
+    from dockfactory.eval.cli import _all_parsers, build_parser
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sorted(p.prog.replace("dockfactory ", "") for p in _all_parsers(sub)
+                  if any(a.dest == "out" for a in p._actions))
+
+
+@pytest.mark.parametrize("command", _out_commands())
+def test_an_empty_out_path_is_refused_by_every_command(capsys, command):
+    """`solve --out ""` and `show --out ""` ended in a traceback deep in the atomic writer."""
+    argv = command.split() + ["--out", ""]
+    code, out = _exit(argv, capsys)
+    assert code == 2 and "argument --out: expected a path, got an empty one" in out.err, out.err
