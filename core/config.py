@@ -21,7 +21,7 @@ from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
 from dockfactory.core.sensor_presets import PRESETS
-from dockfactory.core.names import MIN_CHROMA
+from dockfactory.core.names import EXPORT_FORMATS, MIN_CHROMA
 
 Range = tuple[float, float]
 Overrides = tuple[tuple[str, float], ...]   # a TOML table of name = number, sorted by name
@@ -241,7 +241,6 @@ class ExportConfig:
     formats: tuple[str, ...] = ("coco", "yolo")  # written when the dataset completes; also bop
 
 
-EXPORT_FORMATS = ("coco", "yolo", "bop")
 
 
 @dataclass(frozen=True)

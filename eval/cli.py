@@ -15,7 +15,7 @@ from pathlib import Path
 from dockfactory import __version__
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
-from dockfactory.core.names import MIN_SCORE
+from dockfactory.core.names import MIN_SCORE, SPLITS
 from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.dataset_access import read_json_for
@@ -34,7 +34,6 @@ from dockfactory.generator.dataset_open import Dataset
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 
 
-SPLITS = ("train", "val", "test", "repeat")
 
 
 def parse_splits(text: str) -> tuple[str, ...]:

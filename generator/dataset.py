@@ -22,6 +22,7 @@ from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.core.names import SPLITS
 from dockfactory.generator.draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan
@@ -53,7 +54,6 @@ class DatasetError(DockfactoryError):
 # ----------------------------------------------------------------------------- names and locks
 
 FRAME_ID_RE = re.compile(r"^\d{6}$|^rep\d{3}_\d{2}$")
-SPLITS = ("train", "val", "test", "repeat")
 LOCK_FILE = Path("logs") / LOCK_NAME    # inside the dataset, outside its content
 ROOT_FILES = ("dataset.json", "config.toml", "layout.json")   # written by prepare, listed in the manifest
 

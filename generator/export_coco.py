@@ -44,13 +44,13 @@ import numpy as np
 
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
+from dockfactory.core.names import SPLITS
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_files import place_file, source_image
 from dockfactory.generator.labels import clip_polygon, image_px, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view
 
 COCO_SHIFT = 0.5          # OpenCV pixel centres -> COCO continuous coordinates (boxes, polygons)
-SPLITS = ("train", "val", "test", "repeat")
 KEYPOINTS = ("centre",)
 # The sigma COCO gives eyes, its most precisely placed keypoints. With the marker's area A as the
 # scale, OKS = exp(-d^2 / (2 A (2 sigma)^2)) falls to 0.5 at d ~ 0.1 marker radius.

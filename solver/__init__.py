@@ -32,7 +32,7 @@ raises a :class:`SolverError` subclass (a ``ValueError``). Units: mm, degrees at
 inside), pixels in the OpenCV convention.
 """
 from dockfactory.core.names import POSE_NAMES
-from dockfactory.solver.camera_models import MODEL_NAMES, CameraModel, Intrinsics
+from dockfactory.solver.camera_models import MODEL_NAMES, IntrinsicsModel, Intrinsics
 from dockfactory.solver.crb import (
     DockingBound,
     SequenceBound,
@@ -74,7 +74,7 @@ __all__ = [
     "solve_pnpf", "PnPfResult", "solve_docking", "DockingResult", "solve_sequence",
     "SequenceResult",
     # camera models
-    "MODEL_NAMES", "CameraModel", "Intrinsics", "ModelChoice", "ModelTest",
+    "MODEL_NAMES", "IntrinsicsModel", "Intrinsics", "ModelChoice", "ModelTest",
     # layers
     "upnp", "Candidate", "fit_joint", "JointFit", "ransac_pnpf", "ransac_docking",
     "DockingConsensus", "identify_markers", "Identification",

@@ -25,7 +25,7 @@ import numpy as np
 from dockfactory.core.distortion import N_COEFFS, distort_normalized, distortion_jacobian
 from dockfactory.solver.errors import InvalidSolverInput
 
-__all__ = ["EXTRA_NAMES", "CameraModel", "MODELS", "MODEL_NAMES", "AUTO", "PINHOLE",
+__all__ = ["EXTRA_NAMES", "IntrinsicsModel", "MODELS", "MODEL_NAMES", "AUTO", "PINHOLE",
            "camera_model", "check_model_name", "Intrinsics", "project_normalized",
            "intrinsics_jacobian"]
 
@@ -37,7 +37,7 @@ AUTO = "auto"
 
 
 @dataclass(frozen=True)
-class CameraModel:
+class IntrinsicsModel:
     """A camera model: its ``name`` and the extra intrinsics it estimates (``free``, a subset of
     ``EXTRA_NAMES`` in that order) besides the focal length."""
 
@@ -53,17 +53,17 @@ class CameraModel:
         """Estimated intrinsics: f and the free extras."""
         return 1 + len(self.free)
 
-    def nests(self, other: CameraModel) -> bool:
+    def nests(self, other: IntrinsicsModel) -> bool:
         """True when ``other`` is this model with some free parameters fixed (strictly)."""
         return set(other.free) < set(self.free)
 
 
 MODELS = {m.name: m for m in (
-    CameraModel("pinhole", ()),
-    CameraModel("k1", ("k1",)),
-    CameraModel("k1k2", ("k1", "k2")),
-    CameraModel("pp_k1", ("cx", "cy", "k1")),
-    CameraModel("pp_k1_p", ("cx", "cy", "k1", "p1", "p2")),
+    IntrinsicsModel("pinhole", ()),
+    IntrinsicsModel("k1", ("k1",)),
+    IntrinsicsModel("k1k2", ("k1", "k2")),
+    IntrinsicsModel("pp_k1", ("cx", "cy", "k1")),
+    IntrinsicsModel("pp_k1_p", ("cx", "cy", "k1", "p1", "p2")),
 )}
 MODEL_NAMES = tuple(MODELS)
 PINHOLE = MODELS["pinhole"]
@@ -77,9 +77,9 @@ def check_model_name(name, allow_auto: bool = True) -> str:
     return name
 
 
-def camera_model(name) -> CameraModel:
-    """The :class:`CameraModel` of a name (a CameraModel passes through)."""
-    if isinstance(name, CameraModel):
+def camera_model(name) -> IntrinsicsModel:
+    """The :class:`IntrinsicsModel` of a name (a IntrinsicsModel passes through)."""
+    if isinstance(name, IntrinsicsModel):
         return name
     return MODELS[check_model_name(name, allow_auto=False)]
 
@@ -109,11 +109,11 @@ class Intrinsics:
         """{name: value} over ``EXTRA_NAMES``."""
         return {n: self.value(n) for n in EXTRA_NAMES}
 
-    def extras(self, model: CameraModel) -> np.ndarray:
+    def extras(self, model: IntrinsicsModel) -> np.ndarray:
         """(e,) values of the model's free extra parameters."""
         return np.array([self.value(n) for n in model.free])
 
-    def stepped(self, model: CameraModel, d_focal: float, d_extra) -> Intrinsics | None:
+    def stepped(self, model: IntrinsicsModel, d_focal: float, d_extra) -> Intrinsics | None:
         """These intrinsics moved by ``d_focal`` and ``d_extra`` (e,) along the model's free
         parameters; None when the focal would not stay positive."""
         f_new = self.focal_px + d_focal
@@ -132,7 +132,7 @@ def project_normalized(xn: np.ndarray, intr: Intrinsics) -> np.ndarray:
     return intr.focal_px * xd + intr.principal_point
 
 
-def intrinsics_jacobian(xn: np.ndarray, intr: Intrinsics, model: CameraModel):
+def intrinsics_jacobian(xn: np.ndarray, intr: Intrinsics, model: IntrinsicsModel):
     """Pixels and their derivatives at normalised coordinates ``xn`` (N, 2).
 
     Returns (uv (N, 2), d uv / d xn (N, 2, 2), d uv / d (f, *model.free) (N, 2, 1 + e)).

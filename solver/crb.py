@@ -137,7 +137,7 @@ def _joint_jac(points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_p
 
 
 def _camera(camera_model, focal_px, principal_point, coeffs):
-    """(CameraModel, true Intrinsics) from the public arguments (checked)."""
+    """(IntrinsicsModel, true Intrinsics) from the public arguments (checked)."""
     model = MODELS[check_model_name(camera_model, allow_auto=False)]
     if not (np.isfinite(focal_px) and focal_px > 0):
         raise InvalidSolverInput(f"focal_px must be positive and finite, got {focal_px}")

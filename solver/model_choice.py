@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dockfactory.solver.camera_models import PINHOLE, CameraModel
+from dockfactory.solver.camera_models import PINHOLE, IntrinsicsModel
 from dockfactory.solver.options import DEFAULT_MODEL_CHOICE, ModelChoiceOptions
 from dockfactory.solver.stats import chi2_logsf, f_logsf
 
@@ -42,7 +42,7 @@ class ModelFitSummary:
     extras (order ``model.free``), ``ok`` (valid, converged, focal observable) and the reason
     when it is not."""
 
-    model: CameraModel
+    model: IntrinsicsModel
     cost: float
     n_residuals: int
     n_params: int

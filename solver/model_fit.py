@@ -20,7 +20,7 @@ from dockfactory.solver.camera_models import (
     EXTRA_NAMES,
     MODELS,
     PINHOLE,
-    CameraModel,
+    IntrinsicsModel,
     Intrinsics,
     camera_model,
 )
@@ -54,7 +54,7 @@ class ModelFit:
     choice: ModelChoice | None = None
 
     @property
-    def model(self) -> CameraModel:
+    def model(self) -> IntrinsicsModel:
         return self.refinement.model
 
     @property
@@ -95,7 +95,7 @@ class ModelFit:
                                ref.jacobian.shape[1], std.reshape(e), not failure, failure)
 
 
-def refine_model(blocks, poses, intr: Intrinsics, model: CameraModel, sigma_px,
+def refine_model(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, sigma_px,
                  options: RefineOptions = DEFAULT_REFINE) -> ModelFit:
     """One LM for ``model`` from ``poses`` and ``intr``, with its covariance (``sigma_px``
     None: estimated from the residuals)."""

@@ -33,7 +33,7 @@ import numpy as np
 from dockfactory.core.geometry import euler_deg_from_rotation
 from dockfactory.solver.camera_models import (
     PINHOLE,
-    CameraModel,
+    IntrinsicsModel,
     Intrinsics,
     intrinsics_jacobian,
 )
@@ -104,7 +104,7 @@ def _jacobian(a, xy, fz):
 
 
 def model_residuals_and_jacobian(points_3d: np.ndarray, points_2d: np.ndarray,
-                                 intr: Intrinsics, model: CameraModel, rotation: np.ndarray,
+                                 intr: Intrinsics, model: IntrinsicsModel, rotation: np.ndarray,
                                  translation: np.ndarray, want_jacobian: bool = True):
     """Residuals (2N,) px and J (2N, 7 + e) over (w, t, f, *model.free) for a camera with
     intrinsics ``intr`` (:class:`solver.camera_models.Intrinsics`); other arguments as in
@@ -359,7 +359,7 @@ class Block:
     sqrt_info: np.ndarray | None = None
 
 
-def stack_blocks(blocks, poses, intr: Intrinsics, model: CameraModel,
+def stack_blocks(blocks, poses, intr: Intrinsics, model: IntrinsicsModel,
                  want_jacobian: bool = True):
     """Residuals (M,) of every block in order and the Jacobian (M, 6 P + 1 + e) over
     (w_0, t_0, ..., f, *model.free), ``poses`` a sequence of P (R (3, 3), t (3,)) pairs.
@@ -400,7 +400,7 @@ def whitened(sqrt_info: np.ndarray, r: np.ndarray, j: np.ndarray | None):
     return r, j
 
 
-def _stack_batched(blocks, poses, intr: Intrinsics, model: CameraModel, want_jacobian: bool):
+def _stack_batched(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, want_jacobian: bool):
     """:func:`stack_blocks` with every point's pose gathered first: one evaluation of the
     Jacobian for all blocks, its pose columns scattered to each point's pose."""
     pose_of = np.concatenate([np.full(b.points_3d.shape[0], b.pose) for b in blocks])
@@ -432,7 +432,7 @@ class BlocksRefineResult:
 
     poses: tuple
     intrinsics: Intrinsics
-    model: CameraModel
+    model: IntrinsicsModel
     residuals: np.ndarray
     jacobian: np.ndarray
     iterations: int
@@ -448,7 +448,7 @@ class BlocksRefineResult:
         return 6 * len(self.poses)
 
 
-def refine_blocks(blocks, poses, intr: Intrinsics, model: CameraModel = PINHOLE,
+def refine_blocks(blocks, poses, intr: Intrinsics, model: IntrinsicsModel = PINHOLE,
                   options: RefineOptions = DEFAULT_REFINE) -> BlocksRefineResult:
     """LM over (w_0, t_0, ..., w_{P-1}, t_{P-1}, f, *model.free): P poses (left perturbations
     of their rotations), one camera shared by every block (:class:`Block`).
