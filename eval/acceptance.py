@@ -154,3 +154,96 @@ def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
         v = getattr(spec.paper, k)
         if not (math.isfinite(v) and v >= 0):
             raise _bad(source, "paper", k, f"must be a finite number >= 0, got {v}")
+
+
+# ----------------------------------------------------------------------------- the verdict
+
+def _without_pose(block: dict) -> tuple[int, int | None]:
+    """(frames without a pose, frames) of a localization / estimation block (0, None when the
+    block does not say)."""
+    n, solved = block.get("n_frames"), block.get("n_solved")
+    if n is None or solved is None:
+        return 0, None
+    return n - solved, n
+
+
+POSE_BLOCKS = (("estimation", "estimation precision (repeatability)", "captures"),
+               ("localization", "localization precision (accuracy)", "test frames"))
+
+
+def _pose_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
+    """One criterion per gated pose component of estimation and localization."""
+    criteria = []
+    for block, label, what in POSE_BLOCKS:
+        gate, blk = getattr(spec, block), metrics[block]
+        lacking, n = _without_pose(blk)
+        for c, thr in gate.thresholds().items():
+            stat = (blk["pooled"] if block == "estimation" else blk["overall"])[c][gate.statistic]
+            note = ""
+            if lacking:
+                stat, note = None, f"{lacking} of {n} {what} without a pose"
+            elif stat is None:
+                note = ("no pose captured twice" if block == "estimation" else "no test frame") + ": nothing to measure"
+            unit = UNITS[c] + ("^2" if gate.statistic == "mse" else "")
+            criteria.append({"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
+                             "value": stat, "threshold": thr, "unit": unit, "note": note,
+                             "pass": criterion_passes("max", stat, thr),
+                             "paper": getattr(spec.paper, f"{block}_{c}", None)})
+    return criteria
+
+
+def _detection_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
+    det, out = metrics.get("detection") or {}, []
+    for key, thr, paper in (("map50", spec.detection.map50_min, spec.paper.map50),
+                            ("map50_95", spec.detection.map50_95_min, spec.paper.map50_95)):
+        if thr != -1.0:
+            v = det.get(key)
+            out.append({"name": f"detection: {key}", "block": "detection", "component": key, "statistic": "min",
+                        "value": v, "threshold": thr, "unit": "", "note": "" if v is not None else "no detections",
+                        "pass": criterion_passes("min", v, thr), "paper": paper})
+    return out
+
+
+def _failure_criterion(metrics: dict, spec: AcceptanceSpec) -> dict:
+    n_fail = n = 0
+    for block in ("failures_test", "failures_repeat"):
+        f = (metrics.get(block) or {}).get("by_condition", {})
+        n_fail += sum(f[c]["failed"] for c in spec.failures.conditions if c in f)
+        n += sum(f[c]["frames"] for c in spec.failures.conditions if c in f)
+    rate = n_fail / n if n else None
+    return {"name": f"failure rate ({', '.join(spec.failures.conditions)})", "block": "failures",
+            "component": "rate", "statistic": "max", "value": rate, "threshold": spec.failures.max_rate,
+            "unit": "", "note": f"{n_fail} of {n} test frames and repeatability captures" if n else
+            "no test frame or repeatability capture of these conditions",
+            "pass": criterion_passes("max", rate, spec.failures.max_rate), "paper": None}
+
+
+def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
+    """The acceptance criteria and the verdict (accepted: every criterion passes).
+
+    Monotone by construction: a frame that fails or disappears can only turn a criterion from pass
+    to fail, never the other way.
+    - A gated pose statistic is defined only over its whole population (localization: every
+      planned test frame; estimation: every planned repeatability capture). If any frame of it has
+      no pose (failed, absent from the poses file or from the dataset) the statistic has no value
+      and the criterion fails, with a note saying how many frames lack a pose; a statistic over
+      zero frames (or a spread with no degree of freedom) fails too.
+    - The failure rate covers the test frames and the repeatability captures of the listed
+      conditions; over zero such frames it has no value and fails.
+    Every criterion passes exactly when its value is not None and within its threshold, so the
+    rows a report prints determine the verdict. ``ungated`` lists what the spec reports without
+    gating (:func:`ungated_components`), so a reader sees what the verdict does not cover.
+    """
+    criteria = _pose_criteria(metrics, spec) + _detection_criteria(metrics, spec) + [_failure_criterion(metrics, spec)]
+    return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria,
+            "ungated": ungated_components(spec)}
+
+
+def criterion_passes(statistic: str, value, threshold) -> bool:
+    """A criterion's result from its value and threshold: "min" needs value >= threshold, every
+    other statistic value <= threshold; no value (None, NaN) fails."""
+    if value is None or threshold is None or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    if not (math.isfinite(value) and math.isfinite(threshold)):
+        return False
+    return bool(value >= threshold) if statistic == "min" else bool(value <= threshold)

@@ -18,7 +18,7 @@ from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
-from dockfactory.eval.evaluate import criterion_passes
+from dockfactory.eval.acceptance import criterion_passes
 from dockfactory.eval.report_calibration import (
     CALIBRATION_SCHEMA,
     CENTRE_NOISE_SCHEMA,
@@ -311,57 +311,60 @@ PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model
 
 
 def check_schema(value, schema, path, key: str = "") -> None:
-    """Raise DatasetError("PATH: KEY: problem") where ``value`` does not follow ``schema``."""
-    where = key or "(top level)"
-
-    def bad(msg):
-        raise DatasetError(f"{path}: {where}: {msg}")
-
+    """Raise DatasetError("PATH: KEY: problem") where ``value`` does not follow ``schema``: a dict
+    of keys (``name?`` optional), ("map", sub) / ("list", sub), "any", or a leaf type ("num",
+    "int", "str", "bool"; with "?" also null)."""
     if isinstance(schema, dict):
-        if not isinstance(value, dict):
-            bad(f"expected an object, got {json_kind(value)}")
-        for k, sub in schema.items():
-            name, optional = (k[:-1], True) if k.endswith("?") else (k, False)
-            if name not in value:
-                if optional:
-                    continue
-                raise DatasetError(f"{path}: {key + '.' if key else ''}{name}: missing")
-            check_schema(value[name], sub, path, f"{key}.{name}" if key else name)
+        _check_object(value, schema, path, key)
     elif isinstance(schema, tuple):
         kind, sub = schema
-        if kind == "map":
-            if not isinstance(value, dict):
-                bad(f"expected an object, got {json_kind(value)}")
-            for k, v in value.items():
-                check_schema(v, sub, path, f"{key}.{k}")
-        else:
-            if not isinstance(value, list):
-                bad(f"expected a list, got {json_kind(value)}")
-            for i, v in enumerate(value):
-                check_schema(v, sub, path, f"{key}[{i}]")
-    elif schema == "any":
-        return
+        want = dict if kind == "map" else list
+        if not isinstance(value, want):
+            _schema_error(path, key, f"expected {'an object' if kind == 'map' else 'a list'}, got {json_kind(value)}")
+        items = value.items() if kind == "map" else enumerate(value)
+        for k, v in items:
+            check_schema(v, sub, path, f"{key}.{k}" if kind == "map" else f"{key}[{k}]")
+    elif schema != "any":
+        _check_leaf(value, schema, path, key)
+
+
+def _schema_error(path, key: str, msg: str):
+    raise DatasetError(f"{path}: {key or '(top level)'}: {msg}")
+
+
+def _check_object(value, schema: dict, path, key: str) -> None:
+    if not isinstance(value, dict):
+        _schema_error(path, key, f"expected an object, got {json_kind(value)}")
+    for k, sub in schema.items():
+        name, optional = (k[:-1], True) if k.endswith("?") else (k, False)
+        if name not in value:
+            if optional:
+                continue
+            raise DatasetError(f"{path}: {key + '.' if key else ''}{name}: missing")
+        check_schema(value[name], sub, path, f"{key}.{name}" if key else name)
+
+
+def _check_leaf(value, schema: str, path, key: str) -> None:
+    if schema.endswith("?"):
+        if value is None:
+            return
+        schema = schema[:-1]
+    if schema == "num":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            _schema_error(path, key, f"expected a number, got {json_kind(value)}")
+        if not np.isfinite(value):
+            _schema_error(path, key, f"must be finite, got {value}")
+    elif schema == "int":
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            _schema_error(path, key, f"expected a count (integer >= 0), got {json_kind(value)} {value!r:.40}")
+    elif schema == "str":
+        if not isinstance(value, str):
+            _schema_error(path, key, f"expected a string, got {json_kind(value)}")
+    elif schema == "bool":
+        if not isinstance(value, bool):
+            _schema_error(path, key, f"expected true or false, got {json_kind(value)} {value!r:.40}")
     else:
-        if schema.endswith("?"):
-            if value is None:
-                return
-            schema = schema[:-1]
-        if schema == "num":
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                bad(f"expected a number, got {json_kind(value)}")
-            if not np.isfinite(value):
-                bad(f"must be finite, got {value}")
-        elif schema == "int":
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                bad(f"expected a count (integer >= 0), got {json_kind(value)} {value!r:.40}")
-        elif schema == "str":
-            if not isinstance(value, str):
-                bad(f"expected a string, got {json_kind(value)}")
-        elif schema == "bool":
-            if not isinstance(value, bool):
-                bad(f"expected true or false, got {json_kind(value)} {value!r:.40}")
-        else:
-            raise ValueError(f"unknown schema {schema!r}")   # programming error
+        raise ValueError(f"unknown schema {schema!r}")   # programming error
 
 
 def checked_verdict(acc: dict, path) -> str:

@@ -80,15 +80,38 @@ def lens_record(cam: dict) -> dict:
 
 
 def export_bop(root, out) -> Path:
+    """The BOP layout of the dataset ``root`` (a folder, or an opened Dataset) under ``out``: the
+    two sections' models, a camera.json, and per split one scene with its cameras, ground truth
+    and frame ids (module docstring for the conventions)."""
     out = Path(out)
     # intact and complete (opened here, or by the caller that exports several formats): its
     # frames are the plan's, ids and splits checked
     ds = root if isinstance(root, Dataset) else Dataset.open(root)
-    root = ds.root
-    ident = ds.identity
-    labels = ds.labels_of()
-    cfg = ident["config"]
-    sec = cfg["sections"]
+    cfg = ds.identity["config"]
+    _write_models(cfg["sections"], out)
+    w, h = cfg["image"]["width"], cfg["image"]["height"]
+    write_json_atomic(out / "camera.json", {"width": w, "height": h, "cx": (w - 1) / 2 + 0.5, "cy": (h - 1) / 2 + 0.5,
+                                            "fx": float(np.mean(cfg["camera"]["focal_px"])),
+                                            "fy": float(np.mean(cfg["camera"]["focal_px"])), "depth_scale": 1.0})
+    scenes: dict[str, dict] = {}
+    for label in ds.labels_of():
+        split = label["spec"]["split"]
+        sc = scenes.setdefault(split, {"camera": {}, "gt": {}, "info": {}, "ids": {}, "lens": {}})
+        im = str(len(sc["ids"]))
+        sc["ids"][im] = label["frame_id"]
+        place_file(source_image(ds.root, label["frame_id"]), out / split / "000000" / "rgb" / f"{int(im):06d}.png")
+        sc["camera"][im], sc["gt"][im], sc["info"][im] = _frame_records(label)
+        sc["lens"][im] = lens_record(label["camera"])
+    for split, sc in scenes.items():
+        d = out / split / "000000"
+        for name, key in (("scene_camera", "camera"), ("scene_gt", "gt"), ("scene_gt_info", "info"),
+                          ("frame_ids", "ids"), ("scene_camera_lens", "lens")):
+            write_json_atomic(d / f"{name}.json", sc[key])
+    return out
+
+
+def _write_models(sec: dict, out: Path) -> None:
+    """models/obj_*.ply of both sections and models_info.json (extents, bounding-box diagonal)."""
     info = {}
     for s in SECTIONS:
         v, f = section_mesh(sec["radius_mm"], sec["length_mm"], sec["flange_width_mm"], sec["flange_height_mm"], s)
@@ -98,39 +121,23 @@ def export_bop(root, out) -> Path:
         info[str(OBJ_ID[s])] = {"diameter": diameter, "min_x": lo[0], "min_y": lo[1], "min_z": lo[2],
                                 "size_x": hi[0] - lo[0], "size_y": hi[1] - lo[1], "size_z": hi[2] - lo[2]}
     write_json_atomic(out / "models" / "models_info.json", {k: {a: float(b) for a, b in d.items()} for k, d in info.items()})
-    w, h = cfg["image"]["width"], cfg["image"]["height"]
-    write_json_atomic(out / "camera.json", {"width": w, "height": h, "cx": (w - 1) / 2 + 0.5, "cy": (h - 1) / 2 + 0.5,
-                                            "fx": float(np.mean(cfg["camera"]["focal_px"])),
-                                            "fy": float(np.mean(cfg["camera"]["focal_px"])), "depth_scale": 1.0})
-    scenes: dict[str, dict] = {}
-    for label in labels:
-        split = label["spec"]["split"]
-        sc = scenes.setdefault(split, {"camera": {}, "gt": {}, "info": {}, "ids": {}, "lens": {}})
-        im = str(len(sc["ids"]))
-        sc["ids"][im] = label["frame_id"]
-        place_file(source_image(root, label["frame_id"]), out / split / "000000" / "rgb" / f"{int(im):06d}.png")
-        k = np.array(label["camera"]["K"], dtype=float)
-        k[0, 2] += 0.5   # BOP/OpenGL-style pixel corners, like COCO
-        k[1, 2] += 0.5
-        cam_from_d = np.array(label["camera"]["cam_from_d"])
-        sc["camera"][im] = {"cam_K": k.ravel().tolist(), "depth_scale": 1.0,
-                            "cam_R_w2c": cam_from_d[:3, :3].ravel().tolist(), "cam_t_w2c": cam_from_d[:3, 3].tolist()}
-        sc["lens"][im] = lens_record(label["camera"])
-        d_from_b = np.array(label["d_from_b"])
-        gts, infos = [], []
-        for srec in label["sections"]:
-            m2c = cam_from_d @ (d_from_b if srec["section"] == "B" else np.eye(4))
-            gts.append({"obj_id": OBJ_ID[srec["section"]], "cam_R_m2c": m2c[:3, :3].ravel().tolist(),
-                        "cam_t_m2c": m2c[:3, 3].tolist()})
-            infos.append({"bbox_obj": _xywh(srec.get("bbox_obj_px")), "bbox_visib": _xywh(srec.get("bbox_visible_px")),
-                          "px_count_all": srec.get("pixels_all", 0), "px_count_valid": srec.get("pixels_all", 0),
-                          "px_count_visib": srec.get("pixels_visible", 0), "visib_fract": srec.get("visible_fraction", 0.0)})
-        sc["gt"][im], sc["info"][im] = gts, infos
-    for split, sc in scenes.items():
-        d = out / split / "000000"
-        write_json_atomic(d / "scene_camera.json", sc["camera"])
-        write_json_atomic(d / "scene_gt.json", sc["gt"])
-        write_json_atomic(d / "scene_gt_info.json", sc["info"])
-        write_json_atomic(d / "frame_ids.json", sc["ids"])
-        write_json_atomic(d / "scene_camera_lens.json", sc["lens"])
-    return out
+
+
+def _frame_records(label: dict) -> tuple[dict, list, list]:
+    """(scene_camera record, scene_gt records, scene_gt_info records) of one frame's label."""
+    k = np.array(label["camera"]["K"], dtype=float)
+    k[0, 2] += 0.5   # BOP/OpenGL-style pixel corners, like COCO
+    k[1, 2] += 0.5
+    cam_from_d = np.array(label["camera"]["cam_from_d"])
+    camera = {"cam_K": k.ravel().tolist(), "depth_scale": 1.0,
+              "cam_R_w2c": cam_from_d[:3, :3].ravel().tolist(), "cam_t_w2c": cam_from_d[:3, 3].tolist()}
+    d_from_b = np.array(label["d_from_b"])
+    gts, infos = [], []
+    for srec in label["sections"]:
+        m2c = cam_from_d @ (d_from_b if srec["section"] == "B" else np.eye(4))
+        gts.append({"obj_id": OBJ_ID[srec["section"]], "cam_R_m2c": m2c[:3, :3].ravel().tolist(),
+                    "cam_t_m2c": m2c[:3, 3].tolist()})
+        infos.append({"bbox_obj": _xywh(srec.get("bbox_obj_px")), "bbox_visib": _xywh(srec.get("bbox_visible_px")),
+                      "px_count_all": srec.get("pixels_all", 0), "px_count_valid": srec.get("pixels_all", 0),
+                      "px_count_visib": srec.get("pixels_visible", 0), "visib_fract": srec.get("visible_fraction", 0.0)})
+    return camera, gts, infos

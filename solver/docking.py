@@ -147,37 +147,25 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                   options: DockingOptions = DEFAULT_DOCKING) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
 
-    ``markers``: the layout, a sequence of :class:`core.layout.Marker` of both sections
-    (``center_mm`` in each marker's own section frame), e.g. ``build_layout(...)``.
-    ``principal_point``: (2,) float64, pixels. Exactly one of:
-    - ``detections = (class_ids, points_2d)``: class_ids (N,) int (0 = A / RedA, 1 = B / BlueB)
-      or "A"/"B"; points_2d (N, 2) float64 pixels. Ids are assigned by
-      :func:`solver.identify.identify_markers` (``options.identify``). Missing markers,
-      spurious detections and swapped classes are tolerated; an ambiguous assignment raises
-      AmbiguousIdentification. Identified detections whose centre is suspect are then left
-      out, worst first, while each section keeps ``MIN_POINTS`` (they keep their id; ``inliers``
-      False; see :mod:`solver.suspects`): ``boxes`` (N, 4) [x0, y0, x1, y1] px, the detected
-      outlines (under ``options.min_extent`` of the predicted outline = partly hidden);
-      ``refined`` (N,) bool, False where the detector could not refine the centre (also used
-      by identification: a hypothesis explaining more refined detections wins). With
-      ``options.eccentricity`` every centre is corrected by its predicted perspective offset
-      and the pose refitted (see :mod:`solver.eccentricity`).
-    - ``correspondences``: dict marker id -> (u, v), or a pair (marker_ids (N,), points_2d
-      (N, 2)). With ``robust=True`` (needs ``rng``, a numpy Generator), outliers are rejected
-      by LO-RANSAC (``options.ransac``).
-    ``sigma_px``: pixel noise std for the covariances; None estimates it from the residuals.
-    ``camera_model``: "pinhole" (the paper's camera: f only, principal point fixed at
-    ``principal_point``, no distortion), a model of :data:`solver.camera_models.MODELS`
-    ("k1", "k1k2", "pp_k1", "pp_k1_p": the pinhole fit first, then the model's extra
-    intrinsics refined from it with ``principal_point`` and no distortion as start) or "auto"
-    (the model the frame's data determine, ``options.model_choice``; see
-    :mod:`solver.model_choice`). Identification and RANSAC use the pinhole model; the final
-    fits, the suspect and eccentricity steps and the inlier re-check use the fitted camera.
+    ``markers``: the layout (:class:`core.layout.Marker` of both sections, ``center_mm`` in each
+    marker's own section frame). ``principal_point``: (2,) px. Exactly one of:
+    - ``detections = (class_ids, points_2d)``: class ids (N,) (0 / "A" red, 1 / "B" blue), pixels
+      (N, 2). Ids come from :func:`solver.identify.identify_markers` (missing markers, strays and
+      swapped classes tolerated; AmbiguousIdentification when two assignments fit equally).
+      Suspect centres are then left out while each section keeps ``MIN_POINTS``
+      (:mod:`solver.suspects`): ``boxes`` (N, 4) [x0, y0, x1, y1] px, the detected outlines;
+      ``refined`` (N,) bool, False where the detector could not refine the centre. With
+      ``options.eccentricity`` centres are corrected by their perspective offset and refitted.
+    - ``correspondences``: dict marker id -> (u, v), or (marker_ids (N,), points_2d (N, 2));
+      ``robust=True`` (with ``rng``, a numpy Generator) rejects outliers by LO-RANSAC.
+    ``sigma_px``: pixel noise std for the covariances (None: from the residuals).
+    ``camera_model``: "pinhole" (the paper's: f only, no distortion), a model of
+    :data:`solver.camera_models.MODELS` (refined from the pinhole fit) or "auto" (the model the
+    frame determines, :mod:`solver.model_choice`); identification and RANSAC use the pinhole.
 
-    Every section needs at least 4 usable points. Returns a :class:`DockingResult`; raises a
-    :class:`SolverError` subclass on bad input (InvalidSolverInput: shapes, NaN/inf, unknown or
-    repeated ids), too few points (TooFewPoints), degenerate geometry, an unobservable focal,
-    or a failed or ambiguous identification.
+    Returns a :class:`DockingResult`; raises a :class:`SolverError` subclass on bad input
+    (InvalidSolverInput), too few points (TooFewPoints), degenerate geometry, an unobservable
+    focal length, or a failed or ambiguous identification.
     """
     if (detections is None) == (correspondences is None):
         raise InvalidSolverInput("give exactly one of detections= or correspondences=")

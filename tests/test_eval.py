@@ -71,7 +71,7 @@ def _fake_metrics(loc_rmse, est_rmse, fail_rate=0.0):
 
 
 def test_verdict_gates_what_the_spec_names():
-    from dockfactory.eval.evaluate import verdict
+    from dockfactory.eval.acceptance import verdict
     good = {c: 0.01 for c in ("x", "y", "z", "alpha", "beta", "gamma")}
     v = verdict(_fake_metrics(good, good), AcceptanceSpec())
     assert v["accepted"] and len(v["criteria"]) == 7   # 3 + 3 pose criteria + failure rate (normal only)
