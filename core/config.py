@@ -42,7 +42,7 @@ MAX_BOUNCES = 1024              # Blender's limit on light path bounces
 # 1000 km, far beyond any docking scene, and sums, spans and products of config values stay finite
 # (a [-1e308, 1e308] range passed and then overflowed numpy's uniform sampler).
 MAX_MAGNITUDE = 1e9
-# Camera units (issue 11): a dataset holds at most this many physical cameras; lens values beyond
+# Camera units: a dataset holds at most this many physical cameras; lens values beyond
 # these bounds are not camera lenses (and the distortion model folds over inside the image).
 MAX_CAMERA_UNITS = 100
 MAX_PRINCIPAL_OFFSET = 0.25     # |principal point offset| <= this share of the image side

@@ -3,8 +3,8 @@ oracle centres) solved four ways, the paper's pinhole beside self-calibration pe
 docking run, and the reference of a calibrated camera (each frame's centres undistorted with its
 label's true intrinsics, the principal point given; the focal length still estimated), with the
 error of each pose and of the intrinsics each assumes or estimates against the truth in the
-labels (principal point, k1, k2, focal length), and each pose RMSE over the reference's (issue
-11's target: self-calibrated per docking run within 1.2x)."""
+labels (principal point, k1, k2, focal length), and each pose RMSE over the reference's (what
+self-calibration costs against a calibrated camera)."""
 from __future__ import annotations
 
 from collections import Counter

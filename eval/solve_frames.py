@@ -120,8 +120,8 @@ def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_p
 
 def true_camera_centres(label: dict, centres):
     """(principal point (2,), centres) of a frame seen through its label's true camera: the
-    centres and boxes undistorted with the true K and coefficients (issue 11's reference solve:
-    "the same frames solved with the true intrinsics"; the focal length is still estimated)."""
+    centres and boxes undistorted with the true K and coefficients (the reference of a calibrated
+    camera: the same frames solved with the true intrinsics; the focal length is still estimated)."""
     cam = label["camera"]
     pp, dist = tuple(cam["principal_point"]), cam.get("distortion") or [0.0] * 5
 

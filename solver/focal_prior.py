@@ -1,4 +1,4 @@
-"""A known zoom range as a prior on one section's focal length (issue 12).
+"""A known zoom range as a prior on one section's focal length.
 
 Near-planar, fronto-parallel points can put the maximum of the likelihood at an affine camera
 (f -> infinity: measured 1.8e9-4.9e10 px for true 1700-2000 px at 0.3 px, rotation 6-13 bound-

@@ -253,7 +253,7 @@ class ModelChoiceOptions:
     - ``prior_pp_px``, ``prior_k1``, ``prior_k2``, ``prior_p``: half-width of the plausible
       range of each extra intrinsic for a camera nobody calibrated (principal point within
       +-50 px of the centre, |k1| <= 0.2, |k2| <= 0.1, |p1|, |p2| <= 2e-3: a little wider than
-      the ranges of configs/realistic.toml in issue 11, +-40 px, k1 in [-0.15, 0.05],
+      the ranges of configs/realistic.toml, +-40 px, k1 in [-0.15, 0.05],
       |k2| <= 0.05, |p| <= 1e-3);
     - ``max_std_inflation``: a richer model is refused when a parameter of a model it nests sees
       its standard deviation grow by more than this factor in it (its added parameters trade

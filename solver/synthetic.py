@@ -7,7 +7,7 @@ by up to 2 deg, focal length drawn so that every marker stays ``margin_px`` insi
 It is a re-statement for testing, not an import of the factory's sampler, so that solver tests do
 not move when the factory's sampling changes.
 
-Real cameras (issue 11): a principal point offset and OpenCV distortion (:mod:`core.distortion`
+Real cameras: a principal point offset and OpenCV distortion (:mod:`core.distortion`
 applied to the exact projections) per frame (:func:`docking_scene`) or per docking run
 (:func:`docking_run`: a fixed camera, B approaching A).
 """
