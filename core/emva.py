@@ -224,6 +224,32 @@ def _check_expose_inputs(electrons_mean, exposure_s, rng, patterns) -> np.ndarra
     return e
 
 
+NEAR_FULL_WELL_SIGMAS = 6.0   # beyond this many shot-noise sigmas below the full well, clipping is < 1e-9
+
+
+def _add_temporal_noise(mu: np.ndarray, sensor: EmvaSensor, rng: np.random.Generator) -> None:
+    """``mu`` (float32 e-, in place) -> min(mu + sqrt(mu) z1, saturation) + dark_noise z2.
+
+    Away from the full well the clip never acts, and the sum of the two Gaussians is one:
+    mu + sqrt(mu + dark_noise^2) z, one draw per pixel (the draws cost most of the stage). The
+    pixels within NEAR_FULL_WELL_SIGMAS shot-noise sigmas of the full well take the two steps
+    exactly, with their own draws: first one N(0, 1) per pixel (all pixels, row-major), then
+    one more per near-full pixel (in row-major order)."""
+    sat = np.float32(sensor.saturation_e)
+    dark = np.float32(sensor.dark_noise_e)
+    z = rng.standard_normal(mu.shape, dtype=np.float32)
+    near = mu + np.float32(NEAR_FULL_WELL_SIGMAS) * np.sqrt(mu) >= sat
+    if near.any():
+        shot = mu[near] + np.sqrt(mu[near]) * z[near]
+        clipped = np.minimum(shot, sat) + dark * rng.standard_normal(shot.shape, dtype=np.float32)
+    spread = mu + dark * dark
+    np.sqrt(spread, out=spread)
+    z *= spread
+    mu += z
+    if near.any():
+        mu[near] = clipped
+
+
 def expose(electrons_mean, sensor: EmvaSensor, exposure_s: float, rng: np.random.Generator,
            patterns: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """One raw frame: (H, W) uint16 DN in [0, 2**sensor.adc_bits - 1].
@@ -231,14 +257,14 @@ def expose(electrons_mean, sensor: EmvaSensor, exposure_s: float, rng: np.random
     ``electrons_mean``: (H, W) real array, the mean photo-electrons each pixel would collect
     during the exposure (photons x QE already applied), finite and >= 0. ``sensor``: validated
     here. ``exposure_s``: exposure time in seconds, >= 0 (it scales the dark current only).
-    ``rng``: the numpy Generator of every temporal draw (two (H, W) standard-normal draws per
-    frame, in this order: shot noise, dark noise). ``patterns``: ``fixed_patterns(sensor, seed,
+    ``rng``: the numpy Generator of every temporal draw (one (H, W) standard-normal draw, then
+    one per pixel near the full well: :func:`_add_temporal_noise`). ``patterns``: ``fixed_patterns(sensor, seed,
     H, W)`` of the camera unit, ``(dsnu_dn, prnu_gain)``.
 
     Stages (units in brackets): mu = electrons_mean * prnu_gain + dark_current * exposure_s [e-];
     n = mu + sqrt(mu) * N(0, 1) [e-]; n = min(n, saturation_e) [e-]; n += dark_noise_e * N(0, 1)
-    [e-]; y = K * n + black_level + dsnu [DN]; rounded to the nearest code and clipped to the
-    ADC range.
+    [e-] (drawn as one Gaussian away from the full well, where the clip cannot act); y = K * n +
+    black_level + dsnu [DN]; rounded to the nearest code and clipped to the ADC range.
 
     Shot noise is Gaussian N(mu, mu), not Poisson: its mean and variance are exactly the Poisson
     ones (so the photon transfer curve, SNR and the linear response are exact), its shape is not
@@ -251,16 +277,9 @@ def expose(electrons_mean, sensor: EmvaSensor, exposure_s: float, rng: np.random
     _check_sensor(sensor, "expose sensor")
     e = _check_expose_inputs(electrons_mean, exposure_s, rng, patterns)
     dsnu, prnu = patterns
-    shape = e.shape
     mu = e * prnu                                                        # e-
     mu += np.float32(sensor.dark_current_e_per_s * exposure_s)           # e-
-    shot = rng.standard_normal(shape, dtype=np.float32)
-    shot *= np.sqrt(mu)                                                  # e-, variance mu
-    mu += shot
-    np.minimum(mu, np.float32(sensor.saturation_e), out=mu)              # full well, e-
-    dark = rng.standard_normal(shape, dtype=np.float32)
-    dark *= np.float32(sensor.dark_noise_e)                              # e-
-    mu += dark
+    _add_temporal_noise(mu, sensor, rng)                                 # e-
     mu *= np.float32(sensor.gain_dn_per_e)                               # DN
     mu += dsnu
     mu += np.float32(sensor.black_level_dn)                              # DN

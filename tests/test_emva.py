@@ -312,3 +312,23 @@ def test_expose_refuses_bad_input(change, word):
         expose(_flat(1.0, 8), sensor, -0.01, np.random.default_rng(0), fixed_patterns(sensor, 1, 8, 8))
     with pytest.raises(ValueError, match="EmvaSensor"):
         expose(_flat(1.0, 8), "imx174", 0.01, np.random.default_rng(0), fixed_patterns(sensor, 1, 8, 8))
+
+
+@pytest.mark.parametrize("share", [0.001, 0.3, 0.9, 0.9995])
+def test_temporal_variance_is_shot_plus_dark_noise_up_to_the_full_well(share):
+    """One Gaussian draw stands for shot + dark noise away from the full well, two exact steps
+    near it: the pair variance of a flat field is K^2 (mu + dark^2) + 1/12 within 4 % below the
+    clip, and at 0.9995 of the full well (every pixel on the exact path) the mean sits below the
+    unclipped value by the clip's share."""
+    sensor = preset("imx273")
+    mu = share * sensor.saturation_e
+    pats = fixed_patterns(sensor, UNIT_SEED, SIZE, SIZE)
+    a, b = (expose(_flat(mu), sensor, EXPOSURE_S, np.random.default_rng(k), pats).astype(float) for k in (11, 12))
+    var = np.var(a - b) / 2
+    expected = sensor.gain_dn_per_e ** 2 * (mu + sensor.dark_current_e_per_s * EXPOSURE_S + sensor.dark_noise_e ** 2) + 1 / 12
+    near = mu + emva.NEAR_FULL_WELL_SIGMAS * math.sqrt(mu) >= sensor.saturation_e
+    if share < 0.99:
+        assert not near and var == pytest.approx(expected, rel=0.04)
+    else:
+        assert near   # clipped: less spread and a lower mean than without the full well
+        assert var < expected and a.mean() < sensor.black_level_dn + sensor.gain_dn_per_e * mu
