@@ -24,6 +24,7 @@ from pathlib import Path
 from dockfactory.core.config import CONDITIONS, ConfigError, build_dataclass
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
 from dockfactory.core.user_files import check_regular_file
+from dockfactory.eval.confidence import frames_to_decide
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,14 @@ class PaperFigures:
     map50_95: float = 0.834
 
 
+DECISION_RULES = ("guarded", "simple")
+EXIT_NOT_PROVEN = 3   # exit status of evaluate / run when the guarded rule cannot decide
+
+
 @dataclass(frozen=True)
 class AcceptanceSpec:
+    decision_rule: str = "guarded"   # guarded: the confidence bound decides (ISO 14253-1); simple: the value
+    confidence: float = 0.95         # of each one-sided bound of a gated statistic
     estimation: Gate = field(default_factory=lambda: Gate(x=1.0, y=1.0, alpha=0.05))
     localization: Gate = field(default_factory=lambda: Gate(x=5.0, y=5.0, alpha=0.1))
     detection: DetectionGate = field(default_factory=DetectionGate)
@@ -120,6 +127,10 @@ def ungated_components(spec: AcceptanceSpec) -> list[str]:
 def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
     """Refuse a spec that would switch a gate off by accident. ``data``: the TOML tables as read
     (a component the file names must carry a real threshold; one it leaves out is not gated)."""
+    if spec.decision_rule not in DECISION_RULES:
+        raise ConfigError(f"{source}: decision_rule: {spec.decision_rule!r} is not one of {', '.join(DECISION_RULES)}")
+    if not (math.isfinite(spec.confidence) and 0.5 <= spec.confidence < 1):
+        raise ConfigError(f"{source}: confidence: must be in [0.5, 1), got {spec.confidence}")
     for name in ("estimation", "localization"):
         gate = getattr(spec, name)
         if gate.statistic not in ("rmse", "mse"):
@@ -172,7 +183,8 @@ POSE_BLOCKS = (("estimation", "estimation precision (repeatability)", "captures"
 
 
 def _pose_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
-    """One criterion per gated pose component of estimation and localization."""
+    """One criterion per gated pose component of estimation and localization, decided by the
+    spec's rule on the statistic's confidence bounds (``metrics["bounds"]``)."""
     criteria = []
     for block, label, what in POSE_BLOCKS:
         gate, blk = getattr(spec, block), metrics[block]
@@ -185,11 +197,53 @@ def _pose_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
             elif stat is None:
                 note = ("no pose captured twice" if block == "estimation" else "no test frame") + ": nothing to measure"
             unit = UNITS[c] + ("^2" if gate.statistic == "mse" else "")
-            criteria.append({"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
-                             "value": stat, "threshold": thr, "unit": unit, "note": note,
-                             "pass": criterion_passes("max", stat, thr),
-                             "paper": getattr(spec.paper, f"{block}_{c}", None)})
+            row = {"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
+                   "value": stat, "threshold": thr, "unit": unit, "note": note,
+                   "paper": getattr(spec.paper, f"{block}_{c}", None)}
+            row.update(_bounds_of(metrics, block, c, gate.statistic, stat))
+            row["decision"] = decide_criterion(spec.decision_rule, stat, thr, row["lower"], row["upper"])
+            row["pass"] = row["decision"] == "pass"
+            if row["decision"] == "undecided":
+                row["note"] = _more_frames_note(blk, c, stat, thr, gate.statistic, spec.confidence, block)
+            criteria.append(row)
     return criteria
+
+
+def _more_frames_note(blk: dict, c: str, value: float, thr: float, statistic: str, confidence: float,
+                      block: str) -> str:
+    """What would decide an undecided criterion: how many more frames (captures) the chi-square
+    bound needs if the measured value holds (eval.confidence.frames_to_decide)."""
+    root = (lambda v: math.sqrt(v)) if statistic == "mse" else (lambda v: v)
+    dof = blk.get("dof") if block == "estimation" else blk["overall"][c].get("n")
+    needed = frames_to_decide(root(value), root(thr), int(dof or 0), confidence)
+    what = "repeatability captures" if block == "estimation" else "test frames"
+    if needed is None:
+        return f"undecided: the value sits at the threshold; no number of {what} decides it"
+    return (f"undecided: about {max(0, needed - int(dof))} more {what} would decide it, if the measured "
+            f"value holds")
+
+
+def _bounds_of(metrics: dict, block: str, c: str, statistic: str, value) -> dict:
+    """The statistic's lower and upper confidence bounds (squared for mse) and their methods."""
+    b = ((metrics.get("bounds") or {}).get(block) or {}).get(c) or {}
+    if value is None or b.get("upper") is None:
+        return {"lower": None, "upper": None, "bounds_by": None}
+    power = 2 if statistic == "mse" else 1
+    return {"lower": b["lower"] ** power, "upper": b["upper"] ** power,
+            "bounds_by": f"{b['lower_by']} / {b['upper_by']}"}
+
+
+def decide_criterion(rule: str, value, threshold, lower, upper) -> str:
+    """"pass", "fail" or "undecided" of a "max" criterion. simple: the value against the
+    threshold. guarded (ISO 14253-1): pass only when the upper bound is within the threshold,
+    fail when the lower bound is beyond it, undecided between; no value or no bound fails."""
+    if rule == "simple":
+        return "pass" if criterion_passes("max", value, threshold) else "fail"
+    if value is None or lower is None or upper is None:
+        return "fail"
+    if criterion_passes("max", upper, threshold):
+        return "pass"
+    return "fail" if not criterion_passes("max", lower, threshold) else "undecided"
 
 
 def _detection_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
@@ -230,13 +284,31 @@ def verdict(metrics: dict, spec: AcceptanceSpec) -> dict:
       zero frames (or a spread with no degree of freedom) fails too.
     - The failure rate covers the test frames and the repeatability captures of the listed
       conditions; over zero such frames it has no value and fails.
-    Every criterion passes exactly when its value is not None and within its threshold, so the
-    rows a report prints determine the verdict. ``ungated`` lists what the spec reports without
+    - Pose criteria follow the spec's decision rule (:func:`decide_criterion`) on the statistic's
+      one-sided confidence bounds (eval.confidence); detection minima and the failure rate
+      compare the value itself.
+    Every criterion's decision follows from the numbers in its row, so the rows a report prints
+    determine the verdict. ``ungated`` lists what the spec reports without
     gating (:func:`ungated_components`), so a reader sees what the verdict does not cover.
     """
     criteria = _pose_criteria(metrics, spec) + _detection_criteria(metrics, spec) + [_failure_criterion(metrics, spec)]
-    return {"accepted": all(c["pass"] for c in criteria), "criteria": criteria,
+    return {"accepted": all(c["pass"] for c in criteria), "verdict": overall_verdict(criteria),
+            "decision_rule": spec.decision_rule, "confidence": spec.confidence, "criteria": criteria,
             "ungated": ungated_components(spec)}
+
+
+def overall_verdict(criteria: list[dict]) -> str:
+    """ACCEPTED when every criterion passes, REJECTED when one fails, NOT PROVEN when none fails
+    but some could not be decided (the guarded rule: more frames would decide)."""
+    decisions = [c.get("decision", "pass" if c["pass"] else "fail") for c in criteria]
+    if all(d == "pass" for d in decisions):
+        return "ACCEPTED"
+    return "REJECTED" if "fail" in decisions else "NOT PROVEN"
+
+
+def verdict_exit_status(verdict_text: str) -> int:
+    """0 ACCEPTED, 1 REJECTED, EXIT_NOT_PROVEN (3) NOT PROVEN."""
+    return {"ACCEPTED": 0, "REJECTED": 1}.get(verdict_text, EXIT_NOT_PROVEN)
 
 
 def criterion_passes(statistic: str, value, threshold) -> bool:
@@ -247,3 +319,21 @@ def criterion_passes(statistic: str, value, threshold) -> bool:
     if not (math.isfinite(value) and math.isfinite(threshold)):
         return False
     return bool(value >= threshold) if statistic == "min" else bool(value <= threshold)
+
+
+def _num(v) -> str:
+    return "-" if v is None else f"{v:.4g}"
+
+
+def criterion_lines(acc: dict) -> list[str]:
+    """One line per criterion for a terminal: decision, name, value (with its bounds under the
+    guarded rule), threshold, note."""
+    out = []
+    for c in acc["criteria"]:
+        decision = c.get("decision", "pass" if c["pass"] else "fail").upper()
+        bounds = (f" ({acc.get('confidence', 0.95):.0%} bounds {_num(c['lower'])}-{_num(c['upper'])})"
+                  if c.get("upper") is not None else "")
+        note = f" [{c['note']}]" if c.get("note") else ""
+        out.append(f"{decision:9s} {c['name']}: {_num(c['value'])}{bounds} (threshold {_num(c['threshold'])} "
+                   f"{c['unit']}){note}")
+    return out

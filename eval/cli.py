@@ -17,7 +17,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.names import MIN_SCORE, SPLITS
 from dockfactory.core.resources import default_acceptance, resolve_config
-from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.acceptance import criterion_lines, load_acceptance, verdict_exit_status
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
@@ -94,12 +94,10 @@ def cmd_evaluate(args) -> int:
         "detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
         # the weights the detections name: a report of a detector's run says which detector it judged
         "model_sha256": metrics.get("detection", {}).get("weights_sha256") if args.detections else None})
-    for c in metrics["acceptance"]["criteria"]:
-        note = f" [{c['note']}]" if c.get("note") else ""
-        print(f"{'PASS' if c['pass'] else 'FAIL'}  {c['name']}: {c['value']}{note} (threshold {c['threshold']} {c['unit']})")
-    accepted = metrics["acceptance"]["accepted"]
-    print(f"verdict: {'ACCEPTED' if accepted else 'REJECTED'}  ({args.out}/metrics.json)")
-    return 0 if accepted else 1
+    acc = metrics["acceptance"]
+    print("\n".join(criterion_lines(acc)))
+    print(f"verdict: {acc['verdict']}  ({args.out}/metrics.json)")
+    return verdict_exit_status(acc["verdict"])
 
 
 def cmd_report(args) -> int:

@@ -16,6 +16,7 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, verdict
+from dockfactory.eval.confidence import pooled_spread_bounds, rmse_bounds
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
 from dockfactory.eval.centre_noise_disc import (
@@ -206,6 +207,24 @@ def estimation_block(rows: list[dict]) -> dict:
     return rep
 
 
+def statistic_bounds(test: list[dict], rep: list[dict], confidence: float) -> dict:
+    """One-sided ``confidence`` bounds (eval.confidence: chi-square and bootstrap, the cautious
+    pair deciding) of every component's localization RMSE over the solved test frames and pooled
+    repeatability spread over the static poses; bootstrap seeds fixed per component (the same
+    rows give the same bounds)."""
+    ok = [r for r in test if r["ok"]]
+    groups = defaultdict(list)
+    for r in rep:
+        if r["ok"]:
+            groups[r["pose_index"]].append(r)
+    out = {"confidence": confidence, "localization": {}, "estimation": {}}
+    for k, c in enumerate(COMPONENTS):
+        out["localization"][c] = rmse_bounds([r[f"err_{c}"] for r in ok], confidence, seed=k) if ok else {}
+        out["estimation"][c] = pooled_spread_bounds([[r[f"est_{c}"] for r in g] for _, g in sorted(groups.items())],
+                                                    confidence, seed=100 + k)
+    return out
+
+
 def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None,
              min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None,
              envelope: EnvelopeGrid | None = None, camera_models: bool = False) -> tuple[dict, list[dict]]:
@@ -249,6 +268,7 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
     if camera_models:
         metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
     metrics["simulated_cameras"] = simulated_cameras_block(ds, test)
+    metrics["bounds"] = statistic_bounds(test, rep, spec.confidence)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows
 

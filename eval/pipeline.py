@@ -18,7 +18,7 @@ from pathlib import Path
 from dockfactory.core.config import load_config
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
-from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.acceptance import load_acceptance, verdict_exit_status
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.report import build_report
@@ -233,4 +233,4 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     summary = build_report(eval_dir, report, commands)
     say(f"done in {time.monotonic() - t_all:.0f} s")
     print(f"verdict: {summary['verdict']}  report: {report}")
-    return 0 if metrics["acceptance"]["accepted"] else 1
+    return verdict_exit_status(summary["verdict"])

@@ -18,7 +18,7 @@ from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
-from dockfactory.eval.acceptance import criterion_passes
+from dockfactory.eval.acceptance import DECISION_RULES, criterion_passes, decide_criterion, overall_verdict
 from dockfactory.eval.report_calibration import (
     CALIBRATION_SCHEMA,
     CENTRE_NOISE_SCHEMA,
@@ -302,9 +302,12 @@ METRICS_SCHEMA = {
     "camera_envelope?": ENVELOPE_SCHEMA,
     "camera_models?": CAMERA_MODELS_SCHEMA,
     "simulated_cameras?": SIMULATED_CAMERAS_SCHEMA,
-    "acceptance": {"accepted": "bool",
+    "bounds?": "any",
+    "acceptance": {"accepted": "bool", "verdict?": "str", "decision_rule?": "str", "confidence?": "num",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
-                                         "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str"}),
+                                         "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str",
+                                         "block?": "str", "lower?": "num?", "upper?": "num?", "bounds_by?": "str?",
+                                         "decision?": "str"}),
                    "ungated?": ("list", "str")},
 }
 PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model_sha256?": "str?"}
@@ -368,24 +371,36 @@ def _check_leaf(value, schema: str, path, key: str) -> None:
 
 
 def checked_verdict(acc: dict, path) -> str:
-    """The verdict of the criteria rows the report prints, recomputed from each row's value and
-    threshold; a metrics.json whose pass flags or ``accepted`` disagree with its own rows (edited
-    by hand, or written by a buggy tool) is refused, never believed."""
+    """The verdict of the criteria rows the report prints, recomputed from each row's value,
+    bounds and threshold under the spec's decision rule; a metrics.json whose pass flags,
+    decisions, ``accepted`` or ``verdict`` disagree with its own rows (edited by hand, or written
+    by a buggy tool) is refused, never believed."""
     if not acc["criteria"]:
         raise DatasetError(f"{path}: acceptance.criteria: empty (a verdict needs criteria)")
+    rule = acc.get("decision_rule", "simple")
+    if rule not in DECISION_RULES:
+        raise DatasetError(f"{path}: acceptance.decision_rule: {rule!r} is not one of {', '.join(DECISION_RULES)}")
     for i, c in enumerate(acc["criteria"]):
-        passes = criterion_passes(c["statistic"], c["value"], c["threshold"])
-        if passes != c["pass"]:
+        decision = _recomputed_decision(c, rule)
+        if (decision == "pass") != c["pass"] or c.get("decision", decision) != decision:
             raise DatasetError(f"{path}: acceptance.criteria[{i}] ({c['name']}): pass is {str(c['pass']).lower()} "
-                               f"but value {c['value']} against threshold {c['threshold']} "
-                               f"({c['statistic']}) {'passes' if passes else 'fails'}; refusing an "
+                               f"(decision {c.get('decision')}) but value {c['value']} against threshold "
+                               f"{c['threshold']} ({c['statistic']}, {rule} rule) gives {decision}; refusing an "
                                "inconsistent metrics.json (run dockfactory evaluate again)")
-    accepted = all(c["pass"] for c in acc["criteria"])
-    if accepted != acc["accepted"]:
-        raise DatasetError(f"{path}: acceptance.accepted: {str(acc['accepted']).lower()} contradicts its criteria "
-                           f"(which give {'ACCEPTED' if accepted else 'REJECTED'}); refusing an inconsistent "
-                           "metrics.json (run dockfactory evaluate again)")
-    return "ACCEPTED" if accepted else "REJECTED"
+    verdict = overall_verdict(acc["criteria"])
+    if (verdict == "ACCEPTED") != acc["accepted"] or acc.get("verdict", verdict) != verdict:
+        raise DatasetError(f"{path}: acceptance.accepted / verdict ({str(acc['accepted']).lower()}, "
+                           f"{acc.get('verdict')}) contradict its criteria (which give {verdict}); refusing an "
+                           "inconsistent metrics.json (run dockfactory evaluate again)")
+    return verdict
+
+
+def _recomputed_decision(c: dict, rule: str) -> str:
+    """A criterion row's decision from its own numbers: pose statistics under the rule (with
+    their bounds), detection minima and the failure rate on the value."""
+    if c.get("block") in ("estimation", "localization") and "decision" in c:
+        return decide_criterion(rule, c["value"], c["threshold"], c.get("lower"), c.get("upper"))
+    return "pass" if criterion_passes(c["statistic"], c["value"], c["threshold"]) else "fail"
 
 
 def _optional_json(path, what: str, named_by: str):
@@ -415,14 +430,42 @@ def _note(c: dict) -> str:
     return f" ({html.escape(c['note'])})" if c.get("note") else ""
 
 
+def _decision(c: dict) -> str:
+    return c.get("decision", "pass" if c["pass"] else "fail").upper()
+
+
+def _bounds_cell(c: dict, conf: float) -> str:
+    if c.get("upper") is None:
+        return "-"
+    return (f"{_num(c['lower'])} - {_num(c['upper'])} {c['unit']} "
+            f"<span class='note'>({html.escape(c.get('bounds_by') or '')})</span>")
+
+
 def _criteria_rows(acc: dict) -> str:
     out = []
+    conf = acc.get("confidence", 0.95)
     for c in acc["criteria"]:
-        cls = "pass" if c["pass"] else "fail"
+        decision = _decision(c)
+        cls = {"PASS": "pass", "FAIL": "fail"}.get(decision, "undecided")
         out.append(f"<tr class='{cls}'><td>{html.escape(c['name'])}</td><td>{c['statistic']}</td>"
-                   f"<td>{_num(c['value'])} {c['unit']}{_note(c)}</td><td>{_num(c['threshold'])} {c['unit']}</td>"
-                   f"<td>{_num(c.get('paper'))}</td><td><b>{'PASS' if c['pass'] else 'FAIL'}</b></td></tr>")
+                   f"<td>{_num(c['value'])} {c['unit']}{_note(c)}</td><td>{_bounds_cell(c, conf)}</td>"
+                   f"<td>{_num(c['threshold'])} {c['unit']}</td>"
+                   f"<td>{_num(c.get('paper'))} {c['unit'] if c.get('paper') is not None else ''}</td>"
+                   f"<td><b>{decision}</b></td></tr>")
     return "\n".join(out)
+
+
+def _rule_text(acc: dict) -> str:
+    """How the verdict was decided, in one sentence."""
+    conf = acc.get("confidence", 0.95)
+    if acc.get("decision_rule", "simple") == "guarded":
+        return (f"Decision rule: guarded (ISO 14253-1 style). A pose statistic passes only when its one-sided "
+                f"{conf:.0%} upper confidence bound is within its threshold, fails when its {conf:.0%} lower bound "
+                "is beyond it, and is UNDECIDED between (more frames would decide); bounds by chi-square under a "
+                "Gaussian error model and by bootstrap, the more cautious one deciding (the method of each bound in "
+                "brackets). Detection minima and the failure rate compare the value itself.")
+    return ("Decision rule: simple. Each statistic's value is compared with its threshold; its confidence "
+            "bounds are shown but do not decide.")
 
 
 def _stats_table(block: dict, title: str) -> str:
@@ -433,11 +476,13 @@ def _stats_table(block: dict, title: str) -> str:
 
 def _html_verdict(metrics: dict, acc: dict, verdict: str) -> list[str]:
     loc = metrics["localization"]
-    return [f"<h1>dockfactory acceptance report: <span class='{'pass' if acc['accepted'] else 'fail'}'>{verdict}</span></h1>",
+    cls = {"ACCEPTED": "pass", "REJECTED": "fail"}.get(verdict, "undecided")
+    return [f"<h1>dockfactory acceptance report: <span class='{cls}'>{verdict}</span></h1>",
             f"<p>Dataset <code>{html.escape(metrics['dataset']['name'])}</code> version <code>{metrics['dataset']['version_id']}</code>; "
             f"poses from <b>{html.escape(str(metrics['poses']['source']))}</b>; test frames {loc['n_frames']} "
             f"(solved {loc['n_solved']}); repeatability captures {metrics['estimation']['n_frames']}.</p>",
-            "<h2>Verdict</h2><table><tr><th>criterion</th><th>statistic</th><th>ours</th><th>threshold</th><th>paper</th><th>result</th></tr>",
+            f"<h2>Verdict</h2><p>{html.escape(_rule_text(acc))}</p><table><tr><th>criterion</th><th>statistic</th><th>ours</th>"
+            f"<th>{acc.get('confidence', 0.95):.0%} bounds</th><th>threshold</th><th>paper</th><th>result</th></tr>",
             _criteria_rows(acc), "</table>", _ungated_line(acc, "html"),
             "<p class='note'>Estimation precision = pooled spread of repeated estimates of one static pose; localization precision = "
             "error against exact ground truth (test split). RMSE in mm / deg, MSE in mm^2 / deg^2. The paper's localization alpha "
@@ -537,6 +582,7 @@ def _html_document(parts: list[str]) -> str:
     css = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;color:#222}"
            "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;font-size:90%}"
            "tr.pass td:last-child,.pass{color:#17702a}tr.fail td:last-child,.fail{color:#b00020}"
+           "tr.undecided td:last-child,.undecided{color:#a05a00}"
            ".note{color:#555;font-size:85%}img{max-width:100%}figure{display:inline-block;margin:4px;max-width:540px}"
            "@media print{h2{page-break-before:auto}img{max-width:95%}}")
     return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
@@ -553,9 +599,14 @@ def _ungated_line(acc: dict, fmt: str) -> str:
 
 
 def _summary_markdown(verdict: str, acc: dict) -> str:
-    md = [f"## dockfactory acceptance: **{verdict}**", "", "| criterion | ours | threshold | paper | result |", "|---|---|---|---|---|"]
-    md += [f"| {c['name']} | {_num(c['value'])} {c['unit']}{' (' + c['note'] + ')' if c.get('note') else ''} | {_num(c['threshold'])} {c['unit']} | {_num(c.get('paper'))} | "
-           f"{'PASS' if c['pass'] else 'FAIL'} |" for c in acc["criteria"]]
+    conf = acc.get("confidence", 0.95)
+    md = [f"## dockfactory acceptance: **{verdict}**", "", _rule_text(acc), "",
+          f"| criterion | ours | {conf:.0%} bounds | threshold | paper | result |", "|---|---|---|---|---|---|"]
+    for c in acc["criteria"]:
+        bounds = f"{_num(c['lower'])} - {_num(c['upper'])}" if c.get("upper") is not None else "-"
+        note = f" ({c['note']})" if c.get("note") else ""
+        md.append(f"| {c['name']} | {_num(c['value'])} {c['unit']}{note} | {bounds} | {_num(c['threshold'])} {c['unit']} | "
+                  f"{_num(c.get('paper'))} | {_decision(c)} |")
     ungated = _ungated_line(acc, "md")
     return "\n".join(md) + "\n" + (f"\n{ungated}" if ungated else "")
 

@@ -87,6 +87,18 @@ def test_solve_cli_self_calibrates_each_docking_run(runs, tmp_path, capsys):
     assert poses["self_calibrate"] == "sequence" and poses["camera_model"] == "auto"
     assert all(r["ok"] and r["self_calibrated"] == "sequence" and r["run_frames"] == 20 for r in recs)
     assert len({json.dumps(r["intrinsics"], sort_keys=True) for r in recs}) == 1   # shared by the run
+    # a detector's centre-noise floor (the detections' centre_noise_px) above the run's own residual
+    # estimate is the sigma its joint solve uses
+    frames = {lab["frame_id"]: [{"class_id": m["class_id"], "center_px": m["outline_centroid_px"], "score": 0.9,
+                                 "bbox_px": m["bbox_px"], "refined": True}
+                                for m in lab["markers"] if m.get("visibility") == 2]
+              for lab in runs.labels_of("test")}
+    dets = tmp_path / "dets.json"
+    dets.write_text(json.dumps({"dataset_version": runs.version_id, "frames": frames, "centre_noise_px": 0.3}))
+    assert main(["solve", str(runs.root), "--detections", str(dets), "--self-calibrate", "sequence",
+                 "--camera-model", "pinhole", "--split", "test", "--out", str(out)]) == 0
+    floored = [r for r in json.loads(out.read_text())["frames"].values() if r["ok"]]
+    assert floored and all(r["sigma_px"] >= 0.3 - 1e-12 for r in floored)
     assert main(["solve", str(runs.root), "--oracle-noise", "0.1", "--camera-model", "fisheye",
                  "--out", str(tmp_path / "q.json")]) == 2
     assert "fisheye" in capsys.readouterr().err
