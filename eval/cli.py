@@ -27,6 +27,7 @@ from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
+from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
@@ -82,8 +83,16 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
+    """Evaluate holding the lock of --out from the first read to the printed verdict: a second
+    writer into the same folder is refused in one line, so the verdict printed is the one the
+    metrics file holds."""
     check_min_score(args.min_score)
     spec = load_acceptance(args.acceptance or default_acceptance())
+    with writer_lock(args.out, "evaluate"):
+        return _evaluate(args, spec)
+
+
+def _evaluate(args, spec) -> int:
     ds = Dataset.open(args.dataset)   # every byte checked: the judge reads only an intact dataset
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score,
                              envelope=EnvelopeGrid() if args.envelope else None, camera_models=args.camera_models)
@@ -101,7 +110,8 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    summary = build_report(args.eval_dir, args.out)
+    with writer_lock(args.out, "report"):
+        summary = build_report(args.eval_dir, args.out)
     print(f"verdict: {summary['verdict']}  report: {args.out}")
     return 0
 
