@@ -74,7 +74,8 @@ def peak_rss(image: Path, layout: Path, out: Path, backend: str) -> dict:
     wall = time.perf_counter() - t0
     stderr = proc.stderr.read().decode(errors="replace")
     proc.stderr.close()
-    rec = json.loads((out / "measurements.json").read_text())["images"][0] if (out / "measurements.json").exists() else {}
+    doc = out / "measurements.json"
+    rec = json.loads(doc.read_text())["images"][0] if doc.exists() else {}
     return {"peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "wall_s": round(wall, 2),
             "exit": os.waitstatus_to_exitcode(status), "ok": rec.get("ok"), "category": rec.get("category"),
             "stderr": stderr.strip()[-200:]}

@@ -83,19 +83,18 @@ def cmd_solve(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    """Evaluate holding the lock of --out from the first read to the printed verdict: a second
-    writer into the same folder is refused in one line, so the verdict printed is the one the
-    metrics file holds."""
     check_min_score(args.min_score)
     spec = load_acceptance(args.acceptance or default_acceptance())
-    with writer_lock(args.out, "evaluate"):
-        return _evaluate(args, spec)
-
-
-def _evaluate(args, spec) -> int:
     ds = Dataset.open(args.dataset)   # every byte checked: the judge reads only an intact dataset
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score,
                              envelope=EnvelopeGrid() if args.envelope else None, camera_models=args.camera_models)
+    with writer_lock(args.out, "evaluate"):   # a second writer is refused: the verdict printed is the file's
+        return _write_verdict(args, metrics, rows)
+
+
+def _write_verdict(args, metrics: dict, rows) -> int:
+    """Write metrics, frames and provenance into --out and print the verdict (the caller holds
+    the folder's lock until it is printed)."""
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {
         "detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
@@ -110,7 +109,9 @@ def _evaluate(args, spec) -> int:
 
 
 def cmd_report(args) -> int:
-    with writer_lock(args.out, "report"):
+    """Build the report holding the lock of the folder of --out (the HTML file; its .md and .json
+    go beside it)."""
+    with writer_lock(Path(args.out).parent, "report", f"--out {args.out}: its folder"):
         summary = build_report(args.eval_dir, args.out)
     print(f"verdict: {summary['verdict']}  report: {args.out}")
     return 0

@@ -5,7 +5,8 @@ decoding (a 1 MB PNG can claim 20000 x 20000 px: decoding it first costs 12 GB).
 ("a folder", "a named pipe (FIFO)", ...): a FIFO is never opened (opening one blocks).
 ``image_size(path)``: (format, width, height) from the header of a PNG, JPEG, TIFF or BMP file;
 :class:`ImageHeaderError` (a ValueError) says why not for anything else. At most
-``MAX_HEADER_BYTES`` of the file are read.
+``MAX_HEADER_BYTES`` of the file are read. ``check_size(path, max_pixels)`` adds the limit
+(:class:`ImageTooLarge`).
 """
 from __future__ import annotations
 
@@ -24,6 +25,10 @@ _SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 
 
 class ImageHeaderError(ValueError):
     """The file is not an image whose size its header states (the message says what it is)."""
+
+
+class ImageTooLarge(ImageHeaderError):
+    """The header states more pixels than the limit."""
 
 
 def path_kind(path) -> str | None:
@@ -100,8 +105,8 @@ def _tiff(head: bytes) -> tuple[str, int, int]:
             tag, typ, _count = struct.unpack(end + "HHI", head[ifd + 2 + 12 * k:ifd + 10 + 12 * k])
             if tag in (256, 257):
                 at = ifd + 10 + 12 * k   # the value field: a SHORT sits in its first two bytes
-                size[tag] = struct.unpack(end + "H", head[at:at + 2]) if typ == 3 else struct.unpack(end + "I", head[at:at + 4])
-                size[tag] = size[tag][0]
+                short = typ == 3
+                size[tag] = struct.unpack(end + ("H" if short else "I"), head[at:at + (2 if short else 4)])[0]
     except struct.error:
         raise ImageHeaderError("a TIFF file with a truncated or damaged directory") from None
     if 256 not in size or 257 not in size:
@@ -128,6 +133,6 @@ def check_size(path: Path, max_pixels: int) -> tuple[str, int, int]:
     if w < 1 or h < 1:
         raise ImageHeaderError(f"a {fmt} file whose header says {w}x{h} px: no pixels")
     if w * h > max_pixels:
-        raise ImageHeaderError(f"a {fmt} image of {w}x{h} px ({w * h / 1e6:.1f} megapixels) is over the limit of "
+        raise ImageTooLarge(f"a {fmt} image of {w}x{h} px ({w * h / 1e6:.1f} megapixels) is over the limit of "
                                f"{max_pixels / 1e6:g} megapixels (--max-megapixels)")
     return fmt, w, h

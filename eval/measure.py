@@ -98,8 +98,11 @@ def collect_images(items) -> list[Path]:
     return out
 
 
+DEFAULT_MAX_PIXELS = max_pixels_of(DEFAULT_MAX_MEGAPIXELS)
+
+
 def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float,
-                  camera: CameraInput = CameraInput(), max_pixels: int = max_pixels_of(DEFAULT_MAX_MEGAPIXELS)) -> Frame:
+                  camera: CameraInput = CameraInput(), max_pixels: int = DEFAULT_MAX_PIXELS) -> Frame:
     """Read, detect and solve one image (its own camera model fit). A frame without a detection
     scoring ``min_score`` is "no markers detected"; the messages of the decoder and the warnings
     raised on the way are kept in the record (``notes``), not printed."""
@@ -124,8 +127,8 @@ def _detect_and_solve(detector, markers, index, path, camera_model, min_score, c
     t1 = time.perf_counter()
     centres = detection_arrays(frame.detections, min_score)
     if len(centres[0]) == 0:
-        frame.record = {"ok": False, "category": NO_MARKERS,
-                        "reason": f"{path}: {NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"}
+        why = f"{NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"
+        frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     else:
         frame.record, frame.used_points = solve_frame(markers, frame.principal_point, centres, None, camera_model,
                                                       docking_options(detector.centre_noise_px))
@@ -222,7 +225,7 @@ class MeasureOptions:
 
 def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_score: float, out: Path,
                      size: float | None, camera: CameraInput = CameraInput(),
-                     max_pixels: int = max_pixels_of(DEFAULT_MAX_MEGAPIXELS)) -> Frame:
+                     max_pixels: int = DEFAULT_MAX_PIXELS) -> Frame:
     """Read, detect, solve and (with ``size``) draw one image; the image is not kept. An error on
     the way becomes the image's failure record ("measure error", with the exception's words)."""
     try:
@@ -231,7 +234,8 @@ def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_scor
             draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
     except Exception as exc:   # noqa: BLE001 -- one image's failure is recorded, the batch goes on
         words = " ".join(str(exc).split())[:300] or "no message"
-        return Frame(i, path, {"ok": False, "category": "measure error", "reason": f"{path}: {type(exc).__name__}: {words}"})
+        why = f"{type(exc).__name__}: {words}"
+        return Frame(i, path, {"ok": False, "category": "measure error", "reason": f"{path}: {why}"})
     frame.image = None
     return frame
 
@@ -261,7 +265,7 @@ def measure_all(weights, markers, jobs, model: str, min_score: float, out: Path,
 
 
 def draw_overlays(frames: list[Frame], markers, out: Path, size: float, camera: CameraInput = CameraInput(),
-                  max_pixels: int = max_pixels_of(DEFAULT_MAX_MEGAPIXELS)) -> None:
+                  max_pixels: int = DEFAULT_MAX_PIXELS) -> None:
     """The overlays of frames whose records changed after they were measured (a docking run's
     joint solve): each image is read again rather than kept in memory."""
     for f in frames:
@@ -345,7 +349,11 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         run = None
         if sequence:
             t0 = time.perf_counter()
-            run = self_calibrate_sequence(frames, markers, model, floor)
+            with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
+                warnings.simplefilter("always")
+                run = self_calibrate_sequence(frames, markers, model, floor)
+            if caught:
+                run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
             if options.overlay_size is not None:
                 draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
             wall += time.perf_counter() - t0

@@ -58,7 +58,8 @@ def add_subcommand(sub) -> None:
                         "images; default 2: one per core)")
     m.add_argument("--max-megapixels", type=_float_in(0.0, MAX_MEGAPIXELS, low_open=True),
                    default=DEFAULT_MAX_MEGAPIXELS,
-                   help=f"the largest image measured, by the size its header states (default {DEFAULT_MAX_MEGAPIXELS:g}: "
+                   help=f"the largest image measured, by the size its header states "
+                        f"(default {DEFAULT_MAX_MEGAPIXELS:g}: "
                         f"e.g. 8160x6120; at most {MAX_MEGAPIXELS:g}); a larger image is reported, never decoded "
                         "(decoding costs about 3 bytes per pixel per copy)")
     m.add_argument("--backend", choices=("auto", "torch", "onnx"), default="auto",

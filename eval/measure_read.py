@@ -23,7 +23,7 @@ from dockfactory.core.camera_chain import develop_raw
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.eval.image_header import ImageHeaderError, check_size, path_kind
+from dockfactory.eval.image_header import ImageHeaderError, ImageTooLarge, check_size, path_kind
 
 DEFAULT_MAX_MEGAPIXELS = 50.0   # e.g. 8160 x 6120: decoding one costs about 0.15 GB per copy of it
 MAX_MEGAPIXELS = 250.0          # the highest limit --max-megapixels accepts
@@ -79,7 +79,8 @@ def probe_image(path: Path, max_pixels: int) -> tuple[tuple[str, int, int] | Non
     try:
         return check_size(path, max_pixels), None
     except ImageHeaderError as exc:
-        return None, unreadable(path, str(exc), "image too large" if "over the limit" in str(exc) else "unreadable image")
+        category = "image too large" if isinstance(exc, ImageTooLarge) else "unreadable image"
+        return None, unreadable(path, str(exc), category)
     except OSError as exc:
         return None, unreadable(path, f"cannot be read ({exc.strerror})")
 

@@ -15,6 +15,8 @@ import zlib
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from dockfactory.eval import measure as measure_mod
 from dockfactory.eval.cli import main
@@ -92,6 +94,20 @@ def test_image_sizes_come_from_the_header_of_every_supported_format(tmp_path):
     cv2.imwrite(str(tmp_path / "deep.tif"), np.zeros((5, 70000 // 1000, 3), np.uint16))
     assert image_size(tmp_path / "deep.tif") == ("TIFF", 70, 5)
     assert image_size(huge_png(tmp_path / "h.png")) == ("PNG", 65000, 65000)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from([b"\x89PNG\r\n\x1a\n", b"\xff\xd8", b"II*\x00", b"MM\x00*", b"BM", b""]), st.binary(max_size=200))
+def test_a_damaged_header_is_an_image_header_error_never_another_exception(tmp_path_factory, magic, tail):
+    from dockfactory.eval.image_header import ImageHeaderError, image_size
+    path = tmp_path_factory.getbasetemp() / "fuzz.img"
+    path.write_bytes(magic + tail)
+    try:
+        fmt, w, h = image_size(path)
+    except ImageHeaderError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert fmt in ("PNG", "JPEG", "TIFF", "BMP") and w >= 0 and h >= 0
 
 
 def test_an_image_over_the_limit_is_never_decoded(tmp_path, monkeypatch):
@@ -196,7 +212,8 @@ def test_other_images_or_options_start_over_without_stale_outputs(source, tmp_pa
     assert len(list((out / "overlays").glob("*.png"))) == 2
     assert _measure(_images(folder, names[2:]), layout, out, "--workers", "1", "--overlay-size", "0") == 0
     doc = _doc(out)
-    assert doc["earlier_run_discarded"] and doc["resumed"] == 0 and [os.path.basename(r["image"]) for r in doc["images"]] == names[2:]
+    assert doc["earlier_run_discarded"] and doc["resumed"] == 0
+    assert [os.path.basename(r["image"]) for r in doc["images"]] == names[2:]
     assert list((out / "overlays").glob("*.png")) == [] and len(list((out / "records").glob("*.json"))) == 1
     # the same path with other bytes is another input: measured again, not taken from the earlier run
     moved = tmp_path / "moved"

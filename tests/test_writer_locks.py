@@ -118,11 +118,11 @@ def test_evaluate_holds_its_lock_until_the_verdict_is_printed(painted_source, po
 
 
 def test_report_refuses_a_folder_another_writer_holds(eval_dir, tmp_path, capsys):
-    out = tmp_path / "report"
-    with folder_lock(out, "report"):
-        code, _, err = _run(["report", eval_dir, "--out", out], capsys)
+    folder = tmp_path / "report"
+    with folder_lock(folder, "report"):
+        code, _, err = _run(["report", eval_dir, "--out", folder / "r.html"], capsys)
     assert code == 2 and "in use" in _one_line(err)
-    assert not (out / "report.html").exists()
+    assert sorted(p.name for p in folder.iterdir()) == [".dockfactory.lock"]
 
 
 def test_evaluate_into_a_file_is_one_line(painted_source, poses, tmp_path, capsys):
@@ -212,7 +212,8 @@ def test_show_writes_the_format_its_suffix_names(painted_source, tmp_path, capsy
     out = tmp_path / name
     code, _, _ = _run(["show", painted_source, _a_frame(painted_source), "--out", out], capsys)
     assert code == 0 and out.read_bytes().startswith(magic)
-    assert cv2.imread(str(out)).shape[:2] == cv2.imread(str(painted_source / "images" / f"{_a_frame(painted_source)}.png")).shape[:2]
+    frame = cv2.imread(str(painted_source / "images" / f"{_a_frame(painted_source)}.png"))
+    assert cv2.imread(str(out)).shape == frame.shape
 
 
 def test_show_refuses_a_suffix_it_cannot_write(painted_source, tmp_path, capsys):
