@@ -222,6 +222,8 @@ def make_output_folder(folder, option: str = "--out") -> Path:
     """Create the output folder ``folder`` (and its parents) and return it, or raise one
     :class:`DockfactoryError` line naming ``option`` and the folder: an existing file, a folder
     under a file, a place where no folder can be made (read-only, /proc), a folder not writable."""
+    if not str(folder).strip():   # Path("") is the current folder: never written by accident
+        raise DockfactoryError(f"{option}: an empty path; give the output folder")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise DockfactoryError(f"{option} {folder}: is a file, not a folder")

@@ -5,8 +5,8 @@ decoding (a 1 MB PNG can claim 20000 x 20000 px: decoding it first costs 12 GB).
 ("a folder", "a named pipe (FIFO)", ...): a FIFO is never opened (opening one blocks).
 ``image_size(path)``: (format, width, height) from the header of a PNG, JPEG, TIFF or BMP file;
 :class:`ImageHeaderError` (a ValueError) says why not for anything else. At most
-``MAX_HEADER_BYTES`` of the file are read. ``check_size(path, max_pixels)`` adds the limit
-(:class:`ImageTooLarge`).
+``MAX_HEADER_BYTES`` of the file are read (and a TIFF's directory). ``check_size(path,
+max_pixels)`` adds the limit (:class:`ImageTooLarge`).
 """
 from __future__ import annotations
 
@@ -48,12 +48,25 @@ def image_size(path) -> tuple[str, int, int]:
     """(format, width, height) in pixels from the header of the regular file ``path``."""
     with open(path, "rb") as fh:
         head = fh.read(MAX_HEADER_BYTES)
+
+        def read_at(offset: int, n: int) -> bytes:   # a TIFF's directory may be anywhere in the file
+            if offset + n <= len(head):
+                return head[offset:offset + n]
+            fh.seek(offset)
+            return fh.read(n)
+        return header_size(head, read_at)
+
+
+def header_size(head: bytes, read_at=None) -> tuple[str, int, int]:
+    """(format, width, height) from ``head``, the first bytes of a file (or all of them);
+    ``read_at(offset, n)`` reads elsewhere in the file (default: within ``head``)."""
+    read_at = read_at or (lambda offset, n: head[offset:offset + n])
     if head.startswith(b"\x89PNG\r\n\x1a\n"):
         return _png(head)
     if head.startswith(b"\xff\xd8"):
-        return _jpeg(head)
+        return _jpeg(head[:MAX_HEADER_BYTES])
     if head[:4] in (b"II*\x00", b"MM\x00*"):
-        return _tiff(head)
+        return _tiff(head, read_at)
     if head.startswith(b"BM"):
         return _bmp(head)
     if head[:4] in (b"II+\x00", b"MM\x00+"):
@@ -94,19 +107,19 @@ def _jpeg(head: bytes) -> tuple[str, int, int]:
                            "truncated or damaged")
 
 
-def _tiff(head: bytes) -> tuple[str, int, int]:
+def _tiff(head: bytes, read_at) -> tuple[str, int, int]:
     """ImageWidth (256) and ImageLength (257) of the first image file directory."""
     end = "<" if head[:2] == b"II" else ">"
     try:
         (ifd,) = struct.unpack(end + "I", head[4:8])
-        (n,) = struct.unpack(end + "H", head[ifd:ifd + 2])
+        (n,) = struct.unpack(end + "H", read_at(ifd, 2))
+        entries = read_at(ifd + 2, 12 * n)
         size = {}
         for k in range(n):
-            tag, typ, _count = struct.unpack(end + "HHI", head[ifd + 2 + 12 * k:ifd + 10 + 12 * k])
-            if tag in (256, 257):
-                at = ifd + 10 + 12 * k   # the value field: a SHORT sits in its first two bytes
-                short = typ == 3
-                size[tag] = struct.unpack(end + ("H" if short else "I"), head[at:at + (2 if short else 4)])[0]
+            tag, typ, _count = struct.unpack(end + "HHI", entries[12 * k:12 * k + 8])
+            if tag in (256, 257):   # the value field: a SHORT sits in its first two bytes
+                fmt, n_bytes = ("H", 2) if typ == 3 else ("I", 4)
+                size[tag] = struct.unpack(end + fmt, entries[12 * k + 8:12 * k + 8 + n_bytes])[0]
     except struct.error:
         raise ImageHeaderError("a TIFF file with a truncated or damaged directory") from None
     if 256 not in size or 257 not in size:
@@ -126,10 +139,10 @@ def _bmp(head: bytes) -> tuple[str, int, int]:
     return "BMP", abs(w), abs(h)
 
 
-def check_size(path: Path, max_pixels: int) -> tuple[str, int, int]:
-    """(format, width, height) of the image at ``path`` when it has at least one pixel and at most
-    ``max_pixels``; ImageHeaderError otherwise (the file is never decoded)."""
-    fmt, w, h = image_size(path)
+def check_size(path, max_pixels: int, data: bytes | None = None) -> tuple[str, int, int]:
+    """(format, width, height) of the image at ``path`` (or of its bytes ``data``) when it has at
+    least one pixel and at most ``max_pixels``; ImageHeaderError otherwise (nothing is decoded)."""
+    fmt, w, h = image_size(path) if data is None else header_size(data)
     if w < 1 or h < 1:
         raise ImageHeaderError(f"a {fmt} file whose header says {w}x{h} px: no pixels")
     if w * h > max_pixels:

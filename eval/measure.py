@@ -22,6 +22,7 @@ writer lock for the whole run.
 from __future__ import annotations
 
 import csv
+import os
 import io
 import time
 import warnings
@@ -31,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.detector.noise_card import centre_noise_px
@@ -81,6 +82,8 @@ def collect_images(items) -> list[Path]:
     in name order), each once; a path that does not exist, or an entry that is no file (a FIFO or
     a folder called x.png), stays in the list (reported per image, never dropped)."""
     out, seen = [], set()
+    if any(not str(item).strip() for item in items):
+        raise DockfactoryError("measure: an image path is empty (Path('') would be the current folder)")
     for item in map(Path, items):
         if item.is_dir():
             found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
@@ -89,7 +92,7 @@ def collect_images(items) -> list[Path]:
         else:
             found = [item]
         for p in found:
-            key = p.resolve()
+            key = os.path.realpath(p)   # never raises (a symlink loop is reported per image)
             if key not in seen:
                 seen.add(key)
                 out.append(p)
@@ -278,7 +281,8 @@ def write_records(out: Path, frames: list[Frame], header: dict) -> None:
     """measurements.json and measurements.csv (each written atomically)."""
     records = [{"image": str(f.path), **f.record} for f in frames]
     write_json_atomic(out / "measurements.json", {**header, "images": records}, indent=None)
-    write_text_atomic(out / "measurements.csv", csv_text(frames))
+    # a file name that is not UTF-8 (surrogate escapes) is written as \udcff rather than refused
+    write_bytes_atomic(out / "measurements.csv", csv_text(frames).encode("utf-8", "backslashreplace"))
 
 
 def check_one_size(paths, probes) -> None:

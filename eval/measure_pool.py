@@ -98,10 +98,11 @@ class MeasurePool:
 
     def _restart(self) -> str:
         """Shut the broken pool down, start a new one; returns how its worker(s) died."""
-        codes = [p.exitcode for p in list((getattr(self.executor, "_processes", None) or {}).values())]
-        self.executor.shutdown(wait=True, cancel_futures=True)
+        processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        self.executor.shutdown(wait=True, cancel_futures=True)   # joins them: their exit codes are final
+        codes = [p.exitcode for p in processes]
         self._start()
-        return _death(codes)
+        return _death(sorted(codes, key=lambda c: c == -signal.SIGTERM))   # the pool SIGTERMs the survivors
 
     def run(self, jobs, on_done) -> None:
         """Measure every job ``(index, path)``; see the class docstring."""

@@ -106,14 +106,17 @@ def captured_stderr(lines: list):
 def read_image(path: Path, camera: CameraInput = CameraInput(), max_pixels: int = max_pixels_of(DEFAULT_MAX_MEGAPIXELS),
                notes: list | None = None) -> tuple[np.ndarray | None, dict | None]:
     """(RGB image (H, W, 3) uint8, None) or (None, failure record). The path and header are
-    checked first (:func:`probe_image`), so no image over ``max_pixels`` is ever decoded. A
-    one-channel 16-bit PNG is a raw frame, developed with ``camera`` (its Bayer pattern and white
-    level are needed). Decoder messages go to ``notes`` (or into the failure's reason)."""
-    header, failed = probe_image(path, max_pixels)
+    checked first (:func:`probe_image`), then the file's bytes are read once (at most 8 bytes a
+    pixel of the limit) and their own header checked again before they are decoded, so no image
+    over ``max_pixels`` is ever decoded (and OpenCV never sees the path: a file name that is not
+    UTF-8 crashed it). A one-channel 16-bit PNG is a raw frame, developed with ``camera`` (its
+    Bayer pattern and white level are needed). Decoder messages go to ``notes`` (or into the
+    failure's reason)."""
+    data, failed = _read_bytes(path, max_pixels)
     if failed is not None:
         return None, failed
     messages: list = []
-    image, failed = _decode(path, header[0], camera, messages)
+    image, failed = _decode(path, data, camera, messages)
     if failed is not None and messages:
         failed["reason"] += f" ({'; '.join(messages)[:300]})"
     elif notes is not None:
@@ -121,20 +124,42 @@ def read_image(path: Path, camera: CameraInput = CameraInput(), max_pixels: int 
     return image, failed
 
 
-def _decode(path: Path, fmt: str, camera: CameraInput, messages: list) -> tuple[np.ndarray | None, dict | None]:
-    """Decode once (twice for a PNG that is neither raw nor 8-bit colour)."""
+def _read_bytes(path: Path, max_pixels: int) -> tuple[bytes | None, dict | None]:
+    """The file's bytes, checked (kind, size, header) before and after they are read."""
+    header, failed = probe_image(path, max_pixels)
+    if failed is not None:
+        return None, failed
+    limit = 8 * max_pixels + (1 << 20)   # 16-bit RGBA stored raw, and room for metadata
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1)
+        if len(data) > limit:
+            return None, unreadable(path, f"a file of more than {limit / 1e6:.0f} MB: more than any image within "
+                                          "the limit needs (--max-megapixels)", "image too large")
+        check_size(path, max_pixels, data)
+    except ImageHeaderError as exc:   # the file changed since it was probed
+        category = "image too large" if isinstance(exc, ImageTooLarge) else "unreadable image"
+        return None, unreadable(path, str(exc), category)
+    except OSError as exc:
+        return None, unreadable(path, f"cannot be read ({exc.strerror})")
+    return data, None
+
+
+def _decode(path: Path, data: bytes, camera: CameraInput, messages: list) -> tuple[np.ndarray | None, dict | None]:
+    """Decode ``data`` once (twice for a PNG that is neither raw nor 8-bit colour)."""
+    buf = np.frombuffer(data, np.uint8)
     try:
         with captured_stderr(messages):
-            if fmt == "PNG":   # a raw frame is a one-channel 16-bit PNG; a PNG has no orientation tag
-                data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-                if data is None:
+            if data.startswith(b"\x89PNG"):   # a raw frame is a one-channel 16-bit PNG; a PNG has no orientation tag
+                img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+                if img is None:
                     return None, unreadable(path, "not a readable image (truncated or damaged)")
-                if data.ndim == 2 and data.dtype == np.uint16:
-                    return _raw(path, data, camera)
-                if data.ndim == 3 and data.shape[2] == 3 and data.dtype == np.uint8:
-                    return cv2.cvtColor(data, cv2.COLOR_BGR2RGB, dst=data), None
-                del data
-            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)   # JPEG orientation, depth and channels as OpenCV does
+                if img.ndim == 2 and img.dtype == np.uint16:
+                    return _raw(path, img, camera)
+                if img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8:
+                    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB, dst=img), None
+                del img
+            bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)   # JPEG orientation, depth and channels as OpenCV does
             if bgr is None:
                 return None, unreadable(path, "not a readable image (truncated or damaged)")
             return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=bgr), None

@@ -85,10 +85,10 @@ def writer_lock(folder, what: str, option: str = "--out"):
     """Create the output folder ``folder`` and hold, for the block, the lock a renderer takes on
     it: the dataset's (:func:`dataset_lock`) when ``folder`` is a dataset, else its folder lock
     (core.io.output_lock). Yields the folder; bad folders and busy ones are one-line errors."""
-    folder = Path(folder)
-    dataset = folder.is_dir() and ((folder / LOCK_FILE).exists() or (folder / "dataset.json").exists())
-    with output_lock(folder, what, option, folder / LOCK_FILE if dataset else None):
-        yield folder
+    path = Path(folder)
+    dataset = str(folder).strip() and path.is_dir() and ((path / LOCK_FILE).exists() or (path / "dataset.json").exists())
+    with output_lock(folder, what, option, path / LOCK_FILE if dataset else None) as made:
+        yield made
 
 
 def _only_lock(root: Path) -> bool:

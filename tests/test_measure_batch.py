@@ -91,8 +91,10 @@ def test_image_sizes_come_from_the_header_of_every_supported_format(tmp_path):
     for ext, fmt in ((".png", "PNG"), (".jpg", "JPEG"), (".tif", "TIFF"), (".bmp", "BMP")):
         cv2.imwrite(str(tmp_path / f"a{ext}"), img)
         assert image_size(tmp_path / f"a{ext}") == (fmt, 37, 23)
-    cv2.imwrite(str(tmp_path / "deep.tif"), np.zeros((5, 70000 // 1000, 3), np.uint16))
-    assert image_size(tmp_path / "deep.tif") == ("TIFF", 70, 5)
+    noise = np.random.default_rng(1).integers(0, 65535, (480, 640, 3), dtype=np.uint16)
+    cv2.imwrite(str(tmp_path / "deep.tif"), noise)   # 1.8 MB: its directory is after the first megabyte
+    assert (tmp_path / "deep.tif").stat().st_size > (1 << 20)
+    assert image_size(tmp_path / "deep.tif") == ("TIFF", 640, 480)
     assert image_size(huge_png(tmp_path / "h.png")) == ("PNG", 65000, 65000)
 
 
@@ -148,6 +150,27 @@ def test_bad_images_are_recorded_with_their_reason_and_the_rest_goes_on(source, 
     assert "a folder, not an image file" in recs["dir.png"]["reason"]
     assert recs["black.png"]["category"] == "no markers detected"
     assert len((out / "measurements.csv").read_text().splitlines()) == 7
+
+
+def test_odd_paths_are_reported_and_a_name_that_is_not_utf8_is_measured(source, tmp_path, capfd):
+    """A symlink loop raised in the collection of images; a file name that is not UTF-8 crashed
+    OpenCV (a segfault in imread and putText): now read by measure and written as \\udcff."""
+    folder, layout = source
+    inp = tmp_path / "in"
+    inp.mkdir()
+    os.symlink(inp / "loop.png", inp / "loop.png")
+    os.symlink(tmp_path / "nowhere", inp / "dangling.png")
+    odd = os.fsdecode(bytes(inp) + b"/odd_\xff.png")
+    with open(odd, "wb") as fh:
+        fh.write(sorted(folder.glob("*.png"))[0].read_bytes())
+    out = tmp_path / "out"
+    assert _measure([inp], layout, out, "--workers", "1") == 1
+    assert "Traceback" not in capfd.readouterr().err
+    recs = _by_name(_doc(out))
+    assert recs["odd_\udcff.png"]["ok"] and len(list((out / "overlays").glob("*.png"))) == 1
+    assert "Too many levels of symbolic links" in recs["loop.png"]["reason"]
+    assert recs["dangling.png"]["reason"].endswith("a broken symbolic link, not an image file")
+    assert "odd_\\udcff.png" in (out / "measurements.csv").read_text()
 
 
 def test_a_fifo_given_as_an_image_is_named_as_such(source, tmp_path):
