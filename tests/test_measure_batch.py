@@ -286,6 +286,11 @@ def test_a_killed_worker_is_recorded_and_the_rest_goes_on(source, tmp_path, monk
     assert recs["kill.png"]["category"] == "worker died" and "SIGKILL" in recs["kill.png"]["reason"]
     assert all(recs[n]["ok"] for n in names) and len(recs) == 4
     assert len(list((out / "overlays").glob("*.png"))) == 3
+    # a rerun (the memory freed) measures the image whose worker died, and only that one
+    monkeypatch.undo()
+    assert _measure([inp], layout, out, "--workers", "1") == 0
+    doc = _doc(out)
+    assert doc["resumed"] == 3 and doc["images_measured"] == 1 and _by_name(doc)["kill.png"]["ok"]
 
 
 def test_workers_are_capped_by_the_images(source, tmp_path, monkeypatch):
