@@ -9,7 +9,7 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.eval.detector_cli import MAX_THREADS, _float_in, _thread_count, _torch, _unit_float, int_in
+from dockfactory.eval.detector_cli import MAX_THREADS, _float_in, _positive_int, _thread_count, _torch, _unit_float
 from dockfactory.eval.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.eval.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
@@ -53,7 +53,7 @@ def add_subcommand(sub) -> None:
     m.add_argument("--min-score", type=_unit_float, default=MIN_SCORE)
     m.add_argument("--threads", type=_thread_count, default=None,
                    help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")
-    m.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=2,
+    m.add_argument("--workers", type=_positive_int, default=2,
                    help=f"images measured at once, each by its own process (1 to {MAX_WORKERS}, never more than the "
                         "images; default 2: one per core)")
     m.add_argument("--max-megapixels", type=_float_in(0.0, MAX_MEGAPIXELS, low_open=True),

@@ -54,7 +54,8 @@ def test_bad_input_is_one_line_exit_2(big, tmp_path, capsys):
               "no such file"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--weights", str(tmp_path / "junk.pt")],
               "not a readable checkpoint"),
-             ([str(big / "images"), "--layout", str(big / "layout.json"), "--overlay-size", "3"], "overlay size")]
+             ([str(big / "images"), "--layout", str(big / "layout.json"), "--overlay-size", "3"], "overlay size"),
+             ([str(big / "images"), "--layout", str(big / "layout.json"), "--workers", "40"], "workers")]
     for argv, words in cases:
         assert main(["measure", *argv, "--out", str(tmp_path / "out"), "--quiet"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
