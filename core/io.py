@@ -216,3 +216,32 @@ def folder_lock(folder, what: str, lock_path=None):
                 os.ftruncate(fd, 0)
     finally:
         os.close(fd)   # releases the lock
+
+
+def make_output_folder(folder, option: str = "--out") -> Path:
+    """Create the output folder ``folder`` (and its parents) and return it, or raise one
+    :class:`DockfactoryError` line naming ``option`` and the folder: an existing file, a folder
+    under a file, a place where no folder can be made (read-only, /proc), a folder not writable."""
+    if not str(folder).strip():   # Path("") is the current folder: never written by accident
+        raise DockfactoryError(f"{option}: an empty path; give the output folder")
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise DockfactoryError(f"{option} {folder}: is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        why = ("a parent of it is not a folder" if isinstance(exc, (NotADirectoryError, FileExistsError))
+               else exc.strerror or str(exc))
+        raise DockfactoryError(f"{option} {folder}: cannot create this folder ({why})") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise DockfactoryError(f"{option} {folder}: this folder is not writable")
+    return folder
+
+
+@contextlib.contextmanager
+def output_lock(folder, what: str, option: str = "--out", lock_path=None):
+    """:func:`make_output_folder`, then hold its :func:`folder_lock` (``lock_path`` as there) for
+    the block: a writer's whole run, so two writers never interleave their outputs."""
+    folder = make_output_folder(folder, option)
+    with folder_lock(folder, what, lock_path):
+        yield folder

@@ -8,13 +8,13 @@ for the check).
 """
 from __future__ import annotations
 
-import os
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import atomic_path
 
 
 def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool = True, seed: int = 0,
@@ -27,17 +27,10 @@ def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool =
     model, _ = load_model(weights, fuse=True)
     x = torch.rand((1, 3, height, width), generator=torch.Generator().manual_seed(seed))
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # tracer warnings about the shape checks (fixed input)
-            torch.onnx.export(model, (x,), str(tmp), input_names=["images"], output_names=["predictions"],
-                              opset_version=17, dynamo=False)
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(out) as tmp, warnings.catch_warnings():   # a failed write leaves the old file and no temporary
+        warnings.simplefilter("ignore")  # tracer warnings about the shape checks (fixed input)
+        torch.onnx.export(model, (x,), str(tmp), input_names=["images"], output_names=["predictions"],
+                          opset_version=17, dynamo=False)
     info = {"path": str(out), "input_shape": [1, 3, height, width]}
     if check:
         import onnxruntime as ort

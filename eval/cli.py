@@ -29,6 +29,7 @@ from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
 from dockfactory.generator.cli import add_subcommands as add_factory_commands
+from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
@@ -89,6 +90,13 @@ def cmd_evaluate(args) -> int:
     ds = Dataset.open(args.dataset)   # every byte checked: the judge reads only an intact dataset
     metrics, rows = evaluate(ds, args.poses, spec, args.detections, min_score=args.min_score,
                              envelope=EnvelopeGrid() if args.envelope else None, camera_models=args.camera_models)
+    with writer_lock(args.out, "evaluate"):   # a second writer is refused: the verdict printed is the file's
+        return _write_verdict(args, metrics, rows)
+
+
+def _write_verdict(args, metrics: dict, rows) -> int:
+    """Write metrics, frames and provenance into --out and print the verdict (the caller holds
+    the folder's lock until it is printed)."""
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {
         "detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
@@ -101,7 +109,10 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    summary = build_report(args.eval_dir, args.out)
+    """Build the report holding the lock of the folder of --out (the HTML file; its .md and .json
+    go beside it)."""
+    with writer_lock(Path(args.out).parent, "report", f"--out {args.out}: its folder"):
+        summary = build_report(args.eval_dir, args.out)
     print(f"verdict: {summary['verdict']}  report: {args.out}")
     return 0
 

@@ -11,6 +11,7 @@ import math
 import os
 from pathlib import Path
 
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.onnx_export import export_onnx
@@ -22,14 +23,38 @@ from dockfactory.eval.detection_metrics import (
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.generator.cli import int_at_least
+from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
 
 
+MAX_THREADS = 64   # torch threads: far more than the cores of any machine this runs on (100000 segfaulted)
+
+
+def int_in(low: int, high: int):
+    """argparse type: an integer in [low, high]."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            v = low - 1
+        if not low <= v <= high:
+            raise argparse.ArgumentTypeError(f"expected an integer in [{low}, {high}], got {text!r}")
+        return v
+    parse.__name__ = f"integer in [{low}, {high}]"
+    return parse
+
+
+_thread_count = int_in(1, MAX_THREADS)
+
+
 def _torch(threads: int | None):
-    """Import torch with a passive OpenMP wait policy (the machine is shared) and set the threads."""
+    """Import torch with a passive OpenMP wait policy (the machine is shared) and set the threads
+    (``threads`` in [1, MAX_THREADS]; None: one per core, at most MAX_THREADS)."""
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise DockfactoryError(f"--threads: expected an integer in [1, {MAX_THREADS}], got {threads}")
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
-    torch.set_num_threads(max(1, threads or os.cpu_count() or 1))
+    torch.set_num_threads(threads or min(MAX_THREADS, os.cpu_count() or 1))
     return torch
 
 
@@ -111,8 +136,15 @@ def cmd_ablate(args) -> int:
 
 
 def cmd_export_onnx(args) -> int:
+    """Export under the lock of the ONNX file's folder (one writer at a time; a folder that
+    cannot be written is one line before any work)."""
+    out = Path(args.out)
+    if out.is_dir():
+        raise DockfactoryError(f"--out {out}: is a folder; give the ONNX file's name")
     _torch(args.threads)
-    info = export_onnx(args.weights or shipped_weights(), args.out, height=args.height, width=args.width, check=not args.no_check)
+    with writer_lock(out.parent, "export-onnx", f"--out {out}: its folder"):
+        info = export_onnx(args.weights or shipped_weights(), out, height=args.height, width=args.width,
+                           check=not args.no_check)
     print(f"ONNX model -> {info['path']} (input {info['input_shape']}); "
           + (f"max |onnx - torch| = {info['max_abs_diff']:.2e}" if "max_abs_diff" in info else "not checked"))
     return 0
@@ -137,7 +169,7 @@ def _add_training_options(p) -> None:
     p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
     p.add_argument("--input-scale", type=_input_scale, default=0.5, help="network px per image px (default 0.5)")
     p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
-    p.add_argument("--threads", type=_positive_int, help="torch threads (default: all cores)")
+    p.add_argument("--threads", type=_thread_count, help="torch threads (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -164,7 +196,7 @@ def _add_detect_parser(subparsers) -> None:
     d.add_argument("--iou", type=_unit_float, default=0.45, help="NMS IoU threshold")
     d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")
     d.add_argument("--eval", action="store_true", help="print mAP, centre error and recall afterwards")
-    d.add_argument("--threads", type=_positive_int)
+    d.add_argument("--threads", type=_thread_count)
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_detect)
 
@@ -192,7 +224,7 @@ def _add_export_parser(subparsers) -> None:
     e.add_argument("--height", type=_positive_int, default=480, help="network input height (default 480)")
     e.add_argument("--width", type=_positive_int, default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
-    e.add_argument("--threads", type=_positive_int)
+    e.add_argument("--threads", type=_thread_count)
     e.set_defaults(func=cmd_export_onnx)
 
 
@@ -203,7 +235,7 @@ def _add_noise_card_parser(subparsers) -> None:
     n.add_argument("--weights", help="default: the shipped weights (the card is written next to them)")
     n.add_argument("--split", default="val", choices=("train", "val"),
                    help="a split the evaluation does not judge (default val)")
-    n.add_argument("--threads", type=_positive_int)
+    n.add_argument("--threads", type=_thread_count)
     n.add_argument("--quiet", action="store_true")
     n.set_defaults(func=cmd_noise_card)
 

@@ -1,6 +1,6 @@
 """``dockfactory measure``: the pose of B in A from real images, without labels.
 
-PNG/JPEG images (files or folders) -> detector -> identification -> solve (the chosen camera
+PNG/JPEG/TIFF/BMP images (files or folders) -> detector -> identification -> solve (the chosen camera
 model, per frame, or self-calibrated over the whole set as one docking run of one camera) ->
 OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT/overlays/.
 
@@ -9,29 +9,44 @@ is reported with its reason and category, never dropped; the exit status is 1 wh
 no pose. The principal point assumed (and the start of an estimated one) is each image's centre.
 With ``--self-calibrate sequence`` the images are one camera unit (one docking run: the camera,
 its zoom and A fixed, B moving): each frame is identified on its own, then every identified frame
-is solved jointly with shared intrinsics (solver.solve_sequence).
+is solved jointly with shared intrinsics (solver.solve_sequence); their sizes are checked (from
+the headers: one size) before anything is measured.
+
+A batch is never lost: every image's size is read from its header and checked against
+``MeasureOptions.max_megapixels`` before it is decoded; each image's result is written as it
+finishes (eval.measure_store: a rerun into the same folder with the same images and options
+measures only what is missing; with others it starts over); an image that fails, or whose worker
+process dies (eval.measure_pool), is recorded with its reason and the others go on; OUT holds its
+writer lock for the whole run.
 """
 from __future__ import annotations
 
 import csv
+import os
 import io
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from dockfactory.core.camera_chain import develop_raw
-from dockfactory.core.cfa import PATTERNS
-from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic, write_text_atomic
+from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.detector.noise_card import centre_noise_px
 from dockfactory.eval.measure_overlay import draw_measurement
 from dockfactory.eval.measure_pool import MeasurePool
+from dockfactory.eval.measure_read import (
+    DEFAULT_MAX_MEGAPIXELS,
+    MAX_MEGAPIXELS,
+    CameraInput,
+    max_pixels_of,
+    probe_image,
+    read_image,
+)
+from dockfactory.eval.measure_store import MeasureStore, image_identity
 from dockfactory.eval.solve_frames import (
     detection_arrays,
     docking_options,
@@ -39,9 +54,15 @@ from dockfactory.eval.solve_frames import (
     solve_frame,
     solve_run,
 )
+from dockfactory.generator.dataset import writer_lock
+from dockfactory.generator.version import package_version
+
+__all__ = ["CameraInput", "MeasureOptions", "collect_images", "measure", "read_image"]
 
 MEASURE_FORMAT = "dockfactory.measure/1"
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")   # a one-channel 16-bit PNG is a raw frame
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")   # a one-channel 16-bit PNG is a raw frame
+MAX_WORKERS = 16   # measure's worker processes (each holds a detector: about 0.3 GB)
+NO_MARKERS = "no markers detected"   # the category of a frame without one detection
 
 
 @dataclass
@@ -57,18 +78,21 @@ class Frame:
 
 
 def collect_images(items) -> list[Path]:
-    """The images named by ``items`` (files, or folders whose PNG/JPEG files are taken in name
-    order), each once; a path that does not exist stays in the list (reported per image)."""
+    """The images named by ``items`` (files, or folders whose entries named like images are taken
+    in name order), each once; a path that does not exist, or an entry that is no file (a FIFO or
+    a folder called x.png), stays in the list (reported per image, never dropped)."""
     out, seen = [], set()
+    if any(not str(item).strip() for item in items):
+        raise DockfactoryError("measure: an image path is empty (Path('') would be the current folder)")
     for item in map(Path, items):
         if item.is_dir():
-            found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
             if not found:
-                raise DockfactoryError(f"{item}: no PNG or JPEG images in this folder")
+                raise DockfactoryError(f"{item}: no PNG, JPEG, TIFF or BMP images in this folder")
         else:
             found = [item]
         for p in found:
-            key = p.resolve()
+            key = os.path.realpath(p)   # never raises (a symlink loop is reported per image)
             if key not in seen:
                 seen.add(key)
                 out.append(p)
@@ -77,68 +101,26 @@ def collect_images(items) -> list[Path]:
     return out
 
 
-@dataclass(frozen=True)
-class CameraInput:
-    """What the user knows of the camera behind the images. ``cfa``: its Bayer pattern (RGGB,
-    BGGR, GRBG, GBRG; None: a three-chip camera or unknown): the centre refinement then fits the
-    samples the sensor took, and raw frames can be read. A raw frame is a one-channel 16-bit PNG
-    of the mosaic in DN (BayerRG12 and the like): ``raw_black_dn`` is subtracted, ``raw_white_dn`` is
-    full scale (the sensor's white level: a 16-bit PNG does not say its ADC depth, and a level
-    guessed from each frame's brightest pixel would develop a dark frame brighter; None: raw
-    frames are refused), then grey-world white balance, ``demosaic`` and the sRGB curve."""
-    cfa: str | None = None
-    raw_black_dn: float = 0.0
-    raw_white_dn: float | None = None
-    demosaic: str = "mhc"
-
-    def __post_init__(self):
-        if self.cfa is not None and self.cfa not in PATTERNS:
-            raise DockfactoryError(f"--cfa: expected one of {', '.join(PATTERNS)}, got {self.cfa!r}")
-        if self.demosaic not in DEMOSAICS:
-            raise DockfactoryError(f"--demosaic: expected one of {', '.join(DEMOSAICS)}, got {self.demosaic!r}")
-        if not (np.isfinite(self.raw_black_dn) and 0 <= self.raw_black_dn < 65535):
-            raise DockfactoryError(f"--raw-black: expected a level in [0, 65535) DN, got {self.raw_black_dn}")
-        if self.raw_white_dn is not None and not (np.isfinite(self.raw_white_dn)
-                                                  and self.raw_black_dn < self.raw_white_dn <= 65535):
-            raise DockfactoryError(f"--raw-white: expected a level above --raw-black and at most 65535 DN, "
-                                   f"got {self.raw_white_dn}")
-
-    def develop(self, raw: np.ndarray) -> np.ndarray:
-        """A raw frame (H, W) uint16 as 8-bit sRGB (core.camera_chain.develop_raw)."""
-        return develop_raw(raw, self.cfa, self.raw_black_dn, self.raw_white_dn, self.demosaic)
-
-
-def _unreadable(path: Path, why: str) -> tuple[None, dict]:
-    return None, {"ok": False, "reason": f"{path}: {why}", "category": "unreadable image"}
-
-
-def read_image(path: Path, camera: CameraInput = CameraInput()) -> tuple[np.ndarray | None, dict | None]:
-    """(RGB image, None) or (None, failure record) for a missing or unreadable file. A one-channel
-    16-bit PNG is a raw frame: developed with ``camera`` (its Bayer pattern is needed)."""
-    if not path.is_file():
-        return _unreadable(path, "no such image file")
-    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if data is None:
-        return _unreadable(path, "not a readable PNG or JPEG image")
-    if data.ndim == 2 and data.dtype == np.uint16:
-        if camera.cfa is None:
-            return _unreadable(path, "a raw frame (one 16-bit channel): give its Bayer pattern with --cfa")
-        if camera.raw_white_dn is None:
-            return _unreadable(path, "a raw frame: give the sensor's white level with --raw-white "
-                                     "(e.g. 4095 for 12 bit)")
-        if data.shape[0] % 2 or data.shape[1] % 2 or min(data.shape) < 4:
-            return _unreadable(path, f"a raw frame must have an even size of at least 4x4, got {data.shape[1]}x{data.shape[0]}")
-        return camera.develop(data), None
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        return _unreadable(path, "not a readable PNG or JPEG image")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None
+DEFAULT_MAX_PIXELS = max_pixels_of(DEFAULT_MAX_MEGAPIXELS)
 
 
 def measure_frame(detector, markers, index: int, path: Path, camera_model: str, min_score: float,
-                  camera: CameraInput = CameraInput()) -> Frame:
-    """Read, detect and solve one image (its own camera model fit)."""
-    image, failed = read_image(path, camera)
+                  camera: CameraInput = CameraInput(), max_pixels: int = DEFAULT_MAX_PIXELS) -> Frame:
+    """Read, detect and solve one image (its own camera model fit). A frame without a detection
+    scoring ``min_score`` is "no markers detected"; the messages of the decoder and the warnings
+    raised on the way are kept in the record (``notes``), not printed."""
+    notes: list = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        frame = _detect_and_solve(detector, markers, index, path, camera_model, min_score, camera, max_pixels, notes)
+    notes += [f"{w.category.__name__}: {w.message}" for w in caught]
+    if notes:
+        frame.record["notes"] = sorted(set(notes))[:20]
+    return frame
+
+
+def _detect_and_solve(detector, markers, index, path, camera_model, min_score, camera, max_pixels, notes) -> Frame:
+    image, failed = read_image(path, camera, max_pixels, notes)
     if failed is not None:
         return Frame(index, path, failed)
     h, w = image.shape[:2]
@@ -146,9 +128,13 @@ def measure_frame(detector, markers, index: int, path: Path, camera_model: str, 
     t0 = time.perf_counter()
     frame.detections = detector.detect(image, cfa=camera.cfa, jpeg=path.suffix.lower() in (".jpg", ".jpeg"))
     t1 = time.perf_counter()
-    frame.record, frame.used_points = solve_frame(markers, frame.principal_point,
-                                                  detection_arrays(frame.detections, min_score), None, camera_model,
-                                                  docking_options(detector.centre_noise_px))
+    centres = detection_arrays(frame.detections, min_score)
+    if len(centres[0]) == 0:
+        why = f"{NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"
+        frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
+    else:
+        frame.record, frame.used_points = solve_frame(markers, frame.principal_point, centres, None, camera_model,
+                                                      docking_options(detector.centre_noise_px))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
@@ -215,60 +201,78 @@ def overlay_path(out: Path, frame: Frame) -> Path:
 @dataclass(frozen=True)
 class MeasureOptions:
     """How measure runs: the detector's network ``backend`` (auto, torch or onnx), the frames in
-    flight at once (``workers``: each one thread reading, detecting, solving and drawing one image)
-    and the overlays' ``overlay_size`` (a fraction of the image's resolution; None: no overlays)."""
+    flight at once (``workers``, at most ``MAX_WORKERS`` and never more than the images to
+    measure: each a process reading, detecting, solving and drawing one image), the overlays'
+    ``overlay_size`` (a fraction of the image's resolution; None: no overlays) and the largest
+    image measured, ``max_megapixels`` by its header (a larger one is refused undecoded)."""
     backend: str = "auto"
     workers: int = 2
     overlay_size: float | None = 0.5
     camera: CameraInput = CameraInput()
+    max_megapixels: float = DEFAULT_MAX_MEGAPIXELS
 
     def __post_init__(self):
         if self.backend not in ("auto", "torch", "onnx"):
             raise DockfactoryError(f"backend must be auto, torch or onnx, got {self.backend!r}")
-        if not 1 <= self.workers <= 16:
-            raise DockfactoryError(f"workers must be in [1, 16], got {self.workers}")
+        if not 1 <= self.workers <= MAX_WORKERS:
+            raise DockfactoryError(f"workers must be in [1, {MAX_WORKERS}], got {self.workers}")
         if self.overlay_size is not None and not 0.1 <= self.overlay_size <= 1:
             raise DockfactoryError(f"overlay size must be in [0.1, 1], got {self.overlay_size}")
+        if not 0 < self.max_megapixels <= MAX_MEGAPIXELS:
+            raise DockfactoryError(f"--max-megapixels: must be in (0, {MAX_MEGAPIXELS:g}], got {self.max_megapixels}")
+
+    @property
+    def max_pixels(self) -> int:
+        return max_pixels_of(self.max_megapixels)
 
 
 def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_score: float, out: Path,
-                     size: float | None, camera: CameraInput = CameraInput()) -> Frame:
-    """Read, detect, solve and (with ``size``) draw one image; the image is not kept."""
-    frame = measure_frame(detector, markers, i, path, model, min_score, camera)
-    if size is not None and frame.image is not None:
-        draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
+                     size: float | None, camera: CameraInput = CameraInput(),
+                     max_pixels: int = DEFAULT_MAX_PIXELS) -> Frame:
+    """Read, detect, solve and (with ``size``) draw one image; the image is not kept. An error on
+    the way becomes the image's failure record ("measure error", with the exception's words)."""
+    try:
+        frame = measure_frame(detector, markers, i, path, model, min_score, camera, max_pixels)
+        if size is not None and frame.image is not None:
+            draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
+    except Exception as exc:   # noqa: BLE001 -- one image's failure is recorded, the batch goes on
+        words = " ".join(str(exc).split())[:300] or "no message"
+        why = f"{type(exc).__name__}: {words}"
+        return Frame(i, path, {"ok": False, "category": "measure error", "reason": f"{path}: {why}"})
     frame.image = None
     return frame
 
 
-def measure_all(weights, markers, paths, model: str, min_score: float, out: Path, size: float | None,
-                options: MeasureOptions, progress=None) -> tuple[list[Frame], float]:
-    """Every image measured, in input order: in this process with one worker, else by worker
-    processes (eval.measure_pool). Returns the frames and the wall time after the detector(s)
-    were loaded."""
-    if options.workers == 1:
+def measure_all(weights, markers, jobs, model: str, min_score: float, out: Path, size: float | None,
+                options: MeasureOptions, on_done) -> tuple[float, int]:
+    """Measure every job ``(index, path)``: in this process with one worker (or one job), else by
+    worker processes (eval.measure_pool, at most one per job). ``on_done(job, frame, error)`` is
+    called as each finishes. Returns the wall time after the detector(s) were loaded and the
+    number of workers used."""
+    workers = max(1, min(options.workers, len(jobs)))
+    if workers == 1:
         from dockfactory.detector.infer import MarkerDetector
         detector = MarkerDetector(weights, conf_threshold=min_score, backend=options.backend)
-        t0, frames = time.perf_counter(), []
-        for i, p in enumerate(paths):
-            frames.append(measure_and_draw(detector, markers, i, p, model, min_score, out, size, options.camera))
-            if progress:
-                progress(i + 1, len(paths))
-        return frames, time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for i, p in jobs:
+            on_done((i, p), measure_and_draw(detector, markers, i, p, model, min_score, out, size, options.camera,
+                                             options.max_pixels), None)
+        return time.perf_counter() - t0, workers
     from dockfactory.detector.checkpoint import load_model
     load_model(weights, fuse=False)   # a bad weights file is named here, not in every worker
-    with MeasurePool(measure_and_draw, options.workers, weights, min_score, options.backend, markers, model, out, size,
-                     options.camera) as pool:
+    with MeasurePool(measure_and_draw, workers, weights, min_score, options.backend, markers, model, out, size,
+                     options.camera, options.max_pixels) as pool:
         t0 = time.perf_counter()
-        frames = pool.run(paths, progress)
-        return frames, time.perf_counter() - t0
+        pool.run(jobs, on_done)
+        return time.perf_counter() - t0, workers
 
 
-def draw_overlays(frames: list[Frame], markers, out: Path, size: float, camera: CameraInput = CameraInput()) -> None:
+def draw_overlays(frames: list[Frame], markers, out: Path, size: float, camera: CameraInput = CameraInput(),
+                  max_pixels: int = DEFAULT_MAX_PIXELS) -> None:
     """The overlays of frames whose records changed after they were measured (a docking run's
     joint solve): each image is read again rather than kept in memory."""
     for f in frames:
-        image, failed = read_image(f.path, camera)
+        image, failed = read_image(f.path, camera, max_pixels)
         if failed is None:
             draw_measurement(image, f.detections, f.record, markers, overlay_path(out, f), size)
 
@@ -277,49 +281,117 @@ def write_records(out: Path, frames: list[Frame], header: dict) -> None:
     """measurements.json and measurements.csv (each written atomically)."""
     records = [{"image": str(f.path), **f.record} for f in frames]
     write_json_atomic(out / "measurements.json", {**header, "images": records}, indent=None)
-    write_text_atomic(out / "measurements.csv", csv_text(frames))
+    # a file name that is not UTF-8 (surrogate escapes) is written as \udcff rather than refused
+    write_bytes_atomic(out / "measurements.csv", csv_text(frames).encode("utf-8", "backslashreplace"))
+
+
+def check_one_size(paths, probes) -> None:
+    """--self-calibrate sequence: the images (by their headers) must share one size; one line
+    naming the sizes and an image of each otherwise."""
+    sizes: dict = {}
+    for p, (header, _) in zip(paths, probes):
+        if header is not None:
+            sizes.setdefault((header[1], header[2]), p)
+    if len(sizes) > 1:
+        raise DockfactoryError("--self-calibrate sequence: the images are one camera's, but their sizes differ ("
+                               + ", ".join(f"{w}x{h} e.g. {p}" for (w, h), p in sorted(sizes.items())) + ")")
+
+
+def _entry(frame: Frame) -> dict:
+    return {"record": frame.record, "detections": frame.detections, "principal_point": list(frame.principal_point),
+            "used_points": [[mid, *uv] for mid, uv in frame.used_points.items()]}
+
+
+def _frame(index: int, path: Path, entry: dict) -> Frame:
+    return Frame(index, path, entry["record"], detections=entry["detections"],
+                 principal_point=tuple(entry["principal_point"]),
+                 used_points={mid: (u, v) for mid, u, v in entry["used_points"]})
+
+
+def _died(path: Path, error: BaseException) -> dict:
+    category = "worker died" if type(error).__name__ == "WorkerDied" else "measure error"
+    return {"ok": False, "category": category, "reason": f"{path}: {' '.join(str(error).split())[:300]}"}
+
+
+def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options, floor) -> dict:
+    """What the results depend on (the run's key in eval.measure_store); not the worker count."""
+    from dockfactory.detector.onnx_runtime import resolve_backend
+    return {"dockfactory": package_version("dockfactory"), "images": [image_identity(p) for p in paths],
+            "layout_sha256": sha256_file(layout_path), "weights_sha256": sha256_file(weights),
+            "camera_model": model, "self_calibrate": self_calibrate, "min_score": min_score,
+            "backend": resolve_backend(options.backend), "overlay_size": options.overlay_size,
+            "max_pixels": options.max_pixels, "camera": asdict(options.camera), "sigma_floor_px": floor}
 
 
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
             self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None,
             options: MeasureOptions = MeasureOptions()) -> dict:
     """Measure every image (see the module docstring); returns the summary written to
-    OUT/measurements.json (without the per-image records). ``frames_per_s`` counts everything
-    after the detector is loaded: reading, detection, solve, overlays."""
-    from dockfactory.detector.onnx_runtime import resolve_backend
+    OUT/measurements.json (without the per-image records). ``frames_per_s`` counts the images
+    measured by this run over everything after the detector is loaded: reading, detection,
+    solve, overlays. ``progress(done, total)`` after each image."""
     paths = collect_images(images)
     markers = read_layout_file(layout_path)
     model = resolve_camera_model(camera_model, self_calibrate)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     sequence = self_calibrate == "sequence"
-    floor = centre_noise_px(weights)   # hashes the weights: once
-    with folder_lock(out, "measure"):
-        # per frame the pinhole when the run fits the intrinsics
-        frames, wall = measure_all(weights, markers, paths, "pinhole" if sequence else model, min_score, out,
-                                   None if sequence else options.overlay_size, options, progress)
+    with writer_lock(out, "measure") as out:
+        probes = [probe_image(p, options.max_pixels) for p in paths]
+        if sequence:
+            check_one_size(paths, probes)
+        floor = centre_noise_px(weights)   # hashes the weights: once
+        store = MeasureStore(out, _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options,
+                                             floor))
+        frames = {i: _frame(i, paths[i], e) for i, e in store.open(paths).items()}
+        resumed = len(frames)
+        frames.update({i: Frame(i, p, probe[1]) for i, (p, probe) in enumerate(zip(paths, probes))
+                       if probe[1] is not None})
+        jobs = [(i, p) for i, p in enumerate(paths) if i not in frames]
+        wall, workers = _measure_jobs(weights, markers, jobs, "pinhole" if sequence else model, min_score, out,
+                                      options, store, frames, lambda: progress and progress(len(frames), len(paths)),
+                                      sequence)
+        frames = [frames[i] for i in range(len(paths))]
         run = None
         if sequence:
             t0 = time.perf_counter()
-            run = self_calibrate_sequence(frames, markers, model, floor)
+            with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
+                warnings.simplefilter("always")
+                run = self_calibrate_sequence(frames, markers, model, floor)
+            if caught:
+                run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
             if options.overlay_size is not None:
-                draw_overlays(frames, markers, out, options.overlay_size, options.camera)
+                draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
             wall += time.perf_counter() - t0
-        header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run)
-        header.update(backend=resolve_backend(options.backend), workers=options.workers,
-                      overlay_size=options.overlay_size, sigma_floor_px=floor, camera=asdict(options.camera))
+        header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run, len(jobs))
+        header.update(backend=store.made_with["backend"], workers=workers, overlay_size=options.overlay_size,
+                      sigma_floor_px=floor, camera=asdict(options.camera), max_megapixels=options.max_megapixels,
+                      resumed=resumed, earlier_run_discarded=store.discarded)
         write_records(out, frames, header)
     return header
 
 
-def _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run) -> dict:
+def _measure_jobs(weights, markers, jobs, model, min_score, out, options, store, frames, tick, sequence):
+    """Measure ``jobs`` into ``frames`` (index -> Frame), saving each entry as it finishes."""
+    def on_done(job, frame, error):
+        index, path = job
+        frame = frame if error is None else Frame(index, path, _died(path, error))
+        frames[index] = frame
+        store.save(index, path, _entry(frame))
+        tick()
+    tick()
+    if not jobs:
+        return 0.0, 0
+    return measure_all(weights, markers, jobs, model, min_score, out, None if sequence else options.overlay_size,
+                       options, on_done)
+
+
+def _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run, measured) -> dict:
     n_ok = sum(f.record["ok"] for f in frames)
     return {"format": MEASURE_FORMAT, "layout": str(layout_path), "layout_sha256": sha256_file(layout_path),
             "weights": str(weights), "weights_sha256": sha256_file(weights), "camera_model": model,
             "self_calibrate": self_calibrate, "min_score": min_score,
             "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
             "principal_point": "each image's centre ((W - 1) / 2, (H - 1) / 2), the start of an estimated one",
-            "images_total": len(paths), "images_with_pose": n_ok,
+            "images_total": len(paths), "images_with_pose": n_ok, "images_measured": measured,
             "failures": {c: sum(f.record.get("category") == c for f in frames if not f.record["ok"])
                          for c in sorted({f.record.get("category") for f in frames if not f.record["ok"]})},
-            "sequence": run, "wall_s": round(wall, 3), "frames_per_s": round(len(paths) / max(wall, 1e-9), 2)}
+            "sequence": run, "wall_s": round(wall, 3), "frames_per_s": round(measured / max(wall, 1e-9), 2)}

@@ -7,10 +7,11 @@ from pathlib import Path
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
-from dockfactory.eval.detector_cli import _positive_int, _torch, _unit_float
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.eval.measure import CameraInput, MeasureOptions, measure
+from dockfactory.eval.detector_cli import MAX_THREADS, _float_in, _positive_int, _thread_count, _torch, _unit_float
+from dockfactory.eval.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
+from dockfactory.eval.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -19,7 +20,7 @@ def cmd_measure(args) -> int:
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
     camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
-    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera)
+    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
     _torch(args.threads)
 
     def progress(done, total):
@@ -28,16 +29,20 @@ def cmd_measure(args) -> int:
     s = measure(args.images, args.layout, weights, args.out, camera_model=args.camera_model,
                 self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress, options=options)
     fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
+    if s["earlier_run_discarded"]:
+        print(f"measure: {args.out} held the results of other images or options: removed, measured afresh",
+              file=sys.stderr)
     print(f"{s['images_with_pose']} of {s['images_total']} images with a pose ({s['camera_model']} camera"
           + (f", self-calibrated per {s['self_calibrate']}" if s["self_calibrate"] else "") + f"); "
-          f"{s['frames_per_s']} frames/s" + (f"; no pose: {fails}" if fails else "")
+          f"{s['frames_per_s']} frames/s" + (f" ({s['resumed']} done by an earlier run)" if s["resumed"] else "")
+          + (f"; no pose: {fails}" if fails else "")
           + f" -> {Path(args.out) / 'measurements.json'}")
     return 0 if s["images_with_pose"] == s["images_total"] else 1
 
 
 def add_subcommand(sub) -> None:
     m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
-    m.add_argument("images", nargs="+", help="PNG/JPEG files or folders of them")
+    m.add_argument("images", nargs="+", help="PNG/JPEG/TIFF/BMP files or folders of them")
     m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
@@ -46,9 +51,17 @@ def add_subcommand(sub) -> None:
                    help="frame: choose the camera model per image; sequence: the images are one camera's "
                         "docking run, solved with shared intrinsics")
     m.add_argument("--min-score", type=_unit_float, default=MIN_SCORE)
-    m.add_argument("--threads", type=_positive_int, default=None, help="torch threads with --workers 1")
+    m.add_argument("--threads", type=_thread_count, default=None,
+                   help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")
     m.add_argument("--workers", type=_positive_int, default=2,
-                   help="images measured at once, each by its own process (default 2: one per core)")
+                   help=f"images measured at once, each by its own process (1 to {MAX_WORKERS}, never more than the "
+                        "images; default 2: one per core)")
+    m.add_argument("--max-megapixels", type=_float_in(0.0, MAX_MEGAPIXELS, low_open=True),
+                   default=DEFAULT_MAX_MEGAPIXELS,
+                   help=f"the largest image measured, by the size its header states "
+                        f"(default {DEFAULT_MAX_MEGAPIXELS:g}: "
+                        f"e.g. 8160x6120; at most {MAX_MEGAPIXELS:g}); a larger image is reported, never decoded "
+                        "(decoding costs about 3 bytes per pixel per copy)")
     m.add_argument("--backend", choices=("auto", "torch", "onnx"), default="auto",
                    help="the detector network's runtime (auto: ONNX Runtime when installed, about 2x faster)")
     m.add_argument("--overlay-size", type=float, default=0.5,
@@ -62,5 +75,7 @@ def add_subcommand(sub) -> None:
                    help="raw frames: the sensor's white level, DN (needed: e.g. 4095 for 12 bit)")
     m.add_argument("--demosaic", choices=DEMOSAICS, default="mhc", help="raw frames: demosaic (default mhc)")
     m.add_argument("--quiet", action="store_true")
-    m.add_argument("--out", required=True, help="output folder")
+    m.add_argument("--out", required=True, help="output folder (locked while measure runs); a rerun with the same "
+                                                "images and options measures only what is missing, with others "
+                                                "it starts over")
     m.set_defaults(func=cmd_measure)

@@ -70,6 +70,7 @@ def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, mark
             if np.isfinite(u) and np.isfinite(v):
                 cv2.drawMarker(img, _at((u, v), sx, sy), PROJ_BGR, cv2.MARKER_CROSS, 10 * scale, scale)
     for k, line in enumerate(_text_lines(record, str(out.stem))):
+        line = line.encode("ascii", "backslashreplace").decode("ascii")   # ASCII: a lone surrogate crashed OpenCV
         y = (18 + 20 * k) * scale
         cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (0, 0, 0), 3 * scale, cv2.LINE_AA)
         cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255), scale, cv2.LINE_AA)

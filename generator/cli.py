@@ -14,7 +14,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator import published
-from dockfactory.generator.dataset import identity
+from dockfactory.generator.dataset import identity, writer_lock
 from dockfactory.generator.overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
@@ -97,8 +97,9 @@ def cmd_verify(args) -> int:
 
 
 def cmd_publish(args) -> int:
-    for root in args.dirs:
-        print(published.publish(root, args.out))
+    with writer_lock(args.out, "dataset publish"):   # one writer; a bad folder is one line, nothing written
+        for root in args.dirs:
+            print(published.publish(root, args.out))
     return EXIT_OK
 
 
@@ -227,7 +228,7 @@ def add_subcommands(sub) -> None:
     add_set_flag(c)
     c.set_defaults(func=cmd_check)
 
-    s = sub.add_parser("show", help="draw a frame's labels over its image (PNG)")
+    s = sub.add_parser("show", help="draw a frame's labels over its image (PNG or JPEG, by the suffix of --out)")
     s.add_argument("dataset")
     s.add_argument("frame_id")
     s.add_argument("--out", required=True)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import LOCK_NAME, folder_lock, sha256_file, write_bytes_atomic, write_json_atomic
+from dockfactory.core.io import LOCK_NAME, folder_lock, output_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.draws import static_scene
@@ -78,6 +78,17 @@ def dataset_lock(root, what: str):
     once with a DatasetError naming the holder."""
     with folder_lock(root, what, Path(root) / LOCK_FILE):
         yield
+
+
+@contextlib.contextmanager
+def writer_lock(folder, what: str, option: str = "--out"):
+    """Create the output folder ``folder`` and hold, for the block, the lock a renderer takes on
+    it: the dataset's (:func:`dataset_lock`) when ``folder`` is a dataset, else its folder lock
+    (core.io.output_lock). Yields the folder; bad folders and busy ones are one-line errors."""
+    path = Path(folder)
+    dataset = str(folder).strip() and path.is_dir() and ((path / LOCK_FILE).exists() or (path / "dataset.json").exists())
+    with output_lock(folder, what, option, path / LOCK_FILE if dataset else None) as made:
+        yield made
 
 
 def _only_lock(root: Path) -> bool:

@@ -34,10 +34,18 @@ def frame_files_to_show(root: Path, frame_id: str) -> tuple[Path, Path]:
     return label_path, image_path
 
 
+OVERLAY_SUFFIXES = {".png": ".png", ".jpg": ".jpg", ".jpeg": ".jpg"}   # --out's suffix -> the format written
+
+
 def draw_overlay(root, frame_id: str, out) -> str:
-    """Draw frame ``frame_id`` of dataset ``root`` into the PNG ``out``; DatasetError (one line)
+    """Draw frame ``frame_id`` of dataset ``root`` into ``out``, in the format its suffix names
+    (.png, .jpg or .jpeg; another suffix is refused before any work); DatasetError (one line)
     for a folder that is not a dataset, a frame it does not have, or an unreadable label/image."""
     root = Path(root)
+    fmt = OVERLAY_SUFFIXES.get(Path(out).suffix.lower())
+    if fmt is None:
+        raise DatasetError(f"--out {out}: unknown image type {Path(out).suffix or '(no suffix)'!r}; "
+                           f"give a name ending in {', '.join(OVERLAY_SUFFIXES)}")
     label_path, image_path = frame_files_to_show(root, frame_id)
     try:
         label = json.loads(label_path.read_text(encoding="utf-8"))
@@ -50,10 +58,10 @@ def draw_overlay(root, frame_id: str, out) -> str:
         _draw(img, frame_id, label)
     except (KeyError, TypeError, ValueError, IndexError, AttributeError, cv2.error) as exc:
         raise DatasetError(f"{label_path}: not a frame label ({type(exc).__name__}: {exc})") from None
-    ok, png = cv2.imencode(".png", img)
+    ok, data = cv2.imencode(fmt, img, [cv2.IMWRITE_JPEG_QUALITY, 95] if fmt == ".jpg" else [])
     if not ok:
-        raise DatasetError(f"{image_path}: cannot encode the overlay as PNG")
-    write_bytes_atomic(out, png.tobytes())
+        raise DatasetError(f"{image_path}: cannot encode the overlay as {fmt[1:].upper()}")
+    write_bytes_atomic(out, data.tobytes())
     return str(out)
 
 

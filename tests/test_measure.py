@@ -47,7 +47,7 @@ def test_bad_input_is_one_line_exit_2(big, tmp_path, capsys):
     empty = tmp_path / "empty"
     empty.mkdir()
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
-    cases = [([str(empty), "--layout", str(big / "layout.json")], "no PNG or JPEG"),
+    cases = [([str(empty), "--layout", str(big / "layout.json")], "no PNG, JPEG, TIFF or BMP images"),
              ([str(big / "images"), "--layout", str(tmp_path / "nope.json")], "layout file not found"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--camera-model", "fisheye"], "fisheye"),
              ([str(big / "images"), "--layout", str(big / "layout.json"), "--weights", str(tmp_path / "w.pt")],
@@ -128,7 +128,7 @@ def test_bad_images_are_reported_not_dropped_and_self_calibration_runs(big, tmp_
     assert doc["failures"] == {"unreadable image": 2}
     assert doc["sequence"]["ok"] and doc["sequence"]["frames"] == 6
     recs = _poses(doc)
-    assert recs["broken"]["reason"].endswith("not a readable PNG or JPEG image")
+    assert recs["broken"]["reason"].endswith("not a PNG, JPEG, TIFF or BMP file (its first bytes are b'not a pn')")
     assert all(r.get("self_calibrated") == "sequence" for r in doc["images"] if r["ok"])
     assert len(list((out / "overlays").glob("*.png"))) == 6
 
