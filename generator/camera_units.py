@@ -43,16 +43,15 @@ def unit_lens(units: CameraUnitsConfig, seed: int, unit: int) -> UnitLens:
     from the unit's STREAM_UNIT_LENS stream; every value is drawn, in a fixed order, whether its
     feature is on or not (principal offset x, y; k1, k2, k3, p1, p2; aberration red, blue;
     f-number, focus error; JPEG quality)."""
-    u = units
     rng = rng_for(seed, STREAM_UNIT_LENS, unit)
-    offset = (uniform(rng, u.principal_offset_x_px), uniform(rng, u.principal_offset_y_px))
-    k1, k2, k3, p1, p2 = (uniform(rng, getattr(u, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
-    aberration = (uniform(rng, u.aberration_red_px), uniform(rng, u.aberration_blue_px))
-    f_number, focus_error = uniform(rng, u.f_number), uniform(rng, u.focus_error_mm)
-    quality = int(rng.integers(u.jpeg_quality[0], u.jpeg_quality[1] + 1))
-    dof = u.depth_of_field
+    offset = (uniform(rng, units.principal_offset_x_px), uniform(rng, units.principal_offset_y_px))
+    k1, k2, k3, p1, p2 = (uniform(rng, getattr(units, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
+    aberration = (uniform(rng, units.aberration_red_px), uniform(rng, units.aberration_blue_px))
+    f_number, focus_error = uniform(rng, units.f_number), uniform(rng, units.focus_error_mm)
+    quality = int(rng.integers(units.jpeg_quality[0], units.jpeg_quality[1] + 1))
+    dof = units.depth_of_field
     return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
-                    focus_error if dof else 0.0, quality if u.jpeg else 0)
+                    focus_error if dof else 0.0, quality if units.jpeg else 0)
 
 
 @dataclass(frozen=True)
@@ -75,15 +74,15 @@ def unit_sensor(sensor: SensorConfig, seed: int, unit: int) -> UnitSensor | None
     ``unit % len``; the draws come from the unit's STREAM_UNIT_SENSOR stream of the dataset
     ``seed`` (crosstalk, sharpening, pattern seed, in that order). None without [sensor] presets
     (the three-chip noise model)."""
-    s = sensor
-    if not s.presets:
+    if not sensor.presets:
         return None
     rng = rng_for(seed, STREAM_UNIT_SENSOR, unit)
-    crosstalk, sharpen = uniform(rng, s.crosstalk), uniform(rng, s.sharpen)
+    crosstalk, sharpen = uniform(rng, sensor.crosstalk), uniform(rng, sensor.sharpen)
     pattern_seed = int(rng.integers(2**62))
-    name = s.presets[unit % len(s.presets)]
-    return UnitSensor(unit, name, configured_sensor(name, s.overrides, s.adc_bits), s.cfa[unit % len(s.cfa)],
-                      s.demosaic[unit % len(s.demosaic)], crosstalk, sharpen, pattern_seed)
+    name = sensor.presets[unit % len(sensor.presets)]
+    return UnitSensor(unit, name, configured_sensor(name, sensor.overrides, sensor.adc_bits),
+                      sensor.cfa[unit % len(sensor.cfa)], sensor.demosaic[unit % len(sensor.demosaic)],
+                      crosstalk, sharpen, pattern_seed)
 
 
 def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:

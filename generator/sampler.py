@@ -9,6 +9,12 @@ their geometry while their lighting and noise differ.
 This module holds the frame plan and the per-frame sampling; the streams and the draws it shares
 are in ``generator.draws``, the camera units' lenses in ``generator.camera_units`` and the docking
 runs in ``generator.runs``.
+
+Only the entry points read the whole ``Config``: ``frame_plan`` (the plan), ``sample_frame`` (one
+frame's scene) and the checks (``check_focal_fits``, ``check_rolling_fits``). They read the config
+once and hand each helper the sections it needs ([pose], [camera], [sensor], ...), the dataset
+seed, and what a frame shares with others (the static scene, its unit's lens); the scene they
+return is plain frozen data that goes to the render worker as is.
 """
 from __future__ import annotations
 
@@ -108,10 +114,9 @@ def _split_members(dataset: DatasetConfig, members: np.ndarray, ci: int,
     moves an item into or out of the test split); the first round(val_fraction * n_train) of
     the train items are val.
     """
-    d = dataset
-    n_train = int(np.floor(d.train_fraction * len(members) + 0.5))
-    n_val = int(np.floor(d.val_fraction * n_train + 0.5))
-    order = rng_for(d.seed, stream, 1 + ci).permutation(len(members))
+    n_train = int(np.floor(dataset.train_fraction * len(members) + 0.5))
+    n_val = int(np.floor(dataset.val_fraction * n_train + 0.5))
+    order = rng_for(dataset.seed, stream, 1 + ci).permutation(len(members))
     return {"val": members[order[:n_val]], "train": members[order[n_val:n_train]],
             "test": members[order[n_train:]]}
 
@@ -172,11 +177,10 @@ def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
 def _streams(seed: int, spec: FrameSpec) -> tuple[np.random.Generator, np.random.Generator]:
     """The (geometry, look) streams of a planned frame of the dataset ``seed``: a repeatability
     capture shares its pose's geometry stream and has its own look stream."""
-    s = seed
     if spec.kind == "repeat":
-        return (rng_for(s, STREAM_REPEAT_GEOMETRY, spec.pose_index),
-                rng_for(s, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture))
-    return rng_for(s, STREAM_GEOMETRY, spec.index), rng_for(s, STREAM_LOOK, spec.index)
+        return (rng_for(seed, STREAM_REPEAT_GEOMETRY, spec.pose_index),
+                rng_for(seed, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture))
+    return rng_for(seed, STREAM_GEOMETRY, spec.index), rng_for(seed, STREAM_LOOK, spec.index)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -422,37 +426,35 @@ def frame_chain(sensor: SensorConfig, seed: int, spec: FrameSpec) -> ColourChain
     unit = unit_sensor(sensor, seed, spec.unit)
     if unit is None:
         return None
-    s = sensor
     rng = rng_for(seed, STREAM_FRAME_ISP, spec.index)
-    exposure_s = uniform(rng, s.exposure_time_ms) / 1000.0
-    wb = (uniform(rng, s.wb_error), uniform(rng, s.wb_error))
+    exposure_s = uniform(rng, sensor.exposure_time_ms) / 1000.0
+    wb = (uniform(rng, sensor.wb_error), uniform(rng, sensor.wb_error))
     return ColourChain(unit.cfa, unit.sensor, unit.seed, unit.crosstalk, exposure_s, unit.demosaic, wb,
-                       s.colour_correction, s.tone, s.denoise, unit.sharpen, s.sharpen_sigma_px)
+                       sensor.colour_correction, sensor.tone, sensor.denoise, unit.sharpen, sensor.sharpen_sigma_px)
 
 
 def sample_sensor(sensor: SensorConfig, rng, condition: str, bloom: float,
                   chain: ColourChain | None = None) -> SensorParams:
     """The frame's sensor parameters from [sensor] (the look stream's draws, in a fixed order
     whether or not a colour ``chain`` replaces the three-chip noise model)."""
-    s = sensor
     seed = int(rng.integers(2**62))
     if condition == "ideal":
-        return SensorParams(True, 0.0, 0.0, 1.0, 0.0, s.adc_bits, 0.0, 0.0, seed)
+        return SensorParams(True, 0.0, 0.0, 1.0, 0.0, sensor.adc_bits, 0.0, 0.0, seed)
     if condition == "low_light":
-        ev, gain = uniform(rng, s.low_light_ev), uniform(rng, s.low_light_gain_ev)
+        ev, gain = uniform(rng, sensor.low_light_ev), uniform(rng, sensor.low_light_gain_ev)
     else:
-        ev, gain = uniform(rng, s.exposure_ev), 0.0
-    return SensorParams(False, ev, gain, uniform(rng, s.full_well_e), uniform(rng, s.read_noise_e),
-                        s.adc_bits, uniform(rng, s.vignetting), bloom, seed, chain)
+        ev, gain = uniform(rng, sensor.exposure_ev), 0.0
+    return SensorParams(False, ev, gain, uniform(rng, sensor.full_well_e), uniform(rng, sensor.read_noise_e),
+                        sensor.adc_bits, uniform(rng, sensor.vignetting), bloom, seed, chain)
 
 
 # ----------------------------------------------------------------------------- frame
 
 def render_settings(render: RenderConfig) -> RenderSettings:
     """What Cycles needs of [render], per frame."""
-    r = render
-    return RenderSettings(r.samples, r.denoise, r.max_bounces, r.adaptive_threshold,
-                          r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter, r.sampling_pattern, r.post_filter)
+    return RenderSettings(render.samples, render.denoise, render.max_bounces, render.adaptive_threshold,
+                          render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
+                          render.sampling_pattern, render.post_filter)
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
