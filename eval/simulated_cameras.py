@@ -39,7 +39,7 @@ def sensor_schema(sensor: dict) -> dict:
 
 
 def _lens(cfg, unit: int) -> dict:
-    lens = unit_lens(cfg, unit)
+    lens = unit_lens(cfg.camera_units, cfg.dataset.seed, unit)
     return {"principal_offset_px": list(lens.principal_offset), "k1": lens.distortion[0], "k2": lens.distortion[1],
             "aberration_px": list(lens.aberration_px), "f_number": lens.f_number or None,
             "jpeg_quality": lens.jpeg_quality or None,
@@ -48,7 +48,7 @@ def _lens(cfg, unit: int) -> dict:
 
 def _sensor(cfg, unit: int) -> dict:
     s = cfg.sensor
-    us = unit_sensor(cfg, unit)
+    us = unit_sensor(s, cfg.dataset.seed, unit)
     if us is None:
         return {"model": "three-chip noise model", "full_well_e": list(s.full_well_e),
                 "read_noise_e": list(s.read_noise_e), "adc_bits": s.adc_bits}
@@ -128,9 +128,9 @@ def dataset_camera(ds: Dataset):
     cfg = ds.config
     units = {}
     for u in range(cfg.camera_units.count):
-        us = unit_sensor(cfg, u)
+        us = unit_sensor(cfg.sensor, cfg.dataset.seed, u)
         cfa = us.cfa if us is not None and us.cfa != "none" else None
-        units[u] = (cfa, bool(unit_lens(cfg, u).jpeg_quality))
+        units[u] = (cfa, bool(unit_lens(cfg.camera_units, cfg.dataset.seed, u).jpeg_quality))
     if all(v == (None, False) for v in units.values()):
         return None
     return lambda fid: units[int(ds.labels[fid]["spec"].get("unit", 0))]

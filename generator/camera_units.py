@@ -2,6 +2,9 @@
 field, JPEG), drawn once per unit from [camera_units] with the dataset seed; the units dealt to
 frames or runs; the frame's camera through a unit's lens and the largest focal that keeps the
 markers inside its image.
+
+Every function takes the config sections it reads ([camera_units], [sensor], [image]) and the
+dataset seed, never the whole config (``ImageFit.of`` picks what the focal fit reads).
 """
 from __future__ import annotations
 
@@ -10,7 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from dockfactory.core.config import Config, ConfigError
+from dockfactory.core.config import CameraUnitsConfig, Config, ConfigError, ImageConfig, SensorConfig
 from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.scene import CameraModel, mat4, vec
@@ -35,19 +38,20 @@ class UnitLens:
 
 
 @lru_cache(maxsize=256)
-def unit_lens(cfg: Config, unit: int) -> UnitLens:
-    """Lens of camera unit ``unit``: a function of (config, seed, unit); every value is drawn, in a
-    fixed order, whether its feature is on or not."""
-    u = cfg.camera_units
-    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_LENS, unit)
-    offset = (uniform(rng, u.principal_offset_x_px), uniform(rng, u.principal_offset_y_px))
-    k1, k2, k3, p1, p2 = (uniform(rng, getattr(u, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
-    aberration = (uniform(rng, u.aberration_red_px), uniform(rng, u.aberration_blue_px))
-    f_number, focus_error = uniform(rng, u.f_number), uniform(rng, u.focus_error_mm)
-    quality = int(rng.integers(u.jpeg_quality[0], u.jpeg_quality[1] + 1))
-    dof = u.depth_of_field
+def unit_lens(units: CameraUnitsConfig, seed: int, unit: int) -> UnitLens:
+    """Lens of camera unit ``unit``: a function of ([camera_units], dataset seed, unit) alone, drawn
+    from the unit's STREAM_UNIT_LENS stream; every value is drawn, in a fixed order, whether its
+    feature is on or not (principal offset x, y; k1, k2, k3, p1, p2; aberration red, blue;
+    f-number, focus error; JPEG quality)."""
+    rng = rng_for(seed, STREAM_UNIT_LENS, unit)
+    offset = (uniform(rng, units.principal_offset_x_px), uniform(rng, units.principal_offset_y_px))
+    k1, k2, k3, p1, p2 = (uniform(rng, getattr(units, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
+    aberration = (uniform(rng, units.aberration_red_px), uniform(rng, units.aberration_blue_px))
+    f_number, focus_error = uniform(rng, units.f_number), uniform(rng, units.focus_error_mm)
+    quality = int(rng.integers(units.jpeg_quality[0], units.jpeg_quality[1] + 1))
+    dof = units.depth_of_field
     return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
-                    focus_error if dof else 0.0, quality if u.jpeg else 0)
+                    focus_error if dof else 0.0, quality if units.jpeg else 0)
 
 
 @dataclass(frozen=True)
@@ -65,19 +69,20 @@ class UnitSensor:
 
 
 @lru_cache(maxsize=256)
-def unit_sensor(cfg: Config, unit: int) -> UnitSensor | None:
-    """Colour sensor of camera unit ``unit``: the per-unit lists' item ``unit % len``, the draws
-    from the unit's own stream (crosstalk, sharpening, pattern seed, in that order); None without
-    [sensor] presets (the three-chip noise model)."""
-    s = cfg.sensor
-    if not s.presets:
+def unit_sensor(sensor: SensorConfig, seed: int, unit: int) -> UnitSensor | None:
+    """Colour sensor of camera unit ``unit``: the per-unit lists of [sensor] give item
+    ``unit % len``; the draws come from the unit's STREAM_UNIT_SENSOR stream of the dataset
+    ``seed`` (crosstalk, sharpening, pattern seed, in that order). None without [sensor] presets
+    (the three-chip noise model)."""
+    if not sensor.presets:
         return None
-    rng = rng_for(cfg.dataset.seed, STREAM_UNIT_SENSOR, unit)
-    crosstalk, sharpen = uniform(rng, s.crosstalk), uniform(rng, s.sharpen)
-    seed = int(rng.integers(2**62))
-    name = s.presets[unit % len(s.presets)]
-    return UnitSensor(unit, name, configured_sensor(name, s.overrides, s.adc_bits), s.cfa[unit % len(s.cfa)],
-                      s.demosaic[unit % len(s.demosaic)], crosstalk, sharpen, seed)
+    rng = rng_for(seed, STREAM_UNIT_SENSOR, unit)
+    crosstalk, sharpen = uniform(rng, sensor.crosstalk), uniform(rng, sensor.sharpen)
+    pattern_seed = int(rng.integers(2**62))
+    name = sensor.presets[unit % len(sensor.presets)]
+    return UnitSensor(unit, name, configured_sensor(name, sensor.overrides, sensor.adc_bits),
+                      sensor.cfa[unit % len(sensor.cfa)], sensor.demosaic[unit % len(sensor.demosaic)],
+                      crosstalk, sharpen, pattern_seed)
 
 
 def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:
@@ -89,37 +94,55 @@ def balanced_units(seed: int, n: int, count: int, key: int) -> np.ndarray:
     return out
 
 
-def repeat_unit(cfg: Config) -> int:
-    """The one camera unit that takes every repeatability capture."""
-    count = cfg.camera_units.count
-    return 0 if count == 1 else int(rng_for(cfg.dataset.seed, STREAM_UNITS, 2).integers(count))
+def repeat_unit(seed: int, count: int) -> int:
+    """The one camera unit (of ``count``) that takes every repeatability capture: drawn from the
+    dataset ``seed``'s STREAM_UNITS stream, key 2; 0 with a single unit (nothing drawn)."""
+    return 0 if count == 1 else int(rng_for(seed, STREAM_UNITS, 2).integers(count))
 
 
-def principal_point(cfg: Config, lens: UnitLens) -> tuple[float, float]:
-    return ((cfg.image.width - 1) / 2.0 + lens.principal_offset[0],
-            (cfg.image.height - 1) / 2.0 + lens.principal_offset[1])
+@dataclass(frozen=True)
+class ImageFit:
+    """What keeping the markers inside a frame's image reads: the image size ([image], px), the
+    margin the marker discs keep from its border ([camera] margin_px, px) and the discs' radius
+    ([markers] diameter_mm / 2, mm)."""
+    image: ImageConfig
+    margin_px: float
+    disc_radius_mm: float
+
+    @classmethod
+    def of(cls, cfg: Config) -> ImageFit:
+        return cls(cfg.image, cfg.camera.margin_px, cfg.markers.diameter_mm / 2.0)
 
 
-def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndarray,
+def principal_point(image: ImageConfig, lens: UnitLens) -> tuple[float, float]:
+    """The unit's principal point (cx, cy), OpenCV pixels: the image centre
+    ((W - 1) / 2, (H - 1) / 2) plus the lens's offset."""
+    return ((image.width - 1) / 2.0 + lens.principal_offset[0],
+            (image.height - 1) / 2.0 + lens.principal_offset[1])
+
+
+def largest_fitting_focal(fit: ImageFit, cam_from_d: np.ndarray, points_d: np.ndarray,
                           lens: UnitLens | None = None) -> float:
-    """Largest focal (px) that keeps every marker disc ``margin_px`` inside the image, through the
-    unit's lens (principal point and distortion; pixel offsets from the principal point scale with
-    the focal, so the bound is closed-form)."""
+    """Largest focal (px) that keeps every marker disc (centres ``points_d`` (N, 3) mm in D, seen
+    by a camera at ``cam_from_d`` (4, 4)) ``fit.margin_px`` inside the image, through the unit's
+    lens (principal point and distortion; pixel offsets from the principal point scale with the
+    focal, so the bound is closed-form). 0 when a marker is behind the camera or the principal
+    point leaves no room; an ideal lens (or None) uses the centred pinhole's bound."""
     pc = transform_points(cam_from_d, points_d)
     z = pc[:, 2]
     if np.any(z <= 0):
         return 0.0
-    r = cfg.markers.diameter_mm / 2.0
+    r, image, margin = fit.disc_radius_mm, fit.image, fit.margin_px
     if lens is None or lens.is_ideal():
-        half_w = cfg.image.width / 2.0 - cfg.camera.margin_px
-        half_h = cfg.image.height / 2.0 - cfg.camera.margin_px
+        half_w = image.width / 2.0 - margin
+        half_h = image.height / 2.0 - margin
         ext_x = (np.abs(pc[:, 0]) + r) / z
         ext_y = (np.abs(pc[:, 1]) + r) / z
         return float(min(half_w / ext_x.max(), half_h / ext_y.max()))
     corners = np.concatenate([(pc[:, :2] + r * np.array(sign)) / z[:, None]
                               for sign in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
     xd = distort_normalized(corners, lens.distortion)
-    pp, size, margin = principal_point(cfg, lens), (cfg.image.width, cfg.image.height), cfg.camera.margin_px
+    pp, size = principal_point(image, lens), (image.width, image.height)
     caps = [np.inf]
     for axis in (0, 1):
         room_hi, room_lo = size[axis] - 0.5 - margin - pp[axis], pp[axis] + 0.5 - margin
@@ -130,20 +153,24 @@ def largest_fitting_focal(cfg: Config, cam_from_d: np.ndarray, points_d: np.ndar
     return float(min(caps))
 
 
-def camera_model(cfg: Config, lens: UnitLens, focal_px: float, cam_from_d, eye, target) -> CameraModel:
-    """The frame's camera: pinhole K with the unit's principal point, plus the unit's lens."""
+def camera_model(image: ImageConfig, units: CameraUnitsConfig, lens: UnitLens, focal_px: float,
+                 cam_from_d, eye, target) -> CameraModel:
+    """The frame's camera: pinhole K (``focal_px``, the unit's principal point) at ``cam_from_d``
+    (4, 4), aimed from ``eye`` at ``target`` ((3,) mm in D), plus the unit's lens and the shared
+    body of [camera_units] (sensor width, JPEG chroma subsampling)."""
     distance = float(np.linalg.norm(np.asarray(eye) - np.asarray(target)))
-    return CameraModel(cfg.image.width, cfg.image.height, float(focal_px), principal_point(cfg, lens),
+    return CameraModel(image.width, image.height, float(focal_px), principal_point(image, lens),
                        mat4(cam_from_d), vec(target), distance, lens.unit, lens.distortion, lens.aberration_px,
                        lens.f_number, distance + lens.focus_error_mm if lens.f_number > 0 else 0.0,
-                       cfg.camera_units.sensor_width_mm, lens.jpeg_quality, cfg.camera_units.jpeg_subsampling)
+                       units.sensor_width_mm, lens.jpeg_quality, units.jpeg_subsampling)
 
 
-def check_lenses(cfg: Config, source: str) -> None:
-    """Every unit's lens is usable at the smallest focal (no fold, a bounded render canvas)."""
-    for unit in range(cfg.camera_units.count):
-        lens = unit_lens(cfg, unit)
-        cam = camera_model(cfg, lens, cfg.camera.focal_px[0], np.eye(4), np.zeros(3), np.array([0, 0, 1.0]))
+def check_lenses(units: CameraUnitsConfig, image: ImageConfig, seed: int, focal_px: float, source: str) -> None:
+    """Raise ConfigError (naming ``source``) unless every unit's lens is usable at ``focal_px``
+    (the smallest of [camera] focal_px): no fold, a bounded render canvas."""
+    for unit in range(units.count):
+        lens = unit_lens(units, seed, unit)
+        cam = camera_model(image, units, lens, focal_px, np.eye(4), np.zeros(3), np.array([0, 0, 1.0]))
         try:
             cam.canvas()
         except ValueError as exc:

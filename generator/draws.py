@@ -11,7 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from dockfactory.core.config import Config
+from dockfactory.core.config import CameraConfig, Config, PoseConfig
 from dockfactory.core.geometry import (
     look_at_cam_from_world,
     make_transform,
@@ -45,6 +45,8 @@ def uniform(rng, lo_hi) -> float:
 
 @lru_cache(maxsize=8)
 def static_scene(cfg: Config) -> StaticScene:
+    """What stays fixed for a whole dataset, from [sections], [markers] and [occlusion] occluders
+    (lengths in mm): built once from the config, then passed down to every frame and worker."""
     return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
                        flange_width_mm=cfg.sections.flange_width_mm,
                        flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(),
@@ -52,7 +54,7 @@ def static_scene(cfg: Config) -> StaticScene:
 
 
 def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
-    """Marker centres (N, 3) in D, in layout order."""
+    """Marker centres (N, 3) mm in D, in layout order; B's markers moved by ``d_from_b`` (4, 4)."""
     pa = marker_points(static.markers)
     is_b = np.array([m.section == "B" for m in static.markers])
     out = pa.copy()
@@ -60,23 +62,25 @@ def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
     return out
 
 
-def sample_pose(cfg: Config, rng: np.random.Generator) -> np.ndarray:
-    """d_from_b drawn from the [pose] ranges (X, Y, Z, alpha, beta, gamma, in that order)."""
-    p = cfg.pose
-    return transform_from_pose_components(uniform(rng, p.x_mm), uniform(rng, p.y_mm), uniform(rng, p.z_mm),
-                                          uniform(rng, p.alpha_deg), uniform(rng, p.beta_deg),
-                                          uniform(rng, p.gamma_deg))
+def sample_pose(pose: PoseConfig, rng: np.random.Generator) -> np.ndarray:
+    """d_from_b (4, 4), mm: six uniform draws from ``rng`` over the [pose] ranges, in the order
+    X, Y, Z (mm), alpha, beta, gamma (degrees; conventions.md, Frames)."""
+    return transform_from_pose_components(uniform(rng, pose.x_mm), uniform(rng, pose.y_mm), uniform(rng, pose.z_mm),
+                                          uniform(rng, pose.alpha_deg), uniform(rng, pose.beta_deg),
+                                          uniform(rng, pose.gamma_deg))
 
 
-def aim_camera(cfg: Config, rng: np.random.Generator, b_x_mm: float):
-    """Camera pose from jitter, tilt, roll and distance drawn from ``rng`` (in that order), aimed
-    near the seam of B at axial gap ``b_x_mm``: (cam_from_d, eye, target)."""
-    c = cfg.camera
-    jx, jy = rng.uniform(-c.lateral_jitter_mm, c.lateral_jitter_mm, size=2)
-    tx, ty = np.radians(rng.uniform(-c.tilt_deg, c.tilt_deg, size=2))
-    roll = np.radians(rng.uniform(-c.roll_deg, c.roll_deg))
-    distance = uniform(rng, c.distance_mm)
-    target = np.array([b_x_mm / 2.0 + jx, jy, cfg.sections.radius_mm])
+def aim_camera(camera: CameraConfig, radius_mm: float, rng: np.random.Generator, b_x_mm: float):
+    """A camera aimed near the seam: draws from ``rng`` the lateral jitter (X, Y), the tilt (about
+    X, Y), the roll and the distance, in that order, from [camera]; the look-at point is on the
+    sections' surface (Z = ``radius_mm``) halfway across the axial gap ``b_x_mm`` (B's X in D).
+
+    Returns (cam_from_d (4, 4), eye (3,) mm in D, target (3,) mm in D); the camera frame is OpenCV's."""
+    jx, jy = rng.uniform(-camera.lateral_jitter_mm, camera.lateral_jitter_mm, size=2)
+    tx, ty = np.radians(rng.uniform(-camera.tilt_deg, camera.tilt_deg, size=2))
+    roll = np.radians(rng.uniform(-camera.roll_deg, camera.roll_deg))
+    distance = uniform(rng, camera.distance_mm)
+    target = np.array([b_x_mm / 2.0 + jx, jy, radius_mm])
     eye = target + distance * (rot_y(ty) @ rot_x(tx) @ np.array([0.0, 0.0, 1.0]))
     cam_from_d = make_transform(rot_z(roll), np.zeros(3)) @ look_at_cam_from_world(eye, target)
     return cam_from_d, eye, target

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dockfactory.core.config import Config, ConfigError
+from dockfactory.core.config import ConfigError, MotionConfig
 from dockfactory.core.geometry import check_array, transform_points
-from dockfactory.core.scene import FrameScene, FrameSpec, MotionParams, vec
+from dockfactory.core.scene import FrameScene, MotionParams, vec
 from dockfactory.generator.draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, uniform
 
 FIXED_POINT_TOL_PX = 1e-6    # Newton stops once a step moves no image point by more than this
@@ -32,20 +32,20 @@ FIXED_POINT_MAX_STEPS = 30
 SWEEP_STEPS = 9              # instants across an exposure window for the swept boxes
 
 
-def frame_motion(cfg: Config, spec: FrameSpec) -> MotionParams | None:
-    """The frame's motion: None without [motion] (nothing is drawn). B's velocity in D (mm/s)
-    comes from the frame's own stream (STREAM_FRAME_MOTION: the closing speed toward A, then the
-    Y and Z components); the exposure is the frame's [sensor] exposure_time_ms draw, the first
-    draw of its STREAM_FRAME_ISP stream (the colour chain's exposure time, when there is one)."""
-    m = cfg.motion
-    if not m.enabled:
+def frame_motion(motion: MotionConfig, exposure_time_ms: tuple[float, float], seed: int,
+                 index: int) -> MotionParams | None:
+    """The motion of frame ``index`` (``FrameSpec.index``): None without [motion] (nothing is
+    drawn). B's velocity in D (mm/s) comes from the frame's own STREAM_FRAME_MOTION stream of the
+    dataset ``seed`` (the closing speed toward A, then the Y and Z components); the exposure (ms)
+    is the frame's draw from [sensor] ``exposure_time_ms``, the first draw of its STREAM_FRAME_ISP
+    stream (the colour chain's exposure time, when there is one)."""
+    if not motion.enabled:
         return None
-    seed = cfg.dataset.seed
-    rng = rng_for(seed, STREAM_FRAME_MOTION, spec.index)
-    velocity = (0.0 - uniform(rng, m.velocity_mm_s), uniform(rng, m.velocity_y_mm_s),
-                uniform(rng, m.velocity_z_mm_s))
-    exposure_ms = uniform(rng_for(seed, STREAM_FRAME_ISP, spec.index), cfg.sensor.exposure_time_ms)
-    return MotionParams(vec(velocity), exposure_ms, m.rolling_shutter_ms)
+    rng = rng_for(seed, STREAM_FRAME_MOTION, index)
+    velocity = (0.0 - uniform(rng, motion.velocity_mm_s), uniform(rng, motion.velocity_y_mm_s),
+                uniform(rng, motion.velocity_z_mm_s))
+    exposure_ms = uniform(rng_for(seed, STREAM_FRAME_ISP, index), exposure_time_ms)
+    return MotionParams(vec(velocity), exposure_ms, motion.rolling_shutter_ms)
 
 
 def row_time_s(rows, canvas_height: int, readout_s: float) -> np.ndarray:

@@ -9,6 +9,12 @@ their geometry while their lighting and noise differ.
 This module holds the frame plan and the per-frame sampling; the streams and the draws it shares
 are in ``generator.draws``, the camera units' lenses in ``generator.camera_units`` and the docking
 runs in ``generator.runs``.
+
+Only the entry points read the whole ``Config``: ``frame_plan`` (the plan), ``sample_frame`` (one
+frame's scene) and the checks (``check_focal_fits``, ``check_rolling_fits``). They read the config
+once and hand each helper the sections it needs ([pose], [camera], [sensor], ...), the dataset
+seed, and what a frame shares with others (the static scene, its unit's lens); the scene they
+return is plain frozen data that goes to the render worker as is.
 """
 from __future__ import annotations
 
@@ -18,7 +24,18 @@ import dataclasses
 import numpy as np
 
 from dockfactory.core.camera_chain import ColourChain
-from dockfactory.core.config import CONDITIONS, Config, ConfigError
+from dockfactory.core.config import (
+    CONDITIONS,
+    CameraConfig,
+    ConditionsConfig,
+    Config,
+    ConfigError,
+    DatasetConfig,
+    OcclusionConfig,
+    PoseConfig,
+    RenderConfig,
+    SensorConfig,
+)
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
 from dockfactory.core.layout import marker_points
 from dockfactory.core.scene import (
@@ -38,6 +55,7 @@ from dockfactory.core.scene import (
     vec,
 )
 from dockfactory.generator.camera_units import (
+    ImageFit,
     UnitLens,
     balanced_units,
     camera_model,
@@ -65,7 +83,7 @@ from dockfactory.generator.draws import (
 )
 from dockfactory.generator.labels import section_silhouette
 from dockfactory.generator.motion import check_rolling, frame_motion
-from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, unit_camera
+from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, run_time, unit_camera
 
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
 
@@ -86,35 +104,38 @@ def condition_counts(weights: dict[str, float], total: int) -> dict[str, int]:
     return counts
 
 
-def _split_members(cfg: Config, members: np.ndarray, ci: int, stream: int = STREAM_PLAN) -> dict[str, np.ndarray]:
-    """Item indices (frames, or runs) of one condition per split: test, then val carved from train.
+def _split_members(dataset: DatasetConfig, members: np.ndarray, ci: int,
+                   stream: int = STREAM_PLAN) -> dict[str, np.ndarray]:
+    """Item indices (frames, or runs) of group ``ci`` per split: test, then val carved from train
+    ([dataset] train_fraction, val_fraction; the permutation from ``stream``, key 1 + ci, of its seed).
 
     One permutation of the condition's items decides everything: its first
     round(train_fraction * n) items are train + val, the rest test (so ``val_fraction`` never
     moves an item into or out of the test split); the first round(val_fraction * n_train) of
     the train items are val.
     """
-    d = cfg.dataset
-    n_train = int(np.floor(d.train_fraction * len(members) + 0.5))
-    n_val = int(np.floor(d.val_fraction * n_train + 0.5))
-    order = rng_for(d.seed, stream, 1 + ci).permutation(len(members))
+    n_train = int(np.floor(dataset.train_fraction * len(members) + 0.5))
+    n_val = int(np.floor(dataset.val_fraction * n_train + 0.5))
+    order = rng_for(dataset.seed, stream, 1 + ci).permutation(len(members))
     return {"val": members[order[:n_val]], "train": members[order[n_val:n_train]],
             "test": members[order[n_train:]]}
 
 
-def _condition_groups(cfg: Config, n: int, stream: int) -> list[np.ndarray]:
-    """Members (sorted item indices) of each condition, in CONDITIONS order (exact counts)."""
-    counts = condition_counts(dataclasses.asdict(cfg.conditions), n)
-    perm = rng_for(cfg.dataset.seed, stream).permutation(n)
+def _condition_groups(conditions: ConditionsConfig, seed: int, n: int, stream: int) -> list[np.ndarray]:
+    """Members (sorted item indices) of each condition, in CONDITIONS order: exact counts from the
+    [conditions] weights, dealt by one permutation of ``stream`` of the dataset ``seed``."""
+    counts = condition_counts(dataclasses.asdict(conditions), n)
+    perm = rng_for(seed, stream).permutation(n)
     starts = np.cumsum([0] + [counts[c] for c in CONDITIONS])
     return [np.sort(perm[starts[i]:starts[i + 1]]) for i in range(len(CONDITIONS))]
 
 
-def _stratified_splits(cfg: Config, groups: list[np.ndarray], n: int, stream: int) -> np.ndarray:
-    """Split of each of ``n`` items, drawn within each group (stratum) separately."""
+def _stratified_splits(dataset: DatasetConfig, groups: list[np.ndarray], n: int, stream: int) -> np.ndarray:
+    """Split ("train", "val" or "test") of each of ``n`` items, (n,) object: drawn within each
+    group (stratum) separately (``_split_members``)."""
     split_of = np.empty(n, dtype=object)
     for gi, members in enumerate(groups):
-        for split, idx in _split_members(cfg, members, gi, stream).items():
+        for split, idx in _split_members(dataset, members, gi, stream).items():
             split_of[idx] = split
     return split_of
 
@@ -125,18 +146,18 @@ def _main_specs(cfg: Config) -> list[FrameSpec]:
     stratified by camera unit, so each unit has runs in train and test) and its frames share them."""
     seed, n, units = cfg.dataset.seed, cfg.dataset.frames, cfg.camera_units.count
     per = cfg.runs.frames_per_run
-    items = n if per == 0 else run_count(cfg)
+    items = n if per == 0 else run_count(cfg.runs, n)
     stream = STREAM_PLAN if per == 0 else STREAM_RUN_PLAN
-    groups = _condition_groups(cfg, items, stream)
+    groups = _condition_groups(cfg.conditions, seed, items, stream)
     condition = np.empty(items, dtype=object)
     for cond, members in zip(CONDITIONS, groups):
         condition[members] = cond
     unit = balanced_units(seed, items, units, 0 if per == 0 else 1)
     if per == 0:
-        split = _stratified_splits(cfg, groups, items, stream)
+        split = _stratified_splits(cfg.dataset, groups, items, stream)
         return [FrameSpec(f"{i:06d}", i, "main", str(split[i]), str(condition[i]), -1, -1, int(unit[i]))
                 for i in range(n)]
-    split = _stratified_splits(cfg, [np.flatnonzero(unit == u) for u in range(units)], items, stream)
+    split = _stratified_splits(cfg.dataset, [np.flatnonzero(unit == u) for u in range(units)], items, stream)
     return [FrameSpec(f"{i:06d}", i, "main", str(split[i // per]), str(condition[i // per]), -1, -1,
                       int(unit[i // per]), i // per, i % per) for i in range(n)]
 
@@ -145,7 +166,7 @@ def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
     """Every frame of the dataset: main frames (train/val/test, stratified by condition) then the
     repeatability subset (all on one camera unit)."""
     specs = _main_specs(cfg)
-    n, r, unit = cfg.dataset.frames, cfg.repeatability, repeat_unit(cfg)
+    n, r, unit = cfg.dataset.frames, cfg.repeatability, repeat_unit(cfg.dataset.seed, cfg.camera_units.count)
     for p in range(r.poses):
         for c in range(r.captures):
             specs.append(FrameSpec(f"rep{p:03d}_{c:02d}", n + p * r.captures + c, "repeat",
@@ -153,21 +174,28 @@ def frame_plan(cfg: Config) -> tuple[FrameSpec, ...]:
     return tuple(specs)
 
 
-def _streams(cfg: Config, spec: FrameSpec) -> tuple[np.random.Generator, np.random.Generator]:
-    s = cfg.dataset.seed
+def _streams(seed: int, spec: FrameSpec) -> tuple[np.random.Generator, np.random.Generator]:
+    """The (geometry, look) streams of a planned frame of the dataset ``seed``: a repeatability
+    capture shares its pose's geometry stream and has its own look stream."""
     if spec.kind == "repeat":
-        return (rng_for(s, STREAM_REPEAT_GEOMETRY, spec.pose_index),
-                rng_for(s, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture))
-    return rng_for(s, STREAM_GEOMETRY, spec.index), rng_for(s, STREAM_LOOK, spec.index)
+        return (rng_for(seed, STREAM_REPEAT_GEOMETRY, spec.pose_index),
+                rng_for(seed, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture))
+    return rng_for(seed, STREAM_GEOMETRY, spec.index), rng_for(seed, STREAM_LOOK, spec.index)
 
 
 # ----------------------------------------------------------------------------- geometry
 
-def sample_geometry(cfg: Config, rng: np.random.Generator, lens: UnitLens | None = None):
-    """d_from_b, cam_from_d and the focal cap for one frame (consumes ``rng`` in a fixed order)."""
-    d_from_b = sample_pose(cfg, rng)
-    cam_from_d, eye, target = aim_camera(cfg, rng, d_from_b[0, 3])
-    f_cap = largest_fitting_focal(cfg, cam_from_d, markers_in_d(static_scene(cfg), d_from_b), lens)
+def sample_geometry(pose: PoseConfig, camera: CameraConfig, static: StaticScene, fit: ImageFit,
+                    rng: np.random.Generator, lens: UnitLens | None = None):
+    """One frame's geometry, drawn from ``rng`` in a fixed order: B's pose ([pose]), the camera's
+    aim ([camera], at B's axial gap), then the zoom's uniform variate u_focal in [0, 1).
+
+    Returns (d_from_b (4, 4), cam_from_d (4, 4), f_cap px: the largest focal that keeps the
+    markers inside the image through ``lens`` (``fit``), u_focal, eye (3,) mm, target (3,) mm; D
+    frame)."""
+    d_from_b = sample_pose(pose, rng)
+    cam_from_d, eye, target = aim_camera(camera, static.radius_mm, rng, d_from_b[0, 3])
+    f_cap = largest_fitting_focal(fit, cam_from_d, markers_in_d(static, d_from_b), lens)
     u_focal = float(rng.uniform())
     return d_from_b, cam_from_d, f_cap, u_focal, eye, target
 
@@ -178,7 +206,7 @@ def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
     """Raise ConfigError if some planned frame cannot fit its markers at the smallest focal (with
     runs: at its unit's focal), a unit's lens is unusable, or (with a rolling shutter) some
     frame's B moves too fast for it (``generator.motion.check_rolling``)."""
-    check_lenses(cfg, source)
+    check_lenses(cfg.camera_units, cfg.image, cfg.dataset.seed, cfg.camera.focal_px[0], source)
     if cfg.runs.frames_per_run > 0:
         check_runs_fit(cfg, frame_plan(cfg), source)
     else:
@@ -188,10 +216,12 @@ def check_focal_fits(cfg: Config, source: str = "<config>") -> None:
 
 def _check_single_shot_focal(cfg: Config, source: str) -> None:
     """Without runs: every frame fits its markers at the smallest focal of [camera] focal_px."""
+    static, fit, seed = static_scene(cfg), ImageFit.of(cfg), cfg.dataset.seed
     worst = np.inf
     for spec in frame_plan(cfg):
-        geo_rng, _ = _streams(cfg, spec)
-        worst = min(worst, sample_geometry(cfg, geo_rng, unit_lens(cfg, spec.unit))[2])
+        geo_rng, _ = _streams(seed, spec)
+        lens = unit_lens(cfg.camera_units, seed, spec.unit)
+        worst = min(worst, sample_geometry(cfg.pose, cfg.camera, static, fit, geo_rng, lens)[2])
     f_min = cfg.camera.focal_px[0]
     if worst < f_min:
         raise ConfigError(
@@ -307,12 +337,16 @@ def sample_clutter(rng, radius_mm: float) -> tuple[Prop, ...]:
     return tuple(props)
 
 
-def sample_occluders(cfg: Config, rng, static: StaticScene, points_d, eye) -> tuple[Prop, ...]:
-    n = int(rng.integers(cfg.occlusion.occluders[0], cfg.occlusion.occluders[1] + 1))
+def sample_occluders(occlusion: OcclusionConfig, marker_diameter_mm: float, rng, static: StaticScene, points_d,
+                     eye) -> tuple[Prop, ...]:
+    """An occlusion frame's occluders ([occlusion]: count, kinds, gap), each across the line of
+    sight from ``eye`` ((3,) mm in D) to a marker drawn from ``points_d`` ((N, 3) mm in D, the
+    markers of ``static`` in layout order), near enough to cover a disc of ``marker_diameter_mm``."""
+    n = int(rng.integers(occlusion.occluders[0], occlusion.occluders[1] + 1))
     slots: dict[str, int] = {}
     props = []
     for _ in range(n):
-        kind = str(cfg.occlusion.kinds[rng.integers(len(cfg.occlusion.kinds))])
+        kind = str(occlusion.kinds[rng.integers(len(occlusion.kinds))])
         slot = slots.get(kind, 0)
         slots[kind] = slot + 1
         mi = int(rng.integers(len(static.markers)))
@@ -335,8 +369,8 @@ def sample_occluders(cfg: Config, rng, static: StaticScene, points_d, eye) -> tu
             size = np.array([rng.uniform(160, 300), rng.uniform(30, 60), rng.uniform(15, 30)])
         else:  # hand-sized blob
             size = np.array([rng.uniform(80, 120), rng.uniform(60, 95), rng.uniform(30, 55)])
-        half_width = size[1] / 2 + cfg.markers.diameter_mm / 2
-        gap = uniform(rng, cfg.occlusion.gap_mm)
+        half_width = size[1] / 2 + marker_diameter_mm / 2
+        gap = uniform(rng, occlusion.gap_mm)
         shift_along = rng.uniform(-0.4, 0.4) * size[0] if kind in ("tool", "blob") else 0.0
         centre = marker + gap * ray + rng.uniform(-1.2, 1.2) * half_width * across + shift_along * axis
         rotation = np.stack([axis, across, np.cross(axis, across)], axis=1)
@@ -346,8 +380,9 @@ def sample_occluders(cfg: Config, rng, static: StaticScene, points_d, eye) -> tu
     return tuple(props)
 
 
-def sample_glare(cfg: Config, rng, kind: str, static: StaticScene, cam: CameraModel, eye):
-    """Glare lamp prop and/or a specular light. Returns (props, lights, roughness override)."""
+def sample_glare(rng, kind: str, static: StaticScene, cam: CameraModel, eye):
+    """A glare frame's source of ``kind``: a lamp in ``cam``'s view, or a specular light mirrored
+    off A's surface toward ``eye`` ((3,) mm in D). Returns (props, lights, roughness override or None)."""
     if kind == "lamp_in_view":
         w, h = cam.width, cam.height
         if rng.uniform() < 0.6:  # above the sections
@@ -384,77 +419,79 @@ def sample_glare(cfg: Config, rng, kind: str, static: StaticScene, cam: CameraMo
     return (), (light,), float(rng.uniform(0.08, 0.2))
 
 
-def frame_chain(cfg: Config, spec: FrameSpec) -> ColourChain | None:
-    """The colour camera of a frame: its unit's sensor and ISP, and the frame's own draws (exposure
-    time, white-balance error of the red and blue gains) from its own stream; None without
-    [sensor] presets."""
-    unit = unit_sensor(cfg, spec.unit)
+def frame_chain(sensor: SensorConfig, seed: int, spec: FrameSpec) -> ColourChain | None:
+    """The colour camera of a frame: its unit's sensor and ISP ([sensor]), and the frame's own
+    draws from its STREAM_FRAME_ISP stream of the dataset ``seed`` (exposure time, white-balance
+    error of the red and blue gains, in that order); None without [sensor] presets."""
+    unit = unit_sensor(sensor, seed, spec.unit)
     if unit is None:
         return None
-    s = cfg.sensor
-    rng = rng_for(cfg.dataset.seed, STREAM_FRAME_ISP, spec.index)
-    exposure_s = uniform(rng, s.exposure_time_ms) / 1000.0
-    wb = (uniform(rng, s.wb_error), uniform(rng, s.wb_error))
+    rng = rng_for(seed, STREAM_FRAME_ISP, spec.index)
+    exposure_s = uniform(rng, sensor.exposure_time_ms) / 1000.0
+    wb = (uniform(rng, sensor.wb_error), uniform(rng, sensor.wb_error))
     return ColourChain(unit.cfa, unit.sensor, unit.seed, unit.crosstalk, exposure_s, unit.demosaic, wb,
-                       s.colour_correction, s.tone, s.denoise, unit.sharpen, s.sharpen_sigma_px)
+                       sensor.colour_correction, sensor.tone, sensor.denoise, unit.sharpen, sensor.sharpen_sigma_px)
 
 
-def sample_sensor(cfg: Config, rng, condition: str, bloom: float, chain: ColourChain | None = None) -> SensorParams:
-    """The frame's sensor parameters (the look stream's draws, in a fixed order whether or not a
-    colour ``chain`` replaces the three-chip noise model)."""
-    s = cfg.sensor
+def sample_sensor(sensor: SensorConfig, rng, condition: str, bloom: float,
+                  chain: ColourChain | None = None) -> SensorParams:
+    """The frame's sensor parameters from [sensor] (the look stream's draws, in a fixed order
+    whether or not a colour ``chain`` replaces the three-chip noise model)."""
     seed = int(rng.integers(2**62))
     if condition == "ideal":
-        return SensorParams(True, 0.0, 0.0, 1.0, 0.0, s.adc_bits, 0.0, 0.0, seed)
+        return SensorParams(True, 0.0, 0.0, 1.0, 0.0, sensor.adc_bits, 0.0, 0.0, seed)
     if condition == "low_light":
-        ev, gain = uniform(rng, s.low_light_ev), uniform(rng, s.low_light_gain_ev)
+        ev, gain = uniform(rng, sensor.low_light_ev), uniform(rng, sensor.low_light_gain_ev)
     else:
-        ev, gain = uniform(rng, s.exposure_ev), 0.0
-    return SensorParams(False, ev, gain, uniform(rng, s.full_well_e), uniform(rng, s.read_noise_e),
-                        s.adc_bits, uniform(rng, s.vignetting), bloom, seed, chain)
+        ev, gain = uniform(rng, sensor.exposure_ev), 0.0
+    return SensorParams(False, ev, gain, uniform(rng, sensor.full_well_e), uniform(rng, sensor.read_noise_e),
+                        sensor.adc_bits, uniform(rng, sensor.vignetting), bloom, seed, chain)
 
 
 # ----------------------------------------------------------------------------- frame
 
-def render_settings(cfg: Config) -> RenderSettings:
-    r = cfg.render
-    return RenderSettings(r.samples, r.denoise, r.max_bounces, r.adaptive_threshold,
-                          r.adaptive_min_samples, r.filter_width_px, r.denoise_prefilter, r.sampling_pattern, r.post_filter)
+def render_settings(render: RenderConfig) -> RenderSettings:
+    """What Cycles needs of [render], per frame."""
+    return RenderSettings(render.samples, render.denoise, render.max_bounces, render.adaptive_threshold,
+                          render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
+                          render.sampling_pattern, render.post_filter)
 
 
-def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
-    """Without runs: the frame's own pose and camera (geometry stream), its stage (appearance,
+def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
+    """Without runs: the frame's own pose and camera (geometry stream; the zoom within [camera]
+    focal_px, capped so the markers fit through the unit's ``lens``), its stage (appearance,
     clutter: geometry stream; lights: look stream) and the look stream for the rest."""
-    geo_rng, look_rng = _streams(cfg, spec)
-    lens = unit_lens(cfg, spec.unit)
-    d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg, geo_rng, lens)
+    geo_rng, look_rng = _streams(cfg.dataset.seed, spec)
+    d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg.pose, cfg.camera, static,
+                                                                        ImageFit.of(cfg), geo_rng, lens)
     f_lo, f_hi = cfg.camera.focal_px[0], min(cfg.camera.focal_px[1], f_cap)
     if f_hi < f_lo:
         raise ConfigError(f"[camera] focal_px: frame {spec.frame_id} cannot fit its markers at "
                           f"{f_lo:g} px (largest that fits: {f_cap:.0f} px)")
-    camera = camera_model(cfg, lens, f_lo + u_focal * (f_hi - f_lo), cam_from_d, eye, target)
+    camera = camera_model(cfg.image, cfg.camera_units, lens, f_lo + u_focal * (f_hi - f_lo), cam_from_d, eye, target)
     appearance = sample_appearance(geo_rng, spec.condition)
     clutter = sample_clutter(geo_rng, static.radius_mm)
     lights = sample_lights(look_rng, target, spec.condition)
     return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
 
 
-def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
+def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
     """With runs: the unit's fixed camera; a main frame's pose from its run's trajectory and its
     stage (appearance, clutter, lights) from the run's stream, so they hold for the whole run; a
     repeatability pose's from the repeat streams as without runs."""
     seed = cfg.dataset.seed
-    cam_from_d, focal, eye, target = unit_camera(cfg, spec.unit)
-    camera = camera_model(cfg, unit_lens(cfg, spec.unit), focal, cam_from_d, eye, target)
+    cam_from_d, focal, eye, target = unit_camera(cfg.camera, cfg.pose, cfg.runs, seed, lens, static, ImageFit.of(cfg))
+    camera = camera_model(cfg.image, cfg.camera_units, lens, focal, cam_from_d, eye, target)
     if spec.kind == "repeat":
         stage_rng = rng_for(seed, STREAM_REPEAT_GEOMETRY, spec.pose_index)
         look_rng = rng_for(seed, STREAM_REPEAT_LOOK, spec.pose_index, spec.capture)
-        d_from_b = sample_pose(cfg, stage_rng)
+        d_from_b = sample_pose(cfg.pose, stage_rng)
         light_rng = look_rng
     else:
         stage_rng = light_rng = rng_for(seed, STREAM_RUN_LOOK, spec.run)
         look_rng = rng_for(seed, STREAM_LOOK, spec.index)
-        d_from_b = run_pose(cfg, spec.run, spec.run_frame)
+        t = run_time(cfg.runs, cfg.dataset.frames, spec.run, spec.run_frame)
+        d_from_b = run_pose(cfg.pose, cfg.runs, seed, spec.run, t)
     appearance = sample_appearance(stage_rng, spec.condition)
     clutter = sample_clutter(stage_rng, static.radius_mm)
     lights = sample_lights(light_rng, target, spec.condition)
@@ -462,30 +499,35 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene):
 
 
 def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:
-    """The full scene of one planned frame (pure and deterministic); with [motion], ``d_from_b``
-    is B at mid-exposure and ``motion`` how it moves (``generator.motion``)."""
-    static = static_scene(cfg)
+    """The full scene of one planned frame (pure and deterministic): the config is read here and
+    its sections handed down to the helpers. With [motion], ``d_from_b`` is B at mid-exposure and
+    ``motion`` how it moves (``generator.motion``). Raises ConfigError when the frame's markers
+    cannot fit its image or its rolling shutter cannot image B."""
+    static, seed = static_scene(cfg), cfg.dataset.seed
     shot = _run_shot if cfg.runs.frames_per_run > 0 else _single_shot
-    d_from_b, camera, eye, (appearance, clutter, lights), look_rng = shot(cfg, spec, static)
+    d_from_b, camera, eye, (appearance, clutter, lights), look_rng = shot(
+        cfg, spec, static, unit_lens(cfg.camera_units, seed, spec.unit))
     cond = spec.condition
     props = list(clutter)
     glare_kind = "none"
     bloom = 0.0
     if cond == "occlusion":
-        props += sample_occluders(cfg, look_rng, static, markers_in_d(static, d_from_b), eye)
+        props += sample_occluders(cfg.occlusion, cfg.markers.diameter_mm, look_rng, static,
+                                  markers_in_d(static, d_from_b), eye)
     if cond == "glare":
         glare_kind = str(cfg.glare.kinds[look_rng.integers(len(cfg.glare.kinds))])
-        glare_props, glare_lights, rough = sample_glare(cfg, look_rng, glare_kind, static, camera, eye)
+        glare_props, glare_lights, rough = sample_glare(look_rng, glare_kind, static, camera, eye)
         props += glare_props
         lights = lights + glare_lights
         bloom = uniform(look_rng, cfg.glare.bloom)
         if rough is not None:
             appearance = dataclasses.replace(appearance, roughness=rough,
                                              roughness_variation=min(appearance.roughness_variation, 0.05))
-    sensor = sample_sensor(cfg, look_rng, cond, bloom, frame_chain(cfg, spec))
+    sensor = sample_sensor(cfg.sensor, look_rng, cond, bloom, frame_chain(cfg.sensor, seed, spec))
+    motion = frame_motion(cfg.motion, cfg.sensor.exposure_time_ms, seed, spec.index)
     frame = FrameScene(spec=spec, d_from_b=mat4(d_from_b), camera=camera, lights=tuple(lights),
                        props=tuple(props), appearance=appearance, sensor=sensor,
                        glare_kind=glare_kind, render_seed=int(look_rng.integers(2**31 - 1)),
-                       render=render_settings(cfg), motion=frame_motion(cfg, spec))
+                       render=render_settings(cfg.render), motion=motion)
     check_rolling(frame, np.vstack([marker_points(static.markers, "B"), section_silhouette(static, "B")]))
     return frame

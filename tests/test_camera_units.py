@@ -22,7 +22,7 @@ from dockfactory.core.geometry import blender_camera_intrinsics, pose_components
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import CameraModel, to_dict
 from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.camera_units import largest_fitting_focal, unit_lens, unit_sensor
+from dockfactory.generator.camera_units import ImageFit, largest_fitting_focal, unit_lens, unit_sensor
 from dockfactory.generator.draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
@@ -59,7 +59,7 @@ def painted_lens(lens_cfg, tmp_path_factory):
 def test_defaults_are_one_ideal_unit_without_runs():
     cfg = config_from_dict({})
     assert cfg.camera_units.count == 1 and cfg.runs.frames_per_run == 0
-    lens = unit_lens(cfg, 0)
+    lens = unit_lens(cfg.camera_units, cfg.dataset.seed, 0)
     assert lens.is_ideal() and lens.aberration_px == (0.0, 0.0) and lens.f_number == 0 and lens.jpeg_quality == 0
     cam = sample_frame(cfg, frame_plan(cfg)[0]).camera
     assert cam.is_pinhole() and cam.canvas() == (0, 0, 1280, 960)
@@ -107,7 +107,7 @@ def test_frames_are_dealt_to_units_and_repeatability_stays_on_one():
     counts = collections.Counter(s.unit for s in plan if s.kind == "main")
     assert sorted(counts.values()) == [33, 34, 34]
     assert len({s.unit for s in plan if s.kind == "repeat"}) == 1
-    lenses = {u: unit_lens(cfg, u) for u in range(3)}
+    lenses = {u: unit_lens(cfg.camera_units, cfg.dataset.seed, u) for u in range(3)}
     assert len({lens.distortion for lens in lenses.values()}) == 3
     for spec in plan[:30]:   # a frame's lens is its unit's, whatever the frame
         cam = sample_frame(cfg, spec).camera
@@ -157,14 +157,14 @@ def test_realistic_config_has_the_issue_ranges():
     assert (cfg.image.width, cfg.image.height) == (1280, 960)
     spec = frame_plan(cfg)[0]
     frame = sample_frame(cfg, spec)
-    lens = unit_lens(cfg, spec.unit)
+    lens = unit_lens(cfg.camera_units, cfg.dataset.seed, spec.unit)
     cam = frame_labels(frame, static_scene(cfg), None, 0.5)["camera"]
     dof = cam["depth_of_field"]
     assert 2.8 <= dof["f_number"] <= 5.6 and dof["focus_distance_mm"] == pytest.approx(cam["distance_mm"] + lens.focus_error_mm)
     assert dof["focal_mm"] == pytest.approx(cam["focal_px"] * 8.8 / 1280) and dof["aperture_mm"] == pytest.approx(dof["focal_mm"] / dof["f_number"])
     assert 85 <= cam["jpeg_quality"] <= 95 and cam["render_canvas"]["width"] >= 1280 - 100
     # a Bayer sensor with a published preset behind an ISP in each unit, one frame's chain in its label
-    assert [unit_sensor(cfg, u).preset for u in range(2)] == ["imx273", "imx174"]
+    assert [unit_sensor(cfg.sensor, cfg.dataset.seed, u).preset for u in range(2)] == ["imx273", "imx174"]
     assert frame.sensor.chain.cfa == ("RGGB", "BGGR")[spec.unit]
     assert frame_labels(frame, static_scene(cfg), None, 0.5)["sampled"]["sensor"]["chain"]["cfa"] == frame.sensor.chain.cfa
 
@@ -177,9 +177,9 @@ def test_focal_cap_through_the_lens_is_exact():
     static = static_scene(cfg)
     for spec in frame_plan(cfg)[:8]:
         frame = sample_frame(cfg, spec)
-        lens = unit_lens(cfg, spec.unit)
+        lens = unit_lens(cfg.camera_units, cfg.dataset.seed, spec.unit)
         pts = markers_in_d(static, frame.d_from_b_array())
-        cap = largest_fitting_focal(cfg, frame.camera.cam_from_d_array(), pts, lens)
+        cap = largest_fitting_focal(ImageFit.of(cfg), frame.camera.cam_from_d_array(), pts, lens)
         pc = (frame.camera.cam_from_d_array()[:3, :3] @ pts.T).T + frame.camera.cam_from_d_array()[:3, 3]
         r = cfg.markers.diameter_mm / 2
         corners = np.concatenate([(pc[:, :2] + r * np.array(s)) / pc[:, 2:] for s in ((1, 1), (1, -1), (-1, 1), (-1, -1))])

@@ -47,6 +47,11 @@ def motion_cfg(frames=6, rolling_ms=0.0, **extra):
     return config_from_dict(data)
 
 
+def motion_of(cfg, spec):
+    """``frame_motion`` of a planned frame, from the sections it reads."""
+    return frame_motion(cfg.motion, cfg.sensor.exposure_time_ms, cfg.dataset.seed, spec.index)
+
+
 def sha(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -153,14 +158,14 @@ def test_motion_draws_only_its_own_stream_and_nothing_else_changes():
 def test_velocity_draws_do_not_depend_on_frame_order_and_differ_between_frames():
     cfg = motion_cfg(frames=12)
     plan = frame_plan(cfg)
-    forward = {s.frame_id: frame_motion(cfg, s) for s in plan}
-    backward = {s.frame_id: frame_motion(cfg, s) for s in reversed(plan)}
+    forward = {s.frame_id: motion_of(cfg, s) for s in plan}
+    backward = {s.frame_id: motion_of(cfg, s) for s in reversed(plan)}
     assert forward == backward
     assert all(sample_frame(cfg, s).motion == forward[s.frame_id] for s in plan[::-1][:4])
     assert len({m.velocity_mm_s for m in forward.values()}) == len(plan)
     assert all(-400.0 <= m.velocity_mm_s[0] <= -50.0 for m in forward.values())   # toward A: -X
     other_seed = motion_cfg(frames=12, dataset={"seed": 8})
-    assert frame_motion(other_seed, plan[0]) != forward[plan[0].frame_id]
+    assert motion_of(other_seed, plan[0]) != forward[plan[0].frame_id]
 
 
 def test_the_exposure_is_the_colour_chain_exposure_time():
