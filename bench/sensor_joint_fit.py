@@ -4,6 +4,7 @@ they were dropped: bench/results/sensor_effects/README.md ("Tried").
 
     python bench/sensor_joint_fit.py --variant NAME DATASET [DATASET ...] --out RESULTS.json
                                      [any option of bench/sensor_effects.py]
+    python bench/sensor_joint_fit.py --centres N DATASET [DATASET ...]
 
 The variant replaces the refinement the detector runs when it is told a Bayer pattern (and no JPEG:
 ``detector.centre_camera.refine_centre_camera``); everything else is ``bench/sensor_effects.py``.
@@ -21,6 +22,11 @@ Variants (:data:`VARIANTS`):
 - ``joint-quality``: ``joint`` after coverage passes whose moments are less ``DEMOSAIC_BLUR_PX2``
   per axis (:func:`coverage_pass`): the quality's shape term, the fit's first ellipse and the box.
 - ``joint-quality-strict``: ``joint-quality``, and a refused fit returns the marker unrefined.
+
+``--centres N``: the centre errors alone on the first N test frames, every refinement on the same
+detector boxes (the shipped detector without its refinement), against the labels' outline
+centroids: per scene, effect and refinement, the markers left unrefined and the median and RMS
+error (px), as a markdown table (:func:`centre_table`).
 
 Pixel convention: OpenCV (the centre of the top-left pixel is (0, 0)); values linear (8-bit sRGB
 through ``centre._SRGB_TO_LINEAR``).
@@ -235,8 +241,58 @@ def refine_variant(name: str, image: np.ndarray, box, class_id: int, cfa: str | 
     return Refined(center=fitted, box=_moment_box(image, fitted, win.cov), quality=first.quality, refined=True)
 
 
+def _refiners() -> dict:
+    """Refinement name -> f(image, box, class_id): the shipped one (plain without a pattern, told
+    RGGB otherwise) and every variant told RGGB."""
+    out = {"shipped": lambda i, b, c, cfa: centre_camera.refine_centre_camera(i, b, c, cfa)}
+    for name in VARIANTS:
+        out[name] = (lambda n: lambda i, b, c, cfa: refine_variant(n, i, b, c, cfa))(name)
+    return out
+
+
+def centre_table(roots: list[str], frames: int, effects=("three-chip", "bayer-bilinear", "bayer-mhc")) -> str:
+    """Markdown: per dataset, effect and refinement (``_refiners``, told RGGB; a three-chip image
+    through the plain refinement too), markers left unrefined / detections, median and RMS centre
+    error (px) of the fully visible markers (``sensor_effects.centre_errors``, an unrefined one at
+    its box centre)."""
+    import sensor_effects as se
+    from dockfactory.core.resources import shipped_weights
+    from dockfactory.detector.infer import MarkerDetector
+    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.exr import read_passes
+    detector = MarkerDetector(shipped_weights(), refine=False)
+    lines = ["| scene | effect | refinement | unrefined | median px | RMS px |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for root in roots:
+        ds = Dataset.open(root, full=False)
+        for effect in effects:
+            images = {}
+            for fid in ds.frames("test")[:frames]:
+                image = se.delivered(read_passes(ds.root / "exr" / f"{fid}.exr").rgb, ds.labels[fid], effect)
+                images[fid] = (image, detector.detect(image))
+            named = [("plain", None, "shipped")] if effect == "three-chip" else []
+            for label, cfa, name in named + [(n, "RGGB", n) for n in _refiners()]:
+                refine, errs, unrefined, n = _refiners()[name], [], 0, 0
+                for fid, (image, dets) in images.items():
+                    rows = []
+                    for d in dets:
+                        r = refine(image, np.array(d["bbox_detector_px"]), d["class_id"], cfa)
+                        rows.append({"class_id": d["class_id"], "center_px": r.center.tolist()})
+                        unrefined, n = unrefined + (not r.refined), n + 1
+                    errs += [np.hypot(dx, dy) for _, dx, dy in se.centre_errors(rows, ds.labels[fid])]
+                e = np.array(errs)
+                lines.append(f"| {ds.config.dataset.name} | {effect} | {label} | {unrefined}/{n} | "
+                             f"{np.median(e):.3f} | {np.sqrt(np.mean(e ** 2)):.3f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if "--centres" in argv:
+        i = argv.index("--centres")
+        print(centre_table(argv[:i] + argv[i + 2:], int(argv[i + 1])))
+        return 0
     if "--variant" not in argv or argv.index("--variant") + 1 >= len(argv):
         print(__doc__.split("\n\n")[1], file=sys.stderr)
         return 2
@@ -245,7 +301,6 @@ def main(argv=None) -> int:
     if name not in VARIANTS:
         print(f"--variant must be one of {', '.join(VARIANTS)}, got {name!r}", file=sys.stderr)
         return 2
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     import sensor_effects
     from dockfactory.detector import infer
     infer.refine_centre_camera = lambda *a, **k: refine_variant(name, *a, **k)
