@@ -5,11 +5,12 @@ those samples and interpolates the rest. The interpolated values misplace a shar
 fraction of a pixel that depends on where the edge falls on the 2-pixel lattice of the samples, and
 ``detector.centre.refine_centre``, which fits every pixel, inherits that error (a clean synthetic
 disc: about 0.13 px RMS against 0.005 px for a three-chip image, whatever the demosaic). Here the
-coverage passes are the same, but the edge fit (``centre.fit_disc_edge``) sees only the pixels
-where the sensor sampled the class's own colour, and fits that channel itself (linear) rather
-than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class channel's
-high-pass to the other channels it interpolates at those sites, which the score would subtract.
-The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
+coverage passes are the same, but the edge fit sees only the values the sensor sampled: every
+channel at its own sites (``detector.centre_joint``, below) or, with a JPEG, the class's own
+channel at its sites (``fit_evidence``, then ``centre.fit_disc_edge``), the channel itself (linear)
+rather than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class
+channel's high-pass to the other channels it interpolates at those sites, which the score would
+subtract. The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
 
 A JPEG (4:2:0, as cameras write it) keeps the luma at full resolution and the chroma at half: the
 colour score, made of chroma, loses the edge, the luma keeps it. With ``jpeg`` (and no pattern)
