@@ -5,11 +5,12 @@ those samples and interpolates the rest. The interpolated values misplace a shar
 fraction of a pixel that depends on where the edge falls on the 2-pixel lattice of the samples, and
 ``detector.centre.refine_centre``, which fits every pixel, inherits that error (a clean synthetic
 disc: about 0.13 px RMS against 0.005 px for a three-chip image, whatever the demosaic). Here the
-coverage passes are the same, but the edge fit (``centre.fit_disc_edge``) sees only the pixels
-where the sensor sampled the class's own colour, and fits that channel itself (linear) rather
-than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class channel's
-high-pass to the other channels it interpolates at those sites, which the score would subtract.
-The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
+coverage passes are the same, but the edge fit sees only the values the sensor sampled: every
+channel at its own sites (``detector.centre_joint``, below) or, with a JPEG, the class's own
+channel at its sites (``fit_evidence``, then ``centre.fit_disc_edge``), the channel itself (linear)
+rather than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class
+channel's high-pass to the other channels it interpolates at those sites, which the score would
+subtract. The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
 
 A JPEG (4:2:0, as cameras write it) keeps the luma at full resolution and the chroma at half: the
 colour score, made of chroma, loses the edge, the luma keeps it. With ``jpeg`` (and no pattern)
@@ -18,6 +19,13 @@ colour, and the fit's band (2.5 px inside, 1 px outside the disc edge) stays on 
 dark ring, where the luma step is the disc's. With a pattern as well, the fit keeps the class's
 own channel at its own sites: on the sensor bench's two scenes the luma at those sites was no
 better overall (better alpha, worse X or Y; bench/results/sensor_effects/README.md).
+
+With a pattern and no ``jpeg``, the edge fit is ``detector.centre_joint.fit_disc_joint``: one disc
+geometry fitted to every channel at its own sites (R at R, G at both G sites, B at B), each channel
+with its own disc and ring levels and weight, so that the other channels add the edge evidence they
+hold (little: the markers' colours are saturated on a dark ring; the weights give their cleaner
+steps their due). With ``jpeg`` as well the fit keeps the class's own channel at its own sites: the
+encoding mixes the samples of neighbouring sites.
 
 The module keeps ``detector/centre.py`` untouched: its sha256 names the refinement of the weights'
 noise cards (``detector.noise_card``).
@@ -31,6 +39,7 @@ import numpy as np
 from dockfactory.core.cfa import channel_map
 from dockfactory.detector import centre
 from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
+from dockfactory.detector.centre_joint import fit_disc_joint
 
 
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
@@ -66,7 +75,8 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
     """``centre.refine_centre`` for an ``image`` (H, W, 3) uint8 RGB of a camera with Bayer
     pattern ``cfa`` (RGGB, BGGR, GRBG, GBRG; None: three-chip or unknown) that was JPEG-encoded
     (``jpeg``): the same coverage passes, quality and box, the centre from the edge fit on the
-    evidence the camera kept (see the module docstring); with neither, ``centre.refine_centre``
+    evidence the camera kept (with a pattern and no JPEG every channel at its own sites; see the
+    module docstring); with neither, ``centre.refine_centre``
     itself. ``box``: (4,) [x0, y0, x1, y1] px, OpenCV convention. ValueError for an unknown
     pattern."""
     if cfa is None and not jpeg:
@@ -79,8 +89,11 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
     second, win2 = centre._refine_once(image, first.box, class_id, min_quality, edge_bias_px)
     if second.refined:
         first, win = second, win2
-    own = fit_evidence(image, win, class_id, cfa, jpeg)
-    fitted = None if own is None else centre.fit_disc_edge(own)
+    if cfa is not None and not jpeg:
+        fitted = fit_disc_joint(image, win, class_id, cfa)
+    else:
+        own = fit_evidence(image, win, class_id, cfa, jpeg)
+        fitted = None if own is None else centre.fit_disc_edge(own)
     if fitted is None:
         return first
     h_img, w_img = image.shape[:2]

@@ -1,0 +1,169 @@
+"""Edge fit of one disc to every channel of a Bayer camera, each at the sensor's own samples of it.
+
+``detector.centre.fit_disc_edge`` fits one image with one disc and ring level. A Bayer sensor
+samples each pixel in one channel, and every demosaic keeps those samples. Here the disc's geometry
+(centre, ellipse, edge width) is shared and each channel has its own disc level (a plane: shading)
+and ring level, fitted at that channel's own sites only: R at R sites, G at both G sites, B at B
+sites. A red disc is bright in R and darker than its ring in G and B; a blue disc is bright in B
+and brighter than its ring in G. A channel whose contrast (disc against ring) is under
+``MIN_CHANNEL_CNR`` times its noise (robust spread over the disc and the ring at its sites) is left
+out: its levels would be fitted to noise.
+
+Weights, in two fits. The first weighs each sample by the inverse of its channel's noise, so a
+channel adds edge evidence in proportion to its contrast-to-noise squared, as least squares does.
+The second, started from the first, weighs each channel by the inverse RMS of its residual in the
+first: its noise plus what the model misses of it. The class channel's sharp, high-contrast
+rendered edge is not the model's logistic profile and leaves the largest residual, so the other
+channels' small but cleaner steps count for more than their noise alone says. The band, the usable
+mask and the acceptance checks are those of ``fit_disc_edge``, on the class's own channel.
+
+Pixel convention: OpenCV (the centre of the top-left pixel is (0, 0)); values are linear (8-bit
+sRGB through ``centre._SRGB_TO_LINEAR``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from dockfactory.core.cfa import channel_map
+from dockfactory.detector import centre
+from dockfactory.detector.centre import CLASS_CHANNEL
+
+MIN_CHANNEL_CNR = 2.0   # another channel joins the fit when |disc - ring| is at least this many noise sigmas
+_GEOMETRY, _LEVELS = 6, 4   # centre (2), ellipse (3), log edge width; per channel f0, f1, f2, ring
+
+
+@dataclass(frozen=True)
+class SiteSamples:
+    """The fit's data: per sample position ``x``, ``y`` (px from the coverage centroid), linear value
+    ``s``, channel slot ``k`` and weight ``wt``, all (n,); ``levels`` (m, 2) start disc and ring
+    level per slot, slot 0 the class's own channel."""
+    x: np.ndarray
+    y: np.ndarray
+    s: np.ndarray
+    k: np.ndarray
+    wt: np.ndarray
+    levels: np.ndarray
+
+
+def channel_levels(level: np.ndarray, sites: np.ndarray, rho: np.ndarray) -> tuple[float, float, float] | None:
+    """(disc level, ring level, noise) of one channel's ``level`` (h, w) at ``sites`` (h, w) bool:
+    medians over the inner half of the pass's box (``rho`` <= 0.5) and its ring annulus (1.08-1.22),
+    noise the mean of their robust spreads (1.4826 MAD) + 1e-4; None under 2 samples in either."""
+    inner, ring = level[(rho <= 0.5) & sites], level[(rho >= 1.08) & (rho <= 1.22) & sites]
+    if inner.size < 2 or ring.size < 2:
+        return None
+    fg, bg = float(np.median(inner)), float(np.median(ring))
+    mad = np.median(np.abs(inner - fg)) + np.median(np.abs(ring - bg))
+    return fg, bg, float(1.4826 * 0.5 * mad) + 1e-4
+
+
+def site_samples(lin: np.ndarray, cmap: np.ndarray, win, own: int, band: np.ndarray) -> SiteSamples | None:
+    """Samples of every channel with contrast at its own sites inside ``band`` (h, w) bool, the class
+    channel ``own`` first. ``lin`` (h, w, 3) linear window of the image, ``cmap`` (h, w) its channel
+    map, ``win`` the pass's ``centre._Window``. None when the class channel has no disc above its ring."""
+    dx, dy = win.xs - win.centre[0], win.ys - win.centre[1]
+    parts, levels = [], []
+    for ch in (own, *(c for c in range(3) if c != own)):
+        lv = channel_levels(lin[..., ch], cmap == ch, win.rho)
+        if ch == own and (lv is None or not lv[0] > lv[1]):
+            return None
+        if lv is None or (ch != own and abs(lv[0] - lv[1]) < MIN_CHANNEL_CNR * lv[2]):
+            continue
+        sel = band & (cmap == ch)
+        n = int(sel.sum())
+        parts.append((dx[sel], dy[sel], lin[..., ch][sel], np.full(n, len(levels)), np.full(n, 1.0 / lv[2])))
+        levels.append(lv[:2])
+    x, y, s, k, wt = (np.concatenate(v) for v in zip(*parts))
+    return SiteSamples(x=x, y=y, s=s.astype(np.float64), k=k, wt=wt, levels=np.array(levels))
+
+
+def fit_disc_joint(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = True) -> np.ndarray | None:
+    """Centre (2,) float64 px of the disc in ``win`` (a ``centre._Window`` of ``image`` (H, W, 3) uint8
+    sRGB) fitted to every channel at its own sites of pattern ``cfa``; with ``reweight`` (the
+    refinement's choice) a second fit weighted by each channel's residual RMS in the first. None
+    when there is nothing to fit or ``centre._fit_accepted`` refuses it (geometry and the class
+    channel's levels)."""
+    m0 = centre._inverse_2x2(4 * win.cov)
+    d0, _ = centre._sampson(win.xs - win.centre[0], win.ys - win.centre[1], m0[0, 0], m0[0, 1], m0[1, 1])
+    y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
+    h, w = win.s.shape
+    lin = centre._SRGB_TO_LINEAR[image[y0:y0 + h, x0:x0 + w]]
+    cmap = channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w]
+    c = CLASS_CHANNEL[class_id]
+    lv = channel_levels(lin[..., c], cmap == c, win.rho)
+    if lv is None or not lv[0] > lv[1]:
+        return None
+    band = ((d0 > -centre.FIT_BAND_IN_PX) & (d0 < centre.FIT_BAND_OUT_PX)
+            & centre._usable(lin[..., c], win.pur, win.rho, lv[0], lv[1]))
+    data = site_samples(lin, cmap, win, c, band)
+    if data is None or data.x.size < 20:
+        return None
+    p = _levenberg_marquardt(np.concatenate([[0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2)],
+                                             *([f, 0.0, 0.0, b] for f, b in data.levels)]), data)
+    if p is not None and reweight:
+        r = _residual(p, data)[0] / data.wt
+        count = np.maximum(np.bincount(data.k, minlength=len(data.levels)), 1)
+        rms = np.sqrt(np.bincount(data.k, r * r, minlength=len(data.levels)) / count)
+        p = _levenberg_marquardt(p, replace(data, wt=1.0 / (rms[data.k] + 1e-4)))
+    if p is None or not centre._fit_accepted(p[:_GEOMETRY + _LEVELS], m0):
+        return None
+    return win.centre + p[:2]
+
+
+def _residual(p: np.ndarray, d: SiteSamples):
+    """(weighted residual (n,), the values the Jacobian needs) of parameters ``p``: c (2, px from
+    the centroid), M (3, px^-2), log sigma, then per channel f0, f1, f2, b (``centre.fit_disc_edge``'s
+    model, one disc level plane and ring level per channel)."""
+    ex, ey = d.x - p[0], d.y - p[1]
+    dist, (gx, gy, gn) = centre._sampson(ex, ey, p[2], p[3], p[4])
+    sigma = np.exp(np.clip(p[5], -3.0, 2.0))
+    phi = 1.0 / (1.0 + np.exp(np.clip(dist / sigma, -60.0, 60.0)))    # 1 inside, 0 outside
+    lv = p[_GEOMETRY:].reshape(-1, _LEVELS)[d.k]
+    level = lv[:, 0] + lv[:, 1] * d.x + lv[:, 2] * d.y - lv[:, 3]
+    return d.wt * (d.s - (lv[:, 3] + level * phi)), (ex, ey, dist, gx, gy, gn, sigma, phi, level)
+
+
+def _jacobian(p: np.ndarray, d: SiteSamples, aux) -> np.ndarray:
+    """(6 + 4 m, n) derivatives of the weighted model: geometry rows as ``centre._edge_jacobian``,
+    each channel's level rows non-zero at its own samples only."""
+    ex, ey, dist, gx, gy, gn, sigma, phi, level = aux
+    k = -level * phi * (1 - phi) / (sigma * gn)
+    dh = dist / gn
+    hx, hy = (p[2] * gx + p[3] * gy) * dh, (p[3] * gx + p[4] * gy) * dh
+    j = np.zeros((p.size, d.x.size))
+    j[0], j[1] = k * (hx - gx), k * (hy - gy)
+    j[2] = k * ex * (0.5 * ex - dist * gx)
+    j[3] = k * (ex * ey - dist * (gx * ey + gy * ex))
+    j[4] = k * ey * (0.5 * ey - dist * gy)
+    j[5] = -k * gn * dist if -3.0 < p[5] < 2.0 else 0.0
+    n, row = np.arange(d.x.size), _GEOMETRY + _LEVELS * d.k
+    j[row, n], j[row + 1, n], j[row + 2, n], j[row + 3, n] = phi, phi * d.x, phi * d.y, 1 - phi
+    return j * d.wt
+
+
+def _levenberg_marquardt(p: np.ndarray, d: SiteSamples) -> np.ndarray | None:
+    """Weighted least squares from ``p`` (``centre.FIT_ITERATIONS`` steps at most, stopping below a
+    0.002 px centre step); None when not finite."""
+    r, aux = _residual(p, d)
+    cost, lam = float(r @ r), 1e-3
+    for _ in range(centre.FIT_ITERATIONS):
+        j = _jacobian(p, d, aux)
+        h, g = j @ j.T, j @ r
+        damp = np.diag(np.diag(h) + 1e-12)
+        for _ in range(8):
+            solved, step = cv2.solve(h + lam * damp, g, flags=cv2.DECOMP_CHOLESKY)
+            step = step.ravel()
+            if solved:
+                r_new, aux_new = _residual(p + step, d)
+                if float(r_new @ r_new) < cost:
+                    break
+            lam *= 10.0
+        else:
+            break
+        p, r, aux, cost, lam = p + step, r_new, aux_new, float(r_new @ r_new), max(lam / 10.0, 1e-7)
+        if abs(step[0]) + abs(step[1]) < 2e-3:
+            break
+    return p if np.isfinite(p).all() else None
