@@ -39,7 +39,7 @@ def main() -> None:
     import json
 
     from dockfactory.core.resources import shipped_weights
-    from dockfactory.eval.measure import MeasureOptions, measure
+    from dockfactory.measure import MeasureOptions, measure
     opts = MeasureOptions(args.backend, args.workers, args.overlay_size or None)
     print(f"load average before: {os.getloadavg()[0]:.2f}; torch threads {args.threads}")
     with tempfile.TemporaryDirectory() as tmp:

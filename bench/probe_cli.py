@@ -145,7 +145,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=45.0)
     ap.add_argument("--commands", default=None, help="comma-separated sub-commands (default: all)")
     args = ap.parse_args()
-    from dockfactory.eval.cli import build_parser
+    from dockfactory.cli import build_parser
     keep = set(args.commands.split(",")) if args.commands else None
     with tempfile.TemporaryDirectory() as tmp:
         w = build_world(Path(tmp))

@@ -3,8 +3,9 @@
 One import root; the subpackages live in the repository's folders (package-dir mapping):
 ``dockfactory.core`` (core/), ``dockfactory.generator`` (generator/), ``dockfactory.blender_scenes``
 (blender_scenes/), ``dockfactory.solver`` (solver/), ``dockfactory.detector`` (detector/),
-``dockfactory.eval`` (eval/); shipped configs and weights are ``dockfactory.configs`` and
-``dockfactory.models``. Layers: core <- generator, blender_scenes, solver, detector <- eval.
+``dockfactory.eval`` (eval/, the judge); the app (command line, run, measure, ablate) is the
+modules of this folder; shipped configs and weights are ``dockfactory.configs`` and
+``dockfactory.models``. Layers: core <- generator, blender_scenes, solver, detector <- eval <- app.
 """
 import os
 from importlib import metadata

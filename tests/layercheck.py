@@ -21,7 +21,8 @@ How it works
        dockfactory.detector        -> core
        dockfactory.generator       -> core; blender_scenes only inside functions (it imports bpy)
        dockfactory.eval            -> core, blender_scenes, solver, detector, generator
-       dockfactory (root __init__) -> nothing;  dockfactory.__main__ -> dockfactory.eval.cli only
+       dockfactory.<module> (app)  -> every layer above: the command line, run, measure, ablate
+       dockfactory (root __init__) -> nothing;  dockfactory.__main__ -> dockfactory.cli only
        dockfactory.configs, dockfactory.models (data packages) -> nothing
 
    Any module may import its own subpackage and the root ``dockfactory`` package (which imports
@@ -65,12 +66,13 @@ ALLOWED = {
     "detector": {"core"},
     "generator": {"core", "blender_scenes"},
     "eval": {"core", "blender_scenes", "solver", "detector", "generator"},
+    "app": {"core", "blender_scenes", "solver", "detector", "generator", "eval"},
     "configs": set(),
     "models": set(),
 }
 # (importer subpackage, imported subpackage) allowed only inside functions
 FUNCTION_ONLY = {("generator", "blender_scenes")}
-MAIN_MAY_IMPORT = {"dockfactory.eval.cli"}
+MAIN_MAY_IMPORT = {"dockfactory.cli"}
 
 HEAVY = {"torch", "kornia", "bpy", "mathutils", "ray", "matplotlib", "onnx", "onnxruntime"}
 
@@ -171,12 +173,17 @@ def is_project(name: str) -> bool:
     return name == ROOT_PKG or name.startswith(ROOT_PKG + ".")
 
 
+SUBPACKAGES = {"core", "blender_scenes", "solver", "detector", "generator", "eval", "configs", "models"}
+
+
 def subpackage(name: str) -> str | None:
-    """``dockfactory.solver.docking`` -> ``solver``; the root package and ``__main__`` -> None."""
+    """``dockfactory.solver.docking`` -> ``solver``; a module of the root folder
+    (``dockfactory.cli``, ``dockfactory.measure``) -> ``app``, the top floor; the root package and
+    ``__main__`` -> None."""
     parts = name.split(".")
     if len(parts) < 2 or parts[1] == "__main__":
         return None
-    return parts[1]
+    return parts[1] if parts[1] in SUBPACKAGES else "app"
 
 
 def heavy_modules(imports: list[Import], modules) -> set[str]:

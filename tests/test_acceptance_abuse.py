@@ -23,7 +23,7 @@ from pipeline_data import write_painted_dataset
 from dockfactory.core.config import ConfigError
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec, FailureGate, load_acceptance, ungated_components
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.eval.evaluate import (
     estimation_block,
     evaluate,

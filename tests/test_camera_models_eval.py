@@ -78,7 +78,7 @@ def test_self_calibration_recovers_the_camera_and_beats_the_pinhole(runs):
 
 @pytest.mark.slow
 def test_solve_cli_self_calibrates_each_docking_run(runs, tmp_path, capsys):
-    from dockfactory.eval.cli import main
+    from dockfactory.cli import main
     out = tmp_path / "p.json"
     assert main(["solve", str(runs.root), "--oracle-noise", "0.1", "--self-calibrate", "sequence",
                  "--split", "test", "--out", str(out)]) == 0
@@ -110,7 +110,7 @@ def test_sequence_self_calibration_refuses_frames_that_share_no_camera(painted_s
     one shared focal for all of them gave X errors of tens of mm with a reported std near 1 mm.
     `solve --self-calibrate sequence` refuses in one line; evaluate's camera-model block leaves
     the per-run modes out."""
-    from dockfactory.eval.cli import main
+    from dockfactory.cli import main
     ds = Dataset.open(painted_source)
     assert ds.config.runs.frames_per_run == 0
     focals = {round(lab["camera"]["focal_px"]) for lab in ds.labels_of("test")}

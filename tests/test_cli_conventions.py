@@ -3,7 +3,7 @@ help and flags (a flag of another action is an error, not silently ignored)."""
 import pytest
 
 from dockfactory import __version__
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 
 def _exit(argv, capsys):
@@ -44,7 +44,7 @@ def test_each_dataset_action_has_its_own_help(capsys, action, flag):
 def _out_commands():
     import argparse
 
-    from dockfactory.eval.cli import _all_parsers, build_parser
+    from dockfactory.cli import _all_parsers, build_parser
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return sorted(p.prog.replace("dockfactory ", "") for p in _all_parsers(sub)
                   if any(a.dest == "out" for a in p._actions))

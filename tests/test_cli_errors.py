@@ -14,7 +14,7 @@ import pytest
 from dockfactory.core import io as io_mod
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 
 def _run(argv, capsys):
@@ -217,7 +217,7 @@ def test_manifest_without_counts_info(copy_of, capsys):
 @pytest.fixture
 def no_render(monkeypatch):
     calls = []
-    monkeypatch.setattr("dockfactory.generator.cli.run_render", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr("dockfactory.cli_factory.run_render", lambda *a, **k: calls.append(a))
     return calls
 
 
@@ -232,7 +232,7 @@ def test_render_flags(tmp_path, capsys, no_render, flags):
 @pytest.fixture
 def no_pipeline(monkeypatch):
     calls = []
-    monkeypatch.setattr("dockfactory.eval.cli.run_pipeline", lambda *a, **k: calls.append((a, k)) or 0)
+    monkeypatch.setattr("dockfactory.cli_judge.run_pipeline", lambda *a, **k: calls.append((a, k)) or 0)
     return calls
 
 

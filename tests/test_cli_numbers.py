@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.generator.dataset_open import Dataset
 
 

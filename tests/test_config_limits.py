@@ -17,7 +17,7 @@ import pytest
 
 from dockfactory.core import config as config_mod
 from dockfactory.core.config import Config, ConfigError, Overrides, config_from_dict, load_config
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 
 def _float_slots():

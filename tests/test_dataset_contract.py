@@ -32,7 +32,7 @@ import pytest
 
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval import report
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.generator import render_job
 from dockfactory.generator.dataset import frame_files
 

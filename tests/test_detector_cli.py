@@ -11,7 +11,7 @@ import pytest
 
 
 def test_help_is_torch_free(repo_root):
-    code = ("import argparse, sys\nfrom dockfactory.eval.detector_cli import add_subcommands\n"
+    code = ("import argparse, sys\nfrom dockfactory.cli_detector import add_subcommands\n"
             "p = argparse.ArgumentParser(); add_subcommands(p.add_subparsers(dest='c'))\n"
             "for c in ('train', 'detect', 'ablate', 'export-onnx'):\n"
             "    try:\n        p.parse_args([c, '--help'])\n    except SystemExit:\n        pass\n"
@@ -23,7 +23,7 @@ def test_help_is_torch_free(repo_root):
 
 @pytest.mark.slow   # trains, detects, exports and checks ONNX: about 10 s
 def test_train_detect_eval_export(painted_source, tmp_path, capsys):
-    from dockfactory.eval.cli import main
+    from dockfactory.cli import main
     data = painted_source
     run = tmp_path / "run"
     assert main(["train", str(data), "--out", str(run), "--epochs", "1", "--batch", "4", "--input-scale", "0.5",
@@ -50,7 +50,7 @@ def test_train_detect_eval_export(painted_source, tmp_path, capsys):
 
 
 def test_bad_weights_exit_2(painted_source, tmp_path, capsys):
-    from dockfactory.eval.cli import main
+    from dockfactory.cli import main
     data = painted_source
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"PK\x03\x04 truncated")
@@ -62,8 +62,8 @@ def test_bad_weights_exit_2(painted_source, tmp_path, capsys):
 def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, capsys, monkeypatch):
     import shutil
 
-    from dockfactory.eval import ablate
-    from dockfactory.eval.cli import main
+    from dockfactory import ablate
+    from dockfactory.cli import main
     out, record = tmp_path / "runs", tmp_path / "record"
     argv = ["ablate", str(painted_source), "--attention", "none", "--seeds", "1", "--epochs", "1", "--batch", "4",
             "--crops-per-frame", "1", "--threads", "1", "--quiet", "--out", str(out), "--record", str(record)]
@@ -102,7 +102,7 @@ def test_ablate_record_survives_the_loss_of_the_runs(painted_source, tmp_path, c
 def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
     """An ablation stopped part-way has the first seeds of every variant, not all seeds of the first."""
     from dockfactory.detector.train import TrainConfig
-    from dockfactory.eval import ablate
+    from dockfactory import ablate
     from dockfactory.generator.dataset_open import Dataset
     order = []
 

@@ -10,7 +10,7 @@ import pytest
 from dockfactory.core.config import Config, config_from_dict
 from dockfactory.core.config_text import apply_overrides, defaults_toml, reference_markdown, to_toml
 from dockfactory.core.resources import shipped_config, shipped_configs
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 
 def test_the_key_reference_is_the_schema(repo_root):
@@ -61,7 +61,7 @@ def test_set_overrides_are_validated_like_the_file_and_change_the_version(capsys
 
 def test_render_with_set_records_the_resolved_config(tmp_path, monkeypatch):
     """The dataset's config.toml is the resolved config, so it reproduces the dataset alone."""
-    import dockfactory.generator.cli as gcli
+    import dockfactory.cli_factory as gcli
     seen = {}
 
     def fake_render(cfg, out, text, opts):

@@ -43,7 +43,7 @@ def test_the_pass_map_follows_the_thresholds(ds):
 
 @pytest.mark.slow   # evaluate with the envelope, then the report with its plot
 def test_evaluate_and_report_carry_the_envelope(painted_source, tmp_path, capsys):
-    from dockfactory.eval.cli import main
+    from dockfactory.cli import main
     poses = tmp_path / "p.json"
     assert main(["solve", str(painted_source), "--oracle-noise", "0.05", "--out", str(poses)]) == 0
     spec = tmp_path / "spec.toml"

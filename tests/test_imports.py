@@ -26,7 +26,7 @@ def test_modules_import_without_bpy(repo_root, tmp_path):
 
 
 def test_cli_help_is_instant_and_bpy_free(tmp_path):
-    code = BLOCK_BPY + "\nfrom dockfactory.eval.cli import build_parser\nbuild_parser().format_help()\n" \
+    code = BLOCK_BPY + "\nfrom dockfactory.cli import build_parser\nbuild_parser().format_help()\n" \
         "assert 'bpy' not in sys.modules and 'torch' not in sys.modules\n"
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
@@ -38,6 +38,6 @@ def test_a_foreign_folder_named_like_a_subpackage_cannot_shadow_ours(tmp_path):
     for name in ("eval", "solver", "generator", "detector", "core"):
         (tmp_path / name).mkdir()
         (tmp_path / name / "__init__.py").write_text("raise ImportError('foreign package imported')\n")
-    code = "import dockfactory.eval.cli, dockfactory.solver, dockfactory.core.config; print('ok')"
+    code = "import dockfactory.cli, dockfactory.solver, dockfactory.core.config; print('ok')"
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr

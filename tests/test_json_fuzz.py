@@ -16,7 +16,7 @@ from pipeline_data import write_painted_dataset
 
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.generator.dataset_open import Dataset

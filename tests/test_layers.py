@@ -2,7 +2,8 @@
 imported; see tests/layercheck.py for how the walk, the contract and the cycle search work).
 
     dockfactory.core  <-  blender_scenes, solver, detector, generator (blender_scenes only inside
-    functions)  <-  eval;   dockfactory/__init__ imports nothing, __main__ only eval.cli.
+    functions)  <-  eval  <-  the app (modules of the dockfactory/ folder: cli, pipeline, measure,
+    ablate);   dockfactory/__init__ imports nothing, __main__ only dockfactory.cli.
 
 Function-level imports only for heavy optional dependencies (torch, kornia, bpy, mathutils, ray,
 matplotlib, onnx, onnxruntime) or for a project module that imports one of them at module level.
@@ -31,7 +32,7 @@ def test_the_walk_sees_every_module_of_the_package(repo_root):
     modules = source_tree(repo_root)
     for name in ("dockfactory", "dockfactory.__main__", "dockfactory.core.config",
                  "dockfactory.generator.render_worker", "dockfactory.blender_scenes.render",
-                 "dockfactory.solver.docking", "dockfactory.detector.model", "dockfactory.eval.cli",
+                 "dockfactory.solver.docking", "dockfactory.detector.model", "dockfactory.cli",
                  "dockfactory.configs", "dockfactory.models"):
         assert name in modules
     _, imports = collect_imports(repo_root)
@@ -72,15 +73,16 @@ def test_the_checker_fails_on_deliberate_violations():
         "detector/infer.py:7",       # function level: cv2 is not heavy
         "generator/sampler.py:2",    # generator -> blender_scenes at module level
         "generator/worker.py:5",     # upward, even under TYPE_CHECKING
-        "eval/cli.py:2",             # nothing imports the entry point
-        "eval/cli.py:6",             # function level, not heavy
+        "dockfactory/cli.py:2",      # nothing imports the entry point
+        "dockfactory/cli.py:6",      # function level, not heavy
+        "eval/judge.py:2",           # upward: the judge imports the app layer
         "configs/__init__.py:2",     # a data package imports the project
         "dockfactory/__init__.py:2",  # the root package imports a subpackage
     ]), "\n".join(bad)
     # what is fine stays fine: heavy deps and heavy project modules in functions, relative
     # sibling imports, __main__ -> eval.cli, blender_scenes -> core, eval -> anything below
     for ok in ("core/geometry.py", "detector/model.py", "blender_scenes/render.py",
-               "eval/report.py", "dockfactory/__main__.py", "solver/identify.py"):
+               "eval/report.py", "dockfactory/__main__.py", "solver/identify.py", "dockfactory/pipeline.py"):
         assert not any(b.startswith(ok) for b in bad), ok
     assert {"detector/infer.py:5", "detector/infer.py:6", "generator/worker.py:9"}.isdisjoint(flagged)
     assert heavy_modules(imports, modules) >= {"dockfactory.detector.model",
@@ -91,7 +93,7 @@ def test_the_cycle_check_fails_on_deliberate_cycles():
     modules, imports = collect_imports(FIXTURE)
     found = cycles(imports, modules)
     assert sorted(found) == [
-        "dockfactory.__main__ -> dockfactory.eval.cli -> dockfactory.__main__",
+        "dockfactory.__main__ -> dockfactory.cli -> dockfactory.__main__",
         "dockfactory.core.cycle_a -> dockfactory.core.cycle_b -> dockfactory.core.cycle_a",
     ], found
     # the cycle dodged inside solver.docking's function is not a runtime edge (the layer check

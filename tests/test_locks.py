@@ -149,7 +149,7 @@ def test_readers_need_no_lock(painted, holder):
 
 
 def test_run_work_folder_is_locked(painted, tmp_path, holder, no_render):
-    from dockfactory.eval.pipeline import run_pipeline
+    from dockfactory.pipeline import run_pipeline
     work = tmp_path / "run"
     shutil.copytree(painted, work / "dataset")
     h = holder("run", work)

@@ -12,7 +12,7 @@ from dockfactory.core.names import POSE_NAMES
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.noise_card import centre_noise_px
 from dockfactory.detector.onnx_runtime import onnxruntime_available
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 CONFIG = """
 [dataset]

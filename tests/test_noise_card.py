@@ -8,7 +8,7 @@ import pytest
 
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.noise_card import centre_noise_px, noise_card_path
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 
 CONFIG = """
 [dataset]

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.generator import published
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.fingerprints import read_fingerprints_v2

@@ -21,7 +21,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import default_acceptance, shipped_config
 from dockfactory.eval.acceptance import AcceptanceSpec, load_acceptance
 from dockfactory.eval.evaluate import evaluate, write_outputs
-from dockfactory.eval.pipeline import run_pipeline
+from dockfactory.pipeline import run_pipeline
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses

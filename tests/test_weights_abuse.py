@@ -10,7 +10,7 @@ import torch
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.checkpoint import CheckpointError, load_model
 from dockfactory.detector.noise_card import MAX_CARD_NOISE_PX
-from dockfactory.eval.cli import main
+from dockfactory.cli import main
 from dockfactory.solver.checks import MAX_SIGMA_PX
 
 

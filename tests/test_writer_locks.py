@@ -16,8 +16,8 @@ import cv2
 import pytest
 
 from dockfactory.core.io import folder_lock
-from dockfactory.eval import cli as cli_mod
-from dockfactory.eval.cli import main
+from dockfactory import cli_judge as cli_mod
+from dockfactory.cli import main
 
 
 def _run(argv, capsys):

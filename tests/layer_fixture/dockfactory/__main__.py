@@ -1,2 +1,2 @@
-from dockfactory.eval.cli import main   # allowed: the entry point
+from dockfactory.cli import main   # allowed: the entry point
 main()

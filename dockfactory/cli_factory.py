@@ -1,14 +1,13 @@
 """Factory subcommands of ``dockfactory``: render, dataset, check-config, show (registered by the
-root CLI, ``dockfactory.eval.cli``). Heavy imports happen inside the commands."""
+root CLI, ``dockfactory.cli``). Heavy imports happen inside the commands."""
 from __future__ import annotations
 
-import argparse
 import json
-import math
 import sys
 from collections import Counter
 from pathlib import Path
 
+from dockfactory.cli_args import add_set_flag, int_at_least, shard_spec, tolerance_levels
 from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config
@@ -22,40 +21,6 @@ from dockfactory.generator.sampler import check_focal_fits, frame_plan
 EXIT_OK, EXIT_FAILED = 0, 1
 
 
-def _shard(text: str) -> tuple[int, int]:
-    try:
-        k, n = (int(v) for v in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected K/N (e.g. 2/4), got {text!r}") from None
-    if not (n >= 1 and 1 <= k <= n):
-        raise argparse.ArgumentTypeError(f"expected K/N with 1 <= K <= N, got {text!r}")
-    return k, n
-
-
-def int_at_least(low: int):
-    """argparse type: an integer >= ``low`` (a negative count used to be accepted silently)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
-        if v < low:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
-        return v
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
-def output_path(text: str) -> str:
-    """argparse type of every ``--out``: a non-empty path (an empty one named the current folder's
-    parent deep inside a writer)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("expected a path, got an empty one")
-    if "\0" in text:
-        raise argparse.ArgumentTypeError("a path cannot hold a NUL character")
-    return text
-
-
 def load_checked(path, sets=()):
     """(config, its text) of ``path`` with ``--set`` overrides ``sets``, checked feasible (every
     planned frame fits its markers): the check samples every frame's geometry, so it runs here
@@ -63,13 +28,6 @@ def load_checked(path, sets=()):
     cfg, text = load_config_text(resolve_config(path), sets)
     check_focal_fits(cfg, str(path))
     return cfg, text
-
-
-def add_set_flag(parser) -> None:
-    """``--set TABLE.KEY=VALUE`` (repeatable) on a command that reads a config."""
-    parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="sets",
-                        help="override a config key (repeatable), e.g. --set dataset.frames=10; validated like "
-                             "the file and part of the dataset's version id")
 
 
 def cmd_render(args) -> int:
@@ -154,17 +112,6 @@ def cmd_show(args) -> int:
     return EXIT_OK
 
 
-def tolerance_levels(text: str) -> float:
-    """argparse type of ``--tolerance``: a finite number of 8-bit levels > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of levels > 0, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number of levels > 0, got {text!r}")
-    return v
-
-
 def _add_dataset_actions(d) -> None:
     """``dataset verify | info | diff | export | publish``, each its own parser: a flag of one
     action given to another is an error, not silently ignored."""
@@ -203,7 +150,7 @@ def add_subcommands(sub) -> None:
     r.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, paper, ideal, detector)")
     r.add_argument("--out", required=True, help="dataset directory")
     r.add_argument("--workers", type=int_at_least(1), default=1, help="render processes sharing the cores")
-    r.add_argument("--shard", type=_shard, default=(1, 1), metavar="K/N",
+    r.add_argument("--shard", type=shard_spec, default=(1, 1), metavar="K/N",
                    help="render only shard K of N (frames with index %% N == K-1)")
     r.add_argument("--frames", help="comma-separated frame ids to render (default: all)")
     r.add_argument("--retries", type=int_at_least(0), default=2, help="retries of a frame whose worker crashed")

@@ -36,9 +36,9 @@ from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atom
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.detector.noise_card import centre_noise_px
-from dockfactory.eval.measure_overlay import draw_measurement
-from dockfactory.eval.measure_pool import MeasurePool
-from dockfactory.eval.measure_read import (
+from dockfactory.measure_overlay import draw_measurement
+from dockfactory.measure_pool import MeasurePool
+from dockfactory.measure_read import (
     DEFAULT_MAX_MEGAPIXELS,
     MAX_MEGAPIXELS,
     CameraInput,
@@ -46,7 +46,7 @@ from dockfactory.eval.measure_read import (
     probe_image,
     read_image,
 )
-from dockfactory.eval.measure_store import MeasureStore, image_identity
+from dockfactory.measure_store import MeasureStore, image_identity
 from dockfactory.eval.solve_frames import (
     detection_arrays,
     docking_options,

@@ -1,38 +1,27 @@
-"""The ``dockfactory`` command line (the root of the layers: it registers the factory's and the
-detector's subcommands beside its own solve, evaluate, report and run). Heavy imports (bpy, torch)
-happen inside the subcommands, so ``--help`` is instant.
-
-Exit status: 0 success, 1 a failure or a rejected verdict, 2 bad input (a DockfactoryError: one
-line naming the file, key or value), 130 interrupted.
-"""
+"""The judge's sub-commands of ``dockfactory``: solve, evaluate, report, run (registered by
+``dockfactory.cli``). Each returns an exit status; bad input raises DockfactoryError."""
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
-from dockfactory import __version__
+from dockfactory.cli_args import add_set_flag
+from dockfactory.cli_factory import load_checked
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.names import MIN_SCORE, SPLITS
 from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import criterion_lines, load_acceptance, verdict_exit_status
 from dockfactory.eval.dataset_access import read_json_for
-from dockfactory.eval.detector_cli import add_subcommands as add_detector_commands
 from dockfactory.eval.envelope import EnvelopeGrid
-from dockfactory.generator.cli import add_set_flag, load_checked, output_path
-from dockfactory.solver.checks import MAX_SIGMA_PX
 from dockfactory.eval.evaluate import evaluate, write_outputs
-from dockfactory.eval.measure_cli import add_subcommand as add_measure_command
-from dockfactory.eval.pipeline import run_pipeline
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
-from dockfactory.generator.cli import add_subcommands as add_factory_commands
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
-
-EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+from dockfactory.pipeline import run_pipeline
+from dockfactory.solver.checks import MAX_SIGMA_PX
 
 
 
@@ -198,46 +187,3 @@ def add_eval_commands(sub) -> None:
     u.add_argument("--workers", type=int, default=1, help="render processes (>= 1)")
     add_set_flag(u)
     u.set_defaults(func=cmd_run)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
-                                "for uncalibrated monocular docking of cylindrical sections.")
-    p.add_argument("--version", action="version", version=f"dockfactory {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
-    add_factory_commands(sub)
-    add_eval_commands(sub)
-    add_detector_commands(sub)
-    add_measure_command(sub)
-    for parser in _all_parsers(sub):
-        for action in parser._actions:
-            if action.dest == "out" and action.type is None:
-                action.type = output_path
-    return p
-
-
-def _all_parsers(sub) -> list:
-    """Every parser below ``sub`` (nested sub-commands included)."""
-    out = []
-    for parser in sub.choices.values():
-        out.append(parser)
-        for action in parser._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                out += _all_parsers(action)
-    return out
-
-
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted: run the same command again to resume", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except DockfactoryError as exc:  # bad input: ConfigError, DatasetError, SolverError, ...
-        print(f"dockfactory: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -9,9 +9,9 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.eval.detector_cli import MAX_THREADS, _float_in, _positive_int, _thread_count, _torch, _unit_float
-from dockfactory.eval.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
-from dockfactory.eval.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
+from dockfactory.cli_args import MAX_THREADS, float_in, positive_int, thread_count, torch_threads, unit_float
+from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
+from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -21,7 +21,7 @@ def cmd_measure(args) -> int:
         raise DockfactoryError(f"--weights: {weights}: no such file")
     camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
     options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
-    _torch(args.threads)
+    torch_threads(args.threads)
 
     def progress(done, total):
         if not args.quiet:
@@ -50,13 +50,13 @@ def add_subcommand(sub) -> None:
     m.add_argument("--self-calibrate", choices=SELF_CALIBRATE,
                    help="frame: choose the camera model per image; sequence: the images are one camera's "
                         "docking run, solved with shared intrinsics")
-    m.add_argument("--min-score", type=_unit_float, default=MIN_SCORE)
-    m.add_argument("--threads", type=_thread_count, default=None,
+    m.add_argument("--min-score", type=unit_float, default=MIN_SCORE)
+    m.add_argument("--threads", type=thread_count, default=None,
                    help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")
-    m.add_argument("--workers", type=_positive_int, default=2,
+    m.add_argument("--workers", type=positive_int, default=2,
                    help=f"images measured at once, each by its own process (1 to {MAX_WORKERS}, never more than the "
                         "images; default 2: one per core)")
-    m.add_argument("--max-megapixels", type=_float_in(0.0, MAX_MEGAPIXELS, low_open=True),
+    m.add_argument("--max-megapixels", type=float_in(0.0, MAX_MEGAPIXELS, low_open=True),
                    default=DEFAULT_MAX_MEGAPIXELS,
                    help=f"the largest image measured, by the size its header states "
                         f"(default {DEFAULT_MAX_MEGAPIXELS:g}: "

@@ -221,7 +221,7 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
                     + f" --out {poses_path}")
 
     eval_dir = workdir / "eval"   # 4. evaluate
-    metrics = _evaluate_stage(ds, eval_dir, poses_path, spec, acceptance_path, src, dets_path, oracle_noise_px, stages)
+    _evaluate_stage(ds, eval_dir, poses_path, spec, acceptance_path, src, dets_path, oracle_noise_px, stages)
     commands.append(f"dockfactory evaluate {data_dir} --poses {poses_path}"
                     + (f" --detections {dets_path}" if dets_path else "") + f" --acceptance {acceptance_path} --out {eval_dir}")
     write_json_atomic(eval_dir / "provenance.json", {"detections": str(dets_path) if dets_path else None,

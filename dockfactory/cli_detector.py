@@ -6,80 +6,22 @@ Each command returns an exit status (0 ok); bad input raises ValueError (the cal
 """
 from __future__ import annotations
 
-import argparse
-import math
-import os
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.onnx_export import export_onnx
-from dockfactory.eval.ablate import run_ablation
+from dockfactory.ablate import run_ablation
 from dockfactory.eval.detection_metrics import (
     evaluate_detections,
     format_report,
 )
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.simulated_cameras import dataset_camera
-from dockfactory.generator.cli import int_at_least
+from dockfactory.cli_args import input_scale, non_negative_int, positive_int, thread_count, torch_threads, unit_float
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
-
-
-MAX_THREADS = 64   # torch threads: far more than the cores of any machine this runs on (100000 segfaulted)
-
-
-def int_in(low: int, high: int):
-    """argparse type: an integer in [low, high]."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            v = low - 1
-        if not low <= v <= high:
-            raise argparse.ArgumentTypeError(f"expected an integer in [{low}, {high}], got {text!r}")
-        return v
-    parse.__name__ = f"integer in [{low}, {high}]"
-    return parse
-
-
-_thread_count = int_in(1, MAX_THREADS)
-
-
-def _torch(threads: int | None):
-    """Import torch with a passive OpenMP wait policy (the machine is shared) and set the threads
-    (``threads`` in [1, MAX_THREADS]; None: one per core, at most MAX_THREADS)."""
-    if threads is not None and not 1 <= threads <= MAX_THREADS:
-        raise DockfactoryError(f"--threads: expected an integer in [1, {MAX_THREADS}], got {threads}")
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    import torch
-    torch.set_num_threads(threads or min(MAX_THREADS, os.cpu_count() or 1))
-    return torch
-
-
-_positive_int = int_at_least(1)
-_non_negative_int = int_at_least(0)
-
-
-def _float_in(low: float, high: float, low_open: bool = False):
-    """argparse type: a finite number in [low, high] (``(low, high]`` with ``low_open``)."""
-    span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            v = math.nan
-        if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):
-            raise argparse.ArgumentTypeError(f"expected a number in {span}, got {text!r}")
-        return v
-    parse.__name__ = f"number in {span}"
-    return parse
-
-
-_unit_float = _float_in(0.0, 1.0)                 # scores and IoU thresholds
-_input_scale = _float_in(0.0, 8.0, low_open=True)  # network px per image px
 
 
 def _train_config(args, attention: str, seed: int):
@@ -98,7 +40,7 @@ def _train_config(args, attention: str, seed: int):
 
 
 def cmd_train(args) -> int:
-    _torch(args.threads)
+    torch_threads(args.threads)
     from dockfactory.detector.train import train
     cfg = _train_config(args, args.attention, args.seed)
     summary = train(Dataset.open(args.dataset), args.out, cfg, resume=args.resume, progress=not args.quiet)
@@ -109,7 +51,7 @@ def cmd_train(args) -> int:
 
 
 def cmd_detect(args) -> int:
-    _torch(args.threads)
+    torch_threads(args.threads)
     from dockfactory.detector.infer import detect_dataset
     split = None if args.split == "all" else args.split
     dataset = Dataset.open(args.dataset)
@@ -124,7 +66,7 @@ def cmd_detect(args) -> int:
 
 
 def cmd_ablate(args) -> int:
-    _torch(args.threads)
+    torch_threads(args.threads)
     attentions = [a.strip() for a in args.attention.split(",") if a.strip()]
     seeds = list(range(args.seeds))
     result = run_ablation(Dataset.open(args.dataset), args.out, attentions, seeds,
@@ -141,7 +83,7 @@ def cmd_export_onnx(args) -> int:
     out = Path(args.out)
     if out.is_dir():
         raise DockfactoryError(f"--out {out}: is a folder; give the ONNX file's name")
-    _torch(args.threads)
+    torch_threads(args.threads)
     with writer_lock(out.parent, "export-onnx", f"--out {out}: its folder"):
         info = export_onnx(args.weights or shipped_weights(), out, height=args.height, width=args.width,
                            check=not args.no_check)
@@ -151,7 +93,7 @@ def cmd_export_onnx(args) -> int:
 
 
 def cmd_noise_card(args) -> int:
-    _torch(args.threads)
+    torch_threads(args.threads)
     weights = Path(args.weights) if args.weights else shipped_weights()
     card = calibrate_noise_card(Dataset.open(args.dataset), weights, split=args.split, progress=not args.quiet)
     print(f"centre noise {card['centre_noise_px']:.4f} px per axis (x {card['axis_px'][0]:.4f}, "
@@ -163,13 +105,13 @@ def cmd_noise_card(args) -> int:
 def _add_training_options(p) -> None:
     """Options shared by train and ablate."""
     p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
-    p.add_argument("--epochs", type=_positive_int, default=60, help="epochs (default 60)")
-    p.add_argument("--batch", type=_positive_int, default=16, help="crops per batch (default 16)")
-    p.add_argument("--nbs", type=_positive_int, help="nominal batch for gradient accumulation (default = --batch)")
-    p.add_argument("--crops-per-frame", type=_positive_int, default=2, help="windows per training frame per epoch")
-    p.add_argument("--input-scale", type=_input_scale, default=0.5, help="network px per image px (default 0.5)")
+    p.add_argument("--epochs", type=positive_int, default=60, help="epochs (default 60)")
+    p.add_argument("--batch", type=positive_int, default=16, help="crops per batch (default 16)")
+    p.add_argument("--nbs", type=positive_int, help="nominal batch for gradient accumulation (default = --batch)")
+    p.add_argument("--crops-per-frame", type=positive_int, default=2, help="windows per training frame per epoch")
+    p.add_argument("--input-scale", type=input_scale, default=0.5, help="network px per image px (default 0.5)")
     p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
-    p.add_argument("--threads", type=_thread_count, help="torch threads (default: all cores)")
+    p.add_argument("--threads", type=thread_count, help="torch threads (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -179,7 +121,7 @@ def _add_train_parser(subparsers) -> None:
     t.add_argument("--out", required=True, help="run directory (checkpoints, history, weights)")
     t.add_argument("--attention", choices=("se", "eca", "cbam", "a2", "none"), default="se",
                    help="attention block after the last backbone C3 (default se)")
-    t.add_argument("--seed", type=_non_negative_int, default=0, help="seed of initial weights, crops and augmentation")
+    t.add_argument("--seed", type=non_negative_int, default=0, help="seed of initial weights, crops and augmentation")
     t.add_argument("--resume", action="store_true", help="continue from RUN/last.pt")
     _add_training_options(t)
     t.set_defaults(func=cmd_train)
@@ -192,11 +134,11 @@ def _add_detect_parser(subparsers) -> None:
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
-    d.add_argument("--conf", type=_unit_float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
-    d.add_argument("--iou", type=_unit_float, default=0.45, help="NMS IoU threshold")
+    d.add_argument("--conf", type=unit_float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
+    d.add_argument("--iou", type=unit_float, default=0.45, help="NMS IoU threshold")
     d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")
     d.add_argument("--eval", action="store_true", help="print mAP, centre error and recall afterwards")
-    d.add_argument("--threads", type=_thread_count)
+    d.add_argument("--threads", type=thread_count)
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_detect)
 
@@ -205,9 +147,9 @@ def _add_ablate_parser(subparsers) -> None:
     a = subparsers.add_parser("ablate", help="train and evaluate attention variants under one budget")
     a.add_argument("dataset")
     a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
-    a.add_argument("--seeds", type=_positive_int, default=1, help="number of seeds (0..S-1)")
+    a.add_argument("--seeds", type=positive_int, default=1, help="number of seeds (0..S-1)")
     a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
-    a.add_argument("--conf", type=_unit_float, default=0.001, help="score threshold for mAP")
+    a.add_argument("--conf", type=unit_float, default=0.001, help="score threshold for mAP")
     a.add_argument("--record", help="also write each finished run's metrics to RECORD/<variant>_seed<k>.json and "
                    "take runs recorded there (same dataset version and config) without training them again")
     a.add_argument("--no-train", action="store_true",
@@ -221,10 +163,10 @@ def _add_export_parser(subparsers) -> None:
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
     e.add_argument("--weights", help="default: the shipped weights")
     e.add_argument("--out", required=True, help="ONNX file")
-    e.add_argument("--height", type=_positive_int, default=480, help="network input height (default 480)")
-    e.add_argument("--width", type=_positive_int, default=640, help="network input width (default 640)")
+    e.add_argument("--height", type=positive_int, default=480, help="network input height (default 480)")
+    e.add_argument("--width", type=positive_int, default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
-    e.add_argument("--threads", type=_thread_count)
+    e.add_argument("--threads", type=thread_count)
     e.set_defaults(func=cmd_export_onnx)
 
 
@@ -235,7 +177,7 @@ def _add_noise_card_parser(subparsers) -> None:
     n.add_argument("--weights", help="default: the shipped weights (the card is written next to them)")
     n.add_argument("--split", default="val", choices=("train", "val"),
                    help="a split the evaluation does not judge (default val)")
-    n.add_argument("--threads", type=_thread_count)
+    n.add_argument("--threads", type=thread_count)
     n.add_argument("--quiet", action="store_true")
     n.set_defaults(func=cmd_noise_card)
 

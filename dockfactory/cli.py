@@ -1,0 +1,62 @@
+"""The ``dockfactory`` command line: the root parser and ``main``. The command groups live in one
+module each (``cli_factory``: render, dataset, check-config, show; ``cli_judge``: solve,
+evaluate, report, run; ``cli_detector``: train, detect, ablate, export-onnx, noise-card;
+``cli_measure``: measure) and share their argument types (``cli_args``). Bad input
+(DockfactoryError) is one line and exit 2; argparse's own errors too."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from dockfactory import __version__
+from dockfactory.cli_args import output_path
+from dockfactory.cli_detector import add_subcommands as add_detector_commands
+from dockfactory.cli_factory import add_subcommands as add_factory_commands
+from dockfactory.cli_judge import add_eval_commands
+from dockfactory.cli_measure import add_subcommand as add_measure_command
+from dockfactory.core.errors import DockfactoryError
+
+EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
+                                "for uncalibrated monocular docking of cylindrical sections.")
+    p.add_argument("--version", action="version", version=f"dockfactory {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    add_factory_commands(sub)
+    add_eval_commands(sub)
+    add_detector_commands(sub)
+    add_measure_command(sub)
+    for parser in _all_parsers(sub):
+        for action in parser._actions:
+            if action.dest == "out" and action.type is None:
+                action.type = output_path
+    return p
+
+
+def _all_parsers(sub) -> list:
+    """Every parser below ``sub`` (nested sub-commands included)."""
+    out = []
+    for parser in sub.choices.values():
+        out.append(parser)
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                out += _all_parsers(action)
+    return out
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted: run the same command again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except DockfactoryError as exc:  # bad input: ConfigError, DatasetError, SolverError, ...
+        print(f"dockfactory: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
