@@ -1,4 +1,4 @@
-"""Digests of what a config without [motion] samples and labels, for tests/test_motion.py.
+"""Digests of what a config without [motion] samples and labels, for tests/generator/test_motion.py.
 
 Run on the commit before motion existed (0724401) it recorded tests/data/motion_off_golden.json:
 per shipped config and frame, the sha256 of the frame's scene (``to_dict(sample_frame)``, keys

@@ -3,7 +3,7 @@ the defaults with their meanings, and the key reference (docs/config_reference.m
 
 The schema is ``core.config.Config``: its tables are frozen dataclasses, each key a typed field
 with a default; a key's meaning is the comment beside its field in core/config.py (read from the
-source, so the reference cannot drift from the code: tests/test_docs.py regenerates it).
+source, so the reference cannot drift from the code: tests/contracts/test_docs.py regenerates it).
 """
 from __future__ import annotations
 
@@ -189,7 +189,7 @@ def reference_markdown() -> str:
     """docs/config_reference.md: every table and key (type, default, meaning) and the limits."""
     out = ["# Config key reference", "",
            "Generated from the schema (`core/config.py`) by `core/config_text.py`; `dockfactory check-config "
-           "--defaults` prints the same as a TOML file to copy. Do not edit by hand: tests/test_docs.py "
+           "--defaults` prints the same as a TOML file to copy. Do not edit by hand: tests/contracts/test_docs.py "
            "fails when this page and the schema drift.", "",
            "Every key has a default; a config names only what differs. Unknown keys, wrong types and impossible "
            "values are refused in one line naming the file, table and key. Ranges are `[min, max]` with "

@@ -9,7 +9,7 @@ models beyond the pinhole). On normalised image coordinates (x, y) = (X / Z, Y /
 
 then pixels u = f x_d + cx, v = f y_d + cy (square pixels, no skew: the convention of
 ``core.geometry.intrinsics``). ``cv2.projectPoints`` with ``distCoeffs = (k1, k2, p1, p2, k3)``
-gives the same numbers (tests/test_distortion.py).
+gives the same numbers (tests/core/test_distortion.py).
 """
 from __future__ import annotations
 

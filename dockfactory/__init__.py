@@ -12,7 +12,7 @@ from importlib import metadata
 
 # numpy's OpenBLAS kernel, set before numpy loads it: label geometry is float64 matrix products,
 # and other kernels round the last bits otherwise, so a dataset is the same bytes on every x86-64
-# CPU only with one kernel (dockfactory.core.blas; tests/test_blas_pin.py holds it to the kernel
+# CPU only with one kernel (dockfactory.core.blas; tests/core/test_blas_pin.py holds it to the kernel
 # that made the published datasets: changing it changes labels, not the version id)
 LABEL_BLAS_ENV, LABEL_BLAS_CORE = "OPENBLAS_CORETYPE", "Prescott"
 os.environ[LABEL_BLAS_ENV] = LABEL_BLAS_CORE

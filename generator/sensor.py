@@ -137,7 +137,7 @@ def expose_frame(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, np.nd
 # The exact inverse of the distortion is computed (Newton, core.distortion) on a grid of this
 # spacing and upsampled with separable Catmull-Rom: within 5e-4 px of the exact inverse at every
 # pixel for the lenses of the realistic ranges (3e-4 px measured at the corners of k1 = -0.15,
-# k2 = -0.05 at 1200 px; tests/test_camera_units.py), near the float32 precision of the map and
+# k2 = -0.05 at 1200 px; tests/generator/test_camera_units.py), near the float32 precision of the map and
 # far below cv2.remap's 1/32 px interpolation steps.
 MAP_GRID_PX = 8
 

@@ -22,7 +22,7 @@ def blender_version() -> str:
 
 
 # the modules whose code decides what a rendered dataset contains: every dockfactory module the
-# render worker process imports (tests/test_version.py checks the list against a real worker)
+# render worker process imports (tests/generator/test_version.py checks the list against a real worker)
 OUTPUT_SOURCES = (
     "dockfactory.core.camera_chain", "dockfactory.core.cfa", "dockfactory.core.config", "dockfactory.core.demosaic",
     "dockfactory.core.distortion", "dockfactory.core.emva", "dockfactory.core.errors", "dockfactory.core.geometry",

@@ -222,7 +222,7 @@ def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep
     0.293); configs/centre_scene_b.toml (60 frames, centres refined on true boxes) X 0.398 ->
     0.289 mm, alpha 0.0231 -> 0.0123 deg. A median-based scale (collapsing onto the good points
     of a dozen) and raw first-round residuals (a high-leverage gross centre masks itself) were
-    tried first and did worse on the synthetic test (tests/test_disc_noise.py)."""
+    tried first and did worse on the synthetic test (tests/solver/test_disc_noise.py)."""
     blocks, poses, intr, model, base = _stacked(fit, points, fitter, keep, points_2d)
     shapes = _with_occlusion(base, extra_px2, keep, blocks, poses, intr, model)
     winv = np.linalg.inv(np.linalg.cholesky(shapes))

@@ -398,7 +398,7 @@ def _identify_section(p3, uv, z, cls, section_class, pp, search: _Search):
     against verifying every seed with rescue (bench/solve_speed.py: 500 synthetic frames, 800
     of the identification benchmark's harder kind, 330 real detector frames): the same
     marker ids, swapped flags and inliers on every frame, identification about 18 times faster
-    (tests/test_solver_fast_paths.py keeps checking it)."""
+    (tests/solver/test_solver_fast_paths.py keeps checking it)."""
     w = p3[:, 0] - 1j * p3[:, 1]
     spacing_mm = _min_spacing(w)
     labelled = np.flatnonzero(cls == section_class)

@@ -1,4 +1,4 @@
-"""The import-layer checker behind tests/test_layers.py (tests only; reads sources, imports nothing).
+"""The import-layer checker behind tests/contracts/test_layers.py (tests only; reads sources, imports nothing).
 
 How it works
 ------------

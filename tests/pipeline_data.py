@@ -143,7 +143,7 @@ def seal_hand_made(root, cfg: Config) -> None:
 # A small camera-unit config (320 x 240): two units with a strong barrel lens, the principal point
 # off centre, tangential distortion, chromatic aberration and JPEG; large markers close to the
 # camera, so that most are 150 px or more (the label-vs-pixels tests of distorted frames:
-# tests/test_camera_units.py paints it, tests/test_render.py renders it).
+# tests/generator/test_camera_units.py paints it, tests/generator/test_render.py renders it).
 LENS_CHECK = """
 [dataset]
 name = "lens-check"

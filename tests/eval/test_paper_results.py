@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from paper_results import main, ranking_check, render_figures, table1  # noqa: E402
 
 from dockfactory.core.io import sha256_file  # noqa: E402

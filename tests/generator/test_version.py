@@ -4,14 +4,14 @@ dockfactory module a render worker process imports, and names only modules that 
 Two views of "what the worker imports":
 - fast: a fresh interpreter imports the worker module and the bpy adapter it loads on ``init``
   (``dockfactory.blender_scenes.render``, needs bpy) and lists ``sys.modules``. Because project
-  modules are imported at module level (tests/test_layers.py forbids function-level imports of
+  modules are imported at module level (tests/contracts/test_layers.py forbids function-level imports of
   cheap project modules), these two imports reach every project module the worker can run;
 - render: the real worker module runs as ``__main__`` (what ``python -m
   dockfactory.generator.render_worker`` in generator/worker_pool.py does) through its JSON-lines
   protocol: init, one rendered frame of the shipped smoke config, quit; then ``sys.modules`` is
   listed. This also catches a module imported lazily while rendering or post-processing.
 Package ``__init__`` modules are ignored: they hold no output-shaping code, except the BLAS kernel
-that ``dockfactory/__init__.py`` pins, which tests/test_blas_pin.py holds to the published one.
+that ``dockfactory/__init__.py`` pins, which tests/core/test_blas_pin.py holds to the published one.
 """
 import importlib.util
 import json

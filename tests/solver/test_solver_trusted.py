@@ -61,7 +61,7 @@ def test_without_refinement_flags_the_rule_counts_matches_as_before(frame):
     res = _solve(frame, refined=False)
     used = {mid for mid, ok in zip(res.marker_ids, res.inliers) if ok}
     assert "B5" not in used and "B2" in used
-    # 32.5 mm off before the occlusion variances (tests/test_solver_occlusion.py) damped B2's pull,
+    # 32.5 mm off before the occlusion variances (tests/solver/test_solver_occlusion.py) damped B2's pull,
     # 8.8 mm since: still several times the error of the trusted solve
     trusted = _solve(frame, refined=True)
     truth = doc["pose_b_in_d"]["x_mm"]

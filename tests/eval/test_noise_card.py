@@ -61,7 +61,7 @@ def test_noise_card_is_measured_written_and_used(painted, tmp_path, capsys):
     doc = json.loads(poses.read_text())
     assert doc["sigma_floor_px"] == card["centre_noise_px"]
     # a dataset without docking runs has no frames that share a camera: a joint solve is refused
-    # (tests/test_camera_models_eval.py checks the floor of a docking run's joint solve)
+    # (tests/eval/test_camera_models_eval.py checks the floor of a docking run's joint solve)
     assert main(["solve", str(painted), "--detections", str(dets), "--split", "test", "--self-calibrate",
                  "sequence", "--camera-model", "pinhole", "--out", str(tmp_path / "seq.json")]) == 2
     assert "no docking runs" in capsys.readouterr().err

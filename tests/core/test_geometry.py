@@ -85,7 +85,7 @@ def test_blender_intrinsics_centre_has_no_shift():
     assert intr["shift_y"] == pytest.approx(0.0, abs=1e-15)
     assert intr["lens_mm"] / intr["sensor_width_mm"] * 1280 == pytest.approx(1800.0)
     # a principal point right of and above the centre: Blender's view window moves left and down
-    # (rendered and checked against the index pass in tests/test_render.py, distorted labels)
+    # (rendered and checked against the index pass in tests/generator/test_render.py, distorted labels)
     off = blender_camera_intrinsics(1800.0, (639.5 + 12.8, 479.5 - 25.6), 1280, 960)
     assert off["shift_x"] == pytest.approx(-0.01) and off["shift_y"] == pytest.approx(-0.02)
 

@@ -7,7 +7,7 @@
   reading them, and reports symlinks inside the dataset (to outside, dangling, or replacing a
   listed file) as problems.
 
-No rendering: the export dataset of tests/test_exports.py and the painted smoke dataset of
+No rendering: the export dataset of tests/generator/test_exports.py and the painted smoke dataset of
 tests/pipeline_data.py.
 """
 import hashlib

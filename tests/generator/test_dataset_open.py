@@ -1,5 +1,5 @@
 """Dataset.open, the one dataset contract: what it returns and what it checks (the damage x
-consumer matrix is tests/test_dataset_contract.py)."""
+consumer matrix is tests/contracts/test_dataset_contract.py)."""
 import json
 
 import pytest

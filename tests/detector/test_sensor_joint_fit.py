@@ -14,7 +14,7 @@ from dockfactory.core.cfa import mosaic
 from dockfactory.core.demosaic import DEMOSAICS, demosaic
 from dockfactory.detector.centre_camera import refine_centre_camera
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 import sensor_joint_fit as sj  # noqa: E402
 
 RED = (0.6, 0.03, 0.03)   # the marker's red (linear): little contrast with its dark ring in G and B

@@ -21,7 +21,7 @@ from layercheck import (
     strongly_connected,
 )
 
-FIXTURE = Path(__file__).resolve().parent / "layer_fixture"
+FIXTURE = Path(__file__).resolve().parents[1] / "layer_fixture"
 
 
 def _report(title: str, items: list[str]) -> str:

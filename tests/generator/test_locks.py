@@ -10,7 +10,7 @@
   it declares the dataset complete.
 
 No rendering: the painted smoke dataset of tests/pipeline_data.py (``_render`` is replaced by a
-function that fails the test) and the export dataset of tests/test_exports.py.
+function that fails the test) and the export dataset of tests/generator/test_exports.py.
 """
 import os
 import shutil
