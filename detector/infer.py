@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from dockfactory.core.io import write_json_atomic
+from dockfactory.core.progress import Progress
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre_camera import refine_centre_camera
 from dockfactory.detector.data import resize_exact
@@ -259,16 +260,15 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
         print(f"note: weights trained on dataset version {det.meta['dataset_version']}, "
               f"detecting on {version}", file=sys.stderr)
     results, times = {}, []
+    bar = Progress(len(frames), "detect", enabled=progress, per="s")
     for i, f in enumerate(frames):
         img = read_rgb(f.image_path)
         t = time.perf_counter()
         cfa, jpeg = camera(f.frame_id) if camera is not None else (None, False)
         results[f.frame_id] = det.detect(img, cfa=cfa, jpeg=jpeg)
         times.append(time.perf_counter() - t)
-        if progress:
-            print(f"\rdetect {i + 1}/{len(frames)}  {1000 * np.mean(times):.0f} ms/image", end="", file=sys.stderr)
-    if progress:
-        print(file=sys.stderr)
+        bar.update(i + 1, extra=f"{1000 * np.mean(times):.0f} ms/image")
+    bar.close()
     doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
            "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from copy import deepcopy
 from dataclasses import asdict, dataclass, field
@@ -27,6 +26,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from dockfactory.core.progress import Progress
 from dockfactory.core.io import write_json_atomic
 from dockfactory.detector.anchors import (
     anchor_fitness,
@@ -130,34 +130,6 @@ def param_groups(model: nn.Module, weight_decay: float):
     return [{"params": g_bn, "weight_decay": 0.0, "name": "bn"},
             {"params": g_w, "weight_decay": weight_decay, "name": "weights"},
             {"params": g_b, "weight_decay": 0.0, "name": "bias"}]
-
-
-class EpochBar:
-    """One progress line per epoch on stderr (redrawn in place on a terminal)."""
-
-    def __init__(self, epoch: int, epochs: int, total: int, enabled: bool, stream=None):
-        self.epoch, self.epochs, self.total, self.enabled = epoch, epochs, total, enabled
-        self.stream = stream or sys.stderr
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.start = time.monotonic()
-
-    def line(self, done: int, losses: np.ndarray, images: int, lr: float) -> str:
-        el = time.monotonic() - self.start
-        fill = int(20 * done / self.total)
-        return (f"epoch {self.epoch + 1:>3}/{self.epochs} [{'#' * fill}{'-' * (20 - fill)}] {done}/{self.total}"
-                f"  box {losses[0]:.4f} obj {losses[1]:.4f} cls {losses[2]:.4f}  lr {lr:.5f}"
-                f"  {images / max(el, 1e-9):.1f} img/s  {el:.0f}s")
-
-    def update(self, done, losses, images, lr):
-        if self.enabled and self.tty:
-            self.stream.write("\r" + self.line(done, losses, images, lr) + "\x1b[K")
-            self.stream.flush()
-
-    def close(self, done, losses, images, lr):
-        if self.enabled:
-            text = self.line(done, losses, images, lr)
-            self.stream.write("\r" + text + "\x1b[K\n" if self.tty else text + "\n")
-            self.stream.flush()
 
 
 def fit_anchor_config(cfg: TrainConfig, frames) -> tuple[ModelConfig, float]:
@@ -265,11 +237,17 @@ def _optimizer_step(t: _Training, cfg: TrainConfig) -> None:
     t.ema.update(t.model)
 
 
+def _loss_text(losses: np.ndarray, lr: float, images: int, seconds: float) -> str:
+    """The epoch's running losses, learning rate and speed, for the progress line."""
+    return (f"box {losses[0]:.4f} obj {losses[1]:.4f} cls {losses[2]:.4f}  lr {lr:.5f}  "
+            f"{images / max(seconds, 1e-9):.1f} img/s")
+
+
 def _train_epoch(t: _Training, cfg: TrainConfig, epoch: int, progress: bool) -> dict:
     """One epoch of ``t.nb`` batches; its history record."""
     lf = cfg.lr_gamma ** (epoch // cfg.lr_step_epochs)
     mloss = np.zeros(3)
-    bar = EpochBar(epoch, cfg.epochs, t.nb, progress)
+    bar = Progress(t.nb, f"epoch {epoch + 1}/{cfg.epochs}", enabled=progress, per="s")
     t0, images, pending = time.monotonic(), 0, 0
     t.optimizer.zero_grad()
     for i in range(t.nb):
@@ -286,8 +264,8 @@ def _train_epoch(t: _Training, cfg: TrainConfig, epoch: int, progress: bool) -> 
             pending = 0
         images += imgs.shape[0]
         mloss = (mloss * i + parts.numpy()) / (i + 1)
-        bar.update(i + 1, mloss, images, t.optimizer.param_groups[1]["lr"])
-    bar.close(t.nb, mloss, images, t.optimizer.param_groups[1]["lr"])
+        bar.update(i + 1, extra=_loss_text(mloss, t.optimizer.param_groups[1]["lr"], images, time.monotonic() - t0))
+    bar.close()
     dt = time.monotonic() - t0
     return {"epoch": epoch + 1, "box": float(mloss[0]), "obj": float(mloss[1]), "cls": float(mloss[2]),
             "lr": float(t.optimizer.param_groups[1]["lr"]), "images": images, "seconds": round(dt, 3),

@@ -4,6 +4,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from dockfactory.core.progress import Progress
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
@@ -23,9 +24,14 @@ def cmd_measure(args) -> int:
     options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
 
+    bars = []
+
     def progress(done, total):
-        if not args.quiet:
-            print(f"\rmeasure {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
+        if not bars:
+            bars.append(Progress(total, "measure", enabled=not args.quiet, per="s"))
+        bars[0].update(done)
+        if done >= total:
+            bars[0].close()
     s = measure(args.images, args.layout, weights, args.out, camera_model=args.camera_model,
                 self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress, options=options)
     fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())

@@ -1,4 +1,6 @@
-"""A small progress display on stderr: done/total, rate, ETA (plain lines when not a terminal)."""
+"""The one progress display of every long command (render, detect, measure, train): on a
+terminal a bar redrawn in place; in a log (stderr not a terminal) a plain line every ``every_s``
+seconds and at the end, never a carriage return."""
 from __future__ import annotations
 
 import sys
@@ -11,8 +13,11 @@ def _hms(seconds: float) -> str:
 
 
 class Progress:
-    def __init__(self, total: int, label: str, enabled: bool = True, stream=None, every_s: float = 10.0):
-        self.total, self.label, self.enabled = total, label, enabled
+    def __init__(self, total: int, label: str, enabled: bool = True, stream=None, every_s: float = 10.0,
+                 per: str = "h"):
+        """``total`` items, ``label`` first on the line, ``per``: the rate's unit ("h" or "s")."""
+        self.total, self.label, self.enabled, self.per = total, label, enabled, per
+        self.extra = ""
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.start = time.monotonic()
@@ -30,11 +35,16 @@ class Progress:
         bar = "#" * fill + "-" * (width - fill)
         eta_s = _hms(eta) if eta == eta else "?"
         failed = f"  failed {self.failed}" if self.failed else ""
-        return (f"{self.label} [{bar}] {self.done}/{self.total}  {rate * 3600:.0f}/h  "
-                f"elapsed {_hms(elapsed)}  ETA {eta_s}{failed}")
+        rate_text = f"{rate * 3600:.0f}/h" if self.per == "h" else f"{rate:.1f}/s"
+        extra = f"  {self.extra}" if self.extra else ""
+        return (f"{self.label} [{bar}] {self.done}/{self.total}  {rate_text}  "
+                f"elapsed {_hms(elapsed)}  ETA {eta_s}{failed}{extra}")
 
-    def update(self, done: int, failed: int = 0) -> None:
+    def update(self, done: int, failed: int = 0, extra: str | None = None) -> None:
+        """``done`` of ``total`` (``failed`` of them failed); ``extra``: text after the figures."""
         self.done, self.failed = done, failed
+        if extra is not None:
+            self.extra = extra
         self.refresh()
 
     def refresh(self, force: bool = False) -> None:
