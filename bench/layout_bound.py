@@ -15,7 +15,7 @@ import numpy as np
 
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, marker_points  # noqa: E402
-from dockfactory.generator.draws import static_scene  # noqa: E402
+from dockfactory.generator.random_draws import static_scene  # noqa: E402
 from dockfactory.generator.sampler import frame_plan, sample_frame  # noqa: E402
 from dockfactory.solver import crb_d_from_b  # noqa: E402
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import dockfactory  # noqa: F401  (first: the label BLAS kernel)
 from dockfactory.core.config import load_config
 from dockfactory.core.scene import to_dict
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.frame_output import label_text
 from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.sampler import frame_plan, sample_frame

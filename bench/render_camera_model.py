@@ -33,7 +33,7 @@ from dockfactory.core.config import load_config  # noqa: E402
 from dockfactory.core.resources import shipped_config  # noqa: E402
 from dockfactory.core.scene import NO_DISTORTION  # noqa: E402
 from dockfactory.generator import sensor  # noqa: E402
-from dockfactory.generator.draws import static_scene  # noqa: E402
+from dockfactory.generator.random_draws import static_scene  # noqa: E402
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines  # noqa: E402
 from dockfactory.generator.sampler import frame_plan, sample_frame  # noqa: E402
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from dockfactory.blender_scenes.render import BlenderRenderer
 from dockfactory.blender_scenes.render_profile import plain_material, time_renders, variants
 from dockfactory.core.config import config_from_dict
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
 
 

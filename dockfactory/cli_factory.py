@@ -14,7 +14,7 @@ from dockfactory.core.resources import resolve_config
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator import published
 from dockfactory.generator.dataset import identity, writer_lock
-from dockfactory.generator.overlay import draw_overlay
+from dockfactory.generator.label_overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
 

@@ -22,7 +22,7 @@ from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.pose_metrics import pose_error
-from dockfactory.generator.draws import rng_for
+from dockfactory.generator.random_draws import rng_for
 from dockfactory.solver import SolverError, solve_docking
 
 ENVELOPE_STREAM = 103   # rng stream of the sweep's centre noise (generator.sampler.rng_for)

@@ -21,7 +21,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.draws import rng_for
+from dockfactory.generator.random_draws import rng_for
 from dockfactory.solver import (
     AmbiguousIdentification,
     DockingOptions,

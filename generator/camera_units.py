@@ -19,7 +19,7 @@ from dockfactory.core.geometry import transform_points
 from dockfactory.core.scene import CameraModel, mat4, vec
 from dockfactory.core.camera_chain import configured_sensor
 from dockfactory.core.emva import EmvaSensor
-from dockfactory.generator.draws import STREAM_UNIT_LENS, STREAM_UNIT_SENSOR, STREAM_UNITS, rng_for, uniform
+from dockfactory.generator.random_draws import STREAM_UNIT_LENS, STREAM_UNIT_SENSOR, STREAM_UNITS, rng_for, uniform
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import LOCK_NAME, folder_lock, output_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan
 from dockfactory.generator.version import (

@@ -25,7 +25,7 @@ import numpy as np
 from dockfactory.core.config import ConfigError, MotionConfig
 from dockfactory.core.geometry import check_array, transform_points
 from dockfactory.core.scene import FrameScene, MotionParams, vec
-from dockfactory.generator.draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, uniform
+from dockfactory.generator.random_draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, uniform
 
 FIXED_POINT_TOL_PX = 1e-6    # Newton stops once a step moves no image point by more than this
 FIXED_POINT_MAX_STEPS = 30

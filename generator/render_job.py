@@ -23,7 +23,7 @@ from dockfactory.generator.dataset import check_target, dataset_lock, frame_done
 from dockfactory.generator.dataset_check import inspect
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export_complete, write_export
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.core.progress import Progress
 from dockfactory.generator.sampler import frame_plan, sample_frame

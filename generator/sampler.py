@@ -7,8 +7,8 @@ whatever the shard, worker count or render order, and the captures of a repeatab
 their geometry while their lighting and noise differ.
 
 This module holds the frame plan and the per-frame sampling; the streams and the draws it shares
-are in ``generator.draws``, the camera units' lenses in ``generator.camera_units`` and the docking
-runs in ``generator.runs``.
+are in ``generator.random_draws``, the camera units' lenses in ``generator.camera_units`` and the docking
+runs in ``generator.docking_runs``.
 
 Only the entry points read the whole ``Config``: ``frame_plan`` (the plan), ``sample_frame`` (one
 frame's scene) and the checks (``check_focal_fits``, ``check_rolling_fits``). They read the config
@@ -65,7 +65,7 @@ from dockfactory.generator.camera_units import (
     unit_lens,
     unit_sensor,
 )
-from dockfactory.generator.draws import (
+from dockfactory.generator.random_draws import (
     STREAM_FRAME_ISP,
     STREAM_GEOMETRY,
     STREAM_LOOK,
@@ -83,7 +83,7 @@ from dockfactory.generator.draws import (
 )
 from dockfactory.generator.labels import section_silhouette
 from dockfactory.generator.motion import check_rolling, frame_motion
-from dockfactory.generator.runs import check_runs_fit, run_count, run_pose, run_time, unit_camera
+from dockfactory.generator.docking_runs import check_runs_fit, run_count, run_pose, run_time, unit_camera
 
 LIGHT_LEVEL_W = 400.0  # area-light power (W) that gives the reference light level at 1 m
 

@@ -32,7 +32,7 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
 from dockfactory.generator.dataset import frame_files, prepare, write_manifest
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.exr import RenderPasses, write_compact
 from dockfactory.generator.frame_output import finish_frame
 from dockfactory.generator.labels import section_silhouette

@@ -15,7 +15,7 @@ import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.core.scene import to_dict
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.render_job import JobOptions, run_render
 from dockfactory.generator.sampler import frame_plan, sample_frame

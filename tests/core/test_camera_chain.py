@@ -28,7 +28,7 @@ from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.emva import photon_transfer
 from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.sampler import frame_plan, sample_frame
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 
 
 def srgb(x):

@@ -23,7 +23,7 @@ from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import CameraModel, to_dict
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.camera_units import ImageFit, largest_fitting_focal, unit_lens, unit_sensor
-from dockfactory.generator.draws import markers_in_d, static_scene
+from dockfactory.generator.random_draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.generator.sensor import channel_maps, distortion_maps, jpeg_round_trip, resample_passes

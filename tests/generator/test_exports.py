@@ -29,7 +29,7 @@ from dockfactory.core.layout import CLASS_NAMES, marker_outline
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset import prepare
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.export_coco import (
     KPT_OKS_SIGMAS,
     POLYGON_TOLERANCE_PX,

@@ -4,7 +4,7 @@ import pytest
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.geometry import polygon_area_centroid
 from dockfactory.core.layout import marker_outline
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.labels import clip_polygon, frame_labels
 from dockfactory.generator.sampler import frame_plan, sample_frame
 

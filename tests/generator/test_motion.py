@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from dockfactory.core.config import ConfigError, config_from_dict, load_config
 from dockfactory.core.layout import marker_outline
 from dockfactory.core.scene import FrameScene, MotionParams, from_dict, to_dict
-from dockfactory.generator.draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, static_scene
+from dockfactory.generator.random_draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, static_scene
 from dockfactory.generator.frame_output import label_text
 from dockfactory.generator.labels import frame_labels, image_px, marker_pinhole_outlines
 from dockfactory.generator.motion import (

@@ -26,7 +26,7 @@ import pytest
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.layout import marker_outline
 from dockfactory.core.scene import mat4, to_dict
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.exr import read_compact
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan, sample_frame

@@ -52,7 +52,7 @@ def test_labels_agree_with_the_index_pass(label_dataset):
 
     from dockfactory.core.geometry import project_points
     from dockfactory.core.layout import marker_outline
-    from dockfactory.generator.draws import static_scene
+    from dockfactory.generator.random_draws import static_scene
     cfg, root, _ = label_dataset
     layout = {m.id: m for m in static_scene(cfg).markers}
     errors, mismatch = [], []

@@ -14,7 +14,7 @@ from dockfactory.core.layout import (
     marker_points,
 )
 from dockfactory.core.scene import FrameScene, from_dict, to_dict
-from dockfactory.generator.draws import markers_in_d, static_scene
+from dockfactory.generator.random_draws import markers_in_d, static_scene
 from dockfactory.generator.sampler import condition_counts, frame_plan, sample_frame
 
 

@@ -23,7 +23,7 @@ import pytest
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import to_dict
-from dockfactory.generator.draws import static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.version import OUTPUT_SOURCES
 

@@ -17,7 +17,7 @@ from dockfactory.core.config import CameraConfig, Config, ConfigError, PoseConfi
 from dockfactory.core.geometry import transform_from_pose_components
 from dockfactory.core.scene import FrameSpec, StaticScene
 from dockfactory.generator.camera_units import ImageFit, UnitLens, largest_fitting_focal, unit_lens
-from dockfactory.generator.draws import (
+from dockfactory.generator.random_draws import (
     STREAM_REPEAT_GEOMETRY,
     STREAM_RUN,
     STREAM_UNIT_CAMERA,
