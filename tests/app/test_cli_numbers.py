@@ -6,23 +6,10 @@ import json
 import numpy as np
 import pytest
 
+from cli_run import one_line_error, run_cli
+
 from dockfactory.cli import main
 from dockfactory.generator.dataset_open import Dataset
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def _one_line(err: str) -> str:
-    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and "Traceback" not in err, err
-    return lines[0]
 
 
 def _label_detections(ds: Dataset) -> dict:
@@ -38,9 +25,9 @@ def _label_detections(ds: Dataset) -> dict:
 
 @pytest.mark.parametrize("value", ["1e308", "1e200", "101", "-1", "nan", "inf", "0"])
 def test_sigma_floor_flag_out_of_range(painted_source, tmp_path, capsys, value):
-    code, _, err = _run(["solve", painted_source, "--oracle-noise", "0.1", "--sigma-floor", value,
+    code, _, err = run_cli(["solve", painted_source, "--oracle-noise", "0.1", "--sigma-floor", value,
                          "--out", tmp_path / "p.json"], capsys)
-    assert code == 2 and "--sigma-floor" in _one_line(err)
+    assert code == 2 and "--sigma-floor" in one_line_error(err)
     assert not (tmp_path / "p.json").exists()
 
 
@@ -58,12 +45,12 @@ def test_detections_with_impossible_numbers(painted_source, tmp_path, capsys, ed
     edit(dets)
     path = tmp_path / "dets.json"
     path.write_text(json.dumps(dets))
-    assert _run(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p0.json"], capsys)[0] == 0
+    assert run_cli(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p0.json"], capsys)[0] == 0
     for argv in (["solve", painted_source, "--detections", path, "--out", tmp_path / "p.json"],
                  ["evaluate", painted_source, "--poses", tmp_path / "p0.json", "--detections", path,
                   "--out", tmp_path / "eval"]):
-        code, _, err = _run(argv, capsys)
-        line = _one_line(err)
+        code, _, err = run_cli(argv, capsys)
+        line = one_line_error(err)
         assert code == 2 and str(path) in line and key in line, line
     assert not (tmp_path / "p.json").exists()
 
@@ -74,7 +61,7 @@ def test_the_label_detections_themselves_solve(painted_source, tmp_path, capsys)
     dets["centre_noise_px"] = 0.05
     path = tmp_path / "dets.json"
     path.write_text(json.dumps(dets))
-    code, _, err = _run(["solve", painted_source, "--detections", path, "--out", tmp_path / "p.json"], capsys)
+    code, _, err = run_cli(["solve", painted_source, "--detections", path, "--out", tmp_path / "p.json"], capsys)
     poses = json.loads((tmp_path / "p.json").read_text())
     assert code == 0 and poses["sigma_floor_px"] == 0.05
     assert any(r["ok"] for r in poses["frames"].values()) and np.isfinite(
@@ -82,7 +69,7 @@ def test_the_label_detections_themselves_solve(painted_source, tmp_path, capsys)
 
 
 def _solved(painted_source, tmp_path, capsys) -> dict:
-    assert _run(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p.json"], capsys)[0] == 0
+    assert run_cli(["solve", painted_source, "--oracle-noise", "0.1", "--out", tmp_path / "p.json"], capsys)[0] == 0
     return json.loads((tmp_path / "p.json").read_text())
 
 
@@ -96,9 +83,9 @@ def test_poses_of_impossible_size_are_refused_before_any_statistic(painted_sourc
     rec = next(r for r in poses["frames"].values() if r["ok"])
     (rec["pose"] if field in rec["pose"] else rec)[field] = value
     (tmp_path / "big.json").write_text(json.dumps(poses))
-    code, out, err = _run(["evaluate", painted_source, "--poses", tmp_path / "big.json", "--out", tmp_path / "ev"],
+    code, out, err = run_cli(["evaluate", painted_source, "--poses", tmp_path / "big.json", "--out", tmp_path / "ev"],
                           capsys)
-    line = _one_line(err)
+    line = one_line_error(err)
     assert code == 2 and key in line and "big.json" in line and "ACCEPTED" not in out, line
 
 
@@ -106,14 +93,14 @@ def test_report_refuses_a_frames_table_cut_to_its_header(painted_source, tmp_pat
     _solved(painted_source, tmp_path, capsys)
     spec = tmp_path / "spec.toml"
     spec.write_text("[localization]\nx = 1000\n[estimation]\nx = 1000\n[failures]\nmax_rate = 1.0\n")
-    code, out, _ = _run(["evaluate", painted_source, "--poses", tmp_path / "p.json", "--acceptance", spec,
+    code, out, _ = run_cli(["evaluate", painted_source, "--poses", tmp_path / "p.json", "--acceptance", spec,
                          "--out", tmp_path / "ev"], capsys)
     assert code == 0 and "ACCEPTED" in out
-    assert _run(["report", tmp_path / "ev", "--out", tmp_path / "r.html"], capsys)[0] == 0
+    assert run_cli(["report", tmp_path / "ev", "--out", tmp_path / "r.html"], capsys)[0] == 0
     table = tmp_path / "ev" / "frames.csv"
     table.write_text(table.read_text().splitlines()[0] + "\n")
-    code, out, err = _run(["report", tmp_path / "ev", "--out", tmp_path / "r2.html"], capsys)
-    line = _one_line(err)
+    code, out, err = run_cli(["report", tmp_path / "ev", "--out", tmp_path / "r2.html"], capsys)
+    line = one_line_error(err)
     assert code == 2 and "frames.csv" in line and "0 test frames" in line and "ACCEPTED" not in out, line
     assert not (tmp_path / "r2.html").exists()
 
@@ -132,6 +119,6 @@ def test_a_fifo_or_a_folder_given_as_a_file_is_refused_without_opening_it(painte
                      ["evaluate", painted_source, "--poses", tmp_path / "p.json", "--acceptance", given,
                       "--out", tmp_path / "ev"],
                      ["check-config", given]):
-            code, _, err = _run(argv, capsys)
-            line = _one_line(err)
+            code, _, err = run_cli(argv, capsys)
+            line = one_line_error(err)
             assert code == 2 and f"is a {kind}" in line and str(given) in line, (argv, line)
