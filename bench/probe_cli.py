@@ -10,7 +10,7 @@ every option it takes, runs the command with otherwise valid arguments and that 
 each odd value of its kind: numbers (nan, inf, -1, 0, 1e308, 1e9, "abc", ""), paths (missing, a
 folder, a file where a folder is expected, the fifo, /dev/null, the junk file, a read-only
 folder), choices (an unknown one); and every positional argument replaced the same way. Each
-attempt is its own process with a timeout. An attempt passes when it exits 0, 1 or 2 without
+attempt is its own process with a timeout. An attempt passes when it exits 0, 1, 2 or 3 (not proven) without
 "Traceback" on stderr; a timeout is a pass only for commands that start real work (render, run,
 train, ablate, detect, noise-card, measure, export-onnx), where a valid odd value may well start
 it. Prints one line per failing attempt and a summary; writes them to ``--out``.
@@ -134,7 +134,7 @@ def run_one(name: str, argv: list[str], timeout: float) -> str | None:
         return None if name in WORKING else f"hang (> {timeout:g} s)"
     if "Traceback" in proc.stderr:
         return "traceback: " + proc.stderr.strip().splitlines()[-1][:160]
-    if proc.returncode not in (0, 1, 2):
+    if proc.returncode not in (0, 1, 2, 3):   # 3: evaluate / run not proven
         return f"exit {proc.returncode}: " + (proc.stderr.strip().splitlines() or [""])[-1][:160]
     return None
 
