@@ -118,34 +118,57 @@ def check_rows_match(rows: list[dict], metrics: dict, path) -> None:
                                "the table does not belong to this evaluation (re-run dockfactory evaluate)")
 
 
-def _plot_error_histograms(plt, test: list[dict]) -> str:
+TOLERANCE_STYLE = {"color": "#b00020", "ls": "--", "lw": 1.0}
+
+
+def localization_tolerances(metrics: dict) -> dict:
+    """Component -> the localization threshold in its unit (mm, deg; the root of an mse one)."""
+    out = {}
+    for c in (metrics.get("acceptance") or {}).get("criteria", []):
+        if c.get("block") == "localization" and c["threshold"] is not None:
+            out[c["component"]] = c["threshold"] ** 0.5 if c["statistic"] == "mse" else c["threshold"]
+    return out
+
+
+def _plot_error_histograms(plt, test: list[dict], tol: dict) -> str:
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     for ax, c in zip(axes, GATED):
         e = [r[f"err_{c}"] for r in test]
         ax.hist(e, bins=max(5, min(40, len(e) // 2 or 5)), color="#4477aa")
         ax.set_title(f"{c} error ({UNITS[c]})")
         ax.axvline(0, color="k", lw=0.8)
+        if c in tol:   # the tolerance: the errors seen against what is allowed
+            ax.axvline(-tol[c], **TOLERANCE_STYLE, label=f"tolerance +-{tol[c]:g} {UNITS[c]}")
+            ax.axvline(tol[c], **TOLERANCE_STYLE)
+            ax.legend(fontsize=7)
     return _fig_png(fig)
 
 
-def _plot_xy_scatter(plt, test: list[dict]) -> str:
+def _plot_xy_scatter(plt, test: list[dict], tol: dict) -> str:
     fig, ax = plt.subplots(figsize=(4.5, 4.5))
     ax.scatter([r["err_x"] for r in test], [r["err_y"] for r in test], s=10, c="#aa3377")
     ax.set_xlabel("X error (mm)")
     ax.set_ylabel("Y error (mm)")
     ax.axhline(0, color="k", lw=0.5)
     ax.axvline(0, color="k", lw=0.5)
+    if "x" in tol and "y" in tol:
+        tx, ty = tol["x"], tol["y"]
+        ax.plot([-tx, tx, tx, -tx, -tx], [-ty, -ty, ty, ty, -ty], **TOLERANCE_STYLE, label="tolerance")
+        ax.legend(fontsize=7)
     ax.set_aspect("equal", "datalim")
     return _fig_png(fig)
 
 
-def _plot_per_condition(plt, test: list[dict]) -> str:
+def _plot_per_condition(plt, test: list[dict], tol: dict) -> str:
     conds = sorted({r["condition"] for r in test})
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     for ax, c in zip(axes, GATED):
         ax.boxplot([[abs(r[f"err_{c}"]) for r in test if r["condition"] == k] or [0.0] for k in conds])
         ax.set_xticks(range(1, len(conds) + 1), conds, rotation=20)
         ax.set_title(f"|{c} error| ({UNITS[c]}) per condition")
+        if c in tol:
+            ax.axhline(tol[c], **TOLERANCE_STYLE, label="tolerance")
+            ax.legend(fontsize=7)
     return _fig_png(fig)
 
 
@@ -195,9 +218,10 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
     import matplotlib.pyplot as plt
     test = [r for r in rows if r["split"] == "test" and r["ok"]]
     out = {}
-    out["Error histograms (test split)"] = _plot_error_histograms(plt, test)
-    out["X-Y error scatter"] = _plot_xy_scatter(plt, test)
-    out["Error per condition"] = _plot_per_condition(plt, test)
+    tol = localization_tolerances(metrics)
+    out["Error histograms (test split)"] = _plot_error_histograms(plt, test, tol)
+    out["X-Y error scatter"] = _plot_xy_scatter(plt, test, tol)
+    out["Error per condition"] = _plot_per_condition(plt, test, tol)
     out["Error against camera distance and focal length"] = _plot_distance_focal(plt, test)
     out["Measured error against the Cramer-Rao bound"] = _plot_against_crb(plt, test)
     if detections_pr:
@@ -468,10 +492,20 @@ def _rule_text(acc: dict) -> str:
             "bounds are shown but do not decide.")
 
 
-def _stats_table(block: dict, title: str) -> str:
-    head = "<tr><th>component</th><th>n</th><th>MSE</th><th>RMSE</th><th>bias</th><th>std</th><th>p95 |e|</th><th>max |e|</th></tr>"
-    body = "".join(f"<tr><td>{c} ({UNITS[c]})</td>" + "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")) + "</tr>" for c in COMPONENTS)
-    return f"<h3>{html.escape(title)}</h3><table>{head}{body}</table>"
+MIN_N_STATS = 3   # fewer frames print "n too small", not a std of 0 or a 100 % coverage
+
+
+def _stats_table(block: dict, title: str, min_n: int = 1) -> str:
+    """A statistics table (units in every header); rows with fewer than ``min_n`` frames say so."""
+    head = ("<tr><th>component</th><th>n</th><th>MSE (unit^2)</th><th>RMSE</th><th>bias</th><th>std</th>"
+            "<th>p95 |e|</th><th>max |e|</th></tr>")
+    rows = []
+    for c in COMPONENTS:
+        n = block[c].get("n") or 0
+        cells = (f"<td>{n}</td><td colspan='6' class='note'>n too small (fewer than {min_n} frames)</td>" if n < min_n
+                 else "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")))
+        rows.append(f"<tr><td>{c} ({UNITS[c]})</td>{cells}</tr>")
+    return f"<h3>{html.escape(title)}</h3><table>{head}{''.join(rows)}</table>"
 
 
 def _html_verdict(metrics: dict, acc: dict, verdict: str) -> list[str]:
@@ -493,7 +527,7 @@ def _html_localization(metrics: dict) -> list[str]:
     loc = metrics["localization"]
     parts = ["<h2>Localization (test split)</h2>", _stats_table(loc["overall"], "all conditions")]
     for cond, block in loc["by_condition"].items():
-        parts.append(_stats_table(block, f"condition: {cond}"))
+        parts.append(_stats_table(block, f"condition: {cond}", MIN_N_STATS))
     parts += html_centre_noise(metrics) + html_bound(metrics)
     if "oracle" in metrics:
         o = metrics["oracle"]["localization"]["overall"]

@@ -105,7 +105,12 @@ def html_bound(metrics: dict) -> list[str]:
               f"centre noise above. {html.escape(note)}</p>"]
 
 
+MIN_N_Z = 3   # fewer frames: "n too small" (one frame printed RMS z and "100 % within 2 sigma")
+
+
 def _z_cells(s: dict) -> str:
+    if (s.get("n") or 0) < MIN_N_Z:
+        return f"<td>{s['n']}</td><td colspan='4' class='note'>n too small (fewer than {MIN_N_Z} frames)</td>"
     return (f"<td>{s['n']}</td><td>{_f(s['rms_z'], '.3g')}</td><td>{_f(s.get('robust_z'), '.3g')}</td>"
             f"<td>{_f(s['within_2sigma'], '.1%')}</td><td>{_f(s.get('max_abs_z'), '.3g')}</td>")
 

@@ -220,3 +220,27 @@ def test_an_undecided_criterion_says_how_many_frames_would_decide_it():
     # with that many more frames at RMSE 0.08 the 95 % upper bound is within 0.1 deg, one fewer is not
     assert chi2_bounds(0.08 ** 2 * (9 + more), 9 + more, 0.95)[1] <= 0.1
     assert chi2_bounds(0.08 ** 2 * (8 + more), 8 + more, 0.95)[1] > 0.1
+
+
+def test_tables_say_n_too_small_instead_of_a_std_of_zero():
+    from dockfactory.eval.pose_metrics import error_stats
+    from dockfactory.eval.report import MIN_N_STATS, _stats_table
+    from dockfactory.eval.report_calibration import _z_cells
+    comps = ("x", "y", "z", "alpha", "beta", "gamma")
+    one = {c: error_stats([0.3]) for c in comps}
+    three = {c: error_stats([0.3, -0.1, 0.2]) for c in comps}
+    assert one["x"]["std"] == 0.0                       # what the table used to print for n = 1
+    html_one = _stats_table(one, "condition: glare", MIN_N_STATS)
+    assert html_one.count("n too small") == 6 and "0.3" not in html_one
+    assert "n too small" not in _stats_table(three, "condition: glare", MIN_N_STATS)
+    assert "n too small" in _z_cells({"n": 1, "rms_z": 0.2, "within_2sigma": 1.0})
+    assert "100.0%" not in _z_cells({"n": 1, "rms_z": 0.2, "within_2sigma": 1.0})
+
+
+def test_error_plots_draw_the_tolerance():
+    from dockfactory.eval.report import localization_tolerances
+    metrics = {"acceptance": {"criteria": [
+        {"block": "localization", "component": "x", "statistic": "rmse", "threshold": 5.0},
+        {"block": "localization", "component": "alpha", "statistic": "mse", "threshold": 0.01},
+        {"block": "estimation", "component": "y", "statistic": "rmse", "threshold": 1.0}]}}
+    assert localization_tolerances(metrics) == {"x": 5.0, "alpha": pytest.approx(0.1)}
