@@ -101,8 +101,9 @@ def cmd_report(args) -> int:
     """Build the report holding the lock of the folder of --out (the HTML file; its .md and .json
     go beside it)."""
     with writer_lock(Path(args.out).parent, "report", f"--out {args.out}: its folder"):
-        summary = build_report(args.eval_dir, args.out)
-    print(f"verdict: {summary['verdict']}  report: {args.out}")
+        summary = build_report(args.eval_dir, args.out,
+                               signers={"prepared_by": args.prepared_by, "approved_by": args.approved_by})
+    print(f"verdict: {summary['verdict']}  report: {args.out} (id {summary['report_id']})")
     return 0
 
 
@@ -174,6 +175,8 @@ def add_eval_commands(sub) -> None:
     r = sub.add_parser("report", help="self-contained HTML acceptance report (+ report.json, report.md)")
     r.add_argument("eval_dir")
     r.add_argument("--out", required=True)
+    r.add_argument("--prepared-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
+    r.add_argument("--approved-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
     r.set_defaults(func=cmd_report)
 
     u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")

@@ -5,10 +5,12 @@ from __future__ import annotations
 import base64
 import csv
 import datetime as _dt
+import hashlib
 import html
 import io
 import json
 import subprocess
+import time
 from pathlib import Path
 
 import cv2
@@ -645,7 +647,34 @@ def _summary_markdown(verdict: str, acc: dict) -> str:
     return "\n".join(md) + "\n" + (f"\n{ungated}" if ungated else "")
 
 
-def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
+def sign_off(eval_dir: Path, signers: dict | None) -> dict:
+    """The report's identity and signature block: ``report_id`` (the first 16 hex digits of the
+    sha256 over the evaluation's metrics.json, frames.csv and provenance.json: the same inputs give
+    the same id), the UTC date it was built, and who prepared and approved it (``signers``:
+    "prepared_by", "approved_by"; blank lines to sign by hand when not given)."""
+    digest = hashlib.sha256()
+    for name in ("metrics.json", "frames.csv", "provenance.json"):
+        path = eval_dir / name
+        digest.update(name.encode() + b"\0" + (path.read_bytes() if path.is_file() else b""))
+    signers = signers or {}
+    return {"report_id": digest.hexdigest()[:16], "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "prepared_by": signers.get("prepared_by") or "", "approved_by": signers.get("approved_by") or ""}
+
+
+def _html_sign_off(sign: dict) -> str:
+    def field(name, value):
+        return f"<td>{html.escape(value) if value else '&nbsp;' * 40}</td>"
+    return ("<table class='signoff'><tr><th>report id</th><td><code>" + sign["report_id"] + "</code></td>"
+            f"<th>date</th><td>{html.escape(sign['date'])}</td></tr><tr><th>prepared by</th>"
+            + field("prepared", sign["prepared_by"]) + "<th>approved by</th>" + field("approved", sign["approved_by"])
+            + "</tr></table><p class='note'>The ground truth of every figure below is synthetic: rendered scenes with "
+              "exact labels (see \"What was simulated\"). A real camera's figures differ by what the simulation "
+              "leaves out.</p>")
+
+
+def build_report(eval_dir, out_html, commands: list[str] | None = None, signers: dict | None = None) -> dict:
+    """Build the report of the evaluation folder ``eval_dir`` into ``out_html`` (and report.json,
+    report.md beside it); ``signers``: see :func:`sign_off`. Returns the summary."""
     eval_dir = Path(eval_dir)
     if not eval_dir.is_dir():
         raise DatasetError(f"{eval_dir}: no such evaluation folder (run dockfactory evaluate first)")
@@ -682,17 +711,19 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None) -> dict:
     provenance = _report_provenance(metrics, prov, commands)
     figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
     worst = gallery(dataset_root, rows, poses, detections)
-    parts = (_html_verdict(metrics, acc, verdict) + _html_localization(metrics) + _html_calibration(metrics, rows)
+    sign = sign_off(eval_dir, signers)
+    parts = (_html_verdict(metrics, acc, verdict) + [_html_sign_off(sign)] + _html_localization(metrics)
+             + _html_calibration(metrics, rows)
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
              + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
              + (html_simulated_cameras(metrics["simulated_cameras"]) if metrics.get("simulated_cameras") else [])
              + _html_figures(figs, worst) + [_html_provenance(provenance)])
     write_text_atomic(out_html, _html_document(parts))
-    return write_summary(out_html, metrics, verdict, provenance)
+    return write_summary(out_html, metrics, verdict, provenance, sign)
 
 
-def write_summary(out_html, metrics: dict, verdict: str, provenance: dict) -> dict:
+def write_summary(out_html, metrics: dict, verdict: str, provenance: dict, sign: dict | None = None) -> dict:
     """report.json (the figures a dashboard reads) and report.md (the verdict in a few lines)
     beside ``out_html``; returns the summary."""
     acc = metrics["acceptance"]
@@ -703,11 +734,15 @@ def write_summary(out_html, metrics: dict, verdict: str, provenance: dict) -> di
                "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
                "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()},
                "centre_noise_used": (metrics.get("centre_noise") or {}).get("used"),
-               "covariance_calibration": (loc.get("calibration") or {}).get("overall")}
+               "covariance_calibration": (loc.get("calibration") or {}).get("overall"),
+               "decision_rule": acc.get("decision_rule"), "confidence": acc.get("confidence"), **(sign or {})}
     out_html = Path(out_html)
     write_json_atomic(out_html.with_suffix(".json"), json.loads(json.dumps(summary, default=float)))
     cams = metrics.get("simulated_cameras")
     simulated = (f"\nGround truth: rendered, not measured, through simulated cameras ({cams['statement']}; per unit: "
                  f"report.html, \"What was simulated\").\n" if cams else "")
-    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + markdown_honesty(metrics))
+    signed = (f"\nReport {sign['report_id']}, {sign['date']}; prepared by: {sign['prepared_by'] or '________'}; "
+              f"approved by: {sign['approved_by'] or '________'}\n" if sign else "")
+    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + signed
+                      + markdown_honesty(metrics))
     return summary

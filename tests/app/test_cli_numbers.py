@@ -122,3 +122,20 @@ def test_a_fifo_or_a_folder_given_as_a_file_is_refused_without_opening_it(painte
             code, _, err = run_cli(argv, capsys)
             line = one_line_error(err)
             assert code == 2 and f"is a {kind}" in line and str(given) in line, (argv, line)
+
+
+def test_the_report_carries_an_id_of_its_inputs_and_a_sign_off_block(painted_source, tmp_path, capsys):
+    _solved(painted_source, tmp_path, capsys)
+    run_cli(["evaluate", painted_source, "--poses", tmp_path / "p.json", "--out", tmp_path / "ev"], capsys)
+    assert run_cli(["report", tmp_path / "ev", "--out", tmp_path / "a.html", "--prepared-by", "A. Engineer"],
+                   capsys)[0] == 0
+    first = json.loads((tmp_path / "a.json").read_text())
+    assert len(first["report_id"]) == 16 and first["prepared_by"] == "A. Engineer" and first["approved_by"] == ""
+    assert "A. Engineer" in (tmp_path / "a.html").read_text() and "report id" in (tmp_path / "a.html").read_text()
+    assert f"Report {first['report_id']}" in (tmp_path / "a.md").read_text()
+    run_cli(["report", tmp_path / "ev", "--out", tmp_path / "b.html"], capsys)
+    assert json.loads((tmp_path / "b.json").read_text())["report_id"] == first["report_id"]   # same inputs
+    prov = tmp_path / "ev" / "provenance.json"
+    prov.write_text(prov.read_text().replace('"commands": [', '"commands": ["edited", '))
+    run_cli(["report", tmp_path / "ev", "--out", tmp_path / "c.html"], capsys)
+    assert json.loads((tmp_path / "c.json").read_text())["report_id"] != first["report_id"]
