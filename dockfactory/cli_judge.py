@@ -140,6 +140,13 @@ def cmd_run(args) -> int:
 
 def add_eval_commands(sub) -> None:
     """Register solve, evaluate, report and run on ``sub`` (argparse subparsers)."""
+    _add_solve_parser(sub)
+    _add_evaluate_parser(sub)
+    _add_report_parser(sub)
+    _add_run_parser(sub)
+
+
+def _add_solve_parser(sub) -> None:
     s = sub.add_parser("solve", help="poses of B relative to A from detections (or label centres + noise)")
     s.add_argument("dataset")
     s.add_argument("--detections", help="DETS.json from dockfactory detect")
@@ -157,7 +164,9 @@ def add_eval_commands(sub) -> None:
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_solve)
 
-    e = sub.add_parser("evaluate", help="metrics, per-frame CSV and the acceptance verdict (exit 0/1/2)")
+
+def _add_evaluate_parser(sub) -> None:
+    e = sub.add_parser("evaluate", help="metrics, per-frame CSV and the acceptance verdict (exit 0 accepted, 1 rejected, 2 bad input, 3 not proven)")
     e.add_argument("dataset")
     e.add_argument("--poses", required=True)
     e.add_argument("--detections")
@@ -172,6 +181,8 @@ def add_eval_commands(sub) -> None:
     e.add_argument("--out", required=True)
     e.set_defaults(func=cmd_evaluate)
 
+
+def _add_report_parser(sub) -> None:
     r = sub.add_parser("report", help="self-contained HTML acceptance report (+ report.json, report.md)")
     r.add_argument("eval_dir")
     r.add_argument("--out", required=True)
@@ -179,6 +190,8 @@ def add_eval_commands(sub) -> None:
     r.add_argument("--approved-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
     r.set_defaults(func=cmd_report)
 
+
+def _add_run_parser(sub) -> None:
     u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")
     u.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, ...)")
     u.add_argument("--out", required=True, help="work directory")
