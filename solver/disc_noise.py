@@ -11,14 +11,9 @@ Hence the relative covariance of a disc's centre, ``noise_shapes``:
     T = (REFERENCE_RADIUS_PX / a)^SIZE_EXPONENT (rho^-SHAPE_EXPONENT u u^T + v v^T),
 
 u, v the major and minor axis directions; T = I for a round disc of REFERENCE_RADIUS_PX. The
-scale (px) is measured, never assumed here. The exponents are the edge fit's, checked on the
-refinement's errors on true boxes (bench/centre_bias.py ``collect``, every condition, errors
-of 0.5 px or more left out; a scale per condition): (1.5, 1) is within 5.1 and 0.6
-log-likelihood units of the best exponents on out/detector (configs/detector.toml, 4078 markers)
-and on out/centre_b (configs/centre_scene_b.toml, larger sections and discs, 819 markers);
-isotropic noise (0, 0) is 852 and 154 units worse, shape exponents 1 and 2 (size 1) 58 / 71 and
-16 / 8 units worse. On out/detector the RMS along the major axis is 0.149 / 0.092 / 0.055 px for
-rho < 0.3 / 0.45-0.6 / > 0.9, along the minor axis 0.052-0.064 px throughout. The discs of a docking camera's view are squeezed vertically (the
+scale (px) is measured, never assumed here. The exponents are the edge fit's, checked against
+the refinement's errors on two scenes of different geometry (results/README.md, "Measurements
+behind the code's constants"). The discs of a docking camera's view are squeezed vertically (the
 sections are cylinders seen from the side), so the centres' x noise is larger than their y noise.
 
 The ellipse is the first-order (affine) image of the disc at its centre, lens distortion left

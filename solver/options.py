@@ -64,9 +64,7 @@ class RefineOptions:
     - ``focal_runaway``: a single-section refinement that ends with f above this many times
       the image extent of the points (px from the principal point, + 1) slid toward the
       orthographic limit, the signature of a start in the wrong basin on a few near-planar
-      points (measured: the cheapest closed-form candidate at f 2261 px ran off to 9e11 px with
-      26 px RMS; the next one, f 1842, converged to 1885 px with 0.42 px RMS; true f 1938):
-      the other closed-form candidates are then tried.
+      points: the other closed-form candidates are then tried.
     Fallback of the single-section estimator (:mod:`solver.estimate`):
     - ``accept_rmse_sigmas``: when the pixel noise sigma is known, a fast-path fit whose RMS
       exceeds this many sigma takes the slow path (every closed-form candidate);
@@ -245,11 +243,9 @@ class ModelChoiceOptions:
       against the current one (chi-square with the added parameters as degrees of freedom when
       the pixel noise is known, F when it is estimated). 1e-3: with up to four richer models
       tested on an ideal camera, fewer than 0.4 % of frames leave the pinhole by chance
-      (Bonferroni), so ideal data keep the paper's model (bench/camera_models.py: 199 of 200
-      ideal frames at 0.1 px). The price: a lens or offset whose effect is near the noise stays
-      undetected per frame (k1 = -0.05 moves the outermost markers of the default layout by
-      0.4-1.8 px, and is taken in 23 % of frames; k1 = -0.15, 1.2-5.5 px, in 87 %); a docking
-      run (:func:`solver.solve_sequence`) determines them;
+      (Bonferroni), so ideal data keep the paper's model. The price: a lens or offset whose
+      effect is near the noise stays undetected per frame; a docking run
+      (:func:`solver.solve_sequence`) determines them (figures: results/README.md);
     - ``prior_pp_px``, ``prior_k1``, ``prior_k2``, ``prior_p``: half-width of the plausible
       range of each extra intrinsic for a camera nobody calibrated (principal point within
       +-50 px of the centre, |k1| <= 0.2, |k2| <= 0.1, |p1|, |p2| <= 2e-3: a little wider than
@@ -257,9 +253,8 @@ class ModelChoiceOptions:
       |k2| <= 0.05, |p| <= 1e-3);
     - ``max_std_inflation``: a richer model is refused when a parameter of a model it nests sees
       its standard deviation grow by more than this factor in it (its added parameters trade
-      off against that one: p1, p2 against the principal point over a docking run; measured on
-      realistic.toml d39025b20c0f7f1f: cx 1.96-2.0x, principal point 20 px off; on it and on the
-      strong-lens render e1c9f281d4e0fd03 1.5 keeps pp_k1 on all four runs);
+      off against that one: p1, p2 against the principal point over a docking run; the value
+      is checked on two renders, results/README.md);
     - ``max_std_fraction``: a richer model is supported only when the standard deviation of
       every parameter it adds is at most this fraction of its plausible half-range: 0.5 means
       the data, not the prior, fix its sign and size. An ill-conditioned fit (a singular

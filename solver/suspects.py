@@ -3,9 +3,8 @@
 Identification accepts a detection within a few pixels of where its marker projects. A partly
 hidden marker passes that gate, yet the centre of its visible part is pixels away from the
 marker's centre, and with 5-7 markers per section one such point moves X by millimetres. Two
-kinds of evidence find them (measured on the test split of configs/detector.toml: unrefined
-centres have a median error of 0.6 px against 0.09 px for refined ones; every detection whose
-box was under 0.85 of its predicted outline was a partly hidden marker 3-8 px off):
+kinds of evidence find them (their measured strength: results/README.md, "Measurements behind
+the code's constants"):
 
 - the detector's own: a detection whose centre could not be refined (``refined`` False) is a
   box centre, good to about a pixel;
@@ -14,9 +13,8 @@ box was under 0.85 of its predicted outline was a partly hidden marker 3-8 px of
 
 ``leave_out_suspects`` removes these, worst first, while each section keeps ``MIN_POINTS``, and
 refits once. A purely statistical rule (leave out the point farthest from where the fit of all
-the others projects its marker, beyond 3-6 robust sigmas) was measured on the same frames and
-made the test RMSE of X worse (0.69 mm -> 0.84-0.99 mm): with 5-7 points per section it as
-often removes a good point at the edge of the layout as the bad one.
+the others projects its marker) did worse: with 5-7 points per section it as often removes a
+good point at the edge of the layout as the bad one.
 
 It takes the points of the first fit (:class:`solver.joint.SectionPoints`), that fit
 (:class:`solver.joint.JointFit`) and the :class:`solver.joint.JointFitter` of the frame, and
@@ -118,12 +116,10 @@ def occlusion_variances(fit: JointFit, points: SectionPoints, pp, boxes, bias: f
     A box shorter than the outline ``fit`` predicts for its marker by ``cut`` px along an axis
     sees only part of the disc: the centre of the visible part's box is cut / 2 off the disc's
     centre along that axis, and a centre refined on the visible edge (the occluder's edge taken
-    for the disc's) is about as far off (measured on the 781 test + val frames of out/paper: the
-    error along the cut is 0.46 x the cut, median of 45 occluded refined markers with a cut
-    over 1 px, 0.38-0.58 for 10-90 %). The variance added is (``bias`` x max(0, cut -
-    ``margin_px``))^2 per axis: ``margin_px`` is the box noise of fully visible markers (same
-    frames: the cut of 9447 fully visible refined markers has a robust std of 0.25 px in u and
-    v, 99.9th percentile 1.4 / 0.65 px). The cut is a difference of extents, so the pose error the
+    for the disc's) is about as far off. The variance added is (``bias`` x max(0, cut -
+    ``margin_px``))^2 per axis: ``margin_px`` is the box noise of fully visible markers (both
+    constants measured: results/README.md, "Measurements behind the code's constants";
+    bench/occlusion_constants.py). The cut is a difference of extents, so the pose error the
     partly hidden centre itself puts into ``fit`` hardly moves it."""
     if boxes is None or bias <= 0:
         return None
