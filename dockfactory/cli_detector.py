@@ -19,9 +19,13 @@ from dockfactory.eval.detection_metrics import (
 )
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.simulated_cameras import dataset_camera
-from dockfactory.cli_args import input_scale, non_negative_int, positive_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import input_scale, int_in, non_negative_int, thread_count, torch_threads, unit_float
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
+
+# Named limits of the training flags: beyond them a run asks for gigabytes (1e9 crops per frame
+# wanted a 30 GB index array) or years, not for a detector.
+MAX_EPOCHS, MAX_BATCH, MAX_CROPS_PER_FRAME, MAX_SEEDS, MAX_INPUT_PX = 100_000, 4096, 1000, 100, 8192
 
 
 def _train_config(args, attention: str, seed: int):
@@ -105,10 +109,12 @@ def cmd_noise_card(args) -> int:
 def _add_training_options(p) -> None:
     """Options shared by train and ablate."""
     p.add_argument("--model", choices=("n", "s"), default="n", help="YOLOv5 scale (default n)")
-    p.add_argument("--epochs", type=positive_int, default=60, help="epochs (default 60)")
-    p.add_argument("--batch", type=positive_int, default=16, help="crops per batch (default 16)")
-    p.add_argument("--nbs", type=positive_int, help="nominal batch for gradient accumulation (default = --batch)")
-    p.add_argument("--crops-per-frame", type=positive_int, default=2, help="windows per training frame per epoch")
+    p.add_argument("--epochs", type=int_in(1, MAX_EPOCHS), default=60, help=f"epochs, 1-{MAX_EPOCHS} (default 60)")
+    p.add_argument("--batch", type=int_in(1, MAX_BATCH), default=16, help=f"crops per batch, 1-{MAX_BATCH} (default 16)")
+    p.add_argument("--nbs", type=int_in(1, MAX_BATCH * 64),
+                   help="nominal batch for gradient accumulation (default = --batch)")
+    p.add_argument("--crops-per-frame", type=int_in(1, MAX_CROPS_PER_FRAME), default=2,
+                   help=f"windows per training frame per epoch, 1-{MAX_CROPS_PER_FRAME}")
     p.add_argument("--input-scale", type=input_scale, default=0.5, help="network px per image px (default 0.5)")
     p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
     p.add_argument("--threads", type=thread_count, help="torch threads (default: all cores)")
@@ -147,7 +153,7 @@ def _add_ablate_parser(subparsers) -> None:
     a = subparsers.add_parser("ablate", help="train and evaluate attention variants under one budget")
     a.add_argument("dataset")
     a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
-    a.add_argument("--seeds", type=positive_int, default=1, help="number of seeds (0..S-1)")
+    a.add_argument("--seeds", type=int_in(1, MAX_SEEDS), default=1, help=f"number of seeds (0..S-1), 1-{MAX_SEEDS}")
     a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
     a.add_argument("--conf", type=unit_float, default=0.001, help="score threshold for mAP")
     a.add_argument("--record", help="also write each finished run's metrics to RECORD/<variant>_seed<k>.json and "
@@ -163,8 +169,8 @@ def _add_export_parser(subparsers) -> None:
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
     e.add_argument("--weights", help="default: the shipped weights")
     e.add_argument("--out", required=True, help="ONNX file")
-    e.add_argument("--height", type=positive_int, default=480, help="network input height (default 480)")
-    e.add_argument("--width", type=positive_int, default=640, help="network input width (default 640)")
+    e.add_argument("--height", type=int_in(32, MAX_INPUT_PX), default=480, help="network input height (default 480)")
+    e.add_argument("--width", type=int_in(32, MAX_INPUT_PX), default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
     e.add_argument("--threads", type=thread_count)
     e.set_defaults(func=cmd_export_onnx)

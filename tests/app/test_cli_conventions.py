@@ -56,3 +56,15 @@ def test_an_empty_out_path_is_refused_by_every_command(capsys, command):
     argv = command.split() + ["--out", ""]
     code, out = _exit(argv, capsys)
     assert code == 2 and "argument --out: expected a path, got an empty one" in out.err, out.err
+
+
+@pytest.mark.parametrize("argv", [
+    ["train", "D", "--out", "O", "--crops-per-frame", "1000000000"],   # asked numpy for a 30 GB index array
+    ["train", "D", "--out", "O", "--batch", "1000000000"],
+    ["train", "D", "--out", "O", "--epochs", "0"],
+    ["ablate", "D", "--seeds", "100000"],
+    ["export-onnx", "--out", "m.onnx", "--height", "100000"],
+])
+def test_training_and_export_sizes_have_named_limits(capsys, argv):
+    code, out = _exit(argv, capsys)
+    assert code == 2 and "expected an integer in [" in out.err, out.err
