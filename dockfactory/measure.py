@@ -174,7 +174,23 @@ CSV_FIELDS = (["image", "ok", "category", "reason"] + list(POSE_NAMES) + [f"std_
                  "n_detections", "detect_ms", "solve_ms"])
 
 
+CSV_DECIMALS = {"mm": 4, "deg": 5, "px": 3, "ms": 1}   # 0.1 um, 0.01 mdeg, 0.001 px: below any noise
+
+
+def _csv_value(name: str, value):
+    """A CSV cell at a sensible precision: mm 4 decimals, deg 5, px and intrinsics 3 (k, p: 6
+    significant digits), milliseconds 1; text and counts as they are."""
+    if isinstance(value, bool) or not isinstance(value, float):
+        return value
+    for unit, decimals in CSV_DECIMALS.items():
+        if name.endswith(unit) or name in ("cx", "cy") and unit == "px":
+            return f"{value:.{decimals}f}"
+    return f"{value:.6g}"
+
+
 def csv_text(frames: list[Frame]) -> str:
+    """measurements.csv: one row per image (pose, its 1-sigma standard deviations, intrinsics,
+    reprojection RMS, timings), numbers at the precision of :data:`CSV_DECIMALS`."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, CSV_FIELDS, lineterminator="\n")
     w.writeheader()
@@ -190,7 +206,7 @@ def csv_text(frames: list[Frame]) -> str:
             row.update({k: v for k, v in r.get("intrinsics", {}).items() if k in CSV_FIELDS})
         if "timing_ms" in r:
             row.update(detect_ms=r["timing_ms"]["detect"], solve_ms=r["timing_ms"]["solve"])
-        w.writerow(row)
+        w.writerow({k: _csv_value(k, v) for k, v in row.items()})
     return buf.getvalue()
 
 

@@ -33,7 +33,7 @@ def _text_lines(record: dict, name: str) -> list[str]:
     p, cov = record["pose"], np.array(record["covariance"])
     std = np.sqrt(np.diag(cov))
     return [name, f"X {p['x_mm']:.2f} +- {std[0]:.2f} mm   Y {p['y_mm']:.2f} +- {std[1]:.2f} mm   "
-                  f"alpha {p['alpha_deg']:.3f} +- {std[3]:.3f} deg",
+                  f"alpha {p['alpha_deg']:.3f} +- {std[3]:.3f} deg (+- 1 sigma)",
             f"camera {record.get('camera_model', 'pinhole')}  f {record['focal_px']:.0f} px  "
             f"rms A {record['rmse_px']['A']:.2f} B {record['rmse_px']['B']:.2f} px"]
 

@@ -3,6 +3,7 @@ no Blender) it gives the same poses as detect + solve on the same images; bad im
 per image, never dropped; bad input is a one-line error (exit 2)."""
 import csv
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -111,6 +112,12 @@ def test_measure_gives_the_poses_of_detect_and_solve(big, tmp_path, capsys):
         assert abs(m["focal_px"] - rec["focal_px"]) < 1e-6
     rows = list(csv.DictReader((out / "measurements.csv").open()))
     assert len(rows) == 6 and all(r["ok"] == "True" for r in rows)
+    # the CSV at a sensible precision (it wrote 17 digits): 0.1 um, 0.01 mdeg, the JSON keeps every bit
+    by_name = {Path(r["image"]).stem: r for r in rows}
+    for fid, m in measured.items():
+        r = by_name[fid]
+        assert r["x_mm"] == f"{m['pose']['x_mm']:.4f}" and r["alpha_deg"] == f"{m['pose']['alpha_deg']:.5f}"
+        assert len(r["std_x_mm"].split(".")[1]) == 4 and len(r["focal_px"].split(".")[1]) == 3
     assert len(list((out / "overlays").glob("*.png"))) == 6
 
 
