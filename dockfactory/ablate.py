@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import make_output_folder
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.detection_metrics import evaluate_detections
 
@@ -158,7 +159,9 @@ def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.0
                                f"{','.join(attentions) or 'none'}")
     if not seeds:
         raise DockfactoryError("--seeds: need at least one seed")
-    out = Path(out)
+    out = make_output_folder(out, "--out")   # both folders checked before any training
+    if record_dir:
+        make_output_folder(record_dir, "--record")
     runs = []
     for seed in seeds:          # seed by seed: an interrupted ablation has every variant's first seeds
         for att in attentions:

@@ -68,3 +68,12 @@ def test_an_empty_out_path_is_refused_by_every_command(capsys, command):
 def test_training_and_export_sizes_have_named_limits(capsys, argv):
     code, out = _exit(argv, capsys)
     assert code == 2 and "expected an integer in [" in out.err, out.err
+
+
+@pytest.mark.parametrize("record", ["/dev/null", "/proc/self/x"])
+def test_ablate_checks_its_folders_before_training(painted_source, tmp_path, capsys, record):
+    """`ablate --record FILE` trained a whole run, then ended in a FileExistsError traceback."""
+    from cli_run import one_line_error, run_cli
+    code, _, err = run_cli(["ablate", painted_source, "--out", tmp_path / "abl", "--epochs", "1",
+                            "--record", record], capsys)
+    assert code == 2 and "--record" in one_line_error(err) and not list((tmp_path / "abl").glob("*/"))
