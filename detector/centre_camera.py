@@ -3,8 +3,8 @@
 A Bayer sensor samples a red disc's colour at one pixel in four (blue too); every demosaic keeps
 those samples and interpolates the rest. The interpolated values misplace a sharp edge by a
 fraction of a pixel that depends on where the edge falls on the 2-pixel lattice of the samples, and
-``detector.centre.refine_centre``, which fits every pixel, inherits that error (a clean synthetic
-disc: about 0.13 px RMS against 0.005 px for a three-chip image, whatever the demosaic). Here the
+``detector.centre.refine_centre``, which fits every pixel, inherits that error (its size:
+bench/results/sensor_effects/README.md). Here the
 coverage passes are the same, but the edge fit sees only the values the sensor sampled: every
 channel at its own sites (``detector.centre_joint``, below) or, with a JPEG, the class's own
 channel at its sites (``fit_evidence``, then ``centre.fit_disc_edge``), the channel itself (linear)
@@ -17,8 +17,8 @@ colour score, made of chroma, loses the edge, the luma keeps it. With ``jpeg`` (
 the edge fit takes the luma (linearised) as its data; the coverage passes still segment by
 colour, and the fit's band (2.5 px inside, 1 px outside the disc edge) stays on the disc and its
 dark ring, where the luma step is the disc's. With a pattern as well, the fit keeps the class's
-own channel at its own sites: on the sensor bench's two scenes the luma at those sites was no
-better overall (better alpha, worse X or Y; bench/results/sensor_effects/README.md).
+own channel at its own sites (the luma there was no better on the sensor bench's two scenes:
+bench/results/sensor_effects/README.md).
 
 With a pattern and no ``jpeg``, the edge fit is ``detector.centre_joint.fit_disc_joint``: one disc
 geometry fitted to every channel at its own sites (R at R, G at both G sites, B at B), each channel

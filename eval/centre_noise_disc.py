@@ -6,9 +6,8 @@ label's ``outline_centroid_px``) and whitened by the relative covariance T_i of 
 in px^2 of a round disc of ``REFERENCE_RADIUS_PX``.
 
 Scale: a Cramer-Rao bound is set by the Fisher information of the noise, not by its second moment
-(they agree for Gaussian noise only). The centre errors have heavy tails: on the detector.toml
-test split one partly hidden disc is 2 px off and one glared disc 0.9 px off among centres good to
-0.06 px, and those two alone made the RMS of the occlusion condition 0.21 px (3.5 x its core).
+(they agree for Gaussian noise only). The centre errors have heavy tails (a few partly hidden or
+glared discs pixels off among centres good to a few hundredths: results/README.md).
 A bivariate Student t (scale s, dof nu) is fitted to the whitened errors by maximum likelihood
 (EM for s at each nu of a grid, and the Gaussian limit) and the bound's scale is the Gaussian
 sigma with the same Fisher information about the centre, ``fisher_px`` = s sqrt((nu + 4) /

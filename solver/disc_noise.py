@@ -211,13 +211,10 @@ def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep
     those of the fit their hat matrix describes. Its covariance: :func:`_robust_result`. ``fit`` comes back with
     the disc noise covariance of the unweighted fit (:func:`with_disc_noise`) if a refit fails.
 
-    Measured (the docking pipeline, detections of the shipped detector; unweighted -> reweighted):
-    configs/detector.toml test split (61 frames, 1c6b939ff88e2de6) RMSE X 0.472 -> 0.394 mm,
-    Y 0.131 -> 0.126 mm, alpha 0.0218 -> 0.0177 deg (normal frames unchanged: X 0.292 ->
-    0.293); configs/centre_scene_b.toml (60 frames, centres refined on true boxes) X 0.398 ->
-    0.289 mm, alpha 0.0231 -> 0.0123 deg. A median-based scale (collapsing onto the good points
-    of a dozen) and raw first-round residuals (a high-leverage gross centre masks itself) were
-    tried first and did worse on the synthetic test (tests/solver/test_disc_noise.py)."""
+    A median-based scale (collapsing onto the good points of a dozen) and raw first-round
+    residuals (a high-leverage gross centre masks itself) did worse on the synthetic test
+    (tests/solver/test_disc_noise.py); what the reweighting buys on two scenes:
+    results/README.md."""
     blocks, poses, intr, model, base = _stacked(fit, points, fitter, keep, points_2d)
     shapes = _with_occlusion(base, extra_px2, keep, blocks, poses, intr, model)
     winv = np.linalg.inv(np.linalg.cholesky(shapes))
@@ -252,9 +249,7 @@ def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarra
     weighted estimate under the disc noise model, k^2 A^-1 B A^-1 with A = sum w_i J_i^T T_i^-1
     J_i and B = sum w_i^2 J_i^T T_i^-1 J_i (the final weights), the scale k^2 = sum w_i q_i /
     (2n - p) (the t likelihood's) with the Student-t factor of
-    :func:`solver.refine.covariance_from_jacobian`. RMS z of X / Y / alpha: 1.12 / 0.89 / 1.12 on
-    the detector.toml test split, 1.05 / 1.07 / 1.02 on scene B, 0.90 / 1.04 / 0.95 on synthetic
-    frames with one centre 1.5 px off (the unweighted residuals' scale: 0.45 / 0.61 / 0.51)."""
+    :func:`solver.refine.covariance_from_jacobian` (its calibration: results/README.md)."""
     (ra, ta), (rb, tb) = ref.poses
     rw, jw, _ = _whitened_residuals(blocks, ref.poses, ref.intrinsics, ref.model, winv)
     w = t_weights(rw, jw, previous)

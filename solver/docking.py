@@ -238,10 +238,9 @@ def _solve_correspondences(layout: LayoutArrays, correspondences, rng, fitter: J
                 inliers[k] = bool(ok)
             p3[s], p2[s] = p3[s][keep], p2[s][keep]
         start = consensus.start
-    # a closed-form start can end in a mirrored basin (measured: 6 of 600 frames with 5-marker
-    # sections at 0.5 px, pose 130-520 mm off with 3-66 px RMS, no error raised; good fits stayed
-    # under 1.05 px): a joint RMS above the plausible one makes fit_joint try every section's
-    # candidates and keep the lowest cost
+    # a closed-form start can end in a mirrored basin without an error (results/README.md): a
+    # joint RMS above the plausible one makes fit_joint try every section's candidates and keep
+    # the lowest cost
     plausible = (options.refine.accept_rmse_sigmas * fitter.sigma_px if fitter.sigma_px
                  else options.ransac.threshold_px)
     fit = fitter.fit(p3["A"], p2["A"], p3["B"], p2["B"], start=start,

@@ -2,9 +2,8 @@
 
 A detector measures the centroid of the disc's image (an ellipse under perspective); the solver
 needs the projection of the disc's 3D centre. The two differ by a fraction of a pixel that
-depends on the pose (for the default layout at 1-1.8 m: median 0.026 px, up to 0.064 px over
-the markers of configs/detector.toml, against a median centre error of the detector of about
-0.09 px), and the difference is systematic: it follows the marker's tilt, not the image noise.
+depends on the pose (its size: results/README.md, "Measurements behind the code's constants"),
+and the difference is systematic: it follows the marker's tilt, not the image noise.
 Once a pose is known, each marker's offset is predicted (centroid of the projected outline
 polygon minus the projected centre), taken off its detected centre, and the pose refitted.
 A step of the docking pipeline (layer 5, beside :mod:`solver.suspects`).

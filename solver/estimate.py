@@ -199,7 +199,7 @@ def estimate_pnpf(p3, p2, pp, *, sigma_px=None, all_candidates=False, check_foca
             accept_rmse is not None and ref.rmse_px > accept_rmse)):
         # a few points (an identification hypothesis of an occluded section): the over-determined
         # closed form is unstable there and a right hypothesis can land in a wrong basin far
-        # beyond any rescue (measured: 59.6 px RMS for 5 right pairs fitting to 0.07 px)
+        # beyond any rescue (results/README.md: the measured case)
         ref = _subset_starts(p3, p2, pp, ref, options)
     cov, sigma = covariance_from_jacobian(ref.jacobian, ref.residuals, sigma_px, options.sigma_floor_px)
     if check_focal:
@@ -234,9 +234,7 @@ def _subset_starts(p3, p2, pp, best: RefineResult | None, options: RefineOptions
     """Last resort for a few points (at most ``options.subset_max_points``): the closed-form
     candidates of every 4-point subset (the minimal problem, where a near-planar 5-point set's
     over-determined closed form is unstable), ranked by their RMS over all points, the best few
-    refined (:func:`_best_subset_fit`). Measured: the 10 wrong minima (RMS 30-55 px, 100-240
-    bound-sigmas in rotation) of 1000 seeded 5-point sets at 1 px all end in the right basin
-    (RMS 0.4-1.4 px).
+    refined (:func:`_best_subset_fit`); what it recovers: results/README.md.
     Raises NoValidCamera when neither ``best`` (None: the other starts gave no camera) nor any
     subset gives one."""
     n = p3.shape[0]

@@ -1,8 +1,7 @@
 """A known zoom range as a prior on one section's focal length.
 
 Near-planar, fronto-parallel points can put the maximum of the likelihood at an affine camera
-(f -> infinity: measured 1.8e9-4.9e10 px for true 1700-2000 px at 0.3 px, rotation 6-13 bound-
-sigmas off). When the camera's focal range is known (``focal_range_px = (lo, hi)``, e.g. from the
+(f -> infinity; the measured case: results/README.md). When the camera's focal range is known (``focal_range_px = (lo, hi)``, e.g. from the
 lens's zoom range in px), an estimate outside it is replaced by the constrained maximum
 likelihood: the pose refined with the focal fixed at the nearer bound. Its covariance is that
 of the full 7-parameter problem with the range as a Gaussian prior on f (the variance of a

@@ -453,17 +453,15 @@ def identify_markers(markers, principal_point, detections,
 
     When identification fails for another reason, it is tried once more with hypotheses that
     may shed one pair: the loose similarity gate can pair a marker missing from the image with
-    a stray detection, and that one wrong pair spoils the fit of the others (identification
-    benchmark, 1000 frames with 15 % missing markers, 0-3 spurious detections and 0-2 swapped
-    classes: refusals 1.1 % -> 0.5 %, wrong ids unchanged; the retry costs time only on frames
-    that would otherwise be refused).
+    a stray detection, and that one wrong pair spoils the fit of the others (the retry costs
+    time only on frames that would otherwise be refused; its effect: results/README.md).
 
     ``trusted`` (N,) bool or None: detections whose centre the detector could refine. Between
     hypotheses, the one explaining more trusted detections wins before the one explaining more
     detections: a partly hidden marker's unrefined centre sits pixels off, and a hypothesis
-    bent to take in two of them (RMS 2.1 px) had beaten the one that explains a fully visible
-    marker instead (0.47 px), leaving that marker out of the fit and X 32 mm off (paper
-    dataset, frame 000275). None: every detection is trusted (the rule before).
+    bent to take in two of them can beat the one that explains a fully visible marker instead,
+    leaving that marker out of the fit (the case that showed it: results/README.md). None:
+    every detection is trusted.
     """
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)
