@@ -41,24 +41,13 @@ def default_acceptance() -> Path:
     return _shipped("dockfactory.configs", ACCEPTANCE_NAME)
 
 
-def _check_text(path: Path) -> None:
-    """DockfactoryError unless ``path`` reads as UTF-8 text (a config is TOML, which is UTF-8)."""
-    try:
-        path.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise DockfactoryError(f"{path}: cannot read config: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise DockfactoryError(f"{path}: not a TOML config: byte {exc.start} is not UTF-8 text") from None
-
-
 def resolve_config(arg: str | Path) -> Path:
     """A config given on the command line: an existing file, else a shipped config named by
     ``NAME``, ``NAME.toml`` or ``configs/NAME.toml`` (so the README's commands work from any
-    folder). DockfactoryError (one line) for a folder, a file that is not UTF-8 text, or no
-    such config."""
+    folder). DockfactoryError (one line) for a folder, a fifo or a device, or no such config; the
+    file's text is checked where it is read (core.config_text.load_config_text)."""
     path = Path(arg)
     if path.is_file():
-        _check_text(path)
         return path
     known = shipped_configs()
     stem = path.name[:-5] if path.name.endswith(".toml") else path.name

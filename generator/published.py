@@ -195,7 +195,8 @@ def _check_image(root: Path, fid: str, pub: _Published, rep: PublishedReport) ->
         rep.problems.append(f"{path}: unreadable image (8-bit RGB PNG expected)")
         return
     tiles = pub.prints[fid][0]
-    diff = float(np.abs(image_tiles(image) - tiles).max()) if image_tiles(image).shape == tiles.shape else math.inf
+    means = image_tiles(image)
+    diff = float(np.abs(means - tiles).max()) if means.shape == tiles.shape else math.inf
     rep.max_tile_diff = max(rep.max_tile_diff, diff)
     if diff > rep.tolerance:
         rep.problems.append(f"images/{fid}.png: tile means differ by up to {diff:.3f} levels "

@@ -12,19 +12,11 @@ import shutil
 import pytest
 
 from dockfactory.core import io as io_mod
+from cli_run import run_cli
+
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 from dockfactory.cli import main
-
-
-def _run(argv, capsys):
-    """(exit status, stdout, stderr) of ``dockfactory ARGV``; argparse's exits count too."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def _one_line_error(err: str) -> str:
@@ -56,7 +48,7 @@ def _a_frame(root) -> str:
 
 @pytest.mark.parametrize("frame_id", ["999999", "nope", "../labels/000000", ""])
 def test_show_unknown_frame_names_dataset_and_id(painted, tmp_path, capsys, frame_id):
-    code, _, err = _run(["show", painted, frame_id, "--out", tmp_path / "o.png"], capsys)
+    code, _, err = run_cli(["show", painted, frame_id, "--out", tmp_path / "o.png"], capsys)
     line = _one_line_error(err)
     assert code == 2 and str(painted) in line and repr(frame_id) in line
     assert not (tmp_path / "o.png").exists()
@@ -69,30 +61,30 @@ def test_show_refuses_a_stray_frame_and_a_symlinked_image(copy_of, tmp_path, cap
     fid = _a_frame(painted)
     shutil.copy(painted / "labels" / f"{fid}.json", painted / "labels" / "999999.json")
     shutil.copy(painted / "images" / f"{fid}.png", painted / "images" / "999999.png")
-    code, _, err = _run(["show", painted, "999999", "--out", tmp_path / "o.png"], capsys)
+    code, _, err = run_cli(["show", painted, "999999", "--out", tmp_path / "o.png"], capsys)
     assert code == 2 and "plan" in _one_line_error(err)
     secret = tmp_path / "secret.png"
     shutil.move(painted / "images" / f"{fid}.png", secret)
     (painted / "images" / f"{fid}.png").symlink_to(secret)
-    code, _, err = _run(["show", painted, fid, "--out", tmp_path / "o.png"], capsys)
+    code, _, err = run_cli(["show", painted, fid, "--out", tmp_path / "o.png"], capsys)
     assert code == 2 and "symlink" in _one_line_error(err) and not (tmp_path / "o.png").exists()
 
 
 def test_show_not_a_dataset(tmp_path, capsys):
-    code, _, err = _run(["show", tmp_path, "000000", "--out", tmp_path / "o.png"], capsys)
+    code, _, err = run_cli(["show", tmp_path, "000000", "--out", tmp_path / "o.png"], capsys)
     assert code == 2 and str(tmp_path) in _one_line_error(err)
 
 
 def test_show_draws_a_known_frame(painted, tmp_path, capsys):
     out = tmp_path / "o.png"
-    code, _, _ = _run(["show", painted, _a_frame(painted), "--out", out], capsys)
+    code, _, _ = run_cli(["show", painted, _a_frame(painted), "--out", out], capsys)
     assert code == 0 and out.stat().st_size > 0
 
 
 def test_show_out_is_a_folder(painted, tmp_path, capsys):
     folder = tmp_path / "folder"
     folder.mkdir()
-    code, _, err = _run(["show", painted, _a_frame(painted), "--out", folder], capsys)
+    code, _, err = run_cli(["show", painted, _a_frame(painted), "--out", folder], capsys)
     assert code == 2 and str(folder) in _one_line_error(err)
     assert os.listdir(folder) == [] and [p.name for p in tmp_path.iterdir()] == ["folder"]  # no temporary left
 
@@ -103,7 +95,7 @@ def test_show_out_in_a_read_only_folder(painted, tmp_path, capsys):
     ro.mkdir()
     ro.chmod(0o555)
     try:
-        code, _, err = _run(["show", painted, _a_frame(painted), "--out", ro / "o.png"], capsys)
+        code, _, err = run_cli(["show", painted, _a_frame(painted), "--out", ro / "o.png"], capsys)
     finally:
         ro.chmod(0o755)
     assert code == 2 and str(ro / "o.png") in _one_line_error(err)
@@ -119,7 +111,7 @@ def test_show_out_write_fails(painted, tmp_path, capsys, monkeypatch, exc):
     def fail(fd):
         raise exc
     monkeypatch.setattr(io_mod.os, "fsync", fail)
-    code, _, err = _run(["show", painted, _a_frame(painted), "--out", out], capsys)
+    code, _, err = run_cli(["show", painted, _a_frame(painted), "--out", out], capsys)
     line = _one_line_error(err)
     assert code == 2 and str(out) in line and exc.strerror in line
     assert out.read_bytes() == b"old"                          # atomic: the old file is untouched
@@ -141,28 +133,28 @@ def test_write_errors_are_dockfactory_errors_and_still_oserrors(tmp_path):
 
 def test_verify_takes_every_path(painted, copy_of, capsys):
     b = copy_of("b")
-    code, out, _ = _run(["dataset", "verify", painted, b], capsys)
+    code, out, _ = run_cli(["dataset", "verify", painted, b], capsys)
     assert code == 0 and str(painted) in out and str(b) in out
     label = min((b / "labels").glob("*.json"))
     label.write_text(label.read_text().replace('"x_mm": ', '"x_mm": 1'))   # B damaged, A intact
-    code, out, _ = _run(["dataset", "verify", painted, b], capsys)
+    code, out, _ = run_cli(["dataset", "verify", painted, b], capsys)
     assert code == 1 and f"{b}: FAILED" in out and f"{painted}: OK" in out
-    code, out, _ = _run(["dataset", "verify", b, painted], capsys)     # order does not matter
+    code, out, _ = run_cli(["dataset", "verify", b, painted], capsys)     # order does not matter
     assert code == 1 and f"{b}: FAILED" in out
 
 
 def test_verify_second_path_not_a_dataset(painted, tmp_path, capsys):
-    code, _, err = _run(["dataset", "verify", painted, tmp_path / "nothing"], capsys)
+    code, _, err = run_cli(["dataset", "verify", painted, tmp_path / "nothing"], capsys)
     assert code == 2 and str(tmp_path / "nothing") in _one_line_error(err)
 
 
 def test_info_takes_every_path(painted, copy_of, capsys):
     b = copy_of("b")
-    code, out, _ = _run(["dataset", "info", painted, b], capsys)
+    code, out, _ = run_cli(["dataset", "info", painted, b], capsys)
     assert code == 0 and str(painted) in out and str(b) in out
-    code, out, _ = _run(["dataset", "info", painted, b, "--json"], capsys)
+    code, out, _ = run_cli(["dataset", "info", painted, b, "--json"], capsys)
     assert code == 0 and [d["root"] for d in json.loads(out)] == [str(painted), str(b)]
-    code, out, _ = _run(["dataset", "info", painted, "--json"], capsys)   # one path: one object, as before
+    code, out, _ = run_cli(["dataset", "info", painted, "--json"], capsys)   # one path: one object, as before
     assert code == 0 and json.loads(out)["root"] == str(painted)
 
 
@@ -174,7 +166,7 @@ BAD_IDENTITIES = ["[]", "null", '"x"', "{}", '{"name": "x"}', '{"config": []}']
 def test_bad_dataset_json(painted, copy_of, capsys, content, action):
     b = copy_of("b")
     (b / "dataset.json").write_text(content)
-    code, _, err = _run(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
+    code, _, err = run_cli(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
     assert code == 2 and str(b / "dataset.json") in _one_line_error(err)
 
 
@@ -184,7 +176,7 @@ def test_verify_calls_a_damaged_identity_damage(painted, copy_of, capsys, conten
     bad input: the folder is a dataset, its identity is what broke."""
     b = copy_of("b")
     (b / "dataset.json").write_text(content)
-    code, out, err = _run(["dataset", "verify", b], capsys)
+    code, out, err = run_cli(["dataset", "verify", b], capsys)
     assert code == 1 and "FAILED" in out and "corrupt: dataset.json" in out and not err
 
 
@@ -195,7 +187,7 @@ def test_verify_calls_a_damaged_identity_damage(painted, copy_of, capsys, conten
 def test_bad_manifest(painted, copy_of, capsys, manifest, action):
     b = copy_of("b")
     (b / "manifest.json").write_text(json.dumps(manifest))
-    code, out, err = _run(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
+    code, out, err = run_cli(["dataset", action, b] + ([painted] if action == "diff" else []), capsys)
     assert "Traceback" not in err
     if action == "verify":          # verify reports a damaged manifest as a failed dataset
         assert code == 1 and f"{b}: FAILED" in out and "manifest.json" in out
@@ -208,7 +200,7 @@ def test_manifest_without_counts_info(copy_of, capsys):
     manifest = json.loads((b / "manifest.json").read_text())
     del manifest["counts"]
     (b / "manifest.json").write_text(json.dumps(manifest))
-    code, _, err = _run(["dataset", "info", b], capsys)
+    code, _, err = run_cli(["dataset", "info", b], capsys)
     assert code == 2 and str(b / "manifest.json") in _one_line_error(err)
 
 
@@ -224,7 +216,7 @@ def no_render(monkeypatch):
 @pytest.mark.parametrize("flags", [["--retries", "-1"], ["--recycle-after", "0"], ["--recycle-after", "-5"],
                                    ["--workers", "0"], ["--workers", "-2"]])
 def test_render_flags(tmp_path, capsys, no_render, flags):
-    code, _, err = _run(["render", "smoke", "--out", tmp_path / "o", *flags], capsys)
+    code, _, err = run_cli(["render", "smoke", "--out", tmp_path / "o", *flags], capsys)
     assert code == 2 and flags[0] in _one_line_error(err)
     assert no_render == [] and not (tmp_path / "o").exists()
 
@@ -248,26 +240,26 @@ def no_pipeline(monkeypatch):
     (["--train", "--epochs", "0"], "--epochs"),
 ])
 def test_run_flags(tmp_path, capsys, no_pipeline, flags, named):
-    code, _, err = _run(["run", "smoke", "--out", tmp_path / "w", *flags], capsys)
+    code, _, err = run_cli(["run", "smoke", "--out", tmp_path / "w", *flags], capsys)
     assert code == 2 and named in _one_line_error(err)
     assert no_pipeline == [] and not (tmp_path / "w").exists()
 
 
 def test_run_missing_weights(tmp_path, capsys, no_pipeline):
-    code, _, err = _run(["run", "smoke", "--out", tmp_path / "w", "--weights", tmp_path / "nope.pt"], capsys)
+    code, _, err = run_cli(["run", "smoke", "--out", tmp_path / "w", "--weights", tmp_path / "nope.pt"], capsys)
     assert code == 2 and "nope.pt" in _one_line_error(err)
     assert no_pipeline == [] and not (tmp_path / "w").exists()
 
 
 def test_run_invalid_config_writes_nothing(tmp_config, tmp_path, capsys, no_pipeline):
     path = tmp_config("[camera]\nmargin_px = nan\n")
-    code, _, err = _run(["run", path, "--out", tmp_path / "w"], capsys)
+    code, _, err = run_cli(["run", path, "--out", tmp_path / "w"], capsys)
     assert code == 2 and "margin_px" in _one_line_error(err)
     assert no_pipeline == [] and not (tmp_path / "w").exists()
 
 
 def test_run_good_flags_reach_the_pipeline(tmp_path, capsys, no_pipeline):
-    code, _, _ = _run(["run", "smoke", "--out", tmp_path / "w", "--train", "--epochs", "2"], capsys)
+    code, _, _ = run_cli(["run", "smoke", "--out", tmp_path / "w", "--train", "--epochs", "2"], capsys)
     assert code == 0 and len(no_pipeline) == 1 and no_pipeline[0][1]["train_epochs"] == 2
 
 
@@ -288,6 +280,6 @@ def test_run_good_flags_reach_the_pipeline(tmp_path, capsys, no_pipeline):
 ])
 def test_detector_flags(tmp_path, capsys, argv):
     argv = [a.format(d=tmp_path / "no-dataset", t=tmp_path) for a in argv]
-    code, _, err = _run(argv, capsys)
+    code, _, err = run_cli(argv, capsys)
     assert code == 2 and argv[-2] in _one_line_error(err)
     assert sorted(tmp_path.iterdir()) == []

@@ -139,3 +139,13 @@ def test_the_report_carries_an_id_of_its_inputs_and_a_sign_off_block(painted_sou
     prov.write_text(prov.read_text().replace('"commands": [', '"commands": ["edited", '))
     run_cli(["report", tmp_path / "ev", "--out", tmp_path / "c.html"], capsys)
     assert json.loads((tmp_path / "c.json").read_text())["report_id"] != first["report_id"]
+
+
+def test_a_config_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b'[dataset]\nname = "\xff\xfe"\n')
+    for argv in (["check-config", bad], ["run", bad, "--out", tmp_path / "w"], ["render", bad, "--out", tmp_path / "d"]):
+        code, _, err = run_cli(argv, capsys)
+        line = one_line_error(err)
+        assert code == 2 and "not UTF-8" in line and str(bad) in line, line
+    assert not (tmp_path / "w").exists() and not (tmp_path / "d").exists()
