@@ -71,7 +71,7 @@ class DataConfig:
 
 @dataclass(frozen=True)
 class Frame:
-    """One labelled frame. ``boxes: (M, 4) float64`` [x0, y0, x1, y1] OpenCV px (clipped outline),
+    """One labelled frame. ``boxes: (M, 4) float64`` [x0, y0, x1, y1] OpenCV px (``training_box``),
     ``classes: (M,) int64``, ``centers: (M, 2) float64`` px, ``visible: (M,) float64`` fraction."""
     frame_id: str
     image_path: str
@@ -96,13 +96,23 @@ class FrameSource(Protocol):
     def labels_of(self, split: str | None = None) -> list[dict]: ...
 
 
+def training_box(marker: dict) -> list[float]:
+    """The box a marker's label gives the network to learn, px (OpenCV convention): the marker's
+    outline box ``bbox_px`` (geometry, within the image), or for a marker of B that moved during
+    the exposure ``bbox_swept_px``, the box its outline sweeps over the exposure: the image holds
+    the smear, not the outline at mid-exposure (which ``bbox_px`` is)."""
+    swept = marker.get("bbox_swept_px")
+    return marker["bbox_px"] if swept is None else swept
+
+
 def frame_from_label(root, label: dict) -> Frame:
+    """The :class:`Frame` of one label: its markers that show any pixel and have a box."""
     ms = [m for m in label["markers"] if m.get("visible_pixels") and m.get("bbox_px") is not None]
     return Frame(
         frame_id=label["frame_id"], image_path=str(Path(root) / "images" / f"{label['frame_id']}.png"),
         condition=label["spec"]["condition"], width=int(label["image"]["width"]),
         height=int(label["image"]["height"]),
-        boxes=np.array([m["bbox_px"] for m in ms], dtype=np.float64).reshape(-1, 4),
+        boxes=np.array([training_box(m) for m in ms], dtype=np.float64).reshape(-1, 4),
         classes=np.array([m["class_id"] for m in ms], dtype=np.int64),
         centers=np.array([m["center_px"] for m in ms], dtype=np.float64).reshape(-1, 2),
         visible=np.array([m["visible_fraction"] for m in ms], dtype=np.float64))
