@@ -229,6 +229,14 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
             "annotations": annotations, "categories": categories()}
 
 
+def coco_image_ids(splits: dict[str, str]) -> dict[str, int]:
+    """frame id -> COCO image id of the export: ids run from 1 over the split files in SPLITS order
+    (train, val, test, repeat), each split's frames in plan order. ``splits``: frame id -> split in
+    plan order (``Dataset.splits``)."""
+    order = [fid for split in SPLITS for fid, s in splits.items() if s == split]
+    return {fid: i for i, fid in enumerate(order, start=1)}
+
+
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
     out = Path(out)
@@ -240,16 +248,17 @@ def export_coco(root, out) -> Path:
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)
     labels = ds.labels_of()
-    next_image, next_ann = 1, 1
+    image_ids = coco_image_ids(ds.splits)
+    next_ann = 1
     for split in SPLITS:
         split_labels = [lab for lab in labels if lab["spec"]["split"] == split]
         if not split_labels:
             continue
         info = coco_info(version=str(ident.get("version_id", "")), dataset=ident.get("name", ""), split=split,
                          cameras=camera_units_info(split_labels))
-        coco = coco_from_labels(split_labels, threshold, layout=layout, first_image_id=next_image,
+        coco = coco_from_labels(split_labels, threshold, layout=layout,
+                                first_image_id=image_ids[split_labels[0]["frame_id"]],
                                 first_annotation_id=next_ann, info=info)
-        next_image += len(coco["images"])
         next_ann += len(coco["annotations"])
         for lab in split_labels:
             place_file(source_image(root, lab["frame_id"]), out / "images" / split / f"{lab['frame_id']}.png")
