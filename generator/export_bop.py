@@ -3,6 +3,8 @@
 exports/bop/
   camera.json                     nominal camera (focal varies per frame: see scene_camera.json)
   models/obj_000001.ply, obj_000002.ply, models_info.json   (mm, vertex normals: generator.bop_models)
+  models_eval/                    the same files (bop_toolkit's evaluation and vis_poses read this folder)
+  test_targets_bop19.json         the test scene's instances at least 10 % visible (BOP's target list)
   <split>/000000/                 one BOP scene per split; image ids are frame order
     rgb/<im>.png                  the dataset's images
     mask/<im>_<gt>.png            each section's silhouette, 0 / 255 (gt: 0 = A, 1 = B, scene_gt's order)
@@ -40,6 +42,7 @@ from dockfactory.generator.export_files import place_file, source_exr, source_im
 from dockfactory.generator.random_draws import static_scene
 
 OBJ_ID = {"A": 1, "B": 2}
+TARGET_VISIB_MIN = 0.1   # BOP 19's rule for target instances: visible at least this fraction
 SCENE_FILES = (("scene_camera", "camera"), ("scene_gt", "gt"), ("scene_gt_info", "info"), ("frame_ids", "ids"),
                ("scene_camera_lens", "lens"))
 
@@ -81,7 +84,16 @@ def export_bop(root, out) -> Path:
     for split, sc in scenes.items():
         for name, key in SCENE_FILES:
             write_json_atomic(out / split / "000000" / f"{name}.json", sc[key])
+    if "test" in scenes:
+        write_json_atomic(out / "test_targets_bop19.json", test_targets(scenes["test"]["gt"], scenes["test"]["info"]))
     return out
+
+
+def test_targets(gts: dict, infos: dict) -> list[dict]:
+    """BOP's target list of the test scene (what its evaluation scripts and vis_poses read): each
+    object instance at least TARGET_VISIB_MIN visible (``scene_gt_info``'s ``visib_fract``)."""
+    return [{"im_id": int(im), "obj_id": gt["obj_id"], "inst_count": 1, "scene_id": 0}
+            for im in gts for gt, info in zip(gts[im], infos[im]) if info["visib_fract"] >= TARGET_VISIB_MIN]
 
 
 def _write_models(sec: dict, out: Path) -> None:
@@ -90,11 +102,14 @@ def _write_models(sec: dict, out: Path) -> None:
     for s in SECTIONS:
         v, n, f = section_mesh(sec["radius_mm"], sec["length_mm"], sec["flange_width_mm"], sec["flange_height_mm"], s)
         write_ply(out / "models" / f"obj_{OBJ_ID[s]:06d}.ply", v, n, f)
+        # models_eval/: where bop_toolkit's evaluation and vis_poses look by default; the same mesh
+        place_file(out / "models" / f"obj_{OBJ_ID[s]:06d}.ply", out / "models_eval" / f"obj_{OBJ_ID[s]:06d}.ply")
         lo, hi = v.min(0), v.max(0)
         diameter = float(np.sqrt(((hi - lo) ** 2).sum()))  # bounding-box diagonal >= true diameter
         info[str(OBJ_ID[s])] = {"diameter": diameter, "min_x": lo[0], "min_y": lo[1], "min_z": lo[2],
                                 "size_x": hi[0] - lo[0], "size_y": hi[1] - lo[1], "size_z": hi[2] - lo[2]}
-    write_json_atomic(out / "models" / "models_info.json", {k: {a: float(b) for a, b in d.items()} for k, d in info.items()})
+    for folder in ("models", "models_eval"):
+        write_json_atomic(out / folder / "models_info.json", {k: {a: float(b) for a, b in d.items()} for k, d in info.items()})
 
 
 def _png(path: Path, image: np.ndarray) -> None:

@@ -12,9 +12,12 @@ Steps, as a user follows docs/datasets.md:
 3. ``scripts/calc_gt_info.py`` with its parameter block set to that dataset and each split, the
    vispy renderer (headless: EGL's surfaceless platform, Mesa's software rasteriser), delta 15 mm.
 4. bop_toolkit's renderer draws each section's model in its scene_gt pose with its cam_K: the
-   pixels it covers, against the export's mask/<im>_<gt>.png.
-Prints, per split, bop_toolkit's scene_gt_info records and per image and object the pixels of
-the render outside the export's mask and of the mask outside the render.
+   pixels it covers, against the export's mask/<im>_<gt>.png;
+5. when its plotting dependencies import (trimesh, tqdm), ``scripts/vis_poses.py gt`` on the test
+   split with its defaults (models_eval/, test_targets_bop19.json): the images it wrote.
+Prints, per split, bop_toolkit's scene_gt_info records, per image and object the pixels of the
+render outside the export's mask and of the mask outside the render, and vis_poses' images
+(null when it could not run for want of its dependencies).
 """
 import json
 import os
@@ -85,6 +88,25 @@ def masks_vs_render(data: Path, width: int, height: int) -> dict:
     return out
 
 
+def vis_poses(kit: Path, work: Path) -> list[str] | None:
+    """Run vis_poses.py (GT mode) on the test split; the names of the images it wrote, or None
+    when trimesh or tqdm is missing."""
+    try:
+        import tqdm  # noqa: F401
+        import trimesh  # noqa: F401
+    except ImportError:
+        return None
+    out = work / "vis"
+    argv = sys.argv
+    sys.argv = ["vis_poses.py", "gt", "--dataset", "dockfactory", "--dataset_split", "test", "--vis_path", str(out)]
+    sys.path.insert(0, str(kit / "scripts"))
+    try:
+        runpy.run_path(str(kit / "scripts" / "vis_poses.py"), run_name="__main__")
+    finally:
+        sys.argv = argv
+    return sorted(p.name for p in out.rglob("*.jpg"))
+
+
 RENDERER_MISSING = 3   # exit status: bop_toolkit is there, its renderer's packages are not
 
 
@@ -110,7 +132,9 @@ def main(export: str, work_dir: str, width: str, height: str) -> None:
         if (data / split).is_dir():
             calc_gt_info(kit / "scripts" / "calc_gt_info.py", split)
             out[split] = json.loads((data / split / "000000" / "scene_gt_info.json").read_text())
-    print(json.dumps({"source": str(src), "gt_info": out, "masks": masks_vs_render(data, int(width), int(height))}))
+    masks = masks_vs_render(data, int(width), int(height))
+    vis = vis_poses(kit, work) if (data / "test").is_dir() else None
+    print(json.dumps({"source": str(src), "gt_info": out, "masks": masks, "vis_poses": vis}))
 
 
 if __name__ == "__main__":

@@ -242,3 +242,17 @@ def test_bop_toolkit_calc_gt_info_and_renderer_agree_with_the_export(with_exr, b
             assert abs(calc["px_count_valid"] - mine["px_count_all"]) <= 3
             n += 1
     assert n == 2 * len(list(scenes(with_exr)))
+    if res["vis_poses"] is not None:   # an overlay and a depth difference per test image
+        test_ims = json.loads((with_exr / "exports" / "bop" / "test" / "000000" / "frame_ids.json").read_text())
+        assert res["vis_poses"] == sorted(f"{int(im):06d}_{kind}.jpg" for im in test_ims for kind in ("depth_diff", "overlay"))
+
+
+def test_models_eval_and_test_targets(with_exr):
+    bop = with_exr / "exports" / "bop"
+    for name in ("obj_000001.ply", "obj_000002.ply", "models_info.json"):
+        assert (bop / "models_eval" / name).read_bytes() == (bop / "models" / name).read_bytes()
+    targets = json.loads((bop / "test_targets_bop19.json").read_text())
+    infos = json.loads((bop / "test" / "000000" / "scene_gt_info.json").read_text())
+    expected = [(int(im), gt + 1) for im, recs in infos.items() for gt, r in enumerate(recs) if r["visib_fract"] >= 0.1]
+    assert [(t["im_id"], t["obj_id"]) for t in targets] == expected and expected
+    assert all(t["scene_id"] == 0 and t["inst_count"] == 1 for t in targets)
