@@ -238,7 +238,7 @@ class LabelsConfig:
 
 @dataclass(frozen=True)
 class ExportConfig:
-    formats: tuple[str, ...] = ("coco", "yolo")  # written when the dataset completes; also bop
+    formats: tuple[str, ...] = ("coco", "yolo")  # written when the dataset completes; also yolo-pose, bop
 
 
 

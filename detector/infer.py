@@ -243,7 +243,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
                    iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True,
                    camera=None) -> dict:
     """Run the detector over the frames of ``split`` of the opened ``dataset`` (detector.data.FrameSource)
-    and write the detections JSON atomically.
+    and write the detections JSON atomically to ``out`` (None: return it only, for a caller that
+    writes another format).
 
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
     "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
@@ -277,5 +278,6 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
            "timing": {"frames": len(frames), "mean_ms": round(1000 * float(np.mean(times)), 2),
                       "median_ms": round(1000 * float(np.median(times)), 2)},
            "frames": results}
-    write_json_atomic(out, doc)
+    if out is not None:
+        write_json_atomic(out, doc)
     return doc

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.onnx_export import export_onnx
@@ -22,6 +23,7 @@ from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.cli_args import input_scale, int_in, non_negative_int, thread_count, torch_threads, unit_float
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.export_coco_results import coco_results
 
 # Named limits of the training flags: beyond them a run asks for gigabytes (1e9 crops per frame
 # wanted a 30 GB index array) or years, not for a detector.
@@ -59,11 +61,15 @@ def cmd_detect(args) -> int:
     from dockfactory.detector.infer import detect_dataset
     split = None if args.split == "all" else args.split
     dataset = Dataset.open(args.dataset)
-    doc = detect_dataset(dataset, args.weights or shipped_weights(), args.out, split=split, conf_threshold=args.conf,
-                         iou_threshold=args.iou, refine=not args.no_refine, progress=not args.quiet,
-                         camera=dataset_camera(dataset))
+    native = args.format == "dockfactory"
+    doc = detect_dataset(dataset, args.weights or shipped_weights(), args.out if native else None, split=split,
+                         conf_threshold=args.conf, iou_threshold=args.iou, refine=not args.no_refine,
+                         progress=not args.quiet, camera=dataset_camera(dataset))
+    if not native:   # COCO results: the ids of the dataset's COCO export
+        write_json_atomic(args.out, coco_results(dataset.splits, doc), indent=None)
     n = sum(len(v) for v in doc["frames"].values())
-    print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}")
+    print(f"{n} detections in {len(doc['frames'])} frames ({doc['timing']['mean_ms']} ms/image) -> {args.out}"
+          + ("" if native else " (COCO results)"))
     if args.eval:
         print(format_report(evaluate_detections(dataset, doc)))
     return 0
@@ -140,6 +146,9 @@ def _add_detect_parser(subparsers) -> None:
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
+    d.add_argument("--format", choices=("dockfactory", "coco-results"), default="dockfactory",
+                   help="dockfactory: the detections document (default); coco-results: a COCO results list "
+                        "(image and category ids of the dataset's COCO export) for COCOeval")
     d.add_argument("--conf", type=unit_float, default=MIN_SCORE, help="score threshold (use 0.001 for mAP)")
     d.add_argument("--iou", type=unit_float, default=0.45, help="NMS IoU threshold")
     d.add_argument("--no-refine", action="store_true", help="skip the sub-pixel centre refinement")

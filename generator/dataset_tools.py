@@ -25,9 +25,10 @@ from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
 from dockfactory.generator.export_yolo import export_yolo
+from dockfactory.generator.export_yolo_pose import export_yolo_pose
 from dockfactory.generator.sampler import frame_plan
 
-EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
+EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "yolo-pose": export_yolo_pose, "bop": export_bop}
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this

@@ -25,7 +25,11 @@ Pixel conventions (stated again in each file's ``info``):
   top-left pixel: the label's (OpenCV) coordinates + 0.5;
 - ``keypoints``: pixel indices, the OpenCV convention of the labels ((0, 0) is the centre of the
   top-left pixel): the label's ``center_px`` unchanged. Keypoint consumers (detectron2 and its
-  forks, MMPose) add 0.5 when they load COCO keypoints, which gives the continuous centre.
+  forks, MMPose) add 0.5 when they load COCO keypoints, which gives the continuous centre;
+  a converter that takes them as continuous (ultralytics' ``convert_coco(use_keypoints=True)``)
+  must add 0.5 to x and y of every keypoint with v > 0 first (``info.keypoints_to_continuous``),
+  or the keypoints land half a pixel up and left of the centres: the yolo-pose export has them
+  right.
 
 Cameras: each image record carries its camera unit (``camera_unit``), ``K`` (OpenCV pixels, with
 its principal point) and ``dist_coeffs`` (the unit's lens distortion, OpenCV's order k1, k2, p1,
@@ -58,6 +62,12 @@ KPT_OKS_SIGMAS = (0.025,)
 POLYGON_TOLERANCE_PX = 0.02   # the written polygon stays this close to the label's outline
 POLYGON_DECIMALS = 3
 
+KEYPOINTS_TO_CONTINUOUS = (
+    "keypoints are pixel indices: add 0.5 to x and y of each keypoint with v > 0 to get continuous "
+    "coordinates (the frame of bbox) before normalising by the image size; ultralytics' "
+    "convert_coco(use_keypoints=True) does not, so add it to the JSON before converting (or use the "
+    "yolo-pose export, which has it)")
+
 CONVENTIONS = {
     "bbox": "continuous: (0,0) is the top-left corner of the top-left pixel (label bbox_px + 0.5)",
     "segmentation": "continuous, like bbox: the marker outline clipped to the image (label + 0.5)",
@@ -73,7 +83,7 @@ def categories() -> list[dict]:
 
 def coco_info(**extra) -> dict:
     return {"description": "dockfactory markers", "pixel_conventions": dict(CONVENTIONS),
-            "kpt_oks_sigmas": list(KPT_OKS_SIGMAS),
+            "kpt_oks_sigmas": list(KPT_OKS_SIGMAS), "keypoints_to_continuous": KEYPOINTS_TO_CONTINUOUS,
             "segmentation": f"clipped marker outline, within {POLYGON_TOLERANCE_PX} px of the "
                             f"label's outline polygon; amodal (occluders not cut out)", **extra}
 
@@ -219,6 +229,14 @@ def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layo
             "annotations": annotations, "categories": categories()}
 
 
+def coco_image_ids(splits: dict[str, str]) -> dict[str, int]:
+    """frame id -> COCO image id of the export: ids run from 1 over the split files in SPLITS order
+    (train, val, test, repeat), each split's frames in plan order. ``splits``: frame id -> split in
+    plan order (``Dataset.splits``)."""
+    order = [fid for split in SPLITS for fid, s in splits.items() if s == split]
+    return {fid: i for i, fid in enumerate(order, start=1)}
+
+
 def export_coco(root, out) -> Path:
     """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
     out = Path(out)
@@ -230,16 +248,17 @@ def export_coco(root, out) -> Path:
     threshold = ident["config"]["labels"]["visible_threshold"]
     layout = read_layout(root)
     labels = ds.labels_of()
-    next_image, next_ann = 1, 1
+    image_ids = coco_image_ids(ds.splits)
+    next_ann = 1
     for split in SPLITS:
         split_labels = [lab for lab in labels if lab["spec"]["split"] == split]
         if not split_labels:
             continue
         info = coco_info(version=str(ident.get("version_id", "")), dataset=ident.get("name", ""), split=split,
                          cameras=camera_units_info(split_labels))
-        coco = coco_from_labels(split_labels, threshold, layout=layout, first_image_id=next_image,
+        coco = coco_from_labels(split_labels, threshold, layout=layout,
+                                first_image_id=image_ids[split_labels[0]["frame_id"]],
                                 first_annotation_id=next_ann, info=info)
-        next_image += len(coco["images"])
         next_ann += len(coco["annotations"])
         for lab in split_labels:
             place_file(source_image(root, lab["frame_id"]), out / "images" / split / f"{lab['frame_id']}.png")

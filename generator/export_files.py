@@ -34,3 +34,12 @@ def place_file(src: Path, dst: Path) -> None:
             os.link(src, tmp, follow_symlinks=False)
         except OSError:
             shutil.copyfile(src, tmp)
+
+
+def source_exr(root, frame_id: str) -> Path:
+    """The dataset's kept EXR of a (checked) frame id ([render] keep_exr); a symlink is refused,
+    as for :func:`source_image`."""
+    path = Path(root) / "exr" / f"{check_frame_id(frame_id, root)}.exr"
+    if path.is_symlink():
+        raise DatasetError(f"{path}: is a symlink; a dataset's files live inside it")
+    return path

@@ -114,3 +114,46 @@ def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
     ablate.run_ablation(Dataset.open(painted_source), tmp_path, ["none", "se"], [0, 1],
                         lambda att, seed: TrainConfig(), progress=False)
     assert order == [("none", 0), ("se", 0), ("none", 1), ("se", 1)]
+
+
+@pytest.mark.slow   # the shipped detector twice over the painted test frames: about 8 s
+def test_detect_writes_coco_results_that_cocoeval_takes(painted, tmp_path, capsys):
+    """`detect --format coco-results`: the same detections as the native document, as rows with
+    the ids of the dataset's COCO export, which COCOeval evaluates against that export."""
+    import contextlib
+    import io
+
+    import numpy as np
+    from pycocotools.coco import COCO
+    from pycocotools.cocoeval import COCOeval
+
+    from dockfactory.cli import main
+    assert main(["dataset", "export", str(painted), "--format", "coco"]) == 0
+    native, results = tmp_path / "dets.json", tmp_path / "results.json"
+    for fmt, out in (("dockfactory", native), ("coco-results", results)):
+        assert main(["detect", str(painted), "--out", str(out), "--format", fmt, "--threads", "1", "--quiet"]) == 0
+    assert "(COCO results)" in capsys.readouterr().out
+    doc, rows = json.loads(native.read_text()), json.loads(results.read_text())
+    dets = [d for fid in sorted(doc["frames"]) for d in doc["frames"][fid]]
+    assert isinstance(rows, list) and len(rows) == len(dets) > 0
+    with contextlib.redirect_stdout(io.StringIO()):
+        gt = COCO(str(painted / "exports" / "coco" / "annotations" / "person_keypoints_test.json"))
+        frame_of = {img["id"]: img["frame_id"] for img in gt.dataset["images"]}
+        assert {r["image_id"] for r in rows} <= set(frame_of)
+        for r in rows:   # each row is one of the frame's detections: box + 0.5, centre as it is
+            d = next(d for d in doc["frames"][frame_of[r["image_id"]]]
+                     if np.allclose(np.add(d["bbox_px"][:2], 0.5), r["bbox"][:2], atol=1e-4))
+            assert r["category_id"] == d["class_id"] + 1 and np.allclose(r["keypoints"][:2], d["center_px"], atol=1e-4)
+        for iou_type in ("bbox", "keypoints"):
+            ev = COCOeval(gt, gt.loadRes(rows), iouType=iou_type)
+            ev.params.kpt_oks_sigmas = np.array(gt.dataset["info"]["kpt_oks_sigmas"])
+            ev.evaluate()
+            ev.accumulate()
+            ev.summarize()
+            assert 0.0 < ev.stats[0] <= 1.0, iou_type   # the shipped detector finds the painted markers
+
+
+def test_detect_refuses_an_unknown_format(painted, tmp_path, capsys):
+    from cli_run import run_cli
+    code, _, err = run_cli(["detect", painted, "--out", tmp_path / "d.json", "--format", "yolo"], capsys)
+    assert code == 2 and "--format" in err and "coco-results" in err and not (tmp_path / "d.json").exists()

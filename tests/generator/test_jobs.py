@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+import cv2
 import numpy as np
 import pytest
 
@@ -218,10 +219,10 @@ def test_coco_round_trip(job):
 
 
 def test_bop_round_trip(job):
-    from dockfactory.generator.export_bop import read_ply_vertices
+    from dockfactory.generator.bop_models import read_ply
     _, _, clean = job
     bop = clean / "exports" / "bop"
-    verts = read_ply_vertices(bop / "models" / "obj_000001.ply")
+    verts = read_ply(bop / "models" / "obj_000001.ply")["pts"]
     r = np.hypot(verts[:, 1], verts[:, 2])
     assert r.max() == pytest.approx(308.0, abs=1e-3) and verts[:, 0].min() == pytest.approx(-1200.0)
     info = json.loads((bop / "models" / "models_info.json").read_text())
@@ -244,9 +245,16 @@ def test_bop_round_trip(job):
         m2c[:3, :3] = np.array(gb["cam_R_m2c"]).reshape(3, 3)
         m2c[:3, 3] = gb["cam_t_m2c"]
         assert np.allclose(np.linalg.inv(cam_from_d) @ m2c, lab["d_from_b"], atol=1e-9)
-        for srec, inf in zip(lab["sections"], infos[im]):
-            assert inf["px_count_visib"] == srec["pixels_visible"] > 0
-            assert inf["px_count_all"] == srec["pixels_all"] >= inf["px_count_visib"] * 0.9
+        depth = cv2.imread(str(scene / "depth" / f"{int(im):06d}.png"), cv2.IMREAD_UNCHANGED)
+        assert depth.dtype == np.uint16 and cams[im]["depth_scale"] in (0.1, 1.0, 10.0) and depth.any()
+        for gt, (srec, inf) in enumerate(zip(lab["sections"], infos[im])):
+            # the BOP masks: pixel centres inside the flange or the body (the label's silhouette is
+            # the hull of both, filled fat: larger) and the index pass's pixels within them
+            mask = cv2.imread(str(scene / "mask" / f"{int(im):06d}_{gt:06d}.png"), cv2.IMREAD_UNCHANGED) > 0
+            visib = cv2.imread(str(scene / "mask_visib" / f"{int(im):06d}_{gt:06d}.png"), cv2.IMREAD_UNCHANGED) > 0
+            assert inf["px_count_all"] == mask.sum() <= srec["pixels_all"]
+            assert inf["px_count_visib"] == visib.sum() <= srec["pixels_visible"] and not (visib & ~mask).any()
+            assert inf["px_count_visib"] >= 0.9 * srec["pixels_visible"] > 0
             assert 0 < inf["visib_fract"] <= 1
 
 

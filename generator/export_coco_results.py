@@ -1,0 +1,56 @@
+"""Detections as a COCO results file: the list ``COCO.loadRes`` and ``COCOeval`` (and FiftyOne's
+COCO importers) take, with the image and category ids of the dataset's COCO export.
+
+One row per detection::
+
+    {"image_id", "category_id", "bbox": [x, y, w, h], "score", "keypoints": [x, y, v]}
+
+- ``image_id``: the frame's image id in the COCO export (generator.export_coco.coco_image_ids:
+  ids run over train, val, test, repeat), so the rows of ``detect --split test`` load against
+  ``exports/coco/annotations/person_keypoints_test.json`` as they are (``COCO.loadRes`` refuses
+  rows whose image is not in the file: filter the rows of ``--split all`` by the file's image ids);
+- ``category_id``: class id + 1 (1 RedA, 2 BlueB), as in the export;
+- ``bbox``: the detection's box in continuous coordinates ((0, 0) is the top-left corner of the
+  top-left pixel: the detection's OpenCV ``bbox_px`` + 0.5), like the export's boxes;
+- ``keypoints``: the detection's (refined) centre in pixel indices, the convention of the export's
+  keypoints (OpenCV: the detection's ``center_px`` unchanged), with v = 2; COCOeval reads only x, y
+  of a result's keypoints;
+- ``score``: the detector's confidence.
+
+Keypoint COCOeval needs the OKS sigma of the ``centre`` keypoint, which the export states in
+``info.kpt_oks_sigmas`` (``[0.025]``, generator.export_coco.KPT_OKS_SIGMAS):
+``ev = COCOeval(gt, gt.loadRes(rows), "keypoints"); ev.params.kpt_oks_sigmas = np.array(sigmas)``.
+"""
+from __future__ import annotations
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.generator.export_coco import COCO_SHIFT, coco_image_ids
+
+RESULT_DECIMALS = 4   # 1e-4 px: far below any detector's error, and a compact file
+
+
+def detection_row(image_id: int, det: dict) -> dict:
+    """The COCO results row of one detection record (detector.infer's ``{class_id, score, bbox_px,
+    center_px, ...}``, OpenCV pixels) of image ``image_id``."""
+    x0, y0, x1, y1 = (float(v) for v in det["bbox_px"])
+    u, v = (float(c) for c in det["center_px"])
+    r = RESULT_DECIMALS
+    return {"image_id": image_id, "category_id": int(det["class_id"]) + 1,
+            "bbox": [round(x0 + COCO_SHIFT, r), round(y0 + COCO_SHIFT, r), round(x1 - x0, r), round(y1 - y0, r)],
+            "score": round(float(det["score"]), 6), "keypoints": [round(u, r), round(v, r), 2]}
+
+
+def coco_results(splits: dict[str, str], detections: dict) -> list[dict]:
+    """The COCO results rows of a detections document (``{"frames": {frame_id: [det, ...]}}``,
+    detector.infer.detect_dataset's JSON) on the dataset whose frame splits are ``splits``
+    (frame id -> split in plan order, ``Dataset.splits``): frames in image id order, each frame's
+    detections in their order. DockfactoryError naming the frame when a frame id is not one of
+    the dataset's."""
+    ids = coco_image_ids(splits)
+    frames = detections.get("frames") if isinstance(detections, dict) else None
+    if not isinstance(frames, dict):
+        raise DockfactoryError("detections: no 'frames' object (not a dockfactory detections document)")
+    unknown = sorted(set(frames) - set(ids))
+    if unknown:
+        raise DockfactoryError(f"detections: frame {unknown[0]!r} is not a frame of the dataset")
+    return [detection_row(ids[fid], det) for fid in ids if fid in frames for det in frames[fid]]

@@ -1,0 +1,59 @@
+"""YOLO-pose export: ultralytics' pose layout, the YOLO export's boxes plus one keypoint per marker.
+
+exports/yolo-pose/
+  data.yaml          as the YOLO export's (no ``path:`` key), plus ``kpt_shape: [1, 3]``,
+                     ``flip_idx: [0]`` (one keypoint: a horizontal flip maps it to itself) and
+                     ``kpt_names`` (``centre`` for each class)
+  images/{train,val,test,repeat}/<id>.png   hard links to the dataset's images (else copies)
+  labels/{train,val,test,repeat}/<id>.txt   one line per marker: class cx cy w h kx ky v
+
+The markers, box fields and split folders are the YOLO export's (generator.export_yolo: markers
+below the visible threshold or washed out are left out). ``kx ky`` is the marker's projected
+centre (label ``center_px``) in ultralytics' convention: normalised continuous coordinates,
+(0, 0) the top-left corner of the top-left pixel, so ``kx = (center_px[0] + 0.5) / W`` (the label
+is in OpenCV's convention, pixel centres at integers: dropping the 0.5 puts every keypoint half a
+pixel up and left of the centre). ``v`` is COCO's visibility as the label gives it: 2 visible,
+1 labelled but occluded, and ``0 0 0`` for a marker whose centre is outside the image (part of
+its disc in view), which ultralytics masks out of the keypoint loss and of OKS.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from dockfactory.core.layout import CLASS_NAMES
+from dockfactory.generator.export_coco import KEYPOINTS, centre_in_image
+from dockfactory.generator.export_yolo import box_fields, exported_markers, write_yolo_layout
+
+KEYPOINT_DECIMALS = 10   # normalised: 1e-10 of a 10,000 px image is 1e-6 px
+
+
+def keypoint_fields(m: dict, w: int, h: int) -> str:
+    """``kx ky v`` of marker record ``m`` in a ``w`` x ``h`` image (module docstring)."""
+    if not centre_in_image(m, w, h):
+        return "0 0 0"
+    u, v = m["center_px"]
+    vis = 2 if m.get("visibility", 2) == 2 else 1
+    return f"{(u + 0.5) / w:.{KEYPOINT_DECIMALS}f} {(v + 0.5) / h:.{KEYPOINT_DECIMALS}f} {vis}"
+
+
+def pose_lines(label: dict, visible_threshold: float) -> list[str]:
+    """One ``class cx cy w h kx ky v`` line per exported marker of ``label``."""
+    w, h = label["image"]["width"], label["image"]["height"]
+    return [f"{box_fields(m, w, h)} {keypoint_fields(m, w, h)}" for m in exported_markers(label, visible_threshold)]
+
+
+def parse_pose_keypoint(line: str, w: int, h: int) -> tuple[float, float, int]:
+    """The keypoint of one pose line in the labels' OpenCV pixels: (u, v, visibility)."""
+    kx, ky, vis = line.split()[5:8]
+    return float(kx) * w - 0.5, float(ky) * h - 0.5, int(vis)
+
+
+def pose_yaml_keys() -> str:
+    names = "".join(f"  {i}: [{', '.join(KEYPOINTS)}]\n" for i in range(len(CLASS_NAMES)))
+    return (f"# one keypoint per marker (its centre): x, y normalised continuous, visibility 0/1/2\n"
+            f"kpt_shape: [{len(KEYPOINTS)}, 3]\nflip_idx: [0]\nkpt_names:\n{names}")
+
+
+def export_yolo_pose(root, out) -> Path:
+    """Write the YOLO-pose export of dataset ``root`` (a folder, or an opened Dataset) into ``out``."""
+    return write_yolo_layout(root, out, pose_lines, pose_yaml_keys())
