@@ -1,4 +1,6 @@
-"""Helpers shared by the exporters: images placed (hard link, else copy) atomically.
+"""Helpers shared by the exporters: images placed (hard link, else copy) atomically. An image
+behind a DVC cache link is placed from the cached file (a hard link to it is read-only, as DVC
+makes its hardlink workspaces).
 
 The exporters read a dataset through ``Dataset.open`` (generator.dataset_open): every frame id and
 split that goes into an export path is a planned frame's, from a label whose bytes match the
@@ -12,13 +14,19 @@ from pathlib import Path
 
 from dockfactory.core.io import atomic_path
 from dockfactory.generator.dataset import DatasetError, check_frame_id
+from dockfactory.generator.dvc_links import cache_link, dvc_caches
 
 
 def source_image(root, frame_id: str) -> Path:
-    """The dataset's image of a (checked) frame id; a symlink is refused (it could point anywhere)."""
+    """The dataset's image of a (checked) frame id: the file itself, or the file a DVC cache link
+    resolves to (``generator.dvc_links``; its bytes were checked when the dataset was opened);
+    any other symlink is refused (it could point anywhere)."""
     path = Path(root) / "images" / f"{check_frame_id(frame_id, root)}.png"
     if path.is_symlink():
-        raise DatasetError(f"{path}: is a symlink; a dataset's files live inside it")
+        target = cache_link(path, dvc_caches(root))
+        if target is None:
+            raise DatasetError(f"{path}: is a symlink; a dataset's files live inside it")
+        return target
     return path
 
 
