@@ -3,12 +3,10 @@ directories (the content diff lives in ``generator.dataset_diff``)."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from pathlib import Path
 
 from dockfactory.core.config import config_from_dict
-from dockfactory.core.io import output_lock, remove_stale_temps, temp_name, write_json_atomic
+from dockfactory.core.io import output_lock, remove_stale_temps, write_json_atomic
 from dockfactory.generator.dataset import (
     DatasetError,
     dataset_lock,
@@ -26,6 +24,7 @@ from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dvc_links import export_refusal
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
+from dockfactory.generator.export_files import folder_built_aside
 from dockfactory.generator.export_yolo import export_yolo
 from dockfactory.generator.sampler import frame_plan
 
@@ -101,21 +100,11 @@ def write_export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
     # built aside by a killed export (of this host, or old): never part of any export
     remove_stale_temps(exports, max_age_s=STALE_EXPORT_S, own=True)
     final = exports / fmt
-    tmp = exports / temp_name(fmt)
-    aside = exports / temp_name(f"{fmt}.old")
-    try:
+    with folder_built_aside(final) as tmp:   # old or new, never partial
         ds = ds if ds is not None else Dataset.open(root)
         EXPORT_WRITERS[fmt](ds, tmp)
         n_files = sum(1 for p in tmp.rglob("*") if p.is_file())
         write_json_atomic(tmp / EXPORT_MARK, {"format": fmt, "version_id": ds.version_id, "files": n_files})
-        # old or new, never partial: the old export steps aside, the new one takes its name
-        if final.exists():
-            os.rename(final, aside)
-        os.rename(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
     return final
 
 

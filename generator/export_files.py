@@ -8,11 +8,12 @@ manifest. So a tampered label can never make an exporter write (or read) outside
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from pathlib import Path
 
-from dockfactory.core.io import atomic_path
+from dockfactory.core.io import atomic_path, temp_name
 from dockfactory.generator.dataset import DatasetError, check_frame_id
 from dockfactory.generator.dvc_links import cache_link, dvc_caches
 
@@ -42,3 +43,23 @@ def place_file(src: Path, dst: Path) -> None:
             os.link(src, tmp, follow_symlinks=False)
         except OSError:
             shutil.copyfile(src, tmp)
+
+
+@contextlib.contextmanager
+def folder_built_aside(final: Path):
+    """Yield a temporary folder beside ``final`` to build in; when the block ends it replaces
+    ``final`` by rename (old or new, never partial: the old one steps aside, the new one takes
+    its name, then the old one is removed). On an error the temporary folder is removed and
+    ``final`` is untouched; so it is when the block removed the temporary folder itself (the
+    caller found nothing to change)."""
+    tmp, aside = final.with_name(temp_name(final.name)), final.with_name(temp_name(f"{final.name}.old"))
+    try:
+        yield tmp
+        if tmp.exists():
+            if final.exists():
+                os.rename(final, aside)
+            os.rename(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)

@@ -35,11 +35,11 @@ import os
 import shutil
 from pathlib import Path
 
-from dockfactory.core.io import TMP_MARK, stale_temp, temp_name, write_text_atomic
+from dockfactory.core.io import TMP_MARK, stale_temp, write_text_atomic
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_files import place_file, source_image
+from dockfactory.generator.export_files import folder_built_aside, place_file, source_image
 
 HF_DIR = "hf"
 HF_SPLIT_NAMES = {"train": "train", "val": "validation", "test": "test", "repeat": "repeat"}   # ours -> the hub's
@@ -132,17 +132,8 @@ def write_hf_view(ds: Dataset) -> dict[str, int]:
     for left in root.glob(f".{HF_DIR}*{TMP_MARK}*"):   # built aside by a killed writer
         if stale_temp(left, STALE_VIEW_S, own=True):
             shutil.rmtree(left, ignore_errors=True)
-    tmp, aside = root / temp_name(HF_DIR), root / temp_name(f"{HF_DIR}.old")
-    try:
+    with folder_built_aside(final) as tmp:
         counts = _build(ds, tmp)
         if _same_tree(final, tmp):
-            shutil.rmtree(tmp)
-            return counts
-        if final.exists():
-            os.rename(final, aside)
-        os.rename(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
+            shutil.rmtree(tmp)   # nothing changes: final stays as it is
     return counts
