@@ -16,6 +16,7 @@ from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator import published
 from dockfactory.generator.dataset import dataset_lock, identity, writer_lock
 from dockfactory.generator.dataset_card import write_card
+from dockfactory.generator.dvc_links import outside_note
 from dockfactory.generator.label_overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
@@ -101,6 +102,8 @@ def cmd_export(args) -> int:
         raise DockfactoryError("--out: one dataset at a time (each export folder holds one dataset's formats)")
     for root in args.dirs:
         ds = dt.Dataset.open(root)   # every byte checked once for all its formats
+        if args.out is None and outside_note(root):
+            print(f"note: {outside_note(root)}", file=sys.stderr)
         for fmt in formats:
             print(dt.export(root, fmt, ds, args.out))
     return EXIT_OK
@@ -155,8 +158,8 @@ def _add_dataset_actions(d) -> None:
     e.add_argument("dirs", nargs="+", metavar="DIR")
     e.add_argument("--format", default="coco,yolo,bop", help="coco, yolo, bop (comma-separated)")
     e.add_argument("--out", default=None, metavar="FOLDER",
-                   help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; a dataset tracked "
-                        "by DVC needs --out unless its DVC project ignores exports/)")
+                   help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "
+                        "tracked by DVC whose project does not ignore exports/, T.exports/ beside its tracked folder T)")
     e.set_defaults(func=cmd_export)
     c = acts.add_parser("card", help="write each dataset's card (README.md) and Hugging Face view (hf/) again")
     c.add_argument("dirs", nargs="+", metavar="DIR")

@@ -21,7 +21,7 @@ from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CL
 )
 from dockfactory.generator.dataset_diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.dvc_links import export_refusal
+from dockfactory.generator.dvc_links import outside_exports
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
 from dockfactory.generator.export_files import folder_built_aside
@@ -112,20 +112,19 @@ def export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
     """Write one export of a complete dataset as DIR/exports/<fmt>/ (or ``dest``/<fmt>/): built
     aside, then swapped in by rename (an interrupted export leaves the old one, the new one or
     none, never a partial one), under the lock of the folder written (the dataset's, or
-    ``dest``'s: a concurrent render or export is refused, naming it). Inside a dataset tracked by
-    DVC whose project does not ignore ``exports/`` it is refused (``dvc_links.export_refusal``)."""
+    ``dest``'s: a concurrent render or export is refused, naming it). For a dataset tracked by
+    DVC whose project does not ignore ``exports/``, ``dest`` defaults to a folder beside the
+    tracked one (``dvc_links.outside_exports``): ``dvc status`` stays clean."""
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     load_identity(root)   # a dataset (one-line error naming dataset.json otherwise)
+    dest = dest if dest is not None else outside_exports(root)
     if dest is not None:
         if Path(dest).resolve().is_relative_to(root.resolve()):
             raise DatasetError(f"--out {dest}: inside the dataset {root}; give a folder outside it "
                                f"(inside, exports go to {root / 'exports'} without --out)")
         with output_lock(dest, f"export {fmt}"):
             return write_export(root, fmt, ds, dest)
-    refusal = export_refusal(root)
-    if refusal:
-        raise DatasetError(refusal)
     with dataset_lock(root, f"export {fmt}"):
         return write_export(root, fmt, ds)

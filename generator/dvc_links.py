@@ -15,7 +15,8 @@ cached file is a corrupt file, not a trusted one); every other symlink stays ref
 
 Exports: DVC refuses a ``.dvcignore`` inside a folder it adds, so a dataset cannot ship one. An
 export written inside a tracked dataset makes ``dvc status`` report it modified unless the DVC
-project's ``.dvcignore`` ignores ``exports/`` (``export_refusal``).
+project's ``.dvcignore`` ignores ``exports/``; otherwise exports go beside the tracked folder
+(``outside_exports``).
 """
 from __future__ import annotations
 
@@ -108,12 +109,24 @@ def ignored(root, folder: str) -> bool:
     return bool(lines & (set(IGNORE_LINES[folder]) | own))
 
 
-def export_refusal(root) -> str:
-    """Why an export may not be written inside the dataset at ``root`` ("" when it may): the
-    dataset is tracked by DVC and its project's ``.dvcignore`` does not ignore ``exports/``."""
+def outside_exports(root) -> Path | None:
+    """Where exports of the dataset at ``root`` go by default when they may not go inside it (it is
+    tracked by DVC and its project's ``.dvcignore`` does not ignore ``exports/``): beside the
+    tracked folder T, ``T.exports/`` (plus the dataset's path inside T); None when they may go
+    inside (``root/exports/``)."""
     tracker = tracking_file(root)
     if tracker is None or ignored(root, "exports"):
+        return None
+    tracked = tracker.with_suffix("")
+    return tracked.parent / f"{tracked.name}.exports" / Path(root).resolve().relative_to(tracked)
+
+
+def outside_note(root) -> str:
+    """"" when exports of the dataset at ``root`` go inside it, else a line saying where they go
+    instead and why (:func:`outside_exports`)."""
+    dest = outside_exports(root)
+    if dest is None:
         return ""
-    return (f"{root}: tracked by DVC ({tracker}); an export written inside it makes `dvc status` report "
-            f"it modified: write it outside with --out FOLDER, or add the line `exports/` to "
-            f"{dvc_project(root) / '.dvcignore'} before `dvc add`")
+    return (f"{root}: tracked by DVC ({tracking_file(root)}); exports written inside it would make `dvc status` "
+            f"report it modified, so `dockfactory dataset export` writes them to {dest} (or --out FOLDER); to "
+            f"keep them inside, add the line `exports/` to {dvc_project(root) / '.dvcignore'} before `dvc add`")

@@ -24,7 +24,7 @@ from dockfactory.generator.dataset_check import inspect
 from dockfactory.generator.dataset_card import write_card
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export_complete, write_export
-from dockfactory.generator.dvc_links import export_refusal
+from dockfactory.generator.dvc_links import outside_note
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.core.progress import Progress
@@ -157,13 +157,14 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
 
 def _finish(ds: Dataset, cfg: Config, summary: JobSummary) -> None:
     """The derived files of a complete, intact dataset: its exports (written once; not inside a
-    DVC-tracked dataset whose project does not ignore ``exports/``: a note says so) and its card."""
-    refusal = export_refusal(ds.root)
+    DVC-tracked dataset whose project does not ignore ``exports/``: a note says where `dataset
+    export` writes them) and its card."""
+    outside = outside_note(ds.root)
     for fmt in cfg.export.formats:
         if export_complete(ds.root, fmt):        # written once, when the dataset completes
             continue
-        if refusal:
-            summary.notes.append(f"export {fmt} not written: {refusal}")
+        if outside:
+            summary.notes.append(f"export {fmt} not written: {outside}")
             continue
         write_export(ds.root, fmt, ds)           # (a partial export of a killed run is replaced)
     write_card(ds)                               # untouched when current (a DVC-tracked dataset stays clean)

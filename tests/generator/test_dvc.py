@@ -11,7 +11,7 @@ import subprocess
 import sys
 
 import pytest
-from cli_run import one_line_error, run_cli
+from cli_run import run_cli
 
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
@@ -69,7 +69,7 @@ def _status_clean(proj):
 
 def test_symlink_cache_every_consumer(finished, tmp_path, capsys, monkeypatch):
     """Without a .dvcignore DVC links logs/ and exports/ too: verify, run, card and every export
-    (outside the dataset: inside is refused) work, and ``dvc status`` stays clean."""
+    (beside the dataset by default, or --out) work, and ``dvc status`` stays clean."""
     import dockfactory.eval.report as report
     monkeypatch.setattr(report, "plots", lambda rows, metrics, detections_pr=None: {})
     proj, ds = _tracked(finished, tmp_path, dvcignore="")
@@ -79,10 +79,12 @@ def test_symlink_cache_every_consumer(finished, tmp_path, capsys, monkeypatch):
     code, out, err = run_cli(["run", shipped_config("smoke"), "--out", proj / "run", "--oracle-noise", "0"], capsys)
     assert code in (0, 1) and "verdict:" in out and "damaged" not in err, err
     assert (proj / "run" / "report.md").is_file()
-    code, _, err = run_cli(["dataset", "export", ds, "--format", "bop"], capsys)
-    assert code == 2 and "tracked by DVC" in one_line_error(err)
+    code, out, err = run_cli(["dataset", "export", ds, "--format", "coco,yolo,bop"], capsys)
+    beside = proj / "run" / "dataset.exports"      # the default for a tracked dataset: beside it
+    assert code == 0 and "tracked by DVC" in err and out.split() == [str(beside / f) for f in ("coco", "yolo", "bop")]
     code, out, _ = run_cli(["dataset", "export", ds, "--format", "coco,yolo,bop", "--out", tmp_path / "ex"], capsys)
-    assert code == 0 and all((tmp_path / "ex" / f / ".dockfactory-export.json").is_file() for f in ("coco", "yolo", "bop"))
+    for folder in (beside, tmp_path / "ex"):
+        assert all((folder / f / ".dockfactory-export.json").is_file() for f in ("coco", "yolo", "bop"))
     code, _, _ = run_cli(["dataset", "card", ds], capsys)
     assert code == 0
     _status_clean(proj)

@@ -16,7 +16,7 @@ from dockfactory.generator.dataset import DatasetError, dataset_lock, frame_done
 from dockfactory.generator.dataset_check import verify
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export
-from dockfactory.generator.dvc_links import CACHE_ENV, dvc_caches, export_refusal, tracking_file
+from dockfactory.generator.dvc_links import CACHE_ENV, dvc_caches, outside_exports, outside_note, tracking_file
 
 
 def link_into_cache(root: Path, cache: Path) -> int:
@@ -126,20 +126,34 @@ def test_a_symlinked_lock_file_is_never_written_through(project):
     assert lock.is_symlink() and target.read_bytes() == before
 
 
-def test_exports_inside_a_tracked_dataset(project, capsys, tmp_path):
-    """``dvc add ds`` writes ds.dvc beside it: an export inside would make ``dvc status`` dirty."""
-    assert tracking_file(project) is None and export_refusal(project) == ""
+def test_exports_of_a_tracked_dataset_go_beside_it(project, capsys, tmp_path):
+    """``dvc add ds`` writes ds.dvc beside it: an export inside would make ``dvc status`` dirty, so
+    it goes to ds.exports/ unless the project's .dvcignore ignores exports/."""
+    assert tracking_file(project) is None and outside_exports(project) is None and outside_note(project) == ""
     (project.parent / "ds.dvc").write_text("outs:\n- path: ds\n")
     assert tracking_file(project) == project.parent / "ds.dvc"
-    code, _, err = run_cli(["dataset", "export", project, "--format", "yolo"], capsys)
-    line = one_line_error(err)
-    assert code == 2 and "tracked by DVC" in line and "--out FOLDER" in line and "exports/" in line
+    code, out, err = run_cli(["dataset", "export", project, "--format", "yolo"], capsys)
+    beside = project.parent / "ds.exports"
+    assert code == 0 and out.strip() == str(beside / "yolo") and (beside / "yolo" / "data.yaml").is_file()
+    assert err.startswith("note: ") and "tracked by DVC" in err and "exports/" in err
     assert not (project / "exports").exists()
     code, _, err = run_cli(["dataset", "export", project, "--format", "yolo", "--out", project / "x"], capsys)
     assert code == 2 and "inside the dataset" in one_line_error(err)
     (project.parent / ".dvcignore").write_text("# derived folders of every dockfactory dataset\nlogs/\nexports/\n")
-    assert export_refusal(project) == ""
-    assert export(project, "yolo").is_dir()
+    assert outside_exports(project) is None
+    assert export(project, "yolo") == project / "exports" / "yolo"
+
+
+def test_a_dataset_inside_a_tracked_folder(project):
+    """``dvc add data`` of a folder holding datasets: their exports go beside that folder."""
+    proj = project.parent
+    (proj / "data").mkdir()
+    project.rename(proj / "data" / "ds")
+    (proj / "data.dvc").write_text("outs:\n- path: data\n")
+    ds = proj / "data" / "ds"
+    assert outside_exports(ds) == (proj / "data.exports" / "ds").resolve()
+    (proj / ".dvcignore").write_text("data/ds/exports/\n")
+    assert outside_exports(ds) is None
 
 
 def test_the_manifest_is_what_is_linked_not_what_the_links_say(project):
