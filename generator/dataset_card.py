@@ -46,6 +46,7 @@ def front_matter(ds: Dataset, license_id: str, counts: dict[str, int]) -> str:
              "task_categories:", "- object-detection", "- keypoint-detection",
              "tags:", *[f"- {t}" for t in TAGS],
              "size_categories:", f"- {q(size_category(sum(counts.values())))}",
+             "annotations_creators:", "- machine-generated", "source_datasets:", "- original",
              "configs:", "- config_name: default", "  data_files:"]
     for split in SPLITS:
         if counts.get(split):
@@ -82,17 +83,21 @@ def _config_summary(c) -> list[str]:
 
 
 def _camera_rows(ds: Dataset) -> list[str]:
+    """One row per camera unit: frames, focal range, lens (from the labels), sensor (the config's
+    per-unit lists: unit u takes item u % len)."""
     units: dict[int, list[dict]] = {}
     for label in ds.labels_of():
         units.setdefault(int(label["camera"].get("unit", 0)), []).append(label["camera"])
-    rows = ["| unit | frames | focal (px) | principal point (px) | distortion k1, k2, p1, p2, k3 | JPEG quality |",
-            "|---|---|---|---|---|---|"]
+    sensor = ds.config.sensor
+    rows = ["| unit | frames | focal (px) | principal point (px) | distortion k1, k2, p1, p2, k3 | JPEG quality "
+            "| sensor | CFA |", "|---|---|---|---|---|---|---|---|"]
     for unit, cams in sorted(units.items()):
         f = [c["focal_px"] for c in cams]
         pp = ", ".join(f"{v:.2f}" for v in cams[0]["principal_point"])
         dist = ", ".join(f"{v:.4g}" for v in cams[0].get("distortion", []))
+        preset = sensor.presets[unit % len(sensor.presets)] if sensor.presets else "generic noise model"
         rows.append(f"| {unit} | {len(cams)} | {min(f):.1f} .. {max(f):.1f} | ({pp}) | {dist} | "
-                    f"{cams[0].get('jpeg_quality') or 'none'} |")
+                    f"{cams[0].get('jpeg_quality') or 'none'} | {preset} | {sensor.cfa[unit % len(sensor.cfa)]} |")
     return rows
 
 
@@ -109,6 +114,8 @@ def _conventions() -> list[str]:
 def body(ds: Dataset, license_id: str, counts: dict[str, int]) -> str:
     """The card's Markdown body (module docstring)."""
     ident, m = ds.identity, ds.manifest
+    source = ("the config's `[dataset] license`" if license_id == ds.config.dataset.license
+              else "given to `dockfactory dataset card --license`")
     size_mb = sum(f["bytes"] for f in m["files"]) / 1e6
     lines = [f"# dockfactory dataset `{ident['name']}`", "",
              "Synthetic images of two cylindrical sections (A fixed, B mobile) with coloured markers near their "
@@ -134,7 +141,7 @@ def body(ds: Dataset, license_id: str, counts: dict[str, int]) -> str:
              "`dockfactory dataset card DIR` writes them again); `dockfactory dataset verify DIR --manifest "
              "PUBLISHED/manifest.json` checks a re-render against a published dataset.", "",
              "## Licence", "",
-             f"The data: `{license_id}` (the config's `[dataset] license`). dockfactory itself is GPL-3.0-or-later; "
+             f"The data: `{license_id}` ({source}). dockfactory itself is GPL-3.0-or-later; "
              "the images and labels it renders are its output, not a copy of it, and carry the data's licence.", ""]
     return "\n".join(lines)
 

@@ -115,3 +115,36 @@ def test_hugging_face_datasets_loads_every_split_and_the_labels(painted, tmp_pat
                 assert row["objects"]["bbox"][0] == pytest.approx([x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0], abs=1e-12)
                 assert row["objects"]["center_px"][0] == boxed[0]["center_px"]
                 assert row["label_sha256"] == sha[row["label_file"]]
+
+
+@pytest.fixture
+def lens_dataset(tmp_path):
+    """Two camera units (distortion, JPEG) and all four splits, val included (6 painted frames)."""
+    from pipeline_data import LENS_CHECK, write_painted_dataset
+    config = tmp_path / "lens.toml"
+    config.write_text(LENS_CHECK.replace("[dataset]", "[dataset]\nval_fraction = 0.5\ntrain_fraction = 0.75\n"
+                                         "license = \"cc0-1.0\"")
+                      + "[repeatability]\nposes = 1\ncaptures = 2\n")
+    root = tmp_path / "lens"
+    write_painted_dataset(root, config)
+    return root
+
+
+def test_every_split_and_every_camera_unit(lens_dataset, tmp_path, monkeypatch, capsys):
+    assert run_cli(["dataset", "card", lens_dataset], capsys)[0] == 0
+    meta = front_matter(lens_dataset)
+    assert meta["license"] == "cc0-1.0"
+    assert [c["split"] for c in meta["configs"][0]["data_files"]] == ["train", "validation", "test", "repeat"]
+    text = (lens_dataset / "README.md").read_text()
+    units = [ln for ln in text.splitlines() if ln.endswith("| generic noise model | none |")]
+    assert [ln.split(" | ")[0] for ln in units] == ["| 0", "| 1"]                 # one row per unit
+    assert sum(int(ln.split(" | ")[1]) for ln in units) == 6                      # their frames
+    assert all(" | none | generic" not in ln for ln in units)                    # both have a JPEG quality
+    if importlib.util.find_spec("datasets") is None:
+        pytest.skip("datasets is not installed (pip install '.[hf]')")
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    from datasets import load_dataset
+    loaded = load_dataset(str(lens_dataset), cache_dir=str(tmp_path / "cache"))
+    assert {k: len(v) for k, v in loaded.items()} == {"train": 1, "validation": 2, "test": 1, "repeat": 2}
+    row = loaded["validation"][0]
+    assert row["split"] == "val" and row["dist_coeffs"][0] < -0.09 and row["camera_unit"] in (0, 1)
