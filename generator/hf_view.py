@@ -39,11 +39,11 @@ from dockfactory.core.io import TMP_MARK, stale_temp, write_text_atomic
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.export_coco import COCO_SHIFT   # OpenCV pixel centres -> continuous coordinates
 from dockfactory.generator.export_files import folder_built_aside, place_file, source_image
 
 HF_DIR = "hf"
 HF_SPLIT_NAMES = {"train": "train", "val": "validation", "test": "test", "repeat": "repeat"}   # ours -> the hub's
-COCO_SHIFT = 0.5   # OpenCV pixel centres -> continuous coordinates (as the COCO export)
 STALE_VIEW_S = 6 * 3600.0
 
 
