@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -55,6 +56,10 @@ SENSOR_WIDTH_LIMITS_MM = (1.0, 100.0)
 MAX_SPEED_MM_S = 10_000.0
 MAX_READOUT_MS = 1_000.0
 
+# a licence id as the Hugging Face hub spells them (cc-by-4.0, cc0-1.0, mit, other): the shape only,
+# the hub's list changes
+LICENSE_ID = re.compile(r"[a-z0-9][a-z0-9.+-]{0,63}")
+
 CONDITIONS = ("normal", "low_light", "occlusion", "glare", "ideal")
 CHALLENGING = ("low_light", "occlusion", "glare")
 
@@ -70,6 +75,7 @@ class DatasetConfig:
     frames: int = 50             # main frames (train + val + test); the repeatability subset is extra
     train_fraction: float = 0.8  # share of each condition's frames outside the test split
     val_fraction: float = 0.1    # share of each condition's train frames held out as the val split
+    license: str = "cc-by-4.0"   # the data's licence in the dataset card (a Hugging Face licence id, or "other")
 
 
 @dataclass(frozen=True)
@@ -429,6 +435,9 @@ def _validate_dataset(cfg: Config, source: str) -> None:
         raise _err(source, "dataset", "val_fraction", f"must be in [0, 1), got {d.val_fraction}")
     if not 0 <= d.seed < 2**63:
         raise _err(source, "dataset", "seed", f"must be in [0, 2^63), got {d.seed}")
+    if not LICENSE_ID.fullmatch(d.license):
+        raise _err(source, "dataset", "license", f"{d.license!r} is not a licence id (lower-case letters, digits, "
+                                                  f"'.', '-', '+'; e.g. cc-by-4.0, cc0-1.0, mit, other)")
     weights = dataclasses.asdict(cfg.conditions)
     for k, w in weights.items():
         _check_positive(source, "conditions", k, w, allow_zero=True)

@@ -8,12 +8,15 @@ from collections import Counter
 from pathlib import Path
 
 from dockfactory.cli_args import add_set_flag, int_at_least, shard_spec, tolerance_levels
+from dockfactory.core.config import LICENSE_ID
 from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator import published
-from dockfactory.generator.dataset import identity, writer_lock
+from dockfactory.generator.dataset import dataset_lock, identity, writer_lock
+from dockfactory.generator.dataset_card import write_card
+from dockfactory.generator.dvc_links import outside_note
 from dockfactory.generator.label_overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
@@ -71,8 +74,21 @@ def cmd_info(args) -> int:
 
 
 def cmd_diff(args) -> int:
+    """Exit like ``git diff --exit-code``: 0 identical, 1 different (2, bad input, by the CLI)."""
     d = dt.diff(args.dir_a, args.dir_b)
     print(json.dumps(d, indent=1) if args.json else dt.diff_text(d, args.dir_a, args.dir_b))
+    return EXIT_OK if d["identical"] else EXIT_FAILED
+
+
+def cmd_card(args) -> int:
+    """Write each dataset's card (README.md) and Hugging Face view (hf/) again."""
+    if args.license is not None and not LICENSE_ID.fullmatch(args.license):
+        raise DockfactoryError(f"--license {args.license!r}: not a licence id (lower-case letters, digits, "
+                               f"'.', '-', '+'; e.g. cc-by-4.0, cc0-1.0, mit, other)")
+    for root in args.dirs:
+        ds = dt.Dataset.open(root)   # every byte checked: the card describes an intact dataset
+        with dataset_lock(root, "dataset card"):
+            print(write_card(ds, args.license))
     return EXIT_OK
 
 
@@ -82,10 +98,14 @@ def cmd_export(args) -> int:
     if unknown:
         raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
                                f"(known: {', '.join(dt.EXPORT_WRITERS)})")
+    if args.out is not None and len(args.dirs) > 1:
+        raise DockfactoryError("--out: one dataset at a time (each export folder holds one dataset's formats)")
     for root in args.dirs:
         ds = dt.Dataset.open(root)   # every byte checked once for all its formats
+        if args.out is None and outside_note(root):
+            print(f"note: {outside_note(root)}", file=sys.stderr)
         for fmt in formats:
-            print(dt.export(root, fmt, ds))
+            print(dt.export(root, fmt, ds, args.out))
     return EXIT_OK
 
 
@@ -113,7 +133,7 @@ def cmd_show(args) -> int:
 
 
 def _add_dataset_actions(d) -> None:
-    """``dataset verify | info | diff | export | publish``, each its own parser: a flag of one
+    """``dataset verify | info | diff | export | card | publish``, each its own parser: a flag of one
     action given to another is an error, not silently ignored."""
     acts = d.add_subparsers(dest="action", required=True, metavar="ACTION")
     v = acts.add_parser("verify", help="check every byte of each dataset, or a re-render against a published one")
@@ -128,7 +148,8 @@ def _add_dataset_actions(d) -> None:
     i.add_argument("dirs", nargs="+", metavar="DIR")
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=cmd_info)
-    f = acts.add_parser("diff", help="compare two datasets' manifests")
+    f = acts.add_parser("diff", help="compare two datasets file by file (size, sha256) and label by label; "
+                                     "exit 0 identical, 1 different, 2 bad input")
     f.add_argument("dir_a", metavar="DIR_A")
     f.add_argument("dir_b", metavar="DIR_B")
     f.add_argument("--json", action="store_true", help="print JSON")
@@ -136,7 +157,15 @@ def _add_dataset_actions(d) -> None:
     e = acts.add_parser("export", help="write COCO, YOLO, YOLO-pose or BOP files of each dataset (under its exports/)")
     e.add_argument("dirs", nargs="+", metavar="DIR")
     e.add_argument("--format", default="coco,yolo,bop", help="coco, yolo, yolo-pose, bop (comma-separated)")
+    e.add_argument("--out", default=None, metavar="FOLDER",
+                   help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "
+                        "tracked by DVC whose project does not ignore exports/, T.exports/ beside its tracked folder T)")
     e.set_defaults(func=cmd_export)
+    c = acts.add_parser("card", help="write each dataset's card (README.md) and Hugging Face view (hf/) again")
+    c.add_argument("dirs", nargs="+", metavar="DIR")
+    c.add_argument("--license", default=None, metavar="ID",
+                   help="the data's licence in the card (default: the config's [dataset] license)")
+    c.set_defaults(func=cmd_card)
     p = acts.add_parser("publish", help="verify a complete dataset and write its manifest and fingerprints")
     p.add_argument("dirs", nargs="+", metavar="DIR")
     p.add_argument("--out", required=True, help="folder for manifest.json, fingerprints.npz, fingerprints_v2.npz")
@@ -164,7 +193,7 @@ def add_subcommands(sub) -> None:
     add_set_flag(r)
     r.set_defaults(func=cmd_render)
 
-    _add_dataset_actions(sub.add_parser("dataset", help="verify, describe, compare, export or publish datasets",
+    _add_dataset_actions(sub.add_parser("dataset", help="verify, describe, compare, export, card or publish datasets",
                                         description="One action per sub-command; each has its own flags "
                                                     "(dockfactory dataset ACTION --help)."))
 

@@ -7,6 +7,14 @@ The chain of trust: dataset.json's config gives its version id (recomputed, so a
 caught) -> the config gives the frame plan -> the manifest must list exactly the plan's frames and
 files -> every file must match its manifest record (size, sha256) -> nothing else may sit among the
 content (a stray label+image pair, a symlink).
+
+Symlinks: refused, except the links a DVC cache puts in place (``generator.dvc_links``): a file
+symlink that resolves to a regular file inside the DVC cache of the dataset's project (or one the
+user names in ``DOCKFACTORY_DVC_CACHE``); a listed file behind such a link must still have its
+manifest size and sha256. Symlinked folders are always refused.
+
+Derived files (not content, never in the manifest, regenerable): ``logs/``, ``exports/``, the
+dataset card ``README.md`` and its Hugging Face view ``hf/`` (``generator.dataset_card``).
 """
 from __future__ import annotations
 
@@ -26,10 +34,12 @@ from dockfactory.generator.dataset import (
     frame_files,
     load_identity,
 )
+from dockfactory.generator.dvc_links import CACHE_ENV, cache_link, dvc_caches
 from dockfactory.generator.sampler import frame_plan
 from dockfactory.generator.version import dataset_version_id, generator_version
 
-NOT_CONTENT = ("logs", "exports")  # job logs and derived exports are not part of the hashed content
+# job logs, derived exports, the dataset card and its Hugging Face view: not part of the hashed content
+NOT_CONTENT = ("logs", "exports", "README.md", "hf")
 BULK_DIRS = ("images", "exr", "raw")      # the cheap check compares these by size only (sha256 in verify)
 
 
@@ -131,21 +141,23 @@ def outside_reason(rel) -> str:
     return ""
 
 
-def symlinks(root: Path) -> list[tuple[str, str]]:
-    """Every symlink inside the dataset (logs and exports included): (relative path, reason)."""
+def symlinks(root: Path, caches: tuple[Path, ...] = ()) -> list[tuple[str, str]]:
+    """Every symlink inside the dataset (logs and exports included) but the DVC cache links of
+    files (into one of ``caches``): (relative path, reason)."""
     out = []
     real_root = root.resolve()
     for dirpath, dirnames, filenames in os.walk(root):   # never follows symlinked folders
         for name in dirnames + filenames:
             p = Path(dirpath) / name
-            if not p.is_symlink():
+            if not p.is_symlink() or (name in filenames and cache_link(p, caches) is not None):
                 continue
             target = os.readlink(p)
             rel = p.relative_to(root).as_posix()
             if not p.exists():
                 out.append((rel, f"dangling symlink to {target}"))
             elif not p.resolve().is_relative_to(real_root):
-                out.append((rel, f"symlink to {target}, outside the dataset"))
+                out.append((rel, f"symlink to {target}, outside the dataset and not into a DVC cache "
+                                 f"(name one in {CACHE_ENV})"))
             else:
                 out.append((rel, f"symlink to {target}; a dataset holds files, not links"))
     return sorted(out)
@@ -237,6 +249,7 @@ def _check_files(root: Path, manifest: dict, report: VerifyReport, hash_bulk: bo
     """Each manifest file against its record (size; sha256 of all, or of all but images/EXR);
     returns the listed paths."""
     listed = set()
+    linked = {p for p, _ in report.unsafe}
     for rec in manifest["files"]:
         why = outside_reason(rec["path"])
         if why:   # checked before the path is built: never read
@@ -244,7 +257,7 @@ def _check_files(root: Path, manifest: dict, report: VerifyReport, hash_bulk: bo
             continue
         listed.add(rec["path"])
         path = root / rec["path"]
-        if any(p.is_symlink() for p in (path, *path.parents) if p != root and p.is_relative_to(root)):
+        if rec["path"] in linked or any(p.is_symlink() for p in path.parents if p != root and p.is_relative_to(root)):
             continue   # the symlink (a file or one of its folders) is reported once, by symlinks()
         if not path.is_file():
             report.missing.append(rec["path"])
@@ -277,7 +290,7 @@ def inspect(root, hash_bulk: bool = True) -> tuple[VerifyReport, Checked | None]
     report = VerifyReport(str(root))
     if not (root / "dataset.json").exists():
         load_identity(root)   # raises: not a dataset at all
-    report.unsafe += symlinks(root)
+    report.unsafe += symlinks(root, dvc_caches(root))
     try:
         ident = load_identity(root)
         cfg, plan = _check_identity(root, ident, report)

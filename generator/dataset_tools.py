@@ -1,16 +1,14 @@
-"""``dockfactory dataset verify | info | diff``: check, describe and compare dataset directories."""
+"""``dockfactory dataset verify | info | diff | export``: check, describe, compare and export dataset
+directories (the content diff lives in ``generator.dataset_diff``)."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from pathlib import Path
 
 from dockfactory.core.config import config_from_dict
-from dockfactory.core.io import remove_stale_temps, sha256_file, temp_name, write_json_atomic
+from dockfactory.core.io import output_lock, remove_stale_temps, write_json_atomic
 from dockfactory.generator.dataset import (
     DatasetError,
-    config_differences,
     dataset_lock,
     load_identity,
     read_identity,
@@ -21,9 +19,12 @@ from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CL
     load_manifest,
     verify,
 )
+from dockfactory.generator.dataset_diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.dvc_links import outside_exports
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
+from dockfactory.generator.export_files import folder_built_aside
 from dockfactory.generator.export_yolo import export_yolo
 from dockfactory.generator.export_yolo_pose import export_yolo_pose
 from dockfactory.generator.sampler import frame_plan
@@ -69,44 +70,6 @@ def info_text(d: dict) -> str:
     return "\n".join(lines)
 
 
-def _file_index(root: Path) -> dict[str, str]:
-    manifest_path = root / "manifest.json"
-    if manifest_path.exists():
-        return {f["path"]: f["sha256"] for f in load_manifest(root)["files"]}
-    return {rel: sha256_file(root / rel) for rel in content_files(root)}
-
-
-def diff(root_a, root_b) -> dict:
-    a, b = Path(root_a), Path(root_b)
-    ia, ib = load_identity(a), load_identity(b)
-    fa, fb = _file_index(a), _file_index(b)
-    return {
-        "version": [ia["version_id"], ib["version_id"]],
-        "config": config_differences(ia["config"], ib["config"]),
-        "software": config_differences({k: ia[k] for k in ("generator_version", "blender_version")},
-                                       {k: ib[k] for k in ("generator_version", "blender_version")}),
-        "only_in_a": sorted(set(fa) - set(fb)),
-        "only_in_b": sorted(set(fb) - set(fa)),
-        "different": sorted(p for p in set(fa) & set(fb) if fa[p] != fb[p]),
-        "same": sum(1 for p in set(fa) & set(fb) if fa[p] == fb[p]),
-    }
-
-
-def diff_text(d: dict, a, b) -> str:
-    lines = [f"A = {a} (version {d['version'][0]})", f"B = {b} (version {d['version'][1]})"]
-    lines.append("config: identical" if not d["config"] else "config differences:")
-    lines += [f"  {c}" for c in d["config"]]
-    lines += [f"software: {c}" for c in d["software"]]
-    lines.append(f"files: {d['same']} identical, {len(d['different'])} different, "
-                 f"{len(d['only_in_a'])} only in A, {len(d['only_in_b'])} only in B")
-    for key, tag in (("different", "~"), ("only_in_a", "-"), ("only_in_b", "+")):
-        shown = d[key][:20]
-        lines += [f"  {tag} {p}" for p in shown]
-        if len(d[key]) > len(shown):
-            lines.append(f"  {tag} ... {len(d[key]) - len(shown)} more")
-    return "\n".join(lines)
-
-
 def export_complete(root, fmt: str) -> bool:
     """True when DIR/exports/<fmt>/ is a finished export of this dataset version (its completion
     mark, written last, names the format and the version): a partial folder is not done."""
@@ -121,46 +84,48 @@ def export_complete(root, fmt: str) -> bool:
         return False
 
 
-def write_export(root, fmt: str, ds: Dataset | None = None) -> Path:
-    """:func:`export` for a caller that already holds the dataset lock (``render``); ``ds``: the
-    dataset already opened (one check for several formats), else it is opened here."""
+def write_export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
+    """:func:`export` for a caller that already holds the lock of the folder written (``render``:
+    the dataset's); ``ds``: the dataset already opened (one check for several formats), else it
+    is opened here; ``dest``: the folder that receives ``<fmt>/`` (default the dataset's
+    ``exports/``)."""
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     if not (root / "manifest.json").exists():
         raise DatasetError(f"{root}: dataset is not complete (no manifest.json); finish rendering first")
-    exports = root / "exports"
+    exports = root / "exports" if dest is None else Path(dest)
     if exports.is_symlink() or (exports / fmt).is_symlink():
-        raise DatasetError(f"{exports}: is (or holds) a symlink; exports are written inside the dataset only")
-    exports.mkdir(exist_ok=True)
+        raise DatasetError(f"{exports}: is (or holds) a symlink; exports are written into real folders only")
+    exports.mkdir(parents=True, exist_ok=True)
     # built aside by a killed export (of this host, or old): never part of any export
     remove_stale_temps(exports, max_age_s=STALE_EXPORT_S, own=True)
     final = exports / fmt
-    tmp = exports / temp_name(fmt)
-    aside = exports / temp_name(f"{fmt}.old")
-    try:
+    with folder_built_aside(final) as tmp:   # old or new, never partial
         ds = ds if ds is not None else Dataset.open(root)
         EXPORT_WRITERS[fmt](ds, tmp)
         n_files = sum(1 for p in tmp.rglob("*") if p.is_file())
         write_json_atomic(tmp / EXPORT_MARK, {"format": fmt, "version_id": ds.version_id, "files": n_files})
-        # old or new, never partial: the old export steps aside, the new one takes its name
-        if final.exists():
-            os.rename(final, aside)
-        os.rename(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
     return final
 
 
-def export(root, fmt: str, ds: Dataset | None = None) -> Path:
-    """Write one export of a complete dataset as DIR/exports/<fmt>/: built aside, then swapped in
-    by rename (an interrupted export leaves the old one, the new one or none, never a partial
-    one), under the dataset's lock (a concurrent render or export is refused, naming it)."""
+def export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
+    """Write one export of a complete dataset as DIR/exports/<fmt>/ (or ``dest``/<fmt>/): built
+    aside, then swapped in by rename (an interrupted export leaves the old one, the new one or
+    none, never a partial one), under the lock of the folder written (the dataset's, or
+    ``dest``'s: a concurrent render or export is refused, naming it). For a dataset tracked by
+    DVC whose project does not ignore ``exports/``, ``dest`` defaults to a folder beside the
+    tracked one (``dvc_links.outside_exports``): ``dvc status`` stays clean."""
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")
     load_identity(root)   # a dataset (one-line error naming dataset.json otherwise)
+    dest = dest if dest is not None else outside_exports(root)
+    if dest is not None:
+        if Path(dest).resolve().is_relative_to(root.resolve()):
+            raise DatasetError(f"--out {dest}: inside the dataset {root}; give a folder outside it "
+                               f"(inside, exports go to {root / 'exports'} without --out)")
+        with output_lock(dest, f"export {fmt}"):
+            return write_export(root, fmt, ds, dest)
     with dataset_lock(root, f"export {fmt}"):
         return write_export(root, fmt, ds)

@@ -10,6 +10,7 @@ import numpy as np
 from dockfactory.core.config import config_from_dict
 from dockfactory.core.io import write_bytes_atomic
 from dockfactory.generator.dataset import DatasetError, load_identity
+from dockfactory.generator.dvc_links import cache_link, dvc_caches
 from dockfactory.generator.sampler import frame_plan
 
 COLORS = {"A": (60, 60, 255), "B": (255, 160, 40)}  # BGR
@@ -18,7 +19,8 @@ COLORS = {"A": (60, 60, 255), "B": (255, 160, 40)}  # BGR
 def frame_files_to_show(root: Path, frame_id: str) -> tuple[Path, Path]:
     """(label, image) paths of a planned frame of the dataset at ``root`` (finished or still being
     rendered); DatasetError for a folder that is not a dataset, a frame id outside its plan, a
-    frame not rendered yet, or a file that is a symlink (a dataset's files live inside it)."""
+    frame not rendered yet, or a file that is a symlink other than a DVC cache link (a dataset's
+    files live inside it)."""
     ident = load_identity(root, required=("config",))
     plan = {s.frame_id for s in frame_plan(config_from_dict(ident["config"], str(root / "dataset.json")))}
     if frame_id not in plan:
@@ -27,8 +29,8 @@ def frame_files_to_show(root: Path, frame_id: str) -> tuple[Path, Path]:
     label_path = root / "labels" / f"{frame_id}.json"
     image_path = root / "images" / f"{frame_id}.png"
     for path in (label_path, image_path):
-        if path.is_symlink() or path.parent.is_symlink():
-            raise DatasetError(f"{path}: is a symlink; a dataset's files live inside it")
+        if path.parent.is_symlink() or (path.is_symlink() and cache_link(path, dvc_caches(root)) is None):
+            raise DatasetError(f"{path}: is a symlink (not into a DVC cache); a dataset's files live inside it")
     if not label_path.is_file() or not image_path.is_file():
         raise DatasetError(f"{root}: frame {frame_id} is not rendered yet (no label or no image)")
     return label_path, image_path

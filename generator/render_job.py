@@ -21,8 +21,10 @@ from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
 from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
 from dockfactory.generator.dataset_check import inspect
+from dockfactory.generator.dataset_card import write_card
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export_complete, write_export
+from dockfactory.generator.dvc_links import outside_note
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.core.progress import Progress
@@ -56,6 +58,7 @@ class JobSummary:
     seconds: float = 0.0
     complete: bool = False
     damaged: list = field(default_factory=list)   # problems of a complete dataset (dataset_check)
+    notes: list = field(default_factory=list)     # what was left undone on purpose (an export refused)
     timings: list = field(default_factory=list)
 
     @property
@@ -81,6 +84,7 @@ class JobSummary:
             lines.append(f"  but DAMAGED ({len(self.damaged)} problems; no export written; "
                          f"`dockfactory dataset verify {self.root}` lists them all):")
             lines += [f"    {p}" for p in self.damaged[:5]]
+        lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
 
 
@@ -147,10 +151,23 @@ def _run_locked(cfg: Config, root: Path, config_text: str, opts: JobOptions, fra
         if summary.damaged:
             return summary
         ds = Dataset.of_checked(root, checked, full=False)
-        for fmt in cfg.export.formats:
-            if not export_complete(root, fmt):   # written once, when the dataset completes
-                write_export(root, fmt, ds)      # (a partial export of a killed run is replaced)
+        _finish(ds, cfg, summary)
     return summary
+
+
+def _finish(ds: Dataset, cfg: Config, summary: JobSummary) -> None:
+    """The derived files of a complete, intact dataset: its exports (written once; not inside a
+    DVC-tracked dataset whose project does not ignore ``exports/``: a note says where `dataset
+    export` writes them) and its card."""
+    outside = outside_note(ds.root)
+    for fmt in cfg.export.formats:
+        if export_complete(ds.root, fmt):        # written once, when the dataset completes
+            continue
+        if outside:
+            summary.notes.append(f"export {fmt} not written: {outside}")
+            continue
+        write_export(ds.root, fmt, ds)           # (a partial export of a killed run is replaced)
+    write_card(ds)                               # untouched when current (a DVC-tracked dataset stays clean)
 
 
 def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary) -> None:

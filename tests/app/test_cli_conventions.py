@@ -32,12 +32,13 @@ def test_each_dataset_action_takes_only_its_own_flags(capsys, argv, words):
 
 
 @pytest.mark.parametrize("action, flag", [("verify", "--manifest"), ("info", "--json"), ("diff", "DIR_B"),
-                                          ("export", "--format"), ("publish", "--out")])
+                                          ("export", "--format"), ("publish", "--out"), ("card", "--license")])
 def test_each_dataset_action_has_its_own_help(capsys, action, flag):
     code, out = _exit(["dataset", action, "--help"], capsys)
     assert code == 0 and f"dockfactory dataset {action}" in out.out and flag in out.out
-    others = {"verify": "--manifest", "info": "--json", "export": "--format", "publish": "--out"}
-    others = {a: f for a, f in others.items() if not (action == "diff" and f == "--json")}   # diff has --json too
+    others = {"verify": "--manifest", "info": "--json", "export": "--format", "publish": "--out", "card": "--license"}
+    others = {a: f for a, f in others.items() if not (action == "diff" and f == "--json")   # diff has --json too
+              and not (action == "export" and f == "--out")}                              # export has --out too
     assert all(f not in out.out for a, f in others.items() if a != action and f != flag)
 
 
