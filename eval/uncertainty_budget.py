@@ -142,3 +142,27 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
         u_c = math.sqrt(sum(v * v for v in row.values() if v is not None))
         out[name] = {**row, "combined": u_c, "expanded": k * u_c, "k": k}
     return out
+
+
+def budget_block(records: list[dict], markers, image_size, bias_px=None, sigma_mm: dict | None = None) -> dict:
+    """The budget over many solved frames (an evaluation's test split): per component the RMS
+    over the frames of each term, of the combined u and U = k u_rms, and ``n`` the frames whose
+    budget could be computed; ``records``: solved pose records (eval.solve_frames.pose_record),
+    ``image_size`` (W, H) of their images. The layout of a rendered dataset is exact: its term is
+    None unless ``sigma_mm`` is given."""
+    budgets = []
+    for r in records:
+        try:
+            budgets.append(pose_budget({"image_size": list(image_size), **r}, markers, sigma_mm, bias_px))
+        except (KeyError, ValueError, IndexError):
+            continue   # a record the budget cannot read is left out (counted by n)
+    out = {"n": len(budgets), "k": COVERAGE_K, "bias_px": None if bias_px is None else list(bias_px),
+           "components": {}}
+    for name in POSE_NAMES:
+        row = {}
+        for t in (*TERMS, "combined"):
+            vals = [b[name][t] for b in budgets if b[name][t] is not None]
+            row[t] = math.sqrt(sum(v * v for v in vals) / len(vals)) if vals else None
+        row["expanded"] = None if row["combined"] is None else COVERAGE_K * row["combined"]
+        out["components"][name] = row
+    return out

@@ -115,3 +115,25 @@ def test_a_docking_runs_intrinsics_term_is_its_focal_std_propagated():
             assert two[n]["intrinsics"] == pytest.approx(2 * one[n]["intrinsics"], rel=1e-6)
     huge = pose_budget({**rec, "intrinsics_std": {"focal_px": 1e6}}, MARKERS)
     assert all(huge[n]["intrinsics"] <= reported[i] * (1 + 1e-9) for i, n in enumerate(POSE_NAMES))
+
+
+def test_budget_block_is_the_rms_over_frames_and_the_report_shows_the_gated_components():
+    from dockfactory.eval.report_budget import html_budget
+    from dockfactory.eval.uncertainty_budget import budget_block
+    recs = [_record(s) for s in (21, 22, 23)]
+    sizes = {tuple(r.pop("image_size")) for r in recs}
+    block = budget_block(recs + [{"ok": True, "marker_ids": ["nope"]}], MARKERS, sizes.pop(), bias_px=(0.01, -0.02))
+    assert block["n"] == 3   # the unreadable record is left out
+    singles = [pose_budget({**r, "image_size": [1280, 960]}, MARKERS, bias_px=(0.01, -0.02)) for r in recs]
+    for n in POSE_NAMES:
+        row = block["components"][n]
+        assert row["combined"] == pytest.approx(np.sqrt(np.mean([b[n]["combined"] ** 2 for b in singles])))
+        assert row["expanded"] == pytest.approx(2 * row["combined"]) and row["layout"] is None
+    metrics = {"uncertainty_budget": block,
+               "acceptance": {"criteria": [{"block": "localization", "component": "x"},
+                                           {"block": "localization", "component": "alpha"},
+                                           {"block": "estimation", "component": "y"}]}}
+    text = "".join(html_budget(metrics))
+    assert "x (mm)" in text and "alpha (deg)" in text and "y (mm)" not in text
+    assert "U (k = 2)" in text and "marker layout" in text and "(0.010, -0.020) px" in text
+    assert html_budget({"acceptance": {"criteria": []}}) == []
