@@ -35,7 +35,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.detector.noise_card import centre_noise_px
+from dockfactory.detector.noise_card import centre_bias_px, centre_noise_px
 from dockfactory.measure_overlay import draw_measurement
 from dockfactory.measure_pool import MeasurePool
 from dockfactory.measure_read import (
@@ -398,7 +398,7 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         header.update(backend=store.made_with["backend"], workers=workers, overlay_size=options.overlay_size,
                       sigma_floor_px=floor, camera=asdict(options.camera), max_megapixels=options.max_megapixels,
                       resumed=resumed, earlier_run_discarded=store.discarded,
-                      **_assess(frames, markers, sigmas, spec, acceptance))
+                      **_assess(frames, markers, sigmas, centre_bias_px(weights), spec, acceptance))
         write_records(out, frames, header)
     return header
 
@@ -413,13 +413,14 @@ def _spec(acceptance):
     return spec
 
 
-def _assess(frames: list[Frame], markers, sigmas, spec, acceptance) -> dict:
-    """Every record's uncertainty budget and, with a spec, its conformity; the header's keys."""
+def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dict:
+    """Every record's uncertainty budget (``bias``: the detector's measured centre offset, px, or
+    None) and, with a spec, its conformity; the header's keys."""
     records = [f.record for f in frames]
-    add_uncertainty(records, markers, sigmas)
+    add_uncertainty(records, markers, sigmas, bias)
     extra = {"uncertainty": {"k": COVERAGE_K, "layout_sigma_mm": None if sigmas is None else
                              {"min": min(sigmas.values()), "max": max(sigmas.values())},
-                             "terms": list(TERMS)}}
+                             "detector_bias_px": None if bias is None else list(bias), "terms": list(TERMS)}}
     if spec is not None:
         extra["conformity"] = add_conformity(records, spec, str(acceptance))
     return extra

@@ -3,7 +3,7 @@ eval.conformity), added to the records after every image is solved.
 
 Every image with a pose gets ``record["uncertainty"]``: per pose component the budget's terms
 (centre noise, intrinsics, marker layout when the layout file states ``sigma_mm``, detector bias
-when measured), the combined standard uncertainty u and U = k u (k = 2). With an acceptance spec,
+when the weights' noise card measured it), the combined standard uncertainty u and U = k u (k = 2). With an acceptance spec,
 ``record["conformity"]``: per component of the spec's ``[localization]`` table IN / OUT /
 UNDECIDED with the guard band U (u the combined one), and the image's worst; an image without a
 pose is UNDECIDED (nothing is proven about it). The summary counts the decisions; the exit status
@@ -26,14 +26,15 @@ from dockfactory.eval.conformity import (
 from dockfactory.eval.uncertainty_budget import TERM_LABELS, TERMS, pose_budget
 
 
-def add_uncertainty(records: list[dict], markers, sigma_mm: dict | None) -> None:
-    """``record["uncertainty"]`` of every record with a pose (in place). A budget that cannot be
+def add_uncertainty(records: list[dict], markers, sigma_mm: dict | None, bias_px=None) -> None:
+    """``record["uncertainty"]`` of every record with a pose (in place); ``bias_px`` the detector's
+    measured centre offset (detector.noise_card.centre_bias_px) or None. A budget that cannot be
     computed (a marker id the layout lacks, a degenerate Jacobian) is recorded as its reason."""
     for r in records:
         if not r.get("ok"):
             continue
         try:
-            r["uncertainty"] = pose_budget(r, markers, sigma_mm)
+            r["uncertainty"] = pose_budget(r, markers, sigma_mm, bias_px)
         except (KeyError, ValueError, IndexError) as exc:
             r["uncertainty"] = {"error": f"{type(exc).__name__}: {exc}"[:200]}
 

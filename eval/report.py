@@ -490,7 +490,7 @@ def _rule_text(acc: dict) -> str:
         return (f"Decision rule: guarded (ISO 14253-1 style). A pose statistic passes only when its one-sided "
                 f"{conf:.0%} upper confidence bound is within its threshold, fails when its {conf:.0%} lower bound "
                 "is beyond it, and is UNDECIDED between (more frames would decide); bounds by chi-square under a "
-                "Gaussian error model and by bootstrap, the more cautious one deciding (the method of each bound in "
+                "Gaussian error model and by a studentized bootstrap, the more cautious one deciding (the method of each bound in "
                 "brackets). Detection minima and the failure rate compare the value itself.")
     return ("Decision rule: simple. Each statistic's value is compared with its threshold; its confidence "
             "bounds are shown but do not decide.")
