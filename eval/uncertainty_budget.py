@@ -21,7 +21,10 @@ residuals, :func:`solver.refine.stack_blocks`, at the solved pose and camera; J 
   -(J^T J)^-1 J^T G dX and their covariance is (J^T J)^-1 (sum_i s_i^2 J_i^T T_i T_i^T J_i)
   (J^T J)^-1 with T_i = J_t,i (R R^T = I). Unweighted least squares (the last fit reweights
   its centres; the layout term is a first-order figure, checked against a Monte Carlo of
-  perturbed layouts in tests/eval/test_uncertainty_budget.py);
+  perturbed layouts in tests/eval/test_uncertainty_budget.py). When the covariance's noise was
+  estimated from the frame's residuals, the part of the layout error that shows as misfit is
+  already in it: that share moves from the centre-noise term to the layout term (not counted
+  twice; bench/pose_u_coverage.py measured 99.6-100 % coverage of U when it was);
 - **detector bias** (when measured, ``bias_px`` = the mean offset (2,) px of the detector's
   centres): a common shift of every centre, each axis taken as a standard uncertainty of its
   size (its sign unknown for another camera), propagated as a shift of all residuals.
@@ -78,16 +81,31 @@ class Sensitivity:
         s = self.prop @ (-self.cov_cond @ self.info_pi)
         return (s ** 2) @ intr_var
 
-    def layout_var(self, sigma_mm: np.ndarray) -> np.ndarray:
-        """(6,) pose variance from independent marker displacements of ``sigma_mm`` (N,) per
-        coordinate (rows of J in point order: A's points, then B's)."""
+    def _layout_meat(self, sigma_mm: np.ndarray):
+        """(J rows as (n, 2, p), per-point pixel covariance of the layout (n, 2, 2), the meat
+        sum_i J_i^T S_i J_i) for marker displacements of ``sigma_mm`` (N,) per coordinate."""
         n = self.jac.shape[0] // 2
         jr = self.jac.reshape(n, 2, -1)
         t_cols = np.where(np.arange(n)[:, None] < self.n_a, np.arange(3, 6), np.arange(9, 12))
         t = np.take_along_axis(jr, np.broadcast_to(t_cols[:, None, :], (n, 2, 3)), axis=2)   # (n, 2, 3)
         shape = np.einsum("nak,nbk->nab", t, t) * (np.asarray(sigma_mm, dtype=float) ** 2)[:, None, None]
-        meat = np.einsum("nap,nab,nbq->pq", jr, shape, jr)
+        return jr, shape, np.einsum("nap,nab,nbq->pq", jr, shape, jr)
+
+    def layout_var(self, sigma_mm: np.ndarray) -> np.ndarray:
+        """(6,) pose variance from independent marker displacements of ``sigma_mm`` (N,) per
+        coordinate (rows of J in point order: A's points, then B's)."""
+        _, _, meat = self._layout_meat(sigma_mm)
         return np.diag(self.pose_cov(self.cov @ meat @ self.cov))
+
+    def layout_residual_px2(self, sigma_mm: np.ndarray) -> float:
+        """What the layout's displacements add to a noise variance estimated from the residuals,
+        px^2 per coordinate: tr((I - P) S) / (m - p), P = J (J^T J)^-1 J^T, S the layout's pixel
+        covariance (the part of the displacements the pose cannot absorb shows as misfit)."""
+        jr, shape, meat = self._layout_meat(sigma_mm)
+        dof = self.jac.shape[0] - self.jac.shape[1]
+        if dof <= 0:
+            return 0.0
+        return max(0.0, float(np.trace(shape, axis1=1, axis2=2).sum() - np.sum(self.cov * meat)) / dof)
 
     def bias_var(self, bias_px) -> np.ndarray:
         """(6,) pose variance from a common shift of every centre by (bx, by) px, each axis an
@@ -120,10 +138,14 @@ def record_geometry(record: dict, markers) -> tuple:
 
 
 def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None = None, bias_px=None,
-                k: float = COVERAGE_K) -> dict:
+                k: float = COVERAGE_K, noise_from_residuals: bool = True) -> dict:
     """{component: {term: u or None, "combined": u_c, "expanded": U, "k": k}} of a solved record
     (module docstring); a term not given (no ``sigma_mm``, no ``bias_px``) is None and adds
-    nothing. Units: mm for x_mm, y_mm, z_mm, deg for the angles."""
+    nothing. Units: mm for x_mm, y_mm, z_mm, deg for the angles. ``noise_from_residuals``: the
+    record's covariance scales with a noise estimated from its residuals (measure, solve without
+    a known sigma), which then already holds the share of the layout term that shows as misfit:
+    that share (the layout's residual variance over the noise used, ``sigma_px``) is moved from
+    the centre-noise term to the layout term, so it is not counted twice."""
     pa, pb, ids, ca, cb, intr, model = record_geometry(record, markers)
     sens = Sensitivity(pa, pb, ca, cb, intr, model)
     reported = np.diag(np.array(record["covariance"], dtype=float))
@@ -133,8 +155,13 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
         u_intr2 = np.minimum(sens.intrinsics_var(intr_var), reported)
     else:
         u_intr2 = reported * sens.intrinsics_share()
-    terms = {"centre_noise": np.maximum(reported - u_intr2, 0.0), "intrinsics": u_intr2,
-             "layout": None if sigma_mm is None else sens.layout_var(np.array([sigma_mm[i] for i in ids])),
+    centre2, layout2 = np.maximum(reported - u_intr2, 0.0), None
+    if sigma_mm is not None:
+        s = np.array([sigma_mm[i] for i in ids])
+        layout2 = sens.layout_var(s)
+        if noise_from_residuals and record.get("sigma_px"):
+            centre2 = centre2 * (1.0 - min(1.0, sens.layout_residual_px2(s) / float(record["sigma_px"]) ** 2))
+    terms = {"centre_noise": centre2, "intrinsics": u_intr2, "layout": layout2,
              "detector_bias": None if bias_px is None else sens.bias_var(bias_px)}
     out = {}
     for c, name in enumerate(POSE_NAMES):

@@ -7,7 +7,7 @@ import pytest
 from dockfactory.core.geometry import pose_components
 from dockfactory.core.names import POSE_NAMES
 from dockfactory.eval.solve_frames import pose_record
-from dockfactory.eval.uncertainty_budget import Sensitivity, pose_budget
+from dockfactory.eval.uncertainty_budget import Sensitivity, pose_budget, record_geometry
 from dockfactory.solver import solve_docking
 from dockfactory.solver.camera_models import PINHOLE, Intrinsics
 from dockfactory.solver.crb import crb_d_from_b
@@ -92,14 +92,34 @@ def test_budget_terms_add_up_to_the_reported_uncertainty_and_the_layout():
         assert b["expanded"] == pytest.approx(2 * b["combined"]) and b["k"] == 2.0
         assert b["intrinsics"] > 0   # the focal is always estimated
     sigmas = {m.id: 0.05 for m in MARKERS}
-    with_layout = pose_budget(rec, MARKERS, sigmas, bias_px=(0.02, 0.01))
+    # the record's sigma was given (known): nothing of the layout error is in its covariance
+    with_layout = pose_budget(rec, MARKERS, sigmas, bias_px=(0.02, 0.01), noise_from_residuals=False)
     for i, n in enumerate(POSE_NAMES):
         b = with_layout[n]
         assert b["layout"] > 0 and b["detector_bias"] >= 0
         assert b["combined"] ** 2 == pytest.approx(reported[i] ** 2 + b["layout"] ** 2 + b["detector_bias"] ** 2)
     # the layout term scales with sigma_mm
-    doubled = pose_budget(rec, MARKERS, {m.id: 0.1 for m in MARKERS})
+    doubled = pose_budget(rec, MARKERS, {m.id: 0.1 for m in MARKERS}, noise_from_residuals=False)
     assert doubled["x_mm"]["layout"] == pytest.approx(2 * with_layout["x_mm"]["layout"])
+
+
+def test_a_noise_estimated_from_residuals_holds_part_of_the_layout_error_not_counted_twice():
+    """With the covariance scaled by a residual noise estimate, the layout's share of that noise
+    (its expected residual variance over sigma_px^2) moves from the centre-noise term to the
+    layout term; a layout error the residuals would show in full empties the centre term."""
+    rec = _record(13)
+    pa, pb, ids, ca, cb, intr, model = record_geometry(rec, MARKERS)
+    sens = Sensitivity(pa, pb, ca, cb, intr, model)
+    s = np.full(len(ids), 0.05)
+    share = sens.layout_residual_px2(s) / rec["sigma_px"] ** 2
+    assert 0 < share < 1
+    known = pose_budget(rec, MARKERS, {m.id: 0.05 for m in MARKERS}, noise_from_residuals=False)
+    seen = pose_budget(rec, MARKERS, {m.id: 0.05 for m in MARKERS})
+    for n in POSE_NAMES:
+        assert seen[n]["centre_noise"] ** 2 == pytest.approx(known[n]["centre_noise"] ** 2 * (1 - share))
+        assert seen[n]["layout"] == known[n]["layout"] and seen[n]["combined"] < known[n]["combined"]
+    huge = pose_budget(rec, MARKERS, {m.id: 5.0 for m in MARKERS})
+    assert all(huge[n]["centre_noise"] == 0.0 for n in POSE_NAMES)
 
 
 def test_a_docking_runs_intrinsics_term_is_its_focal_std_propagated():
