@@ -17,7 +17,7 @@ seam (A at x <= 0, B at x >= 0: swapped section labels are caught), and each sec
 checks a config's layout passes (``core.layout.layout_problems``: at least 6 markers, no
 overlapping discs, not coplanar, no symmetry that makes two markers interchangeable).
 
-How well the marker positions themselves are known (a CMM-measured layout: 0.01-0.05 mm) may be
+How well the marker positions themselves are known (a CMM-measured layout: hundredths of a mm) may be
 stated as ``"sigma_mm"``: the standard uncertainty (1 sigma, mm, per coordinate, independent
 between markers and coordinates) of every ``center_mm``, at the top level (the whole layout) and/or
 in a marker's object (that marker; it overrides the top level). A number in [0, MAX_SIGMA_MM];

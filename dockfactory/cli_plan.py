@@ -78,7 +78,8 @@ def add_subcommand(sub) -> None:
     p.add_argument("--centre-noise", type=float_in(0.0, MAX_SIGMA_PX, low_open=True), metavar="PX",
                    help="centre noise per axis, px (with --config)")
     p.add_argument("--bound-factor", type=float_in(1.0, 100.0), default=1.0,
-                   help="expected RMSE over the Cramer-Rao bound (default 1; real solves: 1.1-1.4)")
+                   help="expected RMSE over the Cramer-Rao bound (default 1; measured ratios of real "
+                        "solves: docs/acceptance.md)")
     p.add_argument("--max-frames", type=positive_int, default=200,
                    help="test frames of --config whose bounds are averaged (default 200)")
     p.set_defaults(func=cmd_plan_frames)

@@ -8,7 +8,7 @@ rmse sqrt(n / chi2_{1-c}(n)) falls within T (conformance proven: ACCEPTED on tha
 for rmse > T the n at which the lower bound rises beyond it (REJECTED). It assumes the measured
 statistic comes out at its expected value and Gaussian errors (the chi-square model; from 5
 frames the bootstrap bound also decides, more cautious on heavy tails); the margin rmse / T says
-how hard the proof is (n grows about as 1 / (1 - margin)^2 near 1).
+how hard the proof is (n grows without bound as the margin nears 1).
 
 Localization: n = test frames (nu = n). Estimation: nu = the repeatability captures minus the
 static poses (each pose's mean costs one degree of freedom).
@@ -16,7 +16,7 @@ static poses (each pose's mean costs one degree of freedom).
 The expected figures come from the user, or from a config's geometry (:func:`expected_from_config`):
 the RMS over the config's test frames of the Cramer-Rao standard deviation of each component at a
 given centre noise (solver.crb, joint problem: shared unknown focal), times ``bound_factor``
-(a real solve sits 1.1-1.4 times above the bound: docs/acceptance.md).
+(a real solve sits above the bound: docs/acceptance.md gives the measured ratios).
 """
 from __future__ import annotations
 

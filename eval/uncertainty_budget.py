@@ -24,7 +24,7 @@ residuals, :func:`solver.refine.stack_blocks`, at the solved pose and camera; J 
   perturbed layouts in tests/eval/test_uncertainty_budget.py). When the covariance's noise was
   estimated from the frame's residuals, the part of the layout error that shows as misfit is
   already in it: that share moves from the centre-noise term to the layout term (not counted
-  twice; bench/pose_u_coverage.py measured 99.6-100 % coverage of U when it was);
+  twice; bench/results/confidence/README.md has the coverage of U with and without it);
 - **detector bias** (when measured, ``bias_px`` = the mean offset (2,) px of the detector's
   centres): a common shift of every centre, each axis taken as a standard uncertainty of its
   size (its sign unknown for another camera), propagated as a shift of all residuals.

@@ -40,3 +40,22 @@ def test_not_computed_with_too_few_or_constant_errors(errors):
     assert studentized_rmse_bounds(errors, 0.95, seed=0) is None
     b = rmse_bounds(errors, 0.95, seed=0)
     assert b["bootstrap"] is None and b["upper_by"] == "chi2"
+
+
+def test_heavy_tails_are_flagged_and_named_in_the_criterion():
+    """An error sample with a few gross errors is flagged (kurtosis beyond three Gaussian standard
+    errors); a Gaussian one is not; the criterion's bounds_by says so."""
+    from dockfactory.eval.acceptance import _bounds_of
+    from dockfactory.eval.confidence import tail_check
+    rng = np.random.default_rng(3)
+    gauss = rng.normal(0.0, 1.0, 100)
+    assert 2.0 < tail_check(gauss)["kurtosis"] < 4.0 and not tail_check(gauss)["heavy_tailed"]
+    heavy = gauss.copy()
+    heavy[:3] = 8.0
+    assert tail_check(heavy)["heavy_tailed"] and tail_check(heavy)["kurtosis"] > 3 + 3 * math.sqrt(24 / 100)
+    assert tail_check(np.ones(3)) == {"kurtosis": None, "heavy_tailed": False}
+    metrics = {"bounds": {"localization": {"x": rmse_bounds(heavy, 0.95, seed=0)}}}
+    row = _bounds_of(metrics, "localization", "x", "rmse", 1.0)
+    assert "heavy tails (kurtosis" in row["bounds_by"] and "may undercover" in row["bounds_by"]
+    metrics = {"bounds": {"localization": {"x": rmse_bounds(gauss, 0.95, seed=0)}}}
+    assert "heavy" not in _bounds_of(metrics, "localization", "x", "rmse", 1.0)["bounds_by"]
