@@ -3,6 +3,8 @@
 PNG/JPEG/TIFF/BMP images (files or folders) -> detector -> identification -> solve (the chosen camera
 model, per frame, or self-calibrated over the whole set as one docking run of one camera) ->
 OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT/overlays/.
+Every pose carries its uncertainty budget (U = 2 u); with an acceptance spec each image is judged
+IN / OUT / UNDECIDED against its tolerances (dockfactory.measure_verdict).
 
 Every image given gets a record: a file that is missing or unreadable, or a frame without a pose,
 is reported with its reason and category, never dropped; the exit status is 1 when any image has
