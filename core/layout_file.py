@@ -16,6 +16,13 @@ number is finite and of a docking section's size, each section's markers lie on 
 seam (A at x <= 0, B at x >= 0: swapped section labels are caught), and each section passes the
 checks a config's layout passes (``core.layout.layout_problems``: at least 6 markers, no
 overlapping discs, not coplanar, no symmetry that makes two markers interchangeable).
+
+How well the marker positions themselves are known (a CMM-measured layout: hundredths of a mm) may be
+stated as ``"sigma_mm"``: the standard uncertainty (1 sigma, mm, per coordinate, independent
+between markers and coordinates) of every ``center_mm``, at the top level (the whole layout) and/or
+in a marker's object (that marker; it overrides the top level). A number in [0, MAX_SIGMA_MM];
+:func:`read_layout_sigmas` returns them (None when the file states none), and
+eval.uncertainty_budget propagates them to the pose.
 """
 from __future__ import annotations
 
@@ -32,6 +39,7 @@ MAX_MARKERS_PER_SECTION = 32   # identification's time grows about as markers^5 
 MAX_MARKERS = 2 * MAX_MARKERS_PER_SECTION
 MAX_COORDINATE_MM = 1.0e5   # 100 m: a docking section is metres across, never more
 MAX_DIAMETER_MM = 1.0e3
+MAX_SIGMA_MM = 10.0   # a layout known worse than 1 cm is not a measured layout
 
 
 class LayoutFileError(DockfactoryError):
@@ -85,9 +93,35 @@ def _wrong_side(markers) -> str | None:
     return None
 
 
+def _sigma(value, path, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and 0 <= value <= MAX_SIGMA_MM):
+        raise LayoutFileError(f"{path}: {key}: expected a number in [0, {MAX_SIGMA_MM:g}] mm (the 1-sigma "
+                              f"uncertainty of each marker coordinate), got {value!r}"[:300])
+    return float(value)
+
+
+def read_layout_sigmas(path) -> dict[str, float] | None:
+    """{marker id: sigma_mm} of layout file ``path`` (module docstring): each marker's own
+    ``sigma_mm``, else the layout's; None when the file states no ``sigma_mm`` at all. The file is
+    checked as :func:`read_layout_file` checks it (one-line LayoutFileError)."""
+    data, markers = _read(Path(path))
+    top = data.get("sigma_mm")
+    top = None if top is None else _sigma(top, path, "sigma_mm")
+    own = {i: _sigma(rec["sigma_mm"], path, f"markers[{i}].sigma_mm")
+           for i, rec in enumerate(data["markers"]) if rec.get("sigma_mm") is not None}
+    if top is None and not own:
+        return None
+    return {m.id: own.get(i, top if top is not None else 0.0) for i, m in enumerate(markers)}
+
+
 def read_layout_file(path) -> tuple[Marker, ...]:
     """The markers of layout file ``path`` (checked: one-line LayoutFileError otherwise)."""
-    path = Path(path)
+    return _read(Path(path))[1]
+
+
+def _read(path: Path) -> tuple[dict, tuple[Marker, ...]]:
+    """(the file's JSON object, its checked markers)."""
     check_regular_file(path, "layout")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -116,4 +150,4 @@ def read_layout_file(path) -> tuple[Marker, ...]:
     if problems:
         raise LayoutFileError(f"{path}: markers: {problems[0]}"
                               + (f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""))
-    return out
+    return data, out

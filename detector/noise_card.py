@@ -42,10 +42,9 @@ def noise_card_path(weights) -> Path:
     return w.with_name(w.stem + ".noise.json")
 
 
-def centre_noise_px(weights) -> float | None:
-    """The measured centre noise (px, per axis) of ``weights``, or None when no card is next to
-    them, or the card is for other weights (another sha256) or another centre refinement, or it
-    is not a valid card."""
+def _card(weights) -> dict | None:
+    """The noise card of ``weights`` when it is theirs (their sha256, this centre refinement, the
+    format) and valid, else None."""
     card = noise_card_path(weights)
     if not card.is_file():
         return None
@@ -56,7 +55,31 @@ def centre_noise_px(weights) -> float | None:
               and doc.get("refinement_sha256") == refinement_sha256())
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return value if ok and math.isfinite(value) and 0 < value <= MAX_CARD_NOISE_PX else None
+    return doc if ok and math.isfinite(value) and 0 < value <= MAX_CARD_NOISE_PX else None
+
+
+def centre_noise_px(weights) -> float | None:
+    """The measured centre noise (px, per axis) of ``weights``, or None when no card is next to
+    them, or the card is for other weights (another sha256) or another centre refinement, or it
+    is not a valid card."""
+    doc = _card(weights)
+    return None if doc is None else float(doc["centre_noise_px"])
+
+
+def centre_bias_px(weights) -> tuple[float, float] | None:
+    """The measured mean offset (x, y) px of the weights' refined centres from the exact ones: the
+    detection-weighted mean of the card's per-condition ``mean_px``; None without a valid card or
+    without per-condition means (a detector bias that was not measured)."""
+    doc = _card(weights)
+    try:
+        per = [(int(v["n"]), [float(x) for x in v["mean_px"]]) for v in (doc or {}).get("by_condition", {}).values()
+               if v.get("mean_px") is not None and v.get("n")]
+    except (KeyError, TypeError, ValueError):
+        return None
+    n = sum(k for k, _ in per)
+    if not n or not all(len(m) == 2 and all(math.isfinite(x) for x in m) for _, m in per):
+        return None
+    return (sum(k * m[0] for k, m in per) / n, sum(k * m[1] for k, m in per) / n)
 
 
 def write_noise_card(weights, centre_noise: float, details: dict) -> Path:

@@ -14,6 +14,7 @@ from dockfactory.cli_detector import add_subcommands as add_detector_commands
 from dockfactory.cli_factory import add_subcommands as add_factory_commands
 from dockfactory.cli_judge import add_eval_commands
 from dockfactory.cli_measure import add_subcommand as add_measure_command
+from dockfactory.cli_plan import add_subcommand as add_plan_command
 from dockfactory.core.errors import DockfactoryError
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
@@ -28,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_eval_commands(sub)
     add_detector_commands(sub)
     add_measure_command(sub)
+    add_plan_command(sub)
     for parser in _all_parsers(sub):
         for action in parser._actions:
             if action.dest == "out" and action.type is None:

@@ -1,6 +1,7 @@
 """``dockfactory measure``: the command line of eval.measure (torch is imported inside the command)."""
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -12,6 +13,8 @@ from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.cli_args import MAX_THREADS, float_in, positive_int, thread_count, torch_threads, unit_float
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
+from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
+from dockfactory.eval.conformity import exit_status
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
@@ -33,7 +36,8 @@ def cmd_measure(args) -> int:
         if done >= total:
             bars[0].close()
     s = measure(args.images, args.layout, weights, args.out, camera_model=args.camera_model,
-                self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress, options=options)
+                self_calibrate=args.self_calibrate, min_score=args.min_score, progress=progress, options=options,
+                acceptance=args.acceptance)
     fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
     if s["earlier_run_discarded"]:
         print(f"measure: {args.out} held the results of other images or options: removed, measured afresh",
@@ -43,7 +47,23 @@ def cmd_measure(args) -> int:
           f"{s['frames_per_s']} frames/s" + (f" ({s['resumed']} done by an earlier run)" if s["resumed"] else "")
           + (f"; no pose: {fails}" if fails else "")
           + f" -> {Path(args.out) / 'measurements.json'}")
+    if s["images_total"] == 1 and s["images_with_pose"] == 1 and not args.quiet:
+        doc = json.loads((Path(args.out) / "measurements.json").read_text(encoding="utf-8"))
+        print("\n".join(budget_lines(doc["images"][0])))
+    if "conformity" in s:
+        return _print_conformity(s, Path(args.out), args.quiet)
     return 0 if s["images_with_pose"] == s["images_total"] else 1
+
+
+def _print_conformity(s: dict, out: Path, quiet: bool) -> int:
+    """Per image (unless ``quiet``) the decision and each gated value +- U, then the summary
+    line; the exit status of the worst image (0 IN, 1 OUT, 3 UNDECIDED)."""
+    if not quiet:
+        doc = json.loads((out / "measurements.json").read_text(encoding="utf-8"))
+        for line in pose_lines(doc["images"], [Path(r["image"]).name for r in doc["images"]]):
+            print(line)
+    print(summary_line(s["conformity"]))
+    return exit_status(s["conformity"]["worst"])
 
 
 def add_subcommand(sub) -> None:
@@ -80,6 +100,10 @@ def add_subcommand(sub) -> None:
     m.add_argument("--raw-white", type=float, default=None,
                    help="raw frames: the sensor's white level, DN (needed: e.g. 4095 for 12 bit)")
     m.add_argument("--demosaic", choices=DEMOSAICS, default="mhc", help="raw frames: demosaic (default mhc)")
+    m.add_argument("--acceptance", metavar="SPEC",
+                   help="acceptance spec (TOML, as run and evaluate take): each image's X, Y, alpha... IN / OUT / "
+                        "UNDECIDED against the [localization] tolerances about the docked pose, with the guard "
+                        "band U = 2 u (ISO 14253-1); exit 0 all IN, 1 any OUT, 3 otherwise undecided")
     m.add_argument("--quiet", action="store_true")
     m.add_argument("--out", required=True, help="output folder (locked while measure runs); a rerun with the same "
                                                 "images and options measures only what is missing, with others "

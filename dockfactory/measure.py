@@ -3,6 +3,8 @@
 PNG/JPEG/TIFF/BMP images (files or folders) -> detector -> identification -> solve (the chosen camera
 model, per frame, or self-calibrated over the whole set as one docking run of one camera) ->
 OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT/overlays/.
+Every pose carries its uncertainty budget (U = 2 u); with an acceptance spec each image is judged
+IN / OUT / UNDECIDED against its tolerances (dockfactory.measure_verdict).
 
 Every image given gets a record: a file that is missing or unreadable, or a frame without a pose,
 is reported with its reason and category, never dropped; the exit status is 1 when any image has
@@ -33,9 +35,9 @@ import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
-from dockfactory.core.layout_file import read_layout_file
+from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.detector.noise_card import centre_noise_px
+from dockfactory.detector.noise_card import centre_bias_px, centre_noise_px
 from dockfactory.measure_overlay import draw_measurement
 from dockfactory.measure_pool import MeasurePool
 from dockfactory.measure_read import (
@@ -47,6 +49,10 @@ from dockfactory.measure_read import (
     read_image,
 )
 from dockfactory.measure_store import MeasureStore, image_identity
+from dockfactory.measure_verdict import add_conformity, add_uncertainty
+from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
+from dockfactory.eval.uncertainty_budget import TERMS
 from dockfactory.eval.solve_frames import (
     detection_arrays,
     docking_options,
@@ -169,7 +175,9 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
             "intrinsics": first["intrinsics"], "intrinsics_std": first["intrinsics_std"]}
 
 
-CSV_FIELDS = (["image", "ok", "category", "reason"] + list(POSE_NAMES) + [f"std_{n}" for n in POSE_NAMES]
+CSV_FIELDS = (["image", "ok", "category", "reason", "conformity"] + list(POSE_NAMES)
+              + [f"{p}_{n}" for p in ("std", "u", "U") for n in POSE_NAMES]
+              + [f"conformity_{n}" for n in POSE_NAMES]
               + ["focal_px", "camera_model", "cx", "cy", "k1", "k2", "p1", "p2", "rmse_px_a", "rmse_px_b",
                  "n_detections", "detect_ms", "solve_ms"])
 
@@ -188,9 +196,25 @@ def _csv_value(name: str, value):
     return f"{value:.6g}"
 
 
+def _uncertainty_cells(r: dict) -> dict:
+    """The CSV cells of a record's budget (u_*: combined standard uncertainty, U_*: expanded,
+    k = 2) and conformity decisions (the image's and each gated component's)."""
+    row = {}
+    budget = r.get("uncertainty") or {}
+    if budget and "error" not in budget:
+        row.update({f"u_{n}": budget[n]["combined"] for n in POSE_NAMES})
+        row.update({f"U_{n}": budget[n]["expanded"] for n in POSE_NAMES})
+    conf = r.get("conformity")
+    if conf is not None:
+        row["conformity"] = conf["decision"]
+        row.update({f"conformity_{n}": c["decision"] for n, c in conf["components"].items()})
+    return row
+
+
 def csv_text(frames: list[Frame]) -> str:
-    """measurements.csv: one row per image (pose, its 1-sigma standard deviations, intrinsics,
-    reprojection RMS, timings), numbers at the precision of :data:`CSV_DECIMALS`."""
+    """measurements.csv: one row per image (pose, its 1-sigma standard deviations std_*, the
+    budget's combined u_* and expanded U_* (k = 2), conformity decisions with an acceptance spec,
+    intrinsics, reprojection RMS, timings), numbers at the precision of :data:`CSV_DECIMALS`."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, CSV_FIELDS, lineterminator="\n")
     w.writeheader()
@@ -204,6 +228,7 @@ def csv_text(frames: list[Frame]) -> str:
             row.update(focal_px=r["focal_px"], camera_model=r["camera_model"], rmse_px_a=r["rmse_px"]["A"],
                        rmse_px_b=r["rmse_px"]["B"], n_detections=r["n_detections"])
             row.update({k: v for k, v in r.get("intrinsics", {}).items() if k in CSV_FIELDS})
+        row.update(_uncertainty_cells(r))
         if "timing_ms" in r:
             row.update(detect_ms=r["timing_ms"]["detect"], solve_ms=r["timing_ms"]["solve"])
         w.writerow({k: _csv_value(k, v) for k, v in row.items()})
@@ -341,13 +366,16 @@ def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, op
 
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
             self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None,
-            options: MeasureOptions = MeasureOptions()) -> dict:
+            options: MeasureOptions = MeasureOptions(), acceptance=None) -> dict:
     """Measure every image (see the module docstring); returns the summary written to
     OUT/measurements.json (without the per-image records). ``frames_per_s`` counts the images
     measured by this run over everything after the detector is loaded: reading, detection,
-    solve, overlays. ``progress(done, total)`` after each image."""
+    solve, overlays. ``progress(done, total)`` after each image. Every pose gets its uncertainty
+    budget; ``acceptance`` (an acceptance spec's path) adds the conformity decisions
+    (dockfactory.measure_verdict; the summary's ``conformity``)."""
     paths = collect_images(images)
-    markers = read_layout_file(layout_path)
+    markers, sigmas = read_layout_file(layout_path), read_layout_sigmas(layout_path)
+    spec = _spec(acceptance)
     model = resolve_camera_model(camera_model, self_calibrate)
     sequence = self_calibrate == "sequence"
     with writer_lock(out, "measure") as out:
@@ -366,23 +394,52 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
                                       options, store, frames, lambda: progress and progress(len(frames), len(paths)),
                                       sequence)
         frames = [frames[i] for i in range(len(paths))]
-        run = None
-        if sequence:
-            t0 = time.perf_counter()
-            with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
-                warnings.simplefilter("always")
-                run = self_calibrate_sequence(frames, markers, model, floor)
-            if caught:
-                run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
-            if options.overlay_size is not None:
-                draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
-            wall += time.perf_counter() - t0
-        header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall, run, len(jobs))
+        run, seconds = _run_of(frames, markers, model, floor, out, options) if sequence else (None, 0.0)
+        header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall + seconds, run,
+                         len(jobs))
         header.update(backend=store.made_with["backend"], workers=workers, overlay_size=options.overlay_size,
                       sigma_floor_px=floor, camera=asdict(options.camera), max_megapixels=options.max_megapixels,
-                      resumed=resumed, earlier_run_discarded=store.discarded)
+                      resumed=resumed, earlier_run_discarded=store.discarded,
+                      **_assess(frames, markers, sigmas, centre_bias_px(weights), spec, acceptance))
         write_records(out, frames, header)
     return header
+
+
+def _spec(acceptance):
+    """The acceptance spec of ``acceptance`` (a path) checked for a single pose's tolerances, or
+    None (bad input is a one-line DockfactoryError before anything is measured)."""
+    if acceptance is None:
+        return None
+    spec = load_acceptance(acceptance)
+    pose_tolerances(spec, str(acceptance))
+    return spec
+
+
+def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dict:
+    """Every record's uncertainty budget (``bias``: the detector's measured centre offset, px, or
+    None) and, with a spec, its conformity; the header's keys."""
+    records = [f.record for f in frames]
+    add_uncertainty(records, markers, sigmas, bias)
+    extra = {"uncertainty": {"k": COVERAGE_K, "layout_sigma_mm": None if sigmas is None else
+                             {"min": min(sigmas.values()), "max": max(sigmas.values())},
+                             "detector_bias_px": None if bias is None else list(bias), "terms": list(TERMS)}}
+    if spec is not None:
+        extra["conformity"] = add_conformity(records, spec, str(acceptance))
+    return extra
+
+
+def _run_of(frames: list[Frame], markers, model, floor, out, options) -> tuple[dict, float]:
+    """--self-calibrate sequence: the joint solve of the identified frames and their overlays
+    (the run's record with its warnings; the seconds it took)."""
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
+        warnings.simplefilter("always")
+        run = self_calibrate_sequence(frames, markers, model, floor)
+    if caught:
+        run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
+    if options.overlay_size is not None:
+        draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
+    return run, time.perf_counter() - t0
 
 
 def _measure_jobs(weights, markers, jobs, model, min_score, out, options, store, frames, tick, sequence):

@@ -229,8 +229,10 @@ def _bounds_of(metrics: dict, block: str, c: str, statistic: str, value) -> dict
     if value is None or b.get("upper") is None:
         return {"lower": None, "upper": None, "bounds_by": None}
     power = 2 if statistic == "mse" else 1
+    tails = (f"; heavy tails (kurtosis {b['kurtosis']:.1f}): the upper bound may undercover"
+             if b.get("heavy_tailed") else "")
     return {"lower": b["lower"] ** power, "upper": b["upper"] ** power,
-            "bounds_by": f"{b['lower_by']} / {b['upper_by']}"}
+            "bounds_by": f"{b['lower_by']} / {b['upper_by']}{tails}"}
 
 
 def decide_criterion(rule: str, value, threshold, lower, upper) -> str:

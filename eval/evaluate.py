@@ -15,6 +15,7 @@ import numpy as np
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
+from dockfactory.eval.uncertainty_budget import budget_block
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, verdict
 from dockfactory.eval.confidence import pooled_spread_bounds, rmse_bounds
 from dockfactory.eval.camera_models_eval import camera_models_block
@@ -269,8 +270,17 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
         metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
     metrics["simulated_cameras"] = simulated_cameras_block(ds, test)
     metrics["bounds"] = statistic_bounds(test, rep, spec.confidence)
+    metrics["uncertainty_budget"] = test_budget(ds, poses, test, noise)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows
+
+
+def test_budget(ds: Dataset, poses: dict, test: list[dict], noise: dict | None) -> dict:
+    """The uncertainty budget over the solved test frames (eval.uncertainty_budget.budget_block);
+    the detector bias term from the measured mean centre offset when detections were measured."""
+    bias = ((noise or {}).get("overall") or {}).get("mean_px")
+    records = [poses["frames"][r["frame_id"]] for r in test if r["ok"]]
+    return budget_block(records, ds.markers(), (ds.config.image.width, ds.config.image.height), bias)
 
 
 def pr_curves(labels: list[dict], frames_dets: dict, visible_threshold: float, max_points: int = 200) -> dict:

@@ -30,6 +30,7 @@ from dockfactory.eval.report_calibration import (
     markdown_honesty,
     plot_qq,
 )
+from dockfactory.eval.report_budget import html_budget
 from dockfactory.eval.report_cameras import (
     CAMERA_MODELS_SCHEMA,
     ENVELOPE_SCHEMA,
@@ -329,6 +330,7 @@ METRICS_SCHEMA = {
     "camera_models?": CAMERA_MODELS_SCHEMA,
     "simulated_cameras?": SIMULATED_CAMERAS_SCHEMA,
     "bounds?": "any",
+    "uncertainty_budget?": "any",
     "acceptance": {"accepted": "bool", "verdict?": "str", "decision_rule?": "str", "confidence?": "num",
                    "criteria": ("list", {"name": "str", "statistic": "str", "value": "num?", "threshold": "num",
                                          "unit": "str", "pass": "bool", "paper?": "num?", "note?": "str",
@@ -488,7 +490,7 @@ def _rule_text(acc: dict) -> str:
         return (f"Decision rule: guarded (ISO 14253-1 style). A pose statistic passes only when its one-sided "
                 f"{conf:.0%} upper confidence bound is within its threshold, fails when its {conf:.0%} lower bound "
                 "is beyond it, and is UNDECIDED between (more frames would decide); bounds by chi-square under a "
-                "Gaussian error model and by bootstrap, the more cautious one deciding (the method of each bound in "
+                "Gaussian error model and by a studentized bootstrap, the more cautious one deciding (the method of each bound in "
                 "brackets). Detection minima and the failure rate compare the value itself.")
     return ("Decision rule: simple. Each statistic's value is compared with its threshold; its confidence "
             "bounds are shown but do not decide.")
@@ -713,7 +715,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None, signers:
     worst = gallery(dataset_root, rows, poses, detections)
     sign = sign_off(eval_dir, signers)
     parts = (_html_verdict(metrics, acc, verdict) + [_html_sign_off(sign)] + _html_localization(metrics)
-             + _html_calibration(metrics, rows)
+             + html_budget(metrics) + _html_calibration(metrics, rows)
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
              + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])

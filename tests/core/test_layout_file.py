@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from dockfactory.core.layout_file import LayoutFileError, read_layout_file
+from dockfactory.core.layout_file import LayoutFileError, read_layout_file, read_layout_sigmas
 from dockfactory.generator.dataset_open import Dataset
 
 
@@ -86,3 +86,36 @@ def test_a_layout_beyond_the_identification_limit_is_refused(tmp_path):
     path.write_text(json.dumps({"markers": markers}))
     with pytest.raises(LayoutFileError, match=f"section A has {n} markers, at most {MAX_MARKERS_PER_SECTION} per section"):
         read_layout_file(path)
+
+
+def test_sigma_mm_per_layout_and_per_marker(tmp_path):
+    """A layout's ``sigma_mm`` applies to every marker, a marker's own overrides it; none stated:
+    None (no layout term in the budget)."""
+    assert read_layout_sigmas(_write(tmp_path, lambda r: None)) is None
+
+    def edit(r):
+        r["sigma_mm"] = 0.02
+        r["markers"][3]["sigma_mm"] = 0.05
+    path = _write(tmp_path, edit)
+    markers, sigmas = read_layout_file(path), read_layout_sigmas(path)
+    assert set(sigmas) == {m.id for m in markers}
+    assert sigmas[markers[3].id] == 0.05
+    assert all(v == 0.02 for k, v in sigmas.items() if k != markers[3].id)
+    only = read_layout_sigmas(_write(tmp_path, lambda r: r["markers"][0].update(sigma_mm=0.01)))
+    assert only[markers[0].id] == 0.01 and only[markers[1].id] == 0.0   # unstated: taken as exact
+
+
+@pytest.mark.parametrize("edit, where", [
+    (lambda r: r.update(sigma_mm=-0.01), "sigma_mm: expected a number in [0, 10] mm"),
+    (lambda r: r.update(sigma_mm="0.02"), "sigma_mm: expected a number"),
+    (lambda r: r.update(sigma_mm=True), "sigma_mm: expected a number"),
+    (lambda r: r.update(sigma_mm=50.0), "sigma_mm: expected a number in [0, 10] mm"),
+    (lambda r: r["markers"][2].update(sigma_mm=float("nan")), "markers[2].sigma_mm"),
+], ids=["negative", "string", "bool", "huge", "marker-nan"])
+def test_bad_sigma_mm_is_a_one_line_error(tmp_path, edit, where):
+    path = _write(tmp_path, edit)
+    read_layout_file(path)   # the markers themselves are fine
+    with pytest.raises(LayoutFileError) as exc:
+        read_layout_sigmas(path)
+    msg = str(exc.value)
+    assert str(path) in msg and where in msg and "\n" not in msg

@@ -154,6 +154,10 @@ def test_report_prints_the_sigma_the_table_and_a_qq_plot(evaluated, tmp_path):
     assert f"| all | x | 4 | {cal['x']['rms_z']:.3g} | {cal['x']['within_2sigma']:.1%} |" in md
     assert summary["centre_noise_used"]["value"] == used["value"]
     assert summary["covariance_calibration"]["alpha"]["rms_z"] == cal["alpha"]["rms_z"]
+    # the GUM budget of a single pose over the solved test frames, per gated component
+    budget = metrics["uncertainty_budget"]
+    assert budget["n"] == metrics["localization"]["n_solved"] and budget["components"]["x_mm"]["combined"] > 0
+    assert "Uncertainty budget of a single pose (GUM, JCGM 100)" in html and "U (k = 2)" in html
 
 
 def test_report_still_reads_an_older_metrics_file(evaluated, tmp_path):

@@ -1,0 +1,98 @@
+"""Conformity of one measured pose with a tolerance, by the guarded rule of ISO 14253-1.
+
+A single measurement y of a component with standard uncertainty u (1 sigma) is compared with a
+symmetric tolerance zone [-T, T] about the nominal docked pose (X = Y = Z = 0 mm, alpha = beta =
+gamma = 0 deg: B's frame coincides with D when the sections are perfectly docked,
+conventions.md). The guard band is the expanded uncertainty U = k u (coverage factor k, 2 for
+about 95 % under a Gaussian):
+
+- IN when |y| + U <= T (conformity proven: the whole interval y +- U is in the zone);
+- OUT when |y| - U > T (non-conformity proven: the whole interval is outside);
+- UNDECIDED otherwise (the interval straddles a limit).
+
+A value or uncertainty that is not a finite number (no pose, an undetermined covariance) is
+UNDECIDED: nothing is proven either way.
+
+The tolerance of a component is the acceptance spec's ``[localization]`` threshold (the square
+root of it for ``statistic = "mse"``): the accuracy the spec demands of a pose against the truth,
+read for one pose as its zone about the nominal docked pose (:func:`pose_tolerances`). The spec's
+``decision_rule = "simple"`` drops the guard band (k = 0: IN when |y| <= T, else OUT). Pure functions, no I/O: measure (per image) and a live
+stream call them alike. Exit statuses follow eval.acceptance (0 proven in, 1 out, 3 undecided).
+"""
+from __future__ import annotations
+
+import math
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import POSE_KEYS
+from dockfactory.eval.acceptance import EXIT_NOT_PROVEN, AcceptanceSpec
+
+IN, OUT, UNDECIDED = "IN", "OUT", "UNDECIDED"
+COVERAGE_K = 2.0   # k of U = k u: about 95 % coverage for a Gaussian (JCGM 100, 6.3)
+EXIT_STATUS = {IN: 0, OUT: 1, UNDECIDED: EXIT_NOT_PROVEN}
+_RANK = {IN: 0, UNDECIDED: 1, OUT: 2}   # OUT is the worst: it proves a defect
+
+
+def expanded(u: float, k: float = COVERAGE_K) -> float:
+    """U = k u (the unit of u)."""
+    return k * u
+
+
+def conformity(value, std, tolerance: float, k: float = COVERAGE_K) -> str:
+    """IN, OUT or UNDECIDED of a measured ``value`` with standard uncertainty ``std`` (1 sigma,
+    same unit) against the zone [-tolerance, tolerance] with guard band U = k std.
+
+    ``tolerance`` must be a finite number > 0 and ``k`` >= 0 (ValueError otherwise: a spec's
+    thresholds are checked when it is loaded, so this is a programming error)."""
+    if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"conformity: tolerance must be a finite number > 0, got {tolerance!r}")
+    if not (math.isfinite(k) and k >= 0):
+        raise ValueError(f"conformity: k must be a finite number >= 0, got {k!r}")
+    if value is None or std is None or not (math.isfinite(value) and math.isfinite(std)) or std < 0:
+        return UNDECIDED
+    band = expanded(std, k)
+    if abs(value) + band <= tolerance:
+        return IN
+    if abs(value) - band > tolerance:
+        return OUT
+    return UNDECIDED
+
+
+def worst(decisions) -> str:
+    """The worst of several decisions: OUT over UNDECIDED over IN (IN for none)."""
+    return max(decisions, key=_RANK.__getitem__, default=IN)
+
+
+def exit_status(decision: str) -> int:
+    """0 IN, 1 OUT, EXIT_NOT_PROVEN (3) UNDECIDED: the convention of eval.acceptance's verdict."""
+    return EXIT_STATUS[decision]
+
+
+def pose_tolerances(spec: AcceptanceSpec, source: str = "acceptance spec") -> dict[str, float]:
+    """{pose name ("x_mm", "alpha_deg", ...): tolerance T} of the components the spec's
+    ``[localization]`` table gates (module docstring); DockfactoryError naming ``source`` when it
+    gates none (a single pose would be judged on nothing)."""
+    gate = spec.localization
+    thresholds = gate.thresholds()
+    if not thresholds:
+        raise DockfactoryError(f"{source}: [localization] gates no component: a single pose has no tolerance "
+                               "to be judged against (give x, y or alpha there)")
+    root = math.sqrt if gate.statistic == "mse" else float
+    return {POSE_KEYS[c]: root(t) for c, t in thresholds.items()}
+
+
+def coverage_k(spec: AcceptanceSpec) -> float:
+    """The guard band's k under the spec's decision rule: COVERAGE_K (guarded) or 0 (simple)."""
+    return COVERAGE_K if spec.decision_rule == "guarded" else 0.0
+
+
+def pose_conformity(pose: dict, std: dict, tolerances: dict, k: float = COVERAGE_K) -> dict:
+    """{"components": {name: {"value", "u", "U", "tolerance", "decision"}}, "decision": worst}
+    of one pose (``pose`` and ``std``: pose name -> value and standard uncertainty) against
+    ``tolerances`` (pose name -> T)."""
+    rows = {}
+    for name, tol in tolerances.items():
+        v, u = pose.get(name), std.get(name)
+        rows[name] = {"value": v, "u": u, "U": None if u is None else expanded(u, k), "tolerance": tol,
+                      "decision": conformity(v, u, tol, k)}
+    return {"components": rows, "decision": worst(r["decision"] for r in rows.values()), "k": k}

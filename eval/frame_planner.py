@@ -1,0 +1,96 @@
+"""How many test frames (repeatability degrees of freedom) prove conformance under the guarded rule.
+
+For a gated pose statistic whose true value is expected to be ``rmse`` (mm or deg) against a
+threshold T (the spec's; its square root for ``statistic = "mse"``), the number of frames n at
+which the one-sided chi-square bound at the spec's ``confidence`` decides
+(eval.confidence.frames_to_decide): for rmse < T the n at which the upper bound
+rmse sqrt(n / chi2_{1-c}(n)) falls within T (conformance proven: ACCEPTED on that criterion),
+for rmse > T the n at which the lower bound rises beyond it (REJECTED). It assumes the measured
+statistic comes out at its expected value and Gaussian errors (the chi-square model; from 5
+frames the bootstrap bound also decides, more cautious on heavy tails); the margin rmse / T says
+how hard the proof is (n grows without bound as the margin nears 1).
+
+Localization: n = test frames (nu = n). Estimation: nu = the repeatability captures minus the
+static poses (each pose's mean costs one degree of freedom).
+
+The expected figures come from the user, or from a config's geometry (:func:`expected_from_config`):
+the RMS over the config's test frames of the Cramer-Rao standard deviation of each component at a
+given centre noise (solver.crb, joint problem: shared unknown focal), times ``bound_factor``
+(a real solve sits above the bound: docs/acceptance.md gives the measured ratios).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.layout import marker_points
+from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS
+from dockfactory.eval.acceptance import AcceptanceSpec
+from dockfactory.eval.confidence import frames_to_decide
+from dockfactory.generator.random_draws import static_scene
+from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.solver.crb import crb_d_from_b
+
+BLOCKS = {"localization": "test frames", "estimation": "repeatability degrees of freedom (captures - poses)"}
+
+
+def plan_frames(spec: AcceptanceSpec, expected: dict[str, dict[str, float]]) -> list[dict]:
+    """One row per gated component of each block in ``expected`` ({"localization" |
+    "estimation": {component: expected rmse}}): threshold (rmse units), margin, what the frames
+    would prove ("conformance" / "non-conformance" / None at the threshold) and how many (None:
+    no count up to 100,000 decides). A gated component without an expected figure is a
+    DockfactoryError (one line)."""
+    rows = []
+    for block, figures in expected.items():
+        gate = getattr(spec, block)
+        root = math.sqrt if gate.statistic == "mse" else float
+        for c, thr in gate.thresholds().items():
+            if c not in figures:
+                raise DockfactoryError(f"plan-frames: [{block}] gates {c} but no expected figure for it was given")
+            rmse, t = figures[c], root(thr)
+            n = frames_to_decide(rmse, t, 1, spec.confidence)
+            proves = None if rmse == t else ("conformance" if rmse < t else "non-conformance")
+            rows.append({"block": block, "component": c, "unit": UNITS[c], "expected_rmse": rmse, "threshold": t,
+                         "margin": rmse / t, "proves": proves, "frames": n, "counts": BLOCKS[block],
+                         "confidence": spec.confidence})
+    return rows
+
+
+def plan_lines(rows: list[dict]) -> list[str]:
+    """One line per row, then per block the count that decides every component."""
+    out = []
+    for r in rows:
+        head = (f"{r['block']}: {r['component']}: expected {r['expected_rmse']:.4g} {r['unit']} against "
+                f"{r['threshold']:.4g} {r['unit']} (margin {r['margin']:.2f})")
+        if r["frames"] is None:
+            out.append(f"{head}: no number of {r['counts']} decides it")
+        else:
+            out.append(f"{head}: {r['frames']} {r['counts']} prove {r['proves']} at {r['confidence']:.0%}")
+    for block, what in BLOCKS.items():
+        mine = [r for r in rows if r["block"] == block]
+        if mine and all(r["proves"] == "conformance" and r["frames"] is not None for r in mine):
+            out.append(f"{block}: {max(r['frames'] for r in mine)} {what} prove every gated component conforms")
+        elif mine:
+            out.append(f"{block}: conformance cannot be proven at these figures")
+    return out
+
+
+def expected_from_config(cfg, sigma_px: float, bound_factor: float = 1.0, max_frames: int = 200) -> dict:
+    """{component: bound_factor x RMS over the config's test frames (the first ``max_frames``)
+    of the Cramer-Rao std} at ``sigma_px`` of isotropic centre noise. DockfactoryError when the
+    config plans no test frame."""
+    st = static_scene(cfg)
+    pa, pb = marker_points(st.markers, "A"), marker_points(st.markers, "B")
+    specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
+    if not specs:
+        raise DockfactoryError("plan-frames: the config plans no test frame: no geometry to bound")
+    stds = []
+    for spec in specs:
+        f = sample_frame(cfg, spec)
+        cam = f.camera.cam_from_d_array()
+        b = crb_d_from_b(pa, cam, pb, cam @ f.d_from_b_array(), f.camera.focal_px, f.camera.principal_point, sigma_px)
+        stds.append([b.std[POSE_KEYS[c]] for c in COMPONENTS])
+    rms = np.sqrt(np.mean(np.square(stds), axis=0)) * bound_factor
+    return {c: float(v) for c, v in zip(COMPONENTS, rms)}

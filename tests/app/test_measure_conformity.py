@@ -1,0 +1,112 @@
+"""measure --acceptance: IN / OUT / UNDECIDED per image with the guard band U = 2 u, the summary
+line, the exit status of the worst image; the layout's sigma_mm in the budget. On two painted
+1280 x 960 frames (tests/pipeline_data.py, no Blender): measured once, then re-judged by reruns
+that resume every image (the spec is not part of what is measured)."""
+import csv
+import json
+
+import pytest
+
+from dockfactory.cli import main
+from test_measure import CONFIG   # the painted 1280 x 960 dataset of tests/app/test_measure.py
+
+IMAGES = ("000000.png", "000001.png")
+
+
+@pytest.fixture(scope="module")
+def painted(tmp_path_factory):
+    from pipeline_data import painted_from_text
+    return painted_from_text(tmp_path_factory, "conformity", CONFIG)
+
+
+def _argv(ds, out, layout=None) -> list:
+    return ["measure", *(str(ds / "images" / n) for n in IMAGES), "--layout", str(layout or ds / "layout.json"),
+            "--out", str(out), "--workers", "1", "--threads", "1", "--overlay-size", "0", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def measured(painted, tmp_path_factory):
+    ds = painted
+    out = tmp_path_factory.mktemp("m") / "out"
+    argv = _argv(ds, out)
+    assert main(argv) == 0
+    return ds, out, argv
+
+
+def _spec(tmp_path, name: str, x: float, rule: str = "guarded") -> str:
+    path = tmp_path / name
+    path.write_text(f'decision_rule = "{rule}"\n[localization]\nx = {x!r}\ny = 1000.0\nalpha = 100.0\n')
+    return str(path)
+
+
+def _doc(out):
+    return json.loads((out / "measurements.json").read_text())
+
+
+@pytest.mark.slow   # the detector on two 1280 x 960 images (once for the module)
+def test_exit_status_follows_the_worst_image_on_both_sides_of_the_guard_band(measured, tmp_path, capsys):
+    ds, out, argv = measured
+    images = _doc(out)["images"]
+    xs = [abs(r["pose"]["x_mm"]) for r in images]
+    near = max(xs)                      # the farthest image sits exactly at the limit: UNDECIDED
+    u_far = images[xs.index(near)]["uncertainty"]["x_mm"]["combined"]
+    cases = [(1000.0, "guarded", 0, "IN"),
+             (near + 2 * u_far * 1.01, "guarded", 0, "IN"),              # just beyond |x| + U
+             (near + 2 * u_far * 0.99, "guarded", 3, "UNDECIDED"),       # just inside |x| + U
+             (near, "guarded", 3, "UNDECIDED"),
+             (near - 2 * u_far * 0.99, "guarded", 3, "UNDECIDED"),       # just above |x| - U
+             (near - 2 * u_far * 1.01, "guarded", 1, "OUT"),             # |x| - U beyond it
+             (near, "simple", 0, "IN"), (near * (1 - 1e-9), "simple", 1, "OUT")]
+    for k, (x, rule, status, worst) in enumerate(cases):
+        capsys.readouterr()
+        assert main([*argv[:-1], "--acceptance", _spec(tmp_path, f"s{k}.toml", x, rule)]) == status, (x, rule)
+        lines = capsys.readouterr().out.strip().splitlines()
+        assert lines[-1].startswith(f"conformity {worst}:"), lines
+        assert "+- U, k = 2" in lines[-2] or rule == "simple"
+        doc = _doc(out)
+        assert doc["conformity"]["worst"] == worst and doc["images_measured"] == 0   # resumed, not re-measured
+        far = doc["images"][xs.index(near)]["conformity"]
+        assert far["components"]["x_mm"]["decision"] == worst and far["k"] == (2.0 if rule == "guarded" else 0.0)
+
+
+@pytest.mark.slow   # the detector on two 1280 x 960 images (once for the module)
+def test_csv_carries_u_U_and_decisions(measured, tmp_path):
+    ds, out, argv = measured
+    assert main([*argv, "--acceptance", _spec(tmp_path, "s.toml", 1000.0)]) == 0
+    rows = list(csv.DictReader((out / "measurements.csv").open()))
+    assert [r["conformity"] for r in rows] == ["IN", "IN"]
+    for r in rows:
+        assert r["conformity_x_mm"] == "IN" and r["conformity_z_mm"] == ""     # z is not gated
+        assert float(r["U_x_mm"]) == pytest.approx(2 * float(r["u_x_mm"]), abs=2e-4)
+        assert float(r["u_x_mm"]) >= float(r["std_x_mm"]) - 1e-4   # + the shipped card's detector bias
+        assert len(r["U_x_mm"].split(".")[1]) == 4                                  # mm to 0.1 um
+
+
+@pytest.mark.slow   # the detector on two 1280 x 960 images (once for the module)
+def test_layout_sigma_mm_enters_the_budget_and_the_guard_band(measured, tmp_path, capsys):
+    ds, out, argv = measured
+    layout = json.loads((ds / "layout.json").read_text())
+    layout["sigma_mm"] = 0.05
+    path = tmp_path / "layout_cmm.json"
+    path.write_text(json.dumps(layout))
+    out2 = tmp_path / "out2"
+    assert main(_argv(ds, out2, path)) == 0
+    before, after = _doc(out)["images"], _doc(out2)["images"]
+    assert _doc(out2)["uncertainty"]["layout_sigma_mm"] == {"min": 0.05, "max": 0.05}
+    for a, b in zip(before, after):
+        bx = b["uncertainty"]["x_mm"]
+        assert bx["layout"] > 0 and bx["combined"] > a["uncertainty"]["x_mm"]["combined"]
+        assert bx["detector_bias"] is not None   # the shipped weights' noise card measured it
+        assert bx["combined"] ** 2 == pytest.approx(bx["centre_noise"] ** 2 + bx["intrinsics"] ** 2 + bx["layout"] ** 2
+                                                    + bx["detector_bias"] ** 2)
+
+
+def test_a_spec_without_pose_tolerances_is_refused_before_measuring(painted, tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[localization]\ngated = false\n")
+    fresh = tmp_path / "fresh"
+    for spec, words in ((bad, "[localization] gates no component"), (tmp_path / "nope.toml", "nope.toml")):
+        assert main([*_argv(painted, fresh), "--acceptance", str(spec)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
+    assert not fresh.exists() or not (fresh / "measurements.json").exists()
