@@ -133,9 +133,12 @@ def _add_dataset_actions(d) -> None:
     f.add_argument("dir_b", metavar="DIR_B")
     f.add_argument("--json", action="store_true", help="print JSON")
     f.set_defaults(func=cmd_diff)
-    e = acts.add_parser("export", help="write COCO, YOLO or BOP files of each dataset (under its exports/)")
+    e = acts.add_parser("export", help="write COCO, YOLO or BOP files, or docking-run videos, of each dataset "
+                                       "(under its exports/)")
     e.add_argument("dirs", nargs="+", metavar="DIR")
-    e.add_argument("--format", default="coco,yolo,bop", help="coco, yolo, bop (comma-separated)")
+    e.add_argument("--format", default="coco,yolo,bop",
+                   help="coco, yolo, bop, video (each docking run as an MP4 with its labels), video_lossless "
+                        "(FFV1 .mkv) (comma-separated; default coco,yolo,bop)")
     e.set_defaults(func=cmd_export)
     p = acts.add_parser("publish", help="verify a complete dataset and write its manifest and fingerprints")
     p.add_argument("dirs", nargs="+", metavar="DIR")

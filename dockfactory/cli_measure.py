@@ -10,16 +10,57 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.cli_args import MAX_THREADS, float_in, positive_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import MAX_THREADS, float_in, non_negative_int, positive_int, thread_count, torch_threads, unit_float
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
+from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
-def cmd_measure(args) -> int:
+def _weights(args) -> Path:
     weights = Path(args.weights) if args.weights else shipped_weights()
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
+    return weights
+
+
+def _check_inputs(args) -> bool:
+    """True for a stream (--video or --camera), False for images; one line naming the clash else."""
+    stream = args.video is not None or args.camera is not None
+    if stream and args.images:
+        raise DockfactoryError("measure: give images, or --video / --camera, not both")
+    if not stream and not args.images:
+        raise DockfactoryError("measure: give images (files or folders), --video PATH or --camera INDEX")
+    if stream and args.self_calibrate:
+        raise DockfactoryError("--self-calibrate: not available on a stream (--video, --camera)")
+    if not stream and (args.jsonl is not None or args.filter or args.max_frames):
+        raise DockfactoryError("--jsonl, --filter and --max-frames apply to a stream (--video, --camera)")
+    if not stream and args.out is None:
+        raise DockfactoryError("measure: --out is needed with images")
+    if stream and args.out is not None:
+        raise DockfactoryError("--out: a stream writes JSON lines (--jsonl FILE or - for standard output)")
+    return stream
+
+
+def cmd_measure_stream(args) -> int:
+    """measure --video / --camera: JSON lines to --jsonl (default standard output), the summary
+    line last; a human summary on standard error. Exit 1 when a frame had no pose."""
+    options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames)
+    weights = _weights(args)
+    torch_threads(args.threads)
+    s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options)
+    fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
+    print(f"{s['frames_with_pose']} of {s['frames']} frames with a pose ({s['camera_model']} camera); "
+          f"{s['frames_per_s']} frames/s, latency p95 {s['latency_ms']['p95']} ms"
+          + (f"; no pose: {fails}" if fails else "") + (" (interrupted)" if s["stopped"] == "interrupted" else ""),
+          file=sys.stderr)
+    return 0 if s["frames_with_pose"] == s["frames"] else 1
+
+
+def cmd_measure(args) -> int:
+    if _check_inputs(args):
+        return cmd_measure_stream(args)
+    weights = _weights(args)
     camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
     options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
@@ -48,7 +89,16 @@ def cmd_measure(args) -> int:
 
 def add_subcommand(sub) -> None:
     m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
-    m.add_argument("images", nargs="+", help="PNG/JPEG/TIFF/BMP files or folders of them")
+    m.add_argument("images", nargs="*", help="PNG/JPEG/TIFF/BMP files or folders of them (or --video, --camera)")
+    m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
+                                   "pattern such as frames/%%06d.png: one JSON line per frame (--jsonl)")
+    m.add_argument("--camera", type=non_negative_int, metavar="INDEX",
+                   help="measure the frames of capture device INDEX as they come (Ctrl-C ends it, with the summary)")
+    m.add_argument("--jsonl", help="a stream's JSON lines: a file, or - for standard output (the default)")
+    m.add_argument("--filter", choices=FILTERS,
+                   help="a stream's display filter: kalman (constant velocity on X, Y, alpha), written beside "
+                        "the raw per-frame pose")
+    m.add_argument("--max-frames", type=positive_int, help="a stream: stop after this many frames")
     m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
@@ -81,7 +131,7 @@ def add_subcommand(sub) -> None:
                    help="raw frames: the sensor's white level, DN (needed: e.g. 4095 for 12 bit)")
     m.add_argument("--demosaic", choices=DEMOSAICS, default="mhc", help="raw frames: demosaic (default mhc)")
     m.add_argument("--quiet", action="store_true")
-    m.add_argument("--out", required=True, help="output folder (locked while measure runs); a rerun with the same "
+    m.add_argument("--out", help="images: output folder (locked while measure runs); a rerun with the same "
                                                 "images and options measures only what is missing, with others "
                                                 "it starts over")
     m.set_defaults(func=cmd_measure)

@@ -123,10 +123,21 @@ def _detect_and_solve(detector, markers, index, path, camera_model, min_score, c
     image, failed = read_image(path, camera, max_pixels, notes)
     if failed is not None:
         return Frame(index, path, failed)
+    return solve_image(detector, markers, index, path, image, camera_model, min_score, camera.cfa,
+                       path.suffix.lower() in (".jpg", ".jpeg"))
+
+
+def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, camera_model: str, min_score: float,
+                cfa: str | None = None, jpeg: bool = False) -> Frame:
+    """Detect and solve one decoded image ``(H, W, 3) uint8`` RGB (its own camera model fit; the
+    principal point assumed is its centre): the per-image path of measure, shared with the stream
+    path (dockfactory.measure_stream). ``path`` names the frame in a failure's reason; ``cfa`` and
+    ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect). The record carries
+    ``image_size`` and ``timing_ms`` (detect, solve)."""
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
     t0 = time.perf_counter()
-    frame.detections = detector.detect(image, cfa=camera.cfa, jpeg=path.suffix.lower() in (".jpg", ".jpeg"))
+    frame.detections = detector.detect(image, cfa=cfa, jpeg=jpeg)
     t1 = time.perf_counter()
     centres = detection_arrays(frame.detections, min_score)
     if len(centres[0]) == 0:

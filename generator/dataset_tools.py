@@ -24,10 +24,13 @@ from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CL
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
+from dockfactory.generator.export_video import export_video, export_video_lossless
 from dockfactory.generator.export_yolo import export_yolo
 from dockfactory.generator.sampler import frame_plan
 
-EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop}
+# coco, yolo, bop: also written by render ([export] formats); the videos only on demand (dataset export)
+EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "bop": export_bop, "video": export_video,
+                  "video_lossless": export_video_lossless}
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this
