@@ -10,7 +10,15 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.cli_args import MAX_THREADS, float_in, non_negative_int, positive_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import (
+    MAX_THREADS,
+    float_in,
+    non_negative_int,
+    positive_int,
+    thread_count,
+    torch_threads,
+    unit_float,
+)
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream
@@ -33,8 +41,9 @@ def _check_inputs(args) -> bool:
         raise DockfactoryError("measure: give images (files or folders), --video PATH or --camera INDEX")
     if stream and args.self_calibrate:
         raise DockfactoryError("--self-calibrate: not available on a stream (--video, --camera)")
-    if not stream and (args.jsonl is not None or args.filter or args.max_frames):
-        raise DockfactoryError("--jsonl, --filter and --max-frames apply to a stream (--video, --camera)")
+    if not stream and (args.jsonl is not None or args.filter or args.max_frames or args.roi or args.input_scale):
+        raise DockfactoryError("--jsonl, --filter, --max-frames, --roi and --input-scale apply to a stream "
+                               "(--video, --camera)")
     if not stream and args.out is None:
         raise DockfactoryError("measure: --out is needed with images")
     if stream and args.out is not None:
@@ -45,7 +54,8 @@ def _check_inputs(args) -> bool:
 def cmd_measure_stream(args) -> int:
     """measure --video / --camera: JSON lines to --jsonl (default standard output), the summary
     line last; a human summary on standard error. Exit 1 when a frame had no pose."""
-    options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames)
+    options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
+                            input_scale=args.input_scale, roi_refresh=args.roi)
     weights = _weights(args)
     torch_threads(args.threads)
     s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options)
@@ -99,6 +109,12 @@ def add_subcommand(sub) -> None:
                    help="a stream's display filter: kalman (constant velocity on X, Y, alpha), written beside "
                         "the raw per-frame pose")
     m.add_argument("--max-frames", type=positive_int, help="a stream: stop after this many frames")
+    m.add_argument("--roi", type=positive_int, metavar="N",
+                   help="a stream: detect in a window around the previous frame's markers, the full frame every N "
+                        "frames and whenever the window loses a marker (faster; default: every frame whole)")
+    m.add_argument("--input-scale", type=float_in(0.1, 2.0),
+                   help="a stream: network px per image px (default: the weights' own, 0.5 for the shipped ones; "
+                        "smaller is faster and sees small markers worse)")
     m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "

@@ -48,6 +48,7 @@ from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.solve_frames import resolve_camera_model
 from dockfactory.measure import NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
+from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_read import captured_stderr
 from dockfactory.measure_store import plain
 
@@ -71,7 +72,9 @@ class StreamOptions:
     ``max_frames`` (None: until the source ends), ``jpeg`` (the frames were JPEG-compressed, as
     a camera streaming MJPEG does), ``prefetch`` (frames decoded ahead by a reader thread, 0: none;
     :class:`FrameReader`) and ``input_scale`` (network px per image px; None: the weights' own,
-    smaller is faster and sees smaller markers worse)."""
+    smaller is faster and sees smaller markers worse) and ``roi_refresh`` (None: every frame
+    detected whole; N: a window around the previous frame's markers, the full frame every N
+    frames and whenever the window loses a marker: dockfactory.measure_roi)."""
     backend: str = "auto"
     camera_model: str | None = None
     min_score: float = MIN_SCORE
@@ -81,6 +84,7 @@ class StreamOptions:
     jpeg: bool = False
     prefetch: int = PREFETCH
     input_scale: float | None = None
+    roi_refresh: int | None = None
 
     def __post_init__(self):
         if self.filter is not None and self.filter not in FILTERS:
@@ -89,6 +93,8 @@ class StreamOptions:
             raise DockfactoryError(f"--max-frames: expected an integer >= 1, got {self.max_frames}")
         if not 0 <= self.prefetch <= MAX_PREFETCH:
             raise DockfactoryError(f"prefetch: expected 0 to {MAX_PREFETCH} frames, got {self.prefetch}")
+        if self.roi_refresh is not None and self.roi_refresh < 1:
+            raise DockfactoryError(f"--roi: expected a refresh interval >= 1 frame, got {self.roi_refresh}")
         if self.input_scale is not None and not 0.1 <= self.input_scale <= 2.0:
             raise DockfactoryError(f"--input-scale: expected a number in [0.1, 2], got {self.input_scale}")
         resolve_camera_model(self.camera_model, None)
@@ -196,8 +202,9 @@ def frame_line(index: int, timestamp_ms: float, record: dict) -> dict:
         line.update(rmse_px=record["rmse_px"], n_detections=record["n_detections"], marker_ids=record["marker_ids"])
     else:
         line.update(category=record.get("category"), reason=record.get("reason"))
-    if "notes" in record:
-        line["notes"] = record["notes"]
+    for key in ("roi", "notes"):
+        if key in record:
+            line[key] = record[key]
     return line
 
 
@@ -261,30 +268,49 @@ class StreamStats:
 @dataclass
 class StreamMeasurer:
     """Measures one frame after another: the loaded ``detector``, the ``markers`` of the layout,
-    the options, the display filter (None or a PoseKalman) and the acceptance hook ``decide``
-    (None or a callable: frame line -> JSON value; see the module docstring)."""
+    the options, the display filter (None or a PoseKalman), the acceptance hook ``decide``
+    (None or a callable: frame line -> JSON value; see the module docstring) and the window
+    tracker (None: every frame detected whole; dockfactory.measure_roi)."""
     detector: object
     markers: tuple
     options: StreamOptions
     kalman: PoseKalman | None = None
     decide: Callable[[dict], object] | None = None
+    tracker: RoiTracker | None = None
 
     def solve(self, index: int, image: np.ndarray) -> dict:
-        """The measure record of one decoded frame; an error on the way is the frame's failure
+        """The measure record of one decoded frame (with ``roi``: the window the detector saw, or
+        null for the full frame, when tracking); an error on the way is the frame's failure
         ("measure error"), warnings are kept in its ``notes``."""
-        model = resolve_camera_model(self.options.camera_model, None)
         name = Path(f"frame {index}")
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                record = solve_image(self.detector, self.markers, index, name, image, model, self.options.min_score,
-                                     self.options.cfa, self.options.jpeg).record
+                record = self._tracked(index, name, image)
         except Exception as exc:   # noqa: BLE001 -- one frame's failure is recorded, the stream goes on
             words = " ".join(str(exc).split())[:300] or "no message"
             return {"ok": False, "category": "measure error", "reason": f"{name}: {type(exc).__name__}: {words}"}
         if caught:
             record["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
         return record
+
+    def _tracked(self, index: int, name: Path, image: np.ndarray) -> dict:
+        """measure.solve_image on the tracker's window (the full frame when it loses a marker)."""
+        o = self.options
+        args = (self.detector, self.markers, index, name, image, resolve_camera_model(o.camera_model, None),
+                o.min_score, o.cfa, o.jpeg)
+        if self.tracker is None:
+            return solve_image(*args).record
+        roi = self.tracker.region()
+        frame = solve_image(*args, roi)
+        if roi is not None and self.tracker.lost(frame.detections, roi):
+            spent = frame.record["timing_ms"]
+            frame = solve_image(*args)
+            frame.record["timing_ms"] = {k: round(v + spent[k], 2) for k, v in frame.record["timing_ms"].items()}
+            roi = None
+        self.tracker.update(frame.detections, roi)
+        frame.record["roi"] = None if roi is None else list(roi)
+        return frame.record
 
     def line(self, item) -> dict:
         """The JSON line of one frame ``(index, t_start, read_ms, timestamp_ms, rgb)`` of a
@@ -331,8 +357,10 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
     except BaseException:
         cap.release()
         raise
+    tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
+               if options.roi_refresh and min(size) > 1 else None)
     measurer = StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
-                              decide)
+                              decide, tracker)
     stats, stopped, t0 = StreamStats(), "end of stream", time.perf_counter()
     try:
         try:
@@ -345,7 +373,8 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
             raise DockfactoryError(f"{name}: no frame could be read")
         summary = {"type": "summary", "format": STREAM_FORMAT, "source": name, "stopped": stopped,
                    "camera_model": resolve_camera_model(options.camera_model, None), "backend": detector.backend,
-                   "filter": options.filter, "acceptance": decide is not None, "layout": str(layout_path),
+                   "filter": options.filter, "roi_refresh": options.roi_refresh, "acceptance": decide is not None,
+                   "layout": str(layout_path),
                    "weights": str(weights), **stats.summary(time.perf_counter() - t0)}
         sink.write(summary)
     finally:

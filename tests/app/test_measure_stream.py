@@ -91,7 +91,7 @@ def test_a_dataset_without_runs_has_no_video(painted, capsys):
     assert not (painted / "exports" / "video").exists()
 
 
-@pytest.mark.slow   # the detector on 4 frames of 1280 x 960, three times
+@pytest.mark.slow   # the detector on 4 frames of 1280 x 960, four times
 def test_video_measured_back_against_labels_and_measure(run_ds, videos, tmp_path, capsys):
     layout = run_ds / "layout.json"
     code, lossless, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout", layout],
@@ -100,6 +100,12 @@ def test_video_measured_back_against_labels_and_measure(run_ds, videos, tmp_path
     code, mp4, err = _stream(["--video", videos / "video" / "unit0_run00.mp4", "--layout", layout,
                               "--filter", "kalman"], capsys, tmp_path, "mp4.jsonl")
     assert code == 0 and "4 of 4 frames with a pose" in err
+    code, windowed, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout", layout,
+                                 "--roi", "3"], capsys, tmp_path, "roi.jsonl")
+    assert code == 0 and windowed[0]["roi"] is None and windowed[1]["roi"] is not None
+    for k in range(4):   # the window changes the network's input, not what it finds: within 1 mm / 0.05 deg
+        assert abs(windowed[k]["pose"]["x_mm"] - lossless[k]["pose"]["x_mm"]) < 1.0
+        assert abs(windowed[k]["pose"]["alpha_deg"] - lossless[k]["pose"]["alpha_deg"]) < 0.05
     images = [run_ds / "images" / f"00000{k}.png" for k in range(4)]
     assert run_cli(["measure", *images, "--layout", layout, "--out", tmp_path / "m", "--workers", "1",
                     "--threads", "1", "--backend", "torch", "--overlay-size", "0", "--quiet"], capsys)[0] == 0
@@ -192,3 +198,33 @@ def test_kalman_smooths_a_constant_velocity_run_and_skips_gaps():
     assert PoseKalman().step(0.0, None, None) is None
     with pytest.raises(ValueError, match="backwards"):
         kf.step(1.0, None, None)
+
+
+def test_roi_tracker_windows_the_markers_and_falls_back_to_full_frames():
+    """The window holds every box of the last frame with its margin, keeps one size between full
+    frames (one network input shape), has even corners, stays inside the image; a full frame comes
+    every ``refresh`` frames, after a frame without detections, and when a marker is lost."""
+    from dockfactory.measure_roi import RoiTracker
+    boxes = [[500.0, 400.0, 530.0, 430.0], [700.0, 420.0, 731.0, 451.0], [610.0, 500.0, 640.0, 530.0]]
+    dets = [{"bbox_px": b, "score": 0.9} for b in boxes]
+    t = RoiTracker(1280, 960, refresh=3, min_score=0.25)
+    assert t.region() is None   # nothing seen yet
+    t.update(dets, None)
+    roi = t.region()
+    assert roi is not None and roi[0] % 2 == 0 and roi[1] % 2 == 0
+    assert all(roi[0] < b[0] and roi[1] < b[1] and b[2] < roi[2] and b[3] < roi[3] for b in boxes)
+    assert (roi[2] - roi[0]) % 64 == 0 and (roi[3] - roi[1]) % 64 == 0
+    moved = [{"bbox_px": [b[0] + 40, b[1] - 20, b[2] + 40, b[3] - 20], "score": 0.9} for b in boxes]
+    assert not t.lost(moved, roi)
+    t.update(moved, roi)
+    roi2 = t.region()
+    assert roi2 is not None and (roi2[2] - roi2[0], roi2[3] - roi2[1]) == (roi[2] - roi[0], roi[3] - roi[1])
+    assert t.lost(moved[:2], roi2)   # a marker fewer than the full frame saw
+    t.update(moved, roi2)
+    assert t.region() is None        # the third frame since the full one: refresh
+    corner = RoiTracker(1280, 960, refresh=10)
+    corner.update([{"bbox_px": [2.0, 900.0, 40.0, 955.0]}], None)
+    x0, y0, x1, y1 = corner.region()
+    assert 0 <= x0 and y1 <= 960 and x1 - x0 >= 38
+    corner.update([], (x0, y0, x1, y1))
+    assert corner.region() is None
