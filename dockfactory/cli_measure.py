@@ -97,9 +97,8 @@ def cmd_measure(args) -> int:
     return 0 if s["images_with_pose"] == s["images_total"] else 1
 
 
-def add_subcommand(sub) -> None:
-    m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
-    m.add_argument("images", nargs="*", help="PNG/JPEG/TIFF/BMP files or folders of them (or --video, --camera)")
+def _add_stream_args(m) -> None:
+    """The flags of measure on a stream (--video, --camera; dockfactory.measure_stream)."""
     m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
                                    "pattern such as frames/%%06d.png: one JSON line per frame (--jsonl)")
     m.add_argument("--camera", type=non_negative_int, metavar="INDEX",
@@ -115,6 +114,12 @@ def add_subcommand(sub) -> None:
     m.add_argument("--input-scale", type=float_in(0.1, 2.0),
                    help="a stream: network px per image px (default: the weights' own, 0.5 for the shipped ones; "
                         "smaller is faster and sees small markers worse)")
+
+
+def add_subcommand(sub) -> None:
+    m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
+    m.add_argument("images", nargs="*", help="PNG/JPEG/TIFF/BMP files or folders of them (or --video, --camera)")
+    _add_stream_args(m)
     m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
