@@ -97,7 +97,7 @@ def cmd_check(args) -> int:
         raise DockfactoryError("check-config needs a CONFIG (or --defaults)")
     cfg, _ = load_checked(args.config, args.sets)
     if args.resolved:
-        print(to_toml(cfg.to_dict()), end="")
+        print(to_toml(cfg.to_dict(full=True)), end="")
         return EXIT_OK
     plan = frame_plan(cfg)
     print(f"{args.config}: valid; dataset version {identity(cfg)['version_id']}, {len(plan)} frames")
