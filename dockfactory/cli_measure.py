@@ -1,6 +1,7 @@
 """``dockfactory measure``: the command line of eval.measure (torch is imported inside the command)."""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from dockfactory.cli_args import (
 )
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
+from dockfactory.measure_selfcal import parse_window
 from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
@@ -39,11 +41,17 @@ def _check_inputs(args) -> bool:
         raise DockfactoryError("measure: give images, or --video / --camera, not both")
     if not stream and not args.images:
         raise DockfactoryError("measure: give images (files or folders), --video PATH or --camera INDEX")
-    if stream and args.self_calibrate:
-        raise DockfactoryError("--self-calibrate: not available on a stream (--video, --camera)")
-    if not stream and (args.jsonl is not None or args.filter or args.max_frames or args.roi or args.input_scale):
-        raise DockfactoryError("--jsonl, --filter, --max-frames, --roi and --input-scale apply to a stream "
-                               "(--video, --camera)")
+    window = (args.self_calibrate or "").startswith("window:")
+    if stream and args.self_calibrate and not window:
+        raise DockfactoryError(f"--self-calibrate {args.self_calibrate}: a stream self-calibrates over a sliding "
+                               "window (window:N)")
+    if not stream and window:
+        raise DockfactoryError("--self-calibrate window:N: for a stream (--video, --camera); images use frame "
+                               "or sequence")
+    if not stream and (args.jsonl is not None or args.filter or args.max_frames or args.roi or args.input_scale
+                       or args.freeze_after):
+        raise DockfactoryError("--jsonl, --filter, --max-frames, --roi, --input-scale and --freeze-after apply to "
+                               "a stream (--video, --camera)")
     if not stream and args.out is None:
         raise DockfactoryError("measure: --out is needed with images")
     if stream and args.out is not None:
@@ -54,8 +62,10 @@ def _check_inputs(args) -> bool:
 def cmd_measure_stream(args) -> int:
     """measure --video / --camera: JSON lines to --jsonl (default standard output), the summary
     line last; a human summary on standard error. Exit 1 when a frame had no pose."""
+    window = parse_window(args.self_calibrate) if args.self_calibrate else None
     options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
-                            input_scale=args.input_scale, roi_refresh=args.roi)
+                            input_scale=args.input_scale, roi_refresh=args.roi, window=window,
+                            freeze_after=args.freeze_after)
     weights = _weights(args)
     torch_threads(args.threads)
     s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options)
@@ -97,6 +107,17 @@ def cmd_measure(args) -> int:
     return 0 if s["images_with_pose"] == s["images_total"] else 1
 
 
+def _self_calibration(text: str) -> str:
+    """argparse type of --self-calibrate: frame, sequence or window:N."""
+    if text in SELF_CALIBRATE:
+        return text
+    try:
+        parse_window(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected frame, sequence or window:N; {exc}") from None
+    return text
+
+
 def _add_stream_args(m) -> None:
     """The flags of measure on a stream (--video, --camera; dockfactory.measure_stream)."""
     m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
@@ -108,6 +129,9 @@ def _add_stream_args(m) -> None:
                    help="a stream's display filter: kalman (constant velocity on X, Y, alpha), written beside "
                         "the raw per-frame pose")
     m.add_argument("--max-frames", type=positive_int, help="a stream: stop after this many frames")
+    m.add_argument("--freeze-after", type=positive_int, metavar="N",
+                   help="a stream with --self-calibrate window:M: freeze the principal point and distortion after "
+                        "N joint solves")
     m.add_argument("--roi", type=positive_int, metavar="N",
                    help="a stream: detect in a window around the previous frame's markers, the full frame every N "
                         "frames and whenever the window loses a marker (faster; default: every frame whole)")
@@ -124,9 +148,10 @@ def add_subcommand(sub) -> None:
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
                                           "(default: pinhole; auto with --self-calibrate)")
-    m.add_argument("--self-calibrate", choices=SELF_CALIBRATE,
+    m.add_argument("--self-calibrate", type=_self_calibration,
                    help="frame: choose the camera model per image; sequence: the images are one camera's "
-                        "docking run, solved with shared intrinsics")
+                        "docking run, solved with shared intrinsics; window:N (a stream): intrinsics refined over "
+                        "the last N frames")
     m.add_argument("--min-score", type=unit_float, default=MIN_SCORE)
     m.add_argument("--threads", type=thread_count, default=None,
                    help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")

@@ -45,10 +45,11 @@ import numpy as np
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.eval.solve_frames import resolve_camera_model
+from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.measure import NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
+from dockfactory.measure_selfcal import WindowCalibration
 from dockfactory.measure_read import captured_stderr
 from dockfactory.measure_store import plain
 
@@ -74,7 +75,9 @@ class StreamOptions:
     :class:`FrameReader`) and ``input_scale`` (network px per image px; None: the weights' own,
     smaller is faster and sees smaller markers worse) and ``roi_refresh`` (None: every frame
     detected whole; N: a window around the previous frame's markers, the full frame every N
-    frames and whenever the window loses a marker: dockfactory.measure_roi)."""
+    frames and whenever the window loses a marker: dockfactory.measure_roi), ``window`` (None, or
+    N: intrinsics self-calibrated over the last N frames, dockfactory.measure_selfcal) and
+    ``freeze_after`` (with a window: freeze them after this many joint solves)."""
     backend: str = "auto"
     camera_model: str | None = None
     min_score: float = MIN_SCORE
@@ -85,6 +88,8 @@ class StreamOptions:
     prefetch: int = PREFETCH
     input_scale: float | None = None
     roi_refresh: int | None = None
+    window: int | None = None
+    freeze_after: int | None = None
 
     def __post_init__(self):
         if self.filter is not None and self.filter not in FILTERS:
@@ -93,6 +98,8 @@ class StreamOptions:
             raise DockfactoryError(f"--max-frames: expected an integer >= 1, got {self.max_frames}")
         if not 0 <= self.prefetch <= MAX_PREFETCH:
             raise DockfactoryError(f"prefetch: expected 0 to {MAX_PREFETCH} frames, got {self.prefetch}")
+        if self.freeze_after is not None and (self.window is None or self.freeze_after < 1):
+            raise DockfactoryError("--freeze-after: needs --self-calibrate window:N and an integer >= 1")
         if self.roi_refresh is not None and self.roi_refresh < 1:
             raise DockfactoryError(f"--roi: expected a refresh interval >= 1 frame, got {self.roi_refresh}")
         if self.input_scale is not None and not 0.1 <= self.input_scale <= 2.0:
@@ -202,7 +209,7 @@ def frame_line(index: int, timestamp_ms: float, record: dict) -> dict:
         line.update(rmse_px=record["rmse_px"], n_detections=record["n_detections"], marker_ids=record["marker_ids"])
     else:
         line.update(category=record.get("category"), reason=record.get("reason"))
-    for key in ("roi", "notes"):
+    for key in ("roi", "self_calibrated", "run_frames", "frozen_intrinsics", "self_calibration", "notes"):
         if key in record:
             line[key] = record[key]
     return line
@@ -270,13 +277,15 @@ class StreamMeasurer:
     """Measures one frame after another: the loaded ``detector``, the ``markers`` of the layout,
     the options, the display filter (None or a PoseKalman), the acceptance hook ``decide``
     (None or a callable: frame line -> JSON value; see the module docstring) and the window
-    tracker (None: every frame detected whole; dockfactory.measure_roi)."""
+    tracker (None: every frame detected whole; dockfactory.measure_roi) and the online
+    self-calibration (None, or dockfactory.measure_selfcal.WindowCalibration)."""
     detector: object
     markers: tuple
     options: StreamOptions
     kalman: PoseKalman | None = None
     decide: Callable[[dict], object] | None = None
     tracker: RoiTracker | None = None
+    calibration: WindowCalibration | None = None
 
     def solve(self, index: int, image: np.ndarray) -> dict:
         """The measure record of one decoded frame (with ``roi``: the window the detector saw, or
@@ -286,7 +295,8 @@ class StreamMeasurer:
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                record = self._tracked(index, name, image)
+                frame = self._tracked(index, name, image)
+                record = frame.record if self.calibration is None else self.calibration.apply(index, frame)
         except Exception as exc:   # noqa: BLE001 -- one frame's failure is recorded, the stream goes on
             words = " ".join(str(exc).split())[:300] or "no message"
             return {"ok": False, "category": "measure error", "reason": f"{name}: {type(exc).__name__}: {words}"}
@@ -294,13 +304,14 @@ class StreamMeasurer:
             record["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
         return record
 
-    def _tracked(self, index: int, name: Path, image: np.ndarray) -> dict:
-        """measure.solve_image on the tracker's window (the full frame when it loses a marker)."""
+    def _tracked(self, index: int, name: Path, image: np.ndarray):
+        """measure.solve_image (a measure.Frame) on the tracker's window (the full frame when it
+        loses a marker); the pinhole model when the window self-calibrates afterwards."""
         o = self.options
-        args = (self.detector, self.markers, index, name, image, resolve_camera_model(o.camera_model, None),
-                o.min_score, o.cfa, o.jpeg)
+        model = "pinhole" if self.calibration is not None else resolve_camera_model(o.camera_model, None)
+        args = (self.detector, self.markers, index, name, image, model, o.min_score, o.cfa, o.jpeg)
         if self.tracker is None:
-            return solve_image(*args).record
+            return solve_image(*args)
         roi = self.tracker.region()
         frame = solve_image(*args, roi)
         if roi is not None and self.tracker.lost(frame.detections, roi):
@@ -310,7 +321,7 @@ class StreamMeasurer:
             roi = None
         self.tracker.update(frame.detections, roi)
         frame.record["roi"] = None if roi is None else list(roi)
-        return frame.record
+        return frame
 
     def line(self, item) -> dict:
         """The JSON line of one frame ``(index, t_start, read_ms, timestamp_ms, rgb)`` of a
@@ -359,8 +370,11 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
         raise
     tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
                if options.roi_refresh and min(size) > 1 else None)
+    calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
+                                     options.freeze_after, docking_options(detector.centre_noise_px))
+                   if options.window else None)
     measurer = StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
-                              decide, tracker)
+                              decide, tracker, calibration)
     stats, stopped, t0 = StreamStats(), "end of stream", time.perf_counter()
     try:
         try:
@@ -372,7 +386,9 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
         if stats.frames == 0:
             raise DockfactoryError(f"{name}: no frame could be read")
         summary = {"type": "summary", "format": STREAM_FORMAT, "source": name, "stopped": stopped,
-                   "camera_model": resolve_camera_model(options.camera_model, None), "backend": detector.backend,
+                   "camera_model": resolve_camera_model(options.camera_model, "sequence" if options.window else None),
+                   "self_calibrate": f"window:{options.window}" if options.window else None,
+                   "freeze_after": options.freeze_after, "backend": detector.backend,
                    "filter": options.filter, "roi_refresh": options.roi_refresh, "acceptance": decide is not None,
                    "layout": str(layout_path),
                    "weights": str(weights), **stats.summary(time.perf_counter() - t0)}

@@ -158,7 +158,7 @@ def test_stream_refusals_are_one_line_exit_2(run_ds, tmp_path, capsys, monkeypat
              (["--video", empty, run_ds / "images"], "not both"),
              ([], "give images"),
              (["--video", empty, "--out", tmp_path / "o"], "a stream writes JSON lines"),
-             (["--video", empty, "--self-calibrate", "sequence"], "not available on a stream")]
+             (["--video", empty, "--self-calibrate", "sequence"], "a stream self-calibrates over a sliding window")]
     for args, words in cases:
         code, lines, err = _stream([*args, "--layout", layout], capsys, tmp_path)
         assert code == 2 and words in one_line_error(err), (args, err)
@@ -228,3 +228,39 @@ def test_roi_tracker_windows_the_markers_and_falls_back_to_full_frames():
     assert 0 <= x0 and y1 <= 960 and x1 - x0 >= 38
     corner.update([], (x0, y0, x1, y1))
     assert corner.region() is None
+
+
+@pytest.mark.slow   # the detector on 4 frames
+def test_online_self_calibration_over_a_window_then_frozen(run_ds, videos, tmp_path, capsys):
+    """--self-calibrate window:3 --freeze-after 1 on the painted run (an ideal pinhole camera):
+    frames 0 and 1 are solved alone (the window is warming up), frame 2 jointly with 0 and 1
+    (shared intrinsics: the principal point found at the image centre within 2 px), frame 3 with
+    those intrinsics frozen; every pose within 1 mm / 0.05 deg of the labels."""
+    code, lines, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout",
+                              run_ds / "layout.json", "--self-calibrate", "window:3", "--freeze-after", "1"],
+                             capsys, tmp_path)
+    assert code == 0
+    labels = _lines(videos / "video" / "unit0_run00.jsonl")
+    assert "solved alone" in lines[0]["self_calibration"] and "solved alone" in lines[1]["self_calibration"]
+    assert (lines[2]["self_calibrated"], lines[2]["run_frames"]) == ("window", 3)
+    assert abs(lines[2]["intrinsics"]["cx"] - 639.5) < 2 and abs(lines[2]["intrinsics"]["cy"] - 479.5) < 2
+    assert lines[3]["self_calibrated"] == "frozen"
+    assert lines[3]["frozen_intrinsics"]["cx"] == lines[2]["intrinsics"]["cx"]
+    for line, truth in zip(lines[:4], labels):
+        assert abs(line["pose"]["x_mm"] - truth["pose"]["x_mm"]) < 1.0
+        assert abs(line["pose"]["alpha_deg"] - truth["pose"]["alpha_deg"]) < 0.05
+    assert lines[-1]["self_calibrate"] == "window:3" and lines[-1]["freeze_after"] == 1
+
+
+def test_self_calibration_flags_are_checked(run_ds, videos, tmp_path, capsys):
+    layout = run_ds / "layout.json"
+    video = videos / "video_lossless" / "unit0_run00.mkv"
+    for args, words in ((["--video", video, "--self-calibrate", "sequence"], "a stream self-calibrates over"),
+                        (["--video", video, "--freeze-after", "2"], "needs --self-calibrate window:N"),
+                        ([run_ds / "images", "--self-calibrate", "window:4", "--out", tmp_path / "o"],
+                         "for a stream"),
+                        ):
+        code, _, err = run_cli(["measure", *args, "--layout", layout], capsys)
+        assert code == 2 and words in one_line_error(err), (args, err)
+    code, _, err = run_cli(["measure", "--video", video, "--self-calibrate", "window:1", "--layout", layout], capsys)
+    assert code == 2 and "window:N with N in [2, 200]" in err.strip().splitlines()[-1]   # argparse: usage + error
