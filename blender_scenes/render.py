@@ -18,11 +18,55 @@ def blender_version() -> str:
     return bpy.app.version_string
 
 
-class BlenderRenderer:
-    """One Blender scene built from a static description, updated and rendered per frame."""
+GPU_BACKENDS = ("OPTIX", "CUDA", "HIP")   # Cycles' GPU backends, in the order they are preferred
 
-    def __init__(self, static: StaticScene, width: int, height: int, threads: int, exr_path: str):
+
+def gpu_devices() -> dict[str, list[str]]:
+    """Cycles' GPU devices on this machine by backend ({"CUDA": ["NVIDIA ..."], ...}; empty: none
+    usable), found through the Cycles add-on's preferences."""
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    found = {}
+    for backend in GPU_BACKENDS:
+        try:
+            prefs.compute_device_type = backend
+        except TypeError:   # a backend this Blender build does not have
+            continue
+        prefs.refresh_devices()
+        names = [d.name for d in prefs.devices if d.type == backend]
+        if names:
+            found[backend] = names
+    return found
+
+
+def use_device(scene, device: str) -> str:
+    """Render ``scene`` on ``device`` ("cpu", or "gpu": every device of the first backend of
+    :data:`GPU_BACKENDS` that has one, the CPU left out); returns what it chose, e.g. "CUDA:
+    NVIDIA L4". RuntimeError when "gpu" finds none (the job checks that before it starts)."""
+    if device == "cpu":
+        scene.cycles.device = "CPU"
+        return "CPU"
+    found = gpu_devices()
+    if device != "gpu" or not found:
+        raise RuntimeError(f"render device {device!r}: " + ("no usable GPU (Cycles finds no OptiX, CUDA or HIP "
+                                                              "device)" if device == "gpu" else "unknown"))
+    backend = next(b for b in GPU_BACKENDS if b in found)
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    prefs.compute_device_type = backend
+    prefs.refresh_devices()
+    for d in prefs.devices:
+        d.use = d.type == backend
+    scene.cycles.device = "GPU"
+    return f"{backend}: {', '.join(found[backend])}"
+
+
+class BlenderRenderer:
+    """One Blender scene built from a static description, updated and rendered per frame, on
+    ``device`` (:func:`use_device`)."""
+
+    def __init__(self, static: StaticScene, width: int, height: int, threads: int, exr_path: str,
+                 device: str = "cpu"):
         self.handles = build_scene(static, width, height, threads, exr_path)
+        self.device = use_device(self.handles.scene, device)
 
     def render(self, frame: FrameScene, exr_path: str) -> dict[str, float]:
         """Render ``frame`` into the multilayer EXR ``exr_path``; wall seconds of each phase."""

@@ -182,6 +182,7 @@ class RenderConfig:
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
+    device: str = "cpu"             # cpu | gpu (Cycles on CUDA, OptiX or HIP; its frames differ from the CPU's)
 
 
 @dataclass(frozen=True)
@@ -249,6 +250,12 @@ class ExportConfig:
 
 
 
+# keys added after datasets were published, at the value that renders what those datasets hold:
+# left out of the identity's config at that value (Config.to_dict), so their version ids stay
+IDENTITY_NEUTRAL = {("render", "device"): "cpu"}
+RENDER_DEVICES = ("cpu", "gpu")
+
+
 @dataclass(frozen=True)
 class Config:
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
@@ -269,9 +276,16 @@ class Config:
     labels: LabelsConfig = field(default_factory=LabelsConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
 
-    def to_dict(self) -> dict:
-        """Plain JSON-able dict (tuples become lists)."""
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+    def to_dict(self, full: bool = False) -> dict:
+        """Plain JSON-able dict (tuples become lists): the dataset identity's config (its version id
+        is a hash of it), where a key added later at a value that leaves the output unchanged
+        (:data:`IDENTITY_NEUTRAL`) is left out, so the datasets made before it keep their version
+        ids; ``full``: every key."""
+        d = json.loads(json.dumps(dataclasses.asdict(self)))
+        for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
+            if d[table][key] == neutral:
+                del d[table][key]
+        return d
 
     def canonical_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
@@ -589,6 +603,8 @@ def _validate_render(cfg: Config, source: str) -> None:
     if not 0.01 <= rc.filter_width_px <= 10:
         raise _err(source, "render", "filter_width_px", f"must be in [0.01, 10], got {rc.filter_width_px}")
     _check_positive(source, "render", "frame_timeout_s", rc.frame_timeout_s)
+    if rc.device not in RENDER_DEVICES:
+        raise _err(source, "render", "device", f"{rc.device!r} is not one of {', '.join(RENDER_DEVICES)}")
 
 
 def _validate_sensor(cfg: Config, source: str) -> None:

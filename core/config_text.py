@@ -149,7 +149,7 @@ TYPE_WORDS = {("markers", "layout_a"): "list of [s_mm, phi_deg]", ("markers", "l
 def tables():
     """(table name, dataclass, [(key, type text, default TOML, meaning)]) of the schema."""
     comments = field_comments()
-    defaults = Config().to_dict()
+    defaults = Config().to_dict(full=True)
     for f in dataclasses.fields(Config):
         cls = typing.get_type_hints(Config)[f.name]
         hints = typing.get_type_hints(cls)

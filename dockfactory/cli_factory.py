@@ -117,7 +117,7 @@ def cmd_check(args) -> int:
         raise DockfactoryError("check-config needs a CONFIG (or --defaults)")
     cfg, _ = load_checked(args.config, args.sets)
     if args.resolved:
-        print(to_toml(cfg.to_dict()), end="")
+        print(to_toml(cfg.to_dict(full=True)), end="")
         return EXIT_OK
     plan = frame_plan(cfg)
     print(f"{args.config}: valid; dataset version {identity(cfg)['version_id']}, {len(plan)} frames")
@@ -154,9 +154,12 @@ def _add_dataset_actions(d) -> None:
     f.add_argument("dir_b", metavar="DIR_B")
     f.add_argument("--json", action="store_true", help="print JSON")
     f.set_defaults(func=cmd_diff)
-    e = acts.add_parser("export", help="write COCO, YOLO, YOLO-pose or BOP files of each dataset (under its exports/)")
+    e = acts.add_parser("export", help="write COCO, YOLO, YOLO-pose or BOP files, or docking-run videos, of each "
+                                       "dataset (under its exports/)")
     e.add_argument("dirs", nargs="+", metavar="DIR")
-    e.add_argument("--format", default="coco,yolo,bop", help="coco, yolo, yolo-pose, bop (comma-separated)")
+    e.add_argument("--format", default="coco,yolo,bop",
+                   help="coco, yolo, yolo-pose, bop, video (each docking run as an MP4 with its labels), video_lossless "
+                        "(FFV1 .mkv) (comma-separated; default coco,yolo,bop)")
     e.add_argument("--out", default=None, metavar="FOLDER",
                    help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "
                         "tracked by DVC whose project does not ignore exports/, T.exports/ beside its tracked folder T)")

@@ -1,6 +1,7 @@
 """``dockfactory measure``: the command line of eval.measure (torch is imported inside the command)."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -11,18 +12,78 @@ from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.cli_args import MAX_THREADS, float_in, positive_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import (
+    MAX_THREADS,
+    float_in,
+    non_negative_int,
+    positive_int,
+    thread_count,
+    torch_threads,
+    unit_float,
+)
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
 from dockfactory.eval.conformity import exit_status
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
+from dockfactory.measure_selfcal import parse_window
+from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
-def cmd_measure(args) -> int:
+def _weights(args) -> Path:
     weights = Path(args.weights) if args.weights else shipped_weights()
     if not weights.is_file():
         raise DockfactoryError(f"--weights: {weights}: no such file")
+    return weights
+
+
+def _check_inputs(args) -> bool:
+    """True for a stream (--video or --camera), False for images; one line naming the clash else."""
+    stream = args.video is not None or args.camera is not None
+    if stream and args.images:
+        raise DockfactoryError("measure: give images, or --video / --camera, not both")
+    if not stream and not args.images:
+        raise DockfactoryError("measure: give images (files or folders), --video PATH or --camera INDEX")
+    window = (args.self_calibrate or "").startswith("window:")
+    if stream and args.self_calibrate and not window:
+        raise DockfactoryError(f"--self-calibrate {args.self_calibrate}: a stream self-calibrates over a sliding "
+                               "window (window:N)")
+    if not stream and window:
+        raise DockfactoryError("--self-calibrate window:N: for a stream (--video, --camera); images use frame "
+                               "or sequence")
+    if not stream and (args.jsonl is not None or args.filter or args.max_frames or args.roi or args.input_scale
+                       or args.freeze_after):
+        raise DockfactoryError("--jsonl, --filter, --max-frames, --roi, --input-scale and --freeze-after apply to "
+                               "a stream (--video, --camera)")
+    if not stream and args.out is None:
+        raise DockfactoryError("measure: --out is needed with images")
+    if stream and args.out is not None:
+        raise DockfactoryError("--out: a stream writes JSON lines (--jsonl FILE or - for standard output)")
+    return stream
+
+
+def cmd_measure_stream(args) -> int:
+    """measure --video / --camera: JSON lines to --jsonl (default standard output), the summary
+    line last; a human summary on standard error. Exit 1 when a frame had no pose."""
+    window = parse_window(args.self_calibrate) if args.self_calibrate else None
+    options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
+                            input_scale=args.input_scale, roi_refresh=args.roi, window=window,
+                            freeze_after=args.freeze_after)
+    weights = _weights(args)
+    torch_threads(args.threads)
+    s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options)
+    fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
+    print(f"{s['frames_with_pose']} of {s['frames']} frames with a pose ({s['camera_model']} camera); "
+          f"{s['frames_per_s']} frames/s, latency p95 {s['latency_ms']['p95']} ms"
+          + (f"; no pose: {fails}" if fails else "") + (" (interrupted)" if s["stopped"] == "interrupted" else ""),
+          file=sys.stderr)
+    return 0 if s["frames_with_pose"] == s["frames"] else 1
+
+
+def cmd_measure(args) -> int:
+    if _check_inputs(args):
+        return cmd_measure_stream(args)
+    weights = _weights(args)
     camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
     options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
@@ -66,16 +127,51 @@ def _print_conformity(s: dict, out: Path, quiet: bool) -> int:
     return exit_status(s["conformity"]["worst"])
 
 
+def _self_calibration(text: str) -> str:
+    """argparse type of --self-calibrate: frame, sequence or window:N."""
+    if text in SELF_CALIBRATE:
+        return text
+    try:
+        parse_window(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected frame, sequence or window:N; {exc}") from None
+    return text
+
+
+def _add_stream_args(m) -> None:
+    """The flags of measure on a stream (--video, --camera; dockfactory.measure_stream)."""
+    m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
+                                   "pattern such as frames/%%06d.png: one JSON line per frame (--jsonl)")
+    m.add_argument("--camera", type=non_negative_int, metavar="INDEX",
+                   help="measure the frames of capture device INDEX as they come (Ctrl-C ends it, with the summary)")
+    m.add_argument("--jsonl", help="a stream's JSON lines: a file, or - for standard output (the default)")
+    m.add_argument("--filter", choices=FILTERS,
+                   help="a stream's display filter: kalman (constant velocity on X, Y, alpha), written beside "
+                        "the raw per-frame pose")
+    m.add_argument("--max-frames", type=positive_int, help="a stream: stop after this many frames")
+    m.add_argument("--freeze-after", type=positive_int, metavar="N",
+                   help="a stream with --self-calibrate window:M: freeze the principal point and distortion after "
+                        "N joint solves")
+    m.add_argument("--roi", type=positive_int, metavar="N",
+                   help="a stream: detect in a window around the previous frame's markers, the full frame every N "
+                        "frames and whenever the window loses a marker (faster; default: every frame whole)")
+    m.add_argument("--input-scale", type=float_in(0.1, 2.0),
+                   help="a stream: network px per image px (default: the weights' own, 0.5 for the shipped ones; "
+                        "smaller is faster and sees small markers worse)")
+
+
 def add_subcommand(sub) -> None:
     m = sub.add_parser("measure", help="poses of B in A from real images (no labels): detect, identify, solve")
-    m.add_argument("images", nargs="+", help="PNG/JPEG/TIFF/BMP files or folders of them")
+    m.add_argument("images", nargs="*", help="PNG/JPEG/TIFF/BMP files or folders of them (or --video, --camera)")
+    _add_stream_args(m)
     m.add_argument("--layout", required=True, help="marker layout JSON (a dataset's layout.json format)")
     m.add_argument("--weights", help="detector weights (default: the shipped ones)")
     m.add_argument("--camera-model", help="pinhole, k1, k1k2, pp_k1, pp_k1_p or auto "
                                           "(default: pinhole; auto with --self-calibrate)")
-    m.add_argument("--self-calibrate", choices=SELF_CALIBRATE,
+    m.add_argument("--self-calibrate", type=_self_calibration,
                    help="frame: choose the camera model per image; sequence: the images are one camera's "
-                        "docking run, solved with shared intrinsics")
+                        "docking run, solved with shared intrinsics; window:N (a stream): intrinsics refined over "
+                        "the last N frames")
     m.add_argument("--min-score", type=unit_float, default=MIN_SCORE)
     m.add_argument("--threads", type=thread_count, default=None,
                    help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")
@@ -105,7 +201,7 @@ def add_subcommand(sub) -> None:
                         "UNDECIDED against the [localization] tolerances about the docked pose, with the guard "
                         "band U = 2 u (ISO 14253-1); exit 0 all IN, 1 any OUT, 3 otherwise undecided")
     m.add_argument("--quiet", action="store_true")
-    m.add_argument("--out", required=True, help="output folder (locked while measure runs); a rerun with the same "
+    m.add_argument("--out", help="images: output folder (locked while measure runs); a rerun with the same "
                                                 "images and options measures only what is missing, with others "
                                                 "it starts over")
     m.set_defaults(func=cmd_measure)

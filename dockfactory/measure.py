@@ -129,10 +129,40 @@ def _detect_and_solve(detector, markers, index, path, camera_model, min_score, c
     image, failed = read_image(path, camera, max_pixels, notes)
     if failed is not None:
         return Frame(index, path, failed)
+    return solve_image(detector, markers, index, path, image, camera_model, min_score, camera.cfa,
+                       path.suffix.lower() in (".jpg", ".jpeg"))
+
+
+def detect_in(detector, image: np.ndarray, roi: tuple | None = None, cfa: str | None = None,
+              jpeg: bool = False) -> list[dict]:
+    """The detections of ``image`` (detector.MarkerDetector.detect), or of its region ``roi`` =
+    (x0, y0, x1, y1) only (pixel indices, x1 and y1 excluded; x0 and y0 even, so a Bayer pattern
+    keeps its phase), in the whole image's pixels either way."""
+    if roi is None:
+        return detector.detect(image, cfa=cfa, jpeg=jpeg)
+    x0, y0, x1, y1 = roi
+    if x0 % 2 or y0 % 2 or not (0 <= x0 < x1 <= image.shape[1] and 0 <= y0 < y1 <= image.shape[0]):
+        raise ValueError(f"roi {roi} is not an even-cornered region of a {image.shape[1]}x{image.shape[0]} image")
+    dets = detector.detect(np.ascontiguousarray(image[y0:y1, x0:x1]), cfa=cfa, jpeg=jpeg)
+    for d in dets:
+        for key in ("bbox_px", "bbox_detector_px"):
+            d[key] = [v + (x0, y0)[i % 2] for i, v in enumerate(d[key])]
+        d["center_px"] = [d["center_px"][0] + x0, d["center_px"][1] + y0]
+    return dets
+
+
+def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, camera_model: str, min_score: float,
+                cfa: str | None = None, jpeg: bool = False, roi: tuple | None = None) -> Frame:
+    """Detect and solve one decoded image ``(H, W, 3) uint8`` RGB (its own camera model fit; the
+    principal point assumed is its centre): the per-image path of measure, shared with the stream
+    path (dockfactory.measure_stream). ``path`` names the frame in a failure's reason; ``cfa`` and
+    ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect); ``roi``: detect in this
+    region only (:func:`detect_in`). The record carries ``image_size`` and ``timing_ms`` (detect,
+    solve)."""
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
     t0 = time.perf_counter()
-    frame.detections = detector.detect(image, cfa=camera.cfa, jpeg=path.suffix.lower() in (".jpg", ".jpeg"))
+    frame.detections = detect_in(detector, image, roi, cfa, jpeg)
     t1 = time.perf_counter()
     centres = detection_arrays(frame.detections, min_score)
     if len(centres[0]) == 0:

@@ -25,11 +25,14 @@ from dockfactory.generator.dvc_links import outside_exports
 from dockfactory.generator.export_bop import export_bop
 from dockfactory.generator.export_coco import export_coco
 from dockfactory.generator.export_files import folder_built_aside
+from dockfactory.generator.export_video import export_video, export_video_lossless
 from dockfactory.generator.export_yolo import export_yolo
 from dockfactory.generator.export_yolo_pose import export_yolo_pose
 from dockfactory.generator.sampler import frame_plan
 
-EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "yolo-pose": export_yolo_pose, "bop": export_bop}
+# coco, yolo, yolo-pose, bop: also written by render ([export] formats); the videos only on demand (dataset export)
+EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "yolo-pose": export_yolo_pose, "bop": export_bop,
+                  "video": export_video, "video_lossless": export_video_lossless}
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this

@@ -12,6 +12,7 @@ from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.generator.worker_pool import WorkerDied, WorkerProcess
 
 
@@ -217,11 +218,37 @@ class LocalExecutor:
                 t.join(timeout=2.0)
 
 
+MAX_ACTOR_LOSSES_PER_WORKER = 3   # actors lost (a node died) per requested worker before the render gives up
+
+
+def _render_actor_class(ray, threads: int, timeout_s: float, retries: int, recycle_after: int):
+    """The Ray actor class: one render worker process per actor, ``threads`` CPUs reserved."""
+    @ray.remote(num_cpus=threads)
+    class RenderActor:
+        def __init__(self, init, log_path, env):
+            self.worker = WorkerProcess(init, Path(log_path), env)
+
+        def render(self, frame):
+            return render_with_retries(self.worker, frame, timeout_s, retries, recycle_after)
+
+        def close(self):
+            self.worker.close()
+    return RenderActor
+
+
 class RayExecutor:
-    """Render actors on a Ray cluster (``address`` None: a local ``ray.init()``).
+    """Render actors on a Ray cluster (``address`` None: a local ``ray.init()``, or the cluster this
+    process is already connected to).
 
     Each actor owns one render worker process and writes into ``root``, which must be on a
-    filesystem every node sees. dockfactory must be installed on every node.
+    filesystem every node sees. dockfactory must be installed on every node. An actor lost with
+    its node (or killed) is noticed when its frame's result is asked for: the frame goes back to
+    the queue (a "retry" event naming the loss) and the surviving actors take it; when no actor
+    survives, as many new ones are started (Ray places them on the nodes left, and waits for
+    resources if there are none). More than ``MAX_ACTOR_LOSSES_PER_WORKER`` losses per worker
+    stop the render (DockfactoryError). A frame the lost node had half written is rendered again:
+    every file is written atomically and the label last, so a half-written frame never counts as
+    done, and a frame rendered twice is the same bytes.
     """
 
     def __init__(self, workers: int, threads: int, address: str | None, log_dir: Path, env: dict | None = None):
@@ -236,37 +263,70 @@ class RayExecutor:
         if started_here:
             kwargs = {"address": self.address} if self.address else {"num_cpus": max(self.threads * self.workers, 1)}
             ray.init(include_dashboard=False, log_to_driver=False, **kwargs)
-
-        @ray.remote(num_cpus=self.threads)
-        class RenderActor:
-            def __init__(self, init, log_path, env):
-                self.worker = WorkerProcess(init, Path(log_path), env)
-
-            def render(self, frame):
-                return render_with_retries(self.worker, frame, timeout_s, retries, recycle_after)
-
-            def close(self):
-                self.worker.close()
-
+        actor_class = _render_actor_class(ray, self.threads, timeout_s, retries, recycle_after)
         try:
-            n = min(self.workers, len(frames))
-            actors = [RenderActor.remote(init, str(self.log_dir / f"ray-worker-{i}.log"), self.env) for i in range(n)]
-            pending = {}
-            todo = list(frames)
-            for actor in actors:
-                if todo:
-                    pending[actor.render.remote(todo.pop(0))] = actor
-            while pending:
-                ready, _ = ray.wait(list(pending), timeout=0.5)
-                if not ready:
-                    yield ("tick", "", None)
-                    continue
-                for ref in ready:
-                    actor = pending.pop(ref)
-                    yield from ray.get(ref)
-                    if todo:
-                        pending[actor.render.remote(todo.pop(0))] = actor
-            ray.get([a.close.remote() for a in actors])
+            yield from _RayDispatch(ray, actor_class, self, init, frames).run()
         finally:
             if started_here:
                 ray.shutdown()
+
+
+class _RayDispatch:
+    """One render's actors, their frames in flight and the frames still to render."""
+
+    def __init__(self, ray, actor_class, executor: RayExecutor, init: dict, frames):
+        self.ray, self.actor_class, self.ex, self.init = ray, actor_class, executor, init
+        self.todo = deque(frames)
+        self.actors: list = []
+        self.pending: dict = {}   # object ref -> (actor, frame)
+        self.started = self.losses = 0
+
+    def _start_actors(self, n: int) -> None:
+        for _ in range(n):
+            log = str(self.ex.log_dir / f"ray-worker-{self.started}.log")
+            self.actors.append(self.actor_class.remote(self.init, log, self.ex.env))
+            self.started += 1
+
+    def _feed_idle(self) -> None:
+        busy = {id(a) for a, _ in self.pending.values()}
+        for actor in self.actors:
+            if self.todo and id(actor) not in busy:
+                frame = self.todo.popleft()
+                self.pending[actor.render.remote(frame)] = (actor, frame)
+
+    def _lost(self, actor, frame, exc) -> tuple:
+        """A lost actor's frame back to the queue; new actors when none survives."""
+        self.losses += 1
+        if self.losses > MAX_ACTOR_LOSSES_PER_WORKER * self.ex.workers:
+            raise DockfactoryError(f"Ray: {self.losses} render actors lost (nodes died?); giving up "
+                                   f"({type(exc).__name__})")
+        self.actors = [a for a in self.actors if a is not actor]
+        self.todo.appendleft(frame)
+        if not self.actors:
+            self._start_actors(min(self.ex.workers, len(self.todo)))
+        words = " ".join(str(exc).split())[:160]
+        return ("retry", frame["spec"]["frame_id"], f"its Ray actor was lost (node died?): {type(exc).__name__}: "
+                                                    f"{words}")
+
+    def run(self):
+        self._start_actors(min(self.ex.workers, len(self.todo)))
+        self._feed_idle()
+        while self.pending:
+            ready, _ = self.ray.wait(list(self.pending), timeout=0.5)
+            if not ready:
+                yield ("tick", "", None)
+                continue
+            for ref in ready:
+                actor, frame = self.pending.pop(ref)
+                try:
+                    events = self.ray.get(ref)
+                except self.ray.exceptions.RayActorError as exc:
+                    yield self._lost(actor, frame, exc)
+                else:
+                    yield from events
+            self._feed_idle()
+        for actor in self.actors:
+            try:
+                self.ray.get(actor.close.remote())
+            except self.ray.exceptions.RayActorError:
+                pass   # lost with its node after its last frame

@@ -6,7 +6,10 @@ file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
 
 - the re-render must carry the published version id (same config, generator and Blender), or
   differ from it only by the generator: the same config (resolved with today's defaults) and
-  Blender, whose frames a newer generator must reproduce (said in a note);
+  Blender, whose frames a newer generator must reproduce (said in a note), or only by the
+  generator and ``[render] device`` (a GPU render checked against a CPU one, or the reverse: its
+  images are never byte-identical, so they pass within ``tolerance``; config.toml, which names the
+  device, is not compared byte for byte; said in a note);
 - every re-rendered frame must be a frame of the manifest; its label must match byte for byte
   or, where Cycles on another CPU gives other bits (``generator.label_prints``):
   - v1 (``fingerprints.npz``): everything but the two measurements a label takes from the
@@ -19,7 +22,7 @@ file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
   channel, in 8-bit levels) must be within ``tolerance`` levels of the published one, and its
   markers must show where the label (whose geometry matched) says, in their colour
   (``generator.marker_check``: an erased, moved or recoloured marker barely moves a tile mean);
-- the config and layout files must match byte for byte.
+- the config (but see the device above) and layout files must match byte for byte.
 
 Frames of the manifest that were not re-rendered are not checked (a subset is the point).
 """
@@ -27,7 +30,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -227,11 +230,31 @@ def _version_difference(ident: dict, manifest: dict) -> str | None:
     if ident.get("blender_version") != software.get("blender"):
         return f"another Blender: {ident.get('blender_version')}, published {software.get('blender')}"
     try:
-        same = (config_from_dict(ident["config"]).canonical_json()
-                == config_from_dict(manifest["config"]).canonical_json())
+        mine, theirs = config_from_dict(ident["config"]), config_from_dict(manifest["config"])
+        mine = replace(mine, render=replace(mine.render, device=theirs.render.device))   # compared apart
+        same = mine.canonical_json() == theirs.canonical_json()
     except (DockfactoryError, KeyError, TypeError):
         same = False
     return None if same else "another config"
+
+
+def _devices(ident: dict, manifest: dict) -> tuple[str, str]:
+    """([render] device of the re-render, of the published dataset); ("cpu", "cpu") if unreadable."""
+    try:
+        return (config_from_dict(ident["config"]).render.device,
+                config_from_dict(manifest["config"]).render.device)
+    except (DockfactoryError, KeyError, TypeError):
+        return "cpu", "cpu"
+
+
+def _difference_note(ident: dict, manifest: dict, devices: tuple[str, str]) -> str:
+    if devices[0] != devices[1]:
+        return (f"rendered on {devices[0]}, published on {devices[1]}, the same config otherwise: no image of one "
+                f"device is byte-identical to the other's, so images are compared within --tolerance, labels on "
+                f"their geometry (config.toml, which names the device, is not compared)")
+    return (f"generator {ident.get('generator_version')}, the manifest's "
+            f"{manifest.get('software', {}).get('generator')}: the same config and Blender, so the "
+            f"frames are compared as they are (a newer generator must reproduce them)")
 
 
 def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) -> PublishedReport:
@@ -243,16 +266,17 @@ def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) ->
     pub = _load_published(manifest_path)
     rep = PublishedReport(str(root), str(manifest_path), tolerance=tolerance)
     ident = load_identity(root)
+    devices = _devices(ident, pub.manifest)
     if ident["version_id"] != pub.manifest["version_id"]:
         why = _version_difference(ident, pub.manifest)
         if why is not None:
             rep.problems.append(f"dataset.json: version {ident['version_id']}, the manifest's is "
                                 f"{pub.manifest['version_id']} ({why})")
             return rep
-        rep.notes.append(f"generator {ident.get('generator_version')}, the manifest's "
-                         f"{pub.manifest.get('software', {}).get('generator')}: the same config and Blender, so the "
-                         f"frames are compared as they are (a newer generator must reproduce them)")
+        rep.notes.append(_difference_note(ident, pub.manifest, devices))
     for name in EXACT_ROOT_FILES:
+        if name == "config.toml" and devices[0] != devices[1]:
+            continue
         if not _same_bytes(root / name, pub.records.get(name)):
             rep.problems.append(f"{name}: differs from the manifest")
     published = {f["frame_id"] for f in pub.manifest["frames"]}

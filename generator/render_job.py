@@ -26,6 +26,7 @@ from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dataset_tools import export_complete, write_export
 from dockfactory.generator.dvc_links import outside_note
 from dockfactory.generator.random_draws import static_scene
+from dockfactory.generator.render_device import check_render_device
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
 from dockfactory.core.progress import Progress
 from dockfactory.generator.sampler import frame_plan, sample_frame
@@ -120,6 +121,7 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     frames = select_frames(cfg, opts)
     # sample every scene up front: a bad frame fails before anything is written
     scenes = {s.frame_id: sample_frame(cfg, s) for s in frames}
+    check_render_device(cfg, opts.executor, opts.env)   # "gpu" without one: refused before anything is written
     check_target(root)   # a foreign folder is refused before the lock file is made in it
     with dataset_lock(root, "render"):   # one writer per dataset: a second render fails at once
         summary = _run_locked(cfg, Path(root), config_text, opts, frames, scenes)
@@ -177,7 +179,7 @@ def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary
             "height": cfg.image.height, "threads": threads, "root": str(root.resolve()),
             "keep_exr": cfg.render.keep_exr, "keep_raw": cfg.sensor.raw_output,
             "visible_threshold": cfg.labels.visible_threshold,
-            "min_chroma": cfg.labels.min_chroma}
+            "min_chroma": cfg.labels.min_chroma, "device": cfg.render.device}
     log_dir = root / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
     if opts.executor == "ray":

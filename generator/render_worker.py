@@ -129,9 +129,10 @@ class _Session:
             self.static = from_dict(StaticScene, req["static"])
             t0 = time.perf_counter()
             self.renderer = BlenderRenderer(self.static, req["width"], req["height"], req["threads"],
-                                            self.exr_paths[0])
+                                            self.exr_paths[0], req.get("device", "cpu"))
             self.replies.send({"ok": True, "op": "init", "build_s": time.perf_counter() - t0,
-                               "blender_version": blender_version(), "pid": os.getpid()})
+                               "blender_version": blender_version(), "pid": os.getpid(),
+                               "device": self.renderer.device})
         except Exception as exc:
             self.replies.send(_error("init", exc))
 

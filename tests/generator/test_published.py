@@ -344,3 +344,29 @@ def test_a_forged_fingerprint_file_is_a_one_line_error(release, capsys, damage):
     assert main(["dataset", "verify", str(sub), "--manifest", str(pub / "manifest.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a fingerprint file" in err[0] and published.FINGERPRINTS_NAME in err[0], err
+
+
+def test_a_gpu_rerender_is_checked_against_a_cpu_release_within_the_tolerance(release):
+    """[render] device = "gpu" re-render of a CPU release (another version id: the device is part
+    of the identity): compared frame by frame, with a note; images with other bits (+-1 level, as
+    another device gives) pass within the tolerance; any other config difference is still refused."""
+    from dockfactory.core.config import config_from_dict
+    from dockfactory.generator.version import dataset_version_id
+    pub, sub, ids = release
+    ident = json.loads((sub / "dataset.json").read_text())
+    cfg = config_from_dict({**ident["config"], "render": {**ident["config"]["render"], "device": "gpu"}})
+    ident.update(config=cfg.to_dict(), version_id=dataset_version_id(cfg.canonical_json(), ident["blender_version"],
+                                                                     ident["generator_version"]))
+    (sub / "dataset.json").write_text(json.dumps(ident))
+    (sub / "config.toml").write_text((sub / "config.toml").read_text() + '\n[render]\ndevice = "gpu"\n')
+    path = sub / "images" / f"{ids[0]}.png"
+    img = cv2.imread(str(path))
+    noise = np.random.default_rng(1).integers(-1, 2, img.shape)
+    cv2.imwrite(str(path), np.clip(img.astype(int) + noise, 0, 255).astype(np.uint8))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok and rep.frames == len(ids) and (rep.images_identical, rep.images_within) == (2, 1), rep.text()
+    assert "rendered on gpu, published on cpu" in rep.notes[0]
+    other = {**ident["config"], "dataset": {**ident["config"]["dataset"], "seed": 1}}
+    (sub / "dataset.json").write_text(json.dumps({**ident, "config": other}))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert not rep.ok and "another config" in rep.problems[0]

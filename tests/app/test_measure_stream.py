@@ -1,0 +1,266 @@
+"""measure on a stream (--video, --camera) and the docking-run video export it reads.
+
+A painted docking run (tests/pipeline_data.py: 4 frames of 1280 x 960, one camera unit, no
+Blender) is exported as video (`dataset export --format video,video_lossless`) and measured back:
+the lossless video (FFV1) gives measure's own poses on the PNGs to 1e-9 (the decoded pixels are the
+PNGs'), the MP4 (mp4v, 4:2:0 chroma) poses within 3 mm / 0.1 deg of the labels. The camera path is
+tested with a file-backed device: ``measure_stream.camera_source`` maps the index to the PNGs'
+image-sequence pattern, which VideoCapture opens like a device."""
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from cli_run import one_line_error, run_cli
+from dockfactory import measure_stream
+from dockfactory.measure_filter import PoseKalman
+
+CONFIG = """
+[dataset]
+name = "stream-test"
+seed = 5
+frames = 4
+train_fraction = 0.0
+
+[conditions]
+normal = 1
+
+[repeatability]
+poses = 1
+captures = 1
+
+[image]
+width = 1280
+height = 960
+
+[runs]
+frames_per_run = 4
+
+[render]
+keep_exr = false
+"""
+
+
+@pytest.fixture(scope="module")
+def run_ds(tmp_path_factory):
+    from pipeline_data import painted_from_text
+    return painted_from_text(tmp_path_factory, "stream", CONFIG)
+
+
+@pytest.fixture(scope="module")
+def videos(run_ds):
+    from dockfactory.cli import main
+    assert main(["dataset", "export", str(run_ds), "--format", "video,video_lossless"]) == 0
+    return run_ds / "exports"
+
+
+def _lines(path):
+    return [json.loads(ln) for ln in path.read_text().splitlines()]
+
+
+def _stream(args, capsys, tmp_path, name="s.jsonl"):
+    out = tmp_path / name
+    code, _, err = run_cli(["measure", *args, "--jsonl", out, "--threads", "1", "--backend", "torch"], capsys)
+    return code, (_lines(out) if out.exists() else None), err
+
+
+def test_video_export_writes_each_run_with_its_labels(run_ds, videos):
+    index = json.loads((videos / "video" / "videos.json").read_text())
+    assert (index["codec"], index["lossy"], len(index["runs"])) == ("mp4v", True, 1)
+    run = index["runs"][0]
+    labels = _lines(videos / "video" / run["labels"])
+    assert [ln["frame"] for ln in labels] == [0, 1, 2, 3] == [ln["run_frame"] for ln in labels]
+    assert [ln["frame_id"] for ln in labels] == ["000000", "000001", "000002", "000003"]
+    truth = json.loads((run_ds / "labels" / "000002.json").read_text())
+    assert labels[2]["pose"] == truth["pose_b_in_d"] and labels[2]["timestamp_ms"] == 200.0
+    for fmt, suffix in (("video", ".mp4"), ("video_lossless", ".mkv")):
+        cap = cv2.VideoCapture(str(videos / fmt / f"unit0_run00{suffix}"))
+        frames = []
+        while (got := cap.read())[0]:
+            frames.append(got[1])
+        assert len(frames) == 4 and frames[0].shape == (960, 1280, 3)
+        png = cv2.imread(str(run_ds / "images" / "000001.png"))
+        diff = np.abs(frames[1].astype(int) - png)
+        assert (diff.max() == 0) if fmt == "video_lossless" else (diff.mean() < 8), (fmt, diff.mean())
+
+
+def test_a_dataset_without_runs_has_no_video(painted, capsys):
+    code, _, err = run_cli(["dataset", "export", painted, "--format", "video"], capsys)
+    assert code == 2 and "no docking runs" in one_line_error(err)
+    assert not (painted / "exports" / "video").exists()
+
+
+@pytest.mark.slow   # the detector on 4 frames of 1280 x 960, four times
+def test_video_measured_back_against_labels_and_measure(run_ds, videos, tmp_path, capsys):
+    layout = run_ds / "layout.json"
+    code, lossless, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout", layout],
+                                capsys, tmp_path, "lossless.jsonl")
+    assert code == 0
+    code, mp4, err = _stream(["--video", videos / "video" / "unit0_run00.mp4", "--layout", layout,
+                              "--filter", "kalman"], capsys, tmp_path, "mp4.jsonl")
+    assert code == 0 and "4 of 4 frames with a pose" in err
+    code, windowed, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout", layout,
+                                 "--roi", "3"], capsys, tmp_path, "roi.jsonl")
+    assert code == 0 and windowed[0]["roi"] is None and windowed[1]["roi"] is not None
+    for k in range(4):   # the window changes the network's input, not what it finds: within 1 mm / 0.05 deg
+        assert abs(windowed[k]["pose"]["x_mm"] - lossless[k]["pose"]["x_mm"]) < 1.0
+        assert abs(windowed[k]["pose"]["alpha_deg"] - lossless[k]["pose"]["alpha_deg"]) < 0.05
+    images = [run_ds / "images" / f"00000{k}.png" for k in range(4)]
+    assert run_cli(["measure", *images, "--layout", layout, "--out", tmp_path / "m", "--workers", "1",
+                    "--threads", "1", "--backend", "torch", "--overlay-size", "0", "--quiet"], capsys)[0] == 0
+    measured = json.loads((tmp_path / "m" / "measurements.json").read_text())["images"]
+    labels = _lines(videos / "video" / "unit0_run00.jsonl")
+    summary = mp4[-1]
+    assert summary["type"] == "summary" and summary["frames"] == summary["frames_with_pose"] == 4
+    assert summary["latency_ms"]["p95"] >= summary["latency_ms"]["p50"] > 0
+    for k in range(4):
+        raw, ref, truth = lossless[k], measured[k], labels[k]["pose"]
+        assert raw["frame"] == k and raw["timestamp_ms"] == pytest.approx(100.0 * k)
+        assert max(abs(raw["pose"][n] - v) for n, v in ref["pose"].items()) < 1e-9   # measure's own path
+        assert raw["focal_px"] == pytest.approx(ref["focal_px"], abs=1e-6)
+        assert set(raw["timing_ms"]) == {"read", "detect", "solve", "total"} and raw["std"]["x_mm"] > 0
+        line = mp4[k]
+        assert abs(line["pose"]["x_mm"] - truth["x_mm"]) < 3 and abs(line["pose"]["y_mm"] - truth["y_mm"]) < 3
+        assert abs(line["pose"]["alpha_deg"] - truth["alpha_deg"]) < 0.1
+        assert set(line["filtered"]) >= {"x_mm", "y_mm", "alpha_deg"} and "pose" in line   # raw kept beside
+
+
+@pytest.mark.slow   # the detector on 2 frames
+def test_camera_path_on_a_file_backed_device(run_ds, tmp_path, capsys, monkeypatch):
+    """--camera INDEX through VideoCapture, the index mapped to an image-sequence pattern; an
+    acceptance hook's answer lands in each line (the decision itself lives in eval/)."""
+    monkeypatch.setattr(measure_stream, "camera_source", lambda index: str(run_ds / "images" / "%06d.png"))
+    code, lines, _ = _stream(["--camera", "0", "--layout", run_ds / "layout.json", "--max-frames", "2"],
+                             capsys, tmp_path)
+    assert code == 0 and [ln["type"] for ln in lines] == ["frame", "frame", "summary"]
+    assert lines[-1]["source"] == "--camera 0" and lines[-1]["frames_with_pose"] == 2
+    out = tmp_path / "hook.jsonl"
+    summary = measure_stream.measure_stream(run_ds / "layout.json", _weights(), str(out), camera=0,
+                                            options=measure_stream.StreamOptions(backend="torch", max_frames=1),
+                                            decide=lambda line: "IN" if line["ok"] else "UNDECIDED")
+    assert summary["acceptance"] and _lines(out)[0]["acceptance"] == "IN"
+
+
+def _weights():
+    from dockfactory.core.resources import shipped_weights
+    return shipped_weights()
+
+
+def test_stream_refusals_are_one_line_exit_2(run_ds, tmp_path, capsys, monkeypatch):
+    layout = run_ds / "layout.json"
+    empty = tmp_path / "empty.mp4"
+    empty.write_bytes(b"")
+    monkeypatch.setattr(measure_stream, "camera_source", lambda index: str(tmp_path / "no_device_%d.png"))
+    cases = [(["--camera", "3"], "--camera 3: OpenCV's VideoCapture cannot open it"),
+             (["--video", tmp_path / "missing.mp4"], "no such video file"),
+             (["--video", empty], "cannot open it"),
+             (["--video", empty, run_ds / "images"], "not both"),
+             ([], "give images"),
+             (["--video", empty, "--out", tmp_path / "o"], "a stream writes JSON lines"),
+             (["--video", empty, "--self-calibrate", "sequence"], "a stream self-calibrates over a sliding window")]
+    for args, words in cases:
+        code, lines, err = _stream([*args, "--layout", layout], capsys, tmp_path)
+        assert code == 2 and words in one_line_error(err), (args, err)
+        assert lines is None, args   # nothing written
+    code, _, err = run_cli(["measure", run_ds / "images", "--layout", layout, "--out", tmp_path / "o",
+                            "--jsonl", "-"], capsys)
+    assert code == 2 and "apply to a stream" in one_line_error(err)
+    code, _, err = run_cli(["measure", "--video", empty, "--layout", layout, "--jsonl", tmp_path], capsys)
+    assert code == 2 and "not a file in an existing folder" in one_line_error(err)
+
+
+def test_a_real_camera_index_that_does_not_exist(run_ds, tmp_path, capsys):
+    """No capture device 63 exists here (nor on CI): one line, exit 2, nothing written."""
+    code, lines, err = _stream(["--camera", "63", "--layout", run_ds / "layout.json"], capsys, tmp_path)
+    assert code == 2 and "--camera 63" in one_line_error(err) and lines is None
+
+
+def test_kalman_smooths_a_constant_velocity_run_and_skips_gaps():
+    """Noisy X, Y, alpha of B moving at constant rates (sigma 0.5 mm, 0.02 deg, 10 frames/s), with
+    a process noise that trusts the constant velocity: the filtered track's RMSE over the last 30
+    of 60 frames is under 0.6 of the raw one's, its rates within 10 % of the truth; a frame without
+    a pose only predicts."""
+    rng = np.random.default_rng(3)
+    kf, raw_err, filt_err = PoseKalman({"x_mm": 0.01, "y_mm": 0.01, "alpha_deg": 1e-6}), [], []
+    std = {"x_mm": 0.5, "y_mm": 0.5, "alpha_deg": 0.02}
+    for k in range(60):
+        t = 0.1 * k
+        truth = {"x_mm": 150.0 - 20.0 * t, "y_mm": 3.0 + 1.0 * t, "alpha_deg": 0.5 - 0.05 * t}
+        meas = {n: v + rng.normal(0.0, std[n]) for n, v in truth.items()}
+        out = kf.step(t, None if k == 40 else meas, std)
+        if k >= 30:
+            raw_err.append([(meas[n] - truth[n]) / std[n] for n in truth])
+            filt_err.append([(out[n] - truth[n]) / std[n] for n in truth])
+    assert np.sqrt(np.mean(np.square(filt_err))) < 0.6 * np.sqrt(np.mean(np.square(raw_err)))
+    assert out["rate_x_mm_per_s"] == pytest.approx(-20.0, rel=0.1)
+    assert out["rate_alpha_deg_per_s"] == pytest.approx(-0.05, rel=0.1)
+    assert PoseKalman().step(0.0, None, None) is None
+    with pytest.raises(ValueError, match="backwards"):
+        kf.step(1.0, None, None)
+
+
+def test_roi_tracker_windows_the_markers_and_falls_back_to_full_frames():
+    """The window holds every box of the last frame with its margin, keeps one size between full
+    frames (one network input shape), has even corners, stays inside the image; a full frame comes
+    every ``refresh`` frames, after a frame without detections, and when a marker is lost."""
+    from dockfactory.measure_roi import RoiTracker
+    boxes = [[500.0, 400.0, 530.0, 430.0], [700.0, 420.0, 731.0, 451.0], [610.0, 500.0, 640.0, 530.0]]
+    dets = [{"bbox_px": b, "score": 0.9} for b in boxes]
+    t = RoiTracker(1280, 960, refresh=3, min_score=0.25)
+    assert t.region() is None   # nothing seen yet
+    t.update(dets, None)
+    roi = t.region()
+    assert roi is not None and roi[0] % 2 == 0 and roi[1] % 2 == 0
+    assert all(roi[0] < b[0] and roi[1] < b[1] and b[2] < roi[2] and b[3] < roi[3] for b in boxes)
+    assert (roi[2] - roi[0]) % 64 == 0 and (roi[3] - roi[1]) % 64 == 0
+    moved = [{"bbox_px": [b[0] + 40, b[1] - 20, b[2] + 40, b[3] - 20], "score": 0.9} for b in boxes]
+    assert not t.lost(moved, roi)
+    t.update(moved, roi)
+    roi2 = t.region()
+    assert roi2 is not None and (roi2[2] - roi2[0], roi2[3] - roi2[1]) == (roi[2] - roi[0], roi[3] - roi[1])
+    assert t.lost(moved[:2], roi2)   # a marker fewer than the full frame saw
+    t.update(moved, roi2)
+    assert t.region() is None        # the third frame since the full one: refresh
+    corner = RoiTracker(1280, 960, refresh=10)
+    corner.update([{"bbox_px": [2.0, 900.0, 40.0, 955.0]}], None)
+    x0, y0, x1, y1 = corner.region()
+    assert 0 <= x0 and y1 <= 960 and x1 - x0 >= 38
+    corner.update([], (x0, y0, x1, y1))
+    assert corner.region() is None
+
+
+@pytest.mark.slow   # the detector on 4 frames
+def test_online_self_calibration_over_a_window_then_frozen(run_ds, videos, tmp_path, capsys):
+    """--self-calibrate window:3 --freeze-after 1 on the painted run (an ideal pinhole camera):
+    frames 0 and 1 are solved alone (the window is warming up), frame 2 jointly with 0 and 1
+    (shared intrinsics: the principal point found at the image centre within 2 px), frame 3 with
+    those intrinsics frozen; every pose within 1 mm / 0.05 deg of the labels."""
+    code, lines, _ = _stream(["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout",
+                              run_ds / "layout.json", "--self-calibrate", "window:3", "--freeze-after", "1"],
+                             capsys, tmp_path)
+    assert code == 0
+    labels = _lines(videos / "video" / "unit0_run00.jsonl")
+    assert "solved alone" in lines[0]["self_calibration"] and "solved alone" in lines[1]["self_calibration"]
+    assert (lines[2]["self_calibrated"], lines[2]["run_frames"]) == ("window", 3)
+    assert abs(lines[2]["intrinsics"]["cx"] - 639.5) < 2 and abs(lines[2]["intrinsics"]["cy"] - 479.5) < 2
+    assert lines[3]["self_calibrated"] == "frozen"
+    assert lines[3]["frozen_intrinsics"]["cx"] == lines[2]["intrinsics"]["cx"]
+    for line, truth in zip(lines[:4], labels):
+        assert abs(line["pose"]["x_mm"] - truth["pose"]["x_mm"]) < 1.0
+        assert abs(line["pose"]["alpha_deg"] - truth["pose"]["alpha_deg"]) < 0.05
+    assert lines[-1]["self_calibrate"] == "window:3" and lines[-1]["freeze_after"] == 1
+
+
+def test_self_calibration_flags_are_checked(run_ds, videos, tmp_path, capsys):
+    layout = run_ds / "layout.json"
+    video = videos / "video_lossless" / "unit0_run00.mkv"
+    for args, words in ((["--video", video, "--self-calibrate", "sequence"], "a stream self-calibrates over"),
+                        (["--video", video, "--freeze-after", "2"], "needs --self-calibrate window:N"),
+                        ([run_ds / "images", "--self-calibrate", "window:4", "--out", tmp_path / "o"],
+                         "for a stream"),
+                        ):
+        code, _, err = run_cli(["measure", *args, "--layout", layout], capsys)
+        assert code == 2 and words in one_line_error(err), (args, err)
+    code, _, err = run_cli(["measure", "--video", video, "--self-calibrate", "window:1", "--layout", layout], capsys)
+    assert code == 2 and "window:N with N in [2, 200]" in err.strip().splitlines()[-1]   # argparse: usage + error
