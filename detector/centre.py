@@ -19,25 +19,18 @@ A marker is a red or blue disc inside a dark ring. Inside a window around the de
    (logistic profile of fitted width: the optics' and the pixel filter's blur), a disc level
    that may vary linearly across the disc (shading) and a ring level. The refined outline box
    is the moment box, half-extents 2 sqrt(var) + ``edge_bias_px``, around the fitted centre
-   (the fitted ellipse's own box falls 0.07-0.17 px per side inside the true outline on the
-   denoised renders of both bench scenes, the moment box 0.00-0.13: ``bench/centre_bias.py``).
+   (the fitted ellipse's own box falls inside the true outline, the moment box closer to it:
+   ``bench/centre_bias.py``).
 
-Why a fit and not the centroid (issue 12). The centroid integrates every pixel of the soft
-coverage, so whatever changes the level of the band just inside the edge unevenly around the disc
-moves it: the clipped coverage turns a shading gradient into an offset toward the brighter side
-(0.04-0.37 px for a 20 % gradient per radius, tests/test_centre_bias.py), and the renderer's
-denoiser (OpenImageDenoise at 2 samples per pixel) lowers that band by up to 0.2 of the contrast,
-unevenly: against the same frames rendered without it, it moved the centroid of BlueB discs by
-(+0.006, -0.014) px and of RedA discs by (-0.010, +0.012) px (bench/results/centre_bias/). The fit
-puts the edge where the profile is steepest and takes the disc level as a plane: the denoiser
-moves its BlueB centres by (+0.003, -0.001) px; on configs/detector.toml (1c6b939ff88e2de6) and
-configs/centre_scene_b.toml (68e5460f43855cf1) BlueB sits at (-0.002, +0.001) and (+0.006,
-+0.001) px instead of (+0.015, -0.008) and (+0.024, -0.008). RedA discs come out of the denoiser
-shifted at the edge itself ((-0.015, +0.010) px for the fit, the same on both scenes within the
-errors): an image property no refinement can tell from the disc, left to the renders (see the
-bench's README). The fit also weighs each edge pixel by what it says about the centre: on a
-foreshortened disc the centroid gives the noisy top and bottom edge pixels the lever of the long
-axis (x scatter on discs flatter than 0.45: 0.122 px for the fit, 0.166 for the centroid).
+Why a fit and not the centroid. The centroid integrates every pixel of the soft coverage, so
+whatever changes the level of the band just inside the edge unevenly around the disc moves it:
+the clipped coverage turns a shading gradient into an offset toward the brighter side, and the
+renderer's denoiser lowers that band unevenly. The fit puts the edge where the profile is
+steepest and takes the disc level as a plane, so neither moves it much; it also weighs each edge
+pixel by what it says about the centre, where the centroid gives the noisy top and bottom pixels
+of a foreshortened disc the lever of its long axis. An offset the denoiser puts at the edge itself
+is an image property no refinement can tell from the disc. The measured sizes of each of these:
+results/README.md, "Measurements behind the code's constants".
 
 Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
 over the disc: noise and shading), and how well
@@ -281,26 +274,13 @@ def _usable(s: np.ndarray, pur: np.ndarray, rho: np.ndarray, fg: float, bg: floa
 
 # --- the edge fit -------------------------------------------------------------------------------
 
-# The band and the guard, checked on two scenes that differ in geometry (bench/centre_bias.py on
-# the main frames of configs/detector.toml, 1c6b939ff88e2de6: section radius 300 mm, 20 mm
-# markers, ~12 px radius; and configs/centre_scene_b.toml, 68e5460f43855cf1: 450 mm, 30 mm,
-# ~15 px), per-class mean (dx, dy) over every condition and RMS on normal frames, px:
-#   as set:        A: RedA (-0.009, +0.017) 0.098, BlueB (-0.002, +0.001) 0.098;
-#                  B: RedA (-0.016, +0.022) 0.086, BlueB (+0.006, +0.001) 0.094
-#   band in 1.5:   A: (-0.012, +0.011) 0.099, (-0.006, +0.007) 0.099; B: (-0.020, +0.015) 0.084, (+0.001, +0.007) 0.093
-#   band in 3.5:   A: (-0.006, +0.019) 0.098, (+0.000, -0.003) 0.098; B: (-0.012, +0.023) 0.087, (+0.009, -0.003) 0.095
-#   band out 0.6:  A: (-0.009, +0.017) 0.098, (-0.003, +0.002) 0.098; B: (-0.015, +0.022) 0.087, (+0.005, +0.003) 0.093
-#   band out 1.5:  A: (-0.009, +0.017) 0.099, (-0.002, +0.001) 0.098; B: (-0.016, +0.023) 0.086, (+0.008, -0.000) 0.096
-#   max shift 0.3: A: (-0.007, +0.017) 0.107, (-0.002, +0.001) 0.101; B: (-0.011, +0.022) 0.100, (+0.005, +0.001) 0.110
-#   max shift 1.0: A: (-0.010, +0.017) 0.106, (-0.002, +0.001) 0.098; B: (-0.012, +0.021) 0.086, (+0.005, +0.001) 0.094
-# 2.5 px inside takes in the whole edge band the denoiser of the renders reshapes (it lowers the
-# level up to 1.1 px inside the edge and raises a halo 1.5-2.4 px inside); a narrower band trades
-# BlueB's offset for RedA's. The RedA offset left (the same on both scenes) is the denoiser's shift
-# of red discs (bench/results/centre_bias/README.md), not the fit's.
+# The band and the guard were checked on two scenes that differ in geometry (bench/centre_bias.py;
+# the figures: results/README.md, "Measurements behind the code's constants"). The band inside takes
+# in the whole edge band the renders' denoiser reshapes; a narrower band trades BlueB's offset for RedA's.
 FIT_BAND_IN_PX = 2.5   # the fit uses the pixels from this far inside the first ellipse's edge ...
 FIT_BAND_OUT_PX = 1.0  # ... to this far outside it (the ring is 2.5 mm wide: 2.5-3 px here, < 1 px across flat discs)
 FIT_MAX_SHIFT_PX = 0.5  # a fitted centre farther than this from the coverage centroid is refused
-FIT_ITERATIONS = 8     # Levenberg-Marquardt steps at most; 4.6 on average, stopping below 0.002 px
+FIT_ITERATIONS = 8     # Levenberg-Marquardt steps at most (it stops earlier below 0.002 px)
 
 
 def fit_disc_edge(win: _Window | None) -> np.ndarray | None:

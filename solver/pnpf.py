@@ -16,6 +16,7 @@ from dockfactory.solver.checks import (
 from dockfactory.solver.errors import InvalidSolverInput
 from dockfactory.solver.estimate import PnPfResult, estimate_pnpf
 from dockfactory.solver.focal_prior import apply_focal_range, check_focal_range
+from dockfactory.solver.focal_profile import widen_along_focal_profile
 from dockfactory.solver.options import RansacOptions, RefineOptions
 from dockfactory.solver.ransac import DEFAULT_RANSAC, ransac_pnpf
 from dockfactory.solver.refine import DEFAULT_REFINE
@@ -47,6 +48,8 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     Returns a :class:`PnPfResult`; a focal the points do not determine (near-planar,
     fronto-parallel points at this noise) is returned with ``focal_determined=False`` and its
     covariance, not refused: the rotation and the in-plane translation are still determined.
+    A weakly determined focal's covariance is widened along its likelihood profile where the
+    linearised one is too narrow (:mod:`solver.focal_profile`).
     Raises a :class:`SolverError` subclass: InvalidSolverInput (shape mismatch, NaN/inf),
     TooFewPoints (fewer than 4 points), DegenerateGeometry (collinear points), NoValidCamera
     (no camera in front of the points fits).
@@ -65,7 +68,9 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
         est = estimate_pnpf(p3, p2, pp, sigma_px=sigma_px, all_candidates=all_candidates,
                             accept_rmse=accept, options=refine_options)
         res = est.result(np.ones(p3.shape[0], dtype=bool))
-    if focal_range is None:
-        return res
     keep = res.inliers
-    return apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, refine_options)
+    if focal_range is not None:
+        res = apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, refine_options)
+        if res.focal_at_bound:
+            return res
+    return widen_along_focal_profile(p3[keep], p2[keep], pp, res, refine_options)
