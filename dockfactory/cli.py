@@ -6,6 +6,7 @@ evaluate, report, run; ``cli_detector``: train, detect, ablate, export-onnx, noi
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from dockfactory import __version__
@@ -17,7 +18,7 @@ from dockfactory.cli_measure import add_subcommand as add_measure_command
 from dockfactory.cli_plan import add_subcommand as add_plan_command
 from dockfactory.core.errors import DockfactoryError
 
-EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 2, 130, 141   # 141: 128 + SIGPIPE, as a shell reports it
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,6 +59,9 @@ def main(argv=None) -> int:
     except DockfactoryError as exc:  # bad input: ConfigError, DatasetError, SolverError, ...
         print(f"dockfactory: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:   # the reader of standard output stopped early (`| head`): no traceback
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # the exit's flush goes nowhere
+        return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

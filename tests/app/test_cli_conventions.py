@@ -78,3 +78,20 @@ def test_ablate_checks_its_folders_before_training(painted_source, tmp_path, cap
     code, _, err = run_cli(["ablate", painted_source, "--out", tmp_path / "abl", "--epochs", "1",
                             "--record", record], capsys)
     assert code == 2 and "--record" in one_line_error(err) and not list((tmp_path / "abl").glob("*/"))
+
+
+def test_output_cut_short_by_its_reader_is_no_traceback():
+    """`dockfactory check-config smoke | head -1`: the reader closes the pipe early; the command
+    stops quietly with the shell's SIGPIPE status (141), no traceback on standard error. (The
+    pipe's read end is closed before the command writes, so every write fails.)"""
+    import os
+    import subprocess
+    import sys
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    proc = subprocess.run([sys.executable, "-m", "dockfactory", "check-config", "smoke", "--resolved"],
+                          stdout=write_end, stderr=subprocess.PIPE, timeout=60)
+    os.close(write_end)
+    err = proc.stderr.decode()
+    assert proc.returncode == 141, err
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
