@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch pinned to the CPU build (any other spec pulls a multi-GB CUDA build); one resolve for all
-	$(BIN)/python -m pip install --quiet "torch==2.13.0" -e ".[test,ray,onnx,dvc,hf]"
+	$(BIN)/python -m pip install --quiet "torch==2.13.0" -e ".[test,ray,onnx,dvc,hf,pdf]"
 	touch $(STAMP)
 
 # render -> detect (shipped weights) -> solve -> evaluate -> report on the quick config.

@@ -60,8 +60,16 @@ def main(argv=None) -> int:
         print(f"dockfactory: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:   # the reader of standard output stopped early (`| head`): no traceback
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # the exit's flush goes nowhere
+        _silence_stdout()
         return EXIT_BROKEN_PIPE
+
+
+def _silence_stdout() -> None:
+    """Point standard output at the null device, so the flush at exit writes nowhere."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except OSError:
+        pass   # no null device to point at: the interpreter's own message at exit is all that is left
 
 
 if __name__ == "__main__":

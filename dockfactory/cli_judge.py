@@ -17,6 +17,7 @@ from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.envelope import EnvelopeGrid
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.report import build_report
+from dockfactory.eval.report_pdf import NO_ENGINE, pdf_engine, write_pdf
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
@@ -100,10 +101,15 @@ def _write_verdict(args, metrics: dict, rows) -> int:
 def cmd_report(args) -> int:
     """Build the report holding the lock of the folder of --out (the HTML file; its .md and .json
     go beside it)."""
+    if args.pdf and pdf_engine() is None:
+        raise DockfactoryError(f"--pdf: {NO_ENGINE}")
     with writer_lock(Path(args.out).parent, "report", f"--out {args.out}: its folder"):
         summary = build_report(args.eval_dir, args.out,
                                signers={"prepared_by": args.prepared_by, "approved_by": args.approved_by})
-    print(f"verdict: {summary['verdict']}  report: {args.out} (id {summary['report_id']})")
+        pdf = Path(args.out).with_suffix(".pdf")
+        engine = write_pdf(args.out, pdf) if args.pdf else None
+    print(f"verdict: {summary['verdict']}  report: {args.out} (id {summary['report_id']})"
+          + (f"  pdf: {pdf} ({engine})" if engine else ""))
     return 0
 
 
@@ -188,6 +194,8 @@ def _add_report_parser(sub) -> None:
     r.add_argument("--out", required=True)
     r.add_argument("--prepared-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
     r.add_argument("--approved-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
+    r.add_argument("--pdf", action="store_true",
+                   help="also write the report as a PDF beside it (WeasyPrint, else a headless Chromium)")
     r.set_defaults(func=cmd_report)
 
 

@@ -602,7 +602,7 @@ def _html_camera_envelope(env: dict | None) -> list[str]:
 def _html_figures(figs: dict[str, str], worst: list[tuple[str, str]]) -> list[str]:
     parts = ["<h2>Plots</h2>"]
     for title, b64 in figs.items():
-        parts.append(f"<h3>{html.escape(title)}</h3>{_img(b64, title)}")
+        parts.append(f"<section class='plot'><h3>{html.escape(title)}</h3>{_img(b64, title)}</section>")
     parts.append("<h2>Worst frames</h2><p class='note'>Green circles: true marker centres; magenta crosses: detections; "
                  "yellow dots: every marker reprojected with the estimated poses and focal length.</p>")
     for cap, b64 in worst:
@@ -622,7 +622,12 @@ def _html_document(parts: list[str]) -> str:
            "tr.pass td:last-child,.pass{color:#17702a}tr.fail td:last-child,.fail{color:#b00020}"
            "tr.undecided td:last-child,.undecided{color:#a05a00}"
            ".note{color:#555;font-size:85%}img{max-width:100%}figure{display:inline-block;margin:4px;max-width:540px}"
-           "@media print{h2{page-break-before:auto}img{max-width:95%}}")
+           # print (and report --pdf): A4; a heading stays with what follows it, a plot, figure or
+           # table row is never cut across pages, a plot fits a third of a page
+           "@page{size:A4;margin:14mm}"
+           "@media print{body{max-width:none;padding:0;font-size:10pt}h1,h2,h3{break-after:avoid-page}"
+           ".plot,figure,tr,img{break-inside:avoid-page}.plot img{max-height:95mm;width:auto}"
+           "figure{max-width:48%}figure img{max-height:70mm;width:auto}}")
     return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
             f"<style>{css}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
 
