@@ -16,7 +16,7 @@ that lies farther (one term: the valley is one path). Each end is
 walked in steps of growing multiples of the linearised std of log f, each refinement starting
 from the previous one.
 
-A layer-5 step of the single-section solver (beside :mod:`solver.focal_prior`), used by
+A layer-3 step of the single-section solver (beside :mod:`solver.focal_prior`), used by
 :func:`solver.pnpf.solve_pnpf`.
 """
 from __future__ import annotations
