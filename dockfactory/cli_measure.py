@@ -26,7 +26,7 @@ from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
 from dockfactory.eval.conformity import exit_status
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.measure_selfcal import parse_window
-from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream
+from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream, stream_decider
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -69,9 +69,10 @@ def cmd_measure_stream(args) -> int:
     options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
                             input_scale=args.input_scale, roi_refresh=args.roi, window=window,
                             freeze_after=args.freeze_after)
+    decide = stream_decider(args.acceptance) if args.acceptance else None
     weights = _weights(args)
     torch_threads(args.threads)
-    s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options)
+    s = measure_stream(args.layout, weights, args.jsonl or "-", args.video, args.camera, options, decide)
     fails = ", ".join(f"{n} {c}" for c, n in s["failures"].items())
     print(f"{s['frames_with_pose']} of {s['frames']} frames with a pose ({s['camera_model']} camera); "
           f"{s['frames_per_s']} frames/s, latency p95 {s['latency_ms']['p95']} ms"

@@ -18,8 +18,9 @@ gives none), ``ok``; with a pose: ``pose`` (X, Y, Z mm, alpha, beta, gamma deg: 
 frame, detect, solve, total: from the start of the frame's read to the line being serialised).
 With a display filter (``filter="kalman"``, dockfactory.measure_filter) the line adds
 ``filtered``: the raw pose above is never replaced. With an acceptance hook (``decide``: any
-callable taking the frame line and returning a JSON value, e.g. "IN" / "OUT" / "UNDECIDED") the
-line adds ``acceptance``: this module takes no decision itself.
+callable taking the frame line and returning a JSON value) the line adds ``acceptance``;
+:func:`stream_decider` makes the hook of ``--acceptance SPEC``: the decision itself is
+``eval.conformity``'s (IN / OUT / UNDECIDED per gated component, guard band U = k u).
 
 The last line is the summary (``type`` "summary"): frames read and with a pose, failures by
 category, frames/s over the run (after the detector is loaded), latency from a frame's read to its
@@ -45,6 +46,8 @@ import numpy as np
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
+from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.measure import NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
@@ -351,6 +354,22 @@ def load_detector(weights, options: StreamOptions, size: tuple[int, int] | None 
     if size and min(size) > 0:
         detector.raw(np.zeros((size[1], size[0], 3), np.uint8))
     return detector
+
+
+def stream_decider(acceptance) -> Callable[[dict], dict]:
+    """The acceptance hook of ``measure --video/--camera --acceptance SPEC``: each frame's pose
+    against the spec's single-pose tolerances (``eval.conformity``, the guard band U = k u of the
+    frame's reported 1-sigma stds; no layout term: a stream carries no budget), as the still-image
+    path judges an image; a frame without a pose is UNDECIDED. Bad spec: one-line DockfactoryError
+    before anything is opened."""
+    spec = load_acceptance(acceptance)
+    tolerances, k = pose_tolerances(spec, str(acceptance)), coverage_k(spec)
+
+    def decide(line: dict) -> dict:
+        if not line.get("ok"):
+            return {"components": {}, "decision": UNDECIDED, "k": k}
+        return pose_conformity(line["pose"], line["std"], tolerances, k)
+    return decide
 
 
 def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: int | None = None,

@@ -264,3 +264,32 @@ def test_self_calibration_flags_are_checked(run_ds, videos, tmp_path, capsys):
         assert code == 2 and words in one_line_error(err), (args, err)
     code, _, err = run_cli(["measure", "--video", video, "--self-calibrate", "window:1", "--layout", layout], capsys)
     assert code == 2 and "window:N with N in [2, 200]" in err.strip().splitlines()[-1]   # argparse: usage + error
+
+
+@pytest.mark.slow   # the detector on 2 frames
+def test_a_stream_judged_against_an_acceptance_spec(run_ds, tmp_path, capsys):
+    """--acceptance SPEC on a stream: every line carries eval.conformity's decision of its pose
+    (per gated component value, U = 2 u and the decision, the worst as the line's); a spec with
+    wide tolerances says IN, one tighter than the guard band UNDECIDED; a bad spec is one line,
+    exit 2, before the video is opened."""
+    video = run_ds / "images" / "%06d.png"
+    wide, tight = tmp_path / "wide.toml", tmp_path / "tight.toml"
+    wide.write_text("[localization]\nx = 1000.0\ny = 1000.0\nalpha = 90.0\n")
+    tight.write_text("[localization]\nx = 1e-6\n")
+    for spec, want in ((wide, "IN"), (tight, None)):
+        code, lines, _ = _stream(["--video", video, "--layout", run_ds / "layout.json", "--max-frames", "2",
+                                  "--acceptance", spec], capsys, tmp_path, f"{spec.stem}.jsonl")
+        assert code == 0
+        for line in lines[:-1]:
+            acc = line["acceptance"]
+            x = acc["components"]["x_mm"]
+            assert x["U"] == pytest.approx(2.0 * line["std"]["x_mm"]) and x["value"] == line["pose"]["x_mm"]
+            if want == "IN":
+                assert acc["decision"] == "IN" and set(acc["components"]) == {"x_mm", "y_mm", "alpha_deg"}
+            else:   # |x| within 1e-6 mm is beyond any pose here: OUT unless the band covers it
+                assert acc["decision"] == ("OUT" if abs(x["value"]) - x["U"] > 1e-6 else "UNDECIDED")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[localization]\n")
+    code, _, err = run_cli(["measure", "--video", video, "--layout", run_ds / "layout.json",
+                            "--acceptance", bad, "--jsonl", tmp_path / "bad.jsonl"], capsys)
+    assert code == 2 and "[localization]" in one_line_error(err) and not (tmp_path / "bad.jsonl").exists()
