@@ -625,7 +625,7 @@ def _html_document(parts: list[str]) -> str:
            # print (and report --pdf): A4; a heading stays with what follows it, a plot, figure or
            # table row is never cut across pages, a plot fits a third of a page
            "@page{size:A4;margin:14mm}"
-           "@media print{body{max-width:none;padding:0;font-size:10pt}h1,h2,h3{break-after:avoid-page}"
+           "@media print{body{max-width:none;padding:0;font-size:10pt}h1,h2,h3,h2+.note,h3+.note{break-after:avoid-page}"
            ".plot,figure,tr,img{break-inside:avoid-page}.plot img{max-height:95mm;width:auto}"
            "figure{max-width:48%}figure img{max-height:70mm;width:auto}}")
     return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dockfactory acceptance report</title>"
