@@ -30,7 +30,8 @@ How it works
    import: a violation.
 4. Imports inside functions are allowed only for heavy optional dependencies: HEAVY below (torch
    and kornia, which imports torch; bpy and its mathutils; ray; matplotlib; onnx and onnxruntime,
-   the optional ``export-onnx`` extra). Each costs from one to over ten seconds to import here, or
+   the optional ``export-onnx`` extra; weasyprint, the optional ``pdf`` extra of ``report --pdf``).
+   Each costs from one to over ten seconds to import here, or
    needs an extra. cv2, pycocotools and OpenEXR are required dependencies that import in well under
    a second and are imported at module level elsewhere in the package, so they are not heavy; neither
    is the standard library. A function-level import of a project module is allowed only when that
@@ -74,7 +75,7 @@ ALLOWED = {
 FUNCTION_ONLY = {("generator", "blender_scenes")}
 MAIN_MAY_IMPORT = {"dockfactory.cli"}
 
-HEAVY = {"torch", "kornia", "bpy", "mathutils", "ray", "matplotlib", "onnx", "onnxruntime"}
+HEAVY = {"torch", "kornia", "bpy", "mathutils", "ray", "matplotlib", "onnx", "onnxruntime", "weasyprint"}
 
 
 @dataclass(frozen=True)

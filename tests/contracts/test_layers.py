@@ -6,7 +6,7 @@ imported; see tests/layercheck.py for how the walk, the contract and the cycle s
     ablate);   dockfactory/__init__ imports nothing, __main__ only dockfactory.cli.
 
 Function-level imports only for heavy optional dependencies (torch, kornia, bpy, mathutils, ray,
-matplotlib, onnx, onnxruntime) or for a project module that imports one of them at module level.
+matplotlib, onnx, onnxruntime, weasyprint) or for a project module that imports one of them at module level.
 The checker is shown to fail on a miniature tree with deliberate violations
 (tests/layer_fixture/), so a green run means something.
 """

@@ -2,6 +2,8 @@
 that needs it skips, saying why, where it is absent). The pages render to images; no heading ends
 a page (the print stylesheet keeps each heading with the plot or table after it); without an engine
 `--pdf` is one line and exit 2, before anything is written."""
+import os
+
 import pytest
 from cli_run import one_line_error, run_cli
 from pipeline_data import write_painted_dataset
@@ -14,6 +16,18 @@ from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.generator.dataset_open import Dataset
 
 HEADINGS = ("h1", "h2", "h3")
+
+
+@pytest.fixture(autouse=True)
+def _keep_the_null_device():
+    """WeasyPrint's import looks for its libraries with ctypes.util.find_library, which runs the
+    system linker on names that do not exist; where /dev/null is a regular file (some containers,
+    this project's CI sandbox) the failing link removes it, and later tests and tools that open it
+    fail. Put it back as it was. (A real /dev/null, a character device, is never removed.)"""
+    was_file = os.path.isfile(os.devnull)
+    yield
+    if was_file and not os.path.exists(os.devnull):
+        open(os.devnull, "w").close()
 
 
 @pytest.fixture(scope="module")
