@@ -17,7 +17,7 @@ from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.uncertainty_budget import budget_block
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, verdict
-from dockfactory.eval.confidence import pooled_spread_bounds, rmse_bounds
+from dockfactory.eval.confidence import chi2_bounds, pooled_spread_bounds, rmse_bounds
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
 from dockfactory.eval.centre_noise_disc import (
@@ -170,17 +170,25 @@ def localization_block(rows: list[dict]) -> dict:
     return out
 
 
+RATIO_CONFIDENCE = 0.95   # two-sided: the ratio's interval from the chi-square spread of an RMSE over n frames
+
+
 def bound_ratios(ok: list[dict], overall: dict, prefix: str) -> dict:
     """{component: bound_rms (RMS over the solved rows of column ``<prefix>_<c>``),
-    measured_rmse, ratio}."""
+    measured_rmse, ratio, ratio_low, ratio_high}: the ratio's two-sided RATIO_CONFIDENCE interval
+    is what the measured RMSE over its n frames can show (chi-square with n degrees of freedom,
+    errors about zero), so a ratio under 1 on a few frames is not read as beating the bound."""
     crb = {}
     for c in COMPONENTS:
         b = [r[f"{prefix}_{c}"] for r in ok if r.get(f"{prefix}_{c}") is not None]
         if b:
             bound_rms = float(np.sqrt(np.mean(np.square(b))))
-            rmse = overall[c]["rmse"]
-            crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse,
-                      "ratio": (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None}
+            rmse, n = overall[c]["rmse"], overall[c]["n"]
+            ratio = (rmse / bound_rms) if rmse is not None and bound_rms > 0 else None
+            spread = chi2_bounds(n * rmse ** 2, n, (1 + RATIO_CONFIDENCE) / 2) if ratio is not None else None
+            crb[c] = {"bound_rms": bound_rms, "measured_rmse": rmse, "ratio": ratio,
+                      "ratio_low": spread[0] / bound_rms if spread else None,
+                      "ratio_high": spread[1] / bound_rms if spread else None}
     return crb
 
 

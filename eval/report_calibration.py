@@ -49,18 +49,35 @@ def used_sigma_text(metrics: dict) -> str:
     return text
 
 
+def _ratio_text(v: dict) -> str:
+    """The ratio, with its 95 % interval over the frames when the metrics hold one."""
+    if v.get("ratio_low") is None or v.get("ratio_high") is None:
+        return _f(v.get("ratio"), ".3g")
+    return f"{_f(v['ratio'], '.3g')} ({v['ratio_low']:.2g}-{v['ratio_high']:.2g})"
+
+
+def _outside(v: dict | None, side: int) -> bool:
+    """The ratio lies below (side -1) or above (+1) RATIO_RANGE, beyond its own sampling interval
+    when the metrics hold one (a ratio under 1 over a few frames is no finding)."""
+    if not v or v.get("ratio") is None:
+        return False
+    if side < 0:
+        return (v.get("ratio_high") if v.get("ratio_high") is not None else v["ratio"]) < RATIO_RANGE[0]
+    return (v.get("ratio_low") if v.get("ratio_low") is not None else v["ratio"]) > RATIO_RANGE[1]
+
+
 def _ratio_note(crb: dict, cn: dict | None) -> str:
-    low = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] < RATIO_RANGE[0]]
-    high = [c for c in GATED if (crb.get(c) or {}).get("ratio") is not None and crb[c]["ratio"] > RATIO_RANGE[1]]
+    low = [c for c in GATED if _outside(crb.get(c), -1)]
+    high = [c for c in GATED if _outside(crb.get(c), 1)]
     notes = [disc_model_text(cn)] if disc_model_text(cn) else []
     axis = ((cn or {}).get("overall") or {}).get("rms_axis_px")
     if low:
         model = ("the disc noise model" if (cn or {}).get("disc_model") else
                  "isotropic, independent centre noise of this size")
-        notes.append(f"{', '.join(low)} below {RATIO_RANGE[0]}: smaller than the bound of {model}, so the "
+        notes.append(f"{', '.join(low)} below {RATIO_RANGE[0]} (its whole 95 % interval): smaller than the bound of {model}, so the "
                      "detector's noise is not that" + (f" (RMS x {axis[0]:.3g} px, y {axis[1]:.3g} px)" if axis else "") + ".")
     if high:
-        notes.append(f"{', '.join(high)} above {RATIO_RANGE[1]}: the solver does not reach the bound.")
+        notes.append(f"{', '.join(high)} above {RATIO_RANGE[1]} (its whole 95 % interval): the solver does not reach the bound.")
     return " ".join(notes)
 
 
@@ -98,9 +115,9 @@ def html_bound(metrics: dict) -> list[str]:
     loc = metrics["localization"]
     note = _ratio_note(loc["crb"], metrics.get("centre_noise"))
     return ["<h3>Measured against the Cramer-Rao bound</h3><table><tr><th>component</th><th>measured RMSE</th>"
-            "<th>bound (RMS)</th><th>ratio</th></tr>"
+            "<th>bound (RMS)</th><th>ratio (95 % interval over the frames)</th></tr>"
             + "".join(f"<tr><td>{c}</td><td>{_f(v['measured_rmse'], '.4g')}</td><td>{_f(v['bound_rms'], '.4g')}</td>"
-                      f"<td>{_f(v['ratio'], '.3g')}</td></tr>" for c, v in loc["crb"].items())
+                      f"<td>{_ratio_text(v)}</td></tr>" for c, v in loc["crb"].items())
             + "</table><p class='note'>Bound from each frame's exact geometry (the markers its fit used) and the "
               f"centre noise above. {html.escape(note)}</p>"]
 
@@ -191,9 +208,9 @@ def plot_qq(plt, rows: list[dict], fig_png) -> str | None:
 def markdown_honesty(metrics: dict) -> str:
     """The centre noise used, measured / bound and the z table, for report.md."""
     loc = metrics["localization"]
-    md = ["", f"Centre noise used: {used_sigma_text(metrics)}.", "", "| component | measured RMSE | bound | ratio |",
-          "|---|---|---|---|"]
-    md += [f"| {c} ({UNITS[c]}) | {_f(v['measured_rmse'], '.4g')} | {_f(v['bound_rms'], '.4g')} | {_f(v['ratio'], '.3g')} |"
+    md = ["", f"Centre noise used: {used_sigma_text(metrics)}.", "",
+          "| component | measured RMSE | bound | ratio (95 % interval) |", "|---|---|---|---|"]
+    md += [f"| {c} ({UNITS[c]}) | {_f(v['measured_rmse'], '.4g')} | {_f(v['bound_rms'], '.4g')} | {_ratio_text(v)} |"
            for c, v in loc["crb"].items() if c in GATED]
     note = _ratio_note(loc["crb"], metrics.get("centre_noise"))
     if note:
