@@ -191,9 +191,14 @@ def folder_lock(folder, what: str, lock_path=None):
     """Hold the exclusive lock of ``folder`` (``fcntl.flock`` on ``lock_path``, by default
     ``folder/.dockfactory.lock``) for the duration of the block. Non-blocking: when another process
     holds it, raise :class:`FolderBusy` naming the holder (what, pid, host, command). The lock dies
-    with its process (kill -9 included); the lock file stays (removing it would race)."""
+    with its process (kill -9 included); the lock file stays (removing it would race). A lock file
+    that is a symlink is never opened: the folder holding it is locked instead (unnamed holder)."""
     folder = Path(folder)
     path = Path(lock_path) if lock_path is not None else folder / LOCK_NAME
+    if path.is_symlink():   # never opened: writing the holder's name would write where the link points
+        with _directory_lock(path.parent, folder):
+            yield path
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
@@ -214,6 +219,25 @@ def folder_lock(folder, what: str, lock_path=None):
         finally:
             with contextlib.suppress(OSError):
                 os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)   # releases the lock
+
+
+@contextlib.contextmanager
+def _directory_lock(directory: Path, folder: Path):
+    """``flock`` on ``directory`` itself (nothing written), the lock of ``folder`` when its lock
+    file is a symlink (a dataset tracked with DVC's symlink cache links its ``logs/`` files);
+    FolderBusy when another process holds it. A symlinked directory is refused."""
+    if directory.is_symlink():
+        raise DockfactoryError(f"{directory}: is a symlink; the lock of {folder} lives in a real folder")
+    fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise FolderBusy(f"{folder}: in use by another dockfactory process (its lock file is a symlink, so the "
+                             "holder is not named); wait for it to finish (or stop it) and run this command again") from None
+        yield
     finally:
         os.close(fd)   # releases the lock
 

@@ -13,16 +13,14 @@ Layout of a dataset directory:
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
-import os
 import re
 from collections import Counter
 from pathlib import Path
 
 from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import LOCK_NAME, FolderBusy, folder_lock, output_lock, sha256_file, write_bytes_atomic, write_json_atomic
+from dockfactory.core.io import LOCK_NAME, folder_lock, output_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.dvc_links import cache_link, dvc_caches
@@ -78,33 +76,10 @@ def check_split(split, where) -> str:
 @contextlib.contextmanager
 def dataset_lock(root, what: str):
     """The dataset's exclusive lock (render, export); readers need none. A second writer fails at
-    once with a DatasetError naming the holder. When the lock file is a symlink (``dvc add`` of
-    the dataset with DVC's symlink cache links ``logs/`` too) it is never opened (writing the
-    holder's name would write into the DVC cache): the ``logs/`` folder itself is locked."""
-    lock = Path(root) / LOCK_FILE
-    if lock.is_symlink():
-        with _folder_flock(lock.parent, what):
-            yield
-        return
-    with folder_lock(root, what, lock):
+    once with a DatasetError naming the holder. A lock file that is a symlink (``dvc add`` with
+    DVC's symlink cache links ``logs/`` too) is never written through (``core.io.folder_lock``)."""
+    with folder_lock(root, what, Path(root) / LOCK_FILE):
         yield
-
-
-@contextlib.contextmanager
-def _folder_flock(folder: Path, what: str):
-    """``flock`` on the folder itself (nothing written); FolderBusy when another process holds it."""
-    if folder.is_symlink():
-        raise DatasetError(f"{folder}: is a symlink; a dataset's folders live inside it")
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise FolderBusy(f"{folder.parent}: in use by another dockfactory process (its lock file is a DVC "
-                             f"link, so the holder is not named); wait for it and run {what} again") from None
-        yield
-    finally:
-        os.close(fd)   # releases the lock
 
 
 @contextlib.contextmanager

@@ -321,3 +321,21 @@ def test_a_foreign_folder_gets_no_lock_file_and_a_leftover_lock_blocks_nothing(t
     with dataset_lock(fresh, "render"):
         pass
     assert prepare(fresh, cfg, text)["name"] == "smoke"
+
+
+def test_a_symlinked_lock_file_of_any_folder_is_never_written_through(tmp_path):
+    """core.io.folder_lock itself (not only a dataset's lock): a lock file that is a symlink is never
+    opened, the folder holding it is locked instead, and a second locker fails at once."""
+    from dockfactory.core.io import FolderBusy, folder_lock
+    target = tmp_path / "elsewhere.lock"
+    target.write_bytes(b"not ours")
+    out = tmp_path / "out"
+    out.mkdir()
+    os.symlink(target, out / ".dockfactory.lock")
+    with folder_lock(out, "first"):
+        with pytest.raises(FolderBusy, match="lock file is a symlink"):
+            with folder_lock(out, "second"):
+                pass
+    assert target.read_bytes() == b"not ours" and (out / ".dockfactory.lock").is_symlink()
+    with folder_lock(out, "again"):   # released with the block
+        pass
