@@ -431,6 +431,8 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
                       sigma_floor_px=floor, camera=asdict(options.camera), max_megapixels=options.max_megapixels,
                       resumed=resumed, earlier_run_discarded=store.discarded,
                       **_assess(frames, markers, sigmas, centre_bias_px(weights), spec, acceptance))
+        if spec is not None and options.overlay_size is not None:   # the overlays show each decision and U
+            draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
         write_records(out, frames, header)
     return header
 

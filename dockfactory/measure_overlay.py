@@ -11,6 +11,7 @@ from dockfactory.core.io import write_bytes_atomic
 
 DET_BGR = {0: (40, 40, 255), 1: (255, 140, 30)}     # detections: red for A, blue for B
 PROJ_BGR = (60, 230, 60)                             # reprojected layout markers
+_LABEL = {"x": "X", "y": "Y", "z": "Z"}             # pose components as the overlay names them
 
 
 def project_layout(record: dict, markers) -> np.ndarray:
@@ -28,14 +29,32 @@ def project_layout(record: dict, markers) -> np.ndarray:
 
 
 def _text_lines(record: dict, name: str) -> list[str]:
+    """The overlay's text: the image name, the pose with its 1-sigma standard deviations, or, when
+    the record carries a conformity decision (measure --acceptance), each component's value +- U
+    (k = 2) and its decision; the camera line."""
     if not record["ok"]:
         return [name, f"NO POSE ({record.get('category', '')}): {record.get('reason', '')}"[:110]]
     p, cov = record["pose"], np.array(record["covariance"])
+    camera = (f"camera {record.get('camera_model', 'pinhole')}  f {record['focal_px']:.0f} px  "
+              f"rms A {record['rmse_px']['A']:.2f} B {record['rmse_px']['B']:.2f} px")
+    conf = record.get("conformity")
+    if conf and conf.get("components"):
+        k = conf.get("k", 2)
+        parts = [f"{_LABEL.get(n.split('_')[0], n.split('_')[0])} {c['value']:.3f} +- {c['U']:.3f} {n.split('_')[1]} {c['decision']}"
+                 for n, c in conf["components"].items() if c.get("value") is not None and c.get("U") is not None]
+        return [f"{name}: {conf['decision']} (+- U, k = {k:g})", "  ".join(parts), camera]
     std = np.sqrt(np.diag(cov))
     return [name, f"X {p['x_mm']:.2f} +- {std[0]:.2f} mm   Y {p['y_mm']:.2f} +- {std[1]:.2f} mm   "
-                  f"alpha {p['alpha_deg']:.3f} +- {std[3]:.3f} deg (+- 1 sigma)",
-            f"camera {record.get('camera_model', 'pinhole')}  f {record['focal_px']:.0f} px  "
-            f"rms A {record['rmse_px']['A']:.2f} B {record['rmse_px']['B']:.2f} px"]
+                  f"alpha {p['alpha_deg']:.3f} +- {std[3]:.3f} deg (+- 1 sigma)", camera]
+
+
+def text_scale(lines: list[str], width_px: int, scale: float) -> float:
+    """The largest font scale, at most ``scale``, at which every line of OpenCV's simplex font
+    fits ``width_px`` less a margin of 8 px each side, its dark outline (3 px) included (never
+    under a third of ``scale``)."""
+    widest = max(cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, scale, 3)[0][0] for line in lines)
+    room = max(width_px - 16, 1)
+    return scale if widest <= room else max(0.97 * scale * room / widest, scale / 3)
 
 
 def _shrunk(image_rgb: np.ndarray, size: float) -> np.ndarray:
@@ -69,11 +88,13 @@ def draw_measurement(image_rgb: np.ndarray, detections: list, record: dict, mark
         for u, v in project_layout(record, markers):
             if np.isfinite(u) and np.isfinite(v):
                 cv2.drawMarker(img, _at((u, v), sx, sy), PROJ_BGR, cv2.MARKER_CROSS, 10 * scale, scale)
-    for k, line in enumerate(_text_lines(record, str(out.stem))):
-        line = line.encode("ascii", "backslashreplace").decode("ascii")   # ASCII: a lone surrogate crashed OpenCV
-        y = (18 + 20 * k) * scale
-        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (0, 0, 0), 3 * scale, cv2.LINE_AA)
-        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255), scale, cv2.LINE_AA)
+    # ASCII: a lone surrogate crashed OpenCV
+    lines = [t.encode("ascii", "backslashreplace").decode("ascii") for t in _text_lines(record, str(out.stem))]
+    font = text_scale(lines, img.shape[1], 0.5 * scale)
+    for k, line in enumerate(lines):
+        y = round((18 + 20 * k) * font / 0.5)
+        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, font, (0, 0, 0), 3 * scale, cv2.LINE_AA)
+        cv2.putText(img, line, (8, y), cv2.FONT_HERSHEY_SIMPLEX, font, (255, 255, 255), scale, cv2.LINE_AA)
     ok, png = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 1])   # fast: a live view
     if not ok:
         raise RuntimeError(f"{out}: PNG encoding failed")

@@ -5,6 +5,7 @@ that resume every image (the spec is not part of what is measured)."""
 import csv
 import json
 
+import numpy as np
 import pytest
 
 from dockfactory.cli import main
@@ -110,3 +111,22 @@ def test_a_spec_without_pose_tolerances_is_refused_before_measuring(painted, tmp
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0], err
     assert not fresh.exists() or not (fresh / "measurements.json").exists()
+
+
+@pytest.mark.slow   # the detector on two 1280 x 960 images (once for the module)
+def test_overlays_are_redrawn_with_each_decision(measured, tmp_path):
+    """A resumed run with a spec redraws the overlays after the decision: the header band of each
+    carries it (the white text reaches further than the 1-sigma line's decision-free text)."""
+    import cv2
+    ds, out, argv = measured
+    argv = [a for a in argv if a != "--quiet"]
+    k = argv.index("--overlay-size")
+    with_overlays = [*argv[:k + 1], "0.5", *argv[k + 2:]]
+    assert main([*with_overlays, "--quiet"]) == 0
+    plain = {p.name: cv2.imread(str(p)) for p in (out / "overlays").glob("*.png")}
+    assert len(plain) == 2
+    assert main([*with_overlays, "--quiet", "--acceptance", _spec(tmp_path, "s.toml", 1000.0)]) == 0
+    for name, before in plain.items():
+        after = cv2.imread(str(out / "overlays" / name))
+        assert after.shape == before.shape and not np.array_equal(after[:60], before[:60]), name
+        assert np.array_equal(after[80:], before[80:])     # only the text changed
