@@ -1,17 +1,14 @@
 """Per-image BOP data of one frame: the sections' masks, the depth image and scene_gt_info records.
 
-- ``mask``: the section's silhouette (body and flange, unoccluded) in the delivered image: the
-  pixels whose centre lies inside the image of the flange or of the body, each the convex hull of
-  its projected circles (:func:`silhouette_parts`; the vertices of the exported model's rims),
-  through the lens when the unit has distortion (each hull's outline densified and distorted, as
-  the label does) and with B's points at their row times under a rolling shutter; from the
-  label's camera and the dataset's section dimensions, so it exists for every frame. Sampling
-  pixel centres is what bop_toolkit's renderer does: on a pinhole camera its render of the
-  exported model in the exported pose is this mask (tests/generator/test_export_bop.py). The
-  label's ``pixels_all`` and ``bbox_obj_px`` are larger: they take the hull of all the circles at
-  once, which also covers the sliver between the flange's rim and the far end (the section is
-  not convex), and count it with cv2's polygon fill, which also takes the pixels the outline
-  crosses.
+- ``mask``: the section's silhouette (body and flange, unoccluded) in the delivered image, the
+  label's own (generator.silhouette, generator.labels.part_outlines): the pixels whose centre lies
+  inside the image of the flange or of the body, each the convex hull of its projected circles
+  (the vertices of the exported model's rims), through the lens when the unit has distortion and
+  with B's points at their row times under a rolling shutter; recomputed from the label's camera
+  and the dataset's section dimensions, so it exists for every frame and its pixel count and box
+  are the label's ``pixels_all`` and ``bbox_obj_px``. Sampling pixel centres is what bop_toolkit's
+  renderer does: on a pinhole camera its render of the exported model in the exported pose is
+  this mask (tests/generator/test_export_bop.py).
 - ``mask_visib``: the pixels whose render index pass shows the section's body or one of its
   markers (occluders, the other section and the image border cut out), within ``mask`` (BOP's
   visible part of the silhouette; the index pass's pixels just outside it are edge samples of a
@@ -30,14 +27,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.layout import SECTION_PASS_INDEX
 from dockfactory.core.scene import StaticScene
-from dockfactory.generator.labels import distorted_region, section_silhouette
+from dockfactory.generator.labels import part_outlines
 from dockfactory.generator.motion import label_rolling_view
+from dockfactory.generator.silhouette import outlines_mask, silhouette_parts
 
 DEPTH_SCALES = (0.1, 1.0, 10.0)   # mm per depth unit, the first that holds the frame's farthest hit
 NO_HIT_MM = 1e6                   # depth at or beyond this (or not finite) is background: value 0
@@ -63,19 +60,6 @@ class LabelLens:
         return self.canvas_box
 
 
-def silhouette_parts(static: StaticScene, sec: str) -> list[np.ndarray]:
-    """The section's two convex solids as points (M, 3) mm in its frame whose convex hull each one
-    is: the flange (its two rim circles) and the body (circles of radius R at the flange's back and
-    at the far end). The section is their union, which is not convex: the hull of all its circles
-    (the label's silhouette) also covers the sliver between the flange's rim and the far end."""
-    pts = section_silhouette(static, sec)
-    n = len(pts) // 3
-    far = pts[2 * n:]
-    near = far.copy()
-    near[:, 0] = pts[n, 0]   # the flange's back face
-    return [pts[:2 * n], np.vstack([near, far])]
-
-
 def pinhole_px(label: dict, pts: np.ndarray, sec: str) -> np.ndarray | None:
     """Points ``pts`` (M, 3) mm of section ``sec`` in pinhole pixels (M, 2) of the label's camera
     (B's at their row times under a rolling shutter); None when one is behind the camera. The
@@ -92,54 +76,20 @@ def pinhole_px(label: dict, pts: np.ndarray, sec: str) -> np.ndarray | None:
     return cam_pts[:, :2] / cam_pts[:, 2:] * cam["focal_px"] + np.asarray(cam["principal_point"])
 
 
-def fill_centres(poly: np.ndarray, w: int, h: int) -> np.ndarray:
-    """(h, w) bool: the pixels whose centre (OpenCV: pixel (c, r) at x = c, y = r) lies inside the
-    closed polygon ``poly`` (N, 2) (even-odd rule; a centre on a left edge is inside, on a right
-    edge outside): a scanline fill at the pixel centres' rows."""
-    mask = np.zeros((h, w + 1), np.int32)
-    p, q = poly, np.roll(poly, -1, axis=0)
-    rows = np.arange(h, dtype=np.float64)
-    lo, hi = np.minimum(p[:, 1], q[:, 1]), np.maximum(p[:, 1], q[:, 1])
-    cross = (rows[None, :] >= lo[:, None]) & (rows[None, :] < hi[:, None])   # (edges, rows), half-open
-    e, r = np.nonzero(cross)
-    if len(r) == 0:
-        return mask[:, :w].astype(bool)
-    t = (rows[r] - p[e, 1]) / (q[e, 1] - p[e, 1])
-    x = p[e, 0] + t * (q[e, 0] - p[e, 0])
-    order = np.lexsort((x, r))
-    r, x = r[order], x[order]
-    start, end = np.ceil(x[0::2]), np.ceil(x[1::2])   # crossings pair up row by row (even-odd)
-    start, end = np.clip(start, 0, w).astype(int), np.clip(end, 0, w).astype(int)
-    np.add.at(mask, (r[0::2], start), 1)
-    np.add.at(mask, (r[1::2], end), -1)
-    return np.cumsum(mask, axis=1)[:, :w] > 0
-
-
 def section_outlines(label: dict, static: StaticScene, sec: str) -> list[np.ndarray]:
     """The outlines (M, 2) in the delivered image, OpenCV px, of the section's flange and body
-    (:func:`silhouette_parts`): each part's pinhole hull, distorted by the unit's lens; none when
-    part of the section is behind the camera."""
-    lens = LabelLens.of(label["camera"])
-    out = []
-    for pts in silhouette_parts(static, sec):
-        uv = pinhole_px(label, pts, sec)
-        if uv is None:
-            return []
-        if any(lens.distortion):   # the image of a convex solid is no longer convex
-            out.append(distorted_region(uv, lens))
-        else:
-            out.append(uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()])
-    return out
+    (generator.silhouette): each part's pinhole hull, distorted by the unit's lens; none when part
+    of the section is behind the camera."""
+    parts_uv = [pinhole_px(label, pts, sec) for pts in silhouette_parts(static, sec)]
+    if any(uv is None for uv in parts_uv):
+        return []
+    return part_outlines(parts_uv, LabelLens.of(label["camera"]))
 
 
 def section_mask(label: dict, static: StaticScene, sec: str) -> np.ndarray:
     """(H, W) bool: the section's silhouette in the delivered image (module docstring)."""
     w, h = label["image"]["width"], label["image"]["height"]
-    mask = np.zeros((h, w), bool)
-    for poly in section_outlines(label, static, sec):
-        if len(poly) >= 3:
-            mask |= fill_centres(poly, w, h)
-    return mask
+    return outlines_mask(section_outlines(label, static, sec), w, h)
 
 
 def visible_mask(index: np.ndarray, mask: np.ndarray, static: StaticScene, sec: str) -> np.ndarray:

@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.io import write_text_atomic
-
-SEGMENTS = 128   # vertices around each circle: the points of generator.labels.section_silhouette
+from dockfactory.generator.silhouette import SEGMENTS   # the rims' vertices are the silhouette's points
 
 
 def _ring(x: float, r: float, a: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, Marker, marker
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene, to_dict
 from dockfactory.generator.motion import MovingB, exposure_offsets, moving_b, rolling_view
+from dockfactory.generator.silhouette import mask_pixels, outlines_mask, silhouette_parts
 
 LABEL_FORMAT = "dockfactory.label/1"
 DISTORTION_MODEL = ("opencv: Brown-Conrady on normalised coordinates, coefficients (k1, k2, p1, p2, k3) "
@@ -95,17 +96,6 @@ def distorted_region(uv: np.ndarray, cam) -> np.ndarray:
     return image_px(densify(clipped, DENSIFY_PX), cam.k(), cam.distortion)
 
 
-def region_pixels(poly: np.ndarray, w: int, h: int) -> tuple[int, list[float] | None]:
-    """Pixel centres inside the (simple, not necessarily convex) polygon ``poly`` (N, 2) within a
-    w x h image: count and box."""
-    mask = np.zeros((h, w), np.uint8)
-    if len(poly) >= 3:
-        cv2.fillPoly(mask, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
-    count = int(cv2.countNonZero(mask))
-    x, y, bw, bh = cv2.boundingRect(mask)
-    return count, (None if count == 0 else [x - 0.5, y - 0.5, x + bw - 0.5, y + bh - 0.5])
-
-
 def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
     """Sutherland-Hodgman clip of polygon (n, 2) to the rectangle [x0, x1] x [y0, y1]."""
     out = np.asarray(poly, dtype=np.float64)
@@ -126,30 +116,13 @@ def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
     return out
 
 
-def section_silhouette(static: StaticScene, section: str, n: int = 128) -> np.ndarray:
-    """Points (M, 3) mm in the section frame whose convex hull is the section's body and flange.
-
-    The body and flange are convex solids of revolution, so the image of the section is the
-    convex hull of the images of its end circles.
-    """
-    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    sign = -1.0 if section == "A" else 1.0
-    rings = []
-    for x, r in ((0.0, static.radius_mm + static.flange_height_mm),
-                 (sign * static.flange_width_mm, static.radius_mm + static.flange_height_mm),
-                 (sign * static.length_mm, static.radius_mm)):
-        rings.append(np.stack([np.full(n, x), r * np.sin(a), r * np.cos(a)], axis=1))
-    return np.concatenate(rings)
-
-
-def hull_pixels(uv: np.ndarray, w: int, h: int) -> tuple[int, list[float] | None]:
-    """Pixel centres inside the convex hull of ``uv`` (N, 2) within a w x h image: count and box."""
-    hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
-    mask = np.zeros((h, w), np.uint8)
-    cv2.fillConvexPoly(mask, hull, 1, cv2.LINE_8, 4)
-    count = int(cv2.countNonZero(mask))
-    x, y, bw, bh = cv2.boundingRect(mask)
-    return count, (None if count == 0 else [x - 0.5, y - 0.5, x + bw - 0.5, y + bh - 0.5])
+def part_outlines(parts_uv: list[np.ndarray], cam) -> list[np.ndarray]:
+    """The delivered-image outlines (M, 2) of convex solids from their pinhole points ``parts_uv``
+    (each (N, 2)): each one's convex hull, through ``cam``'s lens (:func:`distorted_region`) when it
+    has distortion (the image of a convex solid is then no longer convex)."""
+    if any(cam.distortion):
+        return [distorted_region(uv, cam) for uv in parts_uv]
+    return [uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()] for uv in parts_uv]
 
 
 def _bbox(points: np.ndarray) -> list[float]:
@@ -281,30 +254,30 @@ def _add_marker_visibility(rec: dict, m, stats: IndexStats, image: np.ndarray | 
         rec["legible"] = chroma is not None and chroma >= min_chroma
 
 
-def _silhouette_uv(static: StaticScene, sec: str, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
-                   rolling: MovingB | None) -> np.ndarray | None:
-    """The section's silhouette points (M, 2) in pinhole pixels (B's at their row times under the
-    rolling shutter ``rolling``); None when part of it is behind the camera."""
+def _section_uv(pts: np.ndarray, sec: str, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
+                rolling: MovingB | None) -> np.ndarray | None:
+    """Points ``pts`` (M, 3) mm of section ``sec`` in pinhole pixels (M, 2) (B's at their row times
+    under the rolling shutter ``rolling``); None when one of them is behind the camera."""
     if rolling is not None and sec == "B":
-        uv, z, _ = rolling.project(section_silhouette(static, sec))
+        uv, z, _ = rolling.project(pts)
         return uv if np.all(z > 0) else None
     d_from_s = d_from_b if sec == "B" else np.eye(4)
-    pts = transform_points(cam_from_d @ d_from_s, section_silhouette(static, sec))
-    if not np.all(pts[:, 2] > 0):
+    cam_pts = transform_points(cam_from_d @ d_from_s, pts)
+    if not np.all(cam_pts[:, 2] > 0):
         return None
-    return pts[:, :2] / pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
+    return cam_pts[:, :2] / cam_pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
 
 
 def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
                    stats: IndexStats | None, rolling: MovingB | None = None) -> dict:
-    """A section's label: silhouette pixels and box, and with the index pass its visible part."""
-    uv = _silhouette_uv(static, sec, cam, cam_from_d, d_from_b, rolling)
+    """A section's label: its silhouette's pixels and box (generator.silhouette: the pixel centres
+    inside the image of the flange or of the body; absent when part of the section is behind the
+    camera), and with the index pass its visible part."""
+    parts_uv = [_section_uv(pts, sec, cam, cam_from_d, d_from_b, rolling) for pts in silhouette_parts(static, sec)]
     rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
-    if uv is not None:
-        if any(cam.distortion):   # the image of the convex body is no longer convex
-            rec["pixels_all"], rec["bbox_obj_px"] = region_pixels(distorted_region(uv, cam), cam.width, cam.height)
-        else:
-            rec["pixels_all"], rec["bbox_obj_px"] = hull_pixels(uv, cam.width, cam.height)
+    if all(uv is not None for uv in parts_uv):
+        mask = outlines_mask(part_outlines(parts_uv, cam), cam.width, cam.height)
+        rec["pixels_all"], rec["bbox_obj_px"] = mask_pixels(mask)
     if stats is not None:
         ids = [SECTION_PASS_INDEX[sec]] + [m.pass_index for m in static.markers if m.section == sec]
         rec["pixels_visible"] = int(stats.counts[ids].sum())

@@ -81,7 +81,7 @@ from dockfactory.generator.random_draws import (
     static_scene,
     uniform,
 )
-from dockfactory.generator.labels import section_silhouette
+from dockfactory.generator.silhouette import section_silhouette
 from dockfactory.generator.motion import check_rolling, frame_motion
 from dockfactory.generator.docking_runs import check_runs_fit, run_count, run_pose, run_time, unit_camera
 

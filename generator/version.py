@@ -30,6 +30,7 @@ OUTPUT_SOURCES = (
     "dockfactory.core.scene", "dockfactory.core.sensor_presets",
     "dockfactory.generator.camera_units", "dockfactory.generator.random_draws", "dockfactory.generator.exr",
     "dockfactory.generator.frame_output", "dockfactory.generator.labels", "dockfactory.generator.motion",
+    "dockfactory.generator.silhouette",
     "dockfactory.generator.render_worker",
     "dockfactory.generator.docking_runs", "dockfactory.generator.sampler", "dockfactory.generator.sensor",
     "dockfactory.blender_scenes.frame_update", "dockfactory.blender_scenes.materials",

@@ -35,7 +35,7 @@ from dockfactory.generator.dataset import frame_files, prepare, write_manifest
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.exr import RenderPasses, write_compact
 from dockfactory.generator.frame_output import finish_frame
-from dockfactory.generator.labels import section_silhouette
+from dockfactory.generator.silhouette import silhouette_parts
 from dockfactory.generator.sampler import frame_plan, sample_frame
 
 BACKGROUND = (0.05, 0.05, 0.05)
@@ -87,12 +87,13 @@ def painted_passes(frame: FrameScene, static: StaticScene, exact: bool = False) 
         depth[mask] = z_mm / 1000.0
         index[mask] = value
 
-    for sec in SECTIONS:
+    for sec in SECTIONS:   # the flange and the body, each the hull of its circles, at pixel centres
         d_from_s = d_from_b if sec == "B" else np.eye(4)
-        uv, z = project_points(k, cam_from_d @ d_from_s, section_silhouette(static, sec))
-        if np.all(z > 0):
-            hull = cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2).astype(np.float64)
-            paint(_fill((h, w), hull), SECTION_RGB, float(z.max()), SECTION_PASS_INDEX[sec])
+        for pts in silhouette_parts(static, sec):
+            uv, z = project_points(k, cam_from_d @ d_from_s, pts)
+            if np.all(z > 0):
+                hull = cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2).astype(np.float64)
+                paint(fill_exact((h, w), hull), SECTION_RGB, float(z.max()), SECTION_PASS_INDEX[sec])
     discs = []
     for m in static.markers:
         d_from_s = d_from_b if m.section == "B" else np.eye(4)

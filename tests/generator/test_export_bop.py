@@ -87,8 +87,8 @@ def test_masks_depth_and_gt_info_match_the_labels_and_passes(with_exr):
             outlines = section_outlines(lab, static, srec["section"])
             assert len(outlines) == 2
             assert (mask == (fill_exact(mask.shape, outlines[0]) | fill_exact(mask.shape, outlines[1]))).all()
-            # the label's silhouette is the hull of both, filled fat: never smaller
-            assert info["px_count_all"] == mask.sum() <= srec["pixels_all"]
+            # the label's silhouette: the same pixels (count and box)
+            assert info["px_count_all"] == mask.sum() == srec["pixels_all"]
             # the visible mask: the index pass's pixels of the section, within the silhouette
             index = passes.index
             ids = [srec["pass_index"]] + [m["pass_index"] for m in lab["markers"] if m["section"] == srec["section"]]
@@ -97,10 +97,7 @@ def test_masks_depth_and_gt_info_match_the_labels_and_passes(with_exr):
             assert info["visib_fract"] == pytest.approx(visib.sum() / mask.sum(), abs=1e-12)
             assert info["px_count_valid"] == (mask & (depth > 0)).sum()
             assert info["bbox_visib"] == bop_box(visib) and info["bbox_obj"] == bop_box(mask)
-            # within the label's box (the hull of both parts, filled fat)
-            x, y, w, h = info["bbox_obj"]
-            lx, ly, lw, lh = label_box(srec["bbox_obj_px"])
-            assert lx <= x and ly <= y and x + w <= lx + lw and y + h <= ly + lh
+            assert info["bbox_obj"] == label_box(srec["bbox_obj_px"])
             n += 1
     assert n >= 8
 
@@ -128,7 +125,7 @@ def test_without_kept_exr_masks_come_from_geometry_only(tmp_path):
         assert json.loads((d / "scene_camera.json").read_text())[str(im)]["depth_scale"] == 1.0
         for gt, (srec, info) in enumerate(zip(ds.labels[fid]["sections"], infos)):
             mask = read_png(d / "mask" / f"{im:06d}_{gt:06d}.png") > 0
-            assert info["px_count_all"] == mask.sum() == info["px_count_valid"] <= srec["pixels_all"]
+            assert info["px_count_all"] == mask.sum() == info["px_count_valid"] == srec["pixels_all"]
             assert info["px_count_visib"] == srec["pixels_visible"]
             assert info["bbox_visib"] == label_box(srec["bbox_visible_px"])
 

@@ -12,6 +12,7 @@ import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.bop_images import label_box
 from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = pytest.mark.render
@@ -248,11 +249,12 @@ def test_bop_round_trip(job):
         depth = cv2.imread(str(scene / "depth" / f"{int(im):06d}.png"), cv2.IMREAD_UNCHANGED)
         assert depth.dtype == np.uint16 and cams[im]["depth_scale"] in (0.1, 1.0, 10.0) and depth.any()
         for gt, (srec, inf) in enumerate(zip(lab["sections"], infos[im])):
-            # the BOP masks: pixel centres inside the flange or the body (the label's silhouette is
-            # the hull of both, filled fat: larger) and the index pass's pixels within them
+            # the BOP masks: pixel centres inside the flange or the body (the label's silhouette) and
+            # the index pass's pixels within them
             mask = cv2.imread(str(scene / "mask" / f"{int(im):06d}_{gt:06d}.png"), cv2.IMREAD_UNCHANGED) > 0
             visib = cv2.imread(str(scene / "mask_visib" / f"{int(im):06d}_{gt:06d}.png"), cv2.IMREAD_UNCHANGED) > 0
-            assert inf["px_count_all"] == mask.sum() <= srec["pixels_all"]
+            assert inf["px_count_all"] == mask.sum() == srec["pixels_all"]
+            assert inf["bbox_obj"] == label_box(srec["bbox_obj_px"])
             assert inf["px_count_visib"] == visib.sum() <= srec["pixels_visible"] and not (visib & ~mask).any()
             assert inf["px_count_visib"] >= 0.9 * srec["pixels_visible"] > 0
             assert 0 < inf["visib_fract"] <= 1

@@ -119,7 +119,8 @@ def test_runs_and_repeatability_frames_move_too():
 
 @pytest.mark.parametrize("name", ["quick", "realistic", "ideal"])
 def test_configs_without_motion_sample_and_label_the_bytes_of_before(repo_root, name):
-    """Every frame's scene (to_dict) and label text (no index pass) against their digests at 0724401."""
+    """Every frame's scene (to_dict) and label text (no index pass) against their digests: the scenes' at
+    0724401 (before motion), the labels' re-recorded when the section silhouette changed (the file's about)."""
     golden = json.loads((repo_root / "tests" / "data" / "motion_off_golden.json").read_text())["configs"][name]
     cfg = load_config(repo_root / "configs" / f"{name}.toml")
     static = static_scene(cfg)
@@ -406,7 +407,17 @@ def test_rolling_labels_use_row_times_for_centres_boxes_and_silhouettes():
         assert rec["bbox_px"] == [outline[:, 0].min(), outline[:, 1].min(), outline[:, 0].max(), outline[:, 1].max()]
     still = frame_labels(dataclasses.replace(frame, motion=None), static, None, 0.5)
     assert label["sections"][0] == still["sections"][0]          # A does not move
-    assert label["sections"][1]["bbox_obj_px"] != still["sections"][1]["bbox_obj_px"]
+    # B's silhouette: its flange and body hulls with every point at its row time, at pixel centres
+    import cv2
+
+    from dockfactory.generator.silhouette import mask_pixels, outlines_mask, silhouette_parts
+    hulls = []
+    for pts in silhouette_parts(static, "B"):
+        uv = mb.project(pts)[0]
+        hulls.append(uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()])
+    count, box = mask_pixels(outlines_mask(hulls, 1280, 960))
+    assert label["sections"][1]["pixels_all"] == count and label["sections"][1]["bbox_obj_px"] == box
+    assert abs(count - still["sections"][1]["pixels_all"]) > 100   # the row times move the silhouette
 
 
 def test_coco_outlines_of_a_rolling_frame_are_the_labels():
