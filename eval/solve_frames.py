@@ -165,7 +165,7 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     run: a run is one camera unit, whose principal point its first frame's label gives).
     ``lens``: the plausible range of the intrinsics the camera model does not estimate (None:
     :data:`UNCALIBRATED_LENS`, marginalised, unless the lens is known: ``true_camera``, or a
-    dataset whose config pins every camera unit to an ideal lens, :func:`lens_is_known`)."""
+    dataset whose config pins every camera unit to an ideal lens, :func:`lens_prior_for`)."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
@@ -182,7 +182,7 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     if sigma_floor_px is None and detections is not None:
         sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
     if lens is None:
-        lens = replace(UNCALIBRATED_LENS, marginalise=not (true_camera or lens_is_known(ds)))
+        lens = KNOWN_LENS if true_camera else lens_prior_for(ds.config)
     options = docking_options(sigma_floor_px, lens)
     frames, used = {}, {}
     for fid in ds.frames(splits):
@@ -204,14 +204,22 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
 
 
 UNCALIBRATED_LENS = LensPrior(marginalise=True)   # the app's lens: nobody calibrated it
+KNOWN_LENS = LensPrior(marginalise=False)         # calibrated, or an ideal camera
 
 
-def lens_is_known(ds: Dataset) -> bool:
-    """Whether the dataset's config pins every camera unit to an ideal lens (principal point at
-    the image centre, no distortion): the lens is then known, as a calibrated one is."""
-    cu = ds.config.camera_units
+def lens_is_known(config) -> bool:
+    """Whether a dataset ``config`` (core.config) pins every camera unit to an ideal lens
+    (principal point at the image centre, no distortion): the lens is then known, as a
+    calibrated one is."""
+    cu = config.camera_units
     ranges = (cu.principal_offset_x_px, cu.principal_offset_y_px, cu.k1, cu.k2, cu.k3, cu.p1, cu.p2)
     return all(float(lo) == 0.0 and float(hi) == 0.0 for lo, hi in ranges)
+
+
+def lens_prior_for(config) -> LensPrior:
+    """The lens prior a solve of a dataset with this ``config`` uses: :data:`KNOWN_LENS` when
+    :func:`lens_is_known`, else :data:`UNCALIBRATED_LENS`."""
+    return KNOWN_LENS if lens_is_known(config) else UNCALIBRATED_LENS
 
 
 def docking_options(sigma_floor_px: float | None, lens: LensPrior = UNCALIBRATED_LENS) -> DockingOptions:

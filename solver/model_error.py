@@ -41,7 +41,8 @@ from dockfactory.solver.stats import chi2_logsf, f_logsf
 
 __all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "ALL_EXTRAS"]
 
-ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)   # every extra intrinsic free: J_u's source
+ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)
+BIAS_Z = 3.09   # one-sided 1e-3: a per-marker bias is counted only when the residuals show it   # every extra intrinsic free: J_u's source
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,9 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     Q = S^T M S, the moments E[r^T r] = sigma^2 tr(M T) + tau^2 tr Q and E[|S^T r|^2] =
     sigma^2 tr(S^T M T M S) + tau^2 tr Q^2 give sigma^2 and tau^2 (``sigma_px`` given: sigma^2
     is its square over the mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is
-    clipped at 0). The covariance is the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1
+    0 unless |S^T r|^2 exceeds its expectation without a bias by BIAS_Z of its standard
+    deviations, normal approximation: the noise alone never widens an ideal run's covariance
+    beyond its bound but once in about 1,000 runs). The covariance is the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1
     (A = J^T J); sigma^2 is returned per axis averaged over the points (px^2). Not finite when
     A is singular."""
     m, p = jac.shape
@@ -183,8 +186,10 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
         tau2 = (sr - sigma2 * moments[1, 0]) / moments[1, 1]
     else:
         sigma2, tau2 = np.linalg.solve(moments, [rr, sr])
-        if tau2 < 0:
-            sigma2 = rr / moments[0, 0]
-    tau2 = max(float(tau2), 0.0)
+    c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                     # S^T M T M S
+    z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * float(np.sum(c * c))))
+    tau2 = float(tau2) if z > BIAS_Z else 0.0
+    if tau2 == 0.0 and sigma_px is None:
+        sigma2 = rr / moments[0, 0]
     g = a_inv @ js
     return a_inv @ (sigma2 * meat) @ a_inv + tau2 * (g @ g.T), float(sigma2) * mean_var, tau2

@@ -149,7 +149,7 @@ def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: 
             shapes.append(section_noise_shapes([layout.by_id[i] for i in rows], cam, mf.intrinsics.focal_px))
     index = {mid: k for k, mid in enumerate(sorted(set(ids)))}
     ref = mf.refinement
-    cov, sigma2, _ = marker_bias_covariance(ref.jacobian, ref.residuals, np.array([index[i] for i in ids]),
+    cov, sigma2, tau2 = marker_bias_covariance(ref.jacobian, ref.residuals, np.array([index[i] for i in ids]),
                                             sigma, None if sigma is not None else np.concatenate(shapes))
     if not np.all(np.isfinite(cov)):
         return mf
