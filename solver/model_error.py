@@ -140,6 +140,15 @@ def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_param
                       float(log_p), explains, added, dict(zip(names, mu.tolist())))
 
 
+def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:
+    """S (2n, 2K): 1 where row (point i, axis a) belongs to (marker, axis a); markers unseen
+    dropped."""
+    n = marker_of_point.size
+    s = np.zeros((2 * n, 2 * (int(marker_of_point.max()) + 1)))
+    s[np.arange(2 * n), 2 * np.repeat(marker_of_point, 2) + np.tile([0, 1], n)] = 1.0
+    return s[:, s.any(axis=0)]
+
+
 def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np.ndarray,
                            sigma_px: float | None, shapes: np.ndarray | None = None):
     """(covariance (p, p), sigma^2, tau^2) of a least-squares fit whose centre errors are noise
@@ -163,10 +172,7 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     m, p = jac.shape
     n = marker_of_point.size
     t = np.broadcast_to(np.eye(2), (n, 2, 2)) if shapes is None else np.asarray(shapes, dtype=np.float64)
-    col = 2 * np.repeat(marker_of_point, 2) + np.tile([0, 1], n)
-    s = np.zeros((m, 2 * (int(marker_of_point.max()) + 1)))
-    s[np.arange(m), col] = 1.0
-    s = s[:, s.any(axis=0)]
+    s = _marker_indicator(marker_of_point)
     a_inv = inverse_spd(jac.T @ jac)
     if not np.all(np.isfinite(a_inv)) or m <= p:
         return a_inv, float("inf"), 0.0
