@@ -163,8 +163,7 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     each frame solved with its label's principal point and distortion (the reference of a
     calibrated camera, :func:`true_camera_centres`; the pinhole model, per frame or per docking
     run: a run is one camera unit, whose principal point its first frame's label gives).
-    ``lens``: the range of the intrinsics the model does not estimate (None: ``true_camera``'s
-    known lens, else :func:`lens_prior_for` the dataset's config)."""
+    ``lens``: see :func:`lens_prior_for` (None: its choice; known with ``true_camera``)."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
@@ -180,7 +179,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
     if sigma_floor_px is None and detections is not None:
         sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
-    options = docking_options(sigma_floor_px, lens := lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config)))
+    lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
+    options = docking_options(sigma_floor_px, lens)
     frames, used = {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)

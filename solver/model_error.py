@@ -42,7 +42,7 @@ from dockfactory.solver.stats import chi2_logsf, f_logsf
 __all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "ALL_EXTRAS"]
 
 ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)
-BIAS_Z = 3.09   # one-sided 1e-3: a per-marker bias is counted only when the residuals show it   # every extra intrinsic free: J_u's source
+BIAS_Z = 3.09   # one-sided 1e-3: a per-marker bias is counted only when the residuals show it
 
 
 @dataclass(frozen=True)
@@ -164,9 +164,9 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     Q = S^T M S, the moments E[r^T r] = sigma^2 tr(M T) + tau^2 tr Q and E[|S^T r|^2] =
     sigma^2 tr(S^T M T M S) + tau^2 tr Q^2 give sigma^2 and tau^2 (``sigma_px`` given: sigma^2
     is its square over the mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is
-    0 unless |S^T r|^2 exceeds its expectation without a bias by BIAS_Z of its standard
-    deviations, normal approximation: the noise alone never widens an ideal run's covariance
-    beyond its bound but once in about 1,000 runs). The covariance is the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1
+    0 unless |S^T r|^2 exceeds its bias-free expectation by BIAS_Z of its standard deviations:
+    noise alone widens an ideal run's covariance about once in 1,000 runs). The covariance is
+    the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1
     (A = J^T J); sigma^2 is returned per axis averaged over the points (px^2). Not finite when
     A is singular."""
     m, p = jac.shape
