@@ -149,8 +149,23 @@ def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:
     return s[:, s.any(axis=0)]
 
 
+def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, known: float | None):
+    """(sigma^2, tau^2) from the moments (2, 2) of :func:`marker_bias_covariance`, r^T r =
+    ``rr``, |S^T r|^2 = ``sr`` and tr((S^T M T M S)^2) = ``tr_c2``; ``known`` sigma^2 or None.
+    tau^2 is 0 (and sigma^2 the residuals' alone) unless the bias is significant (BIAS_Z)."""
+    if known is not None:
+        sigma2, tau2 = known, (sr - known * moments[1, 0]) / moments[1, 1]
+    else:
+        sigma2, tau2 = (float(v) for v in np.linalg.solve(moments, [rr, sr]))
+    z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * tr_c2))
+    if z > BIAS_Z:
+        return float(sigma2), float(tau2)
+    return (known if known is not None else rr / moments[0, 0]), 0.0
+
+
 def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np.ndarray,
-                           sigma_px: float | None, shapes: np.ndarray | None = None):
+                           sigma_px: float | None, shapes: np.ndarray | None = None,
+                           floor_px: float | None = None):
     """(covariance (p, p), sigma^2, tau^2) of a least-squares fit whose centre errors are noise
     (sigma^2 T_i for point i) plus a bias of each marker that persists across the frames it is
     seen in (tau^2 per axis, independent between markers): a docking run's camera and lens are
@@ -166,7 +181,8 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     is its square over the mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is
     0 unless |S^T r|^2 exceeds its bias-free expectation by BIAS_Z of its standard deviations:
     noise alone widens an ideal run's covariance about once in 1,000 runs). The covariance is
-    the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1
+    the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1, an estimated sigma never below
+    ``floor_px`` (per axis, as :func:`solver.refine.covariance_from_jacobian`'s floor)
     (A = J^T J); sigma^2 is returned per axis averaged over the points (px^2). Not finite when
     A is singular."""
     m, p = jac.shape
@@ -187,15 +203,10 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     moments[1, 1] = float(np.sum(q * q))
     rr, sr = float(res @ res), float(np.sum((s.T @ res) ** 2))
     mean_var = float(np.trace(t, axis1=1, axis2=2).mean()) / 2.0
-    if sigma_px is not None:
-        sigma2 = float(sigma_px) ** 2 / mean_var
-        tau2 = (sr - sigma2 * moments[1, 0]) / moments[1, 1]
-    else:
-        sigma2, tau2 = np.linalg.solve(moments, [rr, sr])
     c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                     # S^T M T M S
-    z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * float(np.sum(c * c))))
-    tau2 = float(tau2) if z > BIAS_Z else 0.0
-    if tau2 == 0.0 and sigma_px is None:
-        sigma2 = rr / moments[0, 0]
+    known = None if sigma_px is None else float(sigma_px) ** 2 / mean_var
+    sigma2, tau2 = _noise_and_bias(moments, rr, sr, float(np.sum(c * c)), known)
+    if sigma_px is None and floor_px is not None:
+        sigma2 = max(sigma2, float(floor_px) ** 2 / mean_var)
     g = a_inv @ js
     return a_inv @ (sigma2 * meat) @ a_inv + tau2 * (g @ g.T), float(sigma2) * mean_var, tau2

@@ -125,19 +125,19 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
     mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
     check_model_focal(mf, options.refine)
     if options.run_marker_bias:
-        mf = _with_marker_bias(mf, parsed, sigma, layout, bool(share_cam_from_a))
+        mf = _with_marker_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), options.refine.sigma_floor_px)
     check = model_check(blocks, mf.poses, mf.intrinsics, mf.model, mf.covariance.shape[0], None,
                         mf.sigma_px ** 2, options.lens, pp, sigma is not None)
     return _result(replace(mf, covariance=mf.covariance + check.added), parsed,
                    bool(share_cam_from_a), check)
 
 
-def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool) -> ModelFit:
+def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, floor_px=None) -> ModelFit:
     """``mf`` with the covariance of noise plus a bias of each marker that persists across the
     run's frames (:func:`solver.model_error.marker_bias_covariance`; with the noise estimated,
     each centre's noise shaped by its disc's image, :func:`solver.disc_noise.
-    section_noise_shapes`); ``sigma_px`` its noise part. Unchanged when that covariance is not
-    finite."""
+    section_noise_shapes`, never below ``floor_px``); ``sigma_px`` its noise part. Unchanged
+    when that covariance is not finite."""
     ids, shapes = [], []
     for k, fr in enumerate(parsed):
         for s, pose in zip(("A", "B"), _pose_indices(k, share)):
@@ -150,7 +150,7 @@ def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: 
     index = {mid: k for k, mid in enumerate(sorted(set(ids)))}
     ref = mf.refinement
     cov, sigma2, tau2 = marker_bias_covariance(ref.jacobian, ref.residuals, np.array([index[i] for i in ids]),
-                                            sigma, None if sigma is not None else np.concatenate(shapes))
+                                            sigma, None if sigma is not None else np.concatenate(shapes), floor_px)
     if not np.all(np.isfinite(cov)):
         return mf
     return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2)))
