@@ -37,7 +37,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.scene import SensorParams, from_dict
 from dockfactory.eval.pose_metrics import pose_error
-from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame
+from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.eval.uncertainty import reported_std
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.exr import read_passes
@@ -116,7 +116,7 @@ def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str |
     h, w = image.shape[:2]
     dets = detector.detect(image, cfa=cfa, jpeg=jpeg)
     rec, _ = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
-                         "pinhole", docking_options(detector.centre_noise_px))
+                         "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))
     row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label)}
     if rec["ok"]:
         err = pose_error(rec["pose"], label["pose_b_in_d"])

@@ -63,10 +63,11 @@ def solve_all(root: Path, ids, dets: dict) -> dict:
     currently imported ``dockfactory.solver``."""
     from dockfactory.core.config import load_config
     from dockfactory.core.names import MIN_SCORE
-    from dockfactory.eval.solve_frames import detection_arrays, docking_options
+    from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for
     from dockfactory.solver import SolverError, solve_docking
-    markers = load_config(root / "config.toml").markers_layout()
-    options = docking_options(dets.get("_noise_px"))
+    config = load_config(root / "config.toml")
+    markers = config.markers_layout()
+    options = docking_options(dets.get("_noise_px"), lens_prior_for(config))
     out = {}
     for fid in ids:
         label = json.loads((root / "labels" / f"{fid}.json").read_text())

@@ -12,7 +12,7 @@ Frames without a pose are kept with their reason: never dropped.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -30,7 +30,7 @@ from dockfactory.solver import (
     solve_docking,
 )
 from dockfactory.solver.camera_models import MODELS
-from dockfactory.solver.options import DEFAULT_DOCKING
+from dockfactory.solver.options import DEFAULT_DOCKING, LensPrior
 from dockfactory.solver.sequence import solve_sequence
 
 POSES_FORMAT = "dockfactory.poses/1"
@@ -89,7 +89,19 @@ def pose_record(res, n_detections: int) -> dict:
     if res.camera_model != "pinhole":
         rec.update(camera_model=res.camera_model, intrinsics=dict(res.intrinsics),
                    intrinsics_std=dict(res.intrinsics_std))
+    if res.model_check is not None:
+        rec["model_check"] = model_check_record(res.model_check)
     return rec
+
+
+def model_check_record(check) -> dict:
+    """The poses-file record of a solve's model error (solver.model_error.ModelCheck): the misfit
+    test (``explains``, ``p_value``, ``statistic``, ``dof``, the intrinsics ``tested``), the
+    ``warning`` sentence ("" when the model explains the residuals) and whether the intrinsics
+    it does not estimate were ``marginalised`` into the covariance."""
+    return {"explains": bool(check.explains), "p_value": float(check.p_value), "statistic": float(check.statistic),
+            "dof": int(check.dof), "tested": list(check.tested), "warning": check.warning(),
+            "marginalised": bool(np.any(check.added != 0.0))}
 
 
 SELF_CALIBRATE = ("frame", "sequence")
@@ -140,7 +152,7 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None, camera_model: str = "pinhole",
                   self_calibrate: str | None = None, sigma_floor_px: float | None = None,
-                  true_camera: bool = False) -> dict:
+                  true_camera: bool = False, lens: LensPrior | None = None) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
     ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
     "sequence" solves each docking run of the labels (one camera unit, one run) with shared
@@ -150,7 +162,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     ``centre_noise_px`` (detect copies it from the weights' noise card), if any. ``true_camera``:
     each frame solved with its label's principal point and distortion (the reference of a
     calibrated camera, :func:`true_camera_centres`; the pinhole model, per frame or per docking
-    run: a run is one camera unit, whose principal point its first frame's label gives)."""
+    run: a run is one camera unit, whose principal point its first frame's label gives).
+    ``lens``: see :func:`lens_prior_for` (None: its choice; known with ``true_camera``)."""
     if (detections is None) == (oracle_sigma_px is None):
         raise ValueError("give detections or an oracle noise level, not both")
     if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
@@ -166,7 +179,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
     if sigma_floor_px is None and detections is not None:
         sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
-    options = docking_options(sigma_floor_px)
+    lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
+    options = docking_options(sigma_floor_px, lens)
     frames, used = {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
@@ -183,14 +197,35 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
             "camera_model": camera_model, "self_calibrate": self_calibrate, "sigma_floor_px": sigma_floor_px,
-            "true_camera": bool(true_camera), "splits": list(splits), "frames": frames}
+            "true_camera": bool(true_camera), "lens_prior": asdict(lens), "splits": list(splits), "frames": frames}
 
 
-def docking_options(sigma_floor_px: float | None) -> DockingOptions:
-    """The solver's options with the detector's measured centre noise as the covariance's floor."""
-    if sigma_floor_px is None:
-        return DEFAULT_DOCKING
-    return replace(DEFAULT_DOCKING, refine=replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px)))
+UNCALIBRATED_LENS = LensPrior(marginalise=True)   # the app's lens: nobody calibrated it
+KNOWN_LENS = LensPrior(marginalise=False)         # calibrated, or an ideal camera
+
+
+def lens_is_known(config) -> bool:
+    """Whether a dataset ``config`` (core.config) pins every camera unit to an ideal lens
+    (principal point at the image centre, no distortion): the lens is then known, as a
+    calibrated one is."""
+    cu = config.camera_units
+    ranges = (cu.principal_offset_x_px, cu.principal_offset_y_px, cu.k1, cu.k2, cu.k3, cu.p1, cu.p2)
+    return all(float(lo) == 0.0 and float(hi) == 0.0 for lo, hi in ranges)
+
+
+def lens_prior_for(config) -> LensPrior:
+    """The lens prior a solve of a dataset with this ``config`` uses: :data:`KNOWN_LENS` when
+    :func:`lens_is_known`, else :data:`UNCALIBRATED_LENS`."""
+    return KNOWN_LENS if lens_is_known(config) else UNCALIBRATED_LENS
+
+
+def docking_options(sigma_floor_px: float | None, lens: LensPrior = UNCALIBRATED_LENS) -> DockingOptions:
+    """The solver's options with the detector's measured centre noise as the covariance's floor
+    and ``lens`` the plausible range of the intrinsics its camera model does not estimate (by
+    default an uncalibrated camera's, marginalised into the covariance)."""
+    refine = DEFAULT_DOCKING.refine if sigma_floor_px is None else \
+        replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px))
+    return replace(DEFAULT_DOCKING, refine=refine, lens=lens)
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,

@@ -29,7 +29,8 @@ import numpy as np
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.camera_models import Intrinsics, camera_model
 from dockfactory.solver.errors import SolverError
-from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints
+from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints, with_model_check
+from dockfactory.solver.model_error import model_check
 from dockfactory.solver.refine import (
     Block,
     covariance_from_jacobian,
@@ -44,7 +45,7 @@ from dockfactory.solver.refine import (
 
 __all__ = ["SHAPE_EXPONENT", "SIZE_EXPONENT", "REFERENCE_RADIUS_PX", "disc_ellipses",
            "noise_shapes", "section_noise_shapes", "with_disc_noise", "robust_refit", "t_weights",
-           "ROBUST_NU", "ROBUST_ITERATIONS"]
+           "with_model_error", "ROBUST_NU", "ROBUST_ITERATIONS"]
 
 SHAPE_EXPONENT = 1.5
 SIZE_EXPONENT = 1.0
@@ -125,8 +126,28 @@ def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, k
         return fit
     cov, sigma = covariance_from_jacobian(jac, res, fitter.sigma_px, None, shapes)
     prop = d_from_b_jacobian(*poses[0], *poses[1])
-    return replace(fit, covariance=prop @ cov[:12, :12] @ prop.T, covariance_params=cov,
-                   sigma_px=sigma)
+    out = replace(fit, covariance=prop @ cov[:12, :12] @ prop.T, covariance_params=cov, sigma_px=sigma)
+    k2 = sigma ** 2 / (np.trace(shapes, axis1=1, axis2=2).mean() / 2.0)
+    return _checked(out, blocks, poses, intr, model, np.linalg.inv(np.linalg.cholesky(shapes)), k2, fitter)
+
+
+def _checked(fit: JointFit, blocks, poses, intr, model, sqrt_w, k2: float, fitter: JointFitter) -> JointFit:
+    """``fit`` with the model error of its camera model (:func:`solver.model_error.model_check`
+    with the fitter's lens prior; ``sqrt_w`` (n, 2, 2) or None the estimator's whitening of the
+    points, ``k2`` the noise scale of the whitened residuals)."""
+    check = model_check(blocks, poses, intr, model, fit.covariance_params.shape[0], sqrt_w, k2,
+                        fitter.lens, fitter.principal_point, fitter.sigma_px is not None)
+    return with_model_check(fit, check)
+
+
+def with_model_error(fit: JointFit, points_3d: dict, points_2d: dict, fitter: JointFitter) -> JointFit:
+    """``fit`` (an unweighted fit with isotropic noise ``fit.sigma_px`` of ``points_3d`` and
+    ``points_2d``, {section: (n_s, 3) mm / (n_s, 2) px}) with the model error of its camera
+    model (:mod:`solver.model_error`)."""
+    blocks = tuple(Block(points_3d[s], points_2d[s], k) for k, s in enumerate(SECTIONS))
+    poses = tuple((c[:3, :3], c[:3, 3]) for c in (fit.cam_from_a, fit.cam_from_b))
+    intr = fit.intrinsics or Intrinsics.pinhole(fit.focal_px, fitter.principal_point)
+    return _checked(fit, blocks, poses, intr, camera_model(fit.model), None, fit.sigma_px ** 2, fitter)
 
 
 def _stacked(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: dict, points_2d):
@@ -240,16 +261,18 @@ def robust_refit(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep
             poses, intr = ref.poses, ref.intrinsics
     except SolverError:
         return with_disc_noise(fit, points, fitter, keep, points_2d, extra_px2)
-    return _robust_result(fit, ref, blocks, shapes, winv, w, base)
+    return _robust_result(fit, ref, blocks, shapes, winv, w, base, fitter)
 
 
 def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarray,
-                   base: np.ndarray | None = None) -> JointFit:
+                   base: np.ndarray | None = None, fitter: JointFitter | None = None) -> JointFit:
     """The JointFit of the robust refinement ``ref``. Its covariance is the sandwich of the
     weighted estimate under the disc noise model, k^2 A^-1 B A^-1 with A = sum w_i J_i^T T_i^-1
     J_i and B = sum w_i^2 J_i^T T_i^-1 J_i (the final weights), the scale k^2 = sum w_i q_i /
     (2n - p) (the t likelihood's) with the Student-t factor of
-    :func:`solver.refine.covariance_from_jacobian` (its calibration: results/README.md)."""
+    :func:`solver.refine.covariance_from_jacobian` (its calibration: results/README.md), plus the
+    model error of its camera model under ``fitter``'s lens prior (:func:`_checked`; no
+    ``fitter``: none)."""
     (ra, ta), (rb, tb) = ref.poses
     rw, jw, _ = _whitened_residuals(blocks, ref.poses, ref.intrinsics, ref.model, winv)
     w = t_weights(rw, jw, previous)
@@ -266,8 +289,11 @@ def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarra
     cam_a, cam_b = np.eye(4), np.eye(4)
     cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3] = ra, ta, rb, tb
     prop = d_from_b_jacobian(ra, ta, rb, tb)
-    return replace(fit, cam_from_a=cam_a, cam_from_b=cam_b, focal_px=float(ref.intrinsics.focal_px),
-                   d_from_b=relative_pose(ra, ta, rb, tb), covariance=prop @ cov[:12, :12] @ prop.T,
-                   covariance_params=cov, sigma_px=sigma, rmse_a=rmse[0], rmse_b=rmse[1],
-                   iterations=fit.iterations + ref.iterations,
-                   intrinsics=ref.intrinsics if fit.intrinsics is not None else None)
+    out = replace(fit, cam_from_a=cam_a, cam_from_b=cam_b, focal_px=float(ref.intrinsics.focal_px),
+                  d_from_b=relative_pose(ra, ta, rb, tb), covariance=prop @ cov[:12, :12] @ prop.T,
+                  covariance_params=cov, sigma_px=sigma, rmse_a=rmse[0], rmse_b=rmse[1],
+                  iterations=fit.iterations + ref.iterations,
+                  intrinsics=ref.intrinsics if fit.intrinsics is not None else None)
+    if fitter is None:
+        return out
+    return _checked(out, blocks, ref.poses, ref.intrinsics, ref.model, np.sqrt(w)[:, None, None] * winv, k2, fitter)

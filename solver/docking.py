@@ -38,7 +38,7 @@ from dockfactory.solver.camera_models import (
     project_normalized,
 )
 from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_sigma
-from dockfactory.solver.disc_noise import robust_refit, with_disc_noise
+from dockfactory.solver.disc_noise import robust_refit, with_disc_noise, with_model_error
 from dockfactory.solver.eccentricity import eccentricity_corrected, section_keep
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera
 from dockfactory.solver.identify import identify_markers, parse_detections
@@ -49,6 +49,7 @@ from dockfactory.solver.layout_points import (
     section_arrays,
 )
 from dockfactory.solver.model_choice import ModelChoice
+from dockfactory.solver.model_error import ModelCheck
 from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
 from dockfactory.solver.ransac import ransac_docking
 from dockfactory.solver.suspects import leave_out_suspects, occlusion_variances
@@ -80,7 +81,11 @@ class DockingResult:
       standard deviations (0.0 for the intrinsics the model keeps fixed);
       ``covariance_params`` is then (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *free);
       ``model_choice``: the automatic choice's tests (:class:`solver.model_choice.ModelChoice`)
-      or None.
+      or None;
+    - ``model_check``: the model error of the camera model (:class:`solver.model_error.
+      ModelCheck`): whether it explains the residuals (``model_warning`` says so in a sentence
+      when not) and, with ``DockingOptions.lens.marginalise``, the pose error of the intrinsics
+      it does not estimate, already in ``covariance`` and ``std``.
     """
 
     d_from_b: np.ndarray
@@ -106,6 +111,12 @@ class DockingResult:
     intrinsics: dict = field(default_factory=dict)
     intrinsics_std: dict = field(default_factory=dict)
     model_choice: ModelChoice | None = None
+    model_check: ModelCheck | None = None
+
+    @property
+    def model_warning(self) -> str:
+        """"" when the camera model explains the residuals (or was not checked), else why not."""
+        return "" if self.model_check is None else self.model_check.warning()
 
     def pose(self) -> dict:
         """{"x_mm": ..., ..., "gamma_deg": ...}."""
@@ -118,7 +129,7 @@ class DockingResult:
         std = dict(zip(POSE_NAMES, np.sqrt(np.diag(fit.covariance)).tolist()))
         intr, intr_std = _intrinsics_report(fit)
         return cls(camera_model=fit.model, intrinsics=intr, intrinsics_std=intr_std,
-                   model_choice=fit.choice, d_from_b=fit.d_from_b, focal_px=fit.focal_px,
+                   model_choice=fit.choice, model_check=fit.model_check, d_from_b=fit.d_from_b, focal_px=fit.focal_px,
                    covariance=fit.covariance, std=std, covariance_params=fit.covariance_params,
                    rmse_px={"A": fit.rmse_a, "B": fit.rmse_b}, marker_ids=marker_ids,
                    inliers=np.asarray(inliers, dtype=bool),
@@ -172,7 +183,7 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     layout = LayoutArrays.of(markers)
     pp = as_principal_point(principal_point)
     fitter = JointFitter(pp, check_sigma(sigma_px), options.refine,
-                         check_model_name(camera_model), options.model_choice)
+                         check_model_name(camera_model), options.model_choice, options.lens)
     if detections is not None:
         return _solve_detections(markers, layout, detections, boxes, refined, fitter, options)
     if boxes is not None or refined is not None:
@@ -217,6 +228,8 @@ def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
                                     options.occlusion_margin_px, coeffs)
         fit = (robust_refit if options.robust else with_disc_noise)(fit, points, fitter, keep, points_2d,
                                                                      extra)
+    else:
+        fit = with_model_error(fit, *_kept(points, keep, points_2d), fitter)
     marker_ids = tuple(ids[k] if used[k] else None for k in range(len(ids)))
     return DockingResult.from_fit(fit, marker_ids, inliers, ident.swapped)
 
@@ -255,7 +268,14 @@ def _solve_correspondences(layout: LayoutArrays, correspondences, rng, fitter: J
         fit, inliers = _recheck_inliers(fit, layout, ids, uv, fitter,
                                         options.ransac.threshold_px, inliers)
     marker_ids = tuple(ids[k] if inliers[k] else None for k in range(len(ids)))
+    fit = with_model_error(fit, *section_arrays(layout, ids, inliers, uv)[1:], fitter)
     return DockingResult.from_fit(fit, marker_ids, inliers, np.zeros(len(ids), dtype=bool))
+
+
+def _kept(points: SectionPoints, keep: dict, points_2d: dict) -> tuple:
+    """({section: points_3d}, {section: points_2d}) of the points ``keep`` (n_s,) bool."""
+    return ({s: points.points_3d[s][keep[s]] for s in SECTIONS},
+            {s: points_2d[s][keep[s]] for s in SECTIONS})
 
 
 def _row_array(value, n, shape, name, dtype):

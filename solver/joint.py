@@ -22,13 +22,20 @@ from dockfactory.solver.camera_models import PINHOLE, Intrinsics, camera_model
 from dockfactory.solver.errors import FocalNotObservable, NoValidCamera, SolverError
 from dockfactory.solver.estimate import estimate_pnpf
 from dockfactory.solver.model_choice import ModelChoice
+from dockfactory.solver.model_error import ModelCheck
 from dockfactory.solver.model_fit import (
     ModelFit,
     check_model_focal,
     fit_camera_model,
     refine_model,
 )
-from dockfactory.solver.options import DEFAULT_MODEL_CHOICE, ModelChoiceOptions, RefineOptions
+from dockfactory.solver.options import (
+    DEFAULT_LENS_PRIOR,
+    DEFAULT_MODEL_CHOICE,
+    LensPrior,
+    ModelChoiceOptions,
+    RefineOptions,
+)
 from dockfactory.solver.refine import (
     DEFAULT_REFINE,
     Block,
@@ -42,7 +49,7 @@ from dockfactory.solver.refine import (
 from dockfactory.solver.upnp import upnp
 
 __all__ = ["JointStart", "JointFit", "JointFitter", "SectionPoints", "fit_joint",
-           "joint_fit_from_model"]
+           "joint_fit_from_model", "with_model_check"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +82,8 @@ class JointFit:
     model's name, ``intrinsics`` (:class:`solver.camera_models.Intrinsics`; None only for a
     bare :func:`fit_joint`: pinhole at the caller's principal point) and ``choice`` (the
     automatic model choice, if any). With a model beyond the pinhole ``covariance_params`` is
-    (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *model.free).
+    (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *model.free). ``model_check``: the model
+    error of the final fit (:mod:`solver.model_error`; None before it is checked).
     """
 
     cam_from_a: np.ndarray
@@ -91,6 +99,7 @@ class JointFit:
     model: str = PINHOLE.name
     intrinsics: Intrinsics | None = None
     choice: ModelChoice | None = None
+    model_check: ModelCheck | None = None
 
     @property
     def cams(self) -> dict:
@@ -121,14 +130,16 @@ class SectionPoints:
 class JointFitter:
     """:func:`fit_joint` bound to one image: ``principal_point`` (2,) px, ``sigma_px`` (None:
     estimated from the residuals), the refinement ``options``, the ``camera_model`` (a name of
-    :data:`solver.camera_models.MODELS` or "auto") and the automatic choice's
-    ``choice_options``."""
+    :data:`solver.camera_models.MODELS` or "auto"), the automatic choice's
+    ``choice_options`` and the ``lens`` prior of the final fit's model error
+    (:mod:`solver.model_error`)."""
 
     principal_point: np.ndarray
     sigma_px: float | None = None
     options: RefineOptions = DEFAULT_REFINE
     camera_model: str = PINHOLE.name
     choice_options: ModelChoiceOptions = DEFAULT_MODEL_CHOICE
+    lens: LensPrior = DEFAULT_LENS_PRIOR
 
     def fit(self, points_a, uv_a, points_b, uv_b, start: JointStart | None = None,
             accept_rmse: float | None = None) -> JointFit:
@@ -196,6 +207,16 @@ def joint_fit_from_model(mf: ModelFit, rows_a: slice, rows_b: slice, pose_a: int
                     relative_pose(ra, ta, rb, tb), prop @ cov[:12, :12] @ prop.T, cov,
                     mf.sigma_px, rmse_a, rmse_b, mf.refinement.iterations, mf.model.name,
                     mf.intrinsics, mf.choice)
+
+
+def with_model_check(fit: JointFit, check: ModelCheck) -> JointFit:
+    """``fit`` carrying ``check``, its covariances grown by ``check.added`` (over the fit's
+    (13 + e) parameters, the order of ``covariance_params``)."""
+    params = fit.covariance_params + check.added
+    prop = d_from_b_jacobian(fit.cam_from_a[:3, :3], fit.cam_from_a[:3, 3], fit.cam_from_b[:3, :3],
+                             fit.cam_from_b[:3, 3])
+    return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T,
+                   model_check=check)
 
 
 def fit_joint(points_a, uv_a, points_b, uv_b, pp, sigma_px=None, start=None, accept_rmse=None,

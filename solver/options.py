@@ -10,7 +10,9 @@ object; every threshold and budget is a documented default defined only here:
 - :class:`RansacOptions`: the robust layer (single section and docking);
 - :class:`IdentifyOptions`: marker identification (hypothesise and verify);
 - :class:`ModelChoiceOptions`: the automatic camera-model choice (``camera_model="auto"``);
-- :class:`DockingOptions`: the docking pipeline (holds the four above).
+- :class:`LensPrior`: the plausible range of the intrinsics a camera model does not estimate
+  (the model error of :mod:`solver.model_error`);
+- :class:`DockingOptions`: the docking pipeline (holds the five above).
 
 Invalid values raise :class:`solver.errors.InvalidSolverInput` when the object is built.
 """
@@ -23,8 +25,8 @@ from dockfactory.solver.checks import check_sigma
 from dockfactory.solver.errors import InvalidSolverInput
 
 __all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
-           "ModelChoiceOptions", "DockingOptions", "DEFAULT_IDENTIFY", "DEFAULT_MODEL_CHOICE",
-           "DEFAULT_DOCKING"]
+           "ModelChoiceOptions", "LensPrior", "DockingOptions", "DEFAULT_IDENTIFY",
+           "DEFAULT_MODEL_CHOICE", "DEFAULT_LENS_PRIOR", "DEFAULT_DOCKING"]
 
 
 def _positive(name: str, value, allow_none: bool = False) -> None:
@@ -287,6 +289,47 @@ class ModelChoiceOptions:
 
 
 @dataclass(frozen=True)
+class LensPrior:
+    """What is plausible for the intrinsics a camera model does not estimate
+    (:mod:`solver.model_error`): each is taken as uniform over its half-range around the value
+    the solve assumes (the given principal point, no distortion), independent of the others.
+
+    - ``pp_fraction``: half-range of the principal point's offset per axis, as a fraction of the
+      image width (taken as 2 cx + 1 from the assumed principal point);
+    - ``k1``, ``k2``: half-ranges of the radial coefficients; ``p``: of p1 and p2;
+    - ``marginalise``: add the pose error these intrinsics cause over their range to the
+      reported covariance (conditioned on what the frame's residuals say about them); False:
+      the lens is known (calibrated, or an ideal camera) and the covariance carries only the
+      noise and the estimated intrinsics;
+    - ``misfit_alpha``: false-alarm probability of the test that flags a solve whose model does
+      not explain its residuals (a score test of the intrinsics it does not estimate, made
+      whether or not ``marginalise`` is set).
+    """
+
+    pp_fraction: float = 0.04
+    k1: float = 0.2
+    k2: float = 0.1
+    p: float = 2e-3
+    marginalise: bool = False
+    misfit_alpha: float = 1e-3
+
+    def __post_init__(self):
+        for name in ("pp_fraction", "k1", "k2", "p"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise InvalidSolverInput(f"{name} must be finite and >= 0, got {v}")
+        if not 0 < self.misfit_alpha < 1:
+            raise InvalidSolverInput(f"misfit_alpha must be in (0, 1), got {self.misfit_alpha}")
+
+    def half_range(self, name: str, principal_point) -> float:
+        """Half-range of an extra intrinsic (``camera_models.EXTRA_NAMES``); the principal
+        point's from the image width that ``principal_point`` (2,) px implies."""
+        if name in ("cx", "cy"):
+            return self.pp_fraction * (2.0 * float(principal_point[0]) + 1.0)
+        return {"k1": self.k1, "k2": self.k2, "p1": self.p, "p2": self.p}[name]
+
+
+@dataclass(frozen=True)
 class DockingOptions:
     """The docking pipeline (:func:`solver.solve_docking`).
 
@@ -311,12 +354,21 @@ class DockingOptions:
       (the centre of the visible part's box moves by cut / 2): that variance is added to the
       point's noise in the last fit (:func:`solver.suspects.occlusion_variances`).
       ``occlusion_bias`` 0 turns it off.
+    - ``lens``: the plausible range of the intrinsics the camera model does not estimate: the
+      misfit test of every solve, and with ``lens.marginalise`` the model error in its
+      covariance (:mod:`solver.model_error`).
+    - ``run_marker_bias``: a docking run's covariance (:func:`solver.solve_sequence`) lets each
+      marker's centre carry a bias that persists across the run's frames, its variance
+      estimated from the run's residuals (:func:`solver.model_error.marker_bias_covariance`);
+      False: the centres' errors are independent between frames.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
     ransac: RansacOptions = field(default_factory=RansacOptions)
     identify: IdentifyOptions = field(default_factory=IdentifyOptions)
     model_choice: ModelChoiceOptions = field(default_factory=ModelChoiceOptions)
+    lens: LensPrior = field(default_factory=LensPrior)
+    run_marker_bias: bool = True
     min_extent: float = 0.85
     eccentricity: bool = True
     disc_noise: bool = True
@@ -335,4 +387,5 @@ class DockingOptions:
 
 DEFAULT_IDENTIFY = IdentifyOptions()
 DEFAULT_MODEL_CHOICE = ModelChoiceOptions()
+DEFAULT_LENS_PRIOR = LensPrior()
 DEFAULT_DOCKING = DockingOptions()

@@ -14,19 +14,23 @@ least-squares problem (top layer of the solver, beside :mod:`solver.docking`):
    determine, :mod:`solver.model_choice`) with shared intrinsics, one cam_from_a for the run
    (``share_cam_from_a``, the default; else one per frame) and one cam_from_b per frame.
 
-The covariance sigma^2 (J^T J)^-1 of every parameter comes from the same Jacobian; each frame's
+The covariance of every parameter comes from the same Jacobian: sigma^2 (J^T J)^-1, or with
+``options.run_marker_bias`` the sandwich of white noise plus a per-marker bias that persists
+across the run (:func:`solver.model_error.marker_bias_covariance`), plus the model error of the
+intrinsics the run does not estimate (:mod:`solver.model_error`); each frame's
 ``d_from_b`` gets its covariance by first-order propagation from its block (with a shared
 cam_from_a the frames' errors are correlated through it: the per-frame covariances are
 marginals).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from dockfactory.solver.camera_models import PINHOLE, Intrinsics, check_model_name
 from dockfactory.solver.checks import as_principal_point, check_sigma
+from dockfactory.solver.disc_noise import section_noise_shapes
 from dockfactory.solver.docking import DockingResult
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera, SolverError
 from dockfactory.solver.joint import fit_joint, joint_fit_from_model
@@ -37,6 +41,7 @@ from dockfactory.solver.layout_points import (
 )
 from dockfactory.solver.lie import project_to_so3
 from dockfactory.solver.model_choice import ModelChoice
+from dockfactory.solver.model_error import ModelCheck, marker_bias_covariance, model_check
 from dockfactory.solver.model_fit import (
     ModelFit,
     check_model_focal,
@@ -61,7 +66,11 @@ class SequenceResult:
       ``intrinsics_covariance`` (1 + e, 1 + e) over (f, *free);
     - ``cam_from_a`` (4, 4): the shared camera pose (the first frame's when not shared);
       ``share_cam_from_a``; ``sigma_px`` the noise std used; ``rmse_px`` the run's
-      reprojection RMS (px, per point); LM ``iterations``; ``model_choice`` (for "auto").
+      reprojection RMS (px, per point); LM ``iterations``; ``model_choice`` (for "auto");
+    - ``model_check``: the model error of the run's camera model (:mod:`solver.model_error`,
+      the intrinsics the run does not estimate, shared by its frames): whether the model
+      explains the run's residuals and, with ``options.lens.marginalise``, their pose error in
+      every frame's covariance (each frame's ``model_check`` is this one).
     """
 
     frames: tuple
@@ -76,6 +85,7 @@ class SequenceResult:
     rmse_px: float
     iterations: int
     model_choice: ModelChoice | None = None
+    model_check: ModelCheck | None = None
 
 
 @dataclass(frozen=True)
@@ -114,7 +124,36 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
     blocks = _blocks(parsed, bool(share_cam_from_a))
     mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
     check_model_focal(mf, options.refine)
-    return _result(mf, parsed, bool(share_cam_from_a))
+    if options.run_marker_bias:
+        mf = _with_marker_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), options.refine.sigma_floor_px)
+    check = model_check(blocks, mf.poses, mf.intrinsics, mf.model, mf.covariance.shape[0], None,
+                        mf.sigma_px ** 2, options.lens, pp, sigma is not None)
+    return _result(replace(mf, covariance=mf.covariance + check.added), parsed,
+                   bool(share_cam_from_a), check)
+
+
+def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, floor_px=None) -> ModelFit:
+    """``mf`` with the covariance of noise plus a bias of each marker that persists across the
+    run's frames (:func:`solver.model_error.marker_bias_covariance`; with the noise estimated,
+    each centre's noise shaped by its disc's image, :func:`solver.disc_noise.
+    section_noise_shapes`, never below ``floor_px``); ``sigma_px`` its noise part. Unchanged
+    when that covariance is not finite."""
+    ids, shapes = [], []
+    for k, fr in enumerate(parsed):
+        for s, pose in zip(("A", "B"), _pose_indices(k, share)):
+            rows = [fr.ids[r] for r in fr.rows[s]]
+            ids += rows
+            rot, t = mf.poses[pose]
+            cam = np.eye(4)
+            cam[:3, :3], cam[:3, 3] = rot, t
+            shapes.append(section_noise_shapes([layout.by_id[i] for i in rows], cam, mf.intrinsics.focal_px))
+    index = {mid: k for k, mid in enumerate(sorted(set(ids)))}
+    ref = mf.refinement
+    cov, sigma2, tau2 = marker_bias_covariance(ref.jacobian, ref.residuals, np.array([index[i] for i in ids]),
+                                            sigma, None if sigma is not None else np.concatenate(shapes), floor_px)
+    if not np.all(np.isfinite(cov)):
+        return mf
+    return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2)))
 
 
 def _parse_frames(layout: LayoutArrays, frames) -> list:
@@ -177,14 +216,15 @@ def _pinhole_run(parsed, pp, sigma, share: bool, options: DockingOptions) -> Mod
                         sigma, options.refine)
 
 
-def _result(mf: ModelFit, parsed, share: bool) -> SequenceResult:
-    """Per-frame DockingResults and the run's intrinsics from the run's model fit."""
+def _result(mf: ModelFit, parsed, share: bool, check: ModelCheck) -> SequenceResult:
+    """Per-frame DockingResults and the run's intrinsics from the run's model fit (its
+    covariance with the model error ``check`` already added)."""
     out, row = [], 0
     for k, fr in enumerate(parsed):
         na, nb = 2 * len(fr.rows["A"]), 2 * len(fr.rows["B"])
         ia, ib = _pose_indices(k, share)
-        fit = joint_fit_from_model(mf, slice(row, row + na), slice(row + na, row + na + nb),
-                                   ia, ib)
+        fit = replace(joint_fit_from_model(mf, slice(row, row + na), slice(row + na, row + na + nb),
+                                           ia, ib), model_check=check)
         row += na + nb
         n = len(fr.ids)
         out.append(DockingResult.from_fit(fit, fr.ids, np.ones(n, dtype=bool),
@@ -198,4 +238,4 @@ def _result(mf: ModelFit, parsed, share: bool) -> SequenceResult:
                           mf.intrinsics.values(), mf.intrinsics_std(),
                           mf.covariance[i0:, i0:].copy(), cam_a, share, mf.sigma_px,
                           float(np.sqrt(2.0 * (res @ res) / res.size)),
-                          mf.refinement.iterations, mf.choice)
+                          mf.refinement.iterations, mf.choice, check)

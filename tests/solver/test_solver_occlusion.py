@@ -18,7 +18,7 @@ import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval.solve_frames import docking_options
+from dockfactory.eval.solve_frames import KNOWN_LENS, docking_options
 from dockfactory.solver import InvalidSolverInput, solve_docking
 from dockfactory.solver.options import DockingOptions
 
@@ -37,7 +37,7 @@ def _z(repo_root, fid, **changes):
     """{key: error / reported std} of the frame solved as `dockfactory solve` does."""
     doc, (cls, uv, boxes, flags) = _frame(repo_root, fid)
     markers = load_config(shipped_config("paper")).markers_layout()
-    options = dataclasses.replace(docking_options(doc["centre_noise_px"]), **changes)
+    options = dataclasses.replace(docking_options(doc["centre_noise_px"], KNOWN_LENS), **changes)
     res = solve_docking(markers, doc["principal_point"], detections=(cls, uv), boxes=boxes, refined=flags,
                         options=options)
     return {k: (getattr(res, k) - doc["pose_b_in_d"][k]) / res.std[k] for k in KEYS}

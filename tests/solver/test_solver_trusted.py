@@ -15,7 +15,7 @@ import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval.solve_frames import docking_options
+from dockfactory.eval.solve_frames import KNOWN_LENS, docking_options
 from dockfactory.solver import InvalidSolverInput, identify_markers, solve_docking
 
 
@@ -32,7 +32,7 @@ def frame(repo_root):
 def _solve(frame, refined):
     doc, markers, (cls, uv, boxes, flags) = frame
     return solve_docking(markers, doc["principal_point"], detections=(cls, uv), boxes=boxes,
-                         refined=flags if refined else None, options=docking_options(doc["centre_noise_px"]))
+                         refined=flags if refined else None, options=docking_options(doc["centre_noise_px"], KNOWN_LENS))
 
 
 def _nearest_ids(doc, uv):

@@ -1,0 +1,91 @@
+"""Bench of the model error in the covariance: RMS z = error / reported std of X, Y and alpha
+on a rendered dataset, for the per-frame pinhole, the per-frame "auto" and the per-run
+(``--self-calibrate sequence``) solves, with the lens prior off (the lens taken as known) and
+on (the unestimated intrinsics marginalised, :mod:`solver.model_error`), and how many solves
+the misfit test flags.
+
+Input: a dataset folder and its detections (``dockfactory detect``), or ``--oracle SIGMA`` for
+the exact centroids plus noise. Splits ``--splits`` (default test). ``--scale`` multiplies every
+half-range of the default :class:`solver.options.LensPrior` (a sweep over several values shows
+how the figures depend on the prior).
+
+Run: python bench/model_error.py DATASET --detections DETS.json [--splits test train]
+[--scale 1.0 0.5] [--json OUT.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from dockfactory.eval.pose_metrics import pose_error
+from dockfactory.eval.solve_frames import docking_options, solve_dataset
+from dockfactory.eval.uncertainty import reported_std
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.solver.options import LensPrior
+
+METHODS = (("pinhole", "pinhole", None), ("auto", "auto", None), ("sequence", "auto", "sequence"))
+COMPS = ("x", "y", "alpha")
+
+
+def z_table(ds: Dataset, poses: dict) -> dict:
+    """{component: RMS z, "n", "flagged", "rmse_<c>"} over the solved frames of ``poses``."""
+    z, e, flagged = {c: [] for c in COMPS}, {c: [] for c in COMPS}, 0
+    for fid, rec in poses["frames"].items():
+        if not rec.get("ok"):
+            continue
+        err = pose_error(rec["pose"], ds.labels[fid]["pose_b_in_d"])
+        std = reported_std(rec["covariance"])
+        flagged += bool(rec.get("model_check", {}).get("warning"))
+        for c in COMPS:
+            z[c].append(err[c] / std[c])
+            e[c].append(err[c])
+    out = {c: float(np.sqrt(np.mean(np.square(z[c])))) for c in COMPS}
+    out.update({f"rmse_{c}": float(np.sqrt(np.mean(np.square(e[c])))) for c in COMPS})
+    out.update(n=len(z["x"]), flagged=flagged)
+    return out
+
+
+def run(ds, dets, oracle, splits, lens: LensPrior) -> dict:
+    """{method: z_table} of the three solves under ``lens``."""
+    out = {}
+    for name, model, selfcal in METHODS:
+        opts_lens = lens
+        poses = solve_dataset(ds, splits, detections=dets, oracle_sigma_px=oracle, camera_model=model,
+                              self_calibrate=selfcal, lens=opts_lens)
+        out[name] = z_table(ds, poses)
+    return out
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("dataset")
+    ap.add_argument("--detections")
+    ap.add_argument("--oracle", type=float)
+    ap.add_argument("--splits", nargs="+", default=["test"])
+    ap.add_argument("--scale", type=float, nargs="+", default=[1.0])
+    ap.add_argument("--json")
+    a = ap.parse_args(argv)
+    ds = Dataset.open(a.dataset, full=False)
+    dets = json.load(open(a.detections)) if a.detections else None
+    base = docking_options(None).lens
+    t0, result = time.time(), {"dataset_version": ds.version_id, "splits": a.splits, "rows": []}
+    for scale in (0.0, *a.scale):
+        lens = replace(base, marginalise=scale > 0, pp_fraction=base.pp_fraction * (scale or 1),
+                       k1=base.k1 * (scale or 1), k2=base.k2 * (scale or 1), p=base.p * (scale or 1))
+        for name, t in run(ds, dets, a.oracle, tuple(a.splits), lens).items():
+            result["rows"].append({"scale": scale, "method": name, **t})
+            print(f"scale {scale:4.2f} {name:9s} n {t['n']:3d} flagged {t['flagged']:3d}  RMS z X {t['x']:.2f} "
+                  f"Y {t['y']:.2f} alpha {t['alpha']:.2f}  RMSE X {t['rmse_x']:.3f} Y {t['rmse_y']:.3f} "
+                  f"alpha {t['rmse_alpha']:.4f}", flush=True)
+    print(f"dataset {ds.version_id}, {time.time() - t0:.0f} s")
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(result, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

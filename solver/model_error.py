@@ -1,0 +1,212 @@
+"""Model error: what the intrinsics a camera model does not estimate do to its pose, and whether
+the residuals show them.
+
+A solve assumes values for the intrinsics its camera model does not estimate (the principal
+point it is given, no k1 / k2 / p1 / p2 beyond the model's). A real lens has others, and the
+estimate moves with them: to first order, for the estimator's (whitened) Jacobian J_e over the
+parameters it estimates and J_u over the ones it does not, the estimate is off by G theta with
+G = (J_e^T J_e)^-1 J_e^T J_u and theta the unestimated intrinsics' departure from the assumed
+values.
+
+Marginalising theta over its plausible range (:class:`solver.options.LensPrior`: uniform over
+each half-range h, variance h^2 / 3, a diagonal prior P) conditioned on the frame's own data:
+with F = J_u^T (I - H) J_u / k^2 (H the estimator's hat matrix, k^2 the noise scale of the
+whitened residuals) the information the data carry on theta beyond what the estimated
+parameters absorb, and s = J_u^T r / k^2 (r the whitened residuals at the estimate, already
+orthogonal to J_e), theta's posterior is N(mu, S) with S = (P^-1 + F)^-1 and mu = -S s. The
+estimate's expected squared error given the data is then the noise term plus
+G (S + mu mu^T) G^T: over lenses drawn from the prior it averages G P G^T, and a frame whose
+residuals show a lens defect carries it in mu.
+
+The misfit test (a Rao score test, no extra fit): T = s^T F^+ s over the directions of theta
+the data determine to better than their plausible range (eigenvalues of the prior-scaled F
+above 1), chi-square with that many degrees of freedom when the noise is known, F-distributed
+(T / q against (q, residual dof)) when it was estimated from the same residuals. A p-value
+below ``LensPrior.misfit_alpha`` says the assumed model does not explain the residuals.
+
+Layer 3 of the solver (estimators), beside :mod:`solver.model_fit`: imports
+:mod:`solver.refine`, :mod:`solver.camera_models`, :mod:`solver.stats` and the options.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dockfactory.solver.camera_models import EXTRA_NAMES, IntrinsicsModel, Intrinsics
+from dockfactory.solver.options import LensPrior
+from dockfactory.solver.refine import inverse_spd, stack_blocks, whitened
+from dockfactory.solver.stats import chi2_logsf, f_logsf
+
+__all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "ALL_EXTRAS"]
+
+ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)
+BIAS_Z = 3.09   # one-sided 1e-3: a per-marker bias is counted only when the residuals show it
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """The model error of one solve: ``tested`` the unestimated intrinsics the misfit test
+    covers (those the data determine), ``statistic`` (chi-square or F), ``dof``, ``log_p``
+    (natural log of its p-value; 0.0 when nothing was testable), ``explains`` (False: the
+    assumed model does not explain the residuals at the prior's ``misfit_alpha``), ``added``
+    (p, p) the covariance added to the estimator's parameters (zeros unless marginalised),
+    ``theta`` {name: posterior mean} of the unestimated intrinsics' departure."""
+
+    model: str
+    tested: tuple
+    statistic: float
+    dof: int
+    log_p: float
+    explains: bool
+    added: np.ndarray
+    theta: dict
+
+    @property
+    def p_value(self) -> float:
+        return math.exp(self.log_p)
+
+    def warning(self) -> str:
+        """One sentence for a user when the model does not explain the data, else ""."""
+        if self.explains:
+            return ""
+        return (f"camera model {self.model} does not explain the residuals: the unestimated "
+                f"{', '.join(self.tested)} would (score test p {self.p_value:.2g})")
+
+
+def _split_columns(n_params: int, model: IntrinsicsModel):
+    """(estimated columns, unestimated columns, unestimated names) of the ALL_EXTRAS Jacobian
+    over (poses, f, *EXTRA_NAMES) for a fit with ``n_params`` = 6 P + 1 + e parameters."""
+    n_pose_f = n_params - model.n_extra
+    est = list(range(n_pose_f)) + [n_pose_f + EXTRA_NAMES.index(n) for n in model.free]
+    names = tuple(n for n in EXTRA_NAMES if n not in model.free)
+    return est, [n_pose_f + EXTRA_NAMES.index(n) for n in names], names
+
+
+def _score_test(f_info, score, half, sigma_known: bool, dof_res: int):
+    """(statistic, dof, log_p, tested mask) of the score test over the directions of the
+    prior-scaled information ``f_info`` with eigenvalue above 1 (see the module docstring)."""
+    d = half / math.sqrt(3.0)
+    lam, vec = np.linalg.eigh(f_info * d[:, None] * d[None, :])
+    keep = lam > 1.0
+    q = int(keep.sum())
+    if q == 0:
+        return 0.0, 0, 0.0, np.zeros(len(half), dtype=bool)
+    proj = vec[:, keep].T @ (d * score)
+    t = float(np.sum(proj ** 2 / lam[keep]))
+    tested = np.sum(vec[:, keep] ** 2 * lam[keep], axis=1) > 1.0 / len(half)
+    if sigma_known or dof_res <= 0:
+        return t, q, chi2_logsf(t, q), tested
+    return t / q, q, f_logsf(t / q, q, dof_res), tested
+
+
+def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_params: int,
+                sqrt_w, k2: float, lens: LensPrior, principal_point, sigma_known: bool) -> ModelCheck:
+    """The :class:`ModelCheck` of a fit of ``blocks`` (:class:`solver.refine.Block`, unweighted)
+    at ``poses`` and ``intr`` with ``model`` (``n_params`` = 6 P + 1 + e estimated parameters).
+
+    ``sqrt_w`` (n, 2, 2) or None: each point's whitening as the estimator weighted it (its
+    noise is taken as k^2 W^-1); ``k2`` the noise scale of the whitened residuals (px^2 when
+    unweighted); ``lens`` the plausible ranges; ``principal_point`` (2,) px the assumed one
+    (the image width for the principal point's range); ``sigma_known``: the noise was given,
+    not estimated from these residuals. ``added`` is zeros when ``lens.marginalise`` is False or
+    nothing can be computed (a point behind the camera, a singular information)."""
+    est, unest, names = _split_columns(n_params, model)
+    zero = ModelCheck(model.name, (), 0.0, 0, 0.0, True, np.zeros((n_params, n_params)), {})
+    half = np.array([lens.half_range(n, principal_point) for n in names])
+    res, jac, valid = stack_blocks(blocks, poses, intr, ALL_EXTRAS)
+    if not names or not valid or not (k2 > 0 and math.isfinite(k2)):
+        return zero
+    if sqrt_w is not None:
+        res, jac = whitened(sqrt_w, res, jac)
+    je, ju = jac[:, est], jac[:, unest]
+    a_inv = inverse_spd(je.T @ je)
+    if not np.all(np.isfinite(a_inv)):
+        return zero
+    g = a_inv @ (je.T @ ju)                               # d estimate / d theta
+    f_info = (ju.T @ ju - (ju.T @ je) @ g) / k2
+    score = ju.T @ res / k2
+    stat, q, log_p, tested = _score_test(f_info, score, half, sigma_known, res.size - n_params)
+    var = half ** 2 / 3.0
+    on = var > 0
+    post = np.zeros((len(names), len(names)))
+    if np.any(on):
+        post[np.ix_(on, on)] = inverse_spd(np.diag(1.0 / var[on]) + f_info[np.ix_(on, on)])
+    mu = -post @ score
+    added = g @ (post + np.outer(mu, mu)) @ g.T if lens.marginalise else np.zeros((n_params,) * 2)
+    explains = not log_p <= math.log(lens.misfit_alpha)
+    return ModelCheck(model.name, tuple(n for n, t in zip(names, tested) if t), float(stat), q,
+                      float(log_p), explains, added, dict(zip(names, mu.tolist())))
+
+
+def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:
+    """S (2n, 2K): 1 where row (point i, axis a) belongs to (marker, axis a); markers unseen
+    dropped."""
+    n = marker_of_point.size
+    s = np.zeros((2 * n, 2 * (int(marker_of_point.max()) + 1)))
+    s[np.arange(2 * n), 2 * np.repeat(marker_of_point, 2) + np.tile([0, 1], n)] = 1.0
+    return s[:, s.any(axis=0)]
+
+
+def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, known: float | None):
+    """(sigma^2, tau^2) from the moments (2, 2) of :func:`marker_bias_covariance`, r^T r =
+    ``rr``, |S^T r|^2 = ``sr`` and tr((S^T M T M S)^2) = ``tr_c2``; ``known`` sigma^2 or None.
+    tau^2 is 0 (and sigma^2 the residuals' alone) unless the bias is significant (BIAS_Z)."""
+    if known is not None:
+        sigma2, tau2 = known, (sr - known * moments[1, 0]) / moments[1, 1]
+    else:
+        sigma2, tau2 = (float(v) for v in np.linalg.solve(moments, [rr, sr]))
+    z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * tr_c2))
+    if z > BIAS_Z:
+        return float(sigma2), float(tau2)
+    return (known if known is not None else rr / moments[0, 0]), 0.0
+
+
+def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np.ndarray,
+                           sigma_px: float | None, shapes: np.ndarray | None = None,
+                           floor_px: float | None = None):
+    """(covariance (p, p), sigma^2, tau^2) of a least-squares fit whose centre errors are noise
+    (sigma^2 T_i for point i) plus a bias of each marker that persists across the frames it is
+    seen in (tau^2 per axis, independent between markers): a docking run's camera and lens are
+    fixed, so a marker's centre is biased the same way in every frame (lens and colour effects
+    on the detector), which the residuals of one frame cannot tell from noise.
+
+    ``jac`` (m, p) and ``res`` (m,) the unweighted fit's Jacobian and residuals, rows 2n
+    interleaved (u, v) over n points; ``marker_of_point`` (n,) int: which marker each point is;
+    ``shapes`` (n, 2, 2) the relative noise covariance T_i of each point (None: I). With S
+    (m, 2K) the indicator of each row's marker and axis, M = I - H (H the hat matrix) and
+    Q = S^T M S, the moments E[r^T r] = sigma^2 tr(M T) + tau^2 tr Q and E[|S^T r|^2] =
+    sigma^2 tr(S^T M T M S) + tau^2 tr Q^2 give sigma^2 and tau^2 (``sigma_px`` given: sigma^2
+    is its square over the mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is
+    0 unless |S^T r|^2 exceeds its bias-free expectation by BIAS_Z of its standard deviations:
+    noise alone widens an ideal run's covariance about once in 1,000 runs). The covariance is
+    the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1, an estimated sigma never below
+    ``floor_px`` (per axis, as :func:`solver.refine.covariance_from_jacobian`'s floor)
+    (A = J^T J); sigma^2 is returned per axis averaged over the points (px^2). Not finite when
+    A is singular."""
+    m, p = jac.shape
+    n = marker_of_point.size
+    t = np.broadcast_to(np.eye(2), (n, 2, 2)) if shapes is None else np.asarray(shapes, dtype=np.float64)
+    s = _marker_indicator(marker_of_point)
+    a_inv = inverse_spd(jac.T @ jac)
+    if not np.all(np.isfinite(a_inv)) or m <= p:
+        return a_inv, float("inf"), 0.0
+    jr = jac.reshape(n, 2, p)
+    meat = np.einsum("nap,nab,nbq->pq", jr, t, jr)                    # J^T T J
+    js = jac.T @ s
+    sm = (s.T - js.T @ a_inv @ jac.T).reshape(-1, n, 2)              # S^T M, rows by point
+    moments = np.array([[float(np.trace(t, axis1=1, axis2=2).sum() - np.sum(a_inv * meat)),
+                         float(np.trace(sm.reshape(-1, m) @ s))],
+                        [float(np.einsum("kna,nab,knb->", sm, t, sm)), 0.0]])
+    q = sm.reshape(-1, m) @ s
+    moments[1, 1] = float(np.sum(q * q))
+    rr, sr = float(res @ res), float(np.sum((s.T @ res) ** 2))
+    mean_var = float(np.trace(t, axis1=1, axis2=2).mean()) / 2.0
+    c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                     # S^T M T M S
+    known = None if sigma_px is None else float(sigma_px) ** 2 / mean_var
+    sigma2, tau2 = _noise_and_bias(moments, rr, sr, float(np.sum(c * c)), known)
+    if sigma_px is None and floor_px is not None:
+        sigma2 = max(sigma2, float(floor_px) ** 2 / mean_var)
+    g = a_inv @ js
+    return a_inv @ (sigma2 * meat) @ a_inv + tau2 * (g @ g.T), float(sigma2) * mean_var, tau2
