@@ -21,8 +21,10 @@ threads:
   mp4-roi-10-0.375   ... both
   png-stream-roi-10  the stream path on the PNGs with the window
   mkv-ffv1           the stream path on the lossless video
+  *-2-workers        ... with two worker processes measuring alternate frames (--workers 2; the
+                     workers start before the clock does, as the detector loads before it)
 Prints one row per variant: CPU ms per frame (this process, every thread: what the load of a
-shared machine changes least), frames/s (after the detector is loaded), latency p50 / p95, median
+shared machine changes least; with workers the parent's only: reading, filtering, writing), frames/s (after the detector is loaded), latency p50 / p95, median
 read / detect / solve ms, X, Y, alpha RMSE against the labels (frames with a pose in every
 variant) and its ratio to png-measure's; then one frame's steps alone, each the best of 11 runs
 (decoding a PNG and an MP4 frame, the network at each scale and runtime and on the --roi window,
@@ -91,11 +93,12 @@ def _pct(values, q):
 
 
 def _stream(source: str, layout, weights, detector, folder: Path, name: str, prefetch: int = 1,
-            roi: int | None = None) -> dict:
+            roi: int | None = None, workers: int = 1) -> dict:
     from dockfactory.measure_stream import StreamOptions, measure_stream
     out = folder / f"{name}.jsonl"
     summary = measure_stream(layout, weights, str(out), video=source,
-                             options=StreamOptions(prefetch=prefetch, roi_refresh=roi), detector=detector)
+                             options=StreamOptions(prefetch=prefetch, roi_refresh=roi, workers=workers),
+                             detector=detector)
     lines = [json.loads(ln) for ln in out.read_text().splitlines()][:-1]
     return {"frames_per_s": summary["frames_per_s"], "latency_ms": summary["latency_ms"],
             "timing_ms_median": summary["timing_ms_median"], "poses": [ln.get("pose") for ln in lines],
@@ -181,12 +184,15 @@ def _run_all(ds, args, folder: Path) -> dict:
     small = _detector(weights, "auto", 0.375, size)
     results = {"png-measure": _cpu_timed(lambda: _today(ds, ids, layout, weights, folder), len(ids))}
     mp4 = str(videos["video"])
-    for name, source, det, prefetch, roi in (
-            ("png-stream", seq, onnx, 1, None), ("mp4", mp4, onnx, 1, None), ("mp4-no-prefetch", mp4, onnx, 0, None),
-            ("mp4-torch", mp4, torch_det, 1, None), ("mp4-scale-0.375", mp4, small, 1, None),
-            ("mp4-roi-10", mp4, onnx, 1, 10), ("mp4-roi-10-0.375", mp4, small, 1, 10),
-            ("png-stream-roi-10", seq, onnx, 1, 10), ("mkv-ffv1", str(videos["video_lossless"]), onnx, 1, None)):
-        results[name] = _cpu_timed(lambda: _stream(source, layout, weights, det, folder, name, prefetch, roi),
+    for name, source, det, prefetch, roi, workers in (
+            ("png-stream", seq, onnx, 1, None, 1), ("mp4", mp4, onnx, 1, None, 1),
+            ("mp4-no-prefetch", mp4, onnx, 0, None, 1), ("mp4-torch", mp4, torch_det, 1, None, 1),
+            ("mp4-scale-0.375", mp4, small, 1, None, 1), ("mp4-roi-10", mp4, onnx, 1, 10, 1),
+            ("mp4-roi-10-0.375", mp4, small, 1, 10, 1), ("png-stream-roi-10", seq, onnx, 1, 10, 1),
+            ("mkv-ffv1", str(videos["video_lossless"]), onnx, 1, None, 1),
+            ("mp4-2-workers", mp4, None, 1, None, 2), ("png-stream-2-workers", seq, None, 1, None, 2),
+            ("mkv-ffv1-2-workers", str(videos["video_lossless"]), None, 1, None, 2)):
+        results[name] = _cpu_timed(lambda: _stream(source, layout, weights, det, folder, name, prefetch, roi, workers),
                                    len(ids))
     _rmse(results, [ds.labels[f]["pose_b_in_d"] for f in ids])
     steps = _components(ds, ids, mp4, onnx, torch_det, small)

@@ -68,7 +68,7 @@ def cmd_measure_stream(args) -> int:
     window = parse_window(args.self_calibrate) if args.self_calibrate else None
     options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
                             input_scale=args.input_scale, roi_refresh=args.roi, window=window,
-                            freeze_after=args.freeze_after)
+                            freeze_after=args.freeze_after, workers=args.workers or 1)
     decide = stream_decider(args.acceptance) if args.acceptance else None
     weights = _weights(args)
     torch_threads(args.threads)
@@ -86,7 +86,7 @@ def cmd_measure(args) -> int:
         return cmd_measure_stream(args)
     weights = _weights(args)
     camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
-    options = MeasureOptions(args.backend, args.workers, args.overlay_size or None, camera, args.max_megapixels)
+    options = MeasureOptions(args.backend, args.workers or 2, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
 
     bars = []
@@ -176,9 +176,10 @@ def add_subcommand(sub) -> None:
     m.add_argument("--min-score", type=unit_float, default=MIN_SCORE)
     m.add_argument("--threads", type=thread_count, default=None,
                    help=f"torch threads with --workers 1 (1 to {MAX_THREADS}; default: one per core)")
-    m.add_argument("--workers", type=positive_int, default=2,
+    m.add_argument("--workers", type=positive_int, default=None,
                    help=f"images measured at once, each by its own process (1 to {MAX_WORKERS}, never more than the "
-                        "images; default 2: one per core)")
+                        "images; default 2: one per core); a stream's frames (default 1: this process; more: "
+                        "frame by frame, not with --roi or --self-calibrate window:N)")
     m.add_argument("--max-megapixels", type=float_in(0.0, MAX_MEGAPIXELS, low_open=True),
                    default=DEFAULT_MAX_MEGAPIXELS,
                    help=f"the largest image measured, by the size its header states "

@@ -49,7 +49,7 @@ from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
-from dockfactory.measure import NO_MARKERS, solve_image
+from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration
@@ -80,7 +80,8 @@ class StreamOptions:
     detected whole; N: a window around the previous frame's markers, the full frame every N
     frames and whenever the window loses a marker: dockfactory.measure_roi), ``window`` (None, or
     N: intrinsics self-calibrated over the last N frames, dockfactory.measure_selfcal) and
-    ``freeze_after`` (with a window: freeze them after this many joint solves)."""
+    ``freeze_after`` (with a window: freeze them after this many joint solves), ``workers``
+    (processes measuring frames at once: dockfactory.measure_stream_pool; 1: this process)."""
     backend: str = "auto"
     camera_model: str | None = None
     min_score: float = MIN_SCORE
@@ -93,8 +94,14 @@ class StreamOptions:
     roi_refresh: int | None = None
     window: int | None = None
     freeze_after: int | None = None
+    workers: int = 1
 
     def __post_init__(self):
+        if not 1 <= self.workers <= MAX_WORKERS:
+            raise DockfactoryError(f"--workers: expected 1 to {MAX_WORKERS} for a stream, got {self.workers}")
+        if self.workers > 1 and (self.roi_refresh or self.window):
+            raise DockfactoryError("--workers: a stream is measured by several processes only frame by frame, "
+                                   "not with --roi or --self-calibrate window:N (they carry state between frames)")
         if self.filter is not None and self.filter not in FILTERS:
             raise DockfactoryError(f"--filter: expected one of {', '.join(FILTERS)}, got {self.filter!r}")
         if self.max_frames is not None and self.max_frames < 1:
@@ -326,11 +333,12 @@ class StreamMeasurer:
         frame.record["roi"] = None if roi is None else list(roi)
         return frame
 
-    def line(self, item) -> dict:
+    def line(self, item, record: dict | None = None) -> dict:
         """The JSON line of one frame ``(index, t_start, read_ms, timestamp_ms, rgb)`` of a
-        :class:`FrameReader`, its timings and (with them) the filtered pose and the hook's answer."""
+        :class:`FrameReader`, its timings and (with them) the filtered pose and the hook's answer;
+        ``record``: the frame's measure record when a worker process made it (None: solved here)."""
         index, t_start, read_ms, timestamp_ms, rgb = item
-        record = self.solve(index, rgb)
+        record = self.solve(index, rgb) if record is None else record
         line = frame_line(index, timestamp_ms, record)
         if self.kalman is not None:
             line["filtered"] = self.kalman.step(timestamp_ms / 1000.0, line.get("pose"), line.get("std"))
@@ -377,41 +385,63 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
                    detector=None) -> dict:
     """Measure every frame of ``video`` or ``camera`` (see the module docstring), writing the lines
     to ``jsonl`` ("-": standard output); returns the summary (also the last line). ``detector``:
-    an already loaded one (else loaded from ``weights``)."""
+    an already loaded one (else loaded from ``weights``; with ``options.workers`` > 1 each worker
+    process loads its own)."""
     markers = read_layout_file(layout_path)
     sink = LineSink(jsonl)
     cap, name = open_capture(video, camera)
+    pool = None
     try:
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        detector = detector if detector is not None else load_detector(weights, options, size)
+        if options.workers > 1:
+            from dockfactory.measure_stream_pool import StreamPool
+            pool = StreamPool(options.workers, weights, options, markers, size)
+        else:
+            detector = detector if detector is not None else load_detector(weights, options, size)
     except BaseException:
         cap.release()
         raise
-    tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
-               if options.roi_refresh and min(size) > 1 else None)
-    calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
-                                     options.freeze_after, docking_options(detector.centre_noise_px))
-                   if options.window else None)
-    measurer = StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
-                              decide, tracker, calibration)
-    stats, stopped, t0 = StreamStats(), "end of stream", time.perf_counter()
+    measurer = _measurer(detector if pool is None else None, markers, options, decide, size)
     try:
-        try:
-            for item in FrameReader(cap, options.max_frames, options.prefetch):
-                sink.write(line := measurer.line(item))
-                stats.add(line, 1000.0 * (time.perf_counter() - item[1]))
-        except KeyboardInterrupt:
-            stopped = "interrupted"
+        stats, stopped, t0 = _measure_lines(measurer, FrameReader(cap, options.max_frames, options.prefetch), pool, sink)
         if stats.frames == 0:
             raise DockfactoryError(f"{name}: no frame could be read")
         summary = {"type": "summary", "format": STREAM_FORMAT, "source": name, "stopped": stopped,
                    "camera_model": resolve_camera_model(options.camera_model, "sequence" if options.window else None),
                    "self_calibrate": f"window:{options.window}" if options.window else None,
-                   "freeze_after": options.freeze_after, "backend": detector.backend,
-                   "filter": options.filter, "roi_refresh": options.roi_refresh, "acceptance": decide is not None,
-                   "layout": str(layout_path),
+                   "freeze_after": options.freeze_after, "backend": detector.backend if pool is None else pool.backend,
+                   "workers": options.workers, "filter": options.filter, "roi_refresh": options.roi_refresh,
+                   "acceptance": decide is not None, "layout": str(layout_path),
                    "weights": str(weights), **stats.summary(time.perf_counter() - t0)}
         sink.write(summary)
     finally:
         sink.close()
+        if pool is not None:
+            pool.__exit__(None, None, None)
     return summary
+
+
+def _measurer(detector, markers, options: StreamOptions, decide, size) -> StreamMeasurer:
+    """The parent's StreamMeasurer: the window tracker and online self-calibration as the options
+    ask (never with worker processes, which ``StreamOptions`` refuses), the display filter, the hook."""
+    tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
+               if options.roi_refresh and min(size) > 1 else None)
+    calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
+                                     options.freeze_after, docking_options(detector.centre_noise_px))
+                   if options.window else None)
+    return StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
+                          decide, tracker, calibration)
+
+
+def _measure_lines(measurer: StreamMeasurer, reader: FrameReader, pool, sink: LineSink):
+    """Measure (here, or by ``pool``'s workers) and write every frame's line; (stats, how the stream
+    stopped, the clock's start)."""
+    stats, stopped, t0 = StreamStats(), "end of stream", time.perf_counter()
+    pairs = ((item, None) for item in reader) if pool is None else pool.measure(reader)
+    try:
+        for item, record in pairs:
+            sink.write(line := measurer.line(item, record))
+            stats.add(line, 1000.0 * (time.perf_counter() - item[1]))
+    except KeyboardInterrupt:
+        stopped = "interrupted"
+    return stats, stopped, t0

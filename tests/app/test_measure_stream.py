@@ -126,6 +126,22 @@ def test_video_measured_back_against_labels_and_measure(run_ds, videos, tmp_path
         assert set(line["filtered"]) >= {"x_mm", "y_mm", "alpha_deg"} and "pose" in line   # raw kept beside
 
 
+@pytest.mark.slow   # the detector on 4 frames, twice, and two worker processes loading it
+def test_two_worker_processes_give_the_same_lines_in_order(run_ds, videos, tmp_path, capsys):
+    """--workers 2: the frames measured by two processes come back in frame order with the poses
+    of one process to 1e-9; the display filter still runs in frame order in the parent."""
+    args = ["--video", videos / "video_lossless" / "unit0_run00.mkv", "--layout", run_ds / "layout.json",
+            "--filter", "kalman"]
+    code, one, _ = _stream(args, capsys, tmp_path, "one.jsonl")
+    code2, two, err = _stream([*args, "--workers", "2"], capsys, tmp_path, "two.jsonl")
+    assert code == code2 == 0 and "4 of 4 frames with a pose" in err
+    assert [ln["frame"] for ln in two[:-1]] == [0, 1, 2, 3]
+    assert two[-1]["workers"] == 2 and one[-1]["workers"] == 1 and two[-1]["backend"] == "torch"
+    for a, b in zip(one[:-1], two[:-1]):
+        assert max(abs(a["pose"][n] - b["pose"][n]) for n in a["pose"]) < 1e-9
+        assert max(abs(a["filtered"][n] - b["filtered"][n]) for n in ("x_mm", "y_mm", "alpha_deg")) < 1e-9
+
+
 @pytest.mark.slow   # the detector on 2 frames
 def test_camera_path_on_a_file_backed_device(run_ds, tmp_path, capsys, monkeypatch):
     """--camera INDEX through VideoCapture, the index mapped to an image-sequence pattern; an
@@ -158,7 +174,9 @@ def test_stream_refusals_are_one_line_exit_2(run_ds, tmp_path, capsys, monkeypat
              (["--video", empty, run_ds / "images"], "not both"),
              ([], "give images"),
              (["--video", empty, "--out", tmp_path / "o"], "a stream writes JSON lines"),
-             (["--video", empty, "--self-calibrate", "sequence"], "a stream self-calibrates over a sliding window")]
+             (["--video", empty, "--self-calibrate", "sequence"], "a stream self-calibrates over a sliding window"),
+             (["--video", empty, "--workers", "2", "--roi", "3"], "not with --roi"),
+             (["--video", empty, "--workers", "17"], "expected 1 to 16 for a stream")]
     for args, words in cases:
         code, lines, err = _stream([*args, "--layout", layout], capsys, tmp_path)
         assert code == 2 and words in one_line_error(err), (args, err)

@@ -1,0 +1,120 @@
+"""measure --video/--camera --workers N: frames measured by N worker processes, lines in order.
+
+A stream's frames are independent once no state is carried from one to the next (no window
+tracking, no online self-calibration: both are refused with more than one worker), so N
+processes can each detect and solve a frame while the parent reads the next ones: the network and
+the solve of two frames run on two cores without sharing an interpreter lock. The parent keeps
+everything that is sequential: reading, the display filter, the acceptance hook, the lines (in
+frame order).
+
+Workers are spawned (never forked from a process that has imported torch), load the detector with
+one thread, and wait at a barrier with the parent, so the stream's clock starts when every worker
+is ready. At most ``workers`` frames are in flight: a frame waits for at most the ones read before
+it, which bounds its latency to about two frames' work. A worker that dies (the out-of-memory
+killer, a crash in native code) breaks the pool: the frames in flight become failure records
+("measure error", naming the worker's death) and the pool is started again.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+from collections import deque
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+from dockfactory.core.errors import DockfactoryError
+
+_STATE: dict = {}
+READY_TIMEOUT_S = 600.0
+
+
+def _init_worker(weights, options, markers, size, barrier) -> None:
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    try:
+        import torch
+
+        from dockfactory.measure_stream import StreamMeasurer, load_detector
+        torch.set_num_threads(1)
+        detector = load_detector(weights, options, size)   # warmed up on a frame of the stream's size
+        if detector.backend == "onnx":
+            detector.network.threads = 1
+    except BaseException:
+        barrier.abort()   # the parent stops waiting at once
+        raise
+    _STATE["measurer"] = StreamMeasurer(detector, markers, options)
+    barrier.wait()
+
+
+def _solve(index: int, rgb):
+    return _STATE["measurer"].solve(index, rgb)
+
+
+def _backend() -> str:
+    return _STATE["measurer"].detector.backend
+
+
+class StreamPool:
+    """``with StreamPool(workers, weights, options, markers) as pool: for item, record in
+    pool.measure(items): ...``: ``items`` are a FrameReader's tuples ``(index, t_start, read_ms,
+    timestamp_ms, rgb)``; each comes back, in order, with its measure record (as
+    ``StreamMeasurer.solve`` gives it); ``size`` (width, height) the frames', to warm each worker's
+    network up on. The constructor returns when every worker has loaded the detector
+    (DockfactoryError when one cannot)."""
+
+    def __init__(self, workers: int, weights, options, markers, size: tuple[int, int] | None = None):
+        self.workers, self.initargs = workers, (weights, options, tuple(markers), size)
+        self.executor = None
+        self._start()
+        self.backend = self.executor.submit(_backend).result()   # the network's runtime, as "auto" chose
+
+    def _start(self) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        barrier = ctx.Barrier(self.workers + 1)
+        self.executor = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_init_worker,
+                                            initargs=(*self.initargs, barrier))
+        for _ in range(self.workers):   # the pool starts its processes on demand: one no-op each
+            self.executor.submit(int)
+        try:
+            barrier.wait(timeout=READY_TIMEOUT_S)
+        except threading.BrokenBarrierError:
+            self.executor.shutdown(wait=True, cancel_futures=True)
+            raise DockfactoryError("measure: a worker process could not load the detector "
+                                   "(run with --workers 1 to see why)") from None
+
+    def _record(self, future, executor, index: int) -> dict:
+        """The record of a submitted frame; a worker's death is the frame's failure record (the
+        pool is started again once, by the first frame that finds it broken)."""
+        try:
+            if future is None:
+                raise BrokenProcessPool("not submitted")
+            return future.result()
+        except BrokenProcessPool:
+            if executor is self.executor:
+                self.executor.shutdown(wait=True, cancel_futures=True)
+                self._start()
+            return {"ok": False, "category": "measure error",
+                    "reason": f"frame {index}: the worker process measuring it died"}
+
+    def measure(self, items):
+        """Yield ``(item, record)`` in the order of ``items``, at most ``workers`` in flight."""
+        flight: deque = deque()
+        for item in items:
+            executor = self.executor
+            try:
+                future = executor.submit(_solve, item[0], item[4])
+            except BrokenProcessPool:
+                future = None
+            flight.append((item, future, executor))
+            while len(flight) >= self.workers:
+                done, fut, ex = flight.popleft()
+                yield done, self._record(fut, ex, done[0])
+        while flight:
+            done, fut, ex = flight.popleft()
+            yield done, self._record(fut, ex, done[0])
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.executor.shutdown(wait=True, cancel_futures=True)
