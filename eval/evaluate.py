@@ -19,6 +19,7 @@ from dockfactory.eval.uncertainty_budget import budget_block
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, verdict
 from dockfactory.eval.confidence import chi2_bounds, pooled_spread_bounds, rmse_bounds
 from dockfactory.eval.camera_models_eval import camera_models_block
+from dockfactory.eval.model_check import model_check_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
 from dockfactory.eval.centre_noise_disc import (
     disc_noise_block,
@@ -277,6 +278,7 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
     if camera_models:
         metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
     metrics["simulated_cameras"] = simulated_cameras_block(ds, test)
+    metrics["model_check"] = model_check_block(poses, test)
     metrics["bounds"] = statistic_bounds(test, rep, spec.confidence)
     metrics["uncertainty_budget"] = test_budget(ds, poses, test, noise)
     metrics["acceptance"] = verdict(metrics, spec)

@@ -38,6 +38,8 @@ from dockfactory.eval.report_cameras import (
     html_envelope,
     plot_envelope,
 )
+from dockfactory.eval.model_check import BLOCK_SCHEMA as MODEL_CHECK_SCHEMA
+from dockfactory.eval.model_check import html_model_check, model_check_sentence
 from dockfactory.eval.simulated_cameras import BLOCK_SCHEMA as SIMULATED_CAMERAS_SCHEMA
 from dockfactory.eval.simulated_cameras import html_simulated_cameras, sensor_schema
 from dockfactory.generator.dataset import DatasetError
@@ -330,6 +332,7 @@ METRICS_SCHEMA = {
     "camera_envelope?": ENVELOPE_SCHEMA,
     "camera_models?": CAMERA_MODELS_SCHEMA,
     "simulated_cameras?": SIMULATED_CAMERAS_SCHEMA,
+    "model_check?": MODEL_CHECK_SCHEMA,
     "bounds?": "any",
     "uncertainty_budget?": "any",
     "acceptance": {"accepted": "bool", "verdict?": "str", "decision_rule?": "str", "confidence?": "num",
@@ -722,6 +725,7 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None, signers:
     sign = sign_off(eval_dir, signers)
     parts = (_html_verdict(metrics, acc, verdict) + [_html_sign_off(sign)] + _html_localization(metrics)
              + html_budget(metrics) + _html_calibration(metrics, rows)
+             + (html_model_check(metrics["model_check"]) if metrics.get("model_check") else [])
              + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
              + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
              + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
@@ -751,6 +755,8 @@ def write_summary(out_html, metrics: dict, verdict: str, provenance: dict, sign:
                  f"report.html, \"What was simulated\").\n" if cams else "")
     signed = (f"\nReport {sign['report_id']}, {sign['date']}; prepared by: {sign['prepared_by'] or '________'}; "
               f"approved by: {sign['approved_by'] or '________'}\n" if sign else "")
-    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + signed
+    check = metrics.get("model_check") or {}
+    model = f"\n{model_check_sentence(check)}\n" if check.get("flagged") else ""
+    write_text_atomic(out_html.with_suffix(".md"), _summary_markdown(verdict, acc) + simulated + model + signed
                       + markdown_honesty(metrics))
     return summary
