@@ -53,6 +53,7 @@ from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration
+from dockfactory.measure_stream_pool import StreamPool
 from dockfactory.measure_read import captured_stderr
 from dockfactory.measure_store import plain
 
@@ -364,6 +365,15 @@ def load_detector(weights, options: StreamOptions, size: tuple[int, int] | None 
     return detector
 
 
+def worker_measurer(weights, options: StreamOptions, markers, size) -> StreamMeasurer:
+    """A worker process's measurer (dockfactory.measure_stream_pool): the detector of ``weights``
+    on one thread, warmed up at the frames' ``size``; frame by frame, no filter, hook or state."""
+    detector = load_detector(weights, options, size)
+    if detector.backend == "onnx":
+        detector.network.threads = 1
+    return StreamMeasurer(detector, tuple(markers), options)
+
+
 def stream_decider(acceptance) -> Callable[[dict], dict]:
     """The acceptance hook of ``measure --video/--camera --acceptance SPEC``: each frame's pose
     against the spec's single-pose tolerances (``eval.conformity``, the guard band U = k u of the
@@ -394,8 +404,7 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
     try:
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         if options.workers > 1:
-            from dockfactory.measure_stream_pool import StreamPool
-            pool = StreamPool(options.workers, weights, options, markers, size)
+            pool = StreamPool(worker_measurer, options.workers, weights, options, markers, size)
         else:
             detector = detector if detector is not None else load_detector(weights, options, size)
     except BaseException:

@@ -29,20 +29,16 @@ _STATE: dict = {}
 READY_TIMEOUT_S = 600.0
 
 
-def _init_worker(weights, options, markers, size, barrier) -> None:
+def _init_worker(make_measurer, weights, options, markers, size, barrier) -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
         import torch
-
-        from dockfactory.measure_stream import StreamMeasurer, load_detector
         torch.set_num_threads(1)
-        detector = load_detector(weights, options, size)   # warmed up on a frame of the stream's size
-        if detector.backend == "onnx":
-            detector.network.threads = 1
+        measurer = make_measurer(weights, options, markers, size)
     except BaseException:
         barrier.abort()   # the parent stops waiting at once
         raise
-    _STATE["measurer"] = StreamMeasurer(detector, markers, options)
+    _STATE["measurer"] = measurer
     barrier.wait()
 
 
@@ -55,15 +51,16 @@ def _backend() -> str:
 
 
 class StreamPool:
-    """``with StreamPool(workers, weights, options, markers) as pool: for item, record in
-    pool.measure(items): ...``: ``items`` are a FrameReader's tuples ``(index, t_start, read_ms,
+    """``with StreamPool(make_measurer, workers, weights, options, markers) as pool: for item, record
+    in pool.measure(items): ...``: ``make_measurer(weights, options, markers, size)`` (a module-level
+    function) builds each worker's measurer (a loaded detector, one thread); ``items`` are a FrameReader's tuples ``(index, t_start, read_ms,
     timestamp_ms, rgb)``; each comes back, in order, with its measure record (as
     ``StreamMeasurer.solve`` gives it); ``size`` (width, height) the frames', to warm each worker's
     network up on. The constructor returns when every worker has loaded the detector
     (DockfactoryError when one cannot)."""
 
-    def __init__(self, workers: int, weights, options, markers, size: tuple[int, int] | None = None):
-        self.workers, self.initargs = workers, (weights, options, tuple(markers), size)
+    def __init__(self, make_measurer, workers: int, weights, options, markers, size: tuple[int, int] | None = None):
+        self.workers, self.initargs = workers, (make_measurer, weights, options, tuple(markers), size)
         self.executor = None
         self._start()
         self.backend = self.executor.submit(_backend).result()   # the network's runtime, as "auto" chose

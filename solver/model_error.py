@@ -156,7 +156,9 @@ def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, kno
     if known is not None:
         sigma2, tau2 = known, (sr - known * moments[1, 0]) / moments[1, 1]
     else:
-        sigma2, tau2 = (float(v) for v in np.linalg.solve(moments, [rr, sr]))
+        (a, b), (c, d) = moments                 # two moment equations in two unknowns (Cramer's rule)
+        det = a * d - b * c
+        sigma2, tau2 = float((rr * d - b * sr) / det), float((a * sr - c * rr) / det)
     z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * tr_c2))
     if z > BIAS_Z:
         return float(sigma2), float(tau2)
