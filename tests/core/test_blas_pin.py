@@ -7,6 +7,7 @@ AVX2/AVX-512 machine the default kernel gave other last bits in every label's ge
 Cycles, that a re-rendered published frame verifies on this machine.
 """
 import os
+import json
 import subprocess
 import sys
 
@@ -78,8 +79,9 @@ def test_every_render_worker_gets_the_label_kernel_even_from_a_caller_env(monkey
 @pytest.mark.render
 def test_a_published_paper_frame_rerendered_here_verifies(repo_root, tmp_path):
     """Frame 000001 of the published paper dataset (8e89fd1e76e6ba2b), rendered on this machine:
-    its label geometry equals the published one (byte for byte, image measurements aside) and its
-    image is within the published tolerance."""
+    its label geometry equals the published one (byte for byte, image measurements aside, the
+    sections' silhouettes as the published generator drew them) and its image is within the
+    published tolerance."""
     out = tmp_path / "paper"
     render = subprocess.run([sys.executable, "-m", "dockfactory", "render", "paper", "--out", str(out),
                              "--frames", "000001", "--workers", "1", "--quiet"],
@@ -90,6 +92,17 @@ def test_a_published_paper_frame_rerendered_here_verifies(repo_root, tmp_path):
                             capture_output=True, text=True, timeout=300)
     assert verify.returncode == 0, verify.stdout + verify.stderr
     assert "1 frames checked: labels" in verify.stdout
+    # the published generator drew sections' silhouettes as a convex hull (fixed since): verify
+    # compares them as it drew them, and nothing else is let through: a marker moved by 1e-3 px fails
+    assert "1 labels match once their sections' pixels_all and bbox_obj_px are drawn" in verify.stdout
+    path = out / "labels" / "000001.json"
+    label = json.loads(path.read_text())
+    label["markers"][0]["center_px"][0] += 1e-3
+    path.write_text(json.dumps(label, indent=1) + "\n")
+    again = subprocess.run([sys.executable, "-m", "dockfactory", "dataset", "verify", str(out), "--manifest",
+                            str(repo_root / "results" / "paper" / "manifest.json")],
+                           capture_output=True, text=True, timeout=300)
+    assert again.returncode != 0 and "labels/000001.json: differs from the manifest beyond" in again.stdout
 
 
 def test_the_label_kernel_is_the_one_that_made_the_published_datasets():
