@@ -16,6 +16,11 @@ from importlib import metadata
 # that made the published datasets: changing it changes labels, not the version id)
 LABEL_BLAS_ENV, LABEL_BLAS_CORE = "OPENBLAS_CORETYPE", "Prescott"
 os.environ[LABEL_BLAS_ENV] = LABEL_BLAS_CORE
+# one OpenBLAS thread unless the user asks for more: the solver's linear systems have at most a few
+# dozen unknowns, where a second BLAS thread only adds its wake-up, and on busy cores (measure's two
+# worker processes, a render beside) each small solve then waits milliseconds for it
+# (bench/results/stream_speed/README.md)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 try:
     __version__ = metadata.version("dockfactory")
