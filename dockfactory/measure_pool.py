@@ -68,6 +68,27 @@ def _death(exitcodes) -> str:
     return "ended unexpectedly"
 
 
+READY_TIMEOUT_S = 600.0   # a worker loads the detector within this, or the pool gives up
+
+
+def spawn_ready(workers: int, initializer, initargs: tuple) -> ProcessPoolExecutor:
+    """A pool of ``workers`` spawned processes, returned when each has run ``initializer(*initargs,
+    barrier)`` up to its ``barrier.wait()`` (the initializer calls ``barrier.abort()`` when it
+    fails); DockfactoryError when one cannot load the detector."""
+    ctx = multiprocessing.get_context("spawn")
+    barrier = ctx.Barrier(workers + 1)
+    executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=initializer, initargs=(*initargs, barrier))
+    for _ in range(workers):   # the pool starts its processes on demand: one no-op each
+        executor.submit(int)
+    try:
+        barrier.wait(timeout=READY_TIMEOUT_S)
+    except threading.BrokenBarrierError:
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise DockfactoryError("measure: a worker process could not load the detector "
+                               "(run with --workers 1 to see why)") from None
+    return executor
+
+
 class MeasurePool:
     """``with MeasurePool(...) as pool: pool.run(jobs, on_done)``; the constructor returns when
     every worker has loaded the detector. ``task(detector, markers, index, path, model,
@@ -83,18 +104,7 @@ class MeasurePool:
         self._start()
 
     def _start(self) -> None:
-        ctx = multiprocessing.get_context("spawn")
-        barrier = ctx.Barrier(self.workers + 1)
-        self.executor = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_init_worker,
-                                            initargs=(*self.initargs, barrier))
-        for _ in range(self.workers):   # the pool starts its processes on demand: one no-op each
-            self.executor.submit(int)
-        try:
-            barrier.wait(timeout=600)
-        except threading.BrokenBarrierError:
-            self.executor.shutdown(wait=True, cancel_futures=True)
-            raise DockfactoryError("measure: a worker process could not load the detector "
-                                   "(run with --workers 1 to see why)") from None
+        self.executor = spawn_ready(self.workers, _init_worker, self.initargs)
 
     def _restart(self) -> str:
         """Shut the broken pool down, start a new one; returns how its worker(s) died."""

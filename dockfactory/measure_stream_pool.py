@@ -16,17 +16,13 @@ killer, a crash in native code) breaks the pool: the frames in flight become fai
 """
 from __future__ import annotations
 
-import multiprocessing
 import os
-import threading
 from collections import deque
-from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-from dockfactory.core.errors import DockfactoryError
+from dockfactory.measure_pool import spawn_ready
 
 _STATE: dict = {}
-READY_TIMEOUT_S = 600.0
 
 
 def _init_worker(make_measurer, weights, options, markers, size, barrier) -> None:
@@ -66,18 +62,7 @@ class StreamPool:
         self.backend = self.executor.submit(_backend).result()   # the network's runtime, as "auto" chose
 
     def _start(self) -> None:
-        ctx = multiprocessing.get_context("spawn")
-        barrier = ctx.Barrier(self.workers + 1)
-        self.executor = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_init_worker,
-                                            initargs=(*self.initargs, barrier))
-        for _ in range(self.workers):   # the pool starts its processes on demand: one no-op each
-            self.executor.submit(int)
-        try:
-            barrier.wait(timeout=READY_TIMEOUT_S)
-        except threading.BrokenBarrierError:
-            self.executor.shutdown(wait=True, cancel_futures=True)
-            raise DockfactoryError("measure: a worker process could not load the detector "
-                                   "(run with --workers 1 to see why)") from None
+        self.executor = spawn_ready(self.workers, _init_worker, self.initargs)
 
     def _record(self, future, executor, index: int) -> dict:
         """The record of a submitted frame; a worker's death is the frame's failure record (the

@@ -15,26 +15,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from dockfactory.core.geometry import transform_points
 from dockfactory.core.layout import SECTIONS
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.labels import distorted_region
+from dockfactory.generator.labels import _section_uv, distorted_region
 from dockfactory.generator.motion import rolling_view
+from dockfactory.generator.silhouette import section_silhouette
 
 LEGACY_FIELDS = ("pixels_all", "bbox_obj_px")
-
-
-def hull_points(static: StaticScene, section: str, n: int = 128) -> np.ndarray:
-    """Points (3 n, 3) mm in the section frame: its three end circles (flange face, flange back,
-    far end), whose convex hull the legacy label took for the section."""
-    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    sign = -1.0 if section == "A" else 1.0
-    rings = []
-    for x, r in ((0.0, static.radius_mm + static.flange_height_mm),
-                 (sign * static.flange_width_mm, static.radius_mm + static.flange_height_mm),
-                 (sign * static.length_mm, static.radius_mm)):
-        rings.append(np.stack([np.full(n, x), r * np.sin(a), r * np.cos(a)], axis=1))
-    return np.concatenate(rings)
 
 
 def _filled(mask: np.ndarray) -> tuple[int, list[float] | None]:
@@ -56,27 +43,13 @@ def _legacy_pixels(uv: np.ndarray, cam) -> tuple[int, list[float] | None]:
     return _filled(mask)
 
 
-def _hull_uv(frame: FrameScene, static: StaticScene, sec: str) -> np.ndarray | None:
-    """The hull points of ``sec`` in pinhole pixels (B's at their row times under a rolling
-    shutter that images B moving); None when one is behind the camera."""
-    cam, pts = frame.camera, hull_points(static, sec)
-    rolling = rolling_view(frame)
-    if rolling is not None and sec == "B":
-        uv, z, _ = rolling.project(pts)
-        return uv if np.all(z > 0) else None
-    d_from_s = frame.d_from_b_array() if sec == "B" else np.eye(4)
-    cam_pts = transform_points(cam.cam_from_d_array() @ d_from_s, pts)
-    if not np.all(cam_pts[:, 2] > 0):
-        return None
-    return cam_pts[:, :2] / cam_pts[:, 2:] * cam.focal_px + np.asarray(cam.principal_point)
-
-
 def legacy_section_fields(frame: FrameScene, static: StaticScene) -> dict:
     """{section: (pixels_all, bbox_obj_px) as the legacy label had them, or None when the legacy
     label had neither (part of the section behind the camera)}."""
-    out = {}
-    for sec in SECTIONS:
-        uv = _hull_uv(frame, static, sec)
+    cam, out = frame.camera, {}
+    for sec in SECTIONS:   # the hull of its three end circles, B's at their row times under a rolling shutter
+        uv = _section_uv(section_silhouette(static, sec), sec, cam, cam.cam_from_d_array(), frame.d_from_b_array(),
+                         rolling_view(frame))
         out[sec] = None if uv is None else _legacy_pixels(uv, frame.camera)
     return out
 
