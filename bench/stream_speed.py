@@ -22,7 +22,8 @@ threads:
   png-stream-roi-10  the stream path on the PNGs with the window
   mkv-ffv1           the stream path on the lossless video
   *-2-workers        ... with two worker processes measuring alternate frames (--workers 2; the
-                     workers start before the clock does, as the detector loads before it)
+                     workers start before the clock does, as the detector loads before it);
+                     *-no-prefetch without the reader thread (measure's default with workers)
 Prints one row per variant: CPU ms per frame (this process, every thread: what the load of a
 shared machine changes least; with workers the parent's only: reading, filtering, writing), frames/s (after the detector is loaded), latency p50 / p95, median
 read / detect / solve ms, X, Y, alpha RMSE against the labels (frames with a pose in every
@@ -190,7 +191,8 @@ def _run_all(ds, args, folder: Path) -> dict:
             ("mp4-scale-0.375", mp4, small, 1, None, 1), ("mp4-roi-10", mp4, onnx, 1, 10, 1),
             ("mp4-roi-10-0.375", mp4, small, 1, 10, 1), ("png-stream-roi-10", seq, onnx, 1, 10, 1),
             ("mkv-ffv1", str(videos["video_lossless"]), onnx, 1, None, 1),
-            ("mp4-2-workers", mp4, None, 1, None, 2), ("png-stream-2-workers", seq, None, 1, None, 2),
+            ("mp4-2-workers", mp4, None, 1, None, 2), ("mp4-2-workers-no-prefetch", mp4, None, 0, None, 2),
+            ("png-stream-2-workers", seq, None, 1, None, 2), ("png-2-workers-no-prefetch", seq, None, 0, None, 2),
             ("mkv-ffv1-2-workers", str(videos["video_lossless"]), None, 1, None, 2)):
         results[name] = _cpu_timed(lambda: _stream(source, layout, weights, det, folder, name, prefetch, roi, workers),
                                    len(ids))

@@ -26,7 +26,7 @@ from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
 from dockfactory.eval.conformity import exit_status
 from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.measure_selfcal import parse_window
-from dockfactory.measure_stream import FILTERS, StreamOptions, measure_stream, stream_decider
+from dockfactory.measure_stream import FILTERS, PREFETCH, StreamOptions, measure_stream, stream_decider
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 
@@ -68,7 +68,8 @@ def cmd_measure_stream(args) -> int:
     window = parse_window(args.self_calibrate) if args.self_calibrate else None
     options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
                             input_scale=args.input_scale, roi_refresh=args.roi, window=window,
-                            freeze_after=args.freeze_after, workers=args.workers or 1)
+                            freeze_after=args.freeze_after, workers=args.workers or 1,
+                            prefetch=PREFETCH if (args.workers or 1) == 1 else 0)   # workers overlap the reads
     decide = stream_decider(args.acceptance) if args.acceptance else None
     weights = _weights(args)
     torch_threads(args.threads)

@@ -419,7 +419,8 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
                    "camera_model": resolve_camera_model(options.camera_model, "sequence" if options.window else None),
                    "self_calibrate": f"window:{options.window}" if options.window else None,
                    "freeze_after": options.freeze_after, "backend": detector.backend if pool is None else pool.backend,
-                   "workers": options.workers, "filter": options.filter, "roi_refresh": options.roi_refresh,
+                   "workers": options.workers, "prefetch": options.prefetch, "filter": options.filter,
+                   "roi_refresh": options.roi_refresh,
                    "acceptance": decide is not None, "layout": str(layout_path),
                    "weights": str(weights), **stats.summary(time.perf_counter() - t0)}
         sink.write(summary)

@@ -137,6 +137,7 @@ def test_two_worker_processes_give_the_same_lines_in_order(run_ds, videos, tmp_p
     assert code == code2 == 0 and "4 of 4 frames with a pose" in err
     assert [ln["frame"] for ln in two[:-1]] == [0, 1, 2, 3]
     assert two[-1]["workers"] == 2 and one[-1]["workers"] == 1 and two[-1]["backend"] == "torch"
+    assert two[-1]["prefetch"] == 0 and one[-1]["prefetch"] == 1   # the workers overlap the reads
     for a, b in zip(one[:-1], two[:-1]):
         assert max(abs(a["pose"][n] - b["pose"][n]) for n in a["pose"]) < 1e-9
         assert max(abs(a["filtered"][n] - b["filtered"][n]) for n in ("x_mm", "y_mm", "alpha_deg")) < 1e-9
