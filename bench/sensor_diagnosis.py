@@ -105,8 +105,8 @@ def matched(dets: list[dict], label: dict) -> dict:
 def detections(detector, ds, frames, effect: str) -> dict:
     """{frame id: detections} of ``effect``'s camera (told its pattern, no JPEG)."""
     out = {}
+    from dockfactory.generator.exr import read_passes
     for fid in frames:
-        from dockfactory.generator.exr import read_passes
         cam = EFFECTS[effect][0](ds.labels[fid]["spec"]["index"])
         cfa = cam.cfa if cam is not None and cam.cfa != "none" else None
         image = delivered(read_passes(ds.root / "exr" / f"{fid}.exr").rgb, ds.labels[fid], effect)
@@ -115,8 +115,9 @@ def detections(detector, ds, frames, effect: str) -> dict:
 
 
 def centre_row(name: str, dets: dict, ds) -> str:
-    errs = np.array([np.array(d[fid][i]["center_px"]) - t for fid in dets for d in (dets,)
-                     for i, t in matched(d[fid], ds.labels[fid]).values() if d[fid][i]["refined"]])
+    """A table row: refined centres of ``dets`` ({frame id: detections}) against the labels."""
+    errs = np.array([np.array(found[i]["center_px"]) - truth for fid, found in dets.items()
+                     for i, truth in matched(found, ds.labels[fid]).values() if found[i]["refined"]])
     h = np.hypot(errs[:, 0], errs[:, 1])
     rx, ry = np.sqrt(np.mean(errs ** 2, axis=0))
     return f"| {name} | {len(errs)} | {rx:.3f} / {ry:.3f} | {np.median(h):.3f} | {int((h > 0.3).sum())} |"

@@ -3,7 +3,7 @@
 A label is float64 geometry (camera, poses, projected markers) and numpy hands its matrix products
 to OpenBLAS, which picks a kernel for the CPU it runs on. The Haswell, Zen and SkylakeX kernels
 round differently from the SSE3 one in the last bits, so the same config gave other label bytes on
-another machine (bench/results/paper/blas_labels_2026-12-01.txt). ``import dockfactory`` sets
+another machine (docs/datasets.md, "Publishing a dataset"). ``import dockfactory`` sets
 ``OPENBLAS_CORETYPE`` to the SSE3 (Prescott) kernel, which every x86-64 CPU runs and which made the
 published paper dataset; it takes effect only if numpy has not been imported before dockfactory,
 so a render checks the kernel actually loaded (``check_label_blas``).

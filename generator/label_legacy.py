@@ -4,7 +4,7 @@ against a dataset published by such a generator, never for a new label.
 Before the fix a section's ``pixels_all`` and ``bbox_obj_px`` were the pixel centres inside the
 convex hull of the images of its three end circles (flange and body together), filled by OpenCV
 with its 1/16-px vertices: 2.2 % more pixels than the section's image (the section is not convex:
-generator/silhouette.py, bench/results/tool_checks/section_silhouette_2026-12-02.txt). The
+generator/silhouette.py; the measurement: bench/results/tool_checks/README.md). The
 published paper dataset was labelled that way. A re-render by today's generator labels its
 sections correctly, so its label cannot equal the published one byte for byte; verify replaces the
 two fields by what this module computes for the same frame and compares again, and says so
@@ -17,7 +17,7 @@ import numpy as np
 
 from dockfactory.core.layout import SECTIONS
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.labels import _section_uv, distorted_region
+from dockfactory.generator.labels import section_uv, distorted_region
 from dockfactory.generator.motion import rolling_view
 from dockfactory.generator.silhouette import section_silhouette
 
@@ -48,7 +48,7 @@ def legacy_section_fields(frame: FrameScene, static: StaticScene) -> dict:
     label had neither (part of the section behind the camera)}."""
     cam, out = frame.camera, {}
     for sec in SECTIONS:   # the hull of its three end circles, B's at their row times under a rolling shutter
-        uv = _section_uv(section_silhouette(static, sec), sec, cam, cam.cam_from_d_array(), frame.d_from_b_array(),
+        uv = section_uv(section_silhouette(static, sec), sec, cam, cam.cam_from_d_array(), frame.d_from_b_array(),
                          rolling_view(frame))
         out[sec] = None if uv is None else _legacy_pixels(uv, frame.camera)
     return out

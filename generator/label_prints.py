@@ -9,8 +9,7 @@ A label holds three kinds of fields:
 - pixel counts and boxes read from Cycles' index pass (each marker's ``visible_pixels`` and
   ``bbox_visible_px``, each section's ``pixels_visible`` and ``bbox_visible_px``, and the
   ``visible_fraction`` computed from the counts): on another CPU a pixel on an object's edge can
-  go to its neighbour (measured: one section pixel in 49 of 3,200 paper frames,
-  bench/results/paper/rerender_other_cpu_2026-12-01.txt).
+  go to its neighbour (the measurement: docs/datasets.md, "Publishing a dataset").
 
 Fingerprint v1 (``label_geometry_sha256``) is the sha256 of the label without the image
 measurements. Fingerprint v2 is the sha256 of the label without the image measurements and the

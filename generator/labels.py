@@ -254,7 +254,7 @@ def _add_marker_visibility(rec: dict, m, stats: IndexStats, image: np.ndarray | 
         rec["legible"] = chroma is not None and chroma >= min_chroma
 
 
-def _section_uv(pts: np.ndarray, sec: str, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
+def section_uv(pts: np.ndarray, sec: str, cam, cam_from_d: np.ndarray, d_from_b: np.ndarray,
                 rolling: MovingB | None) -> np.ndarray | None:
     """Points ``pts`` (M, 3) mm of section ``sec`` in pinhole pixels (M, 2) (B's at their row times
     under the rolling shutter ``rolling``); None when one of them is behind the camera."""
@@ -273,7 +273,7 @@ def _section_label(sec: str, static: StaticScene, cam, cam_from_d: np.ndarray, d
     """A section's label: its silhouette's pixels and box (generator.silhouette: the pixel centres
     inside the image of the flange or of the body; absent when part of the section is behind the
     camera), and with the index pass its visible part."""
-    parts_uv = [_section_uv(pts, sec, cam, cam_from_d, d_from_b, rolling) for pts in silhouette_parts(static, sec)]
+    parts_uv = [section_uv(pts, sec, cam, cam_from_d, d_from_b, rolling) for pts in silhouette_parts(static, sec)]
     rec = {"section": sec, "pass_index": SECTION_PASS_INDEX[sec]}
     if all(uv is not None for uv in parts_uv):
         mask = outlines_mask(part_outlines(parts_uv, cam), cam.width, cam.height)

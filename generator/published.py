@@ -65,7 +65,7 @@ from dockfactory.generator.label_prints import (
 
 __all__ = ["FINGERPRINTS_NAME", "FINGERPRINTS_V2_NAME", "PublishedReport", "publish", "verify_against"]
 
-DEFAULT_TOLERANCE = 2.5      # 8-bit levels of a tile mean (bench/results/paper/rerender_2026-12-01.txt)
+DEFAULT_TOLERANCE = 2.5      # 8-bit levels of a tile mean (its measurement: docs/datasets.md)
 EXACT_ROOT_FILES = ("config.toml", "layout.json")
 
 
