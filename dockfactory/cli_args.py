@@ -6,8 +6,11 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from dataclasses import replace
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.solver.errors import InvalidSolverInput
+from dockfactory.solver.options import LensPrior
 
 
 def int_at_least(low: int):
@@ -115,3 +118,33 @@ def float_in(low: float, high: float, low_open: bool = False):
 
 unit_float = float_in(0.0, 1.0)                 # scores and IoU thresholds
 input_scale = float_in(0.0, 8.0, low_open=True)  # network px per image px
+
+
+LENS_PRIOR_KEYS = {"pp": "pp_fraction", "k1": "k1", "k2": "k2", "p": "p"}
+
+
+def lens_prior(text: str):
+    """argparse type of ``--lens-prior``: what is plausible for the intrinsics the camera model does
+    not estimate (solver.options.LensPrior, marginalised into every pose's uncertainty).
+    ``default``: an uncalibrated camera's generic ranges; ``known``: a calibrated lens (nothing
+    marginalised); or ``pp=F,k1=A,k2=B,p=C``: half-ranges (the principal point's as a fraction of the
+    image width; keys not given keep the default's)."""
+    base = LensPrior(marginalise=True)
+    if text == "default":
+        return base
+    if text == "known":
+        return replace(base, marginalise=False)
+    values = {}
+    for item in text.split(","):
+        key, sep, value = item.partition("=")
+        if not sep or key.strip() not in LENS_PRIOR_KEYS:
+            raise argparse.ArgumentTypeError(f"expected default, known or pp=F,k1=A,k2=B,p=C "
+                                             f"(keys {', '.join(LENS_PRIOR_KEYS)}), got {item!r}")
+        try:
+            values[LENS_PRIOR_KEYS[key.strip()]] = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{key.strip()}: expected a number, got {value!r}") from None
+    try:
+        return replace(base, **values)
+    except InvalidSolverInput as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

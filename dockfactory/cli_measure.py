@@ -15,6 +15,7 @@ from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.cli_args import (
     MAX_THREADS,
     float_in,
+    lens_prior,
     non_negative_int,
     positive_int,
     thread_count,
@@ -69,7 +70,8 @@ def cmd_measure_stream(args) -> int:
     options = StreamOptions(args.backend, args.camera_model, args.min_score, args.cfa, args.filter, args.max_frames,
                             input_scale=args.input_scale, roi_refresh=args.roi, window=window,
                             freeze_after=args.freeze_after, workers=args.workers or 1,
-                            prefetch=PREFETCH if (args.workers or 1) == 1 else 0)   # workers overlap the reads
+                            prefetch=PREFETCH if (args.workers or 1) == 1 else 0,   # workers overlap the reads
+                            lens=args.lens_prior)
     decide = stream_decider(args.acceptance) if args.acceptance else None
     weights = _weights(args)
     torch_threads(args.threads)
@@ -86,7 +88,7 @@ def cmd_measure(args) -> int:
     if _check_inputs(args):
         return cmd_measure_stream(args)
     weights = _weights(args)
-    camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic)
+    camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic, args.lens_prior)
     options = MeasureOptions(args.backend, args.workers or 2, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
 
@@ -157,6 +159,11 @@ def _add_stream_args(m) -> None:
     m.add_argument("--roi", type=positive_int, metavar="N",
                    help="a stream: detect in a window around the previous frame's markers, the full frame every N "
                         "frames and whenever the window loses a marker (faster; default: every frame whole)")
+    m.add_argument("--lens-prior", type=lens_prior, default=None,
+                   help="what is plausible for the intrinsics the camera model does not estimate, carried into "
+                        "every pose's uncertainty: default (principal point within 0.04 x the image width, "
+                        "|k1| <= 0.2, |k2| <= 0.1, |p1|, |p2| <= 2e-3), known (a calibrated lens: nothing added) or "
+                        "pp=F,k1=A,k2=B,p=C (half-ranges; keys not given keep the default's)")
     m.add_argument("--input-scale", type=float_in(0.1, 2.0),
                    help="a stream: network px per image px (default: the weights' own, 0.5 for the shipped ones; "
                         "smaller is faster and sees small markers worse)")

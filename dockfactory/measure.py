@@ -53,6 +53,7 @@ from dockfactory.measure_verdict import add_conformity, add_uncertainty
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
 from dockfactory.eval.uncertainty_budget import TERMS
+from dockfactory.solver.options import LensPrior
 from dockfactory.eval.solve_frames import (
     detection_arrays,
     docking_options,
@@ -130,7 +131,7 @@ def _detect_and_solve(detector, markers, index, path, camera_model, min_score, c
     if failed is not None:
         return Frame(index, path, failed)
     return solve_image(detector, markers, index, path, image, camera_model, min_score, camera.cfa,
-                       path.suffix.lower() in (".jpg", ".jpeg"))
+                       path.suffix.lower() in (".jpg", ".jpeg"), lens=camera.lens)
 
 
 def detect_in(detector, image: np.ndarray, roi: tuple | None = None, cfa: str | None = None,
@@ -152,12 +153,14 @@ def detect_in(detector, image: np.ndarray, roi: tuple | None = None, cfa: str | 
 
 
 def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, camera_model: str, min_score: float,
-                cfa: str | None = None, jpeg: bool = False, roi: tuple | None = None) -> Frame:
+                cfa: str | None = None, jpeg: bool = False, roi: tuple | None = None,
+                lens: LensPrior | None = None) -> Frame:
     """Detect and solve one decoded image ``(H, W, 3) uint8`` RGB (its own camera model fit; the
     principal point assumed is its centre): the per-image path of measure, shared with the stream
     path (dockfactory.measure_stream). ``path`` names the frame in a failure's reason; ``cfa`` and
     ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect); ``roi``: detect in this
-    region only (:func:`detect_in`). The record carries ``image_size`` and ``timing_ms`` (detect,
+    region only (:func:`detect_in`); ``lens`` the lens prior marginalised into the covariance (None:
+    an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS). The record carries ``image_size`` and ``timing_ms`` (detect,
     solve)."""
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
@@ -170,7 +173,7 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     else:
         frame.record, frame.used_points = solve_frame(markers, frame.principal_point, centres, None, camera_model,
-                                                      docking_options(detector.centre_noise_px))
+                                                      lens_options(detector.centre_noise_px, lens))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
@@ -179,7 +182,13 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     return frame
 
 
-def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None) -> dict:
+def lens_options(sigma_floor_px, lens: LensPrior | None):
+    """The solver's options with the detector's noise floor and ``lens`` (None: the default)."""
+    return docking_options(sigma_floor_px) if lens is None else docking_options(sigma_floor_px, lens)
+
+
+def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
+                            lens: LensPrior | None = None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
     joint ones. Returns the run's record (shared intrinsics or the reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
@@ -193,7 +202,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     keys = [str(f.index) for f in solved]
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
-                        docking_options(sigma_floor_px))
+                        lens_options(sigma_floor_px, lens))
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
@@ -466,7 +475,7 @@ def _run_of(frames: list[Frame], markers, model, floor, out, options) -> tuple[d
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
         warnings.simplefilter("always")
-        run = self_calibrate_sequence(frames, markers, model, floor)
+        run = self_calibrate_sequence(frames, markers, model, floor, options.camera.lens)
     if caught:
         run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
     if options.overlay_size is not None:

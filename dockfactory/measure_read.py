@@ -24,6 +24,7 @@ from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.image_header import ImageHeaderError, ImageTooLarge, check_size, path_kind
+from dockfactory.solver.options import LensPrior
 
 DEFAULT_MAX_MEGAPIXELS = 50.0   # e.g. 8160 x 6120: decoding one costs about 0.15 GB per copy of it
 MAX_MEGAPIXELS = 250.0          # the highest limit --max-megapixels accepts
@@ -37,11 +38,15 @@ class CameraInput:
     of the mosaic in DN (BayerRG12 and the like): ``raw_black_dn`` is subtracted, ``raw_white_dn`` is
     full scale (the sensor's white level: a 16-bit PNG does not say its ADC depth, and a level
     guessed from each frame's brightest pixel would develop a dark frame brighter; None: raw
-    frames are refused), then grey-world white balance, ``demosaic`` and the sRGB curve."""
+    frames are refused), then grey-world white balance, ``demosaic`` and the sRGB curve.
+    ``lens``: what is plausible for the intrinsics the camera model does not estimate
+    (solver.options.LensPrior), marginalised into every pose's uncertainty; None: an uncalibrated
+    camera's generic ranges (eval.solve_frames.UNCALIBRATED_LENS)."""
     cfa: str | None = None
     raw_black_dn: float = 0.0
     raw_white_dn: float | None = None
     demosaic: str = "mhc"
+    lens: LensPrior | None = None
 
     def __post_init__(self):
         if self.cfa is not None and self.cfa not in PATTERNS:

@@ -48,8 +48,9 @@ from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
-from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
-from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
+from dockfactory.eval.solve_frames import resolve_camera_model
+from dockfactory.solver.options import LensPrior
+from dockfactory.measure import MAX_WORKERS, NO_MARKERS, lens_options, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration
@@ -82,7 +83,9 @@ class StreamOptions:
     frames and whenever the window loses a marker: dockfactory.measure_roi), ``window`` (None, or
     N: intrinsics self-calibrated over the last N frames, dockfactory.measure_selfcal) and
     ``freeze_after`` (with a window: freeze them after this many joint solves), ``workers``
-    (processes measuring frames at once: dockfactory.measure_stream_pool; 1: this process)."""
+    (processes measuring frames at once: dockfactory.measure_stream_pool; 1: this process),
+    ``lens`` (the lens prior marginalised into every pose's uncertainty, solver.options.LensPrior;
+    None: an uncalibrated camera's)."""
     backend: str = "auto"
     camera_model: str | None = None
     min_score: float = MIN_SCORE
@@ -96,6 +99,7 @@ class StreamOptions:
     window: int | None = None
     freeze_after: int | None = None
     workers: int = 1
+    lens: LensPrior | None = None
 
     def __post_init__(self):
         if not 1 <= self.workers <= MAX_WORKERS:
@@ -322,12 +326,12 @@ class StreamMeasurer:
         model = "pinhole" if self.calibration is not None else resolve_camera_model(o.camera_model, None)
         args = (self.detector, self.markers, index, name, image, model, o.min_score, o.cfa, o.jpeg)
         if self.tracker is None:
-            return solve_image(*args)
+            return solve_image(*args, lens=o.lens)
         roi = self.tracker.region()
-        frame = solve_image(*args, roi)
+        frame = solve_image(*args, roi, lens=o.lens)
         if roi is not None and self.tracker.lost(frame.detections, roi):
             spent = frame.record["timing_ms"]
-            frame = solve_image(*args)
+            frame = solve_image(*args, lens=o.lens)
             frame.record["timing_ms"] = {k: round(v + spent[k], 2) for k, v in frame.record["timing_ms"].items()}
             roi = None
         self.tracker.update(frame.detections, roi)
@@ -437,7 +441,7 @@ def _measurer(detector, markers, options: StreamOptions, decide, size) -> Stream
     tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
                if options.roi_refresh and min(size) > 1 else None)
     calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
-                                     options.freeze_after, docking_options(detector.centre_noise_px))
+                                     options.freeze_after, lens_options(detector.centre_noise_px, options.lens))
                    if options.window else None)
     return StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
                           decide, tracker, calibration)

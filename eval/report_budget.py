@@ -33,6 +33,8 @@ def html_budget(metrics: dict) -> list[str]:
             f"<p class='note'>RMS over the {block['n']} solved test frames of each input's standard uncertainty "
             "(mm / deg), propagated through the solver's Jacobian at each frame's solved pose: centre noise and "
             "intrinsics split the reported covariance (what estimating the focal length and the model's free "
-            "intrinsics adds); the marker layout is exact in a rendered dataset (a real layout's sigma_mm enters "
+            "intrinsics adds); camera model: what marginalising the intrinsics the camera model does not estimate "
+            "(principal point, distortion) over their plausible range added (- when the lens is taken as known); "
+            "the marker layout is exact in a rendered dataset (a real layout's sigma_mm enters "
             f"through measure); detector bias: {html.escape(bias_text)}. U = k u is what measure's guard band "
             "uses for one pose.</p>"]

@@ -12,6 +12,8 @@ Frames without a pose are kept with their reason: never dropped.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict, replace
 
 import numpy as np
@@ -91,6 +93,7 @@ def pose_record(res, n_detections: int) -> dict:
                    intrinsics_std=dict(res.intrinsics_std))
     if res.model_check is not None:
         rec["model_check"] = model_check_record(res.model_check)
+        rec["model_check"]["pose_variance"] = np.diag(res.model_error_covariance).tolist()
     return rec
 
 
@@ -98,7 +101,8 @@ def model_check_record(check) -> dict:
     """The poses-file record of a solve's model error (solver.model_error.ModelCheck): the misfit
     test (``explains``, ``p_value``, ``statistic``, ``dof``, the intrinsics ``tested``), the
     ``warning`` sentence ("" when the model explains the residuals) and whether the intrinsics
-    it does not estimate were ``marginalised`` into the covariance."""
+    it does not estimate were ``marginalised`` into the covariance (:func:`pose_record` adds
+    ``pose_variance``, (6,) over POSE_NAMES: what that added to the pose's variances)."""
     return {"explains": bool(check.explains), "p_value": float(check.p_value), "statistic": float(check.statistic),
             "dof": int(check.dof), "tested": list(check.tested), "warning": check.warning(),
             "marginalised": bool(np.any(check.added != 0.0))}
@@ -215,8 +219,27 @@ def lens_is_known(config) -> bool:
 
 def lens_prior_for(config) -> LensPrior:
     """The lens prior a solve of a dataset with this ``config`` uses: :data:`KNOWN_LENS` when
-    :func:`lens_is_known`, else :data:`UNCALIBRATED_LENS`."""
-    return KNOWN_LENS if lens_is_known(config) else UNCALIBRATED_LENS
+    :func:`lens_is_known`, else the ranges the config's camera units are drawn from
+    (:func:`config_lens_prior`): the judge knows the lens population it simulated, as a user who
+    knows the lens class of the camera states it to ``measure --lens-prior``."""
+    return KNOWN_LENS if lens_is_known(config) else config_lens_prior(config)
+
+
+def config_lens_prior(config) -> LensPrior:
+    """The lens prior of the camera units a dataset ``config`` draws (marginalised): each half-range
+    h matches the second moment about the assumed value (0; the image centre) of the config's
+    uniform range [lo, hi], h = sqrt(lo^2 + lo hi + hi^2) (a uniform over [-h, h] has variance h^2 / 3,
+    as U[lo, hi] has E[x^2] = (lo^2 + lo hi + hi^2) / 3): the prior of a user who knows the lens
+    class the factory drew from. The principal point's as a fraction of the image width (the larger
+    axis); p the larger of p1's and p2's. k3 is not in :class:`LensPrior` (not marginalised)."""
+    cu, width = config.camera_units, float(config.image.width)
+
+    def half(rng) -> float:
+        lo, hi = (float(v) for v in rng)
+        return math.sqrt(max(lo * lo + lo * hi + hi * hi, 0.0))
+
+    return LensPrior(pp_fraction=max(half(cu.principal_offset_x_px), half(cu.principal_offset_y_px)) / width,
+                     k1=half(cu.k1), k2=half(cu.k2), p=max(half(cu.p1), half(cu.p2)), marginalise=True)
 
 
 def docking_options(sigma_floor_px: float | None, lens: LensPrior = UNCALIBRATED_LENS) -> DockingOptions:

@@ -6,8 +6,12 @@ Inputs and how each is propagated (first order, through the Jacobian of the solv
 residuals, :func:`solver.refine.stack_blocks`, at the solved pose and camera; J over
 (w_A, t_A, w_B, t_B, f, *free), the d_from_b propagation :func:`solver.refine.d_from_b_jacobian`):
 
-- **centre noise** and **intrinsics**: the pose's reported covariance (the solver's, which
-  already carries the noise of the detected centres and the estimation of the focal length and
+- **camera model**: what the solver added to the reported covariance for the intrinsics its
+  camera model does not estimate, marginalised over their plausible range
+  (:mod:`solver.model_error`; the record's ``model_check.pose_variance``; None when nothing was
+  marginalised, the lens taken as known);
+- **centre noise** and **intrinsics**: the rest of the pose's reported covariance (the solver's,
+  which carries the noise of the detected centres and the estimation of the focal length and
   of the model's free intrinsics) is split. A frame solved alone: the share of the intrinsics
   is 1 - C_cond / C_marg per component, C_marg the pose block of (J^T J)^-1 and C_cond that of
   (J_pose^T J_pose)^-1 (the intrinsics held at their estimate: the Schur complement), so the
@@ -43,8 +47,9 @@ from dockfactory.eval.conformity import COVERAGE_K
 from dockfactory.solver.camera_models import MODELS, Intrinsics
 from dockfactory.solver.refine import Block, d_from_b_jacobian, inverse_spd, stack_blocks
 
-TERMS = ("centre_noise", "intrinsics", "layout", "detector_bias")
+TERMS = ("centre_noise", "intrinsics", "model_error", "layout", "detector_bias")
 TERM_LABELS = {"centre_noise": "centre noise", "intrinsics": "intrinsics",
+               "model_error": "camera model (unestimated intrinsics)",
                "layout": "marker layout", "detector_bias": "detector bias"}
 
 
@@ -137,6 +142,16 @@ def record_geometry(record: dict, markers) -> tuple:
     return pts["A"], pts["B"], ids, cam_from_a, cam_from_b, intr, MODELS[record.get("camera_model", "pinhole")]
 
 
+def model_error_variance(record: dict) -> np.ndarray | None:
+    """(6,) the pose variances the marginalised camera-model error added to a record's covariance,
+    or None when nothing was marginalised (or the record predates ``pose_variance``)."""
+    check = record.get("model_check") or {}
+    var = check.get("pose_variance")
+    if not check.get("marginalised") or var is None:
+        return None
+    return np.maximum(np.array(var, dtype=float), 0.0)
+
+
 def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None = None, bias_px=None,
                 k: float = COVERAGE_K, noise_from_residuals: bool = True) -> dict:
     """{component: {term: u or None, "combined": u_c, "expanded": U, "k": k}} of a solved record
@@ -148,7 +163,11 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
     the centre-noise term to the layout term, so it is not counted twice."""
     pa, pb, ids, ca, cb, intr, model = record_geometry(record, markers)
     sens = Sensitivity(pa, pb, ca, cb, intr, model)
+    model2 = model_error_variance(record)
     reported = np.diag(np.array(record["covariance"], dtype=float))
+    if model2 is not None:
+        model2 = np.minimum(model2, reported)
+        reported = reported - model2
     if record.get("self_calibrated") == "sequence":
         std = record.get("intrinsics_std") or {}
         intr_var = np.array([std.get("focal_px", 0.0)] + [std.get(n, 0.0) for n in model.free]) ** 2
@@ -161,7 +180,7 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
         layout2 = sens.layout_var(s)
         if noise_from_residuals and record.get("sigma_px"):
             centre2 = centre2 * (1.0 - min(1.0, sens.layout_residual_px2(s) / float(record["sigma_px"]) ** 2))
-    terms = {"centre_noise": centre2, "intrinsics": u_intr2, "layout": layout2,
+    terms = {"centre_noise": centre2, "intrinsics": u_intr2, "model_error": model2, "layout": layout2,
              "detector_bias": None if bias_px is None else sens.bias_var(bias_px)}
     out = {}
     for c, name in enumerate(POSE_NAMES):

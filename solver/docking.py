@@ -52,6 +52,7 @@ from dockfactory.solver.model_choice import ModelChoice
 from dockfactory.solver.model_error import ModelCheck
 from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
 from dockfactory.solver.ransac import ransac_docking
+from dockfactory.solver.refine import d_from_b_jacobian
 from dockfactory.solver.suspects import leave_out_suspects, occlusion_variances
 
 __all__ = ["DockingResult", "solve_docking"]
@@ -112,6 +113,16 @@ class DockingResult:
     intrinsics_std: dict = field(default_factory=dict)
     model_choice: ModelChoice | None = None
     model_check: ModelCheck | None = None
+
+    @property
+    def model_error_covariance(self) -> np.ndarray:
+        """(6, 6) over ``POSE_NAMES``: the part of ``covariance`` that marginalising the
+        intrinsics the camera model does not estimate added (zeros when nothing was added)."""
+        if self.model_check is None:
+            return np.zeros((6, 6))
+        prop = d_from_b_jacobian(self.cam_from_a[:3, :3], self.cam_from_a[:3, 3], self.cam_from_b[:3, :3],
+                                 self.cam_from_b[:3, 3])
+        return prop @ self.model_check.added[:12, :12] @ prop.T
 
     @property
     def model_warning(self) -> str:

@@ -26,7 +26,9 @@ from dockfactory.solver.refine import (
 )
 from dockfactory.solver.upnp import CameraPose, focal_sweep, upnp
 
-__all__ = ["PnPfResult", "PnPfEstimate", "estimate_pnpf", "refine_best_candidate",
+MIN_NOISE_DOF = 20   # residual dof of a self-estimated noise below which a std is not gated on
+
+__all__ = ["MIN_NOISE_DOF", "PnPfResult", "PnPfEstimate", "estimate_pnpf", "refine_best_candidate",
            "check_focal_observable", "focal_is_determined"]
 
 
@@ -45,8 +47,12 @@ class PnPfResult(CameraPose):
     - ``iterations``: Levenberg-Marquardt iterations; ``residuals_px`` (n, 2) of the points used;
     - ``focal_determined``: False when the focal's relative standard deviation is above
       ``RefineOptions.max_focal_rel_std`` (near-planar, fronto-parallel points at this noise:
-      the focal and the depth trade off). Rotation and the in-plane translation stay determined
-      and the covariance says how well each parameter is known; gate on it, or on this flag;
+      the focal and the depth trade off). The covariance is then a linearisation at a poorly
+      determined point and may understate the error of any parameter, the in-plane translation
+      included: gate on ``uncertainty_determined``;
+    - ``noise_dof``: the residual degrees of freedom the noise sigma was estimated from
+      (2 n - 7), or inf when the caller gave the noise (``sigma_px``) or a floor for it
+      (``RefineOptions.sigma_floor_px``);
     - ``focal_at_bound``: the estimate fell outside the ``focal_range_px`` given to
       :func:`solver.solve_pnpf` and is the pose refined at the nearer bound (solver.focal_prior).
     """
@@ -62,11 +68,25 @@ class PnPfResult(CameraPose):
     residuals_px: np.ndarray = field(default=None, repr=False)
     focal_determined: bool = True
     focal_at_bound: bool = False
+    noise_dof: float = float("inf")
 
     @property
     def std(self) -> np.ndarray:
         """Standard deviations (7,) of the parameters, from ``covariance``."""
         return np.sqrt(np.diag(self.covariance))
+
+    @property
+    def uncertainty_determined(self) -> bool:
+        """True when ``covariance`` is a standard deviation a user can gate on at several sigmas:
+        the focal is determined and the noise is known, floored, or estimated from at least
+        ``MIN_NOISE_DOF`` residual degrees of freedom.
+
+        Why: with the noise estimated from the frame's own nu residuals, error / std is Student-t
+        with nu degrees of freedom; its tail beyond 6 stds (the variance factor nu / (nu - 2)
+        included) is 1.9e-3 at nu = 3 (5 points), 2e-5 at nu = 13 and below 5e-6 from nu = 20,
+        so a few-point solve without a known noise can be wrong by far more than its std says
+        however the std is scaled."""
+        return self.focal_determined and self.noise_dof >= MIN_NOISE_DOF
 
     @classmethod
     def from_refinement(cls, ref: RefineResult, sigma_px, candidates, inliers,

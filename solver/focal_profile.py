@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from dockfactory.solver.errors import SolverError
-from dockfactory.solver.estimate import PnPfResult
+from dockfactory.solver.estimate import PnPfResult, focal_is_determined
 from dockfactory.solver.options import RefineOptions
 from dockfactory.solver.refine import refine_pnpf
 
@@ -82,7 +82,8 @@ def _profile_end(p3, p2, pp, res: PnPfResult, side: int, rss0: float, options: R
 def widen_along_focal_profile(p3, p2, pp, res: PnPfResult, options: RefineOptions) -> PnPfResult:
     """``res`` with its covariance widened along the focal's likelihood profile (see the module
     docstring) when an end of the profile's 3-sigma interval lies beyond 3 linearised standard
-    deviations of f; ``res`` itself when f's relative std is below PROFILE_MIN_REL_STD, is not
+    deviations of f (``focal_determined`` then judged on the widened covariance: a focal whose
+profile reaches beyond ``max_focal_rel_std`` is not determined); ``res`` itself when f's relative std is below PROFILE_MIN_REL_STD, is not
     finite, or both ends lie within. ``p3`` (N, 3) mm, ``p2`` (N, 2) px: the points ``res`` used."""
     var_f = float(res.covariance[6, 6])
     if not (math.isfinite(var_f) and PROFILE_MIN_REL_STD * res.focal_px < math.sqrt(var_f) < res.focal_px):
@@ -93,4 +94,6 @@ def widen_along_focal_profile(p3, p2, pp, res: PnPfResult, options: RefineOption
     if s2 <= PROFILE_MIN_RATIO ** 2:
         return res
     cov = res.covariance + np.outer(d, d) / 9.0 * (1.0 - 1.0 / s2)
-    return replace(res, covariance=0.5 * (cov + cov.T))
+    cov = 0.5 * (cov + cov.T)
+    return replace(res, covariance=cov,
+                   focal_determined=res.focal_determined and focal_is_determined(res.focal_px, cov, options))

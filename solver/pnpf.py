@@ -6,6 +6,8 @@ LO-RANSAC (:func:`solver.ransac.ransac_pnpf`).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from dockfactory.solver.checks import (
@@ -45,9 +47,9 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     if that gives no valid camera or the refinement fails; ``candidates`` holds the candidates
     that were computed (``all_candidates=True``: always every one).
 
-    Returns a :class:`PnPfResult`; a focal the points do not determine (near-planar,
-    fronto-parallel points at this noise) is returned with ``focal_determined=False`` and its
-    covariance, not refused: the rotation and the in-plane translation are still determined.
+    Returns a :class:`PnPfResult`; an undetermined focal (near-planar, fronto-parallel points at
+    this noise) is returned with ``focal_determined=False``, not refused; gate the covariance on
+    ``uncertainty_determined`` (focal determined, noise given, floored or from enough residuals).
     A weakly determined focal's covariance is widened along its likelihood profile where the
     linearised one is too narrow (:mod:`solver.focal_profile`).
     Raises a :class:`SolverError` subclass: InvalidSolverInput (shape mismatch, NaN/inf),
@@ -71,6 +73,14 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     keep = res.inliers
     if focal_range is not None:
         res = apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, refine_options)
-        if res.focal_at_bound:
-            return res
-    return widen_along_focal_profile(p3[keep], p2[keep], pp, res, refine_options)
+    if not res.focal_at_bound:
+        res = widen_along_focal_profile(p3[keep], p2[keep], pp, res, refine_options)
+    return with_noise_dof(res, sigma_px, refine_options)
+
+
+def with_noise_dof(res: PnPfResult, sigma_px: float | None, options: RefineOptions) -> PnPfResult:
+    """``res`` with ``noise_dof``: 2 n - 7 over its n inliers when the noise sigma came from the
+    residuals alone, inf when the caller gave it or a floor for it."""
+    if sigma_px is not None or options.sigma_floor_px is not None:
+        return replace(res, noise_dof=float("inf"))
+    return replace(res, noise_dof=float(2 * int(np.count_nonzero(res.inliers)) - 7))

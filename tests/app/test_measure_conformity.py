@@ -98,8 +98,34 @@ def test_layout_sigma_mm_enters_the_budget_and_the_guard_band(measured, tmp_path
         bx = b["uncertainty"]["x_mm"]
         assert bx["layout"] > 0 and bx["combined"] > a["uncertainty"]["x_mm"]["combined"]
         assert bx["detector_bias"] is not None   # the shipped weights' noise card measured it
+        assert bx["model_error"] > 0            # the lens is not known: marginalised by default
         assert bx["combined"] ** 2 == pytest.approx(bx["centre_noise"] ** 2 + bx["intrinsics"] ** 2 + bx["layout"] ** 2
-                                                    + bx["detector_bias"] ** 2)
+                                                    + bx["detector_bias"] ** 2 + bx["model_error"] ** 2)
+
+
+@pytest.mark.slow   # the detector on two 1280 x 960 images, twice
+def test_lens_prior_sets_the_camera_model_term(measured, tmp_path, capsys):
+    """--lens-prior known: nothing marginalised (no camera-model term, a smaller u); narrower
+    stated ranges: a smaller term than the default's; the rest of the budget unchanged."""
+    ds, out, argv = measured
+    base = _doc(out)["images"]
+    runs = {}
+    for name, value in (("known", "known"), ("narrow", "pp=0.01,k1=0.05,k2=0.02,p=5e-4")):
+        assert main(_argv(ds, tmp_path / name) + ["--lens-prior", value]) == 0
+        runs[name] = _doc(tmp_path / name)["images"]
+    for a, k, n in zip(base, runs["known"], runs["narrow"]):
+        for c in ("x_mm", "y_mm", "alpha_deg"):
+            ua, uk, un = a["uncertainty"][c], k["uncertainty"][c], n["uncertainty"][c]
+            assert uk["model_error"] is None and ua["model_error"] > 0
+            assert 0 < un["model_error"] < ua["model_error"]
+            assert uk["combined"] < un["combined"] < ua["combined"]
+            assert uk["centre_noise"] == pytest.approx(ua["centre_noise"], rel=1e-6)
+        assert k["pose"] == a["pose"]          # the prior changes the uncertainty, never the pose
+    with pytest.raises(SystemExit) as stop:    # argparse: one error line, exit 2, nothing measured
+        main(_argv(ds, tmp_path / "bad") + ["--lens-prior", "k9=1"])
+    assert stop.value.code == 2 and not (tmp_path / "bad").exists()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "--lens-prior" in err[-1] and "k9=1" in err[-1]
 
 
 def test_a_spec_without_pose_tolerances_is_refused_before_measuring(painted, tmp_path, capsys):

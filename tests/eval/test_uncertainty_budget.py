@@ -157,3 +157,31 @@ def test_budget_block_is_the_rms_over_frames_and_the_report_shows_the_gated_comp
     assert "x (mm)" in text and "alpha (deg)" in text and "y (mm)" not in text
     assert "U (k = 2)" in text and "marker layout" in text and "(0.010, -0.020) px" in text
     assert html_budget({"acceptance": {"criteria": []}}) == []
+
+
+def test_camera_model_term_is_what_marginalising_the_lens_added():
+    """Solved with the unestimated intrinsics marginalised (solver.model_error), the budget's
+    camera-model term is the difference between that covariance and the same solve's with the
+    lens known, and the terms still add up to the reported uncertainty."""
+    from dataclasses import replace
+
+    from dockfactory.solver.options import DEFAULT_DOCKING, LensPrior
+    rng = np.random.default_rng(13)
+    scene = docking_scene(rng, markers=MARKERS)
+    uv = _uv(scene, scene.points_a, scene.points_b) + rng.normal(0.0, 0.1, (len(IDS), 2))
+    solves = {m: solve_docking(MARKERS, scene.image_centre, correspondences=(IDS, uv), sigma_px=0.1,
+                               options=replace(DEFAULT_DOCKING, lens=LensPrior(marginalise=m)))
+              for m in (False, True)}
+    added = np.diag(solves[True].covariance) - np.diag(solves[False].covariance)
+    assert np.all(added > 0)
+    rec = {**pose_record(solves[True], len(IDS)), "image_size": list(scene.image_size)}
+    known = {**pose_record(solves[False], len(IDS)), "image_size": list(scene.image_size)}
+    budget, plain = pose_budget(rec, MARKERS), pose_budget(known, MARKERS)
+    reported = np.sqrt(np.diag(np.array(rec["covariance"])))
+    for i, n in enumerate(POSE_NAMES):
+        b = budget[n]
+        assert b["model_error"] ** 2 == pytest.approx(added[i], rel=1e-6)
+        assert np.sqrt(b["centre_noise"] ** 2 + b["intrinsics"] ** 2 + b["model_error"] ** 2) == \
+            pytest.approx(reported[i], rel=1e-9)
+        assert plain[n]["model_error"] is None
+        assert b["centre_noise"] == pytest.approx(plain[n]["centre_noise"], rel=1e-6)
