@@ -177,20 +177,27 @@ def _plot_per_condition(plt, test: list[dict], tol: dict) -> str:
     return _fig_png(fig)
 
 
-def _plot_distance_focal(plt, test: list[dict]) -> str:
+def _plot_distance_focal(plt, test: list[dict], tol: dict) -> str:
+    """|error| against camera distance and focal length, the tolerance drawn on every panel (the
+    axis then runs to it, as the per-condition panels do)."""
     fig, axes = plt.subplots(2, 3, figsize=(11, 5.5))
     for j, c in enumerate(GATED):
-        axes[0, j].scatter([r["distance_mm"] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8)
-        axes[0, j].set_xlabel("camera distance (mm)")
-        axes[0, j].set_ylabel(f"|{c} error| ({UNITS[c]})")
-        axes[1, j].scatter([r["focal_true"] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8, c="#228833")
-        axes[1, j].set_xlabel("focal length (px)")
-        axes[1, j].set_ylabel(f"|{c} error| ({UNITS[c]})")
+        for i, (key, label, colour) in enumerate((("distance_mm", "camera distance (mm)", "#0077bb"),
+                                                   ("focal_true", "focal length (px)", "#228833"))):
+            ax = axes[i, j]
+            ax.scatter([r[key] for r in test], [abs(r[f"err_{c}"]) for r in test], s=8, c=colour)
+            ax.set_xlabel(label)
+            ax.set_ylabel(f"|{c} error| ({UNITS[c]})")
+            if c in tol:
+                ax.axhline(tol[c], **TOLERANCE_STYLE, label="tolerance")
+                ax.legend(fontsize=7)
     fig.tight_layout()
     return _fig_png(fig)
 
 
-def _plot_against_crb(plt, test: list[dict]) -> str:
+def _plot_against_crb(plt, test: list[dict], tol: dict) -> str:
+    """|error| against the frame's Cramer-Rao std; the tolerance is drawn when it falls on the
+    axis, else named in the panel's corner (the panel is about the bound, at the bound's scale)."""
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
     for ax, c in zip(axes, GATED):
         pts = [(r[f"crb_{c}"], abs(r[f"err_{c}"])) for r in test if r.get(f"crb_{c}")]
@@ -200,9 +207,15 @@ def _plot_against_crb(plt, test: list[dict]) -> str:
             lim = max(b.max(), e.max()) * 1.05
             ax.plot([0, lim], [0, lim], "k--", lw=0.8, label="|error| = bound")
             ax.plot([0, lim], [0, 2 * lim], "k:", lw=0.8, label="2 x bound")
-            ax.legend(fontsize=7)
+            if c in tol and tol[c] <= 2 * lim:
+                ax.axhline(tol[c], **TOLERANCE_STYLE, label="tolerance")
+            elif c in tol:
+                ax.text(0.02, 0.95, f"tolerance {tol[c]:g} {UNITS[c]}: above this axis", transform=ax.transAxes,
+                        fontsize=7, va="top", color=TOLERANCE_STYLE["color"])
+            ax.legend(fontsize=7, loc="lower right")
         ax.set_xlabel(f"Cramer-Rao std of {c} ({UNITS[c]})")
-        ax.set_ylabel(f"|{c} error|")
+        ax.set_ylabel(f"|{c} error| ({UNITS[c]})")
+    fig.tight_layout()
     return _fig_png(fig)
 
 
@@ -227,8 +240,8 @@ def plots(rows: list[dict], metrics: dict, detections_pr=None) -> dict[str, str]
     out["Error histograms (test split)"] = _plot_error_histograms(plt, test, tol)
     out["X-Y error scatter"] = _plot_xy_scatter(plt, test, tol)
     out["Error per condition"] = _plot_per_condition(plt, test, tol)
-    out["Error against camera distance and focal length"] = _plot_distance_focal(plt, test)
-    out["Measured error against the Cramer-Rao bound"] = _plot_against_crb(plt, test)
+    out["Error against camera distance and focal length"] = _plot_distance_focal(plt, test, tol)
+    out["Measured error against the Cramer-Rao bound"] = _plot_against_crb(plt, test, tol)
     if detections_pr:
         out["Precision-recall per class"] = _plot_precision_recall(plt, detections_pr)
     return out
