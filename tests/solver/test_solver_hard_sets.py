@@ -85,9 +85,9 @@ def test_near_planar_sets_with_a_focal_range_stay_within_the_bound():
 
 def test_a_self_estimated_noise_from_few_points_is_flagged_and_a_given_one_is_not():
     """Five points leave 3 residual degrees of freedom: the noise estimated from them makes
-    error / std Student-t(3), which passes 6 stds a few times per 1,000 (measured 4-7 at 1 px
-    before the flag). The solve says so (``uncertainty_determined`` False, ``noise_dof`` 3);
-    told the noise, or a floor for it, it does not."""
+    error / std Student-t(3), which passes 6 stds a few times per 1,000
+    (bench/results/solver_honesty/README.md). The solve says so (``uncertainty_determined``
+    False, ``noise_dof`` 3); told the noise, or a floor for it, it does not."""
     from dataclasses import replace
 
     from solver_bench import hard_trial
