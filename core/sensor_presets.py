@@ -39,7 +39,7 @@ def _colour_qe(mono_qe: float) -> tuple[float, float, float]:
 PRESETS: dict[str, EmvaSensor] = {
     # Sony IMX174 (Pregius 1st generation, 5.86 um pixel; e.g. Basler acA1920-155uc, FLIR
     # Grasshopper3 GS3-U3-23S6C). Source: F. Herb, "Sony Exmor Sensoren: Datenblattrekonstruktion
-    # IMX157", fhotolab.fherb.de, 2016-09-07, quoting the IMX174 EMVA 1288 figures published by
+    # IMX157", fhotolab.fherb.de, 7 September 2016, quoting the IMX174 EMVA 1288 figures published by
     # Point Grey (monochrome camera): saturation capacity 32 691 e-, temporal dark noise 6.83 e-,
     # QE 77 % at 525 nm, gain 0.51 (e-/ADU; read here as Point Grey's 16-bit-normalised ADU, i.e.
     # 0.51 * 16 = 8.16 e-/DN at 12 bits, K = 0.1225 DN/e-, which puts saturation at 4006 of 4095

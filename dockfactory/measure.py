@@ -173,18 +173,13 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     else:
         frame.record, frame.used_points = solve_frame(markers, frame.principal_point, centres, None, camera_model,
-                                                      lens_options(detector.centre_noise_px, lens))
+                                                      docking_options(detector.centre_noise_px, lens))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
     return frame
-
-
-def lens_options(sigma_floor_px, lens: LensPrior | None):
-    """The solver's options with the detector's noise floor and ``lens`` (None: the default)."""
-    return docking_options(sigma_floor_px) if lens is None else docking_options(sigma_floor_px, lens)
 
 
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
@@ -202,7 +197,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     keys = [str(f.index) for f in solved]
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
-                        lens_options(sigma_floor_px, lens))
+                        docking_options(sigma_floor_px, lens))
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}

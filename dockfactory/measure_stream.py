@@ -48,9 +48,9 @@ from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
-from dockfactory.eval.solve_frames import resolve_camera_model
+from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
-from dockfactory.measure import MAX_WORKERS, NO_MARKERS, lens_options, solve_image
+from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration
@@ -441,7 +441,7 @@ def _measurer(detector, markers, options: StreamOptions, decide, size) -> Stream
     tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
                if options.roi_refresh and min(size) > 1 else None)
     calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
-                                     options.freeze_after, lens_options(detector.centre_noise_px, options.lens))
+                                     options.freeze_after, docking_options(detector.centre_noise_px, options.lens))
                    if options.window else None)
     return StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
                           decide, tracker, calibration)

@@ -242,13 +242,13 @@ def config_lens_prior(config) -> LensPrior:
                      k1=half(cu.k1), k2=half(cu.k2), p=max(half(cu.p1), half(cu.p2)), marginalise=True)
 
 
-def docking_options(sigma_floor_px: float | None, lens: LensPrior = UNCALIBRATED_LENS) -> DockingOptions:
+def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None) -> DockingOptions:
     """The solver's options with the detector's measured centre noise as the covariance's floor
-    and ``lens`` the plausible range of the intrinsics its camera model does not estimate (by
-    default an uncalibrated camera's, marginalised into the covariance)."""
+    and ``lens`` the plausible range of the intrinsics its camera model does not estimate (None:
+    an uncalibrated camera's, :data:`UNCALIBRATED_LENS`, marginalised into the covariance)."""
     refine = DEFAULT_DOCKING.refine if sigma_floor_px is None else \
         replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px))
-    return replace(DEFAULT_DOCKING, refine=refine, lens=lens)
+    return replace(DEFAULT_DOCKING, refine=refine, lens=UNCALIBRATED_LENS if lens is None else lens)
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
