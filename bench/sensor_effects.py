@@ -15,7 +15,8 @@ effects differ only in the camera. Geometry never changes: the errors are measur
 labels. The reference ("three-chip") is a three-chip sensor with the same EMVA 1288 preset, PNG
 output. Per effect and dataset: frames solved, X / Y / alpha RMSE, their ratio to the reference,
 RMS z (error / reported std), and the centre error of the detected markers against the labels'
-outline centroids (median length, mean dx / dy per class).
+outline centroids (median length, mean dx / dy per class). ``sampling-rggb`` is the three-chip
+image refined (with ``--tell-cfa``) as if it came from an RGGB sensor: what the sampling alone costs.
 
 Results land in RESULTS.json after each (dataset, effect) pair (resumable: finished pairs are
 skipped), and a markdown table is printed at the end.
@@ -77,7 +78,12 @@ EFFECTS = {
     "wb20": (lambda i: chain(wb=wb_draw(i, 0.2)), 0.0, None),
     "bayer-wb20": (lambda i: chain("RGGB", "bilinear", wb=wb_draw(i, 0.2)), 0.0, None),
     "bayer-sharpen": (lambda i: chain("RGGB", "bilinear", sharpen_amount=0.8), 0.0, None),
+    "sampling-rggb": (lambda i: chain(), 0.0, None),
 }
+# Effects whose image is a three-chip camera's but whose refinement (with --tell-cfa) is told a
+# Bayer pattern: it then fits only the values an RGGB sensor would have sampled, with no demosaic and
+# the same noise per sample, so the row measures what the 1-in-4 sampling alone costs.
+SAMPLED_AS = {"sampling-rggb": "RGGB"}
 
 
 def delivered(passes_rgb: np.ndarray, label: dict, effect: str) -> np.ndarray:
@@ -153,6 +159,7 @@ def run_effect(detector, ds: Dataset, effect: str, frames: list[str], tell_cfa: 
         passes = read_passes(ds.root / "exr" / f"{fid}.exr")
         cam = EFFECTS[effect][0](ds.labels[fid]["spec"]["index"])
         cfa = cam.cfa if tell_cfa and cam is not None and cam.cfa != "none" else None
+        cfa = SAMPLED_AS.get(effect, cfa) if tell_cfa else cfa
         rows.append(measure_frame(detector, ds, fid, delivered(passes.rgb, ds.labels[fid], effect), cfa, jpeg))
     return {**summary(rows), "seconds": round(time.perf_counter() - t0, 1), "rows": rows}
 

@@ -28,7 +28,10 @@ DEFAULT_LAYOUT_A = ((50.0, -53.0), (100.0, -32.0), (62.0, -7.0), (130.0, 10.0),
                     (47.0, 24.0), (88.0, 44.0), (150.0, -61.0))
 DEFAULT_LAYOUT_B = ((52.0, -42.0), (108.0, -19.0), (68.0, 3.0), (140.0, 29.0),
                     (48.0, 41.0), (96.0, 60.0), (158.0, -56.0))
-RING_EXTRA_MM = 2.5  # the dark ring around each coloured disc
+RING_EXTRA_MM = 2.5  # the ring around each coloured disc
+# Grey reflectance range of the ring, per design: a dark ring leaves a Bayer sensor a red disc's
+# edge in its red samples alone; a white ring shows it in the green and blue samples too.
+RING_REFLECTANCE = {"dark": (0.01, 0.05), "white": (0.70, 0.85)}
 SECTION_PASS_INDEX = {"A": 201, "B": 202}  # index pass value of each section's body and flange
 
 

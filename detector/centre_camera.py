@@ -39,7 +39,7 @@ import numpy as np
 from dockfactory.core.cfa import channel_map
 from dockfactory.detector import centre
 from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
-from dockfactory.detector.centre_joint import fit_disc_joint
+from dockfactory.detector.centre_joint import fit_disc_joint, reference_channel
 
 
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
@@ -47,20 +47,27 @@ LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (
 
 def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: bool):
     """The coverage window ``win`` (a ``centre._Window``) with its score replaced by the fit's
-    data: the class's own channel, or with ``jpeg`` and no ``cfa`` the luma, linearised; NaN off
-    the class's own sites of a ``cfa`` sensor. Also the disc and ring levels of that data; None when either
-    level has no pixel or the disc is not above the ring. ValueError for an unknown pattern."""
+    data: with a ``cfa``, the reference channel of ``centre_joint.reference_channel`` (the class's
+    own channel on a dark ring) at its own sites, NaN elsewhere; with ``jpeg`` and no ``cfa`` the
+    luma; linear, negated when its disc is darker than its ring (a disc on a white ring) so that
+    the disc lies above the ring. Also the disc and ring levels of that data; None when either
+    level has no pixel or the disc does not stand out. ValueError for an unknown pattern."""
     y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
     h, w = win.s.shape
-    c = CLASS_CHANNEL[class_id]
     sub = image[y0:y0 + h, x0:x0 + w]
-    if jpeg and cfa is None:
+    if cfa is None:
         luma = np.rint(sub.astype(np.float32) @ LUMA_WEIGHTS).astype(np.uint8)
-        level = centre._SRGB_TO_LINEAR[luma]
+        level, sites = centre._SRGB_TO_LINEAR[luma], np.ones(sub.shape[:2], bool)
+        inner, ring = (win.rho <= 0.5), (win.rho >= 1.08) & (win.rho <= 1.22)
+        sign = 1.0 if not ring.any() or not inner.any() or np.median(level[inner]) >= np.median(level[ring]) else -1.0
     else:
-        level = centre._SRGB_TO_LINEAR[sub[..., c]]
-    sites = (np.ones(level.shape, bool) if cfa is None
-             else channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w] == c)
+        cmap = channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w]
+        lin = centre._SRGB_TO_LINEAR[sub]
+        ref = reference_channel(lin, cmap, win.rho, CLASS_CHANNEL[class_id])
+        if ref is None:
+            return None
+        level, sites, sign = lin[..., ref[0]], cmap == ref[0], ref[1]
+    level = sign * level
     inner, ring = (win.rho <= 0.5) & sites, (win.rho >= 1.08) & (win.rho <= 1.22) & sites
     if not inner.any() or not ring.any():
         return None

@@ -61,43 +61,73 @@ def channel_levels(level: np.ndarray, sites: np.ndarray, rho: np.ndarray) -> tup
 
 
 def site_samples(lin: np.ndarray, cmap: np.ndarray, win, own: int, band: np.ndarray) -> SiteSamples | None:
-    """Samples of every channel with contrast at its own sites inside ``band`` (h, w) bool, the class
-    channel ``own`` first. ``lin`` (h, w, 3) linear window of the image, ``cmap`` (h, w) its channel
-    map, ``win`` the pass's ``centre._Window``. None when the class channel has no disc above its ring."""
+    """Samples of every channel with contrast at its own sites inside ``band`` (h, w) bool, the
+    reference channel ``own`` first. ``lin`` (h, w, 3) linear window of the image, ``cmap`` (h, w) its
+    channel map, ``win`` the pass's ``centre._Window``. A channel whose disc is darker than its ring
+    enters negated (values and levels), so that every slot's disc lies above its ring (the fit's
+    acceptance reads slot 0's). None when the reference channel has no contrast."""
     dx, dy = win.xs - win.centre[0], win.ys - win.centre[1]
     parts, levels = [], []
     for ch in (own, *(c for c in range(3) if c != own)):
         lv = channel_levels(lin[..., ch], cmap == ch, win.rho)
-        if ch == own and (lv is None or not lv[0] > lv[1]):
+        if ch == own and (lv is None or lv[0] == lv[1]):
             return None
         if lv is None or (ch != own and abs(lv[0] - lv[1]) < MIN_CHANNEL_CNR * lv[2]):
             continue
+        sign = 1.0 if lv[0] > lv[1] else -1.0
         sel = band & (cmap == ch)
         n = int(sel.sum())
-        parts.append((dx[sel], dy[sel], lin[..., ch][sel], np.full(n, len(levels)), np.full(n, 1.0 / lv[2])))
-        levels.append(lv[:2])
+        parts.append((dx[sel], dy[sel], sign * lin[..., ch][sel], np.full(n, len(levels)), np.full(n, 1.0 / lv[2])))
+        levels.append((sign * lv[0], sign * lv[1]))
     x, y, s, k, wt = (np.concatenate(v) for v in zip(*parts))
     return SiteSamples(x=x, y=y, s=s.astype(np.float64), k=k, wt=wt, levels=np.array(levels))
+
+
+def reference_channel(lin: np.ndarray, cmap: np.ndarray, rho: np.ndarray, class_channel: int):
+    """(channel, sign) whose samples steer the fit's band: the class's own channel when its disc is
+    above its ring (a disc on a dark ring), else the channel of the largest contrast to noise
+    ``|disc - ring| / noise`` at its own sites (on a white ring, a red disc's edge is in the green
+    and blue samples, dark against the ring), sign -1 when its disc is the darker. None when no
+    channel has a disc and a ring level."""
+    best = None
+    for ch in range(3):
+        lv = channel_levels(lin[..., ch], cmap == ch, rho)
+        if lv is None:
+            continue
+        if ch == class_channel and lv[0] > lv[1]:
+            return ch, 1.0
+        cnr = abs(lv[0] - lv[1]) / lv[2]
+        if cnr > 0 and (best is None or cnr > best[0]):
+            best = (cnr, ch, 1.0 if lv[0] > lv[1] else -1.0)
+    return None if best is None else best[1:]
 
 
 def fit_disc_joint(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = True) -> np.ndarray | None:
     """Centre (2,) float64 px of the disc in ``win`` (a ``centre._Window`` of ``image`` (H, W, 3) uint8
     sRGB) fitted to every channel at its own sites of pattern ``cfa``; with ``reweight`` (the
     refinement's choice) a second fit weighted by each channel's residual RMS in the first. None
-    when there is nothing to fit or ``centre._fit_accepted`` refuses it (geometry and the class
+    when there is nothing to fit or ``centre._fit_accepted`` refuses it (geometry and the reference
     channel's levels)."""
+    fitted = joint_fit(image, win, class_id, cfa, reweight)
+    return None if fitted is None else win.centre + fitted[0][:2]
+
+
+def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = True):
+    """(parameters, the fit's ``SiteSamples`` with the weights of its last fit) of
+    :func:`fit_disc_joint`, the centre at parameters[:2] px from ``win.centre``; None as there."""
     m0 = centre._inverse_2x2(4 * win.cov)
     d0, _ = centre._sampson(win.xs - win.centre[0], win.ys - win.centre[1], m0[0, 0], m0[0, 1], m0[1, 1])
     y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
     h, w = win.s.shape
     lin = centre._SRGB_TO_LINEAR[image[y0:y0 + h, x0:x0 + w]]
     cmap = channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w]
-    c = CLASS_CHANNEL[class_id]
-    lv = channel_levels(lin[..., c], cmap == c, win.rho)
-    if lv is None or not lv[0] > lv[1]:
+    ref = reference_channel(lin, cmap, win.rho, CLASS_CHANNEL[class_id])
+    if ref is None:
         return None
+    c, sign = ref
+    lv = channel_levels(sign * lin[..., c], cmap == c, win.rho)
     band = ((d0 > -centre.FIT_BAND_IN_PX) & (d0 < centre.FIT_BAND_OUT_PX)
-            & centre._usable(lin[..., c], win.pur, win.rho, lv[0], lv[1]))
+            & centre._usable(sign * lin[..., c], win.pur, win.rho, lv[0], lv[1]))
     data = site_samples(lin, cmap, win, c, band)
     if data is None or data.x.size < 20:
         return None
@@ -107,10 +137,11 @@ def fit_disc_joint(image: np.ndarray, win, class_id: int, cfa: str, reweight: bo
         r = _residual(p, data)[0] / data.wt
         count = np.maximum(np.bincount(data.k, minlength=len(data.levels)), 1)
         rms = np.sqrt(np.bincount(data.k, r * r, minlength=len(data.levels)) / count)
-        p = _levenberg_marquardt(p, replace(data, wt=1.0 / (rms[data.k] + 1e-4)))
+        data = replace(data, wt=1.0 / (rms[data.k] + 1e-4))
+        p = _levenberg_marquardt(p, data)
     if p is None or not centre._fit_accepted(p[:_GEOMETRY + _LEVELS], m0):
         return None
-    return win.centre + p[:2]
+    return p, data
 
 
 def _residual(p: np.ndarray, d: SiteSamples):

@@ -37,7 +37,7 @@ from dockfactory.core.config import (
     SensorConfig,
 )
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
-from dockfactory.core.layout import marker_points
+from dockfactory.core.layout import RING_REFLECTANCE, marker_points
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -297,7 +297,9 @@ def sample_lights(rng, target, condition: str) -> tuple[Light, ...]:
     return key, fill
 
 
-def sample_appearance(rng, condition: str) -> Appearance:
+def sample_appearance(rng, condition: str, ring: str = "dark") -> Appearance:
+    """The frame's materials and world light; ``ring`` the marker ring's design
+    (``core.layout.RING_REFLECTANCE``: one draw either way, so the rest of the stream is the same)."""
     ideal = condition == "ideal"
     return Appearance(
         section_color_a=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))]),
@@ -310,7 +312,7 @@ def sample_appearance(rng, condition: str) -> Appearance:
         texture_offset=vec(rng.uniform(-100, 100, size=3)),
         marker_red=_hsv_linear(rng.uniform(-0.02, 0.02), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
         marker_blue=_hsv_linear(rng.uniform(0.58, 0.66), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
-        ring_color=vec([rng.uniform(0.01, 0.05)] * 3),
+        ring_color=vec([rng.uniform(*RING_REFLECTANCE[ring])] * 3),
         floor_color=_jitter_color(rng, (0.25, 0.24, 0.22), 0.4),
         wall_color=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))], 0.3),
         world_color=_jitter_color(rng, (0.9, 0.92, 1.0), 0.08),
@@ -469,7 +471,7 @@ def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLe
         raise ConfigError(f"[camera] focal_px: frame {spec.frame_id} cannot fit its markers at "
                           f"{f_lo:g} px (largest that fits: {f_cap:.0f} px)")
     camera = camera_model(cfg.image, cfg.camera_units, lens, f_lo + u_focal * (f_hi - f_lo), cam_from_d, eye, target)
-    appearance = sample_appearance(geo_rng, spec.condition)
+    appearance = sample_appearance(geo_rng, spec.condition, cfg.markers.ring)
     clutter = sample_clutter(geo_rng, static.radius_mm)
     lights = sample_lights(look_rng, target, spec.condition)
     return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
@@ -492,7 +494,7 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens)
         look_rng = rng_for(seed, STREAM_LOOK, spec.index)
         t = run_time(cfg.runs, cfg.dataset.frames, spec.run, spec.run_frame)
         d_from_b = run_pose(cfg.pose, cfg.runs, seed, spec.run, t)
-    appearance = sample_appearance(stage_rng, spec.condition)
+    appearance = sample_appearance(stage_rng, spec.condition, cfg.markers.ring)
     clutter = sample_clutter(stage_rng, static.radius_mm)
     lights = sample_lights(light_rng, target, spec.condition)
     return d_from_b, camera, eye, (appearance, clutter, lights), look_rng

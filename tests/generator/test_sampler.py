@@ -3,7 +3,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dockfactory.core.config import CHALLENGING, config_from_dict
+from dockfactory.core.config import CHALLENGING, ConfigError, config_from_dict
 from dockfactory.core.geometry import pose_components, project_points, transform_points
 from dockfactory.core.layout import (
     DEFAULT_LAYOUT_A,
@@ -186,3 +186,22 @@ def test_markers_in_d_moves_only_b(cfg):
     is_a = np.array([m.section == "A" for m in static.markers])
     assert np.allclose(pts[is_a], local[is_a])
     assert not np.allclose(pts[~is_a], local[~is_a])
+
+
+def test_a_white_ring_changes_the_ring_alone(cfg):
+    """``[markers] ring = "white"``: every frame keeps its pose, camera and every other material
+    (one draw either way); the ring's grey level moves from the dark range to the white one."""
+    from dockfactory.core.layout import RING_REFLECTANCE
+    white = config_from_dict({"dataset": {"frames": 300, "seed": 42}, "repeatability": {"poses": 3, "captures": 4},
+                              "markers": {"ring": "white"}})
+    for spec in frame_plan(cfg)[:12]:
+        d, w = sample_frame(cfg, spec), sample_frame(white, spec)
+        assert d.d_from_b == w.d_from_b and d.camera == w.camera and d.lights == w.lights
+        assert dataclasses.replace(w.appearance, ring_color=d.appearance.ring_color) == d.appearance
+        lo, hi = RING_REFLECTANCE["white"]
+        assert lo <= w.appearance.ring_color[0] <= hi and d.appearance.ring_color[0] <= RING_REFLECTANCE["dark"][1]
+
+
+def test_an_unknown_ring_is_refused_in_one_line():
+    with pytest.raises(ConfigError, match=r"\[markers\] ring: 'grey' is not one of dark, white"):
+        config_from_dict({"markers": {"ring": "grey"}})

@@ -1,0 +1,204 @@
+"""Why a docking run's Y is under-covered from detections: the per-run solve's errors taken apart.
+
+    python bench/model_error_runs.py DATASET --detections DETS.json units
+    python bench/model_error_runs.py DATASET --detections DETS.json parts --out-dir DIR
+    python bench/model_error_runs.py DATASET --detections DETS.json no-aberration --out-dir DIR
+    python bench/model_error_runs.py DATASET --detections DETS.json section-shift --tau 0.04 0.08
+    python bench/model_error_runs.py DATASET --detections DETS.json gate --z 3.09 0
+
+- ``units``: per camera unit, Y RMSE, median reported std and RMS z of three solves: per run with
+  the config's lens prior (what the judge does), per run and per frame through each frame's true
+  camera (the label's principal point and distortion: no lens left to model).
+- ``parts``: writes three detection files beside each other, each detected centre replaced by the
+  label's outline centroid plus one part of its error: ``persistent`` (its mean over the run's
+  frames, per marker), ``transient`` (the rest) and ``no-section-mean`` (the error less its
+  section's mean over the run); solve them with bench/model_error.py.
+- ``no-aberration``: the detections with each centre's lateral chromatic aberration undone (the
+  label's red / blue magnification about the principal point, in undistorted pixels).
+- ``section-shift``: per-run RMS z when the per-run covariance also carries one common shift per
+  section and axis over the whole run (prior std ``--tau`` px), marginalised like the per-marker
+  bias (``solver.sequence``); a shift that a run's residuals cannot show, since the section's
+  pose absorbs it.
+- ``gate``: per-run RMS z with the run-bias term counted above other significance levels
+  (``solver.model_error.BIAS_Z``; 0: whenever its estimate is positive).
+
+Figures and their reading: results/README.md, "Per-run Y, taken apart".
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from dockfactory.core.distortion import distort_pixels, undistort_pixels
+from dockfactory.core.io import write_json_atomic
+from dockfactory.eval.pose_metrics import pose_error
+from dockfactory.eval.solve_frames import config_lens_prior, docking_runs, solve_dataset
+from dockfactory.eval.uncertainty import reported_std
+from dockfactory.generator.dataset_open import Dataset
+
+
+def frame_detections(dets: dict, fid: str) -> list[dict]:
+    v = dets["frames"][fid]
+    return v["detections"] if isinstance(v, dict) else v
+
+
+def matches(ds: Dataset, dets: dict, fid: str) -> list[tuple[int, str, np.ndarray]]:
+    """(detection index, marker id, outline centroid (2,)) of each fully visible marker with a
+    detection of its class within 3 px (the nearest)."""
+    found, out = frame_detections(dets, fid), []
+    for m in ds.labels[fid]["markers"]:
+        if m.get("visibility") != 2:
+            continue
+        truth = np.array(m["outline_centroid_px"])
+        near = [i for i, d in enumerate(found) if d["class_id"] == m["class_id"]
+                and np.hypot(*(np.array(d["center_px"]) - truth)) < 3.0]
+        if near:
+            out.append((min(near, key=lambda i: np.hypot(*(np.array(found[i]["center_px"]) - truth))), m["id"], truth))
+    return out
+
+
+def write_parts(ds: Dataset, dets: dict, out_dir: Path) -> None:
+    """The ``parts`` mode: three detection files in ``out_dir``."""
+    parts = {name: copy.deepcopy(dets) for name in ("persistent", "transient", "no-section-mean")}
+    section_means = []
+    for group in docking_runs(ds, ds.frames("test")):
+        seen = {fid: matches(ds, dets, fid) for fid in group}
+        err = {(fid, i): np.array(frame_detections(dets, fid)[i]["center_px"]) - t
+               for fid, rows in seen.items() for i, _, t in rows}
+        per_marker: dict = {}
+        for fid, rows in seen.items():
+            for i, mid, _ in rows:
+                per_marker.setdefault(mid, []).append(err[(fid, i)])
+        mean = {mid: np.mean(v, axis=0) for mid, v in per_marker.items()}
+        section = {s: np.mean([e for mid, v in per_marker.items() if mid[0] == s for e in v], axis=0)
+                   for s in {mid[0] for mid in per_marker}}
+        section_means += list(section.values())
+        for fid, rows in seen.items():
+            for i, mid, t in rows:
+                e = err[(fid, i)]
+                for name, value in (("persistent", t + mean[mid]), ("transient", t + e - mean[mid]),
+                                    ("no-section-mean", t + e - section[mid[0]])):
+                    frame_detections(parts[name], fid)[i]["center_px"] = [float(v) for v in value]
+    rms = np.sqrt(np.mean(np.square(section_means), axis=0))
+    print(f"mean centre error per run and section: RMS x {rms[0]:.3f} y {rms[1]:.3f} px over {len(section_means)}")
+    for name, doc in parts.items():
+        write_json_atomic(out_dir / f"dets_{name}.json", doc)
+        print(out_dir / f"dets_{name}.json")
+
+
+def without_aberration(ds: Dataset, dets: dict) -> dict:
+    """``dets`` with each centre moved to where the green image would have put it."""
+    out = copy.deepcopy(dets)
+    for fid in out["frames"]:
+        cam = ds.labels[fid]["camera"]
+        pp, f, dist = tuple(cam["principal_point"]), cam["focal_px"], cam.get("distortion") or [0.0] * 5
+        for d in frame_detections(out, fid):
+            scale = cam["aberration_scale"]["red" if d["class_id"] == 0 else "blue"]
+            u = undistort_pixels(np.array([d["center_px"]]), f, pp, dist)
+            d["center_px"] = [float(v) for v in distort_pixels(np.array(pp) + (u - pp) / scale, f, pp, dist)[0]]
+    return out
+
+
+SOLVES = {"run, config prior": dict(camera_model="auto", self_calibrate="sequence"),
+          "run, true camera": dict(camera_model="pinhole", self_calibrate="sequence", true_camera=True),
+          "frame, true camera": dict(camera_model="pinhole", true_camera=True)}
+
+
+def unit_table(ds: Dataset, dets: dict) -> str:
+    """Markdown: per unit and solve, Y RMSE (mm), median reported std (mm) and RMS z; last row all."""
+    rows: dict = {}
+    for name, opts in SOLVES.items():
+        lens = None if opts.get("true_camera") else config_lens_prior(ds.config)
+        poses = solve_dataset(ds, ("test",), detections=dets, lens=lens, **opts)
+        for fid, rec in poses["frames"].items():
+            if rec.get("ok"):
+                e, s = pose_error(rec["pose"], ds.labels[fid]["pose_b_in_d"])["y"], reported_std(rec["covariance"])["y"]
+                rows.setdefault(name, []).append((ds.labels[fid]["spec"]["unit"], e, s))
+    lines = ["| unit | " + " | ".join(f"{n}: Y RMSE / std / RMS z" for n in SOLVES) + " |",
+             "| --- |" + " --- |" * len(SOLVES)]
+    units = sorted({u for v in rows.values() for u, _, _ in v})
+    for u in [*units, "all"]:
+        cells = []
+        for name in SOLVES:
+            v = np.array([(e, s) for uu, e, s in rows[name] if u == "all" or uu == u])
+            cells.append(f"{np.sqrt(np.mean(v[:, 0] ** 2)):.3f} / {np.median(v[:, 1]):.3f} / "
+                         f"{np.sqrt(np.mean((v[:, 0] / v[:, 1]) ** 2)):.2f}")
+        lines.append(f"| {u} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def section_shift_z(ds: Dataset, dets: dict, taus) -> None:
+    """Prints per-run RMS z X / Y / alpha with a common per-section shift of std tau marginalised."""
+    import dockfactory.solver.sequence as sq
+    from dockfactory.solver.refine import inverse_spd
+    plain = sq._with_marker_bias
+    for tau in taus:
+        def shifted(mf, parsed, sigma, layout, share, floor_px=None, tau=tau):
+            out = plain(mf, parsed, sigma, layout, share, floor_px)
+            ids = [fr.ids[r] for fr in parsed for s in ("A", "B") for r in fr.rows[s]]
+            jac = mf.refinement.jacobian
+            sel = np.zeros((jac.shape[0], 4))
+            sec = np.array([0 if i.startswith("A") else 1 for i in ids])
+            sel[np.arange(0, jac.shape[0], 2), 2 * sec], sel[np.arange(1, jac.shape[0], 2), 2 * sec + 1] = 1.0, 1.0
+            g = inverse_spd(jac.T @ jac) @ (jac.T @ sel)
+            return replace(out, covariance=out.covariance + tau ** 2 * (g @ g.T))
+        sq._with_marker_bias = shifted
+        try:
+            print(f"tau {tau:.3f} px: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
+        finally:
+            sq._with_marker_bias = plain
+
+
+def run_z(ds: Dataset, dets: dict) -> str:
+    """Per-run RMS z X / Y / alpha of the judge's per-run solve (config prior)."""
+    poses = solve_dataset(ds, ("test",), detections=dets, lens=config_lens_prior(ds.config), **SOLVES["run, config prior"])
+    z = np.array([[pose_error(r["pose"], ds.labels[f]["pose_b_in_d"])[c] / reported_std(r["covariance"])[c]
+                   for c in ("x", "y", "alpha")] for f, r in poses["frames"].items() if r.get("ok")])
+    return " / ".join(f"{v:.2f}" for v in np.sqrt(np.mean(z ** 2, 0)))
+
+
+def gate_z(ds: Dataset, dets: dict, levels) -> None:
+    """Prints per-run RMS z with the run-bias term's significance level set to each of ``levels``."""
+    import dockfactory.solver.model_error as me
+    keep = me.BIAS_Z
+    for z in levels:
+        me.BIAS_Z = z
+        try:
+            print(f"gate z > {z:g}: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
+        finally:
+            me.BIAS_Z = keep
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("dataset")
+    ap.add_argument("--detections", required=True)
+    ap.add_argument("mode", choices=("units", "parts", "no-aberration", "section-shift", "gate"))
+    ap.add_argument("--out-dir", default=".")
+    ap.add_argument("--tau", type=float, nargs="+", default=[0.0, 0.04, 0.08])
+    ap.add_argument("--z", type=float, nargs="+", default=[3.09, 1.64, 0.0])
+    a = ap.parse_args(argv)
+    ds = Dataset.open(a.dataset, full=False)
+    dets = json.loads(Path(a.detections).read_text())
+    if a.mode == "units":
+        print(unit_table(ds, dets))
+    elif a.mode == "parts":
+        write_parts(ds, dets, Path(a.out_dir))
+    elif a.mode == "no-aberration":
+        write_json_atomic(Path(a.out_dir) / "dets_no_aberration.json", without_aberration(ds, dets))
+        print(Path(a.out_dir) / "dets_no_aberration.json")
+    elif a.mode == "gate":
+        gate_z(ds, dets, a.z)
+    else:
+        section_shift_z(ds, dets, a.tau)
+    print(f"dataset {ds.version_id}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
