@@ -254,7 +254,7 @@ class ExportConfig:
 # keys added after datasets were published, at the value that renders what those datasets hold
 # (or, for the licence, at the default those datasets are published under): left out of the
 # identity's config at that value (Config.to_dict), so their version ids stay
-IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("dataset", "license"): "cc-by-4.0"}
+IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark"}
 RENDER_DEVICES = ("cpu", "gpu")
 
 
