@@ -3,6 +3,7 @@
     python bench/sensor_diagnosis.py synthetic [--blur 0.3,0.6,1.2]
     python bench/sensor_diagnosis.py noise DATASET [--frames N]
     python bench/sensor_diagnosis.py tail DATASET [--frames N]
+    python bench/sensor_diagnosis.py boxes DATASET [--frames N]
 
 - ``synthetic``: clean discs drawn with exact area coverage (8 x 8 supersampling), a dark ring and
   grey paint, a Gaussian optical blur and no noise at all; each through a three-chip camera and an
@@ -15,6 +16,10 @@
 - ``tail``: the Bayer frames' pose error when the refined centres that are more than 0.2 or 0.3 px
   off, or every centre, are replaced by the three-chip camera's centre of the same marker, and
   when every refined centre's error is halved: which centres make the pose error.
+- ``boxes``: the three-chip camera's frames, the shipped detector without its refinement: the
+  size of each fully visible marker's box against the label's box, and the colour score where the
+  refinement's coverage pass reads the ring level (the annulus at 1.08-1.22 radii) of the label's
+  box against the disc's level: what a new marker design (``[markers] ring``) does to both.
 
 Each prints a table; figures and their reading: bench/results/sensor_effects/README.md.
 """
@@ -188,9 +193,45 @@ def run_tail(detector, ds, frames) -> None:
         print(f"| {name} | {pose_rmse(ds, dets, detector.centre_noise_px)} |")
 
 
+def box_and_ring(image: np.ndarray, dets: list[dict], label: dict) -> list[tuple[float, float, float, float]]:
+    """(detector box width / label box width, the same for heights, median colour score in the
+    label box's annulus at 1.08-1.22 radii, 25th percentile of the score within 0.5 radii) per
+    fully visible marker with a detection of its class within 3 px."""
+    from dockfactory.detector.centre import score_and_purity
+    out = []
+    for m, (i, truth) in ((m, matched(dets, label).get(m["id"], (None, None))) for m in label["markers"]):
+        if i is None:
+            continue
+        x0, y0, x1, y1 = m["bbox_px"]
+        bx = dets[i]["bbox_px"]
+        cx, cy, hw, hh = (x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2, (y1 - y0) / 2
+        wx0, wy0 = int(max(cx - 1.4 * hw, 0)), int(max(cy - 1.4 * hh, 0))
+        win = image[wy0:int(cy + 1.4 * hh) + 1, wx0:int(cx + 1.4 * hw) + 1]
+        score, _ = score_and_purity(win, m["class_id"])
+        ys, xs = np.mgrid[wy0:wy0 + win.shape[0], wx0:wx0 + win.shape[1]]
+        rho = np.hypot((xs - cx) / hw, (ys - cy) / hh)
+        out.append(((bx[2] - bx[0]) / (x1 - x0), (bx[3] - bx[1]) / (y1 - y0),
+                    float(np.median(score[(rho >= 1.08) & (rho <= 1.22)])), float(np.percentile(score[rho <= 0.5], 25))))
+    return out
+
+
+def run_boxes(detector, ds, frames) -> None:
+    from dockfactory.generator.exr import read_passes
+    rows = []
+    for fid in frames:
+        image = delivered(read_passes(ds.root / "exr" / f"{fid}.exr").rgb, ds.labels[fid], "three-chip")
+        rows += box_and_ring(image, detector.detect(image), ds.labels[fid])
+    r = np.array(rows)
+    print("| markers | box / label box, width / height: median (10th percentile) | ring score: median (90th pct) | disc score (median) |")
+    print("| --- | --- | --- | --- |")
+    print(f"| {len(r)} | {np.median(r[:, 0]):.3f} / {np.median(r[:, 1]):.3f} ({np.percentile(r[:, 0], 10):.3f} / "
+          f"{np.percentile(r[:, 1], 10):.3f}) | {np.median(r[:, 2]):.3f} ({np.percentile(r[:, 2], 90):.3f}) | "
+          f"{np.median(r[:, 3]):.3f} |")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("experiment", choices=("synthetic", "noise", "tail"))
+    p.add_argument("experiment", choices=("synthetic", "noise", "tail", "boxes"))
     p.add_argument("dataset", nargs="?")
     p.add_argument("--frames", type=int, default=0, help="first N test frames (0: all)")
     p.add_argument("--blur", default="0.3,0.6,1.2", help="synthetic: optical blur sigmas, px")
@@ -208,6 +249,9 @@ def main(argv=None) -> int:
     ds = Dataset.open(args.dataset, full=False)
     frames = ds.frames("test")[: args.frames or None]
     print(f"{ds.config.dataset.name}@{ds.version_id}, {len(frames)} test frames")
+    if args.experiment == "boxes":
+        run_boxes(MarkerDetector(shipped_weights(), refine=False), ds, frames)
+        return 0
     (run_noise if args.experiment == "noise" else run_tail)(MarkerDetector(shipped_weights()), ds, frames)
     return 0
 
