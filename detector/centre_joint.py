@@ -84,21 +84,22 @@ def site_samples(lin: np.ndarray, cmap: np.ndarray, win, own: int, band: np.ndar
 
 
 def reference_channel(lin: np.ndarray, cmap: np.ndarray, rho: np.ndarray, class_channel: int):
-    """(channel, sign) whose samples steer the fit's band: the class's own channel when its disc is
-    above its ring (a disc on a dark ring), else the channel of the largest contrast to noise
-    ``|disc - ring| / noise`` at its own sites (on a white ring, a red disc's edge is in the green
-    and blue samples, dark against the ring), sign -1 when its disc is the darker. None when no
-    channel has a disc and a ring level."""
+    """(channel, sign, (disc level, ring level) of ``sign`` times the channel) whose samples steer
+    the fit's band: the class's own channel when its disc is above its ring (a disc on a dark ring),
+    else the channel of the largest contrast to noise ``|disc - ring| / noise`` at its own sites (on a
+    white ring, a red disc's edge is in the green and blue samples, dark against the ring), sign -1
+    when its disc is the darker. None when no channel has a disc and a ring level."""
     best = None
     for ch in range(3):
         lv = channel_levels(lin[..., ch], cmap == ch, rho)
         if lv is None:
             continue
         if ch == class_channel and lv[0] > lv[1]:
-            return ch, 1.0
+            return ch, 1.0, lv[:2]
         cnr = abs(lv[0] - lv[1]) / lv[2]
         if cnr > 0 and (best is None or cnr > best[0]):
-            best = (cnr, ch, 1.0 if lv[0] > lv[1] else -1.0)
+            sign = 1.0 if lv[0] > lv[1] else -1.0
+            best = (cnr, ch, sign, (sign * lv[0], sign * lv[1]))
     return None if best is None else best[1:]
 
 
@@ -124,8 +125,7 @@ def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = 
     ref = reference_channel(lin, cmap, win.rho, CLASS_CHANNEL[class_id])
     if ref is None:
         return None
-    c, sign = ref
-    lv = channel_levels(sign * lin[..., c], cmap == c, win.rho)
+    c, sign, lv = ref
     band = ((d0 > -centre.FIT_BAND_IN_PX) & (d0 < centre.FIT_BAND_OUT_PX)
             & centre._usable(sign * lin[..., c], win.pur, win.rho, lv[0], lv[1]))
     data = site_samples(lin, cmap, win, c, band)
