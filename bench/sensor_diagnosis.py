@@ -3,7 +3,7 @@
     python bench/sensor_diagnosis.py synthetic [--blur 0.3,0.6,1.2]
     python bench/sensor_diagnosis.py noise DATASET [--frames N]
     python bench/sensor_diagnosis.py tail DATASET [--frames N]
-    python bench/sensor_diagnosis.py boxes DATASET [--frames N]
+    python bench/sensor_diagnosis.py boxes DATASET [--frames N] [--weights W.pt]
 
 - ``synthetic``: clean discs drawn with exact area coverage (8 x 8 supersampling), a dark ring and
   grey paint, a Gaussian optical blur and no noise at all; each through a three-chip camera and an
@@ -235,6 +235,7 @@ def main(argv=None) -> int:
     p.add_argument("dataset", nargs="?")
     p.add_argument("--frames", type=int, default=0, help="first N test frames (0: all)")
     p.add_argument("--blur", default="0.3,0.6,1.2", help="synthetic: optical blur sigmas, px")
+    p.add_argument("--weights", help="detector weights (default: the shipped ones)")
     args = p.parse_args(argv)
     if args.experiment == "synthetic":
         run_synthetic([float(b) for b in args.blur.split(",")])
@@ -246,13 +247,14 @@ def main(argv=None) -> int:
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import MarkerDetector
     from dockfactory.generator.dataset_open import Dataset
+    weights = args.weights or shipped_weights()
     ds = Dataset.open(args.dataset, full=False)
     frames = ds.frames("test")[: args.frames or None]
     print(f"{ds.config.dataset.name}@{ds.version_id}, {len(frames)} test frames")
     if args.experiment == "boxes":
-        run_boxes(MarkerDetector(shipped_weights(), refine=False), ds, frames)
+        run_boxes(MarkerDetector(weights, refine=False), ds, frames)
         return 0
-    (run_noise if args.experiment == "noise" else run_tail)(MarkerDetector(shipped_weights()), ds, frames)
+    (run_noise if args.experiment == "noise" else run_tail)(MarkerDetector(weights), ds, frames)
     return 0
 
 

@@ -165,7 +165,7 @@ class SectionsConfig:
 class MarkersConfig:
     diameter_mm: float = 20.0       # of each coloured disc
     raise_mm: float = 1.0           # height of the disc's top face above the surface
-    ring: str = "dark"              # the ring around each disc: dark (reflectance 0.01-0.05) | white (0.70-0.85)
+    ring: str = "dark"              # the ring around each disc: dark (reflectance 0.01-0.05) | white (0.70-0.85) | mixed (each frame one of the two)
     layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # A's markers: (s_mm from the docking face, phi_deg about the axis, 0 = toward +Z)
     layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B  # B's, the same way
 
@@ -564,8 +564,8 @@ def _validate_markers(cfg: Config, source: str) -> None:
     m, s = cfg.markers, cfg.sections
     _check_positive(source, "markers", "diameter_mm", m.diameter_mm)
     _check_positive(source, "markers", "raise_mm", m.raise_mm)
-    if m.ring not in layout_mod.RING_REFLECTANCE:
-        raise _err(source, "markers", "ring", f"{m.ring!r} is not one of {', '.join(layout_mod.RING_REFLECTANCE)}")
+    if m.ring not in layout_mod.RING_DESIGNS:
+        raise _err(source, "markers", "ring", f"{m.ring!r} is not one of {', '.join(layout_mod.RING_DESIGNS)}")
     reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM
     lo, hi = s.flange_width_mm + reach + 2.0, s.length_mm - reach
     for key, pattern in (("layout_a", m.layout_a), ("layout_b", m.layout_b)):

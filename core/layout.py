@@ -32,6 +32,17 @@ RING_EXTRA_MM = 2.5  # the ring around each coloured disc
 # Grey reflectance range of the ring, per design: a dark ring leaves a Bayer sensor a red disc's
 # edge in its red samples alone; a white ring shows it in the green and blue samples too.
 RING_REFLECTANCE = {"dark": (0.01, 0.05), "white": (0.70, 0.85)}
+RING_DESIGNS = (*RING_REFLECTANCE, "mixed")   # mixed: each frame dark or white, half and half (detector training)
+
+
+def ring_reflectance(design: str, u: float) -> float:
+    """The ring's grey reflectance of ``design`` (one of RING_DESIGNS) from one uniform draw ``u`` in
+    [0, 1): the design's range at ``u``; "mixed" takes the dark range for u < 0.5 and the white one
+    above, each at its own uniform position, so every design spends the same single draw."""
+    if design == "mixed":
+        design, u = ("dark", 2.0 * u) if u < 0.5 else ("white", 2.0 * u - 1.0)
+    lo, hi = RING_REFLECTANCE[design]
+    return lo + u * (hi - lo)
 SECTION_PASS_INDEX = {"A": 201, "B": 202}  # index pass value of each section's body and flange
 
 

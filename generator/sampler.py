@@ -37,7 +37,7 @@ from dockfactory.core.config import (
     SensorConfig,
 )
 from dockfactory.core.geometry import make_transform, rot_x, rot_y
-from dockfactory.core.layout import RING_REFLECTANCE, marker_points
+from dockfactory.core.layout import marker_points, ring_reflectance
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -299,7 +299,7 @@ def sample_lights(rng, target, condition: str) -> tuple[Light, ...]:
 
 def sample_appearance(rng, condition: str, ring: str = "dark") -> Appearance:
     """The frame's materials and world light; ``ring`` the marker ring's design
-    (``core.layout.RING_REFLECTANCE``: one draw either way, so the rest of the stream is the same)."""
+    (``core.layout.ring_reflectance``: one draw whatever the design, so the rest of the stream is the same)."""
     ideal = condition == "ideal"
     return Appearance(
         section_color_a=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))]),
@@ -312,7 +312,7 @@ def sample_appearance(rng, condition: str, ring: str = "dark") -> Appearance:
         texture_offset=vec(rng.uniform(-100, 100, size=3)),
         marker_red=_hsv_linear(rng.uniform(-0.02, 0.02), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
         marker_blue=_hsv_linear(rng.uniform(0.58, 0.66), rng.uniform(0.75, 0.95), rng.uniform(0.55, 0.85)),
-        ring_color=vec([rng.uniform(*RING_REFLECTANCE[ring])] * 3),
+        ring_color=vec([ring_reflectance(ring, rng.uniform())] * 3),
         floor_color=_jitter_color(rng, (0.25, 0.24, 0.22), 0.4),
         wall_color=_jitter_color(rng, PAINTS[rng.integers(len(PAINTS))], 0.3),
         world_color=_jitter_color(rng, (0.9, 0.92, 1.0), 0.08),

@@ -202,6 +202,26 @@ def test_a_white_ring_changes_the_ring_alone(cfg):
         assert lo <= w.appearance.ring_color[0] <= hi and d.appearance.ring_color[0] <= RING_REFLECTANCE["dark"][1]
 
 
+def test_a_mixed_ring_draws_each_frame_dark_or_white(cfg):
+    """``[markers] ring = "mixed"`` (detector training on both designs): every frame keeps its pose,
+    camera and other materials; its ring is in the dark range or the white one, the two about half
+    and half over 200 frames (binomial: 100 +- 7 expected; asserted 70-130)."""
+    from dockfactory.core.layout import RING_REFLECTANCE
+    mixed = config_from_dict({"dataset": {"frames": 300, "seed": 42}, "repeatability": {"poses": 3, "captures": 4},
+                              "markers": {"ring": "mixed"}})
+    white = 0
+    for k, spec in enumerate(frame_plan(cfg)[:200]):
+        m = sample_frame(mixed, spec)
+        grey = m.appearance.ring_color[0]
+        assert any(lo <= grey <= hi for lo, hi in RING_REFLECTANCE.values()), grey
+        white += grey >= RING_REFLECTANCE["white"][0]
+        if k < 12:
+            d = sample_frame(cfg, spec)
+            assert d.d_from_b == m.d_from_b and d.camera == m.camera and d.lights == m.lights
+            assert dataclasses.replace(m.appearance, ring_color=d.appearance.ring_color) == d.appearance
+    assert 70 <= white <= 130, white
+
+
 def test_an_unknown_ring_is_refused_in_one_line():
-    with pytest.raises(ConfigError, match=r"\[markers\] ring: 'grey' is not one of dark, white"):
+    with pytest.raises(ConfigError, match=r"\[markers\] ring: 'grey' is not one of dark, white, mixed"):
         config_from_dict({"markers": {"ring": "grey"}})
