@@ -9,12 +9,14 @@ For each fully visible, legible marker of the first N test frames (0: all):
   sqrt(psf^2 + 1/12) px (``--psf-px``: the optics and the renderer's pixel filter; 1/12: the
   pixel's own width), plus the effect's optical blur;
 - the levels of disc and ring in each channel as the camera delivers them, and the noise of each
-  channel at both levels: flat patches of the disc's and the ring's colour (medians of the
-  noise-free render inside half the disc's radius, and over its ring at 1.08-1.2 radii) passed
-  through the frame's camera of ``sensor_effects.delivered``, read back in linear light at the
-  channel's own sites (every pixel of a three-chip camera). The noise is therefore the camera's
-  (EMVA 1288 shot, dark and fixed-pattern noise, ADC and 8-bit quantisation), measured, not
-  modelled; between the two levels its variance is taken affine in the level (EMVA 1288);
+  channel at both: the frame (its noise-free render) exposed ``REPEATS`` times through its camera
+  of ``sensor_effects.delivered`` with only the noise seed changed, read back in linear light at
+  the channel's own sites (every pixel of a three-chip camera) inside half the disc's radius and
+  over its ring (1.08-1.2 radii): level the mean, noise the pixels' variance between exposures
+  (EMVA 1288 shot and dark noise, ADC; the frame's own auto exposure, vignetting and glare),
+  measured, not modelled, with the 8-bit step as its floor; the unit's fixed patterns are the same
+  in every exposure and left out. Between the two levels the variance is taken affine in the
+  level (EMVA 1288);
 - the Fisher information of the centre: sum over the channels' samples of
   (contrast * pdf(d / s) / s)^2 n n^T / variance, d the signed distance to the edge, n its
   normal, s the edge width. The bound is its inverse (px^2); the other parameters of the disc
@@ -52,8 +54,7 @@ from dockfactory.solver.crb import crb_d_from_b                     # noqa: E402
 from dockfactory.solver.disc_noise import disc_ellipses             # noqa: E402
 from dockfactory.solver.errors import SolverError                   # noqa: E402
 
-PATCH = 20          # px: side of a flat patch; its inner INNER px are read (a demosaic mixes the border)
-INNER = 12
+REPEATS = 4         # exposures of each frame whose spread gives the camera's temporal noise
 BLUR_PX = 1.2
 # camera name -> (effect of sensor_effects.delivered, Bayer pattern or None, optical blur px, score only)
 CAMERAS = {
@@ -74,34 +75,52 @@ def disc_geometry(label: dict, markers: list[dict]) -> np.ndarray:
     return disc_ellipses(centres, normals, [m["diameter_mm"] for m in markers], float(label["camera"]["focal_px"]))
 
 
-def region_median(rgb: np.ndarray, centre: np.ndarray, s: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """(3,) median linear colour of ``rgb`` (H, W, 3) where the ellipse radius
-    sqrt((x - c)^T S^-1 (x - c)) lies in [lo, hi]; NaN when no pixel does."""
+def region_pixels(centre: np.ndarray, s: np.ndarray, lo: float, hi: float, h: int, w: int):
+    """(ys, xs) int arrays of the pixels of an (h, w) image whose ellipse radius
+    sqrt((x - c)^T S^-1 (x - c)) about ``centre`` (2,) px lies in [lo, hi]."""
     half = int(np.ceil(np.sqrt(np.linalg.eigvalsh(s)[1]) * hi)) + 2
     x0, y0 = int(round(centre[0])) - half, int(round(centre[1])) - half
-    h, w = rgb.shape[:2]
     ys, xs = np.mgrid[max(y0, 0):min(y0 + 2 * half + 1, h), max(x0, 0):min(x0 + 2 * half + 1, w)]
     d = np.stack([xs - centre[0], ys - centre[1]], -1)
     rho = np.sqrt(np.einsum("...i,ij,...j->...", d, np.linalg.inv(s), d))
     sel = (rho >= lo) & (rho <= hi)
-    return np.median(rgb[ys[sel], xs[sel]], axis=0) if sel.any() else np.full(3, np.nan)
+    return ys[sel], xs[sel]
 
 
-def patch_levels(colours: np.ndarray, label: dict, effect: str, cfa: str | None) -> np.ndarray:
-    """(k, 3, 2) (mean, variance) per flat patch of ``colours`` (k, 3) linear and channel, as the
-    camera of ``effect`` delivers it (linear light), read at the channel's own sites."""
-    k = len(colours)
-    image = np.repeat(np.repeat(colours.reshape(1, k, 3).astype(np.float32), PATCH, 0), PATCH, 1)
-    out = _SRGB_TO_LINEAR[delivered(image, label, effect)]
-    cmap = channel_map(cfa, PATCH, k * PATCH) if cfa else None
-    lo = (PATCH - INNER) // 2
-    stats = np.zeros((k, 3, 2))
-    for i in range(k):
-        sl = np.s_[lo:lo + INNER, i * PATCH + lo:i * PATCH + lo + INNER]
-        for ch in range(3):
-            v = out[sl][..., ch] if cmap is None else out[sl][..., ch][cmap[sl] == ch]
-            stats[i, ch] = float(v.mean()), float(v.var(ddof=1))
-    return stats
+def region_levels(rgb: np.ndarray, label: dict, effect: str, cfa: str | None, centres: np.ndarray,
+                  shapes: np.ndarray, repeats: int = REPEATS) -> np.ndarray:
+    """(n, 2, 3, 2): per marker, its disc (within half its radius) and its ring (1.08-1.2 radii),
+    per channel the (mean, temporal variance) the camera of ``effect`` delivers there, in linear
+    light at the channel's own sites: ``repeats`` exposures of the frame ``rgb`` (the noise-free
+    render) that differ only in their noise seed. The frame's auto exposure, vignetting and glare
+    are the camera's own; the variance is the mean over the region of each pixel's sample variance
+    over the exposures. The unit's fixed patterns (DSNU, PRNU) are the same in every exposure and
+    left out: the bound is then lower still."""
+    sensor = label["sampled"]["sensor"]
+    shots = np.stack([_SRGB_TO_LINEAR[delivered(rgb, {**label, "sampled": {**label["sampled"], "sensor": {
+        **sensor, "noise_seed": int(sensor["noise_seed"]) + k}}}, effect)] for k in range(repeats)])
+    mean, var = shots.mean(axis=0), shots.var(axis=0, ddof=1)
+    h, w = rgb.shape[:2]
+    cmap = channel_map(cfa, h, w) if cfa else None
+    out = np.full((len(centres), 2, 3, 2), np.nan)
+    for i, (c, sh) in enumerate(zip(centres, shapes)):
+        for j, (lo, hi) in enumerate(((0.0, 0.5), (1.08, 1.2))):
+            ys, xs = region_pixels(c, sh, lo, hi, h, w)
+            for ch in range(3):
+                keep = np.ones(ys.shape, bool) if cmap is None else cmap[ys, xs] == ch
+                if keep.any():
+                    level = float(mean[ys[keep], xs[keep], ch].mean())
+                    out[i, j, ch] = level, max(float(var[ys[keep], xs[keep], ch].mean()), quantisation_variance(level))
+    return out
+
+
+def quantisation_variance(level: float) -> float:
+    """Variance (linear light^2) of the 8-bit sRGB rounding at linear ``level``: one code step
+    mapped to linear, squared, over 12; the floor of a channel's noise where it clips (a clipped
+    pixel varies not at all between exposures and tells the edge no more than one step)."""
+    code = int(np.clip(np.searchsorted(_SRGB_TO_LINEAR, level), 1, 255))
+    step = float(_SRGB_TO_LINEAR[code] - _SRGB_TO_LINEAR[code - 1])
+    return step * step / 12.0
 
 
 def centre_information(centre: np.ndarray, s: np.ndarray, width: float, contrast: np.ndarray,
@@ -136,13 +155,11 @@ def marker_bounds(label: dict, rgb: np.ndarray, markers: list[dict], psf_px: flo
     ``rgb`` (H, W, 3) linear."""
     shapes = disc_geometry(label, markers)
     centres = np.array([m["outline_centroid_px"] for m in markers], dtype=np.float64)
-    disc = np.array([region_median(rgb, c, sh, 0.0, 0.5) for c, sh in zip(centres, shapes)])
-    ring = np.array([region_median(rgb, c, sh, 1.08, 1.2) for c, sh in zip(centres, shapes)])
     h, w = rgb.shape[:2]
     levels, out = {}, {}
     for name, (effect, cfa, blur, score) in CAMERAS.items():
         if (effect, cfa) not in levels:
-            levels[effect, cfa] = patch_levels(np.concatenate([disc, ring]), label, effect, cfa)
+            levels[effect, cfa] = region_levels(rgb, label, effect, cfa, centres, shapes)
         st = levels[effect, cfa]
         cmap = channel_map(cfa, h, w) if cfa else None
         sites = None if cmap is None else (
@@ -150,7 +167,7 @@ def marker_bounds(label: dict, rgb: np.ndarray, markers: list[dict], psf_px: flo
         width = float(np.sqrt(psf_px ** 2 + 1.0 / 12.0 + blur ** 2))
         covs, share = [], []
         for i, m in enumerate(markers):
-            d_st, r_st = st[i], st[len(markers) + i]
+            d_st, r_st = st[i, 0], st[i, 1]
             contrast, v_ring, v_disc = d_st[:, 0] - r_st[:, 0], r_st[:, 1], d_st[:, 1]
             own = CLASS_CHANNEL[m["class_id"]]
             if score:
