@@ -31,6 +31,7 @@ from centre_bound import centre_information   # noqa: E402  (bench sibling)
 
 from dockfactory.core.cfa import channel_map, mosaic                 # noqa: E402
 from dockfactory.core.demosaic import demosaic                       # noqa: E402
+from dockfactory.core.isp import tone_map                            # noqa: E402
 from dockfactory.detector.centre import refine_centre               # noqa: E402
 from dockfactory.detector.centre_camera import refine_centre_camera  # noqa: E402
 
@@ -52,8 +53,8 @@ def disc_image(cx: float, cy: float, a: float, b: float) -> np.ndarray:
 
 
 def srgb8(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0, 1)
-    return np.rint(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055) * 255).astype(np.uint8)
+    """Linear (H, W, 3) -> the camera ISP's 8-bit sRGB (``core.isp.tone_map``)."""
+    return tone_map(np.asarray(x, dtype=np.float32), "srgb")
 
 
 def trial_errors(a: float, b: float, trials: int, noise: float, rng: np.random.Generator):

@@ -43,6 +43,8 @@ def ring_reflectance(design: str, u: float) -> float:
         design, u = ("dark", 2.0 * u) if u < 0.5 else ("white", 2.0 * u - 1.0)
     lo, hi = RING_REFLECTANCE[design]
     return lo + u * (hi - lo)
+
+
 SECTION_PASS_INDEX = {"A": 201, "B": 202}  # index pass value of each section's body and flange
 
 
