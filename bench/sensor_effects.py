@@ -13,8 +13,8 @@ frame's linear image through ``generator.sensor.expose_frame`` with the frame's 
 vignetting and noise seed (its label's sensor record) and the effect's colour chain, so the
 effects differ only in the camera. Geometry never changes: the errors are measured against the
 labels. The reference ("three-chip") is a three-chip sensor with the same EMVA 1288 preset, PNG
-output. Per effect and dataset: frames solved, X / Y / alpha RMSE, their ratio to the reference,
-RMS z (error / reported std), and the centre error of the detected markers against the labels'
+output. Per effect and dataset: frames solved, X / Y / alpha RMSE, their ratio to the reference
+with its paired bootstrap interval (95 %, the frames resampled together), RMS z (error / reported std), and the centre error of the detected markers against the labels'
 outline centroids (median length, mean dx / dy per class). ``sampling-rggb`` is the three-chip
 image refined (with ``--tell-cfa``) as if it came from an RGGB sensor: what the sampling alone costs.
 
@@ -37,6 +37,7 @@ from dockfactory.core.camera_chain import ColourChain, configured_sensor
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.scene import SensorParams, from_dict
+from dockfactory.eval.confidence import bootstrap_bounds
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.eval.uncertainty import reported_std
@@ -164,18 +165,59 @@ def run_effect(detector, ds: Dataset, effect: str, frames: list[str], tell_cfa: 
     return {**summary(rows), "seconds": round(time.perf_counter() - t0, 1), "rows": rows}
 
 
+INTERVAL_CONFIDENCE = 0.975   # each end: a two-sided 95 % interval
+INTERVAL_SEED = 0
+
+
+def ratio_interval(rows: list[dict], ref_rows: list[dict], component: str) -> list[float] | None:
+    """[low, high]: the paired bootstrap interval (95 %, two-sided) of RMSE(rows) / RMSE(ref_rows)
+    of ``component`` over the frames solved in both, resampled together (the same frame through
+    both cameras); None under 5 such frames. Why: over 48 frames one weakly determined frame can
+    carry most of an RMSE, so a ratio alone can say more than the frames do."""
+    ref = {r["frame"]: r for r in ref_rows if r["ok"]}
+    pairs = [(r[f"err_{component}"], ref[r["frame"]][f"err_{component}"]) for r in rows
+             if r["ok"] and r["frame"] in ref]
+    e = np.array(pairs, dtype=float).reshape(-1, 2) ** 2
+    if not e.size or not e[:, 1].sum() > 0:
+        return None
+
+    def ratio(idx: np.ndarray) -> float:
+        return float(np.sqrt(e[idx, 0].sum() / max(e[idx, 1].sum(), 1e-300)))
+    bounds = bootstrap_bounds(ratio, len(e), INTERVAL_CONFIDENCE, INTERVAL_SEED)
+    return None if bounds is None else [round(bounds[0], 3), round(bounds[1], 3)]
+
+
+def add_intervals(effects: dict) -> None:
+    """Give each effect of one dataset that still holds its rows its ``ratio_interval_<c>`` to
+    the three-chip reference (kept when the rows are stripped)."""
+    ref = effects.get("three-chip")
+    if not ref or "rows" not in ref:
+        return
+    for s in effects.values():
+        if "rows" in s:
+            s.update({f"ratio_interval_{c}": ratio_interval(s["rows"], ref["rows"], c) for c in COMPONENTS})
+
+
+def _ratio_cell(s: dict, ref: dict | None, c: str) -> str:
+    """'v (ratio [low-high])' of one component."""
+    v = s[f"rmse_{c}"]
+    if v is None:
+        return "-"
+    if not ref:
+        return f"{v:.3f}"
+    ci = s.get(f"ratio_interval_{c}")
+    span = f" [{ci[0]:.2f}-{ci[1]:.2f}]" if ci else ""
+    return f"{v:.3f} ({v / ref[f'rmse_{c}']:.2f}{span})"
+
+
 def table(results: dict) -> str:
     """Markdown: per dataset and effect, RMSE (ratio to three-chip) and RMS z."""
-    lines = ["| dataset | effect | solved | X mm (x) | Y mm (x) | alpha deg (x) | RMS z X / Y / alpha | "
+    lines = ["| dataset | effect | solved | X mm (x [95 %]) | Y mm (x [95 %]) | alpha deg (x [95 %]) | RMS z X / Y / alpha | "
              "centre median px | mean A / B px |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for ds_name, effects in results["datasets"].items():
         ref = effects.get("three-chip")
         for name, s in effects.items():
-            cells = []
-            for c in COMPONENTS:
-                v = s[f"rmse_{c}"]
-                ratio = f" ({v / ref[f'rmse_{c}']:.2f})" if ref and v is not None else ""
-                cells.append(f"{v:.3f}{ratio}" if v is not None else "-")
+            cells = [_ratio_cell(s, ref, c) for c in COMPONENTS]
             z = " / ".join(f"{s[f'rms_z_{c}']:.2f}" if s[f"rms_z_{c}"] is not None else "-" for c in COMPONENTS)
             mean = " / ".join(f"({m[0]:+.3f}, {m[1]:+.3f})" if m else "-"
                               for m in (s["centre_mean_A"], s["centre_mean_B"]))
@@ -214,10 +256,49 @@ def compare(paths: list[str]) -> str:
     return "\n".join(lines)
 
 
+def _paired_rows(runs: list[dict], scenes: list[str], effect: str) -> tuple[list[dict], list[dict]]:
+    """The rows of ``effect`` in both runs over ``scenes``, frame names made unique per scene."""
+    out = []
+    for res in runs:
+        rows = []
+        for scene in scenes:
+            s = res["datasets"].get(scene, {}).get(effect) or {}
+            rows += [{**r, "frame": f"{scene}/{r['frame']}"} for r in s.get("rows", [])]
+        out.append(rows)
+    return out[0], out[1]
+
+
+def paired(paths: list[str]) -> str:
+    """Markdown: per effect, per scene and over all scenes, RMSE of the second results file over
+    the first's on the same frames (e.g. new weights over shipped ones), X / Y / alpha, each with its
+    paired bootstrap interval. Needs the files' rows."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    scenes = [k for k in runs[0]["datasets"] if k in runs[1]["datasets"]]
+    lines = [f"| effect | scenes | {Path(paths[1]).stem} / {Path(paths[0]).stem}: X | Y | alpha |",
+             "| --- | --- | --- | --- | --- |"]
+    for effect in EFFECTS:
+        for group in [[sc] for sc in scenes] + ([scenes] if len(scenes) > 1 else []):
+            new, old = _paired_rows(runs[::-1], group, effect)
+            if not new or not old:
+                continue
+            cells = []
+            for c in COMPONENTS:
+                ref = {r["frame"]: r for r in old if r["ok"]}
+                num = [r[f"err_{c}"] ** 2 for r in new if r["ok"] and r["frame"] in ref]
+                den = [ref[r["frame"]][f"err_{c}"] ** 2 for r in new if r["ok"] and r["frame"] in ref]
+                ci = ratio_interval(new, old, c)
+                span = f" [{ci[0]:.2f}-{ci[1]:.2f}]" if ci else ""
+                cells.append(f"{np.sqrt(sum(num) / sum(den)):.2f}{span}" if sum(den) > 0 else "-")
+            lines.append(f"| {effect} | {'all' if len(group) > 1 else group[0]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("datasets", nargs="+", help="datasets (or, with --compare, results files)")
     p.add_argument("--compare", action="store_true", help="print the results files side by side")
+    p.add_argument("--paired", action="store_true",
+                   help="two results files with their rows: the second's RMSE over the first's, with intervals")
     p.add_argument("--out")
     p.add_argument("--effects", default=",".join(EFFECTS))
     p.add_argument("--frames", type=int, default=0, help="first N test frames only (0: all)")
@@ -227,6 +308,11 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.compare:
         print(compare(args.datasets))
+        return 0
+    if args.paired:
+        if len(args.datasets) != 2:
+            p.error("--paired takes exactly two results files")
+        print(paired(args.datasets))
         return 0
     if not args.out:
         p.error("--out is required")
@@ -247,6 +333,7 @@ def main(argv=None) -> int:
                 continue
             res = run_effect(detector, ds, effect, frames, args.tell_cfa, args.tell_jpeg)
             results["datasets"].setdefault(key, {})[effect] = res
+            add_intervals(results["datasets"][key])
             write_json_atomic(out, results)
             print(f"{key} {effect}: X {res['rmse_x']:.3f} Y {res['rmse_y']:.3f} alpha {res['rmse_alpha']:.4f} "
                   f"({res['seconds']} s)", file=sys.stderr, flush=True)
