@@ -17,8 +17,8 @@ import sensor_effects as se  # noqa: E402
 def rows(errors: np.ndarray, names=None) -> list[dict]:
     """Bench rows with the same error in X, Y and alpha."""
     names = names or [f"{i:06d}" for i in range(len(errors))]
-    return [{"frame": n, "ok": True, "centres": [], **{f"err_{c}": float(e) for c in se.COMPONENTS}}
-            for n, e in zip(names, errors)]
+    return [{"frame": n, "ok": True, "centres": [], **{f"err_{c}": float(e) for c in se.COMPONENTS},
+             **{f"z_{c}": float(e) / 0.1 for c in se.COMPONENTS}} for n, e in zip(names, errors)]
 
 
 def test_scaled_errors_give_an_exact_ratio():
@@ -72,3 +72,13 @@ def test_paired_files_pool_scenes(tmp_path):
     assert lines[("bayer-mhc", "B@2")].count("1.00 [1.00-1.00]") == 3
     pooled = np.sqrt((4 * np.sum(a ** 2) + np.sum(b ** 2)) / (np.sum(a ** 2) + np.sum(b ** 2)))
     assert f"{pooled:.2f} [" in lines[("bayer-mhc", "all")]
+
+
+def test_rms_z_interval_spans_the_sampling_noise_of_48_frames():
+    """Gaussian z over 48 frames: the interval holds the sample's RMS and spans about 0.8-1.2."""
+    z = np.random.default_rng(5).normal(0, 1, 48)
+    lo, hi = se.rms_z_interval(z)
+    rms = float(np.sqrt(np.mean(z ** 2)))
+    assert lo < rms < hi
+    assert 0.25 < hi - lo < 0.6
+    assert se.rms_z_interval(z[:4]) is None
