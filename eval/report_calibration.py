@@ -10,11 +10,13 @@ from statistics import NormalDist
 import numpy as np
 
 from dockfactory.core.names import COMPONENTS, UNITS
+from dockfactory.eval.confidence import chi2_quantile
 
 GATED = ("x", "y", "alpha")
 RATIO_RANGE = (0.9, 1.3)      # measured / bound outside it gets a note
 Z_RANGE = (0.85, 1.2)         # RMS z outside it gets a note (the issue's target band)
 WITHIN_RANGE = (0.92, 0.98)   # so does a fraction within 2 sigma outside this one
+Z_CONFIDENCE = 0.95           # two-sided: the interval of RMS z that decides whether a note is a finding
 QQ_LIMIT = 8.0                # |z| beyond it is drawn at the edge of the QQ plot
 
 _NOISE = {"n": "int", "rms_px": "num?", "robust_px": "num?"}
@@ -159,23 +161,40 @@ def html_calibration(metrics: dict, qq_img: str | None) -> list[str]:
     return parts
 
 
+def rms_z_interval(rms_z: float, n: int) -> tuple[float, float] | None:
+    """(low, high): the two-sided ``Z_CONFIDENCE`` interval of the scale s of z ~ N(0, s^2) (s = 1
+    for a calibrated covariance) from the RMS ``rms_z`` of ``n`` scores (chi-square with n degrees
+    of freedom); None without scores. It holds 1 whenever the RMS reads within the range a
+    calibrated covariance gives: over 9 frames 0.55-1.45, over 48 frames 0.80-1.20."""
+    if not n or rms_z is None:
+        return None
+    ss, tail = n * rms_z ** 2, (1 - Z_CONFIDENCE) / 2
+    return float(np.sqrt(ss / chi2_quantile(1 - tail, n))), float(np.sqrt(ss / chi2_quantile(tail, n)))
+
+
 def calibration_note(cal: dict) -> str:
-    """Which gated components' reported std is too small or too large (empty when none)."""
-    small, large = [], []
+    """Which gated components' reported std is too small or too large (empty when none). A
+    component outside the target band (``Z_RANGE``, ``WITHIN_RANGE``) is a finding only when the
+    interval of its RMS z (:func:`rms_z_interval`) excludes 1 on that side; otherwise the note says
+    that its frames are too few to tell, so that a 9-frame statistic is not read as a defect."""
+    found = {"small": [], "large": [], "undecided": []}
     for c in GATED:
         s = cal["overall"][c]
         if s["rms_z"] is None or s["within_2sigma"] is None:
             continue
-        if s["rms_z"] > Z_RANGE[1] or s["within_2sigma"] < WITHIN_RANGE[0]:
-            small.append(f"{c} (RMS z {s['rms_z']:.2f}, {s['within_2sigma']:.0%} within 2 sigma)")
-        elif s["rms_z"] < Z_RANGE[0] or s["within_2sigma"] > WITHIN_RANGE[1]:
-            large.append(f"{c} (RMS z {s['rms_z']:.2f}, {s['within_2sigma']:.0%} within 2 sigma)")
-    notes = []
-    if small:
-        notes.append("Reported std too small (a gate on it accepts too much): " + ", ".join(small) + ".")
-    if large:
-        notes.append("Reported std too large (conservative): " + ", ".join(large) + ".")
-    return " ".join(notes)
+        side = ("small" if s["rms_z"] > Z_RANGE[1] or s["within_2sigma"] < WITHIN_RANGE[0] else
+                "large" if s["rms_z"] < Z_RANGE[0] or s["within_2sigma"] > WITHIN_RANGE[1] else None)
+        if side is None:
+            continue
+        lo, hi = rms_z_interval(s["rms_z"], s["n"])
+        shown = (f"{c} (RMS z {s['rms_z']:.2f}, {Z_CONFIDENCE:.0%} interval {lo:.2f}-{hi:.2f} over {s['n']} "
+                 f"frames, {s['within_2sigma']:.0%} within 2 sigma)")
+        proven = lo > 1 if side == "small" else hi < 1
+        found[side if proven else "undecided"].append(shown)
+    texts = {"small": "Reported std too small (a gate on it accepts too much): ",
+             "large": "Reported std too large (conservative): ",
+             "undecided": "Outside the target band, but too few frames to tell from a calibrated covariance: "}
+    return " ".join(texts[k] + ", ".join(v) + "." for k, v in found.items() if v)
 
 
 def plot_qq(plt, rows: list[dict], fig_png) -> str | None:
