@@ -136,7 +136,7 @@ def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str |
     return row
 
 
-def rms_z_interval(z: np.ndarray) -> list[float] | None:
+def rms_z_bootstrap_interval(z: np.ndarray) -> list[float] | None:
     """[low, high]: bootstrap interval (95 %, two-sided, frames resampled) of the RMS of ``z``
     (error / reported std per frame); None under 5 values. Over 48 Gaussian frames it spans about
     0.80-1.20 around a true 1, the width of the issue's band itself."""
@@ -155,7 +155,7 @@ def summary(rows: list[dict]) -> dict:
         z = np.array([r[f"z_{c}"] for r in ok if r[f"z_{c}"] is not None])
         out[f"rmse_{c}"] = float(np.sqrt(np.mean(e ** 2))) if e.size else None
         out[f"rms_z_{c}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else None
-        out[f"rms_z_interval_{c}"] = rms_z_interval(z)
+        out[f"rms_z_interval_{c}"] = rms_z_bootstrap_interval(z)
     cen = np.array([c for r in rows for c in r["centres"]]).reshape(-1, 3)
     out["centre_median_px"] = float(np.median(np.hypot(cen[:, 1], cen[:, 2]))) if len(cen) else None
     out["centre_rms_px"] = float(np.sqrt(np.mean(cen[:, 1] ** 2 + cen[:, 2] ** 2))) if len(cen) else None
@@ -206,7 +206,7 @@ def add_intervals(effects: dict) -> None:
     for s in effects.values():
         if "rows" in s:
             s.update({f"ratio_interval_{c}": ratio_interval(s["rows"], ref["rows"], c) for c in COMPONENTS})
-            s.update({f"rms_z_interval_{c}": rms_z_interval(
+            s.update({f"rms_z_interval_{c}": rms_z_bootstrap_interval(
                 [r[f"z_{c}"] for r in s["rows"] if r["ok"] and r[f"z_{c}"] is not None]) for c in COMPONENTS})
 
 
@@ -301,9 +301,8 @@ def paired(paths: list[str]) -> str:
             new, old = _paired_rows(runs[::-1], group, effect)
             if not new or not old:
                 continue
-            cells = []
+            cells, ref = [], {r["frame"]: r for r in old if r["ok"]}
             for c in COMPONENTS:
-                ref = {r["frame"]: r for r in old if r["ok"]}
                 num = [r[f"err_{c}"] ** 2 for r in new if r["ok"] and r["frame"] in ref]
                 den = [ref[r["frame"]][f"err_{c}"] ** 2 for r in new if r["ok"] and r["frame"] in ref]
                 ci = ratio_interval(new, old, c)

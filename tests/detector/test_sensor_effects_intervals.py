@@ -77,8 +77,8 @@ def test_paired_files_pool_scenes(tmp_path):
 def test_rms_z_interval_spans_the_sampling_noise_of_48_frames():
     """Gaussian z over 48 frames: the interval holds the sample's RMS and spans about 0.8-1.2."""
     z = np.random.default_rng(5).normal(0, 1, 48)
-    lo, hi = se.rms_z_interval(z)
+    lo, hi = se.rms_z_bootstrap_interval(z)
     rms = float(np.sqrt(np.mean(z ** 2)))
     assert lo < rms < hi
     assert 0.25 < hi - lo < 0.6
-    assert se.rms_z_interval(z[:4]) is None
+    assert se.rms_z_bootstrap_interval(z[:4]) is None
