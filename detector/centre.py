@@ -17,7 +17,10 @@ A marker is a red or blue disc inside a dark ring. Inside a window around the de
 6. the centre: a least-squares fit of the projected disc to the score in a band around that
    ellipse's edge (:func:`fit_disc_edge`): an ellipse (centre and shape), a blurred edge
    (logistic profile of fitted width: the optics' and the pixel filter's blur), a disc level
-   that may vary linearly across the disc (shading) and a ring level. The refined outline box
+   that may vary linearly across the disc (shading) and a ring level; a disc only a few edge
+   widths thick is refitted with that shading along its major axis only (:func:`edge_fit`), and
+   the fitted edge width goes with the centre (``Refined.edge_px``: the solver widens a thin
+   disc's noise across it, ``solver.disc_noise.thin_disc_factor``). The refined outline box
    is the moment box, half-extents 2 sqrt(var) + ``edge_bias_px``, around the fitted centre
    (the fitted ellipse's own box falls inside the true outline, the moment box closer to it:
    ``bench/centre_bias.py``).
@@ -56,11 +59,13 @@ CLASS_CHANNEL = dict(enumerate(CLASS_CHANNELS))  # class id -> RGB channel of it
 @dataclass(frozen=True)
 class Refined:
     """``center: (2,) float64 px`` and ``box: (4,) float64 px`` (OpenCV convention), quality in [0, 1],
-    ``refined``: False when the detector's box was kept."""
+    ``refined``: False when the detector's box was kept; ``edge_px`` the edge fit's edge width
+    (Gaussian std, px; :class:`EdgeFit`), NaN when no edge fit gave the centre."""
     center: np.ndarray
     box: np.ndarray
     quality: float
     refined: bool
+    edge_px: float = float("nan")
 
 
 def colour_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
@@ -128,14 +133,19 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     second, win2 = _refine_once(image, first.box, class_id, min_quality, edge_bias_px)
     if second.refined:
         first, win = second, win2
-    centre = fit_disc_edge(win)
-    if centre is None:
-        return first
+    fit = edge_fit(win)
+    return first if fit is None else refined_at(image, fit.centre, win, first.quality, edge_bias_px, fit.edge_px)
+
+
+def refined_at(image: np.ndarray, centre: np.ndarray, win: _Window, quality: float, edge_bias_px: float,
+               edge_px: float) -> Refined:
+    """The refined detection at the fitted ``centre`` (2,) px: the box of the moment half-extents
+    of ``win`` (plus ``edge_bias_px``) around it, clipped to the ``image``."""
     h_img, w_img = image.shape[:2]
     half = np.array([win.cov[0, 0], win.cov[1, 1]]) ** 0.5 * 2 + edge_bias_px
     rbox = np.clip(np.concatenate([centre - half, centre + half]), -0.5,
                    np.array([w_img, h_img, w_img, h_img]) - 0.5)
-    return Refined(center=centre, box=rbox, quality=first.quality, refined=True)
+    return Refined(center=centre, box=rbox, quality=quality, refined=True, edge_px=float(edge_px))
 
 
 def _checked_box(image: np.ndarray, box) -> np.ndarray:
@@ -283,16 +293,42 @@ FIT_MAX_SHIFT_PX = 0.5  # a fitted centre farther than this from the coverage ce
 FIT_ITERATIONS = 8     # Levenberg-Marquardt steps at most (it stops earlier below 0.002 px)
 
 
+LOGISTIC_TO_GAUSSIAN = 1.702   # the logistic edge of scale s is close to a Gaussian step of std 1.702 s
+# A disc whose fitted minor semi-axis is under this many edge widths (Gaussian std) is refitted with
+# its disc level's gradient along the major axis only: across a thin blurred disc that gradient and
+# a shift of the centre along the minor axis change the score nearly alike (checked on two scenes:
+# results/README.md, "Measurements behind the code's constants").
+THIN_DISC_EDGE_WIDTHS = 6.0
+
+
+@dataclass(frozen=True)
+class EdgeFit:
+    """The edge fit of one disc: ``centre`` (2,) float64 px, ``edge_px`` the std (px) of the
+    Gaussian step its logistic edge approximates (the optics', the pixel filter's and the
+    camera's blur together), ``minor_px`` its minor semi-axis (px)."""
+    centre: np.ndarray
+    edge_px: float
+    minor_px: float
+
+
 def fit_disc_edge(win: _Window | None) -> np.ndarray | None:
-    """Centre ``(2,) float64 px`` of the disc in the window ``win``, by least squares; None when
-    there is nothing to fit or the fit is refused.
+    """Centre ``(2,) float64 px`` of :func:`edge_fit` on ``win``; None where it gives none."""
+    fit = edge_fit(win)
+    return None if fit is None else fit.centre
+
+
+def edge_fit(win: _Window | None) -> EdgeFit | None:
+    """The disc in the window ``win``, by least squares (:class:`EdgeFit`); None when there is
+    nothing to fit or the fit is refused.
 
     Model of the score at pixel x (px): ``b + (f(x) - b) / (1 + exp(d(x) / sigma))`` with
     d(x) the signed distance (px, > 0 outside) to the ellipse {x: (x - c)^T M (x - c) = 1} to first
     order (Sampson: ``(q - 1) / (2 |M (x - c)|)``), sigma the edge width (blur of the optics and
     the pixel filter), f(x) = f0 + f1 x + f2 y the disc level (shading across the disc) and b the
     ring level. Parameters: c (2), M (3), log sigma, f0, f1, f2, b; Levenberg-Marquardt from the
-    coverage ellipse, over the usable pixels in a band around its edge."""
+    coverage ellipse, over the usable pixels in a band around its edge. A disc thinner than
+    ``THIN_DISC_EDGE_WIDTHS`` edge widths is refitted with the shading along its major axis only
+    (:func:`_refit_shading_along_major`)."""
     if win is None:
         return None
     m0 = _inverse_2x2(4 * win.cov)             # uniform ellipse: covariance = M^-1 / 4
@@ -301,11 +337,47 @@ def fit_disc_edge(win: _Window | None) -> np.ndarray | None:
     band = (d0 > -FIT_BAND_IN_PX) & (d0 < FIT_BAND_OUT_PX) & _usable(win.s, win.pur, win.rho, win.fg, win.bg)
     if band.sum() < 20:
         return None
+    x, y, s = dx[band], dy[band], win.s[band].astype(np.float64)
     p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
-    p = _levenberg_marquardt(p0, dx[band], dy[band], win.s[band].astype(np.float64))
+    p = _levenberg_marquardt(p0, x, y, s)
     if p is None or not _fit_accepted(p, m0):
         return None
-    return win.centre + p[:2]
+    if _minor_px(p) < THIN_DISC_EDGE_WIDTHS * _edge_px(p):
+        q = _refit_shading_along_major(p, x, y, s)
+        p = q if q is not None and _fit_accepted(q, m0) else p
+    return EdgeFit(centre=win.centre + p[:2], edge_px=_edge_px(p), minor_px=_minor_px(p))
+
+
+def _edge_px(p: np.ndarray) -> float:
+    """Gaussian-equivalent std (px) of the fitted logistic edge of parameters ``p``."""
+    return LOGISTIC_TO_GAUSSIAN * float(np.exp(np.clip(p[5], -3.0, 2.0)))
+
+
+def _minor_px(p: np.ndarray) -> float:
+    """Minor semi-axis (px) of the fitted ellipse of parameters ``p`` (1 / sqrt of M's largest
+    eigenvalue)."""
+    return float(_eigenvalues_2x2(np.array([[p[2], p[3]], [p[3], p[4]]]))[1]) ** -0.5
+
+
+def _refit_shading_along_major(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray | None:
+    """Parameters ``p`` refitted with the disc level's gradient held along the ellipse's major
+    axis (its component along the minor axis fixed at 0), in the original frame; None when not
+    finite. The fit runs in coordinates rotated onto the axes of ``p``'s ellipse."""
+    m = np.array([[p[2], p[3]], [p[3], p[4]]])
+    t = 0.5 * np.arctan2(2 * p[3], p[2] - p[4])     # direction of M's largest eigenvalue: the minor axis
+    c, sn = np.cos(t), np.sin(t)
+    rot = np.array([[-sn, c], [-c, -sn]])            # rows: major, minor axis (a rotation, no LAPACK)
+    mr = rot @ m @ rot.T
+    grad = rot @ p[7:9]
+    q0 = np.array([*(rot @ p[:2]), mr[0, 0], mr[0, 1], mr[1, 1], p[5], p[6], grad[0], 0.0, p[9]])
+    xr, yr = rot @ np.stack([x, y])
+    free = np.ones(10, bool)
+    free[8] = False
+    q = _levenberg_marquardt(q0, xr, yr, s, free)
+    if q is None:
+        return None
+    mq = rot.T @ np.array([[q[2], q[3]], [q[3], q[4]]]) @ rot
+    return np.array([*(rot.T @ q[:2]), mq[0, 0], mq[0, 1], mq[1, 1], q[5], q[6], *(rot.T @ q[7:9]), q[9]])
 
 
 def _inverse_2x2(m: np.ndarray) -> np.ndarray:
@@ -360,17 +432,21 @@ def _edge_jacobian(p: np.ndarray, x: np.ndarray, y: np.ndarray, aux) -> np.ndarr
     return j
 
 
-def _levenberg_marquardt(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray | None:
-    """Least-squares parameters from ``p``; None when not finite."""
+def _levenberg_marquardt(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray,
+                        free: np.ndarray | None = None) -> np.ndarray | None:
+    """Least-squares parameters from ``p``, those not ``free`` ((10,) bool; None: all free) held
+    at their value; None when not finite."""
+    free = np.ones(p.size, bool) if free is None else free
     r, aux = _edge_residual(p, x, y, s)
     cost, lam = float(r @ r), 1e-3
     for _ in range(FIT_ITERATIONS):
-        j = _edge_jacobian(p, x, y, aux)
+        j = _edge_jacobian(p, x, y, aux)[free]
         h, g = j @ j.T, j @ r
         damp = np.diag(np.diag(h) + 1e-12)
         for _ in range(8):
-            solved, step = cv2.solve(h + lam * damp, g, flags=cv2.DECOMP_CHOLESKY)  # no LAPACK threads
-            step = step.ravel()
+            solved, sub = cv2.solve(h + lam * damp, g, flags=cv2.DECOMP_CHOLESKY)  # no LAPACK threads
+            step = np.zeros(p.size)
+            step[free] = sub.ravel()
             if solved:
                 r_new, aux_new = _edge_residual(p + step, x, y, s)
                 cost_new = float(r_new @ r_new)

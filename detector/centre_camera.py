@@ -39,7 +39,7 @@ import numpy as np
 from dockfactory.core.cfa import channel_map
 from dockfactory.detector import centre
 from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
-from dockfactory.detector.centre_joint import fit_disc_joint, reference_channel
+from dockfactory.detector.centre_joint import joint_fit, reference_channel
 
 
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
@@ -97,14 +97,12 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
     if second.refined:
         first, win = second, win2
     if cfa is not None and not jpeg:
-        fitted = fit_disc_joint(image, win, class_id, cfa)
+        joint = joint_fit(image, win, class_id, cfa)
+        fitted = None if joint is None else (win.centre + joint[0][:2], centre._edge_px(joint[0]))
     else:
         own = fit_evidence(image, win, class_id, cfa, jpeg)
-        fitted = None if own is None else centre.fit_disc_edge(own)
+        fit = None if own is None else centre.edge_fit(own)
+        fitted = None if fit is None else (fit.centre, fit.edge_px)
     if fitted is None:
         return first
-    h_img, w_img = image.shape[:2]
-    half = np.array([win.cov[0, 0], win.cov[1, 1]]) ** 0.5 * 2 + edge_bias_px
-    rbox = np.clip(np.concatenate([fitted - half, fitted + half]), -0.5,
-                   np.array([w_img, h_img, w_img, h_img]) - 0.5)
-    return Refined(center=fitted, box=rbox, quality=first.quality, refined=True)
+    return centre.refined_at(image, fitted[0], win, first.quality, edge_bias_px, fitted[1])

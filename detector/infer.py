@@ -216,6 +216,7 @@ class MarkerDetector:
                 entry.update(bbox_px=[round(float(v), 4) for v in r.box],
                              center_px=[round(float(v), 4) for v in r.center],
                              refine_quality=round(float(r.quality), 4), refined=bool(r.refined),
+                             edge_px=round(float(r.edge_px), 4) if np.isfinite(r.edge_px) else None,
                              bbox_detector_px=[round(float(v), 4) for v in box])
             else:
                 entry.update(bbox_px=[round(float(v), 4) for v in box],
@@ -248,8 +249,8 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
 
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
     "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
-    each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined,
-    bbox_detector_px}``. ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the
+    each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined, edge_px,
+    bbox_detector_px}`` (``edge_px``: the edge fit's edge width, px, null without one). ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the
     camera that took it (what its maker knows; ``MarkerDetector.detect``), None: three-chip PNG.
     """
 

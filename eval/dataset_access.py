@@ -238,4 +238,6 @@ def validate_detections(data, path, required: tuple[str, ...] = ()) -> dict:
                     check_numbers(d[box], path, f"{k}.{box}", 4)
             if "refined" in d:
                 check_bool(d["refined"], path, f"{k}.refined")
+            if d.get("edge_px") is not None:
+                check_number(d["edge_px"], path, f"{k}.edge_px", 0.0, 100.0)
     return data

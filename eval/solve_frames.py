@@ -60,9 +60,10 @@ def oracle_detections(label: dict, sigma_px: float, rng: np.random.Generator):
 
 
 def detection_arrays(dets: list[dict], min_score: float):
-    """(class_ids (N,), centres (N, 2), boxes (N, 4) or None, refined (N,) bool or None) of
-    the detections scoring at least ``min_score``; boxes / refined are None unless every
-    detection has them."""
+    """(class_ids (N,), centres (N, 2), boxes (N, 4) or None, refined (N,) bool or None, edge
+    widths (N,) px or None) of the detections scoring at least ``min_score``; boxes / refined
+    are None unless every detection has them, edge widths None when none has one (NaN where a
+    detection has none: its centre was not edge-fitted)."""
     keep = [d for d in dets if d.get("score", 1.0) >= min_score]
     cls = np.array([d["class_id"] for d in keep], dtype=int)
     uv = np.array([d["center_px"] for d in keep], dtype=float).reshape(-1, 2)
@@ -70,12 +71,14 @@ def detection_arrays(dets: list[dict], min_score: float):
              if all("bbox_px" in d for d in keep) else None)
     refined = (np.array([bool(d["refined"]) for d in keep], dtype=bool)
                if all("refined" in d for d in keep) else None)
-    return cls, uv, boxes, refined
+    edge = (np.array([np.nan if d.get("edge_px") is None else d["edge_px"] for d in keep], dtype=float)
+            if any(d.get("edge_px") is not None for d in keep) else None)
+    return cls, uv, boxes, refined, edge
 
 
 def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
               refined=None, camera_model: str = "pinhole") -> dict:
-    return solve_frame(markers, principal_point, (cls, uv, boxes, refined), sigma_px, camera_model)[0]
+    return solve_frame(markers, principal_point, (cls, uv, boxes, refined, None), sigma_px, camera_model)[0]
 
 
 def pose_record(res, n_detections: int) -> dict:
@@ -123,7 +126,7 @@ def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -
 
 
 def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_px, min_score: float):
-    """(class_ids, centres, boxes, refined) of a frame: its detections, or the oracle's noisy exact
+    """(class_ids, centres, boxes, refined, edge widths) of a frame: its detections, or the oracle's noisy exact
     centroids (seeded per frame); None when the detections file has no entry for it."""
     if detections is not None:
         dets = detections["frames"].get(fid)
@@ -131,7 +134,7 @@ def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_p
     label = ds.labels[fid]   # the oracle reads the exact centroids
     rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
     cls, uv = oracle_detections(label, oracle_sigma_px, rng)
-    return cls, uv, None, None
+    return cls, uv, None, None, None
 
 
 def true_camera_centres(label: dict, centres):
@@ -144,12 +147,12 @@ def true_camera_centres(label: dict, centres):
     def ideal(uv):
         return undistort_pixels(uv, cam["focal_px"], pp, dist)
 
-    cls, uv, boxes, refined = centres
+    cls, uv, boxes, refined, edge = centres
     if boxes is not None:
         corners = ideal(boxes.reshape(-1, 2)).reshape(-1, 4)
         boxes = np.concatenate([np.minimum(corners[:, :2], corners[:, 2:]),
                                 np.maximum(corners[:, :2], corners[:, 2:])], axis=1)
-    return pp, (cls, ideal(uv), boxes, refined)
+    return pp, (cls, ideal(uv), boxes, refined, edge)
 
 
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
@@ -254,10 +257,10 @@ def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None)
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
                 options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict]:
     """(poses record, marker id -> centre the fit used) of one frame."""
-    cls, uv, boxes, refined = centres
+    cls, uv, boxes, refined, edge = centres
     try:
         res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
-                            camera_model=camera_model, options=options)
+                            edge_px=edge, camera_model=camera_model, options=options)
     except SolverError as exc:
         return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}
     used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers))

@@ -163,7 +163,7 @@ def _intrinsics_report(fit: JointFit):
 
 
 def solve_docking(markers, principal_point, *, detections=None, correspondences=None,
-                  boxes=None, refined=None, sigma_px: float | None = None,
+                  boxes=None, refined=None, edge_px=None, sigma_px: float | None = None,
                   robust: bool = False, rng: np.random.Generator | None = None,
                   camera_model: str = PINHOLE.name,
                   options: DockingOptions = DEFAULT_DOCKING) -> DockingResult:
@@ -176,7 +176,9 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
       swapped classes tolerated; AmbiguousIdentification when two assignments fit equally).
       Suspect centres are then left out while each section keeps ``MIN_POINTS``
       (:mod:`solver.suspects`): ``boxes`` (N, 4) [x0, y0, x1, y1] px, the detected outlines;
-      ``refined`` (N,) bool, False where the detector could not refine the centre. With
+      ``refined`` (N,) bool, False where the detector could not refine the centre; ``edge_px``
+      (N,) px, the edge width of each centre's edge fit (NaN: none; None: unknown), which widens
+      the noise of a disc thin for its blur (:func:`solver.disc_noise.noise_shapes`). With
       ``options.eccentricity`` centres are corrected by their perspective offset and refitted.
     - ``correspondences``: dict marker id -> (u, v), or (marker_ids (N,), points_2d (N, 2));
       ``robust=True`` (with ``rng``, a numpy Generator) rejects outliers by LO-RANSAC.
@@ -196,9 +198,9 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     fitter = JointFitter(pp, check_sigma(sigma_px), options.refine,
                          check_model_name(camera_model), options.model_choice, options.lens)
     if detections is not None:
-        return _solve_detections(markers, layout, detections, boxes, refined, fitter, options)
-    if boxes is not None or refined is not None:
-        raise InvalidSolverInput("boxes= and refined= describe detections: give them with "
+        return _solve_detections(markers, layout, detections, (boxes, refined, edge_px), fitter, options)
+    if boxes is not None or refined is not None or edge_px is not None:
+        raise InvalidSolverInput("boxes=, refined= and edge_px= describe detections: give them with "
                                  "detections=")
     if robust and not isinstance(rng, np.random.Generator):
         raise InvalidSolverInput("robust=True needs rng, a numpy.random.Generator (explicit "
@@ -207,13 +209,15 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                                   options)
 
 
-def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
+def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,
                       fitter: JointFitter, options: DockingOptions) -> DockingResult:
     """Identify, fit, leave out suspects, correct the eccentricity, refit; the robust refit and
-    the covariance of the disc noise model (``options.disc_noise``, ``options.robust``)."""
+    the covariance of the disc noise model (``options.disc_noise``, ``options.robust``).
+    ``per_detection``: (boxes, refined, edge_px) as :func:`solve_docking` takes them."""
     n_det = len(parse_detections(detections)[0])
-    boxes = _row_array(boxes, n_det, (4,), "boxes", float)
-    refined = _row_array(refined, n_det, (), "refined", bool)
+    boxes = _row_array(per_detection[0], n_det, (4,), "boxes", float)
+    refined = _row_array(per_detection[1], n_det, (), "refined", bool)
+    edge_px = _edge_widths(per_detection[2], n_det)
     ident = identify_markers(markers, fitter.principal_point, detections, options.identify,
                              options.refine, trusted=refined)
     ids = list(ident.marker_ids)
@@ -225,7 +229,7 @@ def _solve_detections(markers, layout: LayoutArrays, detections, boxes, refined,
     # 150-180 deg, no error raised) and refused 2 more (focal not observable); the poses of
     # all the others moved by at most 6e-8 mm and 1.3e-8 deg (the LM's stopping tolerance)
     fit = fitter.fit(p3["A"], p2["A"], p3["B"], p2["B"], start=ident.start)
-    points = SectionPoints(rows, p3, p2, tuple(layout.by_id.get(i) for i in ids))
+    points = SectionPoints(rows, p3, p2, tuple(layout.by_id.get(i) for i in ids), edge_px)
     fit, inliers = leave_out_suspects(fit, points, fitter, used.copy(), boxes, refined,
                                       options.min_extent)
     keep, points_2d = section_keep(points, inliers), points.points_2d
@@ -289,8 +293,18 @@ def _kept(points: SectionPoints, keep: dict, points_2d: dict) -> tuple:
             {s: points_2d[s][keep[s]] for s in SECTIONS})
 
 
-def _row_array(value, n, shape, name, dtype):
-    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection)."""
+def _edge_widths(value, n: int) -> np.ndarray | None:
+    """``edge_px`` as an (n,) float array (NaN kept: no edge fit); InvalidSolverInput for a
+    negative or infinite width."""
+    edge = _row_array(value, n, (), "edge_px", float, allow_nan=True)
+    if edge is not None and not np.all(np.isnan(edge) | (np.isfinite(edge) & (edge >= 0))):
+        raise InvalidSolverInput(f"edge_px: widths must be finite and >= 0 (NaN: none), got {edge.tolist()}")
+    return edge
+
+
+def _row_array(value, n, shape, name, dtype, allow_nan: bool = False):
+    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection); NaN
+    refused unless ``allow_nan``, inf always."""
     if value is None:
         return None
     try:
@@ -300,7 +314,7 @@ def _row_array(value, n, shape, name, dtype):
     if arr.shape != (n, *shape):
         raise InvalidSolverInput(f"{name}: expected shape {(n, *shape)} (one row per "
                                  f"detection), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.all(np.isfinite(arr) | (allow_nan & np.isnan(arr))):
         raise InvalidSolverInput(f"{name}: contains NaN or inf")
     return arr
 

@@ -18,8 +18,9 @@ def _label_detections(ds: Dataset) -> dict:
     for fid in ds.frames(("test",)):
         lab = ds.labels[fid]
         frames[fid] = [{"class_id": m["class_id"], "center_px": m["outline_centroid_px"], "score": 0.9,
-                        "bbox_px": m["bbox_px"], "bbox_detector_px": m["bbox_px"], "refined": True}
-                       for m in lab["markers"] if m.get("visibility") == 2]
+                        "bbox_px": m["bbox_px"], "bbox_detector_px": m["bbox_px"], "refined": True,
+                        "edge_px": None if k % 3 == 0 else 0.6}
+                       for k, m in enumerate(lab["markers"]) if m.get("visibility") == 2]
     return {"dataset_version": ds.version_id, "frames": frames}
 
 
@@ -39,6 +40,9 @@ def test_sigma_floor_flag_out_of_range(painted_source, tmp_path, capsys, value):
     (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px="x"), "bbox_detector_px"),
     (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px=[1, 2, 3, float("nan")]),
      "bbox_detector_px"),
+    (lambda d: next(iter(d["frames"].values()))[0].update(edge_px="wide"), "edge_px"),
+    (lambda d: next(iter(d["frames"].values()))[0].update(edge_px=-0.5), "edge_px"),
+    (lambda d: next(iter(d["frames"].values()))[0].update(edge_px=1e308), "edge_px"),
 ])
 def test_detections_with_impossible_numbers(painted_source, tmp_path, capsys, edit, key):
     dets = _label_detections(Dataset.open(painted_source))
