@@ -20,12 +20,13 @@ def draws(rng, big_r: float, p: float, n: int, scale: float) -> np.ndarray:
 
 
 def test_the_law_fit_recovers_its_constants():
-    """20000 draws per input at R 4.25, P 2 with two different noise scales: the pooled fit is
-    within one grid step of R and P (0.25 each)."""
+    """20000 draws per input at the shipped law (R 4.75, P 1.5) and at R 3, P 2.5, each with two
+    different noise scales: the pooled fit is within one grid step of R and P (0.25 each)."""
     rng = np.random.default_rng(7)
-    data = [tdn.normalised(draws(rng, 4.25, 2.0, 20000, s)) for s in (0.003, 0.02)]
-    big_r, p = tdn.best_law(data)
-    assert big_r == pytest.approx(4.25, abs=0.26) and p == pytest.approx(2.0, abs=0.26)
+    for true_r, true_p in ((tdn.THIN_DISC_RATIO, tdn.THIN_DISC_POWER), (3.0, 2.5)):
+        data = [tdn.normalised(draws(rng, true_r, true_p, 20000, s)) for s in (0.003, 0.02)]
+        big_r, p = tdn.best_law(data)
+        assert big_r == pytest.approx(true_r, abs=0.26) and p == pytest.approx(true_p, abs=0.26)
 
 
 def test_normalisation_divides_by_the_major_axis_scale():
