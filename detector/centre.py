@@ -96,6 +96,11 @@ PURITY_SHARE = 0.5  # pixels under this share of the disc's median purity are no
 MAX_SCORE_RATIO = 3.0  # pixels scoring this many times the disc's level (above the ring's) are not the disc
 
 
+# The quality's shape term is 0 where the coverage's area is this share of its moments' ellipse (or
+# the ellipse this share of it), 1 at 0.13 above: a disc thin for its blur (or a demosaic) widens its
+# moments, so a higher floor refuses exactly the discs the thin-disc refit and noise are for
+# (checked on two scenes: results/README.md, "Measurements behind the code's constants").
+SHAPE_OK_MIN = 0.75
 EDGE_BIAS_PX = 0.041  # px added to the moment half-extents of the box (it moves no centre): median shortfall on train frames of configs/detector.toml
 
 
@@ -226,7 +231,7 @@ def _quality(area: float, det: float, hw: float, hh: float, contrast: float) -> 
     shape_ok = min(area / ellipse_area, ellipse_area / area)      # 1 for an ellipse
     box_ok = min(area / box_area, box_area / area)                # 1 when it fills the box's ellipse
     q_contrast = float(np.clip((contrast - 2) / 4, 0, 1))
-    q_shape = float(np.clip((shape_ok - 0.85) / 0.13, 0, 1))
+    q_shape = float(np.clip((shape_ok - SHAPE_OK_MIN) / 0.13, 0, 1))
     q_box = float(np.clip((box_ok - 0.4) / 0.3, 0, 1))
     return q_contrast * q_shape * q_box
 
