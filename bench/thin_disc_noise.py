@@ -110,7 +110,8 @@ def main(argv=None) -> int:
     for root in args.datasets:
         ds = Dataset.open(root, full=False)
         for effect in args.effects.split(","):
-            rows = [r for fid in ds.frames("test")[: args.frames or None] for r in frame_rows(detector, ds, fid, effect)]
+            frames = ds.frames("test")[: args.frames or None]
+            rows = [r for fid in frames for r in frame_rows(detector, ds, fid, effect)]
             d = normalised(np.array(rows, dtype=float))
             name = f"{ds.config.dataset.name}@{ds.version_id} {effect}"
             big_r, p = best_law([d])

@@ -250,8 +250,9 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
     "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
     each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined, edge_px,
-    bbox_detector_px}`` (``edge_px``: the edge fit's edge width, px, null without one). ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the
-    camera that took it (what its maker knows; ``MarkerDetector.detect``), None: three-chip PNG.
+    bbox_detector_px}`` (``edge_px``: the edge fit's edge width, px, null without one).
+    ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the camera that took it
+    (what its maker knows; ``MarkerDetector.detect``), None: three-chip PNG.
     """
 
     from dockfactory.detector.data import load_frames, read_rgb
