@@ -4,7 +4,9 @@
     python bench/model_error_runs.py DATASET --detections DETS.json parts --out-dir DIR
     python bench/model_error_runs.py DATASET --detections DETS.json no-aberration --out-dir DIR
     python bench/model_error_runs.py DATASET --detections DETS.json section-shift --tau 0.04 0.08
-    python bench/model_error_runs.py DATASET --detections DETS.json gate --z 3.09 0
+    python bench/model_error_runs.py DATASET --detections DETS.json gate --alpha 0.001 0.05 1
+    python bench/model_error_runs.py DATASET --detections DETS.json length --length 0.1 0.19 0.38
+    python bench/model_error_runs.py DATASET --detections DETS.json correlation
 
 - ``units``: per camera unit, Y RMSE, median reported std and RMS z of three solves: per run with
   the config's lens prior (what the judge does), per run and per frame through each frame's true
@@ -19,8 +21,13 @@
   section and axis over the whole run (prior std ``--tau`` px), marginalised like the per-marker
   bias (``solver.sequence``); a shift that a run's residuals cannot show, since the section's
   pose absorbs it.
-- ``gate``: per-run RMS z with the run-bias term counted above other significance levels
-  (``solver.model_error.BIAS_Z``; 0: whenever its estimate is positive).
+- ``gate``: per-run RMS z with the run-bias term counted at other significance levels
+  (``solver.model_error.BIAS_ALPHA``; 1: whenever its estimate is positive).
+- ``length``: per-run RMS z with other correlation lengths of the run-bias field
+  (``solver.model_error.BIAS_LENGTH``, image diagonals).
+- ``correlation``: how the detector's centre errors correlate between two markers of a section in
+  one frame (by image distance) and for one marker over a run's frames: what the run-bias
+  field's length and persistence rest on.
 
 Figures and their reading: results/README.md, "Per-run Y, taken apart".
 """
@@ -136,10 +143,10 @@ def section_shift_z(ds: Dataset, dets: dict, taus) -> None:
     """Prints per-run RMS z X / Y / alpha with a common per-section shift of std tau marginalised."""
     import dockfactory.solver.sequence as sq
     from dockfactory.solver.refine import inverse_spd
-    plain = sq._with_marker_bias
+    plain = sq._with_run_bias
     for tau in taus:
-        def shifted(mf, parsed, sigma, layout, share, floor_px=None, tau=tau):
-            out = plain(mf, parsed, sigma, layout, share, floor_px)
+        def shifted(mf, parsed, sigma, layout, share, pp, floor_px=None, tau=tau):
+            out = plain(mf, parsed, sigma, layout, share, pp, floor_px)
             ids = [fr.ids[r] for fr in parsed for s in ("A", "B") for r in fr.rows[s]]
             jac = mf.refinement.jacobian
             sel = np.zeros((jac.shape[0], 4))
@@ -147,11 +154,11 @@ def section_shift_z(ds: Dataset, dets: dict, taus) -> None:
             sel[np.arange(0, jac.shape[0], 2), 2 * sec], sel[np.arange(1, jac.shape[0], 2), 2 * sec + 1] = 1.0, 1.0
             g = inverse_spd(jac.T @ jac) @ (jac.T @ sel)
             return replace(out, covariance=out.covariance + tau ** 2 * (g @ g.T))
-        sq._with_marker_bias = shifted
+        sq._with_run_bias = shifted
         try:
             print(f"tau {tau:.3f} px: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
         finally:
-            sq._with_marker_bias = plain
+            sq._with_run_bias = plain
 
 
 def run_z(ds: Dataset, dets: dict) -> str:
@@ -163,25 +170,75 @@ def run_z(ds: Dataset, dets: dict) -> str:
 
 
 def gate_z(ds: Dataset, dets: dict, levels) -> None:
-    """Prints per-run RMS z with the run-bias term's significance level set to each of ``levels``."""
+    """Prints per-run RMS z with the run-bias term's significance level (``BIAS_ALPHA``) set to
+    each of ``levels`` (1: counted whenever its estimate is positive)."""
     import dockfactory.solver.model_error as me
-    keep = me.BIAS_Z
-    for z in levels:
-        me.BIAS_Z = z
+    keep = me.BIAS_ALPHA
+    for alpha in levels:
+        me.BIAS_ALPHA = alpha
         try:
-            print(f"gate z > {z:g}: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
+            print(f"bias counted at p < {alpha:g}: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
         finally:
-            me.BIAS_Z = keep
+            me.BIAS_ALPHA = keep
+
+
+def length_z(ds: Dataset, dets: dict, lengths) -> None:
+    """Prints per-run RMS z with the run-bias field's correlation length (``BIAS_LENGTH``, image
+    diagonals) set to each of ``lengths``."""
+    import dockfactory.solver.sequence as sq
+    keep = sq.BIAS_LENGTH
+    for length in lengths:
+        sq.BIAS_LENGTH = length
+        try:
+            print(f"bias length {length:g} diagonals: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
+        finally:
+            sq.BIAS_LENGTH = keep
+
+
+CORRELATION_BINS_PX = (0, 100, 200, 400, 100000)
+CLIP_PX = 0.8   # centre errors beyond this (gross ones) left out of the correlations
+
+
+def centre_correlations(ds: Dataset, dets: dict) -> str:
+    """Markdown: the correlation of the centre errors (detected minus the outline centroid) of two
+    markers of one section in one frame, per axis, by their image distance; and of one marker's
+    errors in two frames of one docking run (errors beyond CLIP_PX left out)."""
+    pairs, per_marker, errs = {}, {}, []
+    for fid in ds.frames(("train", "val", "test")):
+        if fid not in dets["frames"]:
+            continue
+        found, spec = frame_detections(dets, fid), ds.labels[fid]["spec"]
+        rows = [(mid, truth, np.array(found[i]["center_px"]) - truth) for i, mid, truth in matches(ds, dets, fid)]
+        rows = [r for r in rows if np.all(np.abs(r[2]) < CLIP_PX)]
+        errs += [r[2] for r in rows]
+        for a, (ma, ta, ea) in enumerate(rows):
+            per_marker.setdefault((spec.get("unit", 0), spec.get("run", -1), ma), []).append(ea)
+            for mb, tb, eb in rows[a + 1:]:
+                if ma[0] == mb[0]:
+                    k = int(np.searchsorted(CORRELATION_BINS_PX, np.hypot(*(ta - tb)))) - 1
+                    pairs.setdefault(k, []).append(ea * eb)
+    var = np.mean(np.square(errs), axis=0)
+    lines = ["| pairs | n | x | y |", "| --- | --- | --- | --- |"]
+    for k in sorted(pairs):
+        c = np.mean(pairs[k], axis=0) / var
+        lines.append(f"| same section, {CORRELATION_BINS_PX[k]}-{CORRELATION_BINS_PX[k + 1]} px | {len(pairs[k])} "
+                     f"| {c[0]:.2f} | {c[1]:.2f} |")
+    same = [ea * eb for (_, run, _), e in per_marker.items() if run >= 0 for i, ea in enumerate(e) for eb in e[i + 1:]]
+    c = np.mean(same, axis=0) / var
+    lines.append(f"| one marker, two frames of a run | {len(same)} | {c[0]:.2f} | {c[1]:.2f} |")
+    return "\n".join(lines) + f"\n\ncentre error RMS x / y {np.sqrt(var[0]):.3f} / {np.sqrt(var[1]):.3f} px"
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("dataset")
     ap.add_argument("--detections", required=True)
-    ap.add_argument("mode", choices=("units", "parts", "no-aberration", "section-shift", "gate"))
+    ap.add_argument("mode", choices=("units", "parts", "no-aberration", "section-shift", "gate", "length",
+                                     "correlation"))
     ap.add_argument("--out-dir", default=".")
     ap.add_argument("--tau", type=float, nargs="+", default=[0.0, 0.04, 0.08])
-    ap.add_argument("--z", type=float, nargs="+", default=[3.09, 1.64, 0.0])
+    ap.add_argument("--alpha", type=float, nargs="+", default=[0.001, 0.05, 1.0])
+    ap.add_argument("--length", type=float, nargs="+", default=[0.05, 0.1, 0.19, 0.38])
     a = ap.parse_args(argv)
     ds = Dataset.open(a.dataset, full=False)
     dets = json.loads(Path(a.detections).read_text())
@@ -193,7 +250,11 @@ def main(argv=None) -> int:
         write_json_atomic(Path(a.out_dir) / "dets_no_aberration.json", without_aberration(ds, dets))
         print(Path(a.out_dir) / "dets_no_aberration.json")
     elif a.mode == "gate":
-        gate_z(ds, dets, a.z)
+        gate_z(ds, dets, a.alpha)
+    elif a.mode == "length":
+        length_z(ds, dets, a.length)
+    elif a.mode == "correlation":
+        print(centre_correlations(ds, dets))
     else:
         section_shift_z(ds, dets, a.tau)
     print(f"dataset {ds.version_id}")

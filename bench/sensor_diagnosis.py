@@ -147,8 +147,8 @@ def pose_rmse(ds, dets: dict, noise_px) -> str:
     from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame
     errs = []
     for fid, d in dets.items():
-        rec, _ = solve_frame(ds.markers(), (639.5, 479.5), detection_arrays(d, 0.25), None, "pinhole",
-                             docking_options(noise_px))
+        rec = solve_frame(ds.markers(), (639.5, 479.5), detection_arrays(d, 0.25), None, "pinhole",
+                          docking_options(noise_px))[0]
         if rec["ok"]:
             e = pose_error(rec["pose"], ds.labels[fid]["pose_b_in_d"])
             errs.append([e[c] for c in COMPONENTS])

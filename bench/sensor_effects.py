@@ -125,8 +125,8 @@ def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str |
     label = ds.labels[fid]
     h, w = image.shape[:2]
     dets = detector.detect(image, cfa=cfa, jpeg=jpeg)
-    rec, _ = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
-                         "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))
+    rec = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
+                      "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))[0]
     row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label)}
     if rec["ok"]:
         err = pose_error(rec["pose"], label["pose_b_in_d"])

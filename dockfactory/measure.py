@@ -82,6 +82,7 @@ class Frame:
     detections: list = field(default_factory=list)
     principal_point: tuple = (0.0, 0.0)
     used_points: dict = field(default_factory=dict)   # marker id -> (u, v) the frame's fit used
+    used_edges: dict = field(default_factory=dict)    # marker id -> edge width (px) of those centres, if measured
 
 
 def collect_images(items) -> list[Path]:
@@ -172,8 +173,8 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         why = f"{NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     else:
-        frame.record, frame.used_points = solve_frame(markers, frame.principal_point, centres, None, camera_model,
-                                                      docking_options(detector.centre_noise_px, lens))
+        frame.record, frame.used_points, frame.used_edges = solve_frame(
+            markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
@@ -197,7 +198,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     keys = [str(f.index) for f in solved]
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
-                        docking_options(sigma_floor_px, lens))
+                        docking_options(sigma_floor_px, lens), {str(f.index): f.used_edges for f in solved})
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
@@ -374,13 +375,15 @@ def check_one_size(paths, probes) -> None:
 
 def _entry(frame: Frame) -> dict:
     return {"record": frame.record, "detections": frame.detections, "principal_point": list(frame.principal_point),
-            "used_points": [[mid, *uv] for mid, uv in frame.used_points.items()]}
+            "used_points": [[mid, *uv] for mid, uv in frame.used_points.items()],
+            "used_edge_px": [[mid, w] for mid, w in frame.used_edges.items()]}
 
 
 def _frame(index: int, path: Path, entry: dict) -> Frame:
     return Frame(index, path, entry["record"], detections=entry["detections"],
                  principal_point=tuple(entry["principal_point"]),
-                 used_points={mid: (u, v) for mid, u, v in entry["used_points"]})
+                 used_points={mid: (u, v) for mid, u, v in entry["used_points"]},
+                 used_edges={mid: w for mid, w in entry.get("used_edge_px", [])})
 
 
 def _died(path: Path, error: BaseException) -> dict:

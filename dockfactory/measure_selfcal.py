@@ -43,7 +43,8 @@ def parse_window(text: str) -> int:
 @dataclass
 class WindowCalibration:
     """``apply(index, frame)`` -> the frame's record after the window's joint solve (the module
-    docstring); ``frame`` a measure.Frame solved alone (pinhole), with its ``used_points``."""
+    docstring); ``frame`` a measure.Frame solved alone (pinhole), with its ``used_points`` (and
+    ``used_edges``: the edge widths the run's covariance takes, :func:`solver.solve_sequence`)."""
     markers: tuple
     window: int
     camera_model: str = "auto"
@@ -59,14 +60,15 @@ class WindowCalibration:
             return record
         if self.frozen is not None:
             return self._frozen(index, frame)
-        self.frames.append((str(index), frame.used_points, record["n_detections"]))
+        self.frames.append((str(index), frame.used_points, record["n_detections"], frame.used_edges))
         while len(self.frames) > self.window:
             self.frames.popleft()
         if len(self.frames) < MIN_FRAMES:
             return {**record, "self_calibration": f"window of {len(self.frames)} frames: solved alone"}
-        keys = [k for k, _, _ in self.frames]
-        out = solve_run(self.markers, frame.principal_point, keys, {k: {"n_detections": n} for k, _, n in self.frames},
-                        {k: used for k, used, _ in self.frames}, None, self.camera_model, self.options)[str(index)]
+        keys = [k for k, _, _, _ in self.frames]
+        out = solve_run(self.markers, frame.principal_point, keys, {k: {"n_detections": n} for k, _, n, _ in self.frames},
+                        {k: used for k, used, _, _ in self.frames}, None, self.camera_model, self.options,
+                        {k: edges for k, _, _, edges in self.frames})[str(index)]
         if not out["ok"]:
             return {**record, "self_calibration": f"window solve failed, solved alone: {out['reason']}"}
         self.joint += 1
@@ -84,7 +86,8 @@ class WindowCalibration:
                               [fz.get(k, 0.0) for k in ("k1", "k2", "p1", "p2")] + [0.0])
         key = str(index)
         out = solve_run(self.markers, pp, [key], {key: {"n_detections": frame.record["n_detections"]}},
-                        {key: dict(zip(ids, map(tuple, uv)))}, None, "pinhole", self.options)[key]
+                        {key: dict(zip(ids, map(tuple, uv)))}, None, "pinhole", self.options,
+                        {key: frame.used_edges})[key]
         if not out["ok"]:
             return {**frame.record, "self_calibration": f"frozen-intrinsics solve failed: {out['reason']}"}
         extra = {k: frame.record[k] for k in ("image_size", "timing_ms", "roi") if k in frame.record}

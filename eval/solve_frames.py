@@ -188,18 +188,18 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
         sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
     lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
     options = docking_options(sigma_floor_px, lens)
-    frames, used = {}, {}
+    frames, used, edges = {}, {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
         if centres is None:
             frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
             continue
         frame_pp, centres = true_camera_centres(ds.labels[fid], centres) if true_camera else (pp, centres)
-        frames[fid], used[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, options)
+        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, options)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
-            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options))
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options, edges))
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
@@ -255,17 +255,19 @@ def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None)
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
-                options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict]:
-    """(poses record, marker id -> centre the fit used) of one frame."""
+                options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict, dict]:
+    """(poses record, marker id -> centre (u, v) px the fit used, marker id -> the edge width
+    (px) of each of those centres the detector measured one for) of one frame."""
     cls, uv, boxes, refined, edge = centres
     try:
         res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
                             edge_px=edge, camera_model=camera_model, options=options)
     except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}
-    used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers))
-            if ok and mid}
-    return pose_record(res, int(len(cls))), used
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}, {}
+    kept = [(k, mid) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers)) if ok and mid]
+    used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, mid in kept}
+    widths = {} if edge is None else {mid: float(edge[k]) for k, mid in kept if np.isfinite(edge[k])}
+    return pose_record(res, int(len(cls))), used, widths
 
 
 def has_docking_runs(ds: Dataset) -> bool:
@@ -295,12 +297,14 @@ def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
 
 
 def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str,
-              options: DockingOptions = DEFAULT_DOCKING) -> dict:
+              options: DockingOptions = DEFAULT_DOCKING, edges: dict | None = None) -> dict:
     """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
-    the joint solve fails, every frame of the run says why."""
+    the joint solve fails, every frame of the run says why. ``used`` / ``edges``: per frame id the
+    centres and edge widths :func:`solve_frame` returned (``edges`` None: no widths told)."""
+    widths = None if edges is None else [edges.get(f) or None for f in group]
     try:
         run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma,
-                             options=options)
+                             edge_px=widths, options=options)
     except SolverError as exc:
         return {f: {"ok": False, "reason": f"docking run solve: {exc}", "category": failure_category(exc)}
                 for f in group}

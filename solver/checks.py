@@ -17,8 +17,8 @@ from dockfactory.solver.errors import (
 )
 
 __all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
-           "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL",
-           "MAX_SIGMA_PX"]
+           "check_edge_widths", "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d",
+           "MIN_POINTS", "COLLINEAR_TOL", "MAX_SIGMA_PX"]
 
 MIN_POINTS = 4
 # Largest centre noise (px) the solver takes: a centre known no better than this gives no pose, and
@@ -84,6 +84,22 @@ def check_sigma(sigma_px) -> float | None:
     if not np.isfinite(s) or s <= 0 or s > MAX_SIGMA_PX:
         raise InvalidSolverInput(f"sigma_px must be in (0, {MAX_SIGMA_PX:g}] px, got {sigma_px}")
     return s
+
+
+def check_edge_widths(value, n: int) -> np.ndarray | None:
+    """None, or ``value`` as an (n,) float array of edge widths (px, one per detection; NaN:
+    no edge fit); InvalidSolverInput for another shape, a negative or an infinite width."""
+    if value is None:
+        return None
+    try:
+        edge = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InvalidSolverInput(f"edge_px: not an array of float: {exc}") from None
+    if edge.shape != (n,):
+        raise InvalidSolverInput(f"edge_px: expected shape {(n,)} (one row per detection), got {edge.shape}")
+    if not np.all(np.isnan(edge) | (np.isfinite(edge) & (edge >= 0))):
+        raise InvalidSolverInput(f"edge_px: widths must be finite and >= 0 (NaN: none), got {edge.tolist()}")
+    return edge
 
 
 def collinear_3d(points: np.ndarray) -> bool:

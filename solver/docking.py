@@ -37,7 +37,7 @@ from dockfactory.solver.camera_models import (
     check_model_name,
     project_normalized,
 )
-from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_sigma
+from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_edge_widths, check_sigma
 from dockfactory.solver.disc_noise import robust_refit, with_disc_noise, with_model_error
 from dockfactory.solver.eccentricity import eccentricity_corrected, section_keep
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera
@@ -217,7 +217,7 @@ def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,
     n_det = len(parse_detections(detections)[0])
     boxes = _row_array(per_detection[0], n_det, (4,), "boxes", float)
     refined = _row_array(per_detection[1], n_det, (), "refined", bool)
-    edge_px = _edge_widths(per_detection[2], n_det)
+    edge_px = check_edge_widths(per_detection[2], n_det)
     ident = identify_markers(markers, fitter.principal_point, detections, options.identify,
                              options.refine, trusted=refined)
     ids = list(ident.marker_ids)
@@ -291,15 +291,6 @@ def _kept(points: SectionPoints, keep: dict, points_2d: dict) -> tuple:
     """({section: points_3d}, {section: points_2d}) of the points ``keep`` (n_s,) bool."""
     return ({s: points.points_3d[s][keep[s]] for s in SECTIONS},
             {s: points_2d[s][keep[s]] for s in SECTIONS})
-
-
-def _edge_widths(value, n: int) -> np.ndarray | None:
-    """``edge_px`` as an (n,) float array (NaN kept: no edge fit); InvalidSolverInput for a
-    negative or infinite width."""
-    edge = _row_array(value, n, (), "edge_px", float, allow_nan=True)
-    if edge is not None and not np.all(np.isnan(edge) | (np.isfinite(edge) & (edge >= 0))):
-        raise InvalidSolverInput(f"edge_px: widths must be finite and >= 0 (NaN: none), got {edge.tolist()}")
-    return edge
 
 
 def _row_array(value, n, shape, name, dtype, allow_nan: bool = False):

@@ -39,10 +39,12 @@ from dockfactory.solver.options import LensPrior
 from dockfactory.solver.refine import inverse_spd, stack_blocks, whitened
 from dockfactory.solver.stats import chi2_logsf, f_logsf
 
-__all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "ALL_EXTRAS"]
+__all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "persistent_bias_covariance",
+           "spatial_bias_factor", "ALL_EXTRAS"]
 
 ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)
-BIAS_Z = 3.09   # one-sided 1e-3: a per-marker bias is counted only when the residuals show it
+BIAS_ALPHA = 0.05   # a run's persistent bias is counted only when the residuals show it at this level
+BIAS_LENGTH = 0.19   # correlation length of a run's persistent centre errors, in image diagonals
 
 
 @dataclass(frozen=True)
@@ -149,48 +151,79 @@ def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:
     return s[:, s.any(axis=0)]
 
 
-def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, known: float | None):
-    """(sigma^2, tau^2) from the moments (2, 2) of :func:`marker_bias_covariance`, r^T r =
-    ``rr``, |S^T r|^2 = ``sr`` and tr((S^T M T M S)^2) = ``tr_c2``; ``known`` sigma^2 or None.
-    tau^2 is 0 (and sigma^2 the residuals' alone) unless the bias is significant (BIAS_Z)."""
+def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, known: float | None,
+                    dof: int):
+    """(sigma^2, tau^2) from the moments (2, 2) of :func:`persistent_bias_covariance`, r^T r =
+    ``rr``, |S^T r|^2 = ``sr`` and tr(C^2) = ``tr_c2`` (C = S^T M T M S); ``known`` sigma^2 or
+    None; ``dof`` the residual degrees of freedom. tau^2 is 0 (and sigma^2 the residuals' alone)
+    unless the bias is significant at BIAS_ALPHA: without a bias, |S^T r|^2 / sigma^2 is a sum
+    of chi-squares weighted by C's eigenvalues, taken as g chi2_h (Satterthwaite: g = tr C^2 /
+    tr C, h = (tr C)^2 / tr C^2), against an F(h, dof) when sigma^2 is estimated."""
     if known is not None:
         sigma2, tau2 = known, (sr - known * moments[1, 0]) / moments[1, 1]
     else:
         (a, b), (c, d) = moments                 # two moment equations in two unknowns (Cramer's rule)
         det = a * d - b * c
         sigma2, tau2 = float((rr * d - b * sr) / det), float((a * sr - c * rr) / det)
-    z = (sr - sigma2 * moments[1, 0]) / (sigma2 * math.sqrt(2.0 * tr_c2))
-    if z > BIAS_Z:
+    null = known if known is not None else rr / moments[0, 0]
+    g, h = tr_c2 / moments[1, 0], moments[1, 0] ** 2 / tr_c2
+    stat = sr / (null * g)
+    log_p = chi2_logsf(stat, h) if known is not None or dof < 1 else f_logsf(stat / h, h, dof)
+    if tau2 > 0 and log_p < math.log(BIAS_ALPHA):
         return float(sigma2), float(tau2)
-    return (known if known is not None else rr / moments[0, 0]), 0.0
+    return null, 0.0
 
 
 def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np.ndarray,
                            sigma_px: float | None, shapes: np.ndarray | None = None,
                            floor_px: float | None = None):
+    """:func:`persistent_bias_covariance` with a bias of each marker that persists across the
+    frames it is seen in, independent between markers (``marker_of_point`` (n,) int: which
+    marker each point is): the indicator S (m, 2K) of each row's marker and axis as the factor."""
+    return persistent_bias_covariance(jac, res, _marker_indicator(marker_of_point), sigma_px, shapes, floor_px)
+
+
+def spatial_bias_factor(points_px: np.ndarray, groups: np.ndarray, length_px: float,
+                        rel_tol: float = 1e-3) -> np.ndarray:
+    """F (2n, 2q) with F F^T ~ the correlation of a bias field over the image: points i, j of one
+    group (a section) correlated exp(-d_ij / ``length_px``) (d their image distance, px), per axis
+    alike, none across groups. ``points_px`` (n, 2), ``groups`` (n,) labels. The kernel is positive
+    definite; its eigenvalues below ``rel_tol`` of the largest are dropped (rank q <= n), which
+    changes the moments by that fraction at most."""
+    pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+    grp = np.asarray(groups)
+    d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1])
+    kernel = np.exp(-d / float(length_px)) * (grp[:, None] == grp[None, :])
+    lam, vec = np.linalg.eigh(kernel)
+    keep = lam > rel_tol * lam[-1]
+    return np.kron(vec[:, keep] * np.sqrt(lam[keep]), np.eye(2))
+
+
+def persistent_bias_covariance(jac: np.ndarray, res: np.ndarray, factor: np.ndarray, sigma_px: float | None,
+                               shapes: np.ndarray | None = None, floor_px: float | None = None):
     """(covariance (p, p), sigma^2, tau^2) of a least-squares fit whose centre errors are noise
-    (sigma^2 T_i for point i) plus a bias of each marker that persists across the frames it is
-    seen in (tau^2 per axis, independent between markers): a docking run's camera and lens are
-    fixed, so a marker's centre is biased the same way in every frame (lens and colour effects
-    on the detector), which the residuals of one frame cannot tell from noise.
+    (sigma^2 T_i for point i) plus a bias that persists across a run's frames with correlation
+    S S^T over the rows (tau^2 per axis; ``factor`` S (m, q): :func:`_marker_indicator` for one
+    bias per marker, :func:`spatial_bias_factor` for a field correlated between nearby points):
+    a docking run's camera and lens are fixed, so a centre is biased much the same way in every
+    frame (lens, lighting and colour effects on the detector), which one frame's residuals
+    cannot tell from noise.
 
     ``jac`` (m, p) and ``res`` (m,) the unweighted fit's Jacobian and residuals, rows 2n
-    interleaved (u, v) over n points; ``marker_of_point`` (n,) int: which marker each point is;
-    ``shapes`` (n, 2, 2) the relative noise covariance T_i of each point (None: I). With S
-    (m, 2K) the indicator of each row's marker and axis, M = I - H (H the hat matrix) and
-    Q = S^T M S, the moments E[r^T r] = sigma^2 tr(M T) + tau^2 tr Q and E[|S^T r|^2] =
-    sigma^2 tr(S^T M T M S) + tau^2 tr Q^2 give sigma^2 and tau^2 (``sigma_px`` given: sigma^2
-    is its square over the mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is
-    0 unless |S^T r|^2 exceeds its bias-free expectation by BIAS_Z of its standard deviations:
-    noise alone widens an ideal run's covariance about once in 1,000 runs). The covariance is
-    the sandwich A^-1 J^T (sigma^2 T + tau^2 S S^T) J A^-1, an estimated sigma never below
-    ``floor_px`` (per axis, as :func:`solver.refine.covariance_from_jacobian`'s floor)
-    (A = J^T J); sigma^2 is returned per axis averaged over the points (px^2). Not finite when
-    A is singular."""
+    interleaved (u, v) over n points; ``shapes`` (n, 2, 2) the relative noise covariance T_i of
+    each point (None: I). With M = I - H (H the hat matrix) and Q = S^T M S, the moments
+    E[r^T r] = sigma^2 tr(M T) + tau^2 tr Q and E[|S^T r|^2] = sigma^2 tr(S^T M T M S) +
+    tau^2 tr Q^2 give sigma^2 and tau^2 (``sigma_px`` given: sigma^2 is its square over the
+    mean of tr T_i / 2, and the second moment gives tau^2; tau^2 is 0 unless |S^T r|^2 exceeds
+    its bias-free distribution at BIAS_ALPHA, :func:`_noise_and_bias`: noise alone widens an
+    ideal run's covariance about once in 20 runs). The covariance is the sandwich A^-1 J^T (sigma^2 T +
+    tau^2 S S^T) J A^-1, an estimated sigma never below ``floor_px`` (per axis, as
+    :func:`solver.refine.covariance_from_jacobian`'s floor) (A = J^T J); sigma^2 is returned per
+    axis averaged over the points (px^2). Not finite when A is singular."""
     m, p = jac.shape
-    n = marker_of_point.size
+    n = m // 2
     t = np.broadcast_to(np.eye(2), (n, 2, 2)) if shapes is None else np.asarray(shapes, dtype=np.float64)
-    s = _marker_indicator(marker_of_point)
+    s = np.asarray(factor, dtype=np.float64)
     a_inv = inverse_spd(jac.T @ jac)
     if not np.all(np.isfinite(a_inv)) or m <= p:
         return a_inv, float("inf"), 0.0
@@ -198,16 +231,14 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     meat = np.einsum("nap,nab,nbq->pq", jr, t, jr)                    # J^T T J
     js = jac.T @ s
     sm = (s.T - js.T @ a_inv @ jac.T).reshape(-1, n, 2)              # S^T M, rows by point
-    moments = np.array([[float(np.trace(t, axis1=1, axis2=2).sum() - np.sum(a_inv * meat)),
-                         float(np.trace(sm.reshape(-1, m) @ s))],
-                        [float(np.einsum("kna,nab,knb->", sm, t, sm)), 0.0]])
     q = sm.reshape(-1, m) @ s
-    moments[1, 1] = float(np.sum(q * q))
+    c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                      # S^T M T M S
+    moments = np.array([[float(np.trace(t, axis1=1, axis2=2).sum() - np.sum(a_inv * meat)), float(np.trace(q))],
+                        [float(np.trace(c)), float(np.sum(q * q))]])
     rr, sr = float(res @ res), float(np.sum((s.T @ res) ** 2))
     mean_var = float(np.trace(t, axis1=1, axis2=2).mean()) / 2.0
-    c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                     # S^T M T M S
     known = None if sigma_px is None else float(sigma_px) ** 2 / mean_var
-    sigma2, tau2 = _noise_and_bias(moments, rr, sr, float(np.sum(c * c)), known)
+    sigma2, tau2 = _noise_and_bias(moments, rr, sr, float(np.sum(c * c)), known, m - p)
     if sigma_px is None and floor_px is not None:
         sigma2 = max(sigma2, float(floor_px) ** 2 / mean_var)
     g = a_inv @ js

@@ -357,10 +357,12 @@ class DockingOptions:
     - ``lens``: the plausible range of the intrinsics the camera model does not estimate: the
       misfit test of every solve, and with ``lens.marginalise`` the model error in its
       covariance (:mod:`solver.model_error`).
-    - ``run_marker_bias``: a docking run's covariance (:func:`solver.solve_sequence`) lets each
-      marker's centre carry a bias that persists across the run's frames, its variance
-      estimated from the run's residuals (:func:`solver.model_error.marker_bias_covariance`);
-      False: the centres' errors are independent between frames.
+    - ``run_marker_bias``: a docking run's covariance (:func:`solver.solve_sequence`) lets the
+      centres carry a bias that persists across the run's frames and correlates between nearby
+      markers of a section (a field over the image, correlation length
+      ``solver.model_error.BIAS_LENGTH`` image diagonals), its variance estimated from the run's
+      residuals and counted when they show it (:func:`solver.model_error.
+      persistent_bias_covariance`); False: the centres' errors are independent between frames.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)

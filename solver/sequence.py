@@ -15,21 +15,26 @@ least-squares problem (top layer of the solver, beside :mod:`solver.docking`):
    (``share_cam_from_a``, the default; else one per frame) and one cam_from_b per frame.
 
 The covariance of every parameter comes from the same Jacobian: sigma^2 (J^T J)^-1, or with
-``options.run_marker_bias`` the sandwich of white noise plus a per-marker bias that persists
-across the run (:func:`solver.model_error.marker_bias_covariance`), plus the model error of the
-intrinsics the run does not estimate (:mod:`solver.model_error`); each frame's
+``options.run_marker_bias`` the sandwich of white noise plus a bias field that persists across
+the run and correlates between nearby centres of a section
+(:func:`solver.model_error.persistent_bias_covariance`; a fixed camera repeats its lighting,
+blur and colour effects on the detector in every frame, so averaging the frames does not shrink
+them), plus the model error of the intrinsics the run does not estimate
+(:mod:`solver.model_error`); each frame's
 ``d_from_b`` gets its covariance by first-order propagation from its block (with a shared
 cam_from_a the frames' errors are correlated through it: the per-frame covariances are
 marginals).
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dockfactory.core.names import SECTIONS
 from dockfactory.solver.camera_models import PINHOLE, Intrinsics, check_model_name
-from dockfactory.solver.checks import as_principal_point, check_sigma
+from dockfactory.solver.checks import as_principal_point, check_edge_widths, check_sigma
 from dockfactory.solver.disc_noise import section_noise_shapes
 from dockfactory.solver.docking import DockingResult
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera, SolverError
@@ -41,7 +46,13 @@ from dockfactory.solver.layout_points import (
 )
 from dockfactory.solver.lie import project_to_so3
 from dockfactory.solver.model_choice import ModelChoice
-from dockfactory.solver.model_error import ModelCheck, marker_bias_covariance, model_check
+from dockfactory.solver.model_error import (
+    BIAS_LENGTH,
+    ModelCheck,
+    model_check,
+    persistent_bias_covariance,
+    spatial_bias_factor,
+)
 from dockfactory.solver.model_fit import (
     ModelFit,
     check_model_focal,
@@ -91,17 +102,19 @@ class SequenceResult:
 @dataclass(frozen=True)
 class _Frame:
     """One frame's validated points: ``rows`` / ``p3`` / ``p2`` per section (as
-    :func:`solver.layout_points.section_arrays`), its marker ``ids`` (N,)."""
+    :func:`solver.layout_points.section_arrays`), its marker ``ids`` (N,), the edge width of
+    each centre ``edge`` (N,) px (NaN: not told)."""
 
     ids: tuple
     rows: dict
     p3: dict
     p2: dict
+    edge: np.ndarray
 
 
 def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINHOLE.name,
                    sigma_px: float | None = None, share_cam_from_a: bool = True,
-                   options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
+                   edge_px=None, options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
     """Poses of B in A for every frame of one docking run, with the camera's intrinsics
     estimated once for the run (see the module docstring).
 
@@ -112,67 +125,94 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
     ``camera_model``: a name of :data:`solver.camera_models.MODELS` or "auto";
     ``sigma_px``: the pixel noise std, or None (estimated from the residuals);
     ``share_cam_from_a``: one camera pose relative to A for the whole run (the camera and A
-    are fixed) or one per frame. Returns a :class:`SequenceResult`; raises a SolverError
+    are fixed) or one per frame; ``edge_px``: None, or per frame None or a mapping marker id ->
+    the detector's edge width of that centre (px, NaN: none; :func:`solver.solve_docking`'s
+    ``edge_px``), which widens the noise of centres on discs thin for their blur in the run's
+    covariance (:func:`solver.disc_noise.thin_disc_factor`). Returns a :class:`SequenceResult`; raises a SolverError
     subclass (bad input, too few points, no valid camera, an unobservable focal).
     """
     layout = LayoutArrays.of(markers)
     pp = as_principal_point(principal_point)
     sigma = check_sigma(sigma_px)
     model_name = check_model_name(camera_model)
-    parsed = _parse_frames(layout, frames)
+    parsed = _parse_frames(layout, frames, edge_px)
     pin = _pinhole_run(parsed, pp, sigma, bool(share_cam_from_a), options)
     blocks = _blocks(parsed, bool(share_cam_from_a))
     mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
     check_model_focal(mf, options.refine)
+    noise2 = mf.sigma_px ** 2       # the residuals' whole scale: what the misfit test weighs them by
     if options.run_marker_bias:
-        mf = _with_marker_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), options.refine.sigma_floor_px)
+        mf = _with_run_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), pp, options.refine.sigma_floor_px)
     check = model_check(blocks, mf.poses, mf.intrinsics, mf.model, mf.covariance.shape[0], None,
-                        mf.sigma_px ** 2, options.lens, pp, sigma is not None)
+                        noise2, options.lens, pp, sigma is not None)
     return _result(replace(mf, covariance=mf.covariance + check.added), parsed,
                    bool(share_cam_from_a), check)
 
 
-def _with_marker_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, floor_px=None) -> ModelFit:
-    """``mf`` with the covariance of noise plus a bias of each marker that persists across the
-    run's frames (:func:`solver.model_error.marker_bias_covariance`; with the noise estimated,
-    each centre's noise shaped by its disc's image, :func:`solver.disc_noise.
-    section_noise_shapes`, never below ``floor_px``); ``sigma_px`` its noise part. Unchanged
-    when that covariance is not finite."""
-    ids, shapes = [], []
+def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, pp, floor_px=None) -> ModelFit:
+    """``mf`` with the covariance of noise plus a bias field that persists across the run's
+    frames, correlated between nearby centres of a section (:func:`solver.model_error.
+    spatial_bias_factor` over the image, correlation length BIAS_LENGTH image diagonals, the
+    diagonal taken from the assumed principal point ``pp``; :func:`solver.model_error.
+    persistent_bias_covariance`); with the noise estimated, each centre's noise shaped by its
+    disc's image (:func:`solver.disc_noise.section_noise_shapes`, told the frame's edge widths),
+    never below ``floor_px``; ``sigma_px`` its noise part. Unchanged when that covariance is not
+    finite."""
+    points, groups, shapes = [], [], []
     for k, fr in enumerate(parsed):
-        for s, pose in zip(("A", "B"), _pose_indices(k, share)):
-            rows = [fr.ids[r] for r in fr.rows[s]]
-            ids += rows
+        for s, pose in zip(SECTIONS, _pose_indices(k, share)):
             rot, t = mf.poses[pose]
             cam = np.eye(4)
             cam[:3, :3], cam[:3, 3] = rot, t
-            shapes.append(section_noise_shapes([layout.by_id[i] for i in rows], cam, mf.intrinsics.focal_px))
-    index = {mid: k for k, mid in enumerate(sorted(set(ids)))}
+            points.append(fr.p2[s])
+            groups += [s] * len(fr.rows[s])
+            shapes.append(section_noise_shapes([layout.by_id[fr.ids[r]] for r in fr.rows[s]], cam,
+                                               mf.intrinsics.focal_px, fr.edge[fr.rows[s]]))
+    diagonal = 2.0 * float(np.hypot(pp[0] + 0.5, pp[1] + 0.5))
+    factor = spatial_bias_factor(np.concatenate(points), np.array(groups), BIAS_LENGTH * diagonal)
     ref = mf.refinement
-    cov, sigma2, tau2 = marker_bias_covariance(ref.jacobian, ref.residuals, np.array([index[i] for i in ids]),
-                                            sigma, None if sigma is not None else np.concatenate(shapes), floor_px)
+    cov, sigma2, _ = persistent_bias_covariance(ref.jacobian, ref.residuals, factor, sigma,
+                                                None if sigma is not None else np.concatenate(shapes), floor_px)
     if not np.all(np.isfinite(cov)):
         return mf
     return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2)))
 
 
-def _parse_frames(layout: LayoutArrays, frames) -> list:
-    """Validated :class:`_Frame` per input frame (InvalidSolverInput for an empty run)."""
+def _parse_frames(layout: LayoutArrays, frames, edge_px=None) -> list:
+    """Validated :class:`_Frame` per input frame (InvalidSolverInput for an empty run, for
+    ``edge_px`` not one entry per frame or naming a marker the frame does not have)."""
     try:
         frames = list(frames)
     except TypeError:
         raise InvalidSolverInput("frames: expected a sequence of correspondences") from None
     if not frames:
         raise InvalidSolverInput("frames: a docking run needs at least one frame")
+    edges = [None] * len(frames) if edge_px is None else list(edge_px)
+    if len(edges) != len(frames):
+        raise InvalidSolverInput(f"edge_px: {len(edges)} entries for {len(frames)} frames (one per frame)")
     out = []
-    for k, corr in enumerate(frames):
+    for k, (corr, edge) in enumerate(zip(frames, edges)):
         try:
             ids, uv = checked_correspondences(layout, corr)
             rows, p3, p2 = section_arrays(layout, ids, np.ones(len(ids), dtype=bool), uv)
+            widths = _frame_edges(ids, edge)
         except SolverError as exc:
             raise type(exc)(f"frame {k}: {exc}") from None
-        out.append(_Frame(tuple(ids), rows, p3, p2))
+        out.append(_Frame(tuple(ids), rows, p3, p2, widths))
     return out
+
+
+def _frame_edges(ids, edge) -> np.ndarray:
+    """(N,) edge widths of a frame's centres in the order of ``ids`` from ``edge`` (None or a
+    mapping marker id -> width px); NaN where not told."""
+    if edge is None:
+        return np.full(len(ids), np.nan)
+    if not isinstance(edge, Mapping):
+        raise InvalidSolverInput(f"edge_px: expected a mapping marker id -> width, got {type(edge).__name__}")
+    unknown = sorted(set(edge) - set(ids), key=str)
+    if unknown:
+        raise InvalidSolverInput(f"edge_px: marker ids not among the frame's correspondences: {unknown[:10]}")
+    return check_edge_widths([np.nan if edge.get(i) is None else edge[i] for i in ids], len(ids))
 
 
 def _blocks(parsed, share: bool) -> tuple:

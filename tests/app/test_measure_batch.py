@@ -226,6 +226,35 @@ def test_results_are_written_as_they_finish_and_a_rerun_measures_only_the_rest(s
         assert got["ok"] and max(abs(got["pose"][k] - v) for k, v in rec["pose"].items()) < 1e-9
 
 
+@pytest.mark.slow   # measure three times in this process
+def test_a_resumed_docking_run_keeps_the_edge_widths(source, tmp_path, monkeypatch):
+    """--self-calibrate sequence: each entry keeps the edge widths of the centres its frame used
+    (the run's covariance takes them), so a resumed run reports the covariance of a fresh one
+    (to 1e-9 relative), not the one of centres without widths."""
+    folder, layout = source
+    real, calls = measure_mod.measure_and_draw, []
+
+    def stops_at_third(*args):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args)
+    monkeypatch.setattr(measure_mod, "measure_and_draw", stops_at_third)
+    out, fresh = tmp_path / "out", tmp_path / "fresh"
+    assert _measure([folder], layout, out, "--workers", "1", "--self-calibrate", "sequence") == 130
+    entries = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
+    assert len(entries) == 2 and all(len(e["used_edge_px"]) >= 8 for e in entries)
+    assert all(set(mid for mid, _ in e["used_edge_px"]) <= set(mid for mid, *_ in e["used_points"]) for e in entries)
+    monkeypatch.setattr(measure_mod, "measure_and_draw", real)
+    assert _measure([folder], layout, out, "--workers", "1", "--self-calibrate", "sequence") == 0
+    assert _measure([folder], layout, fresh, "--workers", "1", "--self-calibrate", "sequence") == 0
+    assert _doc(out)["resumed"] == 2
+    for name, rec in _by_name(_doc(fresh)).items():
+        got = _by_name(_doc(out))[name]
+        assert got["ok"] and got["self_calibrated"] == "sequence"
+        assert np.allclose(got["covariance"], rec["covariance"], rtol=1e-9, atol=0.0)
+
+
 @pytest.mark.slow   # measure four times in this process
 def test_other_images_or_options_start_over_without_stale_outputs(source, tmp_path):
     folder, layout = source

@@ -4,6 +4,8 @@ synthetic runs of ``solver.synthetic.docking_run``. Seeded; tolerances stated pe
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from dockfactory.solver import (
     crb_sequence,
     solve_sequence,
 )
+from dockfactory.solver.options import DEFAULT_DOCKING
 from dockfactory.solver.synthetic import POSE_RANGES, default_layout, docking_run
 
 LAYOUT = default_layout()
@@ -121,23 +124,31 @@ def test_sequence_auto_keeps_pinhole_on_an_ideal_camera():
 
 def test_sequence_covariance_is_consistent_with_its_errors():
     """pp_k1 camera solved with pp_k1, 8 runs of 20 frames at 0.1 px: the errors of (f, cx,
-    cy, k1) over their reported std have RMS in [0.7, 1.35] (32 values), and the reported std
-    equals the run's Cramer-Rao bound within 10 % (same Jacobian, evaluated at the estimate)."""
+    cy, k1) over their reported std have RMS in [0.7, 1.35] (32 values); without the run-bias
+    term the reported std equals the run's Cramer-Rao bound within 10 % (same Jacobian,
+    evaluated at the estimate), and with it (the default) never falls below that, and equals it
+    in at least 6 of the 8 runs (white noise shows a bias in about 1 run in 20: BIAS_ALPHA)."""
     rng = np.random.default_rng(5)
-    z = []
+    z, equal = [], 0
     for _ in range(8):
         run = docking_run(rng, 20, pp_offset_px=(20.0, 15.0), coeffs=(-0.05,))
-        r = solve_sequence(LAYOUT, run.frames[0].image_centre, _frames(run, rng, 0.1),
-                           camera_model="pp_k1", sigma_px=0.1)
+        frames = _frames(run, rng, 0.1)
+        r = solve_sequence(LAYOUT, run.frames[0].image_centre, frames, camera_model="pp_k1", sigma_px=0.1)
+        white = solve_sequence(LAYOUT, run.frames[0].image_centre, frames, camera_model="pp_k1", sigma_px=0.1,
+                               options=replace(DEFAULT_DOCKING, run_marker_bias=False))
         std = np.array([r.intrinsics_std[k] for k in KEYS])
         z.append(_intrinsics_error(r, run) / std)
         f0 = run.frames[0]
         b = crb_sequence(f0.points_a, f0.cam_from_d, f0.points_b,
                          [f.cam_from_b for f in run.frames], f0.focal_px, f0.principal_point,
                          0.1, camera_model="pp_k1", coeffs=f0.coeffs)
-        assert np.allclose(std, [b.intrinsics_std[k] for k in KEYS], rtol=0.1)
+        bound = np.array([b.intrinsics_std[k] for k in KEYS])
+        assert np.allclose([white.intrinsics_std[k] for k in KEYS], bound, rtol=0.1)
+        assert np.all(std >= 0.9 * bound)
+        equal += bool(np.allclose(std, bound, rtol=0.1))
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.7 <= rms <= 1.35, rms
+    assert equal >= 6, equal
 
 
 @pytest.mark.slow
