@@ -232,7 +232,8 @@ def persistent_bias_covariance(jac: np.ndarray, res: np.ndarray, factor: np.ndar
     js = jac.T @ s
     sm = (s.T - js.T @ a_inv @ jac.T).reshape(-1, n, 2)              # S^T M, rows by point
     q = sm.reshape(-1, m) @ s
-    c = np.einsum("kna,nab,lnb->kl", sm, t, sm)                      # S^T M T M S
+    tsm = np.einsum("nab,knb->kna", t, sm).reshape(-1, m)
+    c = sm.reshape(-1, m) @ tsm.T                                    # S^T M T M S
     moments = np.array([[float(np.trace(t, axis1=1, axis2=2).sum() - np.sum(a_inv * meat)), float(np.trace(q))],
                         [float(np.trace(c)), float(np.sum(q * q))]])
     rr, sr = float(res @ res), float(np.sum((s.T @ res) ** 2))
