@@ -170,7 +170,7 @@ def _noise_and_bias(moments: np.ndarray, rr: float, sr: float, tr_c2: float, kno
     stat = sr / (null * g)
     log_p = chi2_logsf(stat, h) if known is not None or dof < 1 else f_logsf(stat / h, h, dof)
     if tau2 > 0 and log_p < math.log(BIAS_ALPHA):
-        return float(sigma2), float(tau2)
+        return max(float(sigma2), 0.0), float(tau2)     # the bias may explain all of the residuals
     return null, 0.0
 
 
