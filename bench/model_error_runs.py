@@ -199,34 +199,48 @@ CORRELATION_BINS_PX = (0, 100, 200, 400, 100000)
 CLIP_PX = 0.8   # centre errors beyond this (gross ones) left out of the correlations
 
 
-def centre_correlations(ds: Dataset, dets: dict) -> str:
-    """Markdown: the correlation of the centre errors (detected minus the outline centroid) of two
-    markers of one section in one frame, per axis, by their image distance; and of one marker's
-    errors in two frames of one docking run (errors beyond CLIP_PX left out)."""
-    pairs, per_marker, errs = {}, {}, []
-    for fid in ds.frames(("train", "val", "test")):
-        if fid not in dets["frames"]:
-            continue
-        found, spec = frame_detections(dets, fid), ds.labels[fid]["spec"]
-        rows = [(mid, truth, np.array(found[i]["center_px"]) - truth) for i, mid, truth in matches(ds, dets, fid)]
-        rows = [r for r in rows if np.all(np.abs(r[2]) < CLIP_PX)]
-        errs += [r[2] for r in rows]
-        for a, (ma, ta, ea) in enumerate(rows):
-            per_marker.setdefault((spec.get("unit", 0), spec.get("run", -1), ma), []).append(ea)
-            for mb, tb, eb in rows[a + 1:]:
+def correlation_table(rows) -> str:
+    """Markdown: the correlation of centre errors, per axis, between two markers of one section in
+    one frame by their image distance (CORRELATION_BINS_PX), and of one marker over two frames of
+    one docking run. ``rows``: (frame key, run key or None, marker id, truth (2,) px, error (2,)
+    px) per matched centre; errors beyond CLIP_PX (gross ones) are left out."""
+    rows = [r for r in rows if np.all(np.abs(r[4]) < CLIP_PX)]
+    by_frame, by_marker = {}, {}
+    for frame, run, mid, truth, err in rows:
+        by_frame.setdefault(frame, []).append((mid, truth, err))
+        if run is not None:
+            by_marker.setdefault((run, mid), []).append(err)
+    pairs = {}
+    for found in by_frame.values():
+        for a, (ma, ta, ea) in enumerate(found):
+            for mb, tb, eb in found[a + 1:]:
                 if ma[0] == mb[0]:
                     k = int(np.searchsorted(CORRELATION_BINS_PX, np.hypot(*(ta - tb)))) - 1
                     pairs.setdefault(k, []).append(ea * eb)
-    var = np.mean(np.square(errs), axis=0)
+    var = np.mean(np.square([r[4] for r in rows]), axis=0)
     lines = ["| pairs | n | x | y |", "| --- | --- | --- | --- |"]
     for k in sorted(pairs):
         c = np.mean(pairs[k], axis=0) / var
         lines.append(f"| same section, {CORRELATION_BINS_PX[k]}-{CORRELATION_BINS_PX[k + 1]} px | {len(pairs[k])} "
                      f"| {c[0]:.2f} | {c[1]:.2f} |")
-    same = [ea * eb for (_, run, _), e in per_marker.items() if run >= 0 for i, ea in enumerate(e) for eb in e[i + 1:]]
-    c = np.mean(same, axis=0) / var
-    lines.append(f"| one marker, two frames of a run | {len(same)} | {c[0]:.2f} | {c[1]:.2f} |")
+    same = [ea * eb for e in by_marker.values() for i, ea in enumerate(e) for eb in e[i + 1:]]
+    if same:
+        c = np.mean(same, axis=0) / var
+        lines.append(f"| one marker, two frames of a run | {len(same)} | {c[0]:.2f} | {c[1]:.2f} |")
     return "\n".join(lines) + f"\n\ncentre error RMS x / y {np.sqrt(var[0]):.3f} / {np.sqrt(var[1]):.3f} px"
+
+
+def centre_correlations(ds: Dataset, dets: dict) -> str:
+    """:func:`correlation_table` of a dataset's detections (detected centre minus the label's
+    outline centroid; runs from the labels' unit and run)."""
+    rows = []
+    for fid in ds.frames(("train", "val", "test")):
+        if fid not in dets["frames"]:
+            continue
+        found, spec = frame_detections(dets, fid), ds.labels[fid]["spec"]
+        run = (spec.get("unit", 0), spec["run"]) if spec.get("run", -1) >= 0 else None
+        rows += [(fid, run, mid, truth, np.array(found[i]["center_px"]) - truth) for i, mid, truth in matches(ds, dets, fid)]
+    return correlation_table(rows)
 
 
 def main(argv=None) -> int:

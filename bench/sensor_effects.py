@@ -102,9 +102,9 @@ def delivered(passes_rgb: np.ndarray, label: dict, effect: str) -> np.ndarray:
     return jpeg_round_trip(image, *jpeg) if jpeg else image
 
 
-def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float]]:
-    """(class, dx, dy) px of each fully visible, legible marker against the detection of its class
-    nearest to it (within its box): refined centre minus the label's outline centroid."""
+def matched_centres(dets: list[dict], label: dict) -> list[tuple[dict, np.ndarray, np.ndarray]]:
+    """(marker label, outline centroid (2,), refined centre (2,)) px of each fully visible, legible
+    marker and the detection of its class nearest to it (within its box)."""
     out = []
     for m in label["markers"]:
         if m.get("visibility") != 2 or not m.get("legible", True):
@@ -115,8 +115,14 @@ def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float
                 and y0 <= d["center_px"][1] <= y1]
         if near:
             c = min(near, key=lambda d: np.hypot(*(np.array(d["center_px"]) - truth)))["center_px"]
-            out.append((m["class_id"], c[0] - truth[0], c[1] - truth[1]))
+            out.append((m, truth, np.array(c, dtype=float)))
     return out
+
+
+def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float]]:
+    """(class, dx, dy) px of each :func:`matched_centres` marker: refined centre minus the label's
+    outline centroid."""
+    return [(m["class_id"], float(c[0] - t[0]), float(c[1] - t[1])) for m, t, c in matched_centres(dets, label)]
 
 
 def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str | None, jpeg: bool) -> dict:

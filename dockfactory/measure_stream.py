@@ -224,7 +224,8 @@ def frame_line(index: int, timestamp_ms: float, record: dict) -> dict:
         line.update(rmse_px=record["rmse_px"], n_detections=record["n_detections"], marker_ids=record["marker_ids"])
     else:
         line.update(category=record.get("category"), reason=record.get("reason"))
-    for key in ("roi", "self_calibrated", "run_frames", "frozen_intrinsics", "self_calibration", "notes"):
+    for key in ("roi", "self_calibrated", "run_frames", "run_bias_px", "frozen_intrinsics", "self_calibration",
+                "notes"):
         if key in record:
             line[key] = record[key]
     return line

@@ -312,7 +312,7 @@ def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, ca
     for fid, res in zip(group, run.frames):
         out[fid] = {**pose_record(res, frames[fid]["n_detections"]), "camera_model": run.camera_model,
                     "intrinsics": dict(run.intrinsics), "intrinsics_std": dict(run.intrinsics_std),
-                    "self_calibrated": "sequence", "run_frames": len(group)}
+                    "self_calibrated": "sequence", "run_frames": len(group), "run_bias_px": run.bias_px}
     return out
 
 

@@ -81,7 +81,10 @@ class SequenceResult:
     - ``model_check``: the model error of the run's camera model (:mod:`solver.model_error`,
       the intrinsics the run does not estimate, shared by its frames): whether the model
       explains the run's residuals and, with ``options.lens.marginalise``, their pose error in
-      every frame's covariance (each frame's ``model_check`` is this one).
+      every frame's covariance (each frame's ``model_check`` is this one);
+    - ``bias_px``: the std per axis (px) of the bias field that persists over the run, as its
+      residuals show it (0.0: none counted, or ``options.run_marker_bias`` off): a pattern of
+      centre errors the camera repeats in every frame (lighting, blur, colour), in the covariance.
     """
 
     frames: tuple
@@ -97,6 +100,7 @@ class SequenceResult:
     iterations: int
     model_choice: ModelChoice | None = None
     model_check: ModelCheck | None = None
+    bias_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -140,24 +144,26 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
     blocks = _blocks(parsed, bool(share_cam_from_a))
     mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
     check_model_focal(mf, options.refine)
-    noise2 = mf.sigma_px ** 2       # the residuals' whole scale: what the misfit test weighs them by
+    noise2, bias = mf.sigma_px ** 2, 0.0   # the residuals' whole scale: what the misfit test weighs them by
     if options.run_marker_bias:
-        mf = _with_run_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), pp, options.refine.sigma_floor_px)
+        mf, bias = _with_run_bias(mf, parsed, sigma, layout, bool(share_cam_from_a), pp,
+                                  options.refine.sigma_floor_px)
     check = model_check(blocks, mf.poses, mf.intrinsics, mf.model, mf.covariance.shape[0], None,
                         noise2, options.lens, pp, sigma is not None)
-    return _result(replace(mf, covariance=mf.covariance + check.added), parsed,
-                   bool(share_cam_from_a), check)
+    return replace(_result(replace(mf, covariance=mf.covariance + check.added), parsed,
+                           bool(share_cam_from_a), check), bias_px=bias)
 
 
-def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, pp, floor_px=None) -> ModelFit:
-    """``mf`` with the covariance of noise plus a bias field that persists across the run's
+def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, pp,
+                   floor_px=None) -> tuple[ModelFit, float]:
+    """(``mf`` with the covariance of noise plus a bias field that persists across the run's
     frames, correlated between nearby centres of a section (:func:`solver.model_error.
     spatial_bias_factor` over the image, correlation length BIAS_LENGTH image diagonals, the
     diagonal taken from the assumed principal point ``pp``; :func:`solver.model_error.
     persistent_bias_covariance`); with the noise estimated, each centre's noise shaped by its
     disc's image (:func:`solver.disc_noise.section_noise_shapes`, told the frame's edge widths),
-    never below ``floor_px``; ``sigma_px`` its noise part. Unchanged when that covariance is not
-    finite."""
+    never below ``floor_px``; ``sigma_px`` its noise part, the field's std px per axis). ``mf``
+    unchanged (and 0.0) when that covariance is not finite."""
     points, groups, shapes = [], [], []
     for k, fr in enumerate(parsed):
         for s, pose in zip(SECTIONS, _pose_indices(k, share)):
@@ -171,11 +177,11 @@ def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: boo
     diagonal = 2.0 * float(np.hypot(pp[0] + 0.5, pp[1] + 0.5))
     factor = spatial_bias_factor(np.concatenate(points), np.array(groups), BIAS_LENGTH * diagonal)
     ref = mf.refinement
-    cov, sigma2, _ = persistent_bias_covariance(ref.jacobian, ref.residuals, factor, sigma,
-                                                None if sigma is not None else np.concatenate(shapes), floor_px)
+    cov, sigma2, tau2 = persistent_bias_covariance(ref.jacobian, ref.residuals, factor, sigma,
+                                                   None if sigma is not None else np.concatenate(shapes), floor_px)
     if not np.all(np.isfinite(cov)):
-        return mf
-    return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2)))
+        return mf, 0.0
+    return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2))), float(np.sqrt(tau2))
 
 
 def _parse_frames(layout: LayoutArrays, frames, edge_px=None) -> list:
