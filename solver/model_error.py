@@ -24,6 +24,12 @@ above 1), chi-square with that many degrees of freedom when the noise is known, 
 (T / q against (q, residual dof)) when it was estimated from the same residuals. A p-value
 below ``LensPrior.misfit_alpha`` says the assumed model does not explain the residuals.
 
+A docking run has a model error of its own: a fixed camera repeats its lighting, blur and colour
+effects on the detector in every frame, so part of the centre errors persists over the run and is
+shared by nearby markers of a section, which averaging the frames does not shrink. Its variance
+comes from the run's residuals by moments and enters the covariance when they show it
+(:func:`persistent_bias_covariance`, the field's correlation :func:`spatial_bias_factor`).
+
 Layer 3 of the solver (estimators), beside :mod:`solver.model_fit`: imports
 :mod:`solver.refine`, :mod:`solver.camera_models`, :mod:`solver.stats` and the options.
 """
