@@ -5,7 +5,9 @@ layout and the detections of one frame, each case in a fresh process.
 
 Cases: ``layout-N`` a synthetic layout of N markers per section on the radius-300 mm cylinders
 (random positions at least 32 mm apart, 12 mm discs), every marker detected once (+ N(0, 0.2) px);
-``default-xK`` the factory's default layout (7 + 7) with each detection repeated K times. Layouts
+``default-xK`` the factory's default layout (7 + 7) with each detection repeated K times;
+``run-F`` a docking run of F frames of the default layout (0.1 px) through ``solve_sequence``
+(camera model auto; its covariance's bias field included). Layouts
 beyond ``core.layout_file.MAX_MARKERS_PER_SECTION`` and frames beyond
 ``solver.identify.max_detections`` are refused: their row shows the refusal and what it cost.
 Prints one row per case: markers, detections, result, wall time, peak RSS (ru_maxrss of the
@@ -19,7 +21,7 @@ import subprocess
 import sys
 
 CASES = ("layout-1", "layout-7", "layout-16", "layout-32", "layout-100", "layout-1000",
-         "default-x1", "default-x3", "default-x20")
+         "default-x1", "default-x3", "default-x20", "run-10", "run-40", "run-100", "run-300")
 
 CHILD = r"""
 import os, resource, sys, time
@@ -29,6 +31,19 @@ from dockfactory.solver import SolverError, solve_docking
 from dockfactory.solver.synthetic import default_layout, docking_scene
 kind, n = sys.argv[1].split("-")
 rng = np.random.default_rng(1)
+if kind == "run":   # one docking run of n frames solved at once (shared intrinsics, its bias field)
+    from dockfactory.solver import solve_sequence
+    from dockfactory.solver.synthetic import docking_run
+    run = docking_run(rng, int(n))
+    layout = default_layout()
+    ids = [m.id for m in layout]
+    frames = [(ids, np.vstack([f.uv_a, f.uv_b]) + rng.normal(0, 0.1, (len(ids), 2))) for f in run.frames]
+    t = time.perf_counter()
+    res = solve_sequence(layout, run.frames[0].image_centre, frames, camera_model="auto")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"{sys.argv[1]:>12} {len(layout):>8} {len(ids) * int(n):>10} {time.perf_counter() - t:>8.2f} {rss:>9.0f}  "
+          f"solved ({res.camera_model}, bias {res.bias_px:.3f} px)")
+    sys.exit(0)
 from dockfactory.core.layout_file import MAX_MARKERS_PER_SECTION
 def pattern(count):
     if count > MAX_MARKERS_PER_SECTION:   # refused before any geometry: a dense grid will do

@@ -51,6 +51,7 @@ __all__ = ["ModelCheck", "model_check", "marker_bias_covariance", "persistent_bi
 ALL_EXTRAS = IntrinsicsModel("all", EXTRA_NAMES)
 BIAS_ALPHA = 0.05   # a run's persistent bias is counted only when the residuals show it at this level
 BIAS_LENGTH = 0.19   # correlation length of a run's persistent centre errors, in image diagonals
+GRID_STEP = 0.25     # spacing of the bias field's inducing points, in correlation lengths
 
 
 @dataclass(frozen=True)
@@ -189,20 +190,43 @@ def marker_bias_covariance(jac: np.ndarray, res: np.ndarray, marker_of_point: np
     return persistent_bias_covariance(jac, res, _marker_indicator(marker_of_point), sigma_px, shapes, floor_px)
 
 
-def spatial_bias_factor(points_px: np.ndarray, groups: np.ndarray, length_px: float,
-                        rel_tol: float = 1e-3) -> np.ndarray:
-    """F (2n, 2q) with F F^T ~ the correlation of a bias field over the image: points i, j of one
-    group (a section) correlated exp(-d_ij / ``length_px``) (d their image distance, px), per axis
-    alike, none across groups. ``points_px`` (n, 2), ``groups`` (n,) labels. The kernel is positive
-    definite; its eigenvalues below ``rel_tol`` of the largest are dropped (rank q <= n), which
-    changes the moments by that fraction at most."""
+def spatial_bias_factor(points_px: np.ndarray, groups: np.ndarray, length_px: float, extent_px) -> np.ndarray:
+    """F (2n, 2q) with F F^T the correlation of a bias field over the image: points i, j of one
+    group (a section) correlated exp(-d_ij / ``length_px``) (d their image distance, px), per
+    axis alike, none across groups. ``points_px`` (n, 2), ``groups`` (n,) labels, ``extent_px``
+    (W, H) the image's size.
+
+    Up to as many points as the image holds inducing points (a grid spaced GRID_STEP correlation
+    lengths, per group) the factor is the kernel's own (eigenvalues below 1e-9 of the largest
+    dropped); beyond, the field is represented on that grid (Nystrom: F = K_nm K_mm^-1/2), so F's
+    columns stop growing however many frames a run has (memory and time linear in the points;
+    the field's variation faster than the grid is left out: a point keeps about 0.9 of its
+    variance, the correlations beyond half a length are the kernel's to 0.01)."""
     pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
     grp = np.asarray(groups)
-    d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1])
-    kernel = np.exp(-d / float(length_px)) * (grp[:, None] == grp[None, :])
-    lam, vec = np.linalg.eigh(kernel)
-    keep = lam > rel_tol * lam[-1]
-    return np.kron(vec[:, keep] * np.sqrt(lam[keep]), np.eye(2))
+    step = GRID_STEP * float(length_px)
+    axes = [np.linspace(0.0, float(e), int(np.ceil(float(e) / step)) + 1) for e in extent_px]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 2)
+    labels = list(dict.fromkeys(grp.tolist()))
+    if len(pts) <= len(labels) * len(grid):
+        kernel = _exp_kernel(pts, pts, length_px) * (grp[:, None] == grp[None, :])
+        lam, vec = np.linalg.eigh(kernel)
+        keep = lam > 1e-9 * lam[-1]
+        return np.kron(vec[:, keep] * np.sqrt(lam[keep]), np.eye(2))
+    lam, vec = np.linalg.eigh(_exp_kernel(grid, grid, length_px))
+    keep = lam > 1e-9 * lam[-1]
+    inv_sqrt = vec[:, keep] / np.sqrt(lam[keep])
+    q = inv_sqrt.shape[1]
+    f1 = np.zeros((len(pts), len(labels) * q))
+    for k, label in enumerate(labels):
+        rows = np.flatnonzero(grp == label)
+        f1[rows, k * q:(k + 1) * q] = _exp_kernel(pts[rows], grid, length_px) @ inv_sqrt
+    return np.kron(f1, np.eye(2))
+
+
+def _exp_kernel(a: np.ndarray, b: np.ndarray, length_px: float) -> np.ndarray:
+    """exp(-|a_i - b_j| / length_px) (len(a), len(b))."""
+    return np.exp(-np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1]) / float(length_px))
 
 
 def persistent_bias_covariance(jac: np.ndarray, res: np.ndarray, factor: np.ndarray, sigma_px: float | None,
@@ -234,7 +258,7 @@ def persistent_bias_covariance(jac: np.ndarray, res: np.ndarray, factor: np.ndar
     if not np.all(np.isfinite(a_inv)) or m <= p:
         return a_inv, float("inf"), 0.0
     jr = jac.reshape(n, 2, p)
-    meat = np.einsum("nap,nab,nbq->pq", jr, t, jr)                    # J^T T J
+    meat = jac.T @ np.einsum("nab,nbq->naq", t, jr).reshape(m, p)     # J^T T J (one BLAS product)
     js = jac.T @ s
     sm = (s.T - js.T @ a_inv @ jac.T).reshape(-1, n, 2)              # S^T M, rows by point
     q = sm.reshape(-1, m) @ s

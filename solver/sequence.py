@@ -174,8 +174,9 @@ def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: boo
             groups += [s] * len(fr.rows[s])
             shapes.append(section_noise_shapes([layout.by_id[fr.ids[r]] for r in fr.rows[s]], cam,
                                                mf.intrinsics.focal_px, fr.edge[fr.rows[s]]))
-    diagonal = 2.0 * float(np.hypot(pp[0] + 0.5, pp[1] + 0.5))
-    factor = spatial_bias_factor(np.concatenate(points), np.array(groups), BIAS_LENGTH * diagonal)
+    extent = (2.0 * float(pp[0]) + 1.0, 2.0 * float(pp[1]) + 1.0)       # the image, from its centre
+    factor = spatial_bias_factor(np.concatenate(points), np.array(groups), BIAS_LENGTH * float(np.hypot(*extent)),
+                                 extent)
     ref = mf.refinement
     cov, sigma2, tau2 = persistent_bias_covariance(ref.jacobian, ref.residuals, factor, sigma,
                                                    None if sigma is not None else np.concatenate(shapes), floor_px)

@@ -24,19 +24,35 @@ SECTION = np.array([m.section for m in LAYOUT])
 COMPONENTS = ("x_mm", "y_mm", "alpha_deg")
 
 
-def test_factor_is_the_kernel_within_sections():
-    """F F^T equals exp(-d / L) per axis between points of one group to 1e-3 of the largest
-    eigenvalue, and 0 between groups and between axes."""
-    rng = np.random.default_rng(0)
-    pts = rng.uniform(0, 1000, (40, 2))
-    groups = np.repeat(["A", "B"], 20)
-    f = spatial_bias_factor(pts, groups, 250.0)
-    k = f @ f.T
+def _kernels(n, rng):
+    pts = rng.uniform(0, 1, (n, 2)) * [1280, 960]
+    groups = np.repeat(["A", "B"], n // 2)
+    k = spatial_bias_factor(pts, groups, 300.0, (1280, 960))
     d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
-    want = np.exp(-d / 250.0) * (groups[:, None] == groups[None, :])
-    assert np.allclose(k[0::2, 0::2], want, atol=1e-3 * np.linalg.eigvalsh(want)[-1])
-    assert np.allclose(k[1::2, 1::2], k[0::2, 0::2]) and np.allclose(k[0::2, 1::2], 0.0)
-    assert np.allclose(k[:40, 40:], 0.0)
+    return k, np.exp(-d / 300.0), d, groups[:, None] == groups[None, :]
+
+
+def test_factor_is_the_kernel_within_sections():
+    """Up to the image's inducing points (here 2 x 20 x 15) F F^T is exp(-d / L) per axis
+    between points of one group to 1e-6, 0 between groups and between axes."""
+    f, want, _, same = _kernels(400, np.random.default_rng(0))
+    k = f @ f.T
+    assert np.allclose(k[0::2, 0::2], want * same, atol=1e-6) and np.allclose(k[1::2, 1::2], k[0::2, 0::2])
+    assert np.allclose(k[0::2, 1::2], 0.0)
+
+
+def test_factor_of_a_long_run_is_bounded_and_close():
+    """Beyond them (1,000 points) F keeps the grid's columns (as many as for 700 points) and F F^T
+    follows the kernel beyond half a correlation length (each distance bin's mean within 0.01,
+    every pair within 0.1), keeps 0.8-1.0 of the variance at a point, 0 between groups."""
+    rng = np.random.default_rng(1)
+    f, want, d, same = _kernels(1000, rng)
+    assert f.shape[1] == _kernels(700, rng)[0].shape[1] < 2 * 1000
+    kx = (f @ f.T)[0::2, 0::2]
+    for lo, hi in ((150, 300), (300, 600), (600, 2000)):
+        m = same & (d > lo) & (d <= hi)
+        assert abs(kx[m].mean() - want[m].mean()) < 0.01 and np.abs(kx[m] - want[m]).max() < 0.1
+    assert 0.8 < np.diag(kx).min() and np.diag(kx).max() <= 1.0 + 1e-9 and np.allclose(kx[~same], 0.0)
 
 
 def _biased_run(rng, n_frames=8, sigma=0.1, tau=0.12):
