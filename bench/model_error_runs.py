@@ -169,30 +169,29 @@ def run_z(ds: Dataset, dets: dict) -> str:
     return " / ".join(f"{v:.2f}" for v in np.sqrt(np.mean(z ** 2, 0)))
 
 
+def _sweep(module, name: str, values, label: str, ds: Dataset, dets: dict) -> None:
+    """Prints per-run RMS z with ``module``'s constant ``name`` set to each of ``values``."""
+    keep = getattr(module, name)
+    for value in values:
+        setattr(module, name, value)
+        try:
+            print(f"{label.format(value)}: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
+        finally:
+            setattr(module, name, keep)
+
+
 def gate_z(ds: Dataset, dets: dict, levels) -> None:
     """Prints per-run RMS z with the run-bias term's significance level (``BIAS_ALPHA``) set to
     each of ``levels`` (1: counted whenever its estimate is positive)."""
     import dockfactory.solver.model_error as me
-    keep = me.BIAS_ALPHA
-    for alpha in levels:
-        me.BIAS_ALPHA = alpha
-        try:
-            print(f"bias counted at p < {alpha:g}: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
-        finally:
-            me.BIAS_ALPHA = keep
+    _sweep(me, "BIAS_ALPHA", levels, "bias counted at p < {:g}", ds, dets)
 
 
 def length_z(ds: Dataset, dets: dict, lengths) -> None:
     """Prints per-run RMS z with the run-bias field's correlation length (``BIAS_LENGTH``, image
     diagonals) set to each of ``lengths``."""
     import dockfactory.solver.sequence as sq
-    keep = sq.BIAS_LENGTH
-    for length in lengths:
-        sq.BIAS_LENGTH = length
-        try:
-            print(f"bias length {length:g} diagonals: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
-        finally:
-            sq.BIAS_LENGTH = keep
+    _sweep(sq, "BIAS_LENGTH", lengths, "bias length {:g} diagonals", ds, dets)
 
 
 CORRELATION_BINS_PX = (0, 100, 200, 400, 100000)

@@ -17,8 +17,8 @@ from dockfactory.solver.errors import (
 )
 
 __all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
-           "check_edge_widths", "check_sigma", "layout_arrays", "collinear_2d", "collinear_3d",
-           "MIN_POINTS", "COLLINEAR_TOL", "MAX_SIGMA_PX"]
+           "check_edge_widths", "check_sigma", "row_array", "layout_arrays", "collinear_2d",
+           "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL", "MAX_SIGMA_PX"]
 
 MIN_POINTS = 4
 # Largest centre noise (px) the solver takes: a centre known no better than this gives no pose, and
@@ -86,18 +86,28 @@ def check_sigma(sigma_px) -> float | None:
     return s
 
 
-def check_edge_widths(value, n: int) -> np.ndarray | None:
-    """None, or ``value`` as an (n,) float array of edge widths (px, one per detection; NaN:
-    no edge fit); InvalidSolverInput for another shape, a negative or an infinite width."""
+def row_array(value, n, shape, name, dtype, allow_nan: bool = False):
+    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection); NaN
+    refused unless ``allow_nan``, inf always (InvalidSolverInput naming ``name``)."""
     if value is None:
         return None
     try:
-        edge = np.asarray(value, dtype=float)
+        arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
-        raise InvalidSolverInput(f"edge_px: not an array of float: {exc}") from None
-    if edge.shape != (n,):
-        raise InvalidSolverInput(f"edge_px: expected shape {(n,)} (one row per detection), got {edge.shape}")
-    if not np.all(np.isnan(edge) | (np.isfinite(edge) & (edge >= 0))):
+        raise InvalidSolverInput(f"{name}: not an array of {dtype.__name__}: {exc}") from None
+    if arr.shape != (n, *shape):
+        raise InvalidSolverInput(f"{name}: expected shape {(n, *shape)} (one row per "
+                                 f"detection), got {arr.shape}")
+    if not np.all(np.isfinite(arr) | (allow_nan & np.isnan(arr))):
+        raise InvalidSolverInput(f"{name}: contains NaN or inf")
+    return arr
+
+
+def check_edge_widths(value, n: int) -> np.ndarray | None:
+    """None, or ``value`` as an (n,) float array of edge widths (px, one per detection; NaN:
+    no edge fit); InvalidSolverInput for another shape, a negative or an infinite width."""
+    edge = row_array(value, n, (), "edge_px", float, allow_nan=True)
+    if edge is not None and not np.all(np.isnan(edge) | (edge >= 0)):
         raise InvalidSolverInput(f"edge_px: widths must be finite and >= 0 (NaN: none), got {edge.tolist()}")
     return edge
 

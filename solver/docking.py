@@ -37,7 +37,13 @@ from dockfactory.solver.camera_models import (
     check_model_name,
     project_normalized,
 )
-from dockfactory.solver.checks import MIN_POINTS, as_principal_point, check_edge_widths, check_sigma
+from dockfactory.solver.checks import (
+    MIN_POINTS,
+    as_principal_point,
+    check_edge_widths,
+    check_sigma,
+    row_array,
+)
 from dockfactory.solver.disc_noise import robust_refit, with_disc_noise, with_model_error
 from dockfactory.solver.eccentricity import eccentricity_corrected, section_keep
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera
@@ -215,8 +221,8 @@ def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,
     the covariance of the disc noise model (``options.disc_noise``, ``options.robust``).
     ``per_detection``: (boxes, refined, edge_px) as :func:`solve_docking` takes them."""
     n_det = len(parse_detections(detections)[0])
-    boxes = _row_array(per_detection[0], n_det, (4,), "boxes", float)
-    refined = _row_array(per_detection[1], n_det, (), "refined", bool)
+    boxes = row_array(per_detection[0], n_det, (4,), "boxes", float)
+    refined = row_array(per_detection[1], n_det, (), "refined", bool)
     edge_px = check_edge_widths(per_detection[2], n_det)
     ident = identify_markers(markers, fitter.principal_point, detections, options.identify,
                              options.refine, trusted=refined)
@@ -291,23 +297,6 @@ def _kept(points: SectionPoints, keep: dict, points_2d: dict) -> tuple:
     """({section: points_3d}, {section: points_2d}) of the points ``keep`` (n_s,) bool."""
     return ({s: points.points_3d[s][keep[s]] for s in SECTIONS},
             {s: points_2d[s][keep[s]] for s in SECTIONS})
-
-
-def _row_array(value, n, shape, name, dtype, allow_nan: bool = False):
-    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection); NaN
-    refused unless ``allow_nan``, inf always."""
-    if value is None:
-        return None
-    try:
-        arr = np.asarray(value, dtype=dtype)
-    except (TypeError, ValueError) as exc:
-        raise InvalidSolverInput(f"{name}: not an array of {dtype.__name__}: {exc}") from None
-    if arr.shape != (n, *shape):
-        raise InvalidSolverInput(f"{name}: expected shape {(n, *shape)} (one row per "
-                                 f"detection), got {arr.shape}")
-    if not np.all(np.isfinite(arr) | (allow_nan & np.isnan(arr))):
-        raise InvalidSolverInput(f"{name}: contains NaN or inf")
-    return arr
 
 
 def _recheck_inliers(fit: JointFit, layout: LayoutArrays, ids, uv, fitter: JointFitter, thr,

@@ -54,7 +54,7 @@ def test_edge_widths_are_checked():
     bad = [(widths[:2], "3 frames"), ([widths[0], widths[1], [1.0] * len(IDS)], "mapping"),
            ([widths[0], widths[1], {**widths[2], "Z99": 1.0}], "Z99"),
            ([widths[0], widths[1], {IDS[0]: -1.0}], ">= 0"),
-           ([widths[0], widths[1], {IDS[0]: float("inf")}], ">= 0")]
+           ([widths[0], widths[1], {IDS[0]: float("inf")}], "inf")]
     for value, words in bad:
         with pytest.raises(InvalidSolverInput, match=f"edge_px.*{words}|{words}.*edge_px|frame 2: edge_px"):
             solve_sequence(LAYOUT, pp, frames, edge_px=value)
