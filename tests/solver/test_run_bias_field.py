@@ -75,7 +75,7 @@ def _biased_run(rng, n_frames=8, sigma=0.1, tau=0.12):
 @pytest.mark.slow   # 200 synthetic runs of 8 frames, each solved twice (about 15 s)
 def test_run_covariance_covers_a_persistent_bias_field():
     """With the run-bias term (the default) the RMS z of X, Y and alpha over 200 runs is within
-    0.85-1.2 (measured 0.87 / 1.14 / 0.94); without it every component is under-covered beyond
+    0.85-1.2 (measured 0.87 / 1.13 / 0.94); without it every component is under-covered beyond
     1.25 (measured 1.46 / 1.60 / 1.78): the field repeats in every frame, so averaging the
     frames does not shrink it."""
     rng = np.random.default_rng(2912)
