@@ -14,8 +14,12 @@ A lens error is the same for every frame of a camera unit, so an RMS z over fram
 certain as the number of units: each RMS z comes with a 90 % interval from a bootstrap over the
 camera units (frames resampled by unit, 2,000 resamples, seed 0).
 
+``--section-shift-from DATASET DETS`` adds the common offset of a section's centres
+(solver.section_shift) measured on another dataset's test split (eval.section_shift), as a user
+would measure it on frames of the camera class other than the ones judged.
+
 Run: python bench/model_error.py DATASET --detections DETS.json [--splits test train]
-[--scale 1.0 0.5] [--prior default|config] [--json OUT.json]
+[--scale 1.0 0.5] [--prior default|config] [--section-shift-from OTHER OTHER_DETS] [--json OUT.json]
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ from dataclasses import asdict, replace
 import numpy as np
 
 from dockfactory.eval.pose_metrics import pose_error
+from dockfactory.eval.section_shift import measure_section_shift
 from dockfactory.eval.solve_frames import config_lens_prior, docking_options, solve_dataset
 from dockfactory.eval.uncertainty import reported_std
 from dockfactory.generator.dataset_open import Dataset
@@ -70,15 +75,25 @@ def z_table(ds: Dataset, poses: dict) -> dict:
     return out
 
 
-def run(ds, dets, oracle, splits, lens: LensPrior) -> dict:
-    """{method: z_table} of the three solves under ``lens``."""
+def run(ds, dets, oracle, splits, lens: LensPrior, shift=None) -> dict:
+    """{method: z_table} of the three solves under ``lens`` and the section shift ``shift``
+    ((x, y) px or None: the detections' own)."""
     out = {}
     for name, model, selfcal in METHODS:
-        opts_lens = lens
         poses = solve_dataset(ds, splits, detections=dets, oracle_sigma_px=oracle, camera_model=model,
-                              self_calibrate=selfcal, lens=opts_lens)
+                              self_calibrate=selfcal, lens=lens, section_shift_px=shift)
         out[name] = z_table(ds, poses)
     return out
+
+
+def _shift_from(dataset, detections) -> dict:
+    """The section shift (eval.section_shift) measured on the test split of another dataset with
+    its detections, printed."""
+    other = Dataset.open(dataset, full=False)
+    block = measure_section_shift(other, json.load(open(detections)), ("test",))
+    print(f"section shift from {dataset} ({other.version_id}, {block['groups']} sections): "
+          f"{block['shift_axis_px']} px")
+    return {"dataset": str(dataset), "dataset_version": other.version_id, **block}
 
 
 def main(argv=None) -> None:
@@ -89,18 +104,21 @@ def main(argv=None) -> None:
     ap.add_argument("--splits", nargs="+", default=["test"])
     ap.add_argument("--scale", type=float, nargs="+", default=[1.0])
     ap.add_argument("--prior", choices=("default", "config"), default="default")
+    ap.add_argument("--section-shift-from", nargs=2, metavar=("DATASET", "DETECTIONS"),
+                    help="measure the section shift on another dataset's test split (eval.section_shift)")
     ap.add_argument("--json")
     a = ap.parse_args(argv)
     ds = Dataset.open(a.dataset, full=False)
     dets = json.load(open(a.detections)) if a.detections else None
+    shift = _shift_from(*a.section_shift_from) if a.section_shift_from else None
     base = docking_options(None).lens if a.prior == "default" else config_lens_prior(ds.config)
     print(f"lens prior ({a.prior}): {asdict(base)}")
     t0, result = time.time(), {"dataset_version": ds.version_id, "splits": a.splits, "prior": a.prior,
-                               "lens_prior": asdict(base), "rows": []}
+                               "lens_prior": asdict(base), "section_shift": shift, "rows": []}
     for scale in (0.0, *a.scale):
         lens = replace(base, marginalise=scale > 0, pp_fraction=base.pp_fraction * (scale or 1),
                        k1=base.k1 * (scale or 1), k2=base.k2 * (scale or 1), p=base.p * (scale or 1))
-        for name, t in run(ds, dets, a.oracle, tuple(a.splits), lens).items():
+        for name, t in run(ds, dets, a.oracle, tuple(a.splits), lens, shift and shift["shift_axis_px"]).items():
             result["rows"].append({"scale": scale, "method": name, **t})
             zs = "  ".join(f"{c} {t[c]:.2f} ({t[c + '_90'][0]:.2f}-{t[c + '_90'][1]:.2f})" for c in COMPS)
             print(f"scale {scale:4.2f} {name:9s} n {t['n']:3d} units {t['units']:2d} flagged {t['flagged']:3d}  "

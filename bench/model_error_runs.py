@@ -18,9 +18,8 @@
 - ``no-aberration``: the detections with each centre's lateral chromatic aberration undone (the
   label's red / blue magnification about the principal point, in undistorted pixels).
 - ``section-shift``: per-run RMS z when the per-run covariance also carries one common shift per
-  section and axis over the whole run (prior std ``--tau`` px), marginalised like the per-marker
-  bias (``solver.sequence``); a shift that a run's residuals cannot show, since the section's
-  pose absorbs it.
+  section and axis over the whole run (prior std ``--tau`` px; ``solver.section_shift``); a shift
+  that a run's residuals cannot show, since the section's pose absorbs it.
 - ``gate``: per-run RMS z with the run-bias term counted at other significance levels
   (``solver.model_error.BIAS_ALPHA``; 1: whenever its estimate is positive).
 - ``length``: per-run RMS z with other correlation lengths of the run-bias field
@@ -36,7 +35,6 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -140,30 +138,17 @@ def unit_table(ds: Dataset, dets: dict) -> str:
 
 
 def section_shift_z(ds: Dataset, dets: dict, taus) -> None:
-    """Prints per-run RMS z X / Y / alpha with a common per-section shift of std tau marginalised."""
-    import dockfactory.solver.sequence as sq
-    from dockfactory.solver.refine import inverse_spd
-    plain = sq._with_run_bias
+    """Prints per-run RMS z X / Y / alpha with a common per-section shift of std tau (both axes)
+    in the covariance (``solver.section_shift``, one shift per section over the run)."""
     for tau in taus:
-        def shifted(mf, parsed, sigma, layout, share, pp, floor_px=None, tau=tau):
-            out = plain(mf, parsed, sigma, layout, share, pp, floor_px)
-            ids = [fr.ids[r] for fr in parsed for s in ("A", "B") for r in fr.rows[s]]
-            jac = mf.refinement.jacobian
-            sel = np.zeros((jac.shape[0], 4))
-            sec = np.array([0 if i.startswith("A") else 1 for i in ids])
-            sel[np.arange(0, jac.shape[0], 2), 2 * sec], sel[np.arange(1, jac.shape[0], 2), 2 * sec + 1] = 1.0, 1.0
-            g = inverse_spd(jac.T @ jac) @ (jac.T @ sel)
-            return replace(out, covariance=out.covariance + tau ** 2 * (g @ g.T))
-        sq._with_run_bias = shifted
-        try:
-            print(f"tau {tau:.3f} px: per-run RMS z X / Y / alpha {run_z(ds, dets)}")
-        finally:
-            sq._with_run_bias = plain
+        print(f"tau {tau:.3f} px: per-run RMS z X / Y / alpha {run_z(ds, dets, (tau, tau))}")
 
 
-def run_z(ds: Dataset, dets: dict) -> str:
-    """Per-run RMS z X / Y / alpha of the judge's per-run solve (config prior)."""
-    poses = solve_dataset(ds, ("test",), detections=dets, lens=config_lens_prior(ds.config), **SOLVES["run, config prior"])
+def run_z(ds: Dataset, dets: dict, shift=None) -> str:
+    """Per-run RMS z X / Y / alpha of the judge's per-run solve (config prior; ``shift`` the
+    section shift (x, y) px, None: the detections')."""
+    poses = solve_dataset(ds, ("test",), detections=dets, lens=config_lens_prior(ds.config), section_shift_px=shift,
+                          **SOLVES["run, config prior"])
     z = np.array([[pose_error(r["pose"], ds.labels[f]["pose_b_in_d"])[c] / reported_std(r["covariance"])[c]
                    for c in ("x", "y", "alpha")] for f, r in poses["frames"].items() if r.get("ok")])
     return " / ".join(f"{v:.2f}" for v in np.sqrt(np.mean(z ** 2, 0)))

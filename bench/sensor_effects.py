@@ -125,21 +125,31 @@ def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float
     return [(m["class_id"], float(c[0] - t[0]), float(c[1] - t[1])) for m, t, c in matched_centres(dets, label)]
 
 
+DET_KEYS = ("class_id", "center_px", "bbox_px", "score", "refined", "edge_px")   # what a re-solve needs
+
+
 def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str | None, jpeg: bool) -> dict:
     """Detect, refine (told the camera's Bayer pattern ``cfa`` and whether it wrote a JPEG), solve
-    one delivered image; errors against its label."""
+    one delivered image; errors against its label, the detections (``dets``) and the markers the
+    fit used (``used``), so that the frame can be solved again (bench/sensor_shift.py)."""
     label = ds.labels[fid]
     h, w = image.shape[:2]
-    dets = detector.detect(image, cfa=cfa, jpeg=jpeg)
+    dets = [{k: d[k] for k in DET_KEYS if k in d} for d in detector.detect(image, cfa=cfa, jpeg=jpeg)]
     rec = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
                       "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))[0]
-    row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label)}
+    row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label), "dets": dets,
+           "used": rec.get("marker_ids")}
     if rec["ok"]:
-        err = pose_error(rec["pose"], label["pose_b_in_d"])
-        std = reported_std(rec["covariance"])
-        row.update({f"err_{c}": err[c] for c in COMPONENTS})
-        row.update({f"z_{c}": (err[c] / std[c] if std.get(c) else None) for c in COMPONENTS})
+        row.update(pose_errors(rec, label))
     return row
+
+
+def pose_errors(rec: dict, label: dict) -> dict:
+    """{"err_<c>", "z_<c>"} of a solved record against its label."""
+    err = pose_error(rec["pose"], label["pose_b_in_d"])
+    std = reported_std(rec["covariance"])
+    return {**{f"err_{c}": err[c] for c in COMPONENTS},
+            **{f"z_{c}": (err[c] / std[c] if std.get(c) else None) for c in COMPONENTS}}
 
 
 def rms_z_bootstrap_interval(z: np.ndarray) -> list[float] | None:

@@ -21,7 +21,7 @@ from dockfactory.core.progress import Progress
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre_camera import refine_centre_camera
 from dockfactory.detector.data import resize_exact
-from dockfactory.detector.noise_card import centre_noise_px
+from dockfactory.detector.noise_card import centre_noise_px, section_shift_px
 
 
 @dataclass(frozen=True)
@@ -181,6 +181,7 @@ class MarkerDetector:
         self.model, self.meta = load_model(self.weights, fuse=True)
         self.backend = resolve_backend(backend)
         self.centre_noise_px = centre_noise_px(self.weights)   # the weights' noise card, or None
+        self.section_shift_px = section_shift_px(self.weights)
         if self.backend == "onnx":
             self.network = OnnxNetwork(self.model)
         else:
@@ -275,6 +276,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
            "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
+           "section_shift_px": det.section_shift_px and list(det.section_shift_px),
            "conf_threshold": conf_threshold, "iou_threshold": iou_threshold, "camera_told": camera is not None,
            "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
            "timing": {"frames": len(frames), "mean_ms": round(1000 * float(np.mean(times)), 2),

@@ -13,7 +13,12 @@ on the test split of configs/detector.toml the reported std of X and alpha was 1
   (solver.disc_noise). That model's scale is the core of the errors, so the card's RMS, gross
   errors included, is no floor there.
 
-``detect`` copies the value into the detections it writes, and ``solve`` and ``measure`` pass it
+The card also carries the common offset of a section's centres in a frame that no fit's
+residuals show (``section_shift_px``, eval.section_shift), measured on the same frames: the
+solver adds it to every covariance (solver.section_shift). It belongs to the camera class the
+card was measured on.
+
+``detect`` copies both into the detections it writes, and ``solve`` and ``measure`` pass them
 to the solver.
 """
 from __future__ import annotations
@@ -80,6 +85,19 @@ def centre_bias_px(weights) -> tuple[float, float] | None:
     if not n or not all(len(m) == 2 and all(math.isfinite(x) for x in m) for _, m in per):
         return None
     return (sum(k * m[0] for k, m in per) / n, sum(k * m[1] for k, m in per) / n)
+
+
+def section_shift_px(weights) -> tuple[float, float] | None:
+    """The measured common offset (x, y) px of a section's refined centres in a frame
+    (eval.section_shift: what no fit's residuals show) from the weights' valid card; None without
+    a valid card or when the card did not measure it."""
+    doc = _card(weights)
+    try:
+        x, y = (float(v) for v in (doc or {})["section_shift_px"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    ok = all(math.isfinite(v) and 0 <= v <= MAX_CARD_NOISE_PX for v in (x, y))
+    return (x, y) if ok else None
 
 
 def write_noise_card(weights, centre_noise: float, details: dict) -> Path:

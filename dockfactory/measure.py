@@ -37,7 +37,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.detector.noise_card import centre_bias_px, centre_noise_px
+from dockfactory.detector.noise_card import centre_bias_px, centre_noise_px, section_shift_px
 from dockfactory.measure_overlay import draw_measurement
 from dockfactory.measure_pool import MeasurePool
 from dockfactory.measure_read import (
@@ -174,7 +174,8 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     else:
         frame.record, frame.used_points, frame.used_edges = solve_frame(
-            markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens))
+            markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens,
+                                                                                 detector.section_shift_px))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     t2 = time.perf_counter()
@@ -184,9 +185,10 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
 
 
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
-                            lens: LensPrior | None = None) -> dict:
+                            lens: LensPrior | None = None, section_shift_px=None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
-    joint ones. Returns the run's record (shared intrinsics or the reason it failed)."""
+    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card). Returns the
+    run's record (shared intrinsics or the reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
     if not solved:
         return {"ok": False, "reason": "no frame was identified", "frames": 0}
@@ -198,7 +200,8 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     keys = [str(f.index) for f in solved]
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
-                        docking_options(sigma_floor_px, lens), {str(f.index): f.used_edges for f in solved})
+                        docking_options(sigma_floor_px, lens, section_shift_px),
+                        {str(f.index): f.used_edges for f in solved})
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
@@ -391,14 +394,15 @@ def _died(path: Path, error: BaseException) -> dict:
     return {"ok": False, "category": category, "reason": f"{path}: {' '.join(str(error).split())[:300]}"}
 
 
-def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options, floor) -> dict:
+def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options, card) -> dict:
     """What the results depend on (the run's key in eval.measure_store); not the worker count."""
     from dockfactory.detector.onnx_runtime import resolve_backend
     return {"dockfactory": package_version("dockfactory"), "images": [image_identity(p) for p in paths],
             "layout_sha256": sha256_file(layout_path), "weights_sha256": sha256_file(weights),
             "camera_model": model, "self_calibrate": self_calibrate, "min_score": min_score,
             "backend": resolve_backend(options.backend), "overlay_size": options.overlay_size,
-            "max_pixels": options.max_pixels, "camera": asdict(options.camera), "sigma_floor_px": floor}
+            "max_pixels": options.max_pixels, "camera": asdict(options.camera), "sigma_floor_px": card[0],
+            "section_shift_px": card[1] and list(card[1])}
 
 
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
@@ -419,9 +423,9 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         probes = [probe_image(p, options.max_pixels) for p in paths]
         if sequence:
             check_one_size(paths, probes)
-        floor = centre_noise_px(weights)   # hashes the weights: once
+        card = (centre_noise_px(weights), section_shift_px(weights))   # hashes the weights: twice
         store = MeasureStore(out, _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options,
-                                             floor))
+                                             card))
         frames = {i: _frame(i, paths[i], e) for i, e in store.open(paths).items()}
         resumed = len(frames)
         frames.update({i: Frame(i, p, probe[1]) for i, (p, probe) in enumerate(zip(paths, probes))
@@ -431,11 +435,12 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
                                       options, store, frames, lambda: progress and progress(len(frames), len(paths)),
                                       sequence)
         frames = [frames[i] for i in range(len(paths))]
-        run, seconds = _run_of(frames, markers, model, floor, out, options) if sequence else (None, 0.0)
+        run, seconds = _run_of(frames, markers, model, card, out, options) if sequence else (None, 0.0)
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall + seconds, run,
                          len(jobs))
         header.update(backend=store.made_with["backend"], workers=workers, overlay_size=options.overlay_size,
-                      sigma_floor_px=floor, camera=asdict(options.camera), max_megapixels=options.max_megapixels,
+                      sigma_floor_px=card[0], section_shift_px=card[1] and list(card[1]),
+                      camera=asdict(options.camera), max_megapixels=options.max_megapixels,
                       resumed=resumed, earlier_run_discarded=store.discarded,
                       **_assess(frames, markers, sigmas, centre_bias_px(weights), spec, acceptance))
         if spec is not None and options.overlay_size is not None:   # the overlays show each decision and U
@@ -467,13 +472,14 @@ def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dic
     return extra
 
 
-def _run_of(frames: list[Frame], markers, model, floor, out, options) -> tuple[dict, float]:
+def _run_of(frames: list[Frame], markers, model, card, out, options) -> tuple[dict, float]:
     """--self-calibrate sequence: the joint solve of the identified frames and their overlays
-    (the run's record with its warnings; the seconds it took)."""
+    (the run's record with its warnings; the seconds it took); ``card`` the weights' (centre
+    noise, section shift)."""
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
         warnings.simplefilter("always")
-        run = self_calibrate_sequence(frames, markers, model, floor, options.camera.lens)
+        run = self_calibrate_sequence(frames, markers, model, card[0], options.camera.lens, card[1])
     if caught:
         run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
     if options.overlay_size is not None:

@@ -442,7 +442,8 @@ def _measurer(detector, markers, options: StreamOptions, decide, size) -> Stream
     tracker = (RoiTracker(*size, refresh=options.roi_refresh, min_score=options.min_score)
                if options.roi_refresh and min(size) > 1 else None)
     calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
-                                     options.freeze_after, docking_options(detector.centre_noise_px, options.lens))
+                                     options.freeze_after,
+                                     docking_options(detector.centre_noise_px, options.lens, detector.section_shift_px))
                    if options.window else None)
     return StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
                           decide, tracker, calibration)

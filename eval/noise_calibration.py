@@ -1,6 +1,7 @@
 """Measure a detector's centre noise on a labelled split and write its noise card (the floor of
 the solver's covariance, detector.noise_card): detect the split, solve it, and take the RMS per
-axis of the centres the solver used against the exact image centroids (eval.centre_noise).
+axis of the centres the solver used against the exact image centroids (eval.centre_noise), and
+the common offset of a section's centres in a frame (eval.section_shift).
 
 Use a split the evaluation does not judge (val by default): the card then carries no
 information about the test frames.
@@ -14,6 +15,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.detector.noise_card import write_noise_card
 from dockfactory.eval.centre_noise import centre_noise_block
+from dockfactory.eval.section_shift import section_shift_block
 from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset
 
@@ -32,6 +34,7 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
                               progress=progress, camera=dataset_camera(ds))
     poses = solve_dataset(ds, (split,), detections=dets, min_score=min_score)
     block = centre_noise_block(ds, poses, dets, min_score, splits=(split,))
+    shift = section_shift_block(ds, poses, dets, min_score, splits=(split,))
     overall = block["overall"]
     if not overall["n"]:
         raise DockfactoryError(f"{ds.root}: no solved {split} frame with a matched centre: no noise to measure")
@@ -39,6 +42,7 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
                "outside_gate": block["outside_gate"],
                "measured_on": {"dataset": str(ds.root), "dataset_version": ds.version_id, "split": split,
                                "frames": block["frames"]},
-               "method": block["method"], "by_condition": block["by_condition"]}
+               "method": block["method"], "by_condition": block["by_condition"],
+               "section_shift_px": shift["shift_axis_px"], "section_shift": shift}
     card = write_noise_card(weights, overall["rms_px"], details)
     return {"card": str(card), "centre_noise_px": overall["rms_px"], **details}

@@ -82,7 +82,8 @@ def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=N
 
 
 def pose_record(res, n_detections: int) -> dict:
-    """The poses-file record of a solved frame (a solver.DockingResult)."""
+    """The poses-file record of a solved frame (a solver.DockingResult); with a section shift in
+    its covariance, ``section_shift_variance`` (6,) over POSE_NAMES: what the shift added."""
     used = [i for i, ok in zip(res.marker_ids, res.inliers) if ok and i is not None]
     rejected = [i for i, ok in zip(res.marker_ids, res.inliers) if not ok and i is not None]
     rec = {"ok": True, "d_from_b": res.d_from_b.tolist(), "cam_from_a": res.cam_from_a.tolist(),
@@ -97,6 +98,8 @@ def pose_record(res, n_detections: int) -> dict:
     if res.model_check is not None:
         rec["model_check"] = model_check_record(res.model_check)
         rec["model_check"]["pose_variance"] = np.diag(res.model_error_covariance).tolist()
+    if res.section_shift_covariance is not None:
+        rec["section_shift_variance"] = np.diag(res.section_shift_covariance).tolist()
     return rec
 
 
@@ -159,7 +162,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
                   oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
                   sigma_px: float | None = None, camera_model: str = "pinhole",
                   self_calibrate: str | None = None, sigma_floor_px: float | None = None,
-                  true_camera: bool = False, lens: LensPrior | None = None) -> dict:
+                  true_camera: bool = False, lens: LensPrior | None = None,
+                  section_shift_px=None) -> dict:
     """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
     ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
     "sequence" solves each docking run of the labels (one camera unit, one run) with shared
@@ -170,24 +174,18 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     each frame solved with its label's principal point and distortion (the reference of a
     calibrated camera, :func:`true_camera_centres`; the pinhole model, per frame or per docking
     run: a run is one camera unit, whose principal point its first frame's label gives).
-    ``lens``: see :func:`lens_prior_for` (None: its choice; known with ``true_camera``)."""
-    if (detections is None) == (oracle_sigma_px is None):
-        raise ValueError("give detections or an oracle noise level, not both")
-    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
-        raise ValueError(f"self_calibrate must be one of {SELF_CALIBRATE}, got {self_calibrate!r}")
-    if true_camera and (self_calibrate == "frame" or camera_model != "pinhole"):
-        raise ValueError("true_camera solves with the labels' intrinsics: the pinhole model, per frame or per run")
-    if self_calibrate == "sequence":
-        require_docking_runs(ds)
+    ``lens``: see :func:`lens_prior_for` (None: its choice; known with ``true_camera``).
+    ``section_shift_px`` (x, y): the common offset of a section's centres measured on other
+    labelled frames of the camera class (eval.section_shift); default: the detections' own
+    ``section_shift_px`` (detect copies it from the weights' noise card), if any; the oracle's
+    centres have none."""
+    _check_modes(ds, detections, oracle_sigma_px, self_calibrate, true_camera, camera_model)
     markers = ds.markers()
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
     sigma = sigma_px if sigma_px is not None or detections is not None else (oracle_sigma_px or None)
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
-    if sigma_floor_px is None and detections is not None:
-        sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
-    lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
-    options = docking_options(sigma_floor_px, lens)
+    options = _dataset_options(ds, detections, sigma_floor_px, lens, true_camera, section_shift_px)
     frames, used, edges = {}, {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
@@ -203,8 +201,35 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle",
             "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
-            "camera_model": camera_model, "self_calibrate": self_calibrate, "sigma_floor_px": sigma_floor_px,
-            "true_camera": bool(true_camera), "lens_prior": asdict(lens), "splits": list(splits), "frames": frames}
+            "camera_model": camera_model, "self_calibrate": self_calibrate,
+            "sigma_floor_px": options.refine.sigma_floor_px,
+            "section_shift_px": options.section_shift_px and list(options.section_shift_px),
+            "true_camera": bool(true_camera), "lens_prior": asdict(options.lens), "splits": list(splits), "frames": frames}
+
+
+def _check_modes(ds: Dataset, detections, oracle_sigma_px, self_calibrate, true_camera: bool, camera_model) -> None:
+    """ValueError for a combination :func:`solve_dataset` cannot solve; DockfactoryError for a
+    joint solve of a dataset without docking runs."""
+    if (detections is None) == (oracle_sigma_px is None):
+        raise ValueError("give detections or an oracle noise level, not both")
+    if self_calibrate is not None and self_calibrate not in SELF_CALIBRATE:
+        raise ValueError(f"self_calibrate must be one of {SELF_CALIBRATE}, got {self_calibrate!r}")
+    if true_camera and (self_calibrate == "frame" or camera_model != "pinhole"):
+        raise ValueError("true_camera solves with the labels' intrinsics: the pinhole model, per frame or per run")
+    if self_calibrate == "sequence":
+        require_docking_runs(ds)
+
+
+def _dataset_options(ds: Dataset, detections, sigma_floor_px, lens, true_camera: bool, section_shift_px):
+    """:func:`docking_options` of :func:`solve_dataset`: the floor and the section shift the
+    detections carry (from the weights' noise card) unless given, the lens prior of the
+    dataset's config unless given (known with ``true_camera``)."""
+    if sigma_floor_px is None and detections is not None:
+        sigma_floor_px = detections.get("centre_noise_px")   # the weights' noise card (detect)
+    if section_shift_px is None and detections is not None:
+        section_shift_px = detections.get("section_shift_px")
+    lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
+    return docking_options(sigma_floor_px, lens, section_shift_px)
 
 
 UNCALIBRATED_LENS = LensPrior(marginalise=True)   # the app's lens: nobody calibrated it
@@ -245,13 +270,17 @@ def config_lens_prior(config) -> LensPrior:
                      k1=half(cu.k1), k2=half(cu.k2), p=max(half(cu.p1), half(cu.p2)), marginalise=True)
 
 
-def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None) -> DockingOptions:
-    """The solver's options with the detector's measured centre noise as the covariance's floor
-    and ``lens`` the plausible range of the intrinsics its camera model does not estimate (None:
-    an uncalibrated camera's, :data:`UNCALIBRATED_LENS`, marginalised into the covariance)."""
+def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None,
+                    section_shift_px=None) -> DockingOptions:
+    """The solver's options with the detector's measured centre noise as the covariance's floor,
+    ``lens`` the plausible range of the intrinsics its camera model does not estimate (None: an
+    uncalibrated camera's, :data:`UNCALIBRATED_LENS`, marginalised into the covariance) and
+    ``section_shift_px`` (x, y) the measured common offset of a section's centres (None: none;
+    eval.section_shift)."""
     refine = DEFAULT_DOCKING.refine if sigma_floor_px is None else \
         replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px))
-    return replace(DEFAULT_DOCKING, refine=refine, lens=UNCALIBRATED_LENS if lens is None else lens)
+    return replace(DEFAULT_DOCKING, refine=refine, lens=UNCALIBRATED_LENS if lens is None else lens,
+                   section_shift_px=None if section_shift_px is None else tuple(section_shift_px))
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,

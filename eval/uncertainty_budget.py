@@ -29,6 +29,9 @@ residuals, :func:`solver.refine.stack_blocks`, at the solved pose and camera; J 
   estimated from the frame's residuals, the part of the layout error that shows as misfit is
   already in it: that share moves from the centre-noise term to the layout term (not counted
   twice; bench/results/confidence/README.md has the coverage of U with and without it);
+- **section offset** (when the solve carried one, the record's ``section_shift_variance``): a
+  common offset of each section's centres (solver.section_shift), measured on labelled frames of
+  the camera class; what it added to the covariance;
 - **detector bias** (when measured, ``bias_px`` = the mean offset (2,) px of the detector's
   centres): a common shift of every centre, each axis taken as a standard uncertainty of its
   size (its sign unknown for another camera), propagated as a shift of all residuals.
@@ -47,9 +50,10 @@ from dockfactory.eval.conformity import COVERAGE_K
 from dockfactory.solver.camera_models import MODELS, Intrinsics
 from dockfactory.solver.refine import Block, d_from_b_jacobian, inverse_spd, stack_blocks
 
-TERMS = ("centre_noise", "intrinsics", "model_error", "layout", "detector_bias")
+TERMS = ("centre_noise", "intrinsics", "model_error", "section_shift", "layout", "detector_bias")
 TERM_LABELS = {"centre_noise": "centre noise", "intrinsics": "intrinsics",
                "model_error": "camera model (unestimated intrinsics)",
+               "section_shift": "section offset of the centres",
                "layout": "marker layout", "detector_bias": "detector bias"}
 
 
@@ -142,6 +146,13 @@ def record_geometry(record: dict, markers) -> tuple:
     return pts["A"], pts["B"], ids, cam_from_a, cam_from_b, intr, MODELS[record.get("camera_model", "pinhole")]
 
 
+def section_shift_variance(record: dict) -> np.ndarray | None:
+    """(6,) the pose variances a common offset of each section's centres added to a record's
+    covariance (``section_shift_variance``, solver.section_shift), or None when none was."""
+    var = record.get("section_shift_variance")
+    return None if var is None else np.maximum(np.array(var, dtype=float), 0.0)
+
+
 def model_error_variance(record: dict) -> np.ndarray | None:
     """(6,) the pose variances the marginalised camera-model error added to a record's covariance,
     or None when nothing was marginalised (or the record predates ``pose_variance``)."""
@@ -150,6 +161,15 @@ def model_error_variance(record: dict) -> np.ndarray | None:
     if not check.get("marginalised") or var is None:
         return None
     return np.maximum(np.array(var, dtype=float), 0.0)
+
+
+def _split_off(part, reported: np.ndarray):
+    """(``part`` capped at ``reported``, what is left of ``reported``); (None, ``reported``)
+    without a part."""
+    if part is None:
+        return None, reported
+    part = np.minimum(part, reported)
+    return part, reported - part
 
 
 def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None = None, bias_px=None,
@@ -163,11 +183,9 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
     the centre-noise term to the layout term, so it is not counted twice."""
     pa, pb, ids, ca, cb, intr, model = record_geometry(record, markers)
     sens = Sensitivity(pa, pb, ca, cb, intr, model)
-    model2 = model_error_variance(record)
     reported = np.diag(np.array(record["covariance"], dtype=float))
-    if model2 is not None:
-        model2 = np.minimum(model2, reported)
-        reported = reported - model2
+    model2, reported = _split_off(model_error_variance(record), reported)
+    shift2, reported = _split_off(section_shift_variance(record), reported)
     if record.get("self_calibrated") == "sequence":
         std = record.get("intrinsics_std") or {}
         intr_var = np.array([std.get("focal_px", 0.0)] + [std.get(n, 0.0) for n in model.free]) ** 2
@@ -180,7 +198,8 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
         layout2 = sens.layout_var(s)
         if noise_from_residuals and record.get("sigma_px"):
             centre2 = centre2 * (1.0 - min(1.0, sens.layout_residual_px2(s) / float(record["sigma_px"]) ** 2))
-    terms = {"centre_noise": centre2, "intrinsics": u_intr2, "model_error": model2, "layout": layout2,
+    terms = {"centre_noise": centre2, "intrinsics": u_intr2, "model_error": model2, "section_shift": shift2,
+             "layout": layout2,
              "detector_bias": None if bias_px is None else sens.bias_var(bias_px)}
     out = {}
     for c, name in enumerate(POSE_NAMES):

@@ -17,7 +17,7 @@ from dockfactory.solver.errors import (
 )
 
 __all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
-           "check_edge_widths", "check_sigma", "row_array", "layout_arrays", "collinear_2d",
+           "check_edge_widths", "check_shift_px", "check_sigma", "row_array", "layout_arrays", "collinear_2d",
            "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL", "MAX_SIGMA_PX"]
 
 MIN_POINTS = 4
@@ -84,6 +84,18 @@ def check_sigma(sigma_px) -> float | None:
     if not np.isfinite(s) or s <= 0 or s > MAX_SIGMA_PX:
         raise InvalidSolverInput(f"sigma_px must be in (0, {MAX_SIGMA_PX:g}] px, got {sigma_px}")
     return s
+
+
+def check_shift_px(shift_px) -> tuple[float, float]:
+    """A section shift's std per axis: two finite numbers of pixels in [0, MAX_SIGMA_PX]
+    (InvalidSolverInput naming ``section_shift_px`` otherwise)."""
+    try:
+        x, y = (float(v) for v in shift_px)
+    except (TypeError, ValueError):
+        raise InvalidSolverInput(f"section_shift_px must be two numbers of pixels (x, y), got {shift_px!r}") from None
+    if not all(np.isfinite(v) and 0 <= v <= MAX_SIGMA_PX for v in (x, y)):
+        raise InvalidSolverInput(f"section_shift_px must be in [0, {MAX_SIGMA_PX:g}] px per axis, got {shift_px!r}")
+    return (x, y)
 
 
 def row_array(value, n, shape, name, dtype, allow_nan: bool = False):

@@ -29,7 +29,7 @@ import numpy as np
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.camera_models import Intrinsics, camera_model
 from dockfactory.solver.errors import SolverError
-from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints, with_model_check
+from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints, with_added_covariance, with_model_check
 from dockfactory.solver.model_error import model_check
 from dockfactory.solver.refine import (
     Block,
@@ -42,6 +42,7 @@ from dockfactory.solver.refine import (
     student_t_factor,
     whitened,
 )
+from dockfactory.solver.section_shift import section_shift_covariance
 
 __all__ = ["SHAPE_EXPONENT", "SIZE_EXPONENT", "REFERENCE_RADIUS_PX", "THIN_DISC_RATIO", "THIN_DISC_POWER",
            "disc_ellipses", "noise_shapes", "thin_disc_factor", "section_noise_shapes", "with_disc_noise",
@@ -161,7 +162,20 @@ def _checked(fit: JointFit, blocks, poses, intr, model, sqrt_w, k2: float, fitte
     points, ``k2`` the noise scale of the whitened residuals)."""
     check = model_check(blocks, poses, intr, model, fit.covariance_params.shape[0], sqrt_w, k2,
                         fitter.lens, fitter.principal_point, fitter.sigma_px is not None)
-    return with_model_check(fit, check)
+    return _with_shift(with_model_check(fit, check), blocks, poses, intr, model, sqrt_w, fitter.section_shift_px)
+
+
+def _with_shift(fit: JointFit, blocks, poses, intr, model, sqrt_w, shift_px) -> JointFit:
+    """``fit`` with the covariance of a common shift of each section's centres (std ``shift_px``
+    per axis; :func:`solver.section_shift.section_shift_covariance`), weighted as the estimator
+    (``sqrt_w`` or None); ``fit`` unchanged without a shift or when a point is behind the camera."""
+    if shift_px is None:
+        return fit
+    _, jac, valid = stack_blocks(blocks, poses, intr, model)
+    if not valid:
+        return fit
+    groups = np.concatenate([np.full(b.points_3d.shape[0], k) for k, b in enumerate(blocks)])
+    return with_added_covariance(fit, section_shift_covariance(jac, groups, shift_px, sqrt_w))
 
 
 def with_model_error(fit: JointFit, points_3d: dict, points_2d: dict, fitter: JointFitter) -> JointFit:

@@ -92,7 +92,10 @@ class DockingResult:
     - ``model_check``: the model error of the camera model (:class:`solver.model_error.
       ModelCheck`): whether it explains the residuals (``model_warning`` says so in a sentence
       when not) and, with ``DockingOptions.lens.marginalise``, the pose error of the intrinsics
-      it does not estimate, already in ``covariance`` and ``std``.
+      it does not estimate, already in ``covariance`` and ``std``;
+    - ``section_shift_covariance`` (6, 6) over POSE_NAMES or None: what a common offset of each
+      section's centres (``DockingOptions.section_shift_px``, :mod:`solver.section_shift`) added
+      to ``covariance``.
     """
 
     d_from_b: np.ndarray
@@ -119,6 +122,7 @@ class DockingResult:
     intrinsics_std: dict = field(default_factory=dict)
     model_choice: ModelChoice | None = None
     model_check: ModelCheck | None = None
+    section_shift_covariance: np.ndarray | None = None
 
     @property
     def model_error_covariance(self) -> np.ndarray:
@@ -152,7 +156,7 @@ class DockingResult:
                    inliers=np.asarray(inliers, dtype=bool),
                    swapped=np.asarray(swapped, dtype=bool), cam_from_a=fit.cam_from_a,
                    cam_from_b=fit.cam_from_b, sigma_px=fit.sigma_px,
-                   iterations=fit.iterations, **comp)
+                   iterations=fit.iterations, section_shift_covariance=fit.shift_covariance, **comp)
 
 
 def _intrinsics_report(fit: JointFit):
@@ -202,7 +206,8 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     layout = LayoutArrays.of(markers)
     pp = as_principal_point(principal_point)
     fitter = JointFitter(pp, check_sigma(sigma_px), options.refine,
-                         check_model_name(camera_model), options.model_choice, options.lens)
+                         check_model_name(camera_model), options.model_choice, options.lens,
+                         options.section_shift_px)
     if detections is not None:
         return _solve_detections(markers, layout, detections, (boxes, refined, edge_px), fitter, options)
     if boxes is not None or refined is not None or edge_px is not None:

@@ -49,7 +49,7 @@ from dockfactory.solver.refine import (
 from dockfactory.solver.upnp import upnp
 
 __all__ = ["JointStart", "JointFit", "JointFitter", "SectionPoints", "fit_joint",
-           "joint_fit_from_model", "with_model_check"]
+           "joint_fit_from_model", "with_model_check", "with_added_covariance"]
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,9 @@ class JointFit:
     bare :func:`fit_joint`: pinhole at the caller's principal point) and ``choice`` (the
     automatic model choice, if any). With a model beyond the pinhole ``covariance_params`` is
     (13 + e, 13 + e) over (w_A, t_A, w_B, t_B, f, *model.free). ``model_check``: the model
-    error of the final fit (:mod:`solver.model_error`; None before it is checked).
+    error of the final fit (:mod:`solver.model_error`; None before it is checked);
+    ``shift_covariance`` (6, 6) over POSE_NAMES: what a common shift of each section's centres
+    added to ``covariance`` (:mod:`solver.section_shift`; None: nothing added).
     """
 
     cam_from_a: np.ndarray
@@ -100,6 +102,7 @@ class JointFit:
     intrinsics: Intrinsics | None = None
     choice: ModelChoice | None = None
     model_check: ModelCheck | None = None
+    shift_covariance: np.ndarray | None = None
 
     @property
     def cams(self) -> dict:
@@ -133,8 +136,9 @@ class JointFitter:
     """:func:`fit_joint` bound to one image: ``principal_point`` (2,) px, ``sigma_px`` (None:
     estimated from the residuals), the refinement ``options``, the ``camera_model`` (a name of
     :data:`solver.camera_models.MODELS` or "auto"), the automatic choice's
-    ``choice_options`` and the ``lens`` prior of the final fit's model error
-    (:mod:`solver.model_error`)."""
+    ``choice_options``, the ``lens`` prior of the final fit's model error
+    (:mod:`solver.model_error`) and the ``section_shift_px`` (x, y) std of a common offset of
+    each section's centres (:mod:`solver.section_shift`; None: none)."""
 
     principal_point: np.ndarray
     sigma_px: float | None = None
@@ -142,6 +146,7 @@ class JointFitter:
     camera_model: str = PINHOLE.name
     choice_options: ModelChoiceOptions = DEFAULT_MODEL_CHOICE
     lens: LensPrior = DEFAULT_LENS_PRIOR
+    section_shift_px: tuple | None = None
 
     def fit(self, points_a, uv_a, points_b, uv_b, start: JointStart | None = None,
             accept_rmse: float | None = None) -> JointFit:
@@ -219,6 +224,16 @@ def with_model_check(fit: JointFit, check: ModelCheck) -> JointFit:
                              fit.cam_from_b[:3, 3])
     return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T,
                    model_check=check)
+
+
+def with_added_covariance(fit: JointFit, added: np.ndarray) -> JointFit:
+    """``fit`` with ``added`` (over its (13 + e) parameters) in its covariances and, as a pose
+    covariance, in ``shift_covariance`` (what :mod:`solver.section_shift` adds)."""
+    prop = d_from_b_jacobian(fit.cam_from_a[:3, :3], fit.cam_from_a[:3, 3], fit.cam_from_b[:3, :3],
+                             fit.cam_from_b[:3, 3])
+    params = fit.covariance_params + added
+    return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T,
+                   shift_covariance=prop @ added[:12, :12] @ prop.T)
 
 
 def fit_joint(points_a, uv_a, points_b, uv_b, pp, sigma_px=None, start=None, accept_rmse=None,

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from dockfactory.solver.checks import check_sigma
+from dockfactory.solver.checks import check_shift_px, check_sigma
 from dockfactory.solver.errors import InvalidSolverInput
 
 __all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
@@ -363,6 +363,10 @@ class DockingOptions:
       ``solver.model_error.BIAS_LENGTH`` image diagonals), its variance estimated from the run's
       residuals and counted when they show it (:func:`solver.model_error.
       persistent_bias_covariance`); False: the centres' errors are independent between frames.
+    - ``section_shift_px``: None, or the std (x, y) px of a common offset of each section's
+      centres that no fit's residuals show (its pose absorbs it: :mod:`solver.section_shift`),
+      measured on other labelled frames of the camera class (eval.section_shift, the noise
+      card): added to the covariance of every solve, one shift per section over a run.
     """
 
     refine: RefineOptions = field(default_factory=RefineOptions)
@@ -377,8 +381,11 @@ class DockingOptions:
     robust: bool = True
     occlusion_bias: float = 0.5
     occlusion_margin_px: float = 1.0
+    section_shift_px: tuple[float, float] | None = None
 
     def __post_init__(self):
+        if self.section_shift_px is not None:
+            object.__setattr__(self, "section_shift_px", check_shift_px(self.section_shift_px))
         if not (math.isfinite(self.min_extent) and 0 < self.min_extent <= 1):
             raise InvalidSolverInput(f"min_extent must be in (0, 1], got {self.min_extent}")
         for name in ("occlusion_bias", "occlusion_margin_px"):

@@ -61,6 +61,7 @@ from dockfactory.solver.model_fit import (
 )
 from dockfactory.solver.options import DEFAULT_DOCKING, DockingOptions
 from dockfactory.solver.refine import Block
+from dockfactory.solver.section_shift import section_shift_covariance
 
 __all__ = ["SequenceResult", "solve_sequence"]
 
@@ -150,8 +151,20 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
                                   options.refine.sigma_floor_px)
     check = model_check(blocks, mf.poses, mf.intrinsics, mf.model, mf.covariance.shape[0], None,
                         noise2, options.lens, pp, sigma is not None)
-    return replace(_result(replace(mf, covariance=mf.covariance + check.added), parsed,
-                           bool(share_cam_from_a), check), bias_px=bias)
+    shift = _run_shift_covariance(mf, parsed, options.section_shift_px)
+    return replace(_result(replace(mf, covariance=mf.covariance + check.added + shift), parsed,
+                           bool(share_cam_from_a), check, shift), bias_px=bias)
+
+
+def _run_shift_covariance(mf: ModelFit, parsed, shift_px) -> np.ndarray:
+    """What one common shift of each section's centres over the whole run (std ``shift_px`` per
+    axis, :func:`solver.section_shift.section_shift_covariance`) adds to the run's parameter
+    covariance; zeros without a shift."""
+    jac = mf.refinement.jacobian
+    if shift_px is None:
+        return np.zeros((jac.shape[1],) * 2)
+    groups = np.concatenate([np.full(len(fr.rows[s]), k) for fr in parsed for k, s in enumerate(SECTIONS)])
+    return section_shift_covariance(jac, groups, shift_px)
 
 
 def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: bool, pp,
@@ -263,15 +276,17 @@ def _pinhole_run(parsed, pp, sigma, share: bool, options: DockingOptions) -> Mod
                         sigma, options.refine)
 
 
-def _result(mf: ModelFit, parsed, share: bool, check: ModelCheck) -> SequenceResult:
+def _result(mf: ModelFit, parsed, share: bool, check: ModelCheck, shift: np.ndarray) -> SequenceResult:
     """Per-frame DockingResults and the run's intrinsics from the run's model fit (its
-    covariance with the model error ``check`` already added)."""
+    covariance with the model error ``check`` and the section shift's ``shift`` already added)."""
     out, row = [], 0
     for k, fr in enumerate(parsed):
         na, nb = 2 * len(fr.rows["A"]), 2 * len(fr.rows["B"])
         ia, ib = _pose_indices(k, share)
-        fit = replace(joint_fit_from_model(mf, slice(row, row + na), slice(row + na, row + na + nb),
-                                           ia, ib), model_check=check)
+        rows = (slice(row, row + na), slice(row + na, row + na + nb), ia, ib)
+        fit = replace(joint_fit_from_model(mf, *rows), model_check=check,
+                      shift_covariance=joint_fit_from_model(replace(mf, covariance=shift), *rows).covariance
+                      if np.any(shift) else None)
         row += na + nb
         n = len(fr.ids)
         out.append(DockingResult.from_fit(fit, fr.ids, np.ones(n, dtype=bool),

@@ -185,3 +185,31 @@ def test_camera_model_term_is_what_marginalising_the_lens_added():
             pytest.approx(reported[i], rel=1e-9)
         assert plain[n]["model_error"] is None
         assert b["centre_noise"] == pytest.approx(plain[n]["centre_noise"], rel=1e-6)
+
+
+def test_section_offset_term_is_what_the_section_shift_added():
+    """Solved with a section shift (solver.section_shift), the budget's section-offset term is
+    the difference between that covariance and the same solve's without it; the other terms are
+    those of the solve without it, and all add up to the reported uncertainty."""
+    from dataclasses import replace
+
+    from dockfactory.solver.options import DEFAULT_DOCKING
+    rng = np.random.default_rng(14)
+    scene = docking_scene(rng, markers=MARKERS)
+    uv = _uv(scene, scene.points_a, scene.points_b) + rng.normal(0.0, 0.1, (len(IDS), 2))
+    solves = {s: solve_docking(MARKERS, scene.image_centre, correspondences=(IDS, uv), sigma_px=0.1,
+                               options=replace(DEFAULT_DOCKING, section_shift_px=s))
+              for s in (None, (0.05, 0.08))}
+    added = np.diag(solves[(0.05, 0.08)].covariance) - np.diag(solves[None].covariance)
+    assert np.all(added[:2] > 0)
+    rec = {**pose_record(solves[(0.05, 0.08)], len(IDS)), "image_size": list(scene.image_size)}
+    plain_rec = {**pose_record(solves[None], len(IDS)), "image_size": list(scene.image_size)}
+    assert "section_shift_variance" not in plain_rec
+    budget, plain = pose_budget(rec, MARKERS), pose_budget(plain_rec, MARKERS)
+    reported = np.sqrt(np.diag(np.array(rec["covariance"])))
+    for i, n in enumerate(POSE_NAMES):
+        b = budget[n]
+        assert b["section_shift"] ** 2 == pytest.approx(max(added[i], 0.0), rel=1e-6, abs=1e-15)
+        assert b["combined"] == pytest.approx(reported[i], rel=1e-9)
+        assert plain[n]["section_shift"] is None
+        assert b["centre_noise"] == pytest.approx(plain[n]["centre_noise"], rel=1e-6)

@@ -1,0 +1,79 @@
+"""The common offset of a section's detected centres in a frame, measured on labelled frames.
+
+The centre errors of one section's markers in a frame share a part: each colour's centres move
+together through the lens (lateral chromatic aberration), a Bayer sensor and its demosaic, a JPEG's
+chroma, the blur of the section's depth. A common shift of one section's centres is what its pose
+absorbs without a residual: it moves X and Y of the relative pose and no fit's residuals can show
+it. The solver carries it as a prior (solver.options.RefineOptions.section_shift_px) that has to
+be measured on other labelled frames of the camera class than the ones it is judged on.
+
+Estimator (per axis): for every solved frame and section with at least ``MIN_SECTION_MARKERS``
+matched centres (``eval.centre_noise.used_centre_matches``), m = the mean error of the section's
+centres, s^2 = their sample variance, n their number; the shift's variance is the mean of
+m^2 - s^2 / n over those groups (the part of the section mean that its markers' own scatter does
+not explain; a mean about zero: a bias of unknown sign is counted), floored at 0. A method of
+moments: unbiased when the markers' errors scatter independently about the common offset.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dockfactory.core.names import MIN_SCORE
+from dockfactory.eval.centre_noise import used_centre_matches
+from dockfactory.eval.solve_frames import solve_dataset
+
+MIN_SECTION_MARKERS = 3
+
+__all__ = ["MIN_SECTION_MARKERS", "section_groups", "section_shift_stats", "section_shift_block",
+           "measure_section_shift"]
+
+
+def section_groups(label: dict, dets: list[dict], marker_ids, min_score: float) -> list[np.ndarray]:
+    """The matched centre errors (k, 2) px of each section (class id 0: A, 1: B) of one frame
+    that has at least MIN_SECTION_MARKERS of them (:func:`used_centre_matches`)."""
+    matches, _ = used_centre_matches(label, dets, marker_ids, min_score)
+    out = []
+    for cls in (0, 1):
+        e = np.array([err for m, err in matches if m["class_id"] == cls], dtype=float).reshape(-1, 2)
+        if e.shape[0] >= MIN_SECTION_MARKERS:
+            out.append(e)
+    return out
+
+
+def section_shift_stats(groups) -> dict:
+    """{"groups", "shift_axis_px" [x, y] (the shift's std per axis, module docstring),
+    "mean_axis_px" [x, y] (the mean section offset), "section_mean_rms_px" [x, y] (RMS of the
+    section means, noise included)}; shift None without a group."""
+    groups = [np.asarray(g, dtype=float).reshape(-1, 2) for g in groups]
+    groups = [g for g in groups if g.shape[0] >= MIN_SECTION_MARKERS]
+    if not groups:
+        return {"groups": 0, "shift_axis_px": None, "mean_axis_px": None, "section_mean_rms_px": None}
+    means = np.array([g.mean(axis=0) for g in groups])
+    noise = np.array([g.var(axis=0, ddof=1) / g.shape[0] for g in groups])
+    shift2 = np.maximum(np.mean(means ** 2 - noise, axis=0), 0.0)
+    return {"groups": len(groups), "shift_axis_px": [float(math.sqrt(v)) for v in shift2],
+            "mean_axis_px": means.mean(axis=0).tolist(),
+            "section_mean_rms_px": np.sqrt(np.mean(means ** 2, axis=0)).tolist()}
+
+
+def section_shift_block(ds, poses: dict, detections: dict, min_score: float, splits=("test",)) -> dict:
+    """:func:`section_shift_stats` over the solved frames of ``splits`` (``ds`` an opened
+    Dataset, ``poses`` and ``detections`` the parsed files), the frames' markers being those
+    each pose record used (``marker_ids``)."""
+    groups = []
+    for fid in ds.frames(splits):
+        rec = poses["frames"].get(fid)
+        if not rec or rec.get("ok") is not True or fid not in ds.labels:
+            continue
+        groups += section_groups(ds.labels[fid], detections["frames"].get(fid, []), rec.get("marker_ids"),
+                                 min_score)
+    return {"splits": list(splits), **section_shift_stats(groups)}
+
+
+def measure_section_shift(ds, detections: dict, splits=("test",), min_score: float = MIN_SCORE) -> dict:
+    """:func:`section_shift_block` of ``detections`` on ``splits`` of the opened dataset ``ds``,
+    each frame solved alone with the pinhole model and no shift (the markers a fit uses)."""
+    poses = solve_dataset(ds, splits, detections=detections, min_score=min_score, section_shift_px=(0.0, 0.0))
+    return section_shift_block(ds, poses, detections, min_score, splits)
