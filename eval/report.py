@@ -360,8 +360,8 @@ PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model
 
 def check_schema(value, schema, path, key: str = "") -> None:
     """Raise DatasetError("PATH: KEY: problem") where ``value`` does not follow ``schema``: a dict
-    of keys (``name?`` optional), ("map", sub) / ("list", sub), "any", or a leaf type ("num",
-    "int", "str", "bool"; with "?" also null)."""
+    of keys (``name?`` optional), ("map", sub) / ("list", sub) / ("pair", sub) (a list of exactly
+    two), "any", or a leaf type ("num", "int", "str", "bool"; with "?" also null)."""
     if isinstance(schema, dict):
         _check_object(value, schema, path, key)
     elif isinstance(schema, tuple):
@@ -369,6 +369,8 @@ def check_schema(value, schema, path, key: str = "") -> None:
         want = dict if kind == "map" else list
         if not isinstance(value, want):
             _schema_error(path, key, f"expected {'an object' if kind == 'map' else 'a list'}, got {json_kind(value)}")
+        if kind == "pair" and len(value) != 2:
+            _schema_error(path, key, f"expected 2 values, got {len(value)}")
         items = value.items() if kind == "map" else enumerate(value)
         for k, v in items:
             check_schema(v, sub, path, f"{key}.{k}" if kind == "map" else f"{key}[{k}]")

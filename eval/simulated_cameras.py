@@ -21,12 +21,12 @@ SHOWN = ("x", "y", "alpha")   # the components the paper's acceptance gates
 
 # what the report reads of metrics["simulated_cameras"] (eval.report.check_schema): the lens, and
 # a sensor record of the three-chip model or of a preset (checked by the record's own kind)
-LENS_SCHEMA = {"principal_offset_px": ("list", "num"), "k1": "num", "k2": "num", "aberration_px": ("list", "num"),
+LENS_SCHEMA = {"principal_offset_px": ("pair", "num"), "k1": "num", "k2": "num", "aberration_px": ("pair", "num"),
                "f_number": "num?", "jpeg_quality": "num?", "jpeg_subsampling": "str?"}
-THREE_CHIP_SCHEMA = {"model": "str", "full_well_e": ("list", "num"), "read_noise_e": ("list", "num"), "adc_bits": "int"}
+THREE_CHIP_SCHEMA = {"model": "str", "full_well_e": ("pair", "num"), "read_noise_e": ("pair", "num"), "adc_bits": "int"}
 PRESET_SCHEMA = {"model": "str", "preset": "str", "cfa": "str", "demosaic": "str", "saturation_e": "num",
                  "dark_noise_e": "num", "gain_dn_per_e": "num", "adc_bits": "int", "crosstalk": "num",
-                 "isp": {"wb_error": ("list", "num"), "colour_correction": "bool", "tone": "str", "denoise": "str",
+                 "isp": {"wb_error": ("pair", "num"), "colour_correction": "bool", "tone": "str", "denoise": "str",
                          "sharpen": "num"}}
 BLOCK_SCHEMA = {"statement": "str", "units": ("list", {"unit": "int", "lens": LENS_SCHEMA, "sensor": {"model": "str"},
                                                         "test": {"frames": "int", "solved": "int", "x": "num?",

@@ -99,8 +99,10 @@ def test_layout_sigma_mm_enters_the_budget_and_the_guard_band(measured, tmp_path
         assert bx["layout"] > 0 and bx["combined"] > a["uncertainty"]["x_mm"]["combined"]
         assert bx["detector_bias"] is not None   # the shipped weights' noise card measured it
         assert bx["model_error"] > 0            # the lens is not known: marginalised by default
+        assert bx["section_shift"] is not None   # ... and the section offset of its centres
         assert bx["combined"] ** 2 == pytest.approx(bx["centre_noise"] ** 2 + bx["intrinsics"] ** 2 + bx["layout"] ** 2
-                                                    + bx["detector_bias"] ** 2 + bx["model_error"] ** 2)
+                                                    + bx["detector_bias"] ** 2 + bx["model_error"] ** 2
+                                                    + bx["section_shift"] ** 2)
 
 
 @pytest.mark.slow   # the detector on two 1280 x 960 images, twice

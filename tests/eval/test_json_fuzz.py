@@ -240,3 +240,17 @@ def test_report_refuses_provenance_of_another_shape(world, capsys, value):
     d = _eval_copy(world, "fp_eval_dir")
     _write(d / "provenance.json", value)
     _run(["report", str(d), "--out", str(world["base"] / "fp_r.html")], capsys, d / "provenance.json")
+
+
+@pytest.mark.parametrize("key,value", [("full_well_e", [20000.0]), ("read_noise_e", [1.0, 2.0, 3.0])])
+def test_a_simulated_camera_range_that_is_not_a_pair_is_a_one_line_error(key, value):
+    """Found by the fuzz above: a three-chip sensor's range cut to one value reached the report's
+    text and raised IndexError; every range the report prints as low-high is checked as a pair."""
+    from dockfactory.core.errors import DockfactoryError
+    from dockfactory.eval.report import check_schema
+    from dockfactory.eval.simulated_cameras import THREE_CHIP_SCHEMA
+    sensor = {"model": "three-chip noise model", "full_well_e": [20000.0, 30000.0], "read_noise_e": [2.0, 6.0],
+              "adc_bits": 12}
+    check_schema(sensor, THREE_CHIP_SCHEMA, "metrics.json", "sensor")
+    with pytest.raises(DockfactoryError, match=f"metrics.json: sensor.{key}: expected 2 values, got {len(value)}"):
+        check_schema({**sensor, key: value}, THREE_CHIP_SCHEMA, "metrics.json", "sensor")
