@@ -22,6 +22,7 @@ from dockfactory.eval.acceptance import load_acceptance, verdict_exit_status
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.report import build_report
+from dockfactory.eval.section_shift import split_section_shift
 from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.dataset import identity
@@ -152,7 +153,12 @@ def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, pose
     t = time.monotonic()
     if dets_path:
         dets = json.loads(dets_path.read_text())
-        poses = solve_dataset(ds, detections=dets)
+        shift = split_section_shift(ds, dets, "val")
+        poses = solve_dataset(ds, detections=dets, section_shift_px=shift and shift["shift_axis_px"])
+        poses["section_shift"] = shift or {"source": "the weights' noise card"}
+        if shift:
+            say(f"solve: section offset {shift['shift_axis_px'][0]:.3f} / {shift['shift_axis_px'][1]:.3f} px "
+                f"measured on {shift['groups']} sections of the val split")
     else:
         poses = solve_dataset(ds, oracle_sigma_px=oracle_noise_px)
     write_poses(poses_path, poses, dets_path)

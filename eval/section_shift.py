@@ -25,9 +25,10 @@ from dockfactory.eval.centre_noise import used_centre_matches
 from dockfactory.eval.solve_frames import solve_dataset
 
 MIN_SECTION_MARKERS = 3
+MIN_GROUPS = 10   # sections a split must give before its measured shift replaces the card's
 
-__all__ = ["MIN_SECTION_MARKERS", "section_groups", "section_shift_stats", "section_shift_block",
-           "measure_section_shift"]
+__all__ = ["MIN_SECTION_MARKERS", "MIN_GROUPS", "section_groups", "section_shift_stats", "section_shift_block",
+           "measure_section_shift", "split_section_shift"]
 
 
 def section_groups(label: dict, dets: list[dict], marker_ids, min_score: float) -> list[np.ndarray]:
@@ -77,3 +78,15 @@ def measure_section_shift(ds, detections: dict, splits=("test",), min_score: flo
     each frame solved alone with the pinhole model and no shift (the markers a fit uses)."""
     poses = solve_dataset(ds, splits, detections=detections, min_score=min_score, section_shift_px=(0.0, 0.0))
     return section_shift_block(ds, poses, detections, min_score, splits)
+
+
+def split_section_shift(ds, detections: dict, split: str = "val", min_groups: int = MIN_GROUPS) -> dict | None:
+    """:func:`measure_section_shift` of ``split`` when ``detections`` cover its frames and they give
+    at least ``min_groups`` sections, else None: a dataset's own val frames are labelled frames of
+    its camera class that the judge does not score (eval.solve_frames.solve_dataset's
+    ``section_shift_px``); the block names the split."""
+    frames = [f for f in ds.frames((split,)) if f in detections.get("frames", {})]
+    if not frames:
+        return None
+    block = measure_section_shift(ds, detections, (split,))
+    return block if block["groups"] >= min_groups else None
