@@ -235,3 +235,42 @@ def painted_from_text(tmp_path_factory, name: str, config_text: str) -> Path:
     (root / "c.toml").write_text(config_text)
     write_painted_dataset(root / "ds", root / "c.toml")
     return root / "ds"
+
+
+# a painted dataset with a large val split (section offsets measured on it: eval.section_shift)
+SHIFT_SPLIT_CONFIG = """
+[dataset]
+name = "shift-split"
+seed = 11
+frames = 24
+train_fraction = 0.5
+val_fraction = 0.9
+
+[conditions]
+normal = 1
+
+[repeatability]
+poses = 1
+captures = 2
+
+[image]
+width = 1280
+height = 960
+
+[render]
+keep_exr = false
+"""
+
+
+def offset_detections(ds, frames, shift: float, rng, noise: float = 0.03) -> dict:
+    """A detections document of ``frames`` of the opened dataset ``ds``: every fully visible marker
+    at its exact centroid, plus one draw of a common offset of std ``shift`` px per frame and section,
+    plus ``noise`` px per centre."""
+    out = {}
+    for fid in frames:
+        offset = rng.normal(0.0, shift, (2, 2))
+        out[fid] = [{"class_id": m["class_id"], "score": 1.0,
+                     "center_px": (np.array(m["outline_centroid_px"]) + offset[m["class_id"]]
+                                   + rng.normal(0.0, noise, 2)).tolist()}
+                    for m in ds.labels[fid]["markers"] if m.get("visibility") == 2]
+    return {"frames": out}
