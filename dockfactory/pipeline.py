@@ -155,7 +155,7 @@ def _solve_stage(ds, version: str, dets_path: Path | None, oracle_noise_px, pose
         dets = json.loads(dets_path.read_text())
         shift = split_section_shift(ds, dets, "val")
         poses = solve_dataset(ds, detections=dets, section_shift_px=shift and shift["shift_axis_px"])
-        poses["section_shift"] = shift or {"source": "the weights' noise card"}
+        poses["section_shift"] = {"source": "the val split", **shift} if shift else {"source": "the weights' noise card"}
         if shift:
             say(f"solve: section offset {shift['shift_axis_px'][0]:.3f} / {shift['shift_axis_px'][1]:.3f} px "
                 f"measured on {shift['groups']} sections of the val split")

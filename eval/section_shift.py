@@ -4,7 +4,7 @@ The centre errors of one section's markers in a frame share a part: each colour'
 together through the lens (lateral chromatic aberration), a Bayer sensor and its demosaic, a JPEG's
 chroma, the blur of the section's depth. A common shift of one section's centres is what its pose
 absorbs without a residual: it moves X and Y of the relative pose and no fit's residuals can show
-it. The solver carries it as a prior (solver.options.RefineOptions.section_shift_px) that has to
+it. The solver carries it as a prior (solver.options.DockingOptions.section_shift_px) that has to
 be measured on other labelled frames of the camera class than the ones it is judged on.
 
 Estimator (per axis): for every solved frame and section with at least ``MIN_SECTION_MARKERS``

@@ -169,7 +169,7 @@ def _with_shift(fit: JointFit, blocks, poses, intr, model, sqrt_w, shift_px) -> 
     """``fit`` with the covariance of a common shift of each section's centres (std ``shift_px``
     per axis; :func:`solver.section_shift.section_shift_covariance`), weighted as the estimator
     (``sqrt_w`` or None); ``fit`` unchanged without a shift or when a point is behind the camera."""
-    if shift_px is None:
+    if shift_px is None or not any(v > 0 for v in shift_px):
         return fit
     _, jac, valid = stack_blocks(blocks, poses, intr, model)
     if not valid:

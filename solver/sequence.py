@@ -20,7 +20,8 @@ the run and correlates between nearby centres of a section
 (:func:`solver.model_error.persistent_bias_covariance`; a fixed camera repeats its lighting,
 blur and colour effects on the detector in every frame, so averaging the frames does not shrink
 them), plus the model error of the intrinsics the run does not estimate
-(:mod:`solver.model_error`); each frame's
+(:mod:`solver.model_error`), plus, with ``options.section_shift_px``, one common offset of each
+section's centres over the whole run (:mod:`solver.section_shift`); each frame's
 ``d_from_b`` gets its covariance by first-order propagation from its block (with a shared
 cam_from_a the frames' errors are correlated through it: the per-frame covariances are
 marginals).
