@@ -35,6 +35,8 @@ def html_budget(metrics: dict) -> list[str]:
             "intrinsics split the reported covariance (what estimating the focal length and the model's free "
             "intrinsics adds); camera model: what marginalising the intrinsics the camera model does not estimate "
             "(principal point, distortion) over their plausible range added (- when the lens is taken as known); "
+            "section offset: what a common offset of each section's centres, measured on labelled frames of the "
+            "camera class (the detector's noise card or the dataset's val split), added (- when none was given); "
             "the marker layout is exact in a rendered dataset (a real layout's sigma_mm enters "
             f"through measure); detector bias: {html.escape(bias_text)}. U = k u is what measure's guard band "
             "uses for one pose.</p>"]
