@@ -237,29 +237,17 @@ def painted_from_text(tmp_path_factory, name: str, config_text: str) -> Path:
     return root / "ds"
 
 
+def painted_config(name: str, seed: int, frames: int, train_fraction: float, val_fraction=None) -> str:
+    """The TOML text of a small painted dataset at 1280 x 960: normal light only, one
+    repeatability pose of 2 captures, no kept EXR (``val_fraction`` None: the default)."""
+    val = "" if val_fraction is None else f"val_fraction = {val_fraction}\n"
+    return (f'[dataset]\nname = "{name}"\nseed = {seed}\nframes = {frames}\ntrain_fraction = {train_fraction}\n{val}'
+            "\n[conditions]\nnormal = 1\n\n[repeatability]\nposes = 1\ncaptures = 2\n\n"
+            "[image]\nwidth = 1280\nheight = 960\n\n[render]\nkeep_exr = false\n")
+
+
 # a painted dataset with a large val split (section offsets measured on it: eval.section_shift)
-SHIFT_SPLIT_CONFIG = """
-[dataset]
-name = "shift-split"
-seed = 11
-frames = 24
-train_fraction = 0.5
-val_fraction = 0.9
-
-[conditions]
-normal = 1
-
-[repeatability]
-poses = 1
-captures = 2
-
-[image]
-width = 1280
-height = 960
-
-[render]
-keep_exr = false
-"""
+SHIFT_SPLIT_CONFIG = painted_config("shift-split", 11, 24, 0.5, 0.9)
 
 
 def offset_detections(ds, frames, shift: float, rng, noise: float = 0.03) -> dict:

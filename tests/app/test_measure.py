@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from pipeline_data import painted_config, painted_from_text
 
 from dockfactory.core.names import POSE_NAMES
 from dockfactory.core.resources import shipped_weights
@@ -15,32 +16,11 @@ from dockfactory.detector.noise_card import centre_noise_px
 from dockfactory.detector.onnx_runtime import onnxruntime_available
 from dockfactory.cli import main
 
-CONFIG = """
-[dataset]
-name = "measure-test"
-seed = 11
-frames = 4
-train_fraction = 0.5
-
-[conditions]
-normal = 1
-
-[repeatability]
-poses = 1
-captures = 2
-
-[image]
-width = 1280
-height = 960
-
-[render]
-keep_exr = false
-"""
+CONFIG = painted_config("measure-test", 11, 4, 0.5)
 
 
 @pytest.fixture(scope="module")
 def big(tmp_path_factory):
-    from pipeline_data import painted_from_text
     return painted_from_text(tmp_path_factory, "measure", CONFIG)
 
 

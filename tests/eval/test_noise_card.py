@@ -5,38 +5,17 @@ import json
 import shutil
 
 import pytest
+from pipeline_data import painted_config, painted_from_text
 
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.noise_card import centre_noise_px, noise_card_path, section_shift_px, write_noise_card
 from dockfactory.cli import main
 
-CONFIG = """
-[dataset]
-name = "noise-card-test"
-seed = 5
-frames = 6
-train_fraction = 0.7
-val_fraction = 0.5
-
-[conditions]
-normal = 1
-
-[repeatability]
-poses = 1
-captures = 2
-
-[image]
-width = 1280
-height = 960
-
-[render]
-keep_exr = false
-"""
+CONFIG = painted_config("noise-card-test", 5, 6, 0.7, 0.5)
 
 
 @pytest.fixture(scope="module")
 def painted(tmp_path_factory):
-    from pipeline_data import painted_from_text
     return painted_from_text(tmp_path_factory, "noise", CONFIG)
 
 
