@@ -51,6 +51,22 @@ def check_oracle_noise(value: float | None) -> float | None:
     return value
 
 
+def parse_section_shift(text: str | None) -> tuple[float, float] | None:
+    """``--section-shift``: None, or "PX" (both axes) / "PX,PX" (x, y), each a number of pixels in
+    [0, MAX_SIGMA_PX] (DockfactoryError naming the flag otherwise)."""
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) == 1:
+        values *= 2
+    if len(values) != 2 or not all(math.isfinite(v) and 0 <= v <= MAX_SIGMA_PX for v in values):
+        raise DockfactoryError(f"--section-shift: expected PX or PX,PX, pixels in [0, {MAX_SIGMA_PX:g}], got {text!r}")
+    return (values[0], values[1])
+
+
 def cmd_solve(args) -> int:
     splits = parse_splits(args.split)
     check_min_score(args.min_score)
@@ -61,8 +77,10 @@ def cmd_solve(args) -> int:
     if args.sigma_floor is not None and not (math.isfinite(args.sigma_floor) and 0 < args.sigma_floor <= MAX_SIGMA_PX):
         raise DockfactoryError(f"--sigma-floor: must be a number of pixels in (0, {MAX_SIGMA_PX:g}], "
                                f"got {args.sigma_floor}")
+    shift = parse_section_shift(args.section_shift)
     ds = Dataset.open(args.dataset)
-    modes = {"camera_model": model, "self_calibrate": args.self_calibrate, "sigma_floor_px": args.sigma_floor}
+    modes = {"camera_model": model, "self_calibrate": args.self_calibrate, "sigma_floor_px": args.sigma_floor,
+             "section_shift_px": shift}
     if args.detections:
         dets = read_json_for(args.detections, "detections", ds)
         poses = solve_dataset(ds, splits, detections=dets, min_score=args.min_score, **modes)
@@ -167,6 +185,9 @@ def _add_solve_parser(sub) -> None:
     s.add_argument("--sigma-floor", type=float, metavar="PX",
                    help="the detector's centre noise measured on labelled frames (evaluate's "
                         "centre_noise.used.value on another split): no frame's covariance assumes less")
+    s.add_argument("--section-shift", metavar="PX[,PX]",
+                   help="the common offset of a section's centres (x,y px; one number: both axes) measured on "
+                        "labelled frames of the camera class (default: the detections' noise card)")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_solve)
 

@@ -153,3 +153,30 @@ def test_a_config_that_is_not_utf8_is_one_line(tmp_path, capsys):
         line = one_line_error(err)
         assert code == 2 and "not UTF-8" in line and str(bad) in line, line
     assert not (tmp_path / "w").exists() and not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("value", ["1e308", "-0.1", "nan", "a,b", "0.1,0.2,0.3", ""])
+def test_section_shift_flag_out_of_range(painted_source, tmp_path, capsys, value):
+    code, _, err = run_cli(["solve", painted_source, "--oracle-noise", "0.1", "--section-shift", value,
+                            "--out", tmp_path / "p.json"], capsys)
+    assert code == 2 and "--section-shift" in one_line_error(err)
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_section_shift_flag_overrides_the_card_and_widens_y(painted_source, tmp_path, capsys):
+    """``solve --section-shift`` replaces the detections' card value (one number: both axes) and the
+    records carry what it added; the poses name it."""
+    ds = Dataset.open(painted_source)
+    dets = {**_label_detections(ds), "section_shift_px": [0.0, 0.01]}
+    (tmp_path / "d.json").write_text(json.dumps(dets))
+    stds = {}
+    for flag in (None, "0.2"):
+        out = tmp_path / f"p{flag}.json"
+        argv = ["solve", painted_source, "--detections", tmp_path / "d.json", "--split", "test", "--out", out]
+        code, _, _ = run_cli(argv + (["--section-shift", flag] if flag else []), capsys)
+        poses = json.loads(out.read_text())
+        assert code == 0 and poses["section_shift_px"] == ([0.0, 0.01] if flag is None else [0.2, 0.2])
+        rec = next(r for r in poses["frames"].values() if r["ok"])
+        stds[flag] = rec["covariance"][1][1]
+        assert rec["section_shift_variance"][1] > 0
+    assert stds["0.2"] > stds[None]
