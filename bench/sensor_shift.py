@@ -46,9 +46,9 @@ def resolved_z(ds: Dataset, rows: list[dict], shift, floor) -> dict:
     """{"z_<c>": [...]} of every row solved again from its detections with ``shift`` (x, y) px."""
     w, h = ds.config.image.width, ds.config.image.height
     options = docking_options(floor, lens_prior_for(ds.config), shift)
-    out = {f"z_{c}": [] for c in COMPONENTS}
+    out, markers = {f"z_{c}": [] for c in COMPONENTS}, ds.markers()
     for r in rows:
-        rec = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(r["dets"], MIN_SCORE),
+        rec = solve_frame(markers, ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(r["dets"], MIN_SCORE),
                           None, "pinhole", options)[0]
         if rec["ok"]:
             for k, v in pose_errors(rec, ds.labels[r["frame"]]).items():

@@ -21,7 +21,7 @@ from dockfactory.core.progress import Progress
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre_camera import refine_centre_camera
 from dockfactory.detector.data import resize_exact
-from dockfactory.detector.noise_card import centre_noise_px, section_shift_px
+from dockfactory.detector.noise_card import card_figures
 
 
 @dataclass(frozen=True)
@@ -180,8 +180,8 @@ class MarkerDetector:
         self.weights = Path(weights)
         self.model, self.meta = load_model(self.weights, fuse=True)
         self.backend = resolve_backend(backend)
-        self.centre_noise_px = centre_noise_px(self.weights)   # the weights' noise card, or None
-        self.section_shift_px = section_shift_px(self.weights)
+        card = card_figures(self.weights)   # the weights' noise card (None where there is none)
+        self.centre_noise_px, self.section_shift_px = card.centre_noise_px, card.section_shift_px
         if self.backend == "onnx":
             self.network = OnnxNetwork(self.model)
         else:

@@ -27,6 +27,7 @@ import hashlib
 import json
 import math
 from functools import lru_cache
+from typing import NamedTuple
 from pathlib import Path
 
 from dockfactory.core.io import sha256_file, write_json_atomic
@@ -63,23 +64,50 @@ def _card(weights) -> dict | None:
     return doc if ok and math.isfinite(value) and 0 < value <= MAX_CARD_NOISE_PX else None
 
 
-def centre_noise_px(weights) -> float | None:
-    """The measured centre noise (px, per axis) of ``weights``, or None when no card is next to
-    them, or the card is for other weights (another sha256) or another centre refinement, or it
-    is not a valid card."""
+class CardFigures(NamedTuple):
+    """What a valid noise card says, read once (None where it says nothing): ``centre_noise_px``
+    (px per axis), ``section_shift_px`` (x, y) px, ``bias_px`` (x, y) px."""
+
+    centre_noise_px: float | None
+    section_shift_px: tuple[float, float] | None
+    bias_px: tuple[float, float] | None
+
+
+def card_figures(weights) -> CardFigures:
+    """The figures of the noise card of ``weights`` (each None without a valid card: none next to
+    them, one for other weights or another centre refinement, or not a card), the card read and
+    the weights hashed once."""
     doc = _card(weights)
-    return None if doc is None else float(doc["centre_noise_px"])
+    if doc is None:
+        return CardFigures(None, None, None)
+    return CardFigures(float(doc["centre_noise_px"]), _shift_of(doc), _bias_of(doc))
+
+
+def centre_noise_px(weights) -> float | None:
+    """The measured centre noise (px, per axis) of ``weights`` (:func:`card_figures`)."""
+    return card_figures(weights).centre_noise_px
 
 
 def centre_bias_px(weights) -> tuple[float, float] | None:
-    """The measured mean offset (x, y) px of the weights' refined centres from the exact ones: the
-    detection-weighted mean of the card's per-condition ``mean_px``; None without a valid card or
-    without per-condition means (a detector bias that was not measured)."""
-    doc = _card(weights)
+    """The measured mean offset (x, y) px of the weights' refined centres from the exact ones
+    (:func:`card_figures`, :func:`_bias_of`)."""
+    return card_figures(weights).bias_px
+
+
+def section_shift_px(weights) -> tuple[float, float] | None:
+    """The measured common offset (x, y) px of a section's refined centres in a frame
+    (eval.section_shift: what no fit's residuals show; :func:`card_figures`); None also when the
+    card did not measure it."""
+    return card_figures(weights).section_shift_px
+
+
+def _bias_of(doc: dict) -> tuple[float, float] | None:
+    """The detection-weighted mean of a card's per-condition ``mean_px``; None without
+    per-condition means (a detector bias that was not measured)."""
     try:
-        per = [(int(v["n"]), [float(x) for x in v["mean_px"]]) for v in (doc or {}).get("by_condition", {}).values()
+        per = [(int(v["n"]), [float(x) for x in v["mean_px"]]) for v in doc.get("by_condition", {}).values()
                if v.get("mean_px") is not None and v.get("n")]
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError, AttributeError):
         return None
     n = sum(k for k, _ in per)
     if not n or not all(len(m) == 2 and all(math.isfinite(x) for x in m) for _, m in per):
@@ -87,13 +115,10 @@ def centre_bias_px(weights) -> tuple[float, float] | None:
     return (sum(k * m[0] for k, m in per) / n, sum(k * m[1] for k, m in per) / n)
 
 
-def section_shift_px(weights) -> tuple[float, float] | None:
-    """The measured common offset (x, y) px of a section's refined centres in a frame
-    (eval.section_shift: what no fit's residuals show) from the weights' valid card; None without
-    a valid card or when the card did not measure it."""
-    doc = _card(weights)
+def _shift_of(doc: dict) -> tuple[float, float] | None:
+    """A card's ``section_shift_px`` when it is two finite px in [0, MAX_CARD_NOISE_PX], else None."""
     try:
-        x, y = (float(v) for v in (doc or {})["section_shift_px"])
+        x, y = (float(v) for v in doc["section_shift_px"])
     except (KeyError, TypeError, ValueError):
         return None
     ok = all(math.isfinite(v) and 0 <= v <= MAX_CARD_NOISE_PX for v in (x, y))

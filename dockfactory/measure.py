@@ -37,7 +37,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.detector.noise_card import centre_bias_px, centre_noise_px, section_shift_px
+from dockfactory.detector.noise_card import card_figures
 from dockfactory.measure_overlay import draw_measurement
 from dockfactory.measure_pool import MeasurePool
 from dockfactory.measure_read import (
@@ -401,8 +401,8 @@ def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, op
             "layout_sha256": sha256_file(layout_path), "weights_sha256": sha256_file(weights),
             "camera_model": model, "self_calibrate": self_calibrate, "min_score": min_score,
             "backend": resolve_backend(options.backend), "overlay_size": options.overlay_size,
-            "max_pixels": options.max_pixels, "camera": asdict(options.camera), "sigma_floor_px": card[0],
-            "section_shift_px": card[1] and list(card[1])}
+            "max_pixels": options.max_pixels, "camera": asdict(options.camera), "sigma_floor_px": card.centre_noise_px,
+            "section_shift_px": card.section_shift_px and list(card.section_shift_px)}
 
 
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
@@ -423,7 +423,7 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         probes = [probe_image(p, options.max_pixels) for p in paths]
         if sequence:
             check_one_size(paths, probes)
-        card = (centre_noise_px(weights), section_shift_px(weights))   # hashes the weights: twice
+        card = card_figures(weights)   # hashes the weights: once
         store = MeasureStore(out, _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options,
                                              card))
         frames = {i: _frame(i, paths[i], e) for i, e in store.open(paths).items()}
@@ -439,10 +439,11 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
         header = _header(paths, frames, layout_path, weights, model, self_calibrate, min_score, wall + seconds, run,
                          len(jobs))
         header.update(backend=store.made_with["backend"], workers=workers, overlay_size=options.overlay_size,
-                      sigma_floor_px=card[0], section_shift_px=card[1] and list(card[1]),
+                      sigma_floor_px=card.centre_noise_px,
+                      section_shift_px=card.section_shift_px and list(card.section_shift_px),
                       camera=asdict(options.camera), max_megapixels=options.max_megapixels,
                       resumed=resumed, earlier_run_discarded=store.discarded,
-                      **_assess(frames, markers, sigmas, centre_bias_px(weights), spec, acceptance))
+                      **_assess(frames, markers, sigmas, card.bias_px, spec, acceptance))
         if spec is not None and options.overlay_size is not None:   # the overlays show each decision and U
             draw_overlays(frames, markers, out, options.overlay_size, options.camera, options.max_pixels)
         write_records(out, frames, header)
@@ -474,12 +475,13 @@ def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dic
 
 def _run_of(frames: list[Frame], markers, model, card, out, options) -> tuple[dict, float]:
     """--self-calibrate sequence: the joint solve of the identified frames and their overlays
-    (the run's record with its warnings; the seconds it took); ``card`` the weights' (centre
-    noise, section shift)."""
+    (the run's record with its warnings; the seconds it took); ``card`` the weights' noise card
+    (detector.noise_card.CardFigures)."""
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
         warnings.simplefilter("always")
-        run = self_calibrate_sequence(frames, markers, model, card[0], options.camera.lens, card[1])
+        run = self_calibrate_sequence(frames, markers, model, card.centre_noise_px, options.camera.lens,
+                                      card.section_shift_px)
     if caught:
         run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
     if options.overlay_size is not None:

@@ -219,21 +219,23 @@ def joint_fit_from_model(mf: ModelFit, rows_a: slice, rows_b: slice, pose_a: int
 def with_model_check(fit: JointFit, check: ModelCheck) -> JointFit:
     """``fit`` carrying ``check``, its covariances grown by ``check.added`` (over the fit's
     (13 + e) parameters, the order of ``covariance_params``)."""
-    params = fit.covariance_params + check.added
-    prop = d_from_b_jacobian(fit.cam_from_a[:3, :3], fit.cam_from_a[:3, 3], fit.cam_from_b[:3, :3],
-                             fit.cam_from_b[:3, 3])
-    return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T,
-                   model_check=check)
+    return replace(_grown(fit, check.added)[0], model_check=check)
 
 
 def with_added_covariance(fit: JointFit, added: np.ndarray) -> JointFit:
     """``fit`` with ``added`` (over its (13 + e) parameters) in its covariances and, as a pose
     covariance, in ``shift_covariance`` (what :mod:`solver.section_shift` adds)."""
+    grown, prop = _grown(fit, added)
+    return replace(grown, shift_covariance=prop @ added[:12, :12] @ prop.T)
+
+
+def _grown(fit: JointFit, added: np.ndarray) -> tuple[JointFit, np.ndarray]:
+    """(``fit`` with ``added`` in ``covariance_params`` and its pose ``covariance`` propagated
+    again, the d_from_b propagation (6, 12) of the fit's poses)."""
     prop = d_from_b_jacobian(fit.cam_from_a[:3, :3], fit.cam_from_a[:3, 3], fit.cam_from_b[:3, :3],
                              fit.cam_from_b[:3, 3])
     params = fit.covariance_params + added
-    return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T,
-                   shift_covariance=prop @ added[:12, :12] @ prop.T)
+    return replace(fit, covariance_params=params, covariance=prop @ params[:12, :12] @ prop.T), prop
 
 
 def fit_joint(points_a, uv_a, points_b, uv_b, pp, sigma_px=None, start=None, accept_rmse=None,
