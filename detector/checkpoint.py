@@ -80,7 +80,7 @@ def _unreadable_reason(path: Path, exc: Exception) -> str:
     return f"not a readable checkpoint (truncated or corrupted?): {type(exc).__name__}"
 
 
-def _state_dict_problem(state: dict, model) -> str | None:
+def state_dict_problem(state: dict, model) -> str | None:
     """Why ``state`` does not fit ``model``, in one line; None when it fits."""
     if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
                                               for k, v in state.items()):
@@ -105,11 +105,14 @@ def weights_from_checkpoint(ckpt: dict, half: bool = True) -> dict:
             "data_config": cfg["data"], "dataset_version": ckpt["dataset_version"],
             "provenance": {"epochs": int(ckpt["epoch"]), "updates": int(ckpt["updates"]),
                            "seed": int(cfg["seed"]), "dataset": str(ckpt.get("dataset_path", "")),
-                           "half": bool(half)}}
+                           "half": bool(half), "init_sha256": str(cfg.get("init_sha256", ""))}}
 
 
-def load_model(path, fuse: bool = True):
-    """(model in eval mode (float32), weights dict) from a checkpoint (its EMA) or a weights file."""
+def read_weights(path):
+    """(weights dict with float32 state, ModelConfig, DataConfig) of a checkpoint (its EMA) or a
+    weights file, the state checked against the model its config describes.
+
+    Raises CheckpointError (one line naming the file) for a missing, foreign or inconsistent file."""
     from dockfactory.detector.data import DataConfig
     from dockfactory.detector.model import ModelConfig, build_model
     obj = load_file(path)
@@ -117,14 +120,22 @@ def load_model(path, fuse: bool = True):
         obj = weights_from_checkpoint(obj, half=False)
     try:
         mcfg = ModelConfig.from_dict(obj["model_config"])
-        DataConfig.from_dict(obj["data_config"])
+        dcfg = DataConfig.from_dict(obj["data_config"])
     except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: bad config in checkpoint: {exc}") from None
-    model = build_model(mcfg)
-    problem = _state_dict_problem(obj["state_dict"], model)
+    problem = state_dict_problem(obj["state_dict"], build_model(mcfg))
     if problem:
         raise CheckpointError(f"{path}: {problem}")
-    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
+    state = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
+    return {**obj, "state_dict": state}, mcfg, dcfg
+
+
+def load_model(path, fuse: bool = True):
+    """(model in eval mode (float32), weights dict) from a checkpoint (its EMA) or a weights file."""
+    from dockfactory.detector.model import build_model
+    obj, mcfg, _ = read_weights(path)
+    model = build_model(mcfg)
+    model.load_state_dict(obj["state_dict"])
     model.eval()
     if fuse:
         model.fuse()

@@ -12,6 +12,12 @@ After every epoch ``RUN/last.pt`` (full checkpoint) and ``RUN/history.json`` are
 atomically; at the end ``RUN/weights.pt`` holds the EMA weights (fp32). ``resume=True``
 continues from ``RUN/last.pt``; the batches are functions of (seed, epoch, index), so an
 interrupted and resumed run equals an uninterrupted one.
+
+Fine-tuning (``init``): the run starts from the EMA weights of a weights file or checkpoint; the
+network (scale, attention, heads, anchors) and its input scale come from that file, so the boxes
+keep the anchors they were trained with; the warm-up ramps the biases from ``lr0`` rather than
+from 0.1, which would throw away a trained objectness prior. The file's sha256 is recorded in the
+config (a resumed fine-tune must name the same file) and in the weights' provenance.
 """
 from __future__ import annotations
 
@@ -27,7 +33,7 @@ import torch
 from torch import nn
 
 from dockfactory.core.progress import Progress
-from dockfactory.core.io import write_json_atomic
+from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.detector.anchors import (
     anchor_fitness,
     anchors_per_level,
@@ -37,6 +43,7 @@ from dockfactory.detector.checkpoint import (
     CHECKPOINT_FORMAT,
     CheckpointError,
     load_file,
+    read_weights,
     save_atomic,
     weights_from_checkpoint,
 )
@@ -71,6 +78,7 @@ class TrainConfig:
     grad_clip: float = 10.0
     fit_anchors: bool = True      # k-means anchors on the training boxes (else model.anchors)
     seed: int = 0
+    init_sha256: str = ""         # sha256 of the weights a fine-tune started from ("" = from scratch)
 
     def __post_init__(self):
         if self.epochs < 1:
@@ -160,12 +168,44 @@ def _load_resume_checkpoint(last: Path, dataset: FrameSource, version: str) -> d
     return ckpt
 
 
-def _run_config(cfg: TrainConfig, ckpt: dict | None, frames, log) -> TrainConfig:
+@dataclass(frozen=True)
+class InitWeights:
+    """The weights a fine-tune starts from: their EMA state dict, configs and file sha256."""
+    state_dict: dict
+    model: ModelConfig
+    input_scale: float
+    sha256: str
+
+
+def load_init_weights(path) -> InitWeights:
+    """Read a weights file or training checkpoint to fine-tune from (``torch.load(weights_only=True)``).
+
+    Raises CheckpointError (one line naming the file) for a missing, foreign or inconsistent file."""
+    obj, mcfg, dcfg = read_weights(path)
+    return InitWeights(obj["state_dict"], mcfg, dcfg.input_scale, sha256_file(path))
+
+
+def _fine_tune_config(cfg: TrainConfig, init: InitWeights, log) -> TrainConfig:
+    """``cfg`` with the network and input scale of ``init``, its anchors kept, the bias warm-up
+    from ``lr0`` and the file's sha256 recorded."""
+    data = DataConfig.from_dict({**cfg.data.to_dict(), "input_scale": init.input_scale})
+    log(f"fine-tuning from weights {init.sha256[:12]}: {init.model.scale} + {init.model.attention}, "
+        f"input scale {init.input_scale}, anchors kept")
+    return _with(cfg, model=init.model, data=data, fit_anchors=False, warmup_bias_lr=cfg.lr0,
+                 init_sha256=init.sha256)
+
+
+def _run_config(cfg: TrainConfig, ckpt: dict | None, frames, log, init: InitWeights | None = None) -> TrainConfig:
     """The config of the run: the checkpoint's when resuming (``cfg.epochs`` may raise the epoch
-    count), else ``cfg`` with k-means anchors when ``cfg.fit_anchors``."""
+    count), a fine-tune's from ``init``, else ``cfg`` with k-means anchors when ``cfg.fit_anchors``."""
     if ckpt is not None:
         saved = TrainConfig.from_dict(ckpt["config"])
+        if init is not None and init.sha256 != saved.init_sha256:
+            raise CheckpointError(f"resume: the run was not fine-tuned from these weights "
+                                  f"(sha256 {init.sha256[:12]}, the run's {saved.init_sha256[:12] or 'none'})")
         return _with(saved, epochs=max(cfg.epochs, saved.epochs))
+    if init is not None:
+        return _fine_tune_config(cfg, init, log)
     if cfg.fit_anchors:
         mcfg, bpr = fit_anchor_config(cfg, frames)
         log(f"anchors (k-means, best possible recall {bpr:.4f}): {mcfg.anchors}")
@@ -204,9 +244,14 @@ def _setup_training(cfg: TrainConfig, frames, max_batches: int | None) -> _Train
     return _Training(model, ds, optimizer, ema, loss_fn, nb, accumulate, nw)
 
 
-def _restore(t: _Training, ckpt: dict | None, last: Path, epochs: int, log) -> tuple[int, list]:
-    """Load a resume checkpoint into ``t``; (first epoch to run, history so far)."""
+def _restore(t: _Training, ckpt: dict | None, last: Path, epochs: int, log,
+             init: InitWeights | None = None) -> tuple[int, list]:
+    """Load a resume checkpoint (or, starting a fine-tune, the initial weights) into ``t``;
+    (first epoch to run, history so far)."""
     if ckpt is None:
+        if init is not None:
+            t.model.load_state_dict(init.state_dict)
+            t.ema.ema.load_state_dict(init.state_dict)
         return 0, []
     t.model.load_state_dict(ckpt["model"])
     t.ema.ema.load_state_dict(ckpt["ema"])
@@ -284,20 +329,22 @@ def _save_epoch(t: _Training, cfg: TrainConfig, epoch: int, version: str, datase
 
 
 def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, progress: bool = True,
-          max_batches: int | None = None, log=print) -> dict:
+          max_batches: int | None = None, log=print, init=None) -> dict:
     """Train on the train split of the opened ``dataset``; checkpoints in ``out``. Returns a summary dict.
 
     ``max_batches`` limits the batches per epoch (tests). With ``resume`` the run continues from
     ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the epoch count).
+    ``init`` (a weights file or checkpoint path) fine-tunes from those weights (module docstring).
     """
     out = Path(out)
     version = dataset.version_id
+    init_w = load_init_weights(init) if init is not None else None
     frames = load_frames(dataset, "train")
     last = out / "last.pt"
     ckpt = _load_resume_checkpoint(last, dataset, version) if resume else None
-    cfg = _run_config(cfg, ckpt, frames, log)
+    cfg = _run_config(cfg, ckpt, frames, log, init_w)
     t = _setup_training(cfg, frames, max_batches)
-    start_epoch, history = _restore(t, ckpt, last, cfg.epochs, log)
+    start_epoch, history = _restore(t, ckpt, last, cfg.epochs, log, init_w)
     t_start = time.monotonic()
     for epoch in range(start_epoch, cfg.epochs):
         history.append(_train_epoch(t, cfg, epoch, progress))

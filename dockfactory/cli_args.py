@@ -118,6 +118,7 @@ def float_in(low: float, high: float, low_open: bool = False):
 
 unit_float = float_in(0.0, 1.0)                 # scores and IoU thresholds
 input_scale = float_in(0.0, 8.0, low_open=True)  # network px per image px
+learning_rate = float_in(0.0, 1.0, low_open=True)  # SGD's initial learning rate
 
 
 LENS_PRIOR_KEYS = {"pp": "pp_fraction", "k1": "k1", "k2": "k2", "p": "p"}

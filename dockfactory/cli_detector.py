@@ -20,7 +20,7 @@ from dockfactory.eval.detection_metrics import (
 )
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.simulated_cameras import dataset_camera
-from dockfactory.cli_args import input_scale, int_in, non_negative_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import input_scale, int_in, learning_rate, non_negative_int, thread_count, torch_threads, unit_float
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_coco_results import coco_results
@@ -42,14 +42,15 @@ def _train_config(args, attention: str, seed: int):
                         anchors=DEFAULT_ANCHORS_P2 if args.p2 else DEFAULT_ANCHORS)
     data = DataConfig(crops_per_frame=args.crops_per_frame, input_scale=args.input_scale)
     return TrainConfig(model=model, data=data, epochs=args.epochs, batch_size=args.batch, nbs=args.nbs or args.batch,
-                       seed=seed)
+                       lr0=getattr(args, "lr0", None) or TrainConfig.lr0, seed=seed)
 
 
 def cmd_train(args) -> int:
     torch_threads(args.threads)
     from dockfactory.detector.train import train
     cfg = _train_config(args, args.attention, args.seed)
-    summary = train(Dataset.open(args.dataset), args.out, cfg, resume=args.resume, progress=not args.quiet)
+    summary = train(Dataset.open(args.dataset), args.out, cfg, resume=args.resume, progress=not args.quiet,
+                    init=args.init)
     h = summary["history"]
     print(f"trained {summary['epochs']} epochs on dataset {summary['dataset_version']} in {summary['seconds']} s "
           f"({h[-1]['images_per_s'] if h else float('nan')} img/s last epoch); weights: {summary['weights']}")
@@ -135,6 +136,11 @@ def _add_train_parser(subparsers) -> None:
                    help="attention block after the last backbone C3 (default se)")
     t.add_argument("--seed", type=non_negative_int, default=0, help="seed of initial weights, crops and augmentation")
     t.add_argument("--resume", action="store_true", help="continue from RUN/last.pt")
+    t.add_argument("--init", metavar="WEIGHTS",
+                   help="fine-tune from these weights (a weights file or checkpoint): the network, its anchors and "
+                        "input scale come from them, so --model, --attention, --p2 and --input-scale are not used")
+    t.add_argument("--lr0", type=learning_rate, default=0.01,
+                   help="initial learning rate, (0, 1] (default 0.01; a fine-tune usually wants 0.001-0.003)")
     _add_training_options(t)
     t.set_defaults(func=cmd_train)
 
