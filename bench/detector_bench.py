@@ -1,6 +1,6 @@
 """Detector benchmark: inference ms per image, training images/s, mAP and centre error on a test split.
 
-    python bench/detector_bench.py DATASET [--weights models/yolov5n_se_markers.pt] [--threads 2]
+    python bench/detector_bench.py DATASET [--weights models/yolov5n_se_rings_markers.pt] [--threads 2]
 
 - inference: the default model (n + SE) on full frames (1280 x 960 for the repo's configs):
   letterbox, network, NMS and centre refinement included, score threshold 0.25; median over
@@ -23,7 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-DEFAULT_WEIGHTS = ROOT / "models" / "yolov5n_se_markers.pt"
+DEFAULT_WEIGHTS = ROOT / "models" / "yolov5n_se_rings_markers.pt"
 TARGETS = {"ms_per_image": 60.0, "mAP50": 0.995, "mAP50_95": 0.85, "centre_normal_px": 0.1,
            "centre_challenging_px": 0.25}
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.user_files import check_regular_file
 
-WEIGHTS_NAME = "yolov5n_se_markers.pt"   # the shipped detector (model card: models/README.md)
+WEIGHTS_NAME = "yolov5n_se_rings_markers.pt"   # the default detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
 
 

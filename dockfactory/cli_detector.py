@@ -149,7 +149,7 @@ def _add_detect_parser(subparsers) -> None:
     d = subparsers.add_parser("detect", help="detect markers (boxes, refined centres) in a dataset's frames")
     d.add_argument("dataset")
     d.add_argument("--weights",
-                   help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_markers.pt)")
+                   help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_rings_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
     d.add_argument("--out", required=True, help="detections JSON")
     d.add_argument("--format", choices=("dockfactory", "coco-results"), default="dockfactory",
