@@ -1,6 +1,6 @@
 """Detector benchmark: inference ms per image, training images/s, mAP and centre error on a test split.
 
-    python bench/detector_bench.py DATASET [--weights models/yolov5n_se_rings_markers.pt] [--threads 2]
+    python bench/detector_bench.py DATASET [--weights W (default: the shipped default)] [--threads 2]
 
 - inference: the default model (n + SE) on full frames (1280 x 960 for the repo's configs):
   letterbox, network, NMS and centre refinement included, score threshold 0.25; median over
@@ -21,9 +21,10 @@ import sys
 import time
 from pathlib import Path
 
+from dockfactory.core.resources import shipped_weights
+
 ROOT = Path(__file__).resolve().parent.parent
 
-DEFAULT_WEIGHTS = ROOT / "models" / "yolov5n_se_rings_markers.pt"
 TARGETS = {"ms_per_image": 60.0, "mAP50": 0.995, "mAP50_95": 0.85, "centre_normal_px": 0.1,
            "centre_challenging_px": 0.25}
 
@@ -118,7 +119,7 @@ def _centre_check(stats: dict, group: str, target: float) -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", help="dataset directory with a test split (e.g. rendered from configs/detector.toml)")
-    p.add_argument("--weights", default=str(DEFAULT_WEIGHTS))
+    p.add_argument("--weights", default=str(shipped_weights()))
     p.add_argument("--threads", type=int, default=os.cpu_count())
     p.add_argument("--images", type=int, default=10, help="frames timed (default 10)")
     p.add_argument("--rounds", type=int, default=3, help="passes over them (default 3)")

@@ -42,7 +42,7 @@ def _train_config(args, attention: str, seed: int):
                         anchors=DEFAULT_ANCHORS_P2 if args.p2 else DEFAULT_ANCHORS)
     data = DataConfig(crops_per_frame=args.crops_per_frame, input_scale=args.input_scale)
     return TrainConfig(model=model, data=data, epochs=args.epochs, batch_size=args.batch, nbs=args.nbs or args.batch,
-                       lr0=getattr(args, "lr0", None) or TrainConfig.lr0, seed=seed)
+                       lr0=args.lr0, seed=seed)
 
 
 def cmd_train(args) -> int:
@@ -124,6 +124,8 @@ def _add_training_options(p) -> None:
                    help=f"windows per training frame per epoch, 1-{MAX_CROPS_PER_FRAME}")
     p.add_argument("--input-scale", type=input_scale, default=0.5, help="network px per image px (default 0.5)")
     p.add_argument("--p2", action="store_true", help="add the stride-4 (P2) output")
+    p.add_argument("--lr0", type=learning_rate, default=0.01,
+                   help="initial learning rate, (0, 1] (default 0.01; a fine-tune usually wants 0.001-0.003)")
     p.add_argument("--threads", type=thread_count, help="torch threads (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -139,8 +141,6 @@ def _add_train_parser(subparsers) -> None:
     t.add_argument("--init", metavar="WEIGHTS",
                    help="fine-tune from these weights (a weights file or checkpoint): the network, its anchors and "
                         "input scale come from them, so --model, --attention, --p2 and --input-scale are not used")
-    t.add_argument("--lr0", type=learning_rate, default=0.01,
-                   help="initial learning rate, (0, 1] (default 0.01; a fine-tune usually wants 0.001-0.003)")
     _add_training_options(t)
     t.set_defaults(func=cmd_train)
 

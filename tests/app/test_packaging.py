@@ -34,6 +34,8 @@ from pathlib import Path
 
 import pytest
 
+from dockfactory.core.resources import WEIGHTS_NAME
+
 pytestmark = [pytest.mark.render, pytest.mark.slow]
 
 NOT_SOURCES = shutil.ignore_patterns(".venv", "out", ".git", "build", "dist", "*.egg-info",
@@ -142,7 +144,7 @@ def test_the_installed_wheel_works_from_another_folder(fresh, repo_root, tmp_pat
     assert metrics["localization"]["n_frames"] == 4 and "detection" in metrics
     assert {c["name"] for c in metrics["acceptance"]["criteria"]} >= {"detection: map50", "detection: map50_95"}
     prov = json.loads((out / "eval" / "provenance.json").read_text())
-    weights_sha = hashlib.sha256((repo_root / "models" / "yolov5n_se_rings_markers.pt").read_bytes()).hexdigest()
+    weights_sha = hashlib.sha256((repo_root / "models" / WEIGHTS_NAME).read_bytes()).hexdigest()
     assert prov["model_sha256"] == weights_sha
     assert (out / "report.html").is_file() and (out / "detections.json").is_file()
 
