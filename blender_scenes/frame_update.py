@@ -37,9 +37,9 @@ def _blender_matrix(d_from_x, scale_xyz_mm=None) -> Matrix:
     return Matrix(m.tolist())
 
 
-def _apply_render_settings(scene, frame: FrameScene) -> None:
-    """Cycles samples, seed, bounces, adaptive sampling, filter and denoising of the frame (every
-    one set on every frame, also those the frame switches off)."""
+def apply_render_settings(scene, frame: FrameScene) -> None:
+    """Cycles samples, seed, bounces, adaptive sampling, filter and denoising of the frame, and no
+    border (every one set on every frame, also those the frame switches off)."""
     c = scene.cycles
     rs = frame.render
     c.samples = rs.samples
@@ -53,6 +53,15 @@ def _apply_render_settings(scene, frame: FrameScene) -> None:
     c.denoising_quality = DENOISE_QUALITY.get(rs.denoise, PARKED_DENOISE_QUALITY)
     c.denoising_prefilter = rs.denoise_prefilter.upper()
     c.sampling_pattern = rs.sampling_pattern.upper()
+    park_border(scene.render)
+
+
+def park_border(render) -> None:
+    """No border render: the whole canvas (Blender's defaults)."""
+    render.use_border = False
+    render.use_crop_to_border = False
+    render.border_min_x = render.border_min_y = 0.0
+    render.border_max_x = render.border_max_y = 1.0
 
 
 PARKED_FOCUS_M = 10.0     # depth of field off: Blender's values, never read by the render
@@ -188,7 +197,7 @@ def _apply_motion(h: SceneHandles, frame: FrameScene) -> None:
 def apply_frame(h: SceneHandles, frame: FrameScene) -> None:
     """Set the scene to ``frame``: every property this changes is set on every frame, so the
     scene afterwards depends on ``frame`` alone (:func:`scene_state`), whatever came before."""
-    _apply_render_settings(h.scene, frame)
+    apply_render_settings(h.scene, frame)
     _apply_motion(h, frame)
     _apply_camera(h, frame.camera)
     _apply_lights(h, frame)

@@ -9,7 +9,7 @@ import numpy as np
 
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
-from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
+from dockfactory.core.layout import RING_BASE_DEPTH_MM, RING_EXTRA_MM, SECTION_PASS_INDEX
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -147,7 +147,7 @@ def _build_marker(m, disc_material, ring_material, b_root) -> None:
     disc.pass_index = m.pass_index
     disc.matrix_basis = _matrix(rot, centre)
     base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
-                             -(1.0 + 1.5) * MM, -0.05 * MM)  # top just below the disc
+                             -RING_BASE_DEPTH_MM * MM, -0.05 * MM)  # top just below the disc
     base.data.materials.append(ring_material)
     base.pass_index = SECTION_PASS_INDEX[m.section]
     base.matrix_basis = _matrix(rot, centre)

@@ -181,6 +181,8 @@ class RenderConfig:
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
+    marker_samples: int = 0          # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
+    marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
     device: str = "cpu"             # cpu | gpu (Cycles on CUDA, OptiX or HIP; its frames differ from the CPU's)
@@ -254,7 +256,8 @@ class ExportConfig:
 # keys added after datasets were published, at the value that renders what those datasets hold
 # (or, for the licence, at the default those datasets are published under): left out of the
 # identity's config at that value (Config.to_dict), so their version ids stay
-IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark"}
+IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
+                    ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark"}
 RENDER_DEVICES = ("cpu", "gpu")
 
 
@@ -604,6 +607,10 @@ def _validate_render(cfg: Config, source: str) -> None:
                    f"{rc.sampling_pattern!r} is not one of {', '.join(SAMPLING_PATTERNS)}")
     if rc.post_filter not in POST_FILTERS:
         raise _err(source, "render", "post_filter", f"{rc.post_filter!r} is not one of {', '.join(POST_FILTERS)}")
+    _check_positive(source, "render", "marker_samples", rc.marker_samples, allow_zero=True)
+    _check_at_most(source, "render", "marker_samples", rc.marker_samples, MAX_SAMPLES, "Cycles' limit")
+    if rc.marker_denoise not in ("off", "fast", "balanced", "high"):
+        raise _err(source, "render", "marker_denoise", f"{rc.marker_denoise!r} is not one of off, fast, balanced, high")
     if not 0.01 <= rc.filter_width_px <= 10:
         raise _err(source, "render", "filter_width_px", f"must be in [0.01, 10], got {rc.filter_width_px}")
     _check_positive(source, "render", "frame_timeout_s", rc.frame_timeout_s)

@@ -29,6 +29,7 @@ DEFAULT_LAYOUT_A = ((50.0, -53.0), (100.0, -32.0), (62.0, -7.0), (130.0, 10.0),
 DEFAULT_LAYOUT_B = ((52.0, -42.0), (108.0, -19.0), (68.0, 3.0), (140.0, 29.0),
                     (48.0, 41.0), (96.0, 60.0), (158.0, -56.0))
 RING_EXTRA_MM = 2.5  # the ring around each coloured disc
+RING_BASE_DEPTH_MM = 2.5  # the ring base (a puck under the disc) reaches this far below the disc's top face
 # Grey reflectance range of the ring, per design: a dark ring leaves a Bayer sensor a red disc's
 # edge in its red samples alone; a white ring shows it in the green and blue samples too.
 RING_REFLECTANCE = {"dark": (0.01, 0.05), "white": (0.70, 0.85)}

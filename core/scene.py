@@ -5,6 +5,7 @@ tuples named ``<to>_from_<from>``; ``.matrix()`` style helpers return numpy arra
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import types
 import typing
@@ -19,6 +20,7 @@ from dockfactory.core.layout import Marker
 
 Mat4 = tuple[tuple[float, ...], ...]
 OMIT_IF_NONE = "omit_if_none"   # field metadata: to_dict leaves the field out while it is None
+OMIT_IF_DEFAULT = "omit_if_default"   # field metadata: to_dict leaves the field out while it has its default
 Vec3 = tuple[float, float, float]
 
 
@@ -180,6 +182,10 @@ class RenderSettings:
     denoise_prefilter: str       # none | fast | accurate
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise
     post_filter: str = "off"     # off | median3 | median5 (generator.frame_output)
+    # label-aware sampling (generator.marker_regions): the marker regions again at this many
+    # samples (0 = off), denoised by marker_denoise (off | fast | balanced | high)
+    marker_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
+    marker_denoise: str = dataclasses.field(default="fast", metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)
@@ -262,13 +268,28 @@ def floor_y_mm(radius_mm: float) -> float:
 
 
 def to_dict(obj) -> dict:
-    """JSON-able dict of a scene dataclass (tuples become lists); its fields marked OMIT_IF_NONE
-    are left out while they are None (:func:`from_dict` restores their default)."""
-    out = dataclasses.asdict(obj)
+    """JSON-able dict of a scene dataclass, nested ones included (as ``dataclasses.asdict``); its
+    fields marked OMIT_IF_NONE are left out while they are None, those marked OMIT_IF_DEFAULT while
+    they have their default, at every level (:func:`from_dict` restores their default), so frames
+    and labels written before a field existed stay byte for byte what they were."""
+    out = {}
     for f in dataclasses.fields(obj):
-        if f.metadata.get(OMIT_IF_NONE) and out[f.name] is None:
-            del out[f.name]
+        value = getattr(obj, f.name)
+        if (f.metadata.get(OMIT_IF_NONE) and value is None) or \
+                (f.metadata.get(OMIT_IF_DEFAULT) and value == f.default):
+            continue
+        out[f.name] = _plain(value)
     return out
+
+
+def _plain(value):
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return to_dict(value)
+    if isinstance(value, (list, tuple)):
+        return type(value)(_plain(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return copy.deepcopy(value)
 
 
 def from_dict(cls, data):

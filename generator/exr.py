@@ -35,11 +35,15 @@ def _find(channels: dict, *suffixes) -> np.ndarray | None:
     return None
 
 
-def read_passes(path, depth_scale_mm: float = 1000.0) -> RenderPasses:
-    """Passes of a Blender multilayer EXR or of a kept compact EXR.
+def read_rgb(path) -> np.ndarray:
+    """(H, W, 3) float32 linear colour (the Combined pass) of a Blender multilayer EXR, such as a
+    cropped marker region of label-aware sampling."""
+    return _read_parts(path)[0]
 
-    ``depth_scale_mm``: mm per depth unit in the file (Blender renders in metres: 1000).
-    """
+
+def _read_parts(path) -> tuple[np.ndarray, dict]:
+    """(rgb (H, W, 3) float32, every channel by name) of an EXR; ExrError when unreadable or
+    without a Combined pass."""
     try:
         f = OpenEXR.File(str(path), separate_channels=False)
     except Exception as exc:  # OpenEXR raises plain RuntimeError/OSError
@@ -53,11 +57,19 @@ def read_passes(path, depth_scale_mm: float = 1000.0) -> RenderPasses:
         if any(c is None for c in comps):
             raise ExrError(f"{path}: no Combined pass (channels: {sorted(channels)})")
         rgb = np.stack(comps, axis=-1)
+    return np.ascontiguousarray(rgb[..., :3], dtype=np.float32), channels
+
+
+def read_passes(path, depth_scale_mm: float = 1000.0) -> RenderPasses:
+    """Passes of a Blender multilayer EXR or of a kept compact EXR.
+
+    ``depth_scale_mm``: mm per depth unit in the file (Blender renders in metres: 1000).
+    """
+    rgb, channels = _read_parts(path)
     depth = _find(channels, "Depth.Z", ".Z")
     index = _find(channels, "Object Index.X", "IndexOB.X", "IndexOB")
     if depth is None or index is None:
         raise ExrError(f"{path}: missing Depth or Object Index pass (channels: {sorted(channels)})")
-    rgb = np.ascontiguousarray(rgb[..., :3], dtype=np.float32)
     return RenderPasses(rgb=rgb, depth_mm=depth.astype(np.float32) * np.float32(depth_scale_mm),
                         index=np.rint(index).astype(np.int32))
 

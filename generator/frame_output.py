@@ -30,8 +30,9 @@ from dockfactory.core.io import (
 )
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.exr import read_passes, write_compact
+from dockfactory.generator.exr import read_passes, read_rgb, write_compact
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
+from dockfactory.generator.marker_regions import composite, marker_halos
 from dockfactory.generator.sensor import expose_frame, jpeg_round_trip, resample_passes
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
@@ -76,11 +77,16 @@ def _file_record(rel: str, data: bytes) -> dict:
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
                  visible_threshold: float, timings: dict | None = None, min_chroma: float = MIN_CHROMA,
-                 keep_raw: bool = False) -> dict:
-    """Write the frame's files from the render's scratch EXR; returns its meta record."""
+                 keep_raw: bool = False, crops=()) -> dict:
+    """Write the frame's files from the render's scratch EXR, with ``crops`` ((marker region,
+    cropped EXR) pairs of label-aware sampling) blended into its colour; returns its meta record."""
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
+    if crops:
+        rgb = composite(passes.rgb, [read_rgb(p) for _, p in crops], tuple(r for r, _ in crops),
+                        marker_halos(frame, static))
+        passes = replace(passes, rgb=rgb)
     passes = replace(passes, rgb=median_filtered(passes.rgb, frame.render.post_filter))
     t1 = time.perf_counter()
     outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)

@@ -28,6 +28,7 @@ import traceback
 
 from dockfactory.core.scene import FrameScene, StaticScene, from_dict
 from dockfactory.generator.frame_output import finish_frame
+from dockfactory.generator.marker_regions import marker_regions
 
 
 def _protocol_stream():
@@ -147,15 +148,17 @@ class _Session:
             _inject_fault(frame.spec.frame_id)
             exr_path = self.exr_paths[self.n_rendered % 2]
             self.n_rendered += 1
+            regions = marker_regions(frame, self.static)
             t0, c0 = time.perf_counter(), time.process_time()
-            timings = self.renderer.render(frame, exr_path)
+            timings, crop_paths = self.renderer.render(frame, exr_path, regions)
             render_cpu = time.process_time() - c0
         except Exception as exc:  # reported to the job, which decides to retry or fail
             self.replies.wait()
             fid = (req.get("frame") or {}).get("spec", {}).get("frame_id")
             self.replies.send({**_error(op, exc), "frame_id": fid})
             return
-        self.replies.start_post(lambda: self.post_process(frame, exr_path, t0, timings, render_cpu))
+        crops = tuple(zip(regions, crop_paths))
+        self.replies.start_post(lambda: self.post_process(frame, exr_path, t0, timings, render_cpu, crops))
 
     def handle_state(self, req: dict) -> None:
         """Apply a frame without rendering and report the resulting Blender state (tests check
@@ -175,13 +178,15 @@ class _Session:
         except Exception as exc:
             self.replies.send(_error("state", exc))
 
-    def post_process(self, frame, exr_path: str, t0: float, timings: dict, render_cpu: float) -> None:
-        """Sensor model, labels and writes of a rendered frame (runs beside the next render)."""
+    def post_process(self, frame, exr_path: str, t0: float, timings: dict, render_cpu: float, crops=()) -> None:
+        """Sensor model, labels and writes of a rendered frame (runs beside the next render);
+        ``crops``: (marker region, its cropped EXR) pairs of label-aware sampling."""
         init = self.init
         try:
             p0 = time.thread_time()
             done = finish_frame(frame, self.static, exr_path, init["root"], init["keep_exr"],
-                                init["visible_threshold"], timings, init["min_chroma"], init.get("keep_raw", False))
+                                init["visible_threshold"], timings, init["min_chroma"], init.get("keep_raw", False),
+                                crops)
             done["timings_s"]["total"] = time.perf_counter() - t0
             # CPU seconds: the render's (whole process, all threads; it includes the previous
             # frame's post-processing that ran alongside) and this thread's

@@ -1,0 +1,143 @@
+"""Label-aware sampling through Cycles (small frames): the crops land on the right pixels, the
+labels and the rest of the frame do not change, the worker's state does not remember the crops,
+and a re-render is the same bytes."""
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from dockfactory.core.config import config_from_dict
+from dockfactory.core.scene import to_dict
+from dockfactory.generator.exr import read_compact
+from dockfactory.generator.frame_output import frame_paths
+from dockfactory.generator.marker_regions import halo_weights, marker_halos, marker_regions
+from dockfactory.generator.random_draws import static_scene
+from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.generator.worker_pool import WorkerProcess
+
+pytestmark = pytest.mark.render
+
+TIMEOUT_S = 300
+SAMPLES = 8
+CONFIG = {
+    "dataset": {"name": "marker-sampling-check", "seed": 31, "frames": 2},
+    "conditions": {"normal": 1, "low_light": 0, "occlusion": 0, "glare": 0},
+    "image": {"width": 320, "height": 240},
+    "camera": {"focal_px": [200.0, 280.0]},
+    "render": {"marker_samples": SAMPLES, "marker_denoise": "off", "keep_exr": True, "frame_timeout_s": TIMEOUT_S},
+}
+
+
+def _variant(frame, frame_id, **render):
+    return dataclasses.replace(frame, render=dataclasses.replace(frame.render, **render),
+                               spec=dataclasses.replace(frame.spec, frame_id=frame_id))
+
+
+@pytest.fixture(scope="module")
+def setup():
+    cfg = config_from_dict(CONFIG, "marker-sampling-check")
+    frame = sample_frame(cfg, frame_plan(cfg)[0])
+    return cfg, {"crops": _variant(frame, "crops"),
+                 "plain": _variant(frame, "plain", marker_samples=0),
+                 "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off")}
+
+
+def _worker(cfg, root):
+    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
+            "height": cfg.image.height, "threads": 2, "root": str(root), "keep_exr": True,
+            "visible_threshold": cfg.labels.visible_threshold, "min_chroma": cfg.labels.min_chroma}
+    proc = WorkerProcess(init, root / "logs" / "worker.log")
+    proc.start(TIMEOUT_S)
+    return proc
+
+
+@pytest.fixture(scope="module")
+def rendered(setup, tmp_path_factory):
+    """One worker renders the frame without crops, with them, and uniformly at the crops' samples;
+    the state digests of the plain frame after the plain render and after the crops (a render
+    evaluates the scene, so both follow one)."""
+    cfg, frames = setup
+    root = tmp_path_factory.mktemp("ls") / "ds"
+    proc = _worker(cfg, root)
+    try:
+        digests = []
+        for name in ("plain", "crops", "uniform"):
+            reply = proc.request({"op": "render", "frame": to_dict(frames[name])}, TIMEOUT_S)
+            assert reply.get("ok"), reply
+            if name != "uniform":
+                digests.append(proc.request({"op": "state", "frame": to_dict(frames["plain"])}, TIMEOUT_S)["digest"])
+    finally:
+        proc.close()
+    return root, digests
+
+
+def _exr(root, name):
+    return read_compact(frame_paths(root, name)["exr"])
+
+
+def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(setup, rendered):
+    """Pixel for pixel (the kept EXR, half floats): where the blend is 1 the crops equal a whole
+    frame rendered at the crops' samples without the denoiser (so the border lands on the right
+    pixels), and wherever the blend is 0 the frame is the one rendered without crops."""
+    cfg, frames = setup
+    root, _ = rendered
+    crops, plain, uniform = (_exr(root, n).rgb for n in ("crops", "plain", "uniform"))
+    regions = marker_regions(frames["crops"], static_scene(cfg))
+    halos = marker_halos(frames["crops"], static_scene(cfg))
+    assert len(regions) >= 1
+    covered = np.zeros(crops.shape[:2], bool)
+    for r in regions:
+        w = halo_weights(halos, r)
+        inner = w == 1.0
+        assert inner.sum() > 100
+        assert np.array_equal(crops[r.y0:r.y1, r.x0:r.x1][inner], uniform[r.y0:r.y1, r.x0:r.x1][inner])
+        assert not np.array_equal(crops[r.y0:r.y1, r.x0:r.x1][inner], plain[r.y0:r.y1, r.x0:r.x1][inner])
+        covered[r.y0:r.y1, r.x0:r.x1] = w > 0
+    assert np.array_equal(crops[~covered], plain[~covered])
+
+
+# what a label measures on the delivered image rather than the geometry: the disc's colour (and
+# whether it is legible) and the auto exposure, read off the (now cleaner) pixels
+IMAGE_FIELDS = ("chroma", "legible")
+
+
+def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered):
+    """Every geometric label field is the plain render's; the image-measured ones may differ (and
+    the cleaner markers do show more colour)."""
+    root, _ = rendered
+    a = json.loads(frame_paths(root, "crops")["label"].read_text())
+    b = json.loads(frame_paths(root, "plain")["label"].read_text())
+    assert a["sampled"]["render"]["marker_samples"] == SAMPLES and "marker_samples" not in b["sampled"]["render"]
+    assert a["derived"]["auto_exposure_scale"] == pytest.approx(b["derived"]["auto_exposure_scale"], rel=0.01)
+    chroma = [(ma["chroma"], mb["chroma"]) for ma, mb in zip(a["markers"], b["markers"]) if ma["chroma"] is not None]
+    assert np.mean([c[0] for c in chroma]) > np.mean([c[1] for c in chroma])
+    for lab in (a, b):
+        lab["sampled"]["render"].pop("marker_samples", None)
+        lab.pop("frame_id")
+        lab["spec"].pop("frame_id")
+        lab["derived"].pop("auto_exposure_scale")
+        for m in lab["markers"]:
+            for k in IMAGE_FIELDS:
+                m.pop(k, None)
+    assert a == b
+    pa, pb = _exr(root, "crops"), _exr(root, "plain")
+    assert np.array_equal(pa.index, pb.index) and np.array_equal(pa.depth_mm, pb.depth_mm)
+
+
+def test_the_crops_leave_no_trace_in_the_scene(rendered):
+    _, digests = rendered
+    assert digests[0] == digests[1]
+
+
+def test_a_second_worker_renders_the_same_bytes(setup, rendered, tmp_path):
+    cfg, frames = setup
+    root, _ = rendered
+    proc = _worker(cfg, tmp_path / "again")
+    try:
+        reply = proc.request({"op": "render", "frame": to_dict(frames["crops"])}, TIMEOUT_S)
+        assert reply.get("ok"), reply
+    finally:
+        proc.close()
+    for kind in ("image", "exr", "label"):
+        assert frame_paths(root, "crops")[kind].read_bytes() == frame_paths(tmp_path / "again", "crops")[kind].read_bytes()
