@@ -9,7 +9,7 @@ image's luma at three scales (fine: the image less its Gaussian blur of sigma 1 
 less sigma 3; coarse: sigma 3 less sigma 8):
 
     ratio = mean |band-pass| over the markers' halos where the crop is blended in (weight > 0;
-            the markers' discs and rings, grown by 1 px, left out: they are the markers) /
+            the markers' discs and rings, grown by RING_KEEPOUT_PX, left out: they are the markers) /
             mean |band-pass| over the OUTER_PX pixels just beyond (weight 0; other halos left out).
 
 The same pixels of the PLAIN image give the ratio without sampling. A tell is a candidate whose
@@ -36,7 +36,8 @@ from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
 
 SCALES = {"fine": (0.0, 1.0), "mid": (1.0, 3.0), "coarse": (3.0, 8.0)}
-OUTER_PX = 6    # the band beyond the blend compared with it
+OUTER_PX = 6        # the band beyond the blend compared with it
+RING_KEEPOUT_PX = 2  # the rings grown by this much are the marker (its edge blurred by the pixel filter), not texture
 
 
 def band_passes(path: Path) -> dict[str, np.ndarray]:
@@ -76,7 +77,8 @@ def masks(frame, static, shape) -> list[tuple[np.ndarray, np.ndarray]]:
     regions = marker_regions(frame, static)
     for r in regions:
         weight[r.y0:r.y1, r.x0:r.x1] = halo_weights(halos, r)
-    rings = cv2.dilate(_fill(ring_hulls(frame, static), shape).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    grow = np.ones((2 * RING_KEEPOUT_PX + 1,) * 2, np.uint8)
+    rings = cv2.dilate(_fill(ring_hulls(frame, static), shape).astype(np.uint8), grow) > 0
     blended = weight > 0
     dist = cv2.distanceTransform((~blended).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     out = []

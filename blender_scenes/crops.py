@@ -31,15 +31,18 @@ def _set_border(render, region, wc: int, hc: int) -> None:
 
 def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     """Render each of ``regions`` (generator.marker_regions.Region) of the frame already applied to
-    ``scene`` at ``frame.render.marker_samples`` samples, denoised by ``marker_denoise`` (off: not
-    at all), into :func:`crop_path` files cropped to the region; returns their paths. The render
+    ``scene`` at ``frame.render.marker_samples`` samples (with ``marker_adaptive_threshold`` > 0:
+    adaptive sampling up to that many, Cycles' automatic minimum), denoised by ``marker_denoise``
+    (off: not at all), into :func:`crop_path` files cropped to the region; returns their paths. The render
     settings are put back as ``apply_frame`` set them (no border, the frame's samples and
     denoiser), so what a frame leaves behind does not depend on its crops."""
     r, c, rs = scene.render, scene.cycles, frame.render
     wc, hc = r.resolution_x, r.resolution_y
     paths = []
     c.samples = rs.marker_samples
-    c.use_adaptive_sampling = False
+    c.use_adaptive_sampling = rs.marker_adaptive_threshold > 0
+    c.adaptive_threshold = rs.marker_adaptive_threshold
+    c.adaptive_min_samples = 0
     c.use_denoising = rs.marker_denoise != "off"
     if c.use_denoising:
         c.denoising_quality = DENOISE_QUALITY[rs.marker_denoise]

@@ -183,6 +183,7 @@ class RenderConfig:
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
     marker_samples: int = 0          # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
+    marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
     device: str = "cpu"             # cpu | gpu (Cycles on CUDA, OptiX or HIP; its frames differ from the CPU's)
@@ -257,6 +258,7 @@ class ExportConfig:
 # (or, for the licence, at the default those datasets are published under): left out of the
 # identity's config at that value (Config.to_dict), so their version ids stay
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
+                    ("render", "marker_adaptive_threshold"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark"}
 RENDER_DEVICES = ("cpu", "gpu")
 
@@ -609,6 +611,7 @@ def _validate_render(cfg: Config, source: str) -> None:
         raise _err(source, "render", "post_filter", f"{rc.post_filter!r} is not one of {', '.join(POST_FILTERS)}")
     _check_positive(source, "render", "marker_samples", rc.marker_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_samples", rc.marker_samples, MAX_SAMPLES, "Cycles' limit")
+    _check_positive(source, "render", "marker_adaptive_threshold", rc.marker_adaptive_threshold, allow_zero=True)
     if rc.marker_denoise not in ("off", "fast", "balanced", "high"):
         raise _err(source, "render", "marker_denoise", f"{rc.marker_denoise!r} is not one of off, fast, balanced, high")
     if not 0.01 <= rc.filter_width_px <= 10:

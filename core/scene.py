@@ -183,9 +183,11 @@ class RenderSettings:
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise
     post_filter: str = "off"     # off | median3 | median5 (generator.frame_output)
     # label-aware sampling (generator.marker_regions): the marker regions again at this many
-    # samples (0 = off), denoised by marker_denoise (off | fast | balanced | high)
+    # samples (0 = off), denoised by marker_denoise (off | fast | balanced | high), with adaptive
+    # sampling up to marker_samples when marker_adaptive_threshold > 0
     marker_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
     marker_denoise: str = dataclasses.field(default="fast", metadata={OMIT_IF_DEFAULT: True})
+    marker_adaptive_threshold: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

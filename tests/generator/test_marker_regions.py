@@ -202,10 +202,11 @@ def test_the_key_is_in_the_identity_only_when_on():
     assert identity(_cfg(marker_samples=32)) != identity(_cfg(marker_samples=64))
     assert identity(_cfg(marker_denoise="off")) != identity(_cfg())
     assert identity(_cfg(marker_denoise="fast")) == identity(_cfg())
+    assert identity(_cfg(marker_adaptive_threshold=0.02)) != identity(_cfg())
 
 
 @pytest.mark.parametrize("key, value", [("marker_samples", -1), ("marker_samples", 1 << 25),
-                                        ("marker_denoise", "oidn")])
+                                        ("marker_denoise", "oidn"), ("marker_adaptive_threshold", -0.01)])
 def test_bad_values_are_refused_naming_the_key(key, value):
     with pytest.raises(ConfigError, match=key):
         _cfg(**{key: value})

@@ -40,7 +40,8 @@ def setup():
     frame = sample_frame(cfg, frame_plan(cfg)[0])
     return cfg, {"crops": _variant(frame, "crops"),
                  "plain": _variant(frame, "plain", marker_samples=0),
-                 "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off")}
+                 "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off"),
+                 "adaptive": _variant(frame, "adaptive", marker_samples=4 * SAMPLES, marker_adaptive_threshold=0.1)}
 
 
 def _worker(cfg, root):
@@ -62,10 +63,10 @@ def rendered(setup, tmp_path_factory):
     proc = _worker(cfg, root)
     try:
         digests = []
-        for name in ("plain", "crops", "uniform"):
+        for name in ("plain", "crops", "uniform", "adaptive"):
             reply = proc.request({"op": "render", "frame": to_dict(frames[name])}, TIMEOUT_S)
             assert reply.get("ok"), reply
-            if name != "uniform":
+            if name in ("plain", "crops"):
                 digests.append(proc.request({"op": "state", "frame": to_dict(frames["plain"])}, TIMEOUT_S)["digest"])
     finally:
         proc.close()
@@ -102,18 +103,20 @@ def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(s
 IMAGE_FIELDS = ("chroma", "legible")
 
 
-def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered):
+@pytest.mark.parametrize("name", ["crops", "adaptive"])
+def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name):
     """Every geometric label field is the plain render's; the image-measured ones may differ (and
-    the cleaner markers do show more colour)."""
+    the cleaner markers do show more colour); with uniform and with adaptive sampling."""
     root, _ = rendered
-    a = json.loads(frame_paths(root, "crops")["label"].read_text())
+    a = json.loads(frame_paths(root, name)["label"].read_text())
     b = json.loads(frame_paths(root, "plain")["label"].read_text())
-    assert a["sampled"]["render"]["marker_samples"] == SAMPLES and "marker_samples" not in b["sampled"]["render"]
+    assert a["sampled"]["render"]["marker_samples"] > 0 and "marker_samples" not in b["sampled"]["render"]
     assert a["derived"]["auto_exposure_scale"] == pytest.approx(b["derived"]["auto_exposure_scale"], rel=0.01)
     chroma = [(ma["chroma"], mb["chroma"]) for ma, mb in zip(a["markers"], b["markers"]) if ma["chroma"] is not None]
     assert np.mean([c[0] for c in chroma]) > np.mean([c[1] for c in chroma])
     for lab in (a, b):
-        lab["sampled"]["render"].pop("marker_samples", None)
+        for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold"):
+            lab["sampled"]["render"].pop(key, None)
         lab.pop("frame_id")
         lab["spec"].pop("frame_id")
         lab["derived"].pop("auto_exposure_scale")
@@ -121,7 +124,7 @@ def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered):
             for k in IMAGE_FIELDS:
                 m.pop(k, None)
     assert a == b
-    pa, pb = _exr(root, "crops"), _exr(root, "plain")
+    pa, pb = _exr(root, name), _exr(root, "plain")
     assert np.array_equal(pa.index, pb.index) and np.array_equal(pa.depth_mm, pb.depth_mm)
 
 
