@@ -71,6 +71,8 @@ def measure(root: Path, weights: str | None) -> dict:
     return {"version": ds.version_id, "marker_samples": ds.config.render.marker_samples,
             "samples": ds.config.render.samples, "denoise": ds.config.render.denoise,
             "marker_denoise": ds.config.render.marker_denoise,
+            "marker_adaptive_threshold": ds.config.render.marker_adaptive_threshold,
+            "sampling_pattern": ds.config.render.sampling_pattern,
             "rows": rows, "centres": centres, "timing": render_seconds(root),
             "true": {fid: ds.labels[fid]["pose_b_in_d"] for fid in ds.frames("test")}}
 
@@ -142,7 +144,9 @@ def table(results: dict) -> list[str]:
         base = next((e for e in entries if e["marker_samples"] == 0), entries[0])
         for e in entries:
             c, p, r = e["cmp"]["centre"], e["cmp"]["pose"], e["cmp"]["ratio"]
-            what = f"{e['marker_samples']}" + (f" + {e['marker_denoise']}" if e["marker_denoise"] != "off" else "")
+            what = f"{e['marker_samples']}" + (f" + {e['marker_denoise']}" if e["marker_denoise"] != "off" else "") \
+                + (f", adaptive {e['marker_adaptive_threshold']:g}" if e["marker_adaptive_threshold"] else "") \
+                + (f", {e['sampling_pattern']}" if e["sampling_pattern"] != "tabulated_sobol" else "")
             lines.append(
                 f"| {scene} | {e['name']}@{e['version']} | {what} | {e['timing']['cycles_s']:.2f} | "
                 f"{e['timing']['cycles_s'] / base['timing']['cycles_s']:.2f} | {c['median_px']:.4f} / {c['rms_px']:.4f} | "
@@ -153,6 +157,25 @@ def table(results: dict) -> list[str]:
     return lines
 
 
+def sample_fit(entries: list[dict]) -> dict | None:
+    """The centre error's floor and sampling term, median^2 = floor^2 + c^2 / N, least squares over
+    the entries rendered with N uniform samples at the markers (label-aware sampling without
+    adaptive sampling, the reference included); the samples a render needs for a median within
+    1.2x of the reference's (None when fewer than two such entries). The reference's sampling
+    pattern only."""
+    pts = [(e["marker_samples"], e["cmp"]["centre"]["median_px"]) for e in entries
+           if e["marker_samples"] > 0 and not e["marker_adaptive_threshold"]
+           and e["sampling_pattern"] == entries[0]["sampling_pattern"]]
+    if len(set(n for n, _ in pts)) < 2:
+        return None
+    a = np.array([[1.0, 1.0 / n] for n, _ in pts])
+    (f2, c2), *_ = np.linalg.lstsq(a, np.array([m * m for _, m in pts]), rcond=None)
+    ref = entries[0]["cmp"]["centre"]["median_px"]
+    need = c2 / (1.44 * ref * ref - f2) if 1.44 * ref * ref > f2 else float("inf")
+    return {"points": pts, "floor_px": float(np.sqrt(max(f2, 0.0))), "c_px": float(np.sqrt(max(c2, 0.0))),
+            "samples_for_1p2x_ref": float(need)}
+
+
 def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
     measured = [measure(Path(d), weights) for d in dirs]
     ref = measured[0]
@@ -161,7 +184,8 @@ def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
             raise SystemExit(f"{d}: not the reference's frames (other poses in the labels)")
     out = []
     for m, d in zip(measured, dirs):
-        entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise", "timing")}
+        entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise",
+                                   "marker_adaptive_threshold", "sampling_pattern", "timing")}
         entry["name"] = Path(d).name
         entry["cmp"] = compare(ref, m, boot)
         out.append(entry)
@@ -182,8 +206,15 @@ def main() -> int:
             raise SystemExit(f"--scene {scene[0]}: give the reference and at least one candidate")
         results[scene[0]] = run_scene(scene[1:], args.weights, args.boot)
     print("\n".join(table(results)))
+    for scene, entries in results.items():
+        fit = sample_fit(entries)
+        if fit:
+            print(f"{scene}: median centre error^2 = {fit['floor_px']:.4f}^2 + {fit['c_px']:.4f}^2 / N px^2 "
+                  f"over {len(fit['points'])} settings; a median within 1.2x of the reference needs "
+                  f"N = {fit['samples_for_1p2x_ref']:.0f} samples at the markers")
     if args.out:
-        write_json_atomic(args.out, {"command": " ".join(sys.argv), "scenes": results})
+        fits = {scene: sample_fit(entries) for scene, entries in results.items()}
+        write_json_atomic(args.out, {"command": " ".join(sys.argv), "scenes": results, "fits": fits})
     return 0
 
 
