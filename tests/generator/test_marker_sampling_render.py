@@ -14,7 +14,7 @@ from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.marker_regions import halo_weights, marker_halos, marker_regions
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
-from dockfactory.generator.worker_pool import WorkerProcess
+from render_workers import start_worker
 
 pytestmark = pytest.mark.render
 
@@ -45,12 +45,7 @@ def setup():
 
 
 def _worker(cfg, root):
-    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
-            "height": cfg.image.height, "threads": 2, "root": str(root), "keep_exr": True,
-            "visible_threshold": cfg.labels.visible_threshold, "min_chroma": cfg.labels.min_chroma}
-    proc = WorkerProcess(init, root / "logs" / "worker.log")
-    proc.start(TIMEOUT_S)
-    return proc
+    return start_worker(cfg, root, TIMEOUT_S)
 
 
 @pytest.fixture(scope="module")
