@@ -21,13 +21,14 @@ come from the main render.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from dockfactory.core.geometry import project_points
-from dockfactory.core.layout import RING_BASE_DEPTH_MM, RING_EXTRA_MM, Marker
+from dockfactory.core.layout import RING_BASE_DEPTH_MM, RING_EXTRA_MM, Marker, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
 
 HALO_RADII = 1.4        # the halo's radius in disc radii (the refinement reads out to 1.3), at least the ring's
@@ -64,14 +65,10 @@ def halo_points(marker: Marker, n: int = OUTLINE_N, radius_mm: float | None = No
     """(2 n, 3) mm in the marker's section frame: the halo's circle (radius the larger of the
     ring's and HALO_RADII disc radii, or ``radius_mm``) at the disc's top face and at the bottom
     of the ring base (what a slanted view of the raised puck shows)."""
-    normal = np.asarray(marker.normal, dtype=np.float64)
-    x = np.cross([1.0, 0.0, 0.0], normal) if abs(normal[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], normal)
-    x /= np.linalg.norm(x)
-    y = np.cross(normal, x)
-    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
     r = max(marker.diameter_mm / 2.0 + RING_EXTRA_MM, HALO_RADII * marker.diameter_mm / 2.0) \
         if radius_mm is None else radius_mm
-    circle = np.asarray(marker.center_mm) + r * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)
+    circle = marker_outline(dataclasses.replace(marker, diameter_mm=2.0 * r), n)
+    normal = np.asarray(marker.normal, dtype=np.float64)
     return np.vstack([circle, circle - RING_BASE_DEPTH_MM * normal])
 
 
