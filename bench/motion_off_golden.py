@@ -4,6 +4,8 @@ Run on the commit before motion existed (0724401) it recorded tests/data/motion_
 per shipped config and frame, the sha256 of the frame's scene (``to_dict(sample_frame)``, keys
 sorted) and of its label text before rendering (``frame_labels`` without an index pass). The test
 recomputes both with the current code: a config without [motion] must give the same bytes.
+Recorded again on a CPU without AVX-512 once numpy's trigonometry was pinned to libm's paths
+(bench/results/paper/fingerprints_v3_2026-12-03.txt): scenes at 0724401, labels at 6d3579f.
 
     python bench/motion_off_golden.py [out.json]
 """

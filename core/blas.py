@@ -1,4 +1,5 @@
-"""The BLAS kernel behind numpy's matrix products, pinned so labels are the same bytes on every CPU.
+"""The arithmetic behind labels pinned so they are the same bytes on every x86-64 CPU: numpy's
+BLAS kernel and its SIMD paths for sin, cos and kin.
 
 A label is float64 geometry (camera, poses, projected markers) and numpy hands its matrix products
 to OpenBLAS, which picks a kernel for the CPU it runs on. The Haswell, Zen and SkylakeX kernels
@@ -7,6 +8,13 @@ another machine (docs/datasets.md, "Publishing a dataset"). ``import dockfactory
 ``OPENBLAS_CORETYPE`` to the SSE3 (Prescott) kernel, which every x86-64 CPU runs and which made the
 published paper dataset; it takes effect only if numpy has not been imported before dockfactory,
 so a render checks the kernel actually loaded (``check_label_blas``).
+
+numpy computes float64 sin, cos, arcsin, power... with Intel's SVML on CPUs with AVX-512 and with
+libm on the others; the two round the last bits of some inputs differently, and a frame's sampled
+scene (its angles) then differs in the last bits (the labels of the shipped configs differed on
+about 80 % of their frames between an AVX-512 and an AVX2 machine). ``import dockfactory``
+switches numpy's AVX-512 paths off (``NPY_DISABLE_CPU_FEATURES``), so every CPU takes libm's; the
+same check refuses a render when numpy was loaded earlier with them on.
 """
 from __future__ import annotations
 
@@ -15,14 +23,24 @@ import os
 
 import numpy  # noqa: F401  (loads its BLAS: openblas_core reads the loaded library)
 
-from dockfactory import LABEL_BLAS_CORE
+from dockfactory import LABEL_BLAS_CORE, LABEL_SIMD_ENV, LABEL_SIMD_OFF, pin_label_arithmetic
 from dockfactory import LABEL_BLAS_ENV as ENV
 from dockfactory.core.errors import DockfactoryError
 
 
 def pin_label_blas(environ=os.environ) -> None:
-    """Ask OpenBLAS (when it is loaded after this) for the label kernel."""
-    environ[ENV] = LABEL_BLAS_CORE
+    """Ask OpenBLAS for the label kernel and numpy for libm's trigonometry (both when they are
+    loaded after this); features the caller already switched off stay off."""
+    pin_label_arithmetic(environ)
+
+
+def numpy_simd_on() -> list[str]:
+    """The AVX-512 paths numpy runs in this process (empty when pinned or on a CPU without them)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__
+    except ImportError:   # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_features__
+    return [name for name in LABEL_SIMD_OFF if __cpu_features__.get(name)]
 
 
 def openblas_core() -> str | None:
@@ -47,7 +65,13 @@ def openblas_core() -> str | None:
 
 
 def check_label_blas() -> None:
-    """DockfactoryError (one line) when numpy's OpenBLAS runs another kernel than the label one."""
+    """DockfactoryError (one line) when numpy's OpenBLAS runs another kernel than the label one, or
+    numpy runs its AVX-512 paths."""
+    simd = numpy_simd_on()
+    if simd:
+        raise DockfactoryError(f"numpy runs its {simd[0]} paths: labels' sin and cos would differ in the last bits "
+                               f"from other machines' (import dockfactory before numpy, or set "
+                               f"{LABEL_SIMD_ENV}=\"{' '.join(LABEL_SIMD_OFF)}\")")
     core = openblas_core()
     if core is not None and core.lower() != LABEL_BLAS_CORE.lower():
         raise DockfactoryError(f"numpy's OpenBLAS runs its {core} kernel, not {LABEL_BLAS_CORE}: labels would "

@@ -15,7 +15,23 @@ from importlib import metadata
 # CPU only with one kernel (dockfactory.core.blas; tests/core/test_blas_pin.py holds it to the kernel
 # that made the published datasets: changing it changes labels, not the version id)
 LABEL_BLAS_ENV, LABEL_BLAS_CORE = "OPENBLAS_CORETYPE", "Prescott"
-os.environ[LABEL_BLAS_ENV] = LABEL_BLAS_CORE
+# numpy's float64 sin, cos and kin take Intel's SVML paths on AVX-512 CPUs and libm's elsewhere,
+# which round the last bits differently: those paths are switched off before numpy loads, so
+# every x86-64 CPU computes a label's trigonometry as libm does (dockfactory.core.blas)
+LABEL_SIMD_ENV = "NPY_DISABLE_CPU_FEATURES"
+LABEL_SIMD_OFF = ("AVX512F", "AVX512CD", "AVX512_KNL", "AVX512_KNM", "AVX512_SKX", "AVX512_CLX",
+                  "AVX512_CNL", "AVX512_ICL", "AVX512_SPR")
+
+
+def pin_label_arithmetic(environ) -> None:
+    """Set both pins in ``environ`` (a process's environment, before numpy loads); numpy features
+    the caller already switched off stay off."""
+    environ[LABEL_BLAS_ENV] = LABEL_BLAS_CORE
+    off = environ.get(LABEL_SIMD_ENV, "").split()
+    environ[LABEL_SIMD_ENV] = " ".join(dict.fromkeys(off + list(LABEL_SIMD_OFF)))
+
+
+pin_label_arithmetic(os.environ)
 # one OpenBLAS thread unless the user asks for more: the solver's linear systems have at most a few
 # dozen unknowns, where a second BLAS thread only adds its wake-up, and on busy cores (measure's two
 # worker processes, a render beside) each small solve then waits milliseconds for it

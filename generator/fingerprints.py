@@ -23,6 +23,9 @@ from dockfactory.generator.label_prints import index_measurements, label_core_sh
 TILE_PX = 80
 FINGERPRINTS_NAME = "fingerprints.npz"
 FINGERPRINTS_V2_NAME = "fingerprints_v2.npz"
+# v2's format; each frame's label core as a generator with numpy's trigonometry pinned to libm
+# computes it, for a dataset published with another (generator.published)
+FINGERPRINTS_V3_NAME = "fingerprints_v3.npz"
 
 
 def image_tiles(image: np.ndarray, tile: int = TILE_PX) -> np.ndarray:
@@ -72,10 +75,13 @@ def fingerprints_v2(frame_ids, label_texts) -> bytes:
     """The npz bytes of fingerprint v2 of the labels ``label_texts`` (bytes, one per frame id):
     ``frame_ids``, ``label_core`` (digests), ``index`` (index-pass numbers, one row per frame,
     NaN-padded) and ``index_len`` (each row's length)."""
-    cores, rows = [], []
-    for text in label_texts:
-        cores.append(label_core_sha256(text))
-        rows.append(index_measurements(text))
+    texts = list(label_texts)
+    return fingerprints_of(frame_ids, [label_core_sha256(t) for t in texts], [index_measurements(t) for t in texts])
+
+
+def fingerprints_of(frame_ids, cores, rows) -> bytes:
+    """The npz bytes of v2-format fingerprints from their parts: per frame id a label core digest
+    and a row of index-pass numbers (``generator.label_prints``)."""
     index = np.full((len(rows), max((len(r) for r in rows), default=0)), np.nan)
     for i, r in enumerate(rows):
         index[i, :len(r)] = r
@@ -124,5 +130,6 @@ def read_fingerprints(path: Path) -> dict | None:
 
 
 def read_fingerprints_v2(path: Path) -> dict | None:
-    """v2 fingerprints: {frame_id: (label core sha256, index measurements)}, None without the file."""
+    """v2 (or v3) fingerprints: {frame_id: (label core sha256, index measurements)}, None without
+    the file."""
     return _read_npz(Path(path), _v2)

@@ -18,6 +18,11 @@ file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
   - v2 (``fingerprints_v2.npz``, when published): everything but those and the pixel counts and
     boxes read from Cycles' index pass must match byte for byte, and those counts and box edges
     must be within ``INDEX_TOLERANCE_PX`` of the published ones;
+  - v3 (``fingerprints_v3.npz``, beside v2 for the frames it holds): the same check against the
+    label core as a generator whose numpy computes sin and cos with libm (``dockfactory.core.blas``)
+    gives it, for a dataset published by one that took numpy's AVX-512 paths (the two differ in
+    the last bits; every other part of the label must still match, and the index-pass numbers are
+    v2's);
 - its image must match byte for byte or its fingerprint (the mean of every 80 x 80 px tile per
   channel, in 8-bit levels) must be within ``tolerance`` levels of the published one, and its
   markers must show where the label (whose geometry matched) says, in their colour
@@ -45,6 +50,7 @@ from dockfactory.generator.dataset_check import verify
 from dockfactory.generator.fingerprints import (
     FINGERPRINTS_NAME,
     FINGERPRINTS_V2_NAME,
+    FINGERPRINTS_V3_NAME,
     read_fingerprints,
     read_fingerprints_v2,
     image_tiles,
@@ -78,6 +84,7 @@ class PublishedReport:
     labels_geometry: int = 0
     labels_index_within: int = 0
     labels_legacy_sections: int = 0    # of those, with the sections' silhouettes of the manifest's generator
+    labels_libm: int = 0               # of those, matched on the v3 core (libm's trigonometry)
     max_index_diff: float = 0.0
     images_identical: int = 0
     images_within: int = 0
@@ -105,6 +112,10 @@ class PublishedReport:
             notes.append(f"{self.labels_legacy_sections} labels match once their sections' pixels_all and bbox_obj_px "
                          "are drawn as the manifest's generator drew them (the convex hull of each section, 2 % "
                          "too large; fixed since, generator/label_legacy.py): everything else matches")
+        if self.labels_libm:
+            notes.append(f"{self.labels_libm} labels match the published geometry as libm's sin and cos give it "
+                         f"({FINGERPRINTS_V3_NAME}; the manifest's generator took numpy's AVX-512 paths, which "
+                         "round the last bits otherwise)")
         return "\n".join(lines + [f"  note: {n}" for n in notes] + [f"  {p}" for p in self.problems])
 
 
@@ -114,6 +125,7 @@ class _Published:
     records: dict                      # {path: manifest record}
     prints: dict | None = None         # v1: {frame_id: (tiles, label geometry sha256)}
     prints_v2: dict | None = None      # v2: {frame_id: (label core sha256, index measurements)}
+    prints_v3: dict | None = None      # v3: v2's, the core as libm's trigonometry gives it
 
 
 def _load_published(manifest_path: Path) -> _Published:
@@ -129,7 +141,8 @@ def _load_published(manifest_path: Path) -> _Published:
         raise DatasetError(f"{manifest_path}: not a published dataset manifest: {problem}"[:400])
     records = {r["path"]: r for r in manifest["files"]}
     return _Published(manifest, records, read_fingerprints(manifest_path.with_name(FINGERPRINTS_NAME)),
-                      read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V2_NAME)))
+                      read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V2_NAME)),
+                      read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V3_NAME)))
 
 
 def _manifest_problem(manifest) -> str | None:
@@ -162,15 +175,21 @@ def _same_bytes(path: Path, record: dict | None) -> bool:
         and sha256_file(path) == record["sha256"]
 
 
-def _index_problem(fid: str, text: bytes, published: tuple, rep: PublishedReport, legacy=None) -> str | None:
+def _index_problem(fid: str, text: bytes, published: tuple, rep: PublishedReport, legacy=None,
+                   libm_core: str | None = None) -> str | None:
     """Fingerprint v2 of one label: None when it passes (counted in ``rep``), else the problem.
     ``legacy``: a :class:`LegacyLabels` when the manifest's generator is another one (its
-    sections' silhouettes are then also compared as that generator drew them)."""
+    sections' silhouettes are then also compared as that generator drew them); ``libm_core``: the
+    frame's v3 core, accepted in place of v2's."""
     core, index = published
-    if label_core_sha256(text) != core:
-        if legacy is None or legacy.core_sha256(fid, text) != core:
+    cores = (core,) if libm_core is None else (core, libm_core)
+    mine = label_core_sha256(text)
+    if mine not in cores:
+        mine = legacy.core_sha256(fid, text) if legacy is not None else None
+        if mine not in cores:
             return f"labels/{fid}.json: differs from the manifest beyond its image and index-pass measurements"
         rep.labels_legacy_sections += 1
+    rep.labels_libm += mine != core
     diff = index_difference(index_measurements(text), index)
     if diff is None or diff > INDEX_TOLERANCE_PX:
         what = "another set of counts and boxes" if diff is None else f"up to {diff:g} px"
@@ -212,7 +231,8 @@ def _check_label(root: Path, fid: str, pub: _Published, rep: PublishedReport, le
     if pub.prints is not None and fid in pub.prints and label_geometry_sha256(text) == pub.prints[fid][1]:
         rep.labels_geometry += 1
     elif pub.prints_v2 is not None and fid in pub.prints_v2:
-        problem = _index_problem(fid, text, pub.prints_v2[fid], rep, legacy)
+        libm = pub.prints_v3.get(fid, (None,))[0] if pub.prints_v3 is not None else None
+        problem = _index_problem(fid, text, pub.prints_v2[fid], rep, legacy, libm)
         if problem:
             rep.problems.append(problem)
     else:

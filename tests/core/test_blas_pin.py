@@ -1,10 +1,12 @@
-"""Labels the same on every CPU: numpy's OpenBLAS kernel is pinned (core.blas; issue 13).
+"""Labels the same on every CPU: numpy's OpenBLAS kernel and its trigonometry paths are pinned (core.blas).
 
 The published paper dataset was rendered on a CPU whose OpenBLAS ran its SSE3 kernel; on an
 AVX2/AVX-512 machine the default kernel gave other last bits in every label's geometry, and
 ``dataset verify --manifest`` refused the re-render. These tests check the pin where it is set
 (package import, every render worker), the refusal when it could not take effect, and, with
-Cycles, that a re-rendered published frame verifies on this machine.
+Cycles, that a re-rendered published frame verifies on this machine. numpy's AVX-512 sin and cos
+(which the published generator took) round otherwise than libm's: with them pinned off, the frame
+matches the published geometry as libm gives it (fingerprints_v3.npz), on every CPU.
 """
 import os
 import json
@@ -13,6 +15,7 @@ import sys
 
 import pytest
 
+import dockfactory
 from dockfactory.core import blas
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.generator import worker_pool
@@ -35,6 +38,27 @@ def test_importing_dockfactory_before_numpy_runs_the_label_kernel():
     out = _python("import dockfactory, numpy\nfrom dockfactory.core.blas import openblas_core\nprint(openblas_core())")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == blas.LABEL_BLAS_CORE
+
+
+def test_importing_dockfactory_before_numpy_switches_its_avx512_paths_off_and_keeps_the_callers():
+    code = ("import os, dockfactory, numpy\nfrom dockfactory.core.blas import numpy_simd_on\n"
+            "from numpy.core._multiarray_umath import __cpu_features__ as f\n"
+            "print(os.environ['NPY_DISABLE_CPU_FEATURES']); print(numpy_simd_on(), f['AVX2'])")
+    out = _python(code, NPY_DISABLE_CPU_FEATURES="AVX2")
+    assert out.returncode == 0, out.stderr
+    env, state = out.stdout.strip().splitlines()
+    assert env.split() == ["AVX2", *dockfactory.LABEL_SIMD_OFF]
+    assert state == "[] False"     # the caller's AVX2 off as asked, no AVX-512 path on any CPU
+
+
+def test_a_render_with_numpy_on_its_avx512_paths_is_refused_in_one_line(monkeypatch, repo_root, tmp_path):
+    from dockfactory.core.config import load_config
+    monkeypatch.setattr(blas, "numpy_simd_on", lambda: ["AVX512_SKX"])
+    cfg = load_config(repo_root / "configs" / "smoke.toml")
+    root = tmp_path / "ds"
+    with pytest.raises(DockfactoryError, match="numpy runs its AVX512_SKX paths: labels' sin and cos"):
+        run_render(cfg, root, (repo_root / "configs" / "smoke.toml").read_text(), JobOptions())
+    assert not root.exists()
 
 
 def test_numpy_loaded_first_with_another_kernel_is_refused_in_one_line():
@@ -70,10 +94,12 @@ def test_every_render_worker_gets_the_label_kernel_even_from_a_caller_env(monkey
         raise Stop
 
     monkeypatch.setattr(worker_pool.subprocess, "Popen", popen)
-    proc = worker_pool.WorkerProcess({"op": "init"}, tmp_path / "w.log", env={"PATH": "/bin", blas.ENV: "Haswell"})
+    proc = worker_pool.WorkerProcess({"op": "init"}, tmp_path / "w.log",
+                                     env={"PATH": "/bin", blas.ENV: "Haswell", blas.LABEL_SIMD_ENV: "AVX2"})
     with pytest.raises(Stop):
         proc.start(1.0)
     assert seen[blas.ENV] == blas.LABEL_BLAS_CORE and seen["PATH"] == "/bin"
+    assert seen[blas.LABEL_SIMD_ENV].split() == ["AVX2", *blas.LABEL_SIMD_OFF]
 
 
 @pytest.mark.render
@@ -95,6 +121,7 @@ def test_a_published_paper_frame_rerendered_here_verifies(repo_root, tmp_path):
     # the published generator drew sections' silhouettes as a convex hull (fixed since): verify
     # compares them as it drew them, and nothing else is let through: a marker moved by 1e-3 px fails
     assert "1 labels match once their sections' pixels_all and bbox_obj_px are drawn" in verify.stdout
+    assert "1 labels match the published geometry as libm's sin and cos give it" in verify.stdout
     path = out / "labels" / "000001.json"
     label = json.loads(path.read_text())
     label["markers"][0]["center_px"][0] += 1e-3

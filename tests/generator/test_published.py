@@ -18,21 +18,6 @@ from dockfactory.generator.fingerprints import read_fingerprints_v2
 from dockfactory.generator.label_prints import index_difference, index_measurements, label_core_sha256
 
 
-@pytest.fixture
-def release(painted_source, tmp_path):
-    """(published folder with manifest.json + fingerprints.npz, a re-render of three frames)."""
-    pub = tmp_path / "pub"
-    published.publish(painted_source, pub)
-    sub = tmp_path / "rerender"
-    shutil.copytree(painted_source, sub)
-    (sub / "manifest.json").unlink()
-    ids = sorted(p.stem for p in (sub / "labels").glob("*.json"))
-    for fid in ids[3:]:
-        for rel in (f"labels/{fid}.json", f"images/{fid}.png", f"meta/{fid}.json"):
-            (sub / rel).unlink()
-    return pub, sub, ids[:3]
-
-
 def test_publish_copies_the_manifest_and_fingerprints_every_image(painted_source, tmp_path):
     pub = tmp_path / "pub"
     msg = published.publish(painted_source, pub)
