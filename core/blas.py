@@ -23,6 +23,11 @@ import os
 
 import numpy  # noqa: F401  (loads its BLAS: openblas_core reads the loaded library)
 
+try:
+    from numpy._core._multiarray_umath import __cpu_features__
+except ImportError:   # numpy < 2
+    from numpy.core._multiarray_umath import __cpu_features__
+
 from dockfactory import LABEL_BLAS_CORE, LABEL_SIMD_ENV, LABEL_SIMD_OFF, pin_label_arithmetic
 from dockfactory import LABEL_BLAS_ENV as ENV
 from dockfactory.core.errors import DockfactoryError
@@ -36,10 +41,6 @@ def pin_label_blas(environ=os.environ) -> None:
 
 def numpy_simd_on() -> list[str]:
     """The AVX-512 paths numpy runs in this process (empty when pinned or on a CPU without them)."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__
-    except ImportError:   # numpy < 2
-        from numpy.core._multiarray_umath import __cpu_features__
     return [name for name in LABEL_SIMD_OFF if __cpu_features__.get(name)]
 
 
