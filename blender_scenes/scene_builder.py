@@ -9,7 +9,7 @@ import numpy as np
 
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
-from dockfactory.core.layout import RING_BASE_DEPTH_MM, RING_EXTRA_MM, SECTION_PASS_INDEX
+from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -138,8 +138,9 @@ def _build_section(static: StaticScene, sec: str, sign: int, paint, face, suppor
             o.parent = parent
 
 
-def _build_marker(m, disc_material, ring_material, b_root) -> None:
-    """A marker's disc and the dark ring under it; B's markers are parented to ``b_root``."""
+def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float) -> None:
+    """A marker's disc and the ring base under it, reaching ``base_depth_mm`` below the disc's top
+    face (a puck, or a flat plate: core.layout.base_depth_mm); B's markers are parented to ``b_root``."""
     rot = _basis_from_normal(m.normal)
     centre = np.array(m.center_mm) * MM
     disc = meshes.disc_z(f"marker_{m.id}", m.diameter_mm / 2 * MM)
@@ -147,7 +148,7 @@ def _build_marker(m, disc_material, ring_material, b_root) -> None:
     disc.pass_index = m.pass_index
     disc.matrix_basis = _matrix(rot, centre)
     base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
-                             -RING_BASE_DEPTH_MM * MM, -0.05 * MM)  # top just below the disc
+                             -base_depth_mm * MM, -0.05 * MM)  # top just below the disc
     base.data.materials.append(ring_material)
     base.pass_index = SECTION_PASS_INDEX[m.section]
     base.matrix_basis = _matrix(rot, centre)
@@ -229,7 +230,7 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     for sec, sign, paint, parent in (("A", -1, paint_a, None), ("B", 1, paint_b, b_root)):
         _build_section(static, sec, sign, paint, face, support, parent)
     for m in static.markers:
-        _build_marker(m, red if m.section == "A" else blue, ring, b_root)
+        _build_marker(m, red if m.section == "A" else blue, ring, b_root, static.marker_base_depth_mm)
     floor_mat, wall_mat = _build_floor_and_wall(static)
 
     handles = SceneHandles(scene=scene, camera=None, b_root=b_root, paint_a=paint_a, paint_b=paint_b,

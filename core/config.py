@@ -165,6 +165,7 @@ class SectionsConfig:
 class MarkersConfig:
     diameter_mm: float = 20.0       # of each coloured disc
     raise_mm: float = 1.0           # height of the disc's top face above the surface
+    form: str = "puck"              # puck (the disc on a raised dark cylinder, its side showing at a slant) | flat (printed on a dark plate raise_mm thick, at most 0.5 mm; docs/rendering.md)
     ring: str = "dark"              # the ring around each disc: dark (reflectance 0.01-0.05) | white (0.70-0.85) | mixed (each frame one of the two)
     layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # A's markers: (s_mm from the docking face, phi_deg about the axis, 0 = toward +Z)
     layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B  # B's, the same way
@@ -259,7 +260,8 @@ class ExportConfig:
 # identity's config at that value (Config.to_dict), so their version ids stay
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
                     ("render", "marker_adaptive_threshold"): 0.0,
-                    ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark"}
+                    ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
+                    ("markers", "form"): "puck"}
 RENDER_DEVICES = ("cpu", "gpu")
 
 
@@ -569,6 +571,11 @@ def _validate_markers(cfg: Config, source: str) -> None:
     m, s = cfg.markers, cfg.sections
     _check_positive(source, "markers", "diameter_mm", m.diameter_mm)
     _check_positive(source, "markers", "raise_mm", m.raise_mm)
+    if m.form not in layout_mod.MARKER_FORMS:
+        raise _err(source, "markers", "form", f"{m.form!r} is not one of {', '.join(layout_mod.MARKER_FORMS)}")
+    if m.form == "flat" and m.raise_mm > layout_mod.FLAT_MAX_RAISE_MM:
+        raise _err(source, "markers", "raise_mm", f"a flat marker is a printed plate at most "
+                   f"{layout_mod.FLAT_MAX_RAISE_MM:g} mm thick, got {m.raise_mm:g} (set raise_mm, e.g. 0.2)")
     if m.ring not in layout_mod.RING_DESIGNS:
         raise _err(source, "markers", "ring", f"{m.ring!r} is not one of {', '.join(layout_mod.RING_DESIGNS)}")
     reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM

@@ -30,6 +30,12 @@ DEFAULT_LAYOUT_B = ((52.0, -42.0), (108.0, -19.0), (68.0, 3.0), (140.0, 29.0),
                     (48.0, 41.0), (96.0, 60.0), (158.0, -56.0))
 RING_EXTRA_MM = 2.5  # the ring around each coloured disc
 RING_BASE_DEPTH_MM = 2.5  # the ring base (a puck under the disc) reaches this far below the disc's top face
+BASE_EMBED_MM = 0.05      # how far a marker's base reaches into the section, where it stands highest over it
+# A marker's physical form ([markers] form): a raised puck (the disc on a dark cylinder whose side
+# shows at a slant) or a flat printed plate (the disc printed on a thin dark plate, raise_mm thick,
+# at most FLAT_MAX_RAISE_MM); both have a planar disc, so the labels are exact for either.
+MARKER_FORMS = ("puck", "flat")
+FLAT_MAX_RAISE_MM = 0.5
 # Grey reflectance range of the ring, per design: a dark ring leaves a Bayer sensor a red disc's
 # edge in its red samples alone; a white ring shows it in the green and blue samples too.
 RING_REFLECTANCE = {"dark": (0.01, 0.05), "white": (0.70, 0.85)}
@@ -44,6 +50,19 @@ def ring_reflectance(design: str, u: float) -> float:
         design, u = ("dark", 2.0 * u) if u < 0.5 else ("white", 2.0 * u - 1.0)
     lo, hi = RING_REFLECTANCE[design]
     return lo + u * (hi - lo)
+
+
+def base_depth_mm(form: str, raise_mm: float, diameter_mm: float, section_radius_mm: float) -> float:
+    """How far (mm) a marker's base reaches below its disc's top face, for ``form`` (MARKER_FORMS):
+    down to the section where the base stands highest over it (its rim across the cylinder, the
+    sagitta r^2 / 2R higher than at its centre line) plus BASE_EMBED_MM, so it never floats; a
+    puck at least RING_BASE_DEPTH_MM. ValueError for an unknown form."""
+    if form not in MARKER_FORMS:
+        raise ValueError(f"marker form must be one of {MARKER_FORMS}, got {form!r}")
+    r = diameter_mm / 2.0 + RING_EXTRA_MM
+    sagitta = section_radius_mm - float(np.sqrt(max(section_radius_mm ** 2 - r ** 2, 0.0)))
+    reach = raise_mm + sagitta + BASE_EMBED_MM
+    return max(RING_BASE_DEPTH_MM, reach) if form == "puck" else reach
 
 
 SECTION_PASS_INDEX = {"A": 201, "B": 202}  # index pass value of each section's body and flange

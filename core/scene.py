@@ -16,7 +16,7 @@ import numpy as np
 from dockfactory.core.camera_chain import ColourChain
 from dockfactory.core.distortion import N_COEFFS
 from dockfactory.core.geometry import intrinsics, render_canvas
-from dockfactory.core.layout import Marker
+from dockfactory.core.layout import RING_BASE_DEPTH_MM, Marker
 
 Mat4 = tuple[tuple[float, ...], ...]
 OMIT_IF_NONE = "omit_if_none"   # field metadata: to_dict leaves the field out while it is None
@@ -233,6 +233,8 @@ class StaticScene:
     markers: tuple[Marker, ...]
     max_occluders: int
     clutter_slots: int
+    # how far each marker's base reaches below its disc's top face (core.layout.base_depth_mm)
+    marker_base_depth_mm: float = dataclasses.field(default=RING_BASE_DEPTH_MM, metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

@@ -61,15 +61,16 @@ class Region:
         return Region(min(self.x0, other.x0), min(self.y0, other.y0), max(self.x1, other.x1), max(self.y1, other.y1))
 
 
-def halo_points(marker: Marker, n: int = OUTLINE_N, radius_mm: float | None = None) -> np.ndarray:
+def halo_points(marker: Marker, n: int = OUTLINE_N, radius_mm: float | None = None,
+                base_depth_mm: float = RING_BASE_DEPTH_MM) -> np.ndarray:
     """(2 n, 3) mm in the marker's section frame: the halo's circle (radius the larger of the
     ring's and HALO_RADII disc radii, or ``radius_mm``) at the disc's top face and at the bottom
-    of the ring base (what a slanted view of the raised puck shows)."""
+    of the ring base, ``base_depth_mm`` below it (what a slanted view of the marker's side shows)."""
     r = max(marker.diameter_mm / 2.0 + RING_EXTRA_MM, HALO_RADII * marker.diameter_mm / 2.0) \
         if radius_mm is None else radius_mm
     circle = marker_outline(dataclasses.replace(marker, diameter_mm=2.0 * r), n)
     normal = np.asarray(marker.normal, dtype=np.float64)
-    return np.vstack([circle, circle - RING_BASE_DEPTH_MM * normal])
+    return np.vstack([circle, circle - base_depth_mm * normal])
 
 
 def _b_poses(frame: FrameScene) -> list[np.ndarray]:
@@ -92,7 +93,7 @@ def marker_halos(frame: FrameScene, static: StaticScene) -> list[np.ndarray]:
     out = []
     for m in static.markers:
         poses = _b_poses(frame) if m.section == "B" else [np.eye(4)]
-        uv = np.vstack([project_points(k, cam_from_d @ p, halo_points(m))[0] for p in poses])
+        uv = np.vstack([project_points(k, cam_from_d @ p, halo_points(m, base_depth_mm=static.marker_base_depth_mm))[0] for p in poses])
         if np.all(np.isfinite(uv)):
             out.append(uv - np.array([ox, oy]))
     return out

@@ -21,7 +21,7 @@ from dockfactory.core.geometry import (
     transform_from_pose_components,
     transform_points,
 )
-from dockfactory.core.layout import marker_points
+from dockfactory.core.layout import base_depth_mm, marker_points
 from dockfactory.core.scene import CLUTTER_SLOTS, StaticScene
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
@@ -50,7 +50,9 @@ def static_scene(cfg: Config) -> StaticScene:
     return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
                        flange_width_mm=cfg.sections.flange_width_mm,
                        flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(),
-                       max_occluders=cfg.occlusion.occluders[1], clutter_slots=CLUTTER_SLOTS)
+                       max_occluders=cfg.occlusion.occluders[1], clutter_slots=CLUTTER_SLOTS,
+                       marker_base_depth_mm=base_depth_mm(cfg.markers.form, cfg.markers.raise_mm,
+                                                          cfg.markers.diameter_mm, cfg.sections.radius_mm))
 
 
 def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:
