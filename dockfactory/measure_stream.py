@@ -50,6 +50,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
+from dockfactory.image_header import image_size
 from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
@@ -144,16 +145,56 @@ def open_capture(video=None, camera: int | None = None) -> tuple[cv2.VideoCaptur
     return cap, name
 
 
+SEQUENCE_FIRST_MAX = 1000   # an image sequence's first frame is looked for from index 0 to this (as OpenCV does)
+FRAME_SIZE = "frame size"   # the failure category of a sequence frame of another size than the first
+
+
+def sequence_frame_check(video):
+    """For an image-sequence pattern (``frames/%06d.png``): ``check(index)``, the one-line reason
+    why frame ``index`` of the sequence is refused (its file's header states another size than the
+    first frame's, or none), else None; OpenCV's reader decodes every frame at the first one's size,
+    so a frame of another size would be measured garbled. None for a video file, a camera, or a
+    pattern without a first file."""
+    pattern = str(video) if video is not None else ""
+    if "%" not in pattern:
+        return None
+    try:
+        names = (pattern % i for i in range(SEQUENCE_FIRST_MAX + 1))
+        first = next((i for i, name in enumerate(names) if Path(name).is_file()), None)
+    except (TypeError, ValueError):
+        return None
+    try:
+        size = image_size(pattern % first)[1:] if first is not None else None
+    except (OSError, ValueError):   # OpenCV names an unreadable first frame
+        size = None
+    if size is None:
+        return None
+
+    def check(index: int) -> str | None:
+        path = pattern % (first + index)
+        try:
+            got = image_size(path)[1:]
+        except (OSError, ValueError) as exc:
+            return f"{path}: {' '.join(str(exc).split())[:200]}"
+        if got != size:
+            return (f"{path}: {got[0]}x{got[1]}, the sequence's frames are {size[0]}x{size[1]} (its first, "
+                    f"{pattern % first}): refused, OpenCV would decode it garbled at the first frame's size")
+        return None
+    return check
+
+
 class FrameReader:
     """Iterates ``(index, t_start, read_ms, timestamp_ms, rgb)`` over the frames of an open capture;
     ``t_start`` is the ``time.perf_counter()`` at which the frame's read began (the start of its
     latency). With ``prefetch`` > 0 a thread reads (decodes) up to that many frames ahead of the
     one being measured: the read of frame k + 1 overlaps the measurement of frame k, and a frame
     read ahead waits for the consumer (which counts in its latency). 0: each frame is read when
-    the consumer asks for it. Stops after ``max_frames`` (None: at the end of the source)."""
+    the consumer asks for it. Stops after ``max_frames`` (None: at the end of the source). ``check``
+    (:func:`sequence_frame_check`): a frame it refuses comes with its reason (a str) in place of rgb."""
 
-    def __init__(self, cap: cv2.VideoCapture, max_frames: int | None = None, prefetch: int = PREFETCH):
-        self.cap, self.max_frames, self.prefetch = cap, max_frames, prefetch
+    def __init__(self, cap: cv2.VideoCapture, max_frames: int | None = None, prefetch: int = PREFETCH,
+                 check=None):
+        self.cap, self.max_frames, self.prefetch, self.check = cap, max_frames, prefetch, check
         self.fps = cap.get(cv2.CAP_PROP_FPS) or 0.0
         self.frames: queue.Queue = queue.Queue()
         self.slots = threading.Semaphore(max(prefetch, 1))
@@ -176,7 +217,8 @@ class FrameReader:
         ok, bgr = self.cap.read()
         if not ok or bgr is None:
             return None
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=bgr)
+        refused = self.check(index) if self.check is not None else None
+        rgb = refused or cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=bgr)
         return index, t_start, 1000.0 * (time.perf_counter() - t_start), self._timestamp_ms(index), rgb
 
     def _read_ahead(self) -> None:
@@ -308,6 +350,8 @@ class StreamMeasurer:
         null for the full frame, when tracking); an error on the way is the frame's failure
         ("measure error"), warnings are kept in its ``notes``."""
         name = Path(f"frame {index}")
+        if isinstance(image, str):   # refused by the reader (FrameReader's check)
+            return {"ok": False, "category": FRAME_SIZE, "reason": f"{name}: {image}"}
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
@@ -417,7 +461,8 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
         raise
     measurer = _measurer(detector if pool is None else None, markers, options, decide, size)
     try:
-        stats, stopped, t0 = _measure_lines(measurer, FrameReader(cap, options.max_frames, options.prefetch), pool, sink)
+        stats, stopped, t0 = _measure_lines(measurer, FrameReader(cap, options.max_frames, options.prefetch,
+                                                                    sequence_frame_check(video)), pool, sink)
         if stats.frames == 0:
             raise DockfactoryError(f"{name}: no frame could be read")
         summary = {"type": "summary", "format": STREAM_FORMAT, "source": name, "stopped": stopped,

@@ -24,6 +24,7 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.random_draws import rng_for
+from dockfactory.eval.fit_gate import gate
 from dockfactory.solver import (
     AmbiguousIdentification,
     DockingOptions,
@@ -106,10 +107,12 @@ def pose_record(res, n_detections: int) -> dict:
 def model_check_record(check) -> dict:
     """The poses-file record of a solve's model error (solver.model_error.ModelCheck): the misfit
     test (``explains``, ``p_value``, ``statistic``, ``dof``, the intrinsics ``tested``), the
-    ``warning`` sentence ("" when the model explains the residuals) and whether the intrinsics
+    ``warning`` sentence ("" when the model explains the residuals; ``explains`` None when no
+    intrinsic was testable: dof 0, nothing tested) and whether the intrinsics
     it does not estimate were ``marginalised`` into the covariance (:func:`pose_record` adds
     ``pose_variance``, (6,) over POSE_NAMES: what that added to the pose's variances)."""
-    return {"explains": bool(check.explains), "p_value": float(check.p_value), "statistic": float(check.statistic),
+    explains = bool(check.explains) if check.dof > 0 else None    # nothing the data determine: not tested
+    return {"explains": explains, "p_value": float(check.p_value), "statistic": float(check.statistic),
             "dof": int(check.dof), "tested": list(check.tested), "warning": check.warning(),
             "marginalised": bool(np.any(check.added != 0.0))}
 
@@ -286,17 +289,37 @@ def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None,
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
                 options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict, dict]:
     """(poses record, marker id -> centre (u, v) px the fit used, marker id -> the edge width
-    (px) of each of those centres the detector measured one for) of one frame."""
-    cls, uv, boxes, refined, edge = centres
+    (px) of each of those centres the detector measured one for) of one frame, through the
+    goodness-of-fit gate (eval.fit_gate) against the known centre noise: the noise card's
+    (``options.refine.sigma_floor_px``), else ``sigma`` when given."""
+    known = options.refine.sigma_floor_px if options.refine.sigma_floor_px is not None else sigma
+
+    def refit(keep, ids):
+        rows = [k for k in np.flatnonzero(keep) if ids[k] is not None]
+        res = solve_docking(markers, pp, correspondences=([ids[k] for k in rows], centres[1][rows]), sigma_px=sigma,
+                            camera_model=camera_model, options=options)
+        return pose_record(res, len(rows))
+    return gate(lambda keep: _solve_rows(markers, pp, centres, keep, sigma, camera_model, options), refit,
+                len(centres[0]), known)
+
+
+def _solve_rows(markers, pp, centres, keep: np.ndarray, sigma, camera_model: str, options: DockingOptions):
+    """:func:`solve_frame`'s solve of the detection rows ``keep`` (bool); (record, used, widths,
+    ids: per row of ``centres`` the marker id the fit used it as, else None)."""
+    cls, uv, boxes, refined, edge = (None if a is None else a[keep] for a in centres)
+    ids = [None] * len(keep)
     try:
         res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
                             edge_px=edge, camera_model=camera_model, options=options)
     except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}, {}
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}, {}, ids
+    rows = np.flatnonzero(keep)
     kept = [(k, mid) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers)) if ok and mid]
+    for k, mid in kept:
+        ids[rows[k]] = mid
     used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, mid in kept}
     widths = {} if edge is None else {mid: float(edge[k]) for k, mid in kept if np.isfinite(edge[k])}
-    return pose_record(res, int(len(cls))), used, widths
+    return pose_record(res, int(len(centres[0]))), used, widths, ids
 
 
 def has_docking_runs(ds: Dataset) -> bool:

@@ -312,3 +312,23 @@ def test_a_stream_judged_against_an_acceptance_spec(run_ds, tmp_path, capsys):
     code, _, err = run_cli(["measure", "--video", video, "--layout", run_ds / "layout.json",
                             "--acceptance", bad, "--jsonl", tmp_path / "bad.jsonl"], capsys)
     assert code == 2 and "[localization]" in one_line_error(err) and not (tmp_path / "bad.jsonl").exists()
+
+
+def test_a_sequence_frame_of_another_size_is_refused_in_one_line_and_the_others_read(tmp_path):
+    """An image sequence whose third frame is smaller: OpenCV decodes it at the first frame's
+    size (garbled); the reader refuses it by its file header, in one line, and goes on."""
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    rng = np.random.default_rng(3)
+    for i, (w, h) in enumerate(((320, 240), (320, 240), (200, 150), (320, 240))):
+        cv2.imwrite(str(seq / f"{i + 1:06d}.png"), rng.integers(0, 255, (h, w, 3), dtype=np.uint8))
+    check = measure_stream.sequence_frame_check(seq / "%06d.png")
+    cap, _ = measure_stream.open_capture(video=seq / "%06d.png")
+    items = list(measure_stream.FrameReader(cap, prefetch=0, check=check))
+    assert [type(it[4]).__name__ for it in items] == ["ndarray", "ndarray", "str", "ndarray"]
+    assert items[2][4] == (f"{seq / '000003.png'}: 200x150, the sequence's frames are 320x240 (its first, "
+                           f"{seq / '000001.png'}): refused, OpenCV would decode it garbled at the first frame's size")
+    measurer = measure_stream.StreamMeasurer(None, (), measure_stream.StreamOptions())
+    record = measurer.solve(2, items[2][4])
+    assert record["ok"] is False and record["category"] == "frame size" and record["reason"].startswith("frame 2: ")
+    assert measure_stream.sequence_frame_check(tmp_path / "video.mp4") is None

@@ -1,0 +1,119 @@
+"""A goodness-of-fit gate on every solved frame: residuals the camera's known noise cannot explain.
+
+A solve can converge on a wrong pose with an uncertainty that looks honest: the layout of another
+scene, an image stretched or cropped, a garbled stream frame give residuals tens of times the
+detector's centre noise, the covariance grows with them (it scales with the residuals' own
+estimate), and the pose is still hundreds of millimetres off. What the solve must be tested
+against is the noise the camera class is known to have: the noise card's centre noise (measured
+on labelled frames of that detector), or the noise a caller states.
+
+``fit_test``: the chi-square of a solve's residuals against that noise, T = RSS / sigma^2 over
+dof = 2 n - p (n points used, p = 13 pose and focal parameters plus the free intrinsics of its
+camera model), and its p-value; the frame ``explains`` the residuals when p >= GATE_P. Without a
+known noise, or without degrees of freedom, nothing is tested (``explains`` None).
+
+``gate``: a frame that fails is solved again without one centre (each in turn; the one whose
+removal leaves the smallest statistic), then without a second, at most MAX_LEFT_OUT: a bad
+centre (a glare spot, an occluder) explains a misfit that one point carries. The first fit that
+passes is kept, and its record names the centres left out; if none passes, the frame is not ok,
+with the ratio of its residuals to the known noise in one line. A section shift of the card (a
+common offset of a section's centres) is absorbed by the pose and barely shows in the
+residuals: it is not part of the test.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.solver.camera_models import camera_model as model_named
+from dockfactory.solver.stats import chi2_logsf
+
+GATE_P = 1e-6          # a frame is refused below this p-value (measured false alarms: eval README)
+MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
+MISFIT = "misfit"      # the failure category of a frame the gate refuses
+POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
+
+
+def fit_parameters(record: dict) -> int:
+    """The number of parameters the solve of ``record`` estimated (13 + its model's free ones)."""
+    return POSE_AND_FOCAL + model_named(record.get("camera_model", "pinhole")).n_extra
+
+
+def fit_test(record: dict, sigma_px: float | None) -> dict:
+    """{"explains": True | False | None, "statistic", "dof", "p_value", "ratio"} of a solved
+    poses record against the known centre noise ``sigma_px`` (px per axis; None: not tested).
+    ``ratio``: the residuals' per-axis RMS over ``sigma_px``."""
+    n = {s: record["n_markers"][s] for s in ("A", "B")}
+    rss = sum(record["rmse_px"][s] ** 2 * n[s] for s in n)
+    dof = 2 * sum(n.values()) - fit_parameters(record)
+    if sigma_px is None or not sigma_px > 0 or dof <= 0:
+        why = "no known centre noise" if dof > 0 else "no degrees of freedom"
+        return {"explains": None, "not_tested": why, "dof": max(dof, 0)}
+    stat = rss / sigma_px ** 2
+    log_p = chi2_logsf(stat, dof)
+    return {"explains": bool(log_p >= math.log(GATE_P)), "statistic": float(stat), "dof": int(dof),
+            "p_value": float(math.exp(log_p)), "ratio": float(math.sqrt(rss / dof) / sigma_px)}
+
+
+def misfit_reason(test: dict, sigma_px: float, left_out: int) -> str:
+    """One line: why the gate refused a frame."""
+    tried = f" (and with up to {left_out} centres left out)" if left_out else ""
+    return (f"residuals {test['ratio']:.1f}x the camera's centre noise ({sigma_px:.3g} px; chi-square "
+            f"{test['statistic']:.3g} over {test['dof']} dof, p {test['p_value']:.2g}){tried}: wrong layout, "
+            "wrong image geometry or a bad centre")
+
+
+def gate(solve, refit, n_rows: int, sigma_px: float | None):
+    """Run ``solve(keep)`` through the gate. ``keep`` (n_rows,) bool: the detection rows to use;
+    ``solve`` returns (record, used, widths, ids) with ids (n_rows,) the marker id of each row the
+    fit used, else None; ``refit(keep, ids)`` the record of a quick fit of the rows ``keep`` as
+    the markers ``ids`` (no identification; raises or returns a not-ok record when it fails),
+    which picks the centre to leave out. Returns (record, used, widths) of the first fit that
+    passes (its ``fit_test``; with ``left_out``, the ids of the centres it left out), else a
+    not-ok record."""
+    keep = np.ones(n_rows, dtype=bool)
+    first = solve(keep)
+    if not first[0].get("ok"):
+        return first[:3]
+    test = first[0]["fit_test"] = fit_test(first[0], sigma_px)
+    if test["explains"] is not False:
+        return first[:3]
+    ids, left = first[3], []
+    for _ in range(MAX_LEFT_OUT):
+        k = _worst_row(refit, keep, ids, sigma_px)
+        if k is None:
+            break
+        keep[k] = False
+        left.append(ids[k])
+        best = solve(keep)
+        if not best[0].get("ok"):
+            break
+        ids = best[3]
+        best[0]["fit_test"] = fit_test(best[0], sigma_px)
+        if best[0]["fit_test"]["explains"]:
+            best[0]["left_out"] = left
+            best[0]["fit_test"]["before"] = {"ratio": test["ratio"], "p_value": test["p_value"]}
+            return best[:3]
+    return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}, {}
+
+
+def _worst_row(refit, keep: np.ndarray, ids, sigma_px: float) -> int | None:
+    """The used row whose removal leaves the smallest statistic in a quick refit, or None when
+    no removal gives a fit."""
+    best = None
+    for k in np.flatnonzero(keep):
+        if ids[k] is None:
+            continue
+        trial = keep.copy()
+        trial[k] = False
+        try:
+            record = refit(trial, ids)
+        except DockfactoryError:
+            continue
+        if record.get("ok"):
+            stat = fit_test(record, sigma_px).get("statistic", math.inf)
+            if best is None or stat < best[0]:
+                best = (stat, int(k))
+    return None if best is None else best[1]
