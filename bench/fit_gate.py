@@ -9,7 +9,8 @@ dataset, the same detections solved as they are and after each fault a user real
 
 - as is: frames ok, left one or two centres out, refused; the residual ratio (per-axis RMS over
   the card's noise) median / 90th percentile / max;
-- another layout: the markers of a section of radius 450 mm and 30 mm discs;
+- another layout: the markers of a section of radius 450 mm and 30 mm discs (300 mm and 20 mm
+  for a dataset of the former);
 - stretched: the centres' u stretched 1.5x about the image centre;
 - cropped: the principal point assumed 160 / 120 px off (the centres shifted);
 - mirrored: u -> W - 1 - u; rotated 180: u, v -> W - 1 - u, H - 1 - v.
@@ -53,7 +54,9 @@ def run(root: Path) -> dict:
     card = dets.get("centre_noise_px")
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)
-    other = build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, 450.0, 30.0)
+    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
+    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)   # another scene's
+    other = build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
     out = {"dataset": str(root), "version": ds.version_id, "card_px": card, "faults": {}}
     for name, (markers, move) in faults(w, h, other).items():
         rows = []
