@@ -30,7 +30,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.solver.camera_models import camera_model as model_named
 from dockfactory.solver.stats import chi2_logsf
 
-GATE_P = 1e-6          # a frame is refused below this p-value (measured false alarms: eval README)
+GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms: bench/results/fit_gate/README.md)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
