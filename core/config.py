@@ -182,7 +182,7 @@ class RenderConfig:
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
-    marker_samples: int = 0          # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
+    marker_samples: int = 32         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
@@ -296,6 +296,16 @@ class Config:
                 del d[table][key]
         return d
 
+    def resolved_dict(self) -> dict:
+        """:meth:`to_dict` plus every identity-neutral key at its neutral value where that is not
+        today's default: what a written config must state so that reading it back gives this
+        config (a key left out reads as today's default)."""
+        d, full = self.to_dict(), self.to_dict(full=True)
+        for (table, key), neutral in IDENTITY_NEUTRAL.items():
+            if full[table][key] == neutral != _default_of(table, key):
+                d[table][key] = neutral
+        return d
+
     def canonical_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
@@ -376,6 +386,24 @@ def config_from_dict(data: dict, source: str = "<config>") -> Config:
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
     return cfg
+
+
+def _default_of(table: str, key: str):
+    """Today's default of ``[table] key``."""
+    return json.loads(json.dumps(dataclasses.asdict(getattr(Config(), table))))[key]
+
+
+def config_from_identity(data: dict, source: str = "<config>") -> Config:
+    """Build a :class:`Config` from a stored identity dict (:meth:`Config.to_dict`: a dataset's
+    ``dataset.json``, a manifest): an identity-neutral key it leaves out held its neutral value,
+    whatever today's default (a stored dataset reads back as it was rendered)."""
+    if not isinstance(data, dict):
+        return config_from_dict(data, source)
+    filled = {t: (dict(v) if isinstance(v, dict) else v) for t, v in data.items()}
+    for (table, key), neutral in IDENTITY_NEUTRAL.items():
+        if isinstance(filled.get(table, {}), dict):
+            filled.setdefault(table, {}).setdefault(key, neutral)
+    return config_from_dict(filled, source)
 
 
 def load_config(path) -> Config:

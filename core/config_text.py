@@ -103,7 +103,7 @@ def load_config_text(path, sets=()) -> tuple[Config, str]:
         return config_from_dict(data, str(path)), text
     merged = apply_overrides(data, sets, str(path))
     cfg = config_from_dict(merged, f"{path} with --set {' '.join(sets)}")
-    return cfg, f"# {path.name} with --set {' '.join(sets)}\n" + to_toml(cfg.to_dict())
+    return cfg, f"# {path.name} with --set {' '.join(sets)}\n" + to_toml(cfg.resolved_dict())
 
 
 # ----------------------------------------------------------------------------- the reference

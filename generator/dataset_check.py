@@ -23,7 +23,7 @@ import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from dockfactory.core.config import Config, config_from_dict
+from dockfactory.core.config import Config, config_from_identity
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import dead_writer, is_temp_name, sha256_file
 from dockfactory.generator.dataset import (
@@ -186,7 +186,7 @@ def _check_identity(root: Path, ident: dict, report: VerifyReport) -> tuple[Conf
     if expected != ident["version_id"]:
         report.inconsistent.append(("dataset.json", f"its config and software give version {expected}, it says "
                                                     f"{ident['version_id']} (edited after rendering?)"))
-    cfg = config_from_dict(ident["config"], str(where))
+    cfg = config_from_identity(ident["config"], str(where))
     return cfg, frame_plan(cfg)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dockfactory.core.config import config_from_dict
+from dockfactory.core.config import config_from_identity
 from dockfactory.core.io import output_lock, remove_stale_temps, write_json_atomic
 from dockfactory.generator.dataset import (
     DatasetError,
@@ -41,7 +41,7 @@ STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host
 def info(root) -> dict:
     root = Path(root)
     ident = load_identity(root)
-    cfg = config_from_dict(ident["config"], str(root / "dataset.json"))
+    cfg = config_from_identity(ident["config"], str(root / "dataset.json"))
     out = {"root": str(root), "name": ident["name"], "version_id": ident["version_id"], "seed": ident["seed"],
            "generator_version": ident["generator_version"], "blender_version": ident["blender_version"],
            "image_size": [cfg.image.width, cfg.image.height]}

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.core.config import config_from_dict
+from dockfactory.core.config import config_from_identity
 from dockfactory.core.io import write_bytes_atomic
 from dockfactory.generator.dataset import DatasetError, load_identity
 from dockfactory.generator.dvc_links import cache_link, dvc_caches
@@ -22,7 +22,7 @@ def frame_files_to_show(root: Path, frame_id: str) -> tuple[Path, Path]:
     frame not rendered yet, or a file that is a symlink other than a DVC cache link (a dataset's
     files live inside it)."""
     ident = load_identity(root, required=("config",))
-    plan = {s.frame_id for s in frame_plan(config_from_dict(ident["config"], str(root / "dataset.json")))}
+    plan = {s.frame_id for s in frame_plan(config_from_identity(ident["config"], str(root / "dataset.json")))}
     if frame_id not in plan:
         raise DatasetError(f"{root}: no frame {frame_id!r} in this dataset's plan "
                            f"(frame ids look like 000000 or rep000_00; {len(plan)} planned)")

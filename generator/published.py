@@ -41,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.core.config import config_from_dict, load_config
+from dockfactory.core.config import config_from_identity
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic
 from dockfactory.core.user_files import check_regular_file
@@ -212,7 +212,8 @@ class LegacyLabels:
         """Fingerprint v2's digest of the label ``text`` of frame ``fid`` with legacy section
         silhouettes; None when the frame is not in the re-render's plan."""
         if self.cfg is None:
-            self.cfg = load_config(self.root / "config.toml")
+            ident = json.loads((self.root / "dataset.json").read_text(encoding="utf-8"))
+            self.cfg = config_from_identity(ident["config"], str(self.root / "dataset.json"))
             self.specs = {s.frame_id: s for s in frame_plan(self.cfg)}
             self.static = static_scene(self.cfg)
         if fid not in self.specs:
@@ -285,7 +286,7 @@ def _version_difference(ident: dict, manifest: dict) -> str | None:
     if ident.get("blender_version") != software.get("blender"):
         return f"another Blender: {ident.get('blender_version')}, published {software.get('blender')}"
     try:
-        mine, theirs = config_from_dict(ident["config"]), config_from_dict(manifest["config"])
+        mine, theirs = config_from_identity(ident["config"]), config_from_identity(manifest["config"])
         mine = replace(mine, render=replace(mine.render, device=theirs.render.device))   # compared apart
         same = mine.canonical_json() == theirs.canonical_json()
     except (DockfactoryError, KeyError, TypeError):
@@ -296,8 +297,8 @@ def _version_difference(ident: dict, manifest: dict) -> str | None:
 def _devices(ident: dict, manifest: dict) -> tuple[str, str]:
     """([render] device of the re-render, of the published dataset); ("cpu", "cpu") if unreadable."""
     try:
-        return (config_from_dict(ident["config"]).render.device,
-                config_from_dict(manifest["config"]).render.device)
+        return (config_from_identity(ident["config"]).render.device,
+                config_from_identity(manifest["config"]).render.device)
     except (DockfactoryError, KeyError, TypeError):
         return "cpu", "cpu"
 

@@ -185,6 +185,7 @@ jpeg = true
 samples = 1
 keep_exr = true
 frame_timeout_s = 120
+marker_samples = 0   # the job mechanics, not label-aware sampling (its own render tests)
 """
 
 

@@ -306,6 +306,7 @@ frames_per_run = 2
 samples = 1
 keep_exr = true
 frame_timeout_s = 120
+marker_samples = 0   # the job mechanics, not label-aware sampling (its own render tests)
 """
 
 

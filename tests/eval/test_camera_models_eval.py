@@ -33,6 +33,7 @@ frames_per_run = 20
 x_end_mm = [1.0, 5.0]
 [render]
 keep_exr = false
+marker_samples = 0   # the job mechanics, not label-aware sampling (its own render tests)
 """
 
 

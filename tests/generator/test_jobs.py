@@ -41,6 +41,7 @@ margin_px = 12
 samples = 1
 keep_exr = true
 frame_timeout_s = 60
+marker_samples = 0   # the job mechanics, not label-aware sampling (its own render tests)
 [export]
 formats = ["coco", "yolo", "bop"]
 """

@@ -2,11 +2,13 @@
 (generator.marker_regions), the config key and the identity it leaves alone."""
 import dataclasses
 import itertools
+import json
 
 import numpy as np
 import pytest
 
-from dockfactory.core.config import ConfigError, config_from_dict
+from dockfactory.core.config import ConfigError, config_from_dict, config_from_identity, load_config
+from dockfactory.core.config_text import load_config_text
 from dockfactory.core.geometry import project_points
 from dockfactory.core.scene import RenderSettings, from_dict, to_dict
 from dockfactory.generator.dataset import identity
@@ -197,8 +199,10 @@ def test_render_settings_leave_the_key_out_while_off():
 
 def test_the_key_is_in_the_identity_only_when_on():
     plain = config_from_dict({"dataset": {"frames": 12, "seed": 7}})
-    assert identity(_cfg(marker_samples=0)) == identity(plain)
-    assert identity(_cfg(marker_samples=32)) != identity(plain)
+    assert plain.render.marker_samples == 32                          # on by default
+    assert identity(_cfg(marker_samples=32)) == identity(plain)
+    assert "marker_samples" not in _cfg(marker_samples=0).to_dict()["render"]   # ids of before the key
+    assert identity(_cfg(marker_samples=0)) != identity(plain)
     assert identity(_cfg(marker_samples=32)) != identity(_cfg(marker_samples=64))
     assert identity(_cfg(marker_denoise="off")) != identity(_cfg())
     assert identity(_cfg(marker_denoise="fast")) == identity(_cfg())
@@ -210,3 +214,26 @@ def test_the_key_is_in_the_identity_only_when_on():
 def test_bad_values_are_refused_naming_the_key(key, value):
     with pytest.raises(ConfigError, match=key):
         _cfg(**{key: value})
+
+
+def test_a_stored_identity_without_the_key_reads_back_off():
+    """A dataset.json written while the key was off (or before it existed) leaves it out: read
+    back, it is off, not today's default; a written config states it, so it reads back too."""
+    off = _cfg(marker_samples=0)
+    stored = json.loads(off.canonical_json())
+    assert config_from_dict(stored).render.marker_samples == 32        # a config file's reading
+    assert config_from_identity(stored) == off                         # a stored identity's
+    assert config_from_identity(json.loads(_cfg().canonical_json())) == _cfg()
+    assert off.resolved_dict()["render"]["marker_samples"] == 0
+    assert config_from_dict(off.resolved_dict()) == off
+    assert _cfg().resolved_dict() == _cfg().to_dict()                 # at the defaults: the identity
+
+
+def test_a_config_set_off_writes_a_text_that_reads_back_off(tmp_path):
+    src = tmp_path / "c.toml"
+    src.write_text('[dataset]\nframes = 4\nseed = 3\n')
+    cfg, text = load_config_text(src, ["render.marker_samples=0"])
+    assert cfg.render.marker_samples == 0
+    again = tmp_path / "again.toml"
+    again.write_text(text)
+    assert load_config(again) == cfg and cfg.canonical_json() == load_config(again).canonical_json()

@@ -335,11 +335,11 @@ def test_a_gpu_rerender_is_checked_against_a_cpu_release_within_the_tolerance(re
     """[render] device = "gpu" re-render of a CPU release (another version id: the device is part
     of the identity): compared frame by frame, with a note; images with other bits (+-1 level, as
     another device gives) pass within the tolerance; any other config difference is still refused."""
-    from dockfactory.core.config import config_from_dict
+    from dockfactory.core.config import config_from_identity
     from dockfactory.generator.version import dataset_version_id
     pub, sub, ids = release
     ident = json.loads((sub / "dataset.json").read_text())
-    cfg = config_from_dict({**ident["config"], "render": {**ident["config"]["render"], "device": "gpu"}})
+    cfg = config_from_identity({**ident["config"], "render": {**ident["config"]["render"], "device": "gpu"}})
     ident.update(config=cfg.to_dict(), version_id=dataset_version_id(cfg.canonical_json(), ident["blender_version"],
                                                                      ident["generator_version"]))
     (sub / "dataset.json").write_text(json.dumps(ident))

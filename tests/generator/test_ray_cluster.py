@@ -37,6 +37,7 @@ margin_px = 8
 samples = 4
 keep_exr = false
 frame_timeout_s = 120
+marker_samples = 0   # the job mechanics, not label-aware sampling (its own render tests)
 [export]
 formats = []
 """

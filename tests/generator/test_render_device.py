@@ -9,29 +9,39 @@ import sys
 import pytest
 
 from cli_run import one_line_error, run_cli
-from dockfactory.core.config import ConfigError, config_from_dict, load_config
+from dockfactory.core.config import ConfigError, config_from_dict, config_from_identity, load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.generator.version import dataset_version_id
 
 # version ids of the shipped configs for fixed software strings, computed on main before the
 # device key existed (dataset_version_id(cfg.canonical_json(), blender="5.0.1",
-# generator="0.1.0+fixed")): the config part of every version id must not move
+# generator="0.1.0+fixed")): the config part of every version id must not move. quick and
+# realistic render with label-aware sampling since it became the default: their ids are those of
+# the same config with it off (marker_samples = 0, the value that renders what they held before).
 BEFORE_DEVICE = {"smoke": "0f232de11a0961f8", "quick": "fb879ab49c3d1a7a", "realistic": "b4cacf658a488b5a",
                  "paper": "ed8dae519be049c0"}
+SAMPLING_BY_DEFAULT = ("quick", "realistic")
 
 
 def _vid(cfg) -> str:
     return dataset_version_id(cfg.canonical_json(), blender="5.0.1", generator="0.1.0+fixed")
 
 
+def _before_sampling(cfg):
+    return config_from_dict({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "marker_samples": 0}})
+
+
 def test_the_default_device_keeps_every_config_hash():
     for name, before in BEFORE_DEVICE.items():
         cfg = load_config(shipped_config(name))
+        if name in SAMPLING_BY_DEFAULT:
+            assert cfg.render.marker_samples == 32 and _vid(cfg) != before, name
+            cfg = _before_sampling(cfg)
         assert cfg.render.device == "cpu" and _vid(cfg) == before, name
         assert "device" not in cfg.to_dict()["render"] and cfg.to_dict(full=True)["render"]["device"] == "cpu"
-        explicit = config_from_dict({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "device": "cpu"}})
+        explicit = config_from_identity({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "device": "cpu"}})
         assert explicit.canonical_json() == cfg.canonical_json()
-        gpu = config_from_dict({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "device": "gpu"}})
+        gpu = config_from_identity({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "device": "gpu"}})
         assert gpu.to_dict()["render"]["device"] == "gpu" and _vid(gpu) != before   # GPU frames are other bytes
 
 
@@ -45,6 +55,8 @@ def test_a_stored_dataset_without_the_key_still_opens(painted):
     ident = json.loads((painted / "dataset.json").read_text())
     assert "device" not in ident["config"]["render"]
     assert Dataset.open(painted).config.render.device == "cpu"
+    assert "marker_samples" not in ident["config"]["render"]         # rendered off: reads back off
+    assert Dataset.open(painted).config.render.marker_samples == 0
 
 
 def _has_bpy() -> bool:
