@@ -122,18 +122,22 @@ class FacingPrior:
     """The docking camera faces the markers: to first order a section's image is a similarity
     ``z = a (X - iY) + b`` of its markers' coordinates (weak perspective).
 
-    - ``max_roll_deg``: largest plausible image roll (angle of ``a``);
+    - ``max_roll_deg``: largest plausible image roll (angle of ``a``), at most 180: any roll
+      (cameras are mounted in any orientation; a roll the image shows is not evidence against
+      a hypothesis, the full-perspective verification and the fit test decide);
     - ``scale_range``: plausible |a| = f / depth (px per mm);
     - ``loose_gate``: a projected marker within this fraction of the smallest marker spacing
       (scaled to pixels) of a detection counts as matched by a hypothesis.
     """
 
-    max_roll_deg: float = 30.0
+    max_roll_deg: float = 180.0
     scale_range: tuple = (0.05, 50.0)
     loose_gate: float = 0.4
 
     def __post_init__(self):
         _positive("max_roll_deg", self.max_roll_deg)
+        if self.max_roll_deg > 180.0:
+            raise InvalidSolverInput(f"max_roll_deg must be at most 180 (any roll), got {self.max_roll_deg}")
         _positive("loose_gate", self.loose_gate)
         lo, hi = self.scale_range
         if not (0 < lo < hi and math.isfinite(hi)):
