@@ -15,7 +15,7 @@ from dockfactory.core.resources import default_acceptance, resolve_config
 from dockfactory.eval.acceptance import criterion_lines, load_acceptance, verdict_exit_status
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.envelope import EnvelopeGrid
-from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.evaluate import evaluate, portable_path, write_outputs
 from dockfactory.eval.report import build_report
 from dockfactory.eval.report_pdf import NO_ENGINE, pdf_engine, write_pdf
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
@@ -107,7 +107,7 @@ def _write_verdict(args, metrics: dict, rows) -> int:
     the folder's lock until it is printed)."""
     write_outputs(args.out, metrics, rows)
     write_json_atomic(Path(args.out) / "provenance.json", {
-        "detections": args.detections, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
+        "detections": portable_path(args.detections, args.out) if args.detections else None, "commands": [" ".join(["dockfactory"] + sys.argv[1:])],
         # the weights the detections name: a report of a detector's run says which detector it judged
         "model_sha256": metrics.get("detection", {}).get("weights_sha256") if args.detections else None})
     acc = metrics["acceptance"]

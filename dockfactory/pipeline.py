@@ -19,7 +19,7 @@ from dockfactory.core.config import load_config
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.acceptance import load_acceptance, verdict_exit_status
-from dockfactory.eval.evaluate import evaluate, write_outputs
+from dockfactory.eval.evaluate import evaluate, portable_path, write_outputs
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.report import build_report
 from dockfactory.eval.section_shift import split_section_shift
@@ -230,7 +230,7 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     _evaluate_stage(ds, eval_dir, poses_path, spec, acceptance_path, src, dets_path, oracle_noise_px, stages)
     commands.append(f"dockfactory evaluate {data_dir} --poses {poses_path}"
                     + (f" --detections {dets_path}" if dets_path else "") + f" --acceptance {acceptance_path} --out {eval_dir}")
-    write_json_atomic(eval_dir / "provenance.json", {"detections": str(dets_path) if dets_path else None,
+    write_json_atomic(eval_dir / "provenance.json", {"detections": portable_path(dets_path, eval_dir) if dets_path else None,
                                                      "model_sha256": model_sha, "commands": commands})
 
     # 5. report (always rebuilt: cheap, and it carries the date)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 from collections import defaultdict
 from pathlib import Path
 
@@ -363,8 +364,22 @@ def json_safe(obj):
     return obj
 
 
+def portable_path(path, folder) -> str:
+    """``path`` as the evaluation in ``folder`` records it: relative to that folder, so the tree
+    (dataset, poses, detections, evaluation) can move as one and ``report`` finds its inputs from
+    any current folder (eval.report.input_path); absolute where no relative path exists."""
+    try:
+        return os.path.relpath(os.path.abspath(path), os.path.abspath(folder))
+    except ValueError:   # another drive
+        return os.path.abspath(path)
+
+
 def write_outputs(out_dir, metrics: dict, rows: list[dict]) -> None:
+    """frames.csv and metrics.json into ``out_dir``; the metrics' dataset root and poses path
+    recorded relative to it (:func:`portable_path`)."""
     out = Path(out_dir)
+    metrics = {**metrics, "dataset": {**metrics["dataset"], "root": portable_path(metrics["dataset"]["root"], out)},
+               "poses": {**metrics["poses"], "path": portable_path(metrics["poses"]["path"], out)}}
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
     w.writeheader()

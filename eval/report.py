@@ -9,8 +9,8 @@ import hashlib
 import html
 import io
 import json
+import os
 import subprocess
-import time
 from pathlib import Path
 
 import cv2
@@ -263,8 +263,9 @@ def gallery(dataset_root: Path, rows: list[dict], poses: dict | None, detections
         if "/" in fid or "\\" in fid or fid in (".", ".."):
             continue
         img = cv2.imread(str(dataset_root / "images" / f"{fid}.png"))
-        if img is None:   # the dataset moved or lost the frame: no picture
-            continue
+        if img is None:
+            raise DatasetError(f"{dataset_root / 'images' / f'{fid}.png'}: missing or unreadable: the report "
+                               "draws this frame among the worst (verify the dataset: dockfactory dataset verify)")
         try:
             lab = read_json_file(dataset_root / "labels" / f"{fid}.json", "label")
             item = _gallery_item(img, r, lab, poses, detections)
@@ -450,16 +451,37 @@ def _recomputed_decision(c: dict, rule: str) -> str:
     return "pass" if criterion_passes(c["statistic"], c["value"], c["threshold"]) else "fail"
 
 
-def _optional_json(path, what: str, named_by: str):
-    """The JSON of ``path`` named by another file, or None when it does not exist (a report of a
-    moved evaluation draws fewer pictures); a broken one is refused naming both files."""
-    p = Path(path)
-    if not p.is_file() and not p.is_dir():
-        return None
+def input_path(text: str, eval_dir: Path, named_by: str) -> Path:
+    """The file or folder an evaluation names (``text``, from its metrics.json or
+    provenance.json): absolute as it is; relative to the evaluation folder (how evaluate and run
+    record them, so that the evaluation travels as one tree and ``report`` runs from any folder),
+    else to the current folder (evaluations recorded before). Missing: a one-line DatasetError
+    naming the key and both places looked in, never a report with parts silently left out."""
+    p = Path(text)
+    for candidate in ([p] if p.is_absolute() else [eval_dir / p, p]):
+        if candidate.exists():
+            return candidate
+    where = str(p) if p.is_absolute() else f"{eval_dir / p} or {p.resolve()}"
+    raise DatasetError(f"{named_by}: {text} not found ({where}): the report reads it; run report where the "
+                       "evaluation's inputs are, or evaluate again")
+
+
+def _input_json(text: str, eval_dir: Path, what: str, named_by: str):
+    """The JSON of the input ``text`` names (:func:`input_path`); a broken one is refused naming
+    both files."""
     try:
-        return read_json_file(p, what)
+        return read_json_file(input_path(text, eval_dir, named_by), what)
     except DatasetError as exc:
-        raise DatasetError(f"{named_by}: {exc}") from None
+        raise DatasetError(f"{named_by}: {exc}" if named_by not in str(exc) else str(exc)) from None
+
+
+def report_date() -> str:
+    """The report's date: now (UTC), or ``SOURCE_DATE_EPOCH`` when set (reproducible builds:
+    the same evaluation then gives the same bytes)."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    when = _dt.datetime.fromtimestamp(int(epoch), _dt.timezone.utc) if epoch.isdigit() \
+        else _dt.datetime.now(_dt.timezone.utc)
+    return when.isoformat(timespec="seconds")
 
 
 def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) -> dict:
@@ -468,7 +490,7 @@ def _report_provenance(metrics: dict, prov: dict, commands: list[str] | None) ->
         "model_sha256": prov.get("model_sha256") or "n/a (oracle or no detector)",
         "code_version": git_describe(), "generator_version": generator_version(),
         "software": {p: package_version(p) for p in ("numpy", "torch", "bpy", "opencv-python-headless", "pycocotools", "matplotlib")},
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": report_date(),
         "commands": commands or prov.get("commands", []),
     }
 
@@ -683,7 +705,7 @@ def sign_off(eval_dir: Path, signers: dict | None) -> dict:
         path = eval_dir / name
         digest.update(name.encode() + b"\0" + (path.read_bytes() if path.is_file() else b""))
     signers = signers or {}
-    return {"report_id": digest.hexdigest()[:16], "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    return {"report_id": digest.hexdigest()[:16], "date": report_date()[:16].replace("T", " ") + " UTC",
             "prepared_by": signers.get("prepared_by") or "", "approved_by": signers.get("approved_by") or ""}
 
 
@@ -720,15 +742,14 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None, signers:
     prov_path = eval_dir / "provenance.json"
     prov = read_json_file(prov_path, "provenance") if prov_path.exists() else {}
     check_schema(prov, PROVENANCE_SCHEMA, prov_path)
-    dataset_root = Path(metrics["dataset"]["root"])
-    poses = _optional_json(metrics["poses"]["path"], "poses", f"{metrics_path}: poses.path")
-    if poses is not None:
-        try:
-            validate_poses(poses, metrics["poses"]["path"])
-        except DatasetError as exc:
-            raise DatasetError(f"{metrics_path}: poses.path: {exc}") from None
+    dataset_root = input_path(metrics["dataset"]["root"], eval_dir, f"{metrics_path}: dataset.root")
+    poses = _input_json(metrics["poses"]["path"], eval_dir, "poses", f"{metrics_path}: poses.path")
+    try:
+        validate_poses(poses, metrics["poses"]["path"])
+    except DatasetError as exc:
+        raise DatasetError(f"{metrics_path}: poses.path: {exc}") from None
     det_path = prov.get("detections")
-    detections = _optional_json(det_path, "detections", f"{prov_path}: detections") if det_path else None
+    detections = _input_json(det_path, eval_dir, "detections", f"{prov_path}: detections") if det_path else None
     if detections is not None:
         try:
             validate_detections(detections, det_path)

@@ -14,6 +14,7 @@
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report, read_rows
+from dockfactory.generator.dataset import DatasetError
 from dockfactory.eval.solve_frames import pose_record, solve_dataset, write_poses
 from dockfactory.eval.uncertainty import EXPECTED, calibration_block, reported_std, standard_scores, z_stats
 from dockfactory.generator.dataset import DatasetError
@@ -162,7 +164,8 @@ def test_report_prints_the_sigma_the_table_and_a_qq_plot(evaluated, tmp_path):
 
 def test_report_still_reads_an_older_metrics_file(evaluated, tmp_path):
     _, _, metrics, out = evaluated
-    old = tmp_path / "eval"
+    old = out / "eval_older"             # beside the evaluation: its inputs are where it names them
+    shutil.rmtree(old, ignore_errors=True)
     shutil.copytree(out / "eval", old)
     legacy = json.loads((old / "metrics.json").read_text())
     del legacy["centre_noise"]
@@ -172,3 +175,24 @@ def test_report_still_reads_an_older_metrics_file(evaluated, tmp_path):
     build_report(old, tmp_path / "report.html")
     html = (tmp_path / "report.html").read_text()
     assert "older metrics file" in html and "Is the reported covariance honest?" not in html
+
+
+def test_the_report_is_the_same_from_any_folder_or_one_line_without_its_inputs(evaluated, tmp_path, monkeypatch):
+    """The evaluation records its inputs relative to its folder: report from inside the tree and
+    from elsewhere gives the same bytes (the date pinned by SOURCE_DATE_EPOCH); the evaluation
+    folder copied away from its inputs is a one-line error naming the missing input, not a report
+    without its pictures and exit 0."""
+    _, _, _, out = evaluated
+    metrics = json.loads((out / "eval" / "metrics.json").read_text())
+    assert not Path(metrics["poses"]["path"]).is_absolute() and not Path(metrics["dataset"]["root"]).is_absolute()
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764720000")
+    monkeypatch.chdir(out)
+    build_report(Path("eval"), tmp_path / "a.html")
+    monkeypatch.chdir(tmp_path)
+    build_report(out / "eval", tmp_path / "b.html")
+    assert (tmp_path / "a.html").read_bytes() == (tmp_path / "b.html").read_bytes()
+    assert "2025-12-03T00:00:00+00:00" in (tmp_path / "a.html").read_text()
+    shutil.copytree(out / "eval", tmp_path / "alone")
+    with pytest.raises(DatasetError, match=r"metrics\.json: (dataset\.root|poses\.path): .* not found .*: the report reads it"):
+        build_report(tmp_path / "alone", tmp_path / "c.html")
+    assert not (tmp_path / "c.html").exists()
