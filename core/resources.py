@@ -25,6 +25,11 @@ def shipped_configs() -> tuple[str, ...]:
     return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
 
 
+def shipped_dataset_configs() -> tuple[str, ...]:
+    """Names of the shipped configs that render a dataset (the acceptance spec is not one)."""
+    return tuple(n for n in shipped_configs() if n != "acceptance")
+
+
 def shipped_config(name: str) -> Path:
     """Path of a shipped config, by name (``quick`` or ``quick.toml``)."""
     stem = name[:-5] if name.endswith(".toml") else name

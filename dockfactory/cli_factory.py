@@ -11,7 +11,7 @@ from dockfactory.cli_args import add_set_flag, int_at_least, shard_spec, toleran
 from dockfactory.core.config import LICENSE_ID
 from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.resources import resolve_config
+from dockfactory.core.resources import resolve_config, shipped_dataset_configs
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator import published
 from dockfactory.generator.dataset import dataset_lock, identity, writer_lock
@@ -179,7 +179,8 @@ def add_subcommands(sub) -> None:
     """Register render, dataset, check-config and show on ``sub`` (argparse subparsers)."""
 
     r = sub.add_parser("render", help="render (the missing frames of) a dataset from a TOML config")
-    r.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, paper, ideal, detector)")
+    r.add_argument("config", help="TOML config file, or the name of a shipped one "
+                                  f"({', '.join(shipped_dataset_configs())})")
     r.add_argument("--out", required=True, help="dataset directory")
     r.add_argument("--workers", type=int_at_least(1), default=1, help="render processes sharing the cores")
     r.add_argument("--shard", type=shard_spec, default=(1, 1), metavar="K/N",

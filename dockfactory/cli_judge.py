@@ -11,7 +11,7 @@ from dockfactory.cli_factory import load_checked
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.names import MIN_SCORE, SPLITS
-from dockfactory.core.resources import default_acceptance, resolve_config
+from dockfactory.core.resources import default_acceptance, resolve_config, shipped_dataset_configs
 from dockfactory.eval.acceptance import criterion_lines, load_acceptance, verdict_exit_status
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.envelope import EnvelopeGrid
@@ -222,7 +222,8 @@ def _add_report_parser(sub) -> None:
 
 def _add_run_parser(sub) -> None:
     u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")
-    u.add_argument("config", help="TOML config file, or the name of a shipped one (smoke, quick, ...)")
+    u.add_argument("config", help="TOML config file, or the name of a shipped one "
+                                  f"({', '.join(shipped_dataset_configs())})")
     u.add_argument("--out", required=True, help="work directory")
     u.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
     u.add_argument("--weights", help="detector checkpoint (default: the shipped one; not with --train)")

@@ -100,3 +100,15 @@ def test_bench_readme_names_every_script(repo_root):
     scripts = sorted(p.name for p in (repo_root / "bench").iterdir() if p.suffix in (".py", ".sh"))
     missing = [s for s in scripts if f"`{s}`" not in index]
     assert not missing, f"bench/README.md does not describe {missing}"
+
+
+@pytest.mark.parametrize("command", ["render", "run"])
+def test_the_help_names_every_shipped_config(command, capsys):
+    """render --help and run --help list every shipped dataset config by name (they once listed 5)."""
+    from dockfactory.core.resources import shipped_dataset_configs
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert len(shipped_dataset_configs()) >= 8
+    for name in shipped_dataset_configs():
+        assert name in text, name
