@@ -112,3 +112,14 @@ def test_the_help_names_every_shipped_config(command, capsys):
     assert len(shipped_dataset_configs()) >= 8
     for name in shipped_dataset_configs():
         assert name in text, name
+
+
+def test_the_readme_frame_counts_are_the_configs_plans(repo_root):
+    """Each shipped config the README's table counts ("N frames") plans exactly N frames (smoke's
+    was given as 6 while it renders 10)."""
+    from dockfactory.generator.sampler import frame_plan
+    rows = re.findall(r"^\| `(\w+)` \| ([\d,]+) frames", (repo_root / "README.md").read_text(), re.M)
+    assert {"smoke", "quick"} <= {name for name, _ in rows}
+    for name, count in rows:
+        cfg = config_from_dict(tomllib.loads(shipped_config(name).read_text()))
+        assert len(frame_plan(cfg)) == int(count.replace(",", "")), name
