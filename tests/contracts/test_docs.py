@@ -123,3 +123,14 @@ def test_the_readme_frame_counts_are_the_configs_plans(repo_root):
     for name, count in rows:
         cfg = config_from_dict(tomllib.loads(shipped_config(name).read_text()))
         assert len(frame_plan(cfg)) == int(count.replace(",", "")), name
+
+
+def test_the_documented_plan_frames_example_runs(repo_root, capsys):
+    """docs/acceptance.md's plan-frames example, run as written: exit 0 with a plan for every gated
+    component (it once left y out and exited 2)."""
+    import shlex
+    text = (repo_root / "docs" / "acceptance.md").read_text()
+    example = re.search(r"`(dockfactory plan-frames [^`]+)`", text).group(1)
+    assert main(shlex.split(example)[1:]) == 0
+    out = capsys.readouterr().out
+    assert all(f"localization: {c}: expected" in out for c in ("x", "y", "alpha"))
