@@ -1,7 +1,7 @@
 """The ``dockfactory`` command line: the root parser and ``main``. The command groups live in one
 module each (``cli_factory``: render, dataset, check-config, show; ``cli_judge``: solve,
 evaluate, report, run; ``cli_detector``: train, detect, ablate, export-onnx, noise-card;
-``cli_measure``: measure; ``cli_plan``: plan-frames; ``cli_layout``: layout) and share their
+``cli_measure``: measure; ``cli_plan``: plan-frames; ``cli_layout``: layout, schema) and share their
 argument types (``cli_args``). Bad input (DockfactoryError) is one line and exit 2; argparse's
 own errors too."""
 from __future__ import annotations
@@ -15,6 +15,7 @@ from dockfactory.cli_args import output_path
 from dockfactory.cli_detector import add_subcommands as add_detector_commands
 from dockfactory.cli_factory import add_subcommands as add_factory_commands
 from dockfactory.cli_judge import add_eval_commands
+from dockfactory.cli_layout import add_schema_subcommand
 from dockfactory.cli_layout import add_subcommand as add_layout_command
 from dockfactory.cli_measure import add_subcommand as add_measure_command
 from dockfactory.cli_plan import add_subcommand as add_plan_command
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_measure_command(sub)
     add_plan_command(sub)
     add_layout_command(sub)
+    add_schema_subcommand(sub)
     for parser in _all_parsers(sub):
         for action in parser._actions:
             if action.dest == "out" and action.type is None:

@@ -1,12 +1,17 @@
 """``dockfactory layout``: write a layout file (the measured markers ``measure``, ``solve`` and
 ``evaluate`` take with ``--layout``) from a CSV of measured coordinates, or from a config's
-factory scene. Both are checked as every layout file is before anything is written."""
+factory scene. Both are checked as every layout file is before anything is written.
+``dockfactory schema``: the JSON Schema of the factory's file formats (the labels), for the
+user's own tools."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from dockfactory.cli_args import float_in
 from dockfactory.core.config import load_config
+from dockfactory.core.io import write_text_atomic
+from dockfactory.core.label_schema import SCHEMAS
 from dockfactory.core.layout_csv import SURFACES, UNITS_MM, layout_from_csv, write_layout
 from dockfactory.core.layout_file import MAX_SIGMA_MM
 from dockfactory.core.resources import resolve_config
@@ -55,3 +60,20 @@ def add_subcommand(sub) -> None:
     f.add_argument("config", help="TOML config file or a shipped config's name")
     f.add_argument("--out", required=True, help="the layout file to write (JSON)")
     f.set_defaults(func=cmd_from_config)
+
+
+def cmd_schema(args) -> int:
+    text = json.dumps(SCHEMAS[args.format], indent=1) + "\n"
+    if args.out:
+        write_text_atomic(args.out, text)
+    else:
+        print(text, end="")
+    return 0
+
+
+def add_schema_subcommand(sub) -> None:
+    """Register ``schema FORMAT [--out FILE]`` on ``sub``."""
+    p = sub.add_parser("schema", help="the JSON Schema of a file format (labels): print it or write it")
+    p.add_argument("format", choices=tuple(SCHEMAS), help="labels: labels/<frame_id>.json")
+    p.add_argument("--out", default=None, help="write it here (default: standard output)")
+    p.set_defaults(func=cmd_schema)
