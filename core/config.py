@@ -417,6 +417,8 @@ def load_config(path) -> Config:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     return config_from_dict(data, str(path))
 
 

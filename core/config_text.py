@@ -71,10 +71,16 @@ def apply_overrides(data: dict, sets, source: str) -> dict:
         parts = key.strip().split(".")
         if not eq or len(parts) < 2 or not all(parts):
             raise ConfigError(f"--set {item!r}: expected TABLE.KEY=VALUE (e.g. dataset.frames=10)")
+        bad = next((c for c in item if ord(c) < 0x20 or ord(c) == 0x7F), None)
+        if bad is not None:
+            raise ConfigError(f"--set {item!r}: control character {bad!r} (a newline, a tab, ...): "
+                              "one line of printable text expected")
         try:
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
             value = text.strip()
+        except RecursionError:
+            raise ConfigError(f"--set {item[:60]!r}...: its value nests too deeply") from None
         node = merged
         for p in parts[:-1]:
             node = node.setdefault(p, {})
@@ -99,6 +105,8 @@ def load_config_text(path, sets=()) -> tuple[Config, str]:
         raise ConfigError(f"{path}: not a TOML config: not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     if not sets:
         return config_from_dict(data, str(path)), text
     merged = apply_overrides(data, sets, str(path))

@@ -15,8 +15,8 @@ from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.cli_args import (
     MAX_THREADS,
     float_in,
+    int_in,
     lens_prior,
-    non_negative_int,
     positive_int,
     thread_count,
     torch_threads,
@@ -29,6 +29,8 @@ from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
 from dockfactory.measure_selfcal import parse_window
 from dockfactory.measure_stream import FILTERS, PREFETCH, StreamOptions, measure_stream, stream_decider
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
+
+MAX_CAMERA_INDEX = 1023   # capture device numbers (V4L2 /dev/videoN, DirectShow, AVFoundation) are small
 
 
 def _weights(args) -> Path:
@@ -146,7 +148,7 @@ def _add_stream_args(m) -> None:
     """The flags of measure on a stream (--video, --camera; dockfactory.measure_stream)."""
     m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
                                    "pattern such as frames/%%06d.png: one JSON line per frame (--jsonl)")
-    m.add_argument("--camera", type=non_negative_int, metavar="INDEX",
+    m.add_argument("--camera", type=int_in(0, MAX_CAMERA_INDEX), metavar="INDEX",
                    help="measure the frames of capture device INDEX as they come (Ctrl-C ends it, with the summary)")
     m.add_argument("--jsonl", help="a stream's JSON lines: a file, or - for standard output (the default)")
     m.add_argument("--filter", choices=FILTERS,

@@ -96,6 +96,8 @@ def load_acceptance(path) -> AcceptanceSpec:
         raise ConfigError(f"{path}: acceptance spec is not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     # a table that is given replaces the default gates wholesale: only what it names is gated
     spec = build_dataclass(AcceptanceSpec, data, str(path))
     validate_acceptance(spec, data, str(path))

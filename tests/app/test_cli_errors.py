@@ -283,3 +283,29 @@ def test_detector_flags(tmp_path, capsys, argv):
     code, _, err = run_cli(argv, capsys)
     assert code == 2 and argv[-2] in _one_line_error(err)
     assert sorted(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", [["check-config"], ["render", "--out", "ds"], ["plan-frames", "--rmse", "x=0.4"]])
+def test_a_deeply_nested_toml_is_one_line(tmp_path, capsys, command):
+    """A config (or spec) nested thousands deep: exit 2, one line naming the file (it was a
+    RecursionError traceback); nothing written."""
+    path = tmp_path / "deep.toml"
+    path.write_text("[spec]\nx = " + "[" * 5000 + "]" * 5000 + "\n")
+    argv = [command[0], str(path)] + [str(tmp_path / a) if a == "ds" else a for a in command[1:]]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 2 and "deep.toml: not valid TOML: its arrays or tables nest too deeply" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "ds").exists()
+
+
+@pytest.mark.parametrize("value", ["dataset.name=a\nb", "dataset.name=a\rb", "dataset.name=a\x01b", "dataset.name=a\tb"])
+def test_a_set_value_with_a_control_character_is_one_line(capsys, value):
+    code, _, err = run_cli(["check-config", "smoke", "--set", value], capsys)
+    assert code == 2 and "control character" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_huge_camera_index_is_refused_by_the_parser(tmp_path, capsys):
+    """--camera 10^20 (OpenCV: 'Python int too large to convert to C long', a garbled error list):
+    refused before anything opens, naming the range."""
+    with pytest.raises(SystemExit) as exc:
+        main(["measure", "--camera", "99999999999999999999", "--layout", str(tmp_path / "l.json")])
+    assert exc.value.code == 2 and "expected an integer in [0, 1023]" in capsys.readouterr().err
