@@ -215,3 +215,17 @@ def calibration_text(cal: Calibration, fmt: str) -> str:
 def write_calibration(cal: Calibration, path, fmt: str) -> None:
     """Write ``cal`` to ``path`` in ``fmt`` (atomically)."""
     write_text_atomic(path, calibration_text(cal, fmt))
+
+
+def ideal_pixels(cal: Calibration, uv) -> tuple[np.ndarray, float]:
+    """(uv', f): image points ``uv`` (n, 2) px of the calibrated camera ``cal`` as the ideal
+    pinhole camera with square pixels of focal ``f`` = sqrt(fx fy) px and principal point (cx, cy)
+    sees them: the lens's distortion taken out (cv2.undistortPoints) and fx / fy made one. What a
+    pinhole solver with that principal point takes for the calibrated camera's image."""
+    f = math.sqrt(cal.fx * cal.fy)
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+    if uv.shape[0] == 0:
+        return uv.reshape(0, 2), f
+    p = np.array([[f, 0.0, cal.cx], [0.0, f, cal.cy], [0.0, 0.0, 1.0]])
+    out = cv2.undistortPoints(uv, cal.K, np.array(cal.dist, dtype=np.float64), P=p)
+    return out.reshape(-1, 2), f

@@ -22,6 +22,7 @@ from dockfactory.cli_args import (
     torch_threads,
     unit_float,
 )
+from dockfactory.core.calibration_files import read_calibration
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
 from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
 from dockfactory.eval.conformity import exit_status
@@ -62,6 +63,8 @@ def _check_inputs(args) -> bool:
         raise DockfactoryError("measure: --out is needed with images")
     if stream and args.out is not None:
         raise DockfactoryError("--out: a stream writes JSON lines (--jsonl FILE or - for standard output)")
+    if stream and args.calibration:
+        raise DockfactoryError("--calibration: for images (files or folders); a stream does not take it yet")
     return stream
 
 
@@ -90,7 +93,12 @@ def cmd_measure(args) -> int:
     if _check_inputs(args):
         return cmd_measure_stream(args)
     weights = _weights(args)
-    camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic, args.lens_prior)
+    calibration = read_calibration(args.calibration) if args.calibration else None
+    if calibration is not None and (args.lens_prior is not None or args.camera_model not in (None, "pinhole")
+                                    or args.self_calibrate):
+        raise DockfactoryError("--calibration: the camera is calibrated; --lens-prior, --camera-model and "
+                               "--self-calibrate estimate what it states")
+    camera = CameraInput(args.cfa, args.raw_black, args.raw_white, args.demosaic, args.lens_prior, calibration)
     options = MeasureOptions(args.backend, args.workers or 2, args.overlay_size or None, camera, args.max_megapixels)
     torch_threads(args.threads)
 
@@ -161,6 +169,9 @@ def _add_stream_args(m) -> None:
     m.add_argument("--roi", type=positive_int, metavar="N",
                    help="a stream: detect in a window around the previous frame's markers, the full frame every N "
                         "frames and whenever the window loses a marker (faster; default: every frame whole)")
+    m.add_argument("--calibration", default=None, metavar="FILE",
+                   help="the camera's calibration (OpenCV YAML / JSON, ROS camera_info YAML, COLMAP cameras.txt): "
+                        "its principal point and distortion are known (files; not with a stream yet)")
     m.add_argument("--lens-prior", type=lens_prior, default=None,
                    help="what is plausible for the intrinsics the camera model does not estimate, carried into "
                         "every pose's uncertainty: default (principal point within 0.04 x the image width, "

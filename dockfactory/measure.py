@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dockfactory.core.calibration_files import Calibration, ideal_pixels
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
@@ -70,6 +71,7 @@ MEASURE_FORMAT = "dockfactory.measure/1"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")   # a one-channel 16-bit PNG is a raw frame
 MAX_WORKERS = 16   # measure's worker processes (each holds a detector: about 0.3 GB)
 NO_MARKERS = "no markers detected"   # the category of a frame without one detection
+CALIBRATED_LENS = LensPrior(marginalise=False)   # a calibrated camera's lens: known, nothing marginalised
 
 
 @dataclass
@@ -132,7 +134,7 @@ def _detect_and_solve(detector, markers, index, path, camera_model, min_score, c
     if failed is not None:
         return Frame(index, path, failed)
     return solve_image(detector, markers, index, path, image, camera_model, min_score, camera.cfa,
-                       path.suffix.lower() in (".jpg", ".jpeg"), lens=camera.lens)
+                       path.suffix.lower() in (".jpg", ".jpeg"), lens=camera.lens, calibration=camera.calibration)
 
 
 def detect_in(detector, image: np.ndarray, roi: tuple | None = None, cfa: str | None = None,
@@ -155,13 +157,14 @@ def detect_in(detector, image: np.ndarray, roi: tuple | None = None, cfa: str | 
 
 def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, camera_model: str, min_score: float,
                 cfa: str | None = None, jpeg: bool = False, roi: tuple | None = None,
-                lens: LensPrior | None = None) -> Frame:
+                lens: LensPrior | None = None, calibration: Calibration | None = None) -> Frame:
     """Detect and solve one decoded image ``(H, W, 3) uint8`` RGB (its own camera model fit; the
     principal point assumed is its centre): the per-image path of measure, shared with the stream
     path (dockfactory.measure_stream). ``path`` names the frame in a failure's reason; ``cfa`` and
     ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect); ``roi``: detect in this
     region only (:func:`detect_in`); ``lens`` the lens prior marginalised into the covariance (None:
-    an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS). The record carries ``image_size`` and ``timing_ms`` (detect,
+    an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS); ``calibration`` the camera's
+    (:func:`calibrated_solve`). The record carries ``image_size`` and ``timing_ms`` (detect,
     solve)."""
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
@@ -172,6 +175,9 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     if len(centres[0]) == 0:
         why = f"{NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
+    elif calibration is not None:
+        frame.record, frame.used_points, frame.used_edges = calibrated_solve(detector, markers, path, (w, h), centres,
+                                                                             calibration)
     else:
         frame.record, frame.used_points, frame.used_edges = solve_frame(
             markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens,
@@ -182,6 +188,27 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
     return frame
+
+
+def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration):
+    """(record, used points, used edges) of one image of a calibrated camera: its centres (and
+    boxes) taken to the ideal square-pixel pinhole camera (core.calibration_files.ideal_pixels),
+    solved with the calibration's principal point, the lens known (nothing marginalised) and the
+    pinhole model; the focal is solved and the record's ``calibration`` gives the calibrated one.
+    An image of another size than the calibration's is not ok (category "calibration size")."""
+    if tuple(size) != (cal.width, cal.height):
+        why = f"{path}: the image is {size[0]}x{size[1]}, the calibration is for {cal.width}x{cal.height}"
+        return {"ok": False, "category": "calibration size", "reason": why}, {}, {}
+    cls, uv, boxes, refined, edge = centres
+    ideal, focal = ideal_pixels(cal, uv)
+    if boxes is not None:
+        lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
+        boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
+    options = docking_options(detector.centre_noise_px, CALIBRATED_LENS, detector.section_shift_px)
+    record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
+                                      "pinhole", options)
+    record["calibration"] = {"focal_px": focal, "principal_point": [cal.cx, cal.cy], "distortion": list(cal.dist)}
+    return record, used, edges
 
 
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,

@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from dockfactory.core.calibration_files import Calibration
 from dockfactory.core.camera_chain import develop_raw
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
@@ -41,12 +42,17 @@ class CameraInput:
     frames are refused), then grey-world white balance, ``demosaic`` and the sRGB curve.
     ``lens``: what is plausible for the intrinsics the camera model does not estimate
     (solver.options.LensPrior), marginalised into every pose's uncertainty; None: an uncalibrated
-    camera's generic ranges (eval.solve_frames.UNCALIBRATED_LENS)."""
+    camera's generic ranges (eval.solve_frames.UNCALIBRATED_LENS). ``calibration``: the camera's
+    calibration (core.calibration_files.Calibration: ``measure --calibration FILE``): its
+    principal point and distortion are then known (the detected centres are taken to the ideal
+    pinhole camera before the solve, nothing marginalised); the focal is still solved and
+    reported beside the calibrated one."""
     cfa: str | None = None
     raw_black_dn: float = 0.0
     raw_white_dn: float | None = None
     demosaic: str = "mhc"
     lens: LensPrior | None = None
+    calibration: Calibration | None = None
 
     def __post_init__(self):
         if self.cfa is not None and self.cfa not in PATTERNS:
