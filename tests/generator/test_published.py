@@ -355,3 +355,19 @@ def test_a_gpu_rerender_is_checked_against_a_cpu_release_within_the_tolerance(re
     (sub / "dataset.json").write_text(json.dumps({**ident, "config": other}))
     rep = published.verify_against(sub, pub / "manifest.json")
     assert not rep.ok and "another config" in rep.problems[0]
+
+
+def test_a_config_text_that_states_a_moved_default_still_verifies_and_another_config_does_not(release):
+    """Config texts that differ in a key stated or left out at its identity-neutral value (paper.toml
+    pins label-aware sampling off since 32 became the default; its published text left it out):
+    the same config, a note, not a problem. A text that resolves to another config is still one."""
+    pub, sub, ids = release
+    text = (sub / "config.toml").read_text()
+    assert "\nmarker_samples = 0\n" in text                      # the smoke config pins it
+    (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\n# left to the default\n", 1))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert rep.ok, rep.text()
+    assert any("config.toml: its text is not the published one" in n for n in rep.notes)
+    (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\nmarker_samples = 8\n", 1))
+    rep = published.verify_against(sub, pub / "manifest.json")
+    assert not rep.ok and "config.toml: differs from the manifest" in rep.problems
