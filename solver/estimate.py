@@ -54,7 +54,10 @@ class PnPfResult(CameraPose):
       (2 n - 7), or inf when the caller gave the noise (``sigma_px``) or a floor for it
       (``RefineOptions.sigma_floor_px``);
     - ``focal_at_bound``: the estimate fell outside the ``focal_range_px`` given to
-      :func:`solver.solve_pnpf` and is the pose refined at the nearer bound (solver.focal_prior).
+      :func:`solver.solve_pnpf` and is the pose refined at the nearer bound (solver.focal_prior);
+    - ``other_focal_px``: the focal (px) of a separate basin of the focal profile that explains
+      the points about as well (then ``focal_determined`` is False; :mod:`solver.focal_basins`),
+      None when there is none.
     """
 
     cam_from_world: np.ndarray
@@ -69,6 +72,7 @@ class PnPfResult(CameraPose):
     focal_determined: bool = True
     focal_at_bound: bool = False
     noise_dof: float = float("inf")
+    other_focal_px: float | None = None
 
     @property
     def std(self) -> np.ndarray:

@@ -17,6 +17,7 @@ from dockfactory.solver.checks import (
 )
 from dockfactory.solver.errors import InvalidSolverInput
 from dockfactory.solver.estimate import PnPfResult, estimate_pnpf
+from dockfactory.solver.focal_basins import settle_focal_basin
 from dockfactory.solver.focal_prior import apply_focal_range, check_focal_range
 from dockfactory.solver.focal_profile import widen_along_focal_profile
 from dockfactory.solver.options import RansacOptions, RefineOptions
@@ -48,7 +49,9 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
     that were computed (``all_candidates=True``: always every one).
 
     Returns a :class:`PnPfResult`; an undetermined focal (near-planar, fronto-parallel points at
-    this noise) is returned with ``focal_determined=False``, not refused; gate the covariance on
+    this noise, or a second basin of the focal that explains the points about as well:
+    :mod:`solver.focal_basins`, ``other_focal_px``) is returned with ``focal_determined=False``,
+    not refused; gate the covariance on
     ``uncertainty_determined`` (focal determined, noise given, floored or from enough residuals).
     A weakly determined focal's covariance is widened along its likelihood profile where the
     linearised one is too narrow (:mod:`solver.focal_profile`).
@@ -70,12 +73,19 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
         est = estimate_pnpf(p3, p2, pp, sigma_px=sigma_px, all_candidates=all_candidates,
                             accept_rmse=accept, options=refine_options)
         res = est.result(np.ones(p3.shape[0], dtype=bool))
+    return _settled(p3, p2, pp, res, sigma_px, refine_options, focal_range)
+
+
+def _settled(p3, p2, pp, res: PnPfResult, sigma_px, options: RefineOptions, focal_range) -> PnPfResult:
+    """The estimate ``res`` in the focal profile's best basin (or flagged), at the zoom range's
+    bound when outside it, its covariance widened along the profile, its noise dof stated."""
     keep = res.inliers
+    res = settle_focal_basin(p3[keep], p2[keep], pp, res, sigma_px, options, focal_range)
     if focal_range is not None:
-        res = apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, refine_options)
+        res = apply_focal_range(p3[keep], p2[keep], pp, res, focal_range, sigma_px, options)
     if not res.focal_at_bound:
-        res = widen_along_focal_profile(p3[keep], p2[keep], pp, res, refine_options)
-    return with_noise_dof(res, sigma_px, refine_options)
+        res = widen_along_focal_profile(p3[keep], p2[keep], pp, res, options)
+    return with_noise_dof(res, sigma_px, options)
 
 
 def with_noise_dof(res: PnPfResult, sigma_px: float | None, options: RefineOptions) -> PnPfResult:

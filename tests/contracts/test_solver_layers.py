@@ -70,7 +70,7 @@ LAYERS = {
     # 2 refinement (the one LM, Jacobian, covariance) and the bounds on the same Jacobian
     "refine": 2, "crb": 2,
     # 3 estimators
-    "estimate": 3, "model_fit": 3, "model_error": 3, "section_shift": 3, "joint": 3, "focal_prior": 3, "focal_profile": 3,
+    "estimate": 3, "model_fit": 3, "model_error": 3, "section_shift": 3, "joint": 3, "focal_prior": 3, "focal_profile": 3, "focal_basins": 3,
     # 4 robust estimation and identification
     "ransac": 4, "identify": 4,
     # 5 entry points and the docking pipeline
