@@ -17,6 +17,7 @@ from pathlib import Path
 import torch
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import temp_name
 
 CHECKPOINT_FORMAT = "dockfactory.detector.checkpoint/1"
 WEIGHTS_FORMAT = "dockfactory.detector.weights/1"
@@ -30,7 +31,7 @@ def save_atomic(obj: dict, path) -> Path:
     """torch.save to a temporary name beside ``path``, then rename."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = path.with_name(temp_name(path.name))
     try:
         torch.save(obj, tmp)
         with open(tmp, "rb") as fh:

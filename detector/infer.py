@@ -171,14 +171,20 @@ def sha256_of(path) -> str:
 
 
 class MarkerDetector:
-    """Loaded weights + inference settings. ``detect(image)`` -> list of detection dicts."""
+    """Loaded weights + inference settings. ``detect(image)`` -> list of detection dicts.
+
+    Raises CheckpointError (one line naming the file) for weights that cannot be used, those of a
+    detector whose classes are not the markers' (RedA, BlueB) included."""
 
     def __init__(self, weights, conf_threshold: float = MIN_SCORE, iou_threshold: float = NMS_IOU,
                  max_det: int = 100, refine: bool = True, backend: str = "torch"):
-        from dockfactory.detector.checkpoint import load_model
+        from dockfactory.detector.checkpoint import CheckpointError, load_model
         from dockfactory.detector.onnx_runtime import OnnxNetwork, resolve_backend
         self.weights = Path(weights)
         self.model, self.meta = load_model(self.weights, fuse=True)
+        if self.model.detect.nc != len(CLASS_NAMES):
+            raise CheckpointError(f"{self.weights}: a detector of {self.model.detect.nc} classes, not the "
+                                  f"markers' {len(CLASS_NAMES)} ({', '.join(CLASS_NAMES)})")
         self.backend = resolve_backend(backend)
         card = card_figures(self.weights)   # the weights' noise card (None where there is none)
         self.centre_noise_px, self.section_shift_px = card.centre_noise_px, card.section_shift_px

@@ -33,7 +33,7 @@ import torch
 from torch import nn
 
 from dockfactory.core.progress import Progress
-from dockfactory.core.io import sha256_file, write_json_atomic
+from dockfactory.core.io import remove_stale_temps, sha256_file, write_json_atomic
 from dockfactory.detector.anchors import (
     anchor_fitness,
     anchors_per_level,
@@ -55,6 +55,8 @@ from dockfactory.detector.data import (
 )
 from dockfactory.detector.loss import LossGains, YoloLoss
 from dockfactory.detector.model import ModelConfig, build_model
+
+STALE_CHECKPOINT_S = 24 * 3600.0   # a temporary checkpoint this old is stale even when its writer's pid is alive again
 
 
 @dataclass(frozen=True)
@@ -335,8 +337,11 @@ def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: b
     ``max_batches`` limits the batches per epoch (tests). With ``resume`` the run continues from
     ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the epoch count).
     ``init`` (a weights file or checkpoint path) fine-tunes from those weights (module docstring).
+    Temporary checkpoints in ``out`` whose writer is gone (a killed run) are removed first.
     """
     out = Path(out)
+    if out.is_dir():   # temporary checkpoints a killed run left (their writer is gone)
+        remove_stale_temps(out, max_age_s=STALE_CHECKPOINT_S)
     version = dataset.version_id
     init_w = load_init_weights(init) if init is not None else None
     frames = load_frames(dataset, "train")

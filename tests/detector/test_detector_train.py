@@ -179,3 +179,23 @@ def test_p2_model_trains_and_detects(tmp_path):
     det = MarkerDetector(tmp_path / "run" / "weights.pt", conf_threshold=0.0)
     from dockfactory.detector.data import read_rgb
     assert isinstance(det.detect(read_rgb(load_frames(data, "train")[0].image_path)), list)
+
+
+def test_resume_removes_a_killed_runs_temp_checkpoint(tmp_path):
+    """A run killed while writing ``last.pt`` leaves ``.last.pt.tmp-<host>-<pid>``; the next run in
+    the folder (``--resume``) removes it when its writer is gone, and leaves one whose writer is
+    alive (before: it stayed for good, 3-25 MB each)."""
+    import subprocess
+    import sys
+
+    from dockfactory.core.io import HOST, TMP_MARK
+    torch.set_num_threads(1)
+    _tiny(tmp_path, 1, "run")
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True).stdout.strip()
+    dead = tmp_path / "run" / f".last.pt{TMP_MARK}{HOST}-{gone}"
+    live = tmp_path / "run" / f".last.pt{TMP_MARK}{HOST}-{os.getppid()}"
+    dead.write_bytes(b"half a checkpoint")
+    live.write_bytes(b"another writer's")
+    _tiny(tmp_path, 2, "run", resume=True)
+    assert not dead.exists() and live.exists()

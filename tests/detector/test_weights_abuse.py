@@ -69,3 +69,31 @@ def test_detect_with_foreign_weights_is_exit_2_without_unsafe_advice(tmp_path, p
 
 def test_a_noise_card_and_the_solver_share_the_largest_centre_noise():
     assert MAX_CARD_NOISE_PX == MAX_SIGMA_PX
+
+
+def _three_class_weights(tmp_path):
+    """A well-formed weights file of a detector with 3 classes (the shipped one's recipe)."""
+    from dockfactory.detector.model import ModelConfig, build_model
+    w = torch.load(shipped_weights(), weights_only=True)
+    w["model_config"] = {**w["model_config"], "num_classes": 3}
+    cfg = {k: (tuple(tuple(a) for a in v) if k == "anchors" else tuple(v) if isinstance(v, list) else v)
+           for k, v in w["model_config"].items()}
+    w["state_dict"] = build_model(ModelConfig(**cfg)).state_dict()
+    path = tmp_path / "three.pt"
+    torch.save(w, path)
+    return path
+
+
+def test_weights_of_other_classes_are_refused(tmp_path, painted_source, capsys):
+    """Weights whose detector has other classes than the markers' load as a network, but every
+    consumer (detect, measure) refuses them in one line (before: class 2 had no name and
+    crashed, or a 2-class detector of other objects ran)."""
+    from dockfactory.detector.infer import MarkerDetector
+    path = _three_class_weights(tmp_path)
+    load_model(path)                                        # a valid network ...
+    with pytest.raises(CheckpointError, match="a detector of 3 classes, not the markers' 2 \\(RedA, BlueB\\)"):
+        MarkerDetector(path)                                # ... not a marker detector
+    code = main(["detect", str(painted_source), "--weights", str(path), "--out", str(tmp_path / "d.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "three.pt" in err[0] and "3 classes" in err[0], err
+    assert not (tmp_path / "d.json").exists()
