@@ -49,7 +49,7 @@ from dockfactory.measure_read import (
     probe_image,
     read_image,
 )
-from dockfactory.measure_store import MeasureStore, image_identity
+from dockfactory.measure_store import WRITE_ERROR, MeasureStore, image_identity
 from dockfactory.measure_verdict import add_conformity, add_uncertainty
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
@@ -336,17 +336,25 @@ def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_scor
                      size: float | None, camera: CameraInput = CameraInput(),
                      max_pixels: int = DEFAULT_MAX_PIXELS) -> Frame:
     """Read, detect, solve and (with ``size``) draw one image; the image is not kept. An error on
-    the way becomes the image's failure record ("measure error", with the exception's words)."""
+    the way becomes the image's failure record ("measure error", with the exception's words); an
+    OSError writing its overlay (a full disk, a read-only folder) is a "write error", which a
+    rerun measures again (measure_store.RETRIED): the image is fine, the disk was not."""
     try:
         frame = measure_frame(detector, markers, i, path, model, min_score, camera, max_pixels)
         if size is not None and frame.image is not None:
-            draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
+            try:
+                draw_measurement(frame.image, frame.detections, frame.record, markers, overlay_path(out, frame), size)
+            except OSError as exc:
+                return Frame(i, path, {"ok": False, "category": WRITE_ERROR, "reason": f"{path}: {_words(exc)}"})
     except Exception as exc:   # noqa: BLE001 -- one image's failure is recorded, the batch goes on
-        words = " ".join(str(exc).split())[:300] or "no message"
-        why = f"{type(exc).__name__}: {words}"
-        return Frame(i, path, {"ok": False, "category": "measure error", "reason": f"{path}: {why}"})
+        return Frame(i, path, {"ok": False, "category": "measure error", "reason": f"{path}: {_words(exc)}"})
     frame.image = None
     return frame
+
+
+def _words(exc: BaseException) -> str:
+    """``Type: message`` of an exception on one line, at most 300 characters of message."""
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:300] or 'no message'}"
 
 
 def measure_all(weights, markers, jobs, model: str, min_score: float, out: Path, size: float | None,

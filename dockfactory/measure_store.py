@@ -29,7 +29,8 @@ RUN_NAME = "measure_run.json"
 RUN_FORMAT = "dockfactory.measure_run/1"
 RESULT_NAMES = ("measurements.json", "measurements.csv")
 OWN_FILE = re.compile(r"^\d{5}_.*\.(png|json)$")
-RETRIED = ("worker died",)   # categories measured again by a rerun (the cause may have passed)
+WRITE_ERROR = "write error"    # an output of the image could not be written (a full disk)
+RETRIED = ("worker died", WRITE_ERROR)   # categories measured again by a rerun (the cause may have passed)
 
 
 def image_identity(path: Path) -> dict:

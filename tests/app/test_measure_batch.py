@@ -375,3 +375,28 @@ def test_the_image_limit_is_configurable_and_stated(source, tmp_path, capsys):
         main(["measure", "--help"])
     assert "the largest image measured, by the size its header states (default 50" in " ".join(
         capsys.readouterr().out.split())
+
+
+@pytest.mark.slow   # measure twice in this process
+def test_a_full_disk_is_no_image_result_and_a_rerun_retries_it(source, tmp_path, monkeypatch):
+    """The overlay of one image cannot be written (ENOSPC): that image is "write error", not a
+    stored "measure error" of the image (before: the rerun kept it as the image's result); the
+    rerun, the disk freed, measures that image again and only that one."""
+    import errno
+    folder, layout = source
+    real_draw, victim = measure_mod.draw_measurement, sorted(folder.glob("*.png"))[1].name
+
+    def full_disk(image, dets, record, markers, path, size):
+        if victim.rsplit(".", 1)[0] in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real_draw(image, dets, record, markers, path, size)
+    monkeypatch.setattr(measure_mod, "draw_measurement", full_disk)
+    out = tmp_path / "out"
+    assert _measure([folder], layout, out, "--workers", "1") == 1
+    rec = _by_name(_doc(out))[victim]
+    assert rec["category"] == "write error" and "No space left" in rec["reason"]
+    monkeypatch.setattr(measure_mod, "draw_measurement", real_draw)
+    real, calls = measure_mod.measure_and_draw, []
+    monkeypatch.setattr(measure_mod, "measure_and_draw", lambda *a: calls.append(a[3].name) or real(*a))
+    assert _measure([folder], layout, out, "--workers", "1") == 0
+    assert calls == [victim] and _by_name(_doc(out))[victim]["ok"]
