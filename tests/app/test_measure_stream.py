@@ -332,3 +332,49 @@ def test_a_sequence_frame_of_another_size_is_refused_in_one_line_and_the_others_
     record = measurer.solve(2, items[2][4])
     assert record["ok"] is False and record["category"] == "frame size" and record["reason"].startswith("frame 2: ")
     assert measure_stream.sequence_frame_check(tmp_path / "video.mp4") is None
+
+
+def test_a_jsonl_file_another_stream_writes_is_refused_and_left_whole(tmp_path):
+    """Two streams into one ``--jsonl`` file: the second is refused in one line (at once when the
+    file is already held, else at its first line) and the first's lines stay whole (before:
+    the second truncated the file under the first and their lines interleaved)."""
+    path = tmp_path / "lines.jsonl"
+    first = measure_stream.LineSink(str(path))
+    first.write({"frame": 0})
+    with pytest.raises(measure_stream.DockfactoryError, match="lines.jsonl: another process is writing it"):
+        measure_stream.LineSink(str(path))
+    path.unlink()                                   # a file made after the second sink was checked ...
+    first.close()
+    first = measure_stream.LineSink(str(path))
+    second = measure_stream.LineSink(str(path))
+    first.write({"frame": 0})
+    with pytest.raises(measure_stream.DockfactoryError, match="another process is writing it"):
+        second.write({"frame": 99})                 # ... is refused at the second's first line
+    first.write({"frame": 1})
+    first.close()
+    assert [json.loads(x)["frame"] for x in path.read_text().splitlines()] == [0, 1]
+    again = measure_stream.LineSink(str(path))      # free again: a new stream empties and writes it
+    again.write({"frame": 5})
+    again.close()
+    assert path.read_text() == '{"frame": 5}\n'
+
+
+def test_stream_statistics_use_constant_memory_and_keep_percentiles_within_1_percent():
+    """The summary's latency and timing percentiles come from log-spaced histograms: 200,000
+    frames use the same memory as 10, and p50 / p95 are within 1 % of numpy's (max exact)."""
+    stats = measure_stream.StreamStats()
+    rng = np.random.default_rng(0)
+    lat = rng.lognormal(np.log(40.0), 0.5, 200_000)
+    for k, v in enumerate(lat):
+        stats.add({"ok": k % 7 != 0, "category": "no_pose", "timing_ms": {"detect": v / 2}}, v)
+        if k == 9:
+            size = stats.latency_ms.bins.nbytes + stats.timing_ms["detect"].bins.nbytes
+    assert stats.latency_ms.bins.nbytes + stats.timing_ms["detect"].bins.nbytes == size
+    s = stats.summary(10.0)
+    for q, key in ((50, "p50"), (95, "p95")):
+        assert s["latency_ms"][key] == pytest.approx(np.percentile(lat, q), rel=0.01)
+    assert s["latency_ms"]["max"] == pytest.approx(lat.max(), abs=0.005)
+    assert s["timing_ms_median"]["detect"] == pytest.approx(np.median(lat) / 2, rel=0.01)
+    assert s["frames"] == 200_000 and s["failures"] == {"no_pose": 28_572}
+    with pytest.raises(ValueError, match=">= 0"):
+        stats.latency_ms.add(float("nan"))
