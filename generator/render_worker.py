@@ -13,6 +13,9 @@ prints is sent to stderr (the job's log). Requests:
 Replies: {"ok": true, ...} or {"ok": false, "error": "..."}.
 Fault injection for tests: DOCKFACTORY_FAULT="crash:<frame_id>" or "hang:<frame_id>" acts once per
 frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it); "crash-always:<frame_id>" every time.
+The worker dies with the process that started it (``DOCKFACTORY_WORKER_PARENT``, polled every
+0.5 s and checked again before a frame's files are written): that process held the dataset
+folder's lock.
 """
 from __future__ import annotations
 
@@ -117,8 +120,8 @@ class _Session:
     """The worker's state: the renderer after init, the init request, two scratch EXRs (frame
     k + 1 renders into one while frame k is read from the other)."""
 
-    def __init__(self, replies: _Replies, scratch: str):
-        self.replies = replies
+    def __init__(self, replies: _Replies, scratch: str, parent: int):
+        self.replies, self.parent = replies, parent
         self.exr_paths = [os.path.join(scratch, "render0.exr"), os.path.join(scratch, "render1.exr")]
         self.renderer = self.static = self.init = None
         self.n_rendered = 0
@@ -184,6 +187,7 @@ class _Session:
         init = self.init
         try:
             p0 = time.thread_time()
+            _exit_if_orphaned(self.parent)      # the last moment before any write
             done = finish_frame(frame, self.static, exr_path, init["root"], init["keep_exr"],
                                 init["visible_threshold"], timings, init["min_chroma"], init.get("keep_raw", False),
                                 crops)
@@ -199,10 +203,41 @@ class _Session:
             self.replies.send({**_error("render", exc), "frame_id": frame.spec.frame_id})
 
 
+PARENT_ENV = "DOCKFACTORY_WORKER_PARENT"   # the pid of the process that started the worker
+PARENT_POLL_S = 0.5
+
+
+def _parent_pid() -> int:
+    """The pid of the worker's starter (``PARENT_ENV``, else the parent at start-up)."""
+    text = os.environ.get(PARENT_ENV, "")
+    return int(text) if text.isdigit() else os.getppid()
+
+
+def _exit_if_orphaned(parent: int) -> None:
+    """End the worker at once when its starter is gone: the starter held the dataset folder's
+    lock, which went with it, so this worker may write nothing more (a frame written now could
+    collide with a new run's)."""
+    if os.getppid() != parent:
+        os._exit(3)
+
+
+def _watch_parent(parent: int) -> None:
+    """A daemon thread that ends the worker within PARENT_POLL_S of its starter's death (a
+    killed ``dockfactory render`` leaves no worker rendering on)."""
+    def watch() -> None:
+        while True:
+            _exit_if_orphaned(parent)
+            time.sleep(PARENT_POLL_S)
+    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+
+
 def main() -> int:
+    parent = _parent_pid()
+    _exit_if_orphaned(parent)
+    _watch_parent(parent)
     replies = _Replies(_protocol_stream())
     scratch = _scratch_dir()
-    session = _Session(replies, scratch)
+    session = _Session(replies, scratch, parent)
     try:
         for line in sys.stdin:
             req = json.loads(line)

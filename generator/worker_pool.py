@@ -36,6 +36,7 @@ class WorkerProcess:
         log = open(self.log_path, "ab")
         env = dict(os.environ if self.env is None else self.env)
         env.setdefault("PYTHONUNBUFFERED", "1")
+        env["DOCKFACTORY_WORKER_PARENT"] = str(os.getpid())   # the worker dies with this process
         pin_label_blas(env)   # the same label bytes on every x86-64 CPU (core.blas)
         # the installed package (no sys.path edits); the worker's cwd is the log folder, so no
         # folder of the caller's can shadow an import
