@@ -58,44 +58,57 @@ def _npz_bytes(**arrays) -> bytes:
     return buf.getvalue()
 
 
-def write_fingerprints(root, out_path) -> int:
+def _bound(manifest_sha256: str | None) -> dict:
+    """The npz entry binding a fingerprint file to the manifest it was published with."""
+    return {} if manifest_sha256 is None else {"manifest_sha256": np.array(manifest_sha256)}
+
+
+def write_fingerprints(root, out_path, manifest_sha256: str | None = None) -> int:
     """Fingerprints of every frame of the complete dataset at ``root`` (ids from its manifest):
     image tile means and label geometry digests, written atomically to ``out_path`` (npz:
-    ``frame_ids``, ``tiles``, ``label_geometry``); returns the count."""
+    ``frame_ids``, ``tiles``, ``label_geometry``, and ``manifest_sha256`` when given: the sha256
+    of the manifest published with them); returns the count."""
     root = Path(root)
     ids = _manifest_frame_ids(root)
     tiles = np.stack([read_image_tiles(root / "images" / f"{fid}.png") for fid in ids])
     geometry = [label_geometry_sha256((root / "labels" / f"{fid}.json").read_bytes()) for fid in ids]
     write_bytes_atomic(Path(out_path), _npz_bytes(frame_ids=np.array(ids), tiles=tiles.astype(np.float32),
-                                                  label_geometry=np.array(geometry)))
+                                                  label_geometry=np.array(geometry), **_bound(manifest_sha256)))
     return len(ids)
 
 
-def fingerprints_v2(frame_ids, label_texts) -> bytes:
+def fingerprints_v2(frame_ids, label_texts, manifest_sha256: str | None = None) -> bytes:
     """The npz bytes of fingerprint v2 of the labels ``label_texts`` (bytes, one per frame id):
     ``frame_ids``, ``label_core`` (digests), ``index`` (index-pass numbers, one row per frame,
-    NaN-padded) and ``index_len`` (each row's length)."""
+    NaN-padded), ``index_len`` (each row's length) and, when given, ``manifest_sha256``."""
     texts = list(label_texts)
-    return fingerprints_of(frame_ids, [label_core_sha256(t) for t in texts], [index_measurements(t) for t in texts])
+    return fingerprints_of(frame_ids, [label_core_sha256(t) for t in texts], [index_measurements(t) for t in texts],
+                           manifest_sha256)
 
 
-def fingerprints_of(frame_ids, cores, rows) -> bytes:
+def fingerprints_of(frame_ids, cores, rows, manifest_sha256: str | None = None) -> bytes:
     """The npz bytes of v2-format fingerprints from their parts: per frame id a label core digest
     and a row of index-pass numbers (``generator.label_prints``)."""
     index = np.full((len(rows), max((len(r) for r in rows), default=0)), np.nan)
     for i, r in enumerate(rows):
         index[i, :len(r)] = r
     return _npz_bytes(frame_ids=np.array(list(frame_ids)), label_core=np.array(cores), index=index,
-                      index_len=np.array([len(r) for r in rows], np.int64))
+                      index_len=np.array([len(r) for r in rows], np.int64), **_bound(manifest_sha256))
 
 
-def write_fingerprints_v2(root, out_path) -> int:
+def write_fingerprints_v2(root, out_path, manifest_sha256: str | None = None) -> int:
     """Fingerprint v2 of every label of the complete dataset at ``root``, written atomically."""
     root = Path(root)
     ids = _manifest_frame_ids(root)
     texts = [(root / "labels" / f"{fid}.json").read_bytes() for fid in ids]
-    write_bytes_atomic(Path(out_path), fingerprints_v2(ids, texts))
+    write_bytes_atomic(Path(out_path), fingerprints_v2(ids, texts, manifest_sha256))
     return len(ids)
+
+
+def bound_manifest_sha256(path: Path) -> str | None:
+    """The sha256 of the manifest a fingerprint file was published with (None: the file is absent
+    or older than the binding)."""
+    return _read_npz(Path(path), lambda z: str(z["manifest_sha256"]) if "manifest_sha256" in z.files else None)
 
 
 def _read_npz(path: Path, read) -> dict | None:

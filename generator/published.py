@@ -44,7 +44,7 @@ import numpy as np
 
 from dockfactory.core.config import config_from_identity
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.io import sha256_file, write_bytes_atomic
+from dockfactory.core.io import sha256_bytes, sha256_file, write_bytes_atomic
 from dockfactory.core.user_files import check_regular_file
 from dockfactory.generator.dataset import FRAME_ID_RE, DatasetError, load_identity
 from dockfactory.generator.dataset_check import verify
@@ -52,6 +52,7 @@ from dockfactory.generator.fingerprints import (
     FINGERPRINTS_NAME,
     FINGERPRINTS_V2_NAME,
     FINGERPRINTS_V3_NAME,
+    bound_manifest_sha256,
     read_fingerprints,
     read_fingerprints_v2,
     image_tiles,
@@ -141,9 +142,21 @@ def _load_published(manifest_path: Path) -> _Published:
     if problem:
         raise DatasetError(f"{manifest_path}: not a published dataset manifest: {problem}"[:400])
     records = {r["path"]: r for r in manifest["files"]}
+    _check_bound(manifest_path)
     return _Published(manifest, records, read_fingerprints(manifest_path.with_name(FINGERPRINTS_NAME)),
                       read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V2_NAME)),
                       read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V3_NAME)))
+
+
+def _check_bound(manifest_path: Path) -> None:
+    """DatasetError when a fingerprint file beside the manifest was published with another
+    manifest (a publish that stopped half-way); files older than the binding pass."""
+    mine = sha256_bytes(manifest_path.read_bytes())
+    for name in (FINGERPRINTS_NAME, FINGERPRINTS_V2_NAME, FINGERPRINTS_V3_NAME):
+        bound = bound_manifest_sha256(manifest_path.with_name(name))
+        if bound is not None and bound != mine:
+            raise DatasetError(f"{manifest_path.with_name(name)}: published with another manifest than "
+                               f"{manifest_path.name} (a publish that did not finish): publish again")
 
 
 def _manifest_problem(manifest) -> str | None:
@@ -370,7 +383,10 @@ def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) ->
 def publish(root, out) -> str:
     """Verify the complete dataset at ``root`` (every byte), then write its manifest.json (a byte
     copy) and the fingerprints of its frames (``fingerprints.npz``, ``fingerprints_v2.npz``) into
-    the folder ``out``; a damaged or incomplete dataset is refused and nothing is written."""
+    the folder ``out``; a damaged or incomplete dataset is refused and nothing is written. Each
+    file is written atomically, the fingerprints first and bound to the manifest (its sha256 in
+    them): a publish over an earlier one that stops half-way leaves the earlier manifest beside
+    fingerprints that name another, which verify refuses in one line (publish again)."""
     if not out:
         raise DatasetError("dataset publish needs --out FOLDER")
     report = verify(root)
@@ -378,8 +394,10 @@ def publish(root, out) -> str:
         raise DatasetError(report.refusal())
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    n = write_fingerprints(root, out / FINGERPRINTS_NAME)
-    write_fingerprints_v2(root, out / FINGERPRINTS_V2_NAME)
-    write_bytes_atomic(out / "manifest.json", (Path(root) / "manifest.json").read_bytes())
+    manifest = (Path(root) / "manifest.json").read_bytes()
+    bound = sha256_bytes(manifest)      # the fingerprints name their manifest, which is written last
+    n = write_fingerprints(root, out / FINGERPRINTS_NAME, bound)
+    write_fingerprints_v2(root, out / FINGERPRINTS_V2_NAME, bound)
+    write_bytes_atomic(out / "manifest.json", manifest)
     return (f"{root}: published {n} frames to {out / 'manifest.json'}, {out / FINGERPRINTS_NAME} "
             f"and {out / FINGERPRINTS_V2_NAME}")

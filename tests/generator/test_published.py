@@ -371,3 +371,31 @@ def test_a_config_text_that_states_a_moved_default_still_verifies_and_another_co
     (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\nmarker_samples = 8\n", 1))
     rep = published.verify_against(sub, pub / "manifest.json")
     assert not rep.ok and "config.toml: differs from the manifest" in rep.problems
+
+
+def test_a_publish_that_stops_half_way_over_an_earlier_one_is_refused(painted_source, release, tmp_path, monkeypatch):
+    """Publishing over an earlier release, stopped after the fingerprints and before the manifest:
+    the folder then holds the earlier manifest beside fingerprints of another; verify refuses
+    it in one line naming the file (before: it compared a re-render against a mix). A finished
+    publish binds every fingerprint file to its manifest."""
+    pub, sub, _ = release
+    assert published.bound_manifest_sha256(pub / published.FINGERPRINTS_NAME) == \
+        published.sha256_bytes((pub / "manifest.json").read_bytes())
+    other = tmp_path / "other"
+    shutil.copytree(painted_source, other)
+    doc = json.loads((other / "manifest.json").read_text())
+    doc["created_at"] = "another publish"               # another manifest of the same frames
+    (other / "manifest.json").write_text(json.dumps(doc))
+    real = published.write_bytes_atomic
+
+    def stop_at_manifest(path, data):
+        if path.name == "manifest.json":
+            raise KeyboardInterrupt                     # the machine goes down
+        return real(path, data)
+    monkeypatch.setattr(published, "write_bytes_atomic", stop_at_manifest)
+    monkeypatch.setattr(published, "verify", lambda root: type("R", (), {"ok": True})())
+    with pytest.raises(KeyboardInterrupt):
+        published.publish(other, pub)
+    monkeypatch.undo()
+    with pytest.raises(DatasetError, match=r"fingerprints.npz: published with another manifest than manifest.json"):
+        published.verify_against(sub, pub / "manifest.json")
