@@ -25,7 +25,7 @@ A layer-3 step of the single-section solver (beside :mod:`solver.focal_profile`)
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -42,11 +42,13 @@ BASIN_DELTA_CHI2 = 16.0      # another basin this close (in sigma^2 of RSS) expl
 BASIN_MIN_SEPARATION = 0.1   # |log f_other / f| below this is the same basin
 
 
+@dataclass(frozen=True)
 class _GridPoint:
     """The pose at one grid focal held fixed: rotation (3, 3), translation (3,) mm, focal px, RSS px^2."""
-
-    def __init__(self, rotation, translation, focal_px: float, rss: float):
-        self.rotation, self.translation, self.focal_px, self.rss = rotation, translation, focal_px, rss
+    rotation: np.ndarray
+    translation: np.ndarray
+    focal_px: float
+    rss: float
 
 
 def _rss(ref) -> float:
