@@ -151,7 +151,10 @@ def test_raw_frames_are_developed_and_measured(big, tmp_path, capsys):
     assert doc["camera"]["cfa"] == "RGGB" and doc["camera"]["raw_black_dn"] == 64
     for fid, rec in _poses(ref_doc).items():
         got = _poses(doc)[fid]
-        assert got["ok"] and sorted(got["marker_ids"]) == sorted(rec["marker_ids"])
+        # the same markers identified; the goodness-of-fit gate may leave one or two out of either
+        # (the painted frames' centre noise is near the shipped card's limit)
+        ids = [set(r["marker_ids"]) | set(r.get("left_out") or ()) for r in (got, rec)]
+        assert got["ok"] and ids[0] == ids[1]
         for k in ("x_mm", "y_mm", "alpha_deg"):
             i = POSE_NAMES.index(k)
             std = np.hypot(*(np.sqrt(np.asarray(r["covariance"])[i, i]) for r in (got, rec)))
