@@ -38,17 +38,13 @@ results/README.md, "Measurements behind the code's constants".
 Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
 over the disc: noise and shading), and how well
 the segmented area matches the area of the ellipse that its own moments imply and the area of
-the detector's box (occluded or merged markers score low), and the disc's point symmetry about
-the fitted centre (a projected disc is an ellipse; a part hidden or eaten by glare is not:
-:func:`asymmetry_px`). Below ``min_quality`` in the coverage pass the detector's box is kept and
-its centre returned; below it after the fit the fitted centre is returned, not refined. When
-the fit fails its checks (:func:`_fit_accepted`) the centroid and the moment box are returned,
-not refined, at quality 0.
+the detector's box (occluded or merged markers score low). Below ``min_quality`` the
+detector's box is kept and its centre returned. When the fit fails its checks
+(:func:`_fit_accepted`) the centroid and the moment box are returned.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -63,8 +59,7 @@ CLASS_CHANNEL = dict(enumerate(CLASS_CHANNELS))  # class id -> RGB channel of it
 @dataclass(frozen=True)
 class Refined:
     """``center: (2,) float64 px`` and ``box: (4,) float64 px`` (OpenCV convention), quality in [0, 1],
-    ``refined``: False when the centre is no trusted sub-pixel measurement (the detector's box
-    kept, the edge fit refused, or the quality below the gate); ``edge_px`` the edge fit's edge width
+    ``refined``: False when the detector's box was kept; ``edge_px`` the edge fit's edge width
     (Gaussian std, px; :class:`EdgeFit`), NaN when no edge fit gave the centre."""
     center: np.ndarray
     box: np.ndarray
@@ -114,7 +109,7 @@ class _Window:
     """What one coverage pass measured in its window: the score ``s``, its purity ``pur``, the
     pixel coordinates ``xs``, ``ys`` and the normalised radius ``rho`` of the pass's box (all
     (h, w)), the first ellipse (centre (2,) px and covariance (2, 2) px^2 of the coverage), the
-    disc and ring levels of the score, the soft coverage ``w`` (h, w) of the disc's component."""
+    disc and ring levels of the score."""
     s: np.ndarray
     pur: np.ndarray
     xs: np.ndarray
@@ -124,7 +119,6 @@ class _Window:
     cov: np.ndarray
     fg: float
     bg: float
-    w: np.ndarray | None = None
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
@@ -137,8 +131,7 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     ring mask lands on the disc and the cut at 1.3 box radii clips it. The second pass repeats
     the measurement in the window of the first refined ellipse (kept if it is refined too).
     :func:`fit_disc_edge` then fits the disc in the kept pass's window and gives the centre; the
-    box keeps the moment half-extents (plus ``edge_bias_px``) around it; :func:`finish_refined`
-    judges the result."""
+    box keeps the moment half-extents (plus ``edge_bias_px``) around it."""
     first, win = _refine_once(image, box, class_id, min_quality, edge_bias_px)
     if not first.refined:
         return first
@@ -146,52 +139,7 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     if second.refined:
         first, win = second, win2
     fit = edge_fit(win)
-    return finish_refined(image, first, win, None if fit is None else (fit.centre, fit.edge_px),
-                          min_quality, edge_bias_px)
-
-
-def finish_refined(image: np.ndarray, first: Refined, win: _Window, fitted, min_quality: float,
-                   edge_bias_px: float) -> Refined:
-    """The detection from the kept coverage pass (``first``, ``win``) and the edge fit's
-    ``fitted`` (centre (2,) px, edge width px), None when the fit was refused.
-
-    A refused fit leaves the coverage centroid, not refined, at quality 0 (an occluded or merged
-    disc whose edge is no ellipse: the measured cases were pixels off). Otherwise the quality
-    takes the disc's point symmetry about the fitted centre (:func:`symmetry_quality`): a
-    projected disc is an ellipse, symmetric about its centre; a part hidden by an occluder or
-    eaten by glare is not, and its fitted centre moves toward what is left. Below
-    ``min_quality`` the fitted centre is returned not refined."""
-    if fitted is None:
-        return replace(first, quality=0.0, refined=False)
-    quality = first.quality * symmetry_quality(asymmetry_px(win, fitted[0]))
-    out = refined_at(image, fitted[0], win, quality, edge_bias_px, fitted[1])
-    return out if quality >= min_quality else replace(out, refined=False)
-
-
-# The symmetry term of the quality is 1 up to ASYM_OK_PX of asymmetry and 0 from ASYM_BAD_PX (checked
-# on two scenes and at two render qualities: bench/results/centre_quality/README.md); the coverage is
-# binarised and smoothed by SYMMETRY_BLUR_PX first so that neither shading nor pixel noise counts.
-SYMMETRY_BLUR_PX = 1.0
-ASYM_OK_PX = 0.30
-ASYM_BAD_PX = 0.45
-
-
-def asymmetry_px(win: _Window, centre: np.ndarray) -> float:
-    """Mean distance (px) between the disc's edge and the edge of its copy turned 180 degrees about
-    ``centre`` (2,) px: the summed absolute difference of the smoothed coverage and its turned copy
-    over the perimeter of a disc of the coverage's area, halved (0 for an ellipse centred there; a
-    centre e px off an ellipse gives about 0.64 e)."""
-    w = cv2.GaussianBlur((win.w > 0.5).astype(np.float32), (0, 0), SYMMETRY_BLUR_PX)
-    cx, cy = centre[0] - win.xs[0, 0], centre[1] - win.ys[0, 0]
-    turn = np.float32([[-1, 0, 2 * cx], [0, -1, 2 * cy]])
-    turned = cv2.warpAffine(w, turn, (w.shape[1], w.shape[0]), flags=cv2.INTER_LINEAR, borderValue=0)
-    area = max(float(win.w.sum()), 1.0)
-    return float(np.abs(w - turned).sum()) / (4.0 * math.sqrt(math.pi * area))
-
-
-def symmetry_quality(asymmetry: float) -> float:
-    """The quality's symmetry term in [0, 1] of an asymmetry (px, :func:`asymmetry_px`)."""
-    return float(np.clip((ASYM_BAD_PX - asymmetry) / (ASYM_BAD_PX - ASYM_OK_PX), 0.0, 1.0))
+    return first if fit is None else refined_at(image, fit.centre, win, first.quality, edge_bias_px, fit.edge_px)
 
 
 def refined_at(image: np.ndarray, centre: np.ndarray, win: _Window, quality: float, edge_bias_px: float,
@@ -324,7 +272,7 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     rbox = np.array([mx - ex, my - ey, mx + ex, my + ey])
     rbox = np.clip(rbox, -0.5, np.array([w_img, h_img, w_img, h_img]) - 0.5)
     window = _Window(s=s, pur=pur, xs=xs, ys=ys, rho=rho, centre=np.array([mx, my]),
-                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg, w=w)
+                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg)
     return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True), window
 
 

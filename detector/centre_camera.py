@@ -103,4 +103,6 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
         own = fit_evidence(image, win, class_id, cfa, jpeg)
         fit = None if own is None else centre.edge_fit(own)
         fitted = None if fit is None else (fit.centre, fit.edge_px)
-    return centre.finish_refined(image, first, win, fitted, min_quality, edge_bias_px)
+    if fitted is None:
+        return first
+    return centre.refined_at(image, fitted[0], win, first.quality, edge_bias_px, fitted[1])

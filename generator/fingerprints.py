@@ -59,8 +59,8 @@ def _npz_bytes(**arrays) -> bytes:
 
 
 def _bound(manifest_sha256: str | None) -> dict:
-    """The npz entry binding a fingerprint file to the manifest it was published with."""
-    return {} if manifest_sha256 is None else {"manifest_sha256": np.array(manifest_sha256)}
+    """The npz entry binding a fingerprint file to the manifest it was published with (one string)."""
+    return {} if manifest_sha256 is None else {"manifest_sha256": np.array([manifest_sha256])}
 
 
 def write_fingerprints(root, out_path, manifest_sha256: str | None = None) -> int:
@@ -108,7 +108,16 @@ def write_fingerprints_v2(root, out_path, manifest_sha256: str | None = None) ->
 def bound_manifest_sha256(path: Path) -> str | None:
     """The sha256 of the manifest a fingerprint file was published with (None: the file is absent
     or older than the binding)."""
-    return _read_npz(Path(path), lambda z: str(z["manifest_sha256"]) if "manifest_sha256" in z.files else None)
+    return _read_npz(Path(path), _binding)
+
+
+def _binding(z) -> str | None:
+    if "manifest_sha256" not in z.files:
+        return None
+    a = z["manifest_sha256"]
+    if a.shape != (1,) or a.dtype.kind != "U":
+        raise ValueError(f"manifest_sha256 of shape {a.shape} and dtype {a.dtype} (one string expected)")
+    return str(a[0])
 
 
 def _read_npz(path: Path, read) -> dict | None:

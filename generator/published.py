@@ -148,15 +148,21 @@ def _load_published(manifest_path: Path) -> _Published:
                       read_fingerprints_v2(manifest_path.with_name(FINGERPRINTS_V3_NAME)))
 
 
+def manifest_binding(manifest: dict) -> str:
+    """The sha256 of a manifest's content (canonical JSON: the same for any serialisation of it),
+    which a published fingerprint file carries."""
+    return sha256_bytes(json.dumps(manifest, sort_keys=True, separators=(",", ":")).encode("utf-8"))
+
+
 def _check_bound(manifest_path: Path) -> None:
     """DatasetError when a fingerprint file beside the manifest was published with another
     manifest (a publish that stopped half-way); files older than the binding pass."""
-    mine = sha256_bytes(manifest_path.read_bytes())
+    mine = manifest_binding(json.loads(manifest_path.read_text(encoding="utf-8")))
     for name in (FINGERPRINTS_NAME, FINGERPRINTS_V2_NAME, FINGERPRINTS_V3_NAME):
         bound = bound_manifest_sha256(manifest_path.with_name(name))
         if bound is not None and bound != mine:
-            raise DatasetError(f"{manifest_path.with_name(name)}: published with another manifest than "
-                               f"{manifest_path.name} (a publish that did not finish): publish again")
+            raise DatasetError(f"{manifest_path}: not the manifest {name} was published with (edited, or "
+                               "a publish over another that did not finish): publish again")
 
 
 def _manifest_problem(manifest) -> str | None:
@@ -384,8 +390,8 @@ def publish(root, out) -> str:
     """Verify the complete dataset at ``root`` (every byte), then write its manifest.json (a byte
     copy) and the fingerprints of its frames (``fingerprints.npz``, ``fingerprints_v2.npz``) into
     the folder ``out``; a damaged or incomplete dataset is refused and nothing is written. Each
-    file is written atomically, the fingerprints first and bound to the manifest (its sha256 in
-    them): a publish over an earlier one that stops half-way leaves the earlier manifest beside
+    file is written atomically, the fingerprints first and bound to the manifest (the sha256 of
+    its content in them, :func:`manifest_binding`): a publish over an earlier one that stops half-way leaves the earlier manifest beside
     fingerprints that name another, which verify refuses in one line (publish again)."""
     if not out:
         raise DatasetError("dataset publish needs --out FOLDER")
@@ -395,7 +401,7 @@ def publish(root, out) -> str:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = (Path(root) / "manifest.json").read_bytes()
-    bound = sha256_bytes(manifest)      # the fingerprints name their manifest, which is written last
+    bound = manifest_binding(json.loads(manifest))   # the fingerprints name their manifest, written last
     n = write_fingerprints(root, out / FINGERPRINTS_NAME, bound)
     write_fingerprints_v2(root, out / FINGERPRINTS_V2_NAME, bound)
     write_bytes_atomic(out / "manifest.json", manifest)
