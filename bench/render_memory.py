@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: a render checks it (core.blas)
+
+import numpy as np  # noqa: E402
 
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402

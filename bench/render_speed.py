@@ -22,6 +22,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: a render checks it (core.blas)
+
 from dockfactory.core.config import config_from_dict  # noqa: E402
 from dockfactory.generator.render_job import JobOptions, run_render  # noqa: E402
 

@@ -4,15 +4,15 @@ BLAS kernel and its SIMD paths for sin, cos and kin.
 A label is float64 geometry (camera, poses, projected markers) and numpy hands its matrix products
 to OpenBLAS, which picks a kernel for the CPU it runs on. The Haswell, Zen and SkylakeX kernels
 round differently from the SSE3 one in the last bits, so the same config gave other label bytes on
-another machine (docs/datasets.md, "Publishing a dataset"). ``import dockfactory`` sets
-``OPENBLAS_CORETYPE`` to the SSE3 (Prescott) kernel, which every x86-64 CPU runs and which made the
-published paper dataset; it takes effect only if numpy has not been imported before dockfactory,
-so a render checks the kernel actually loaded (``check_label_blas``).
+another machine (docs/datasets.md, "Publishing a dataset"). The ``dockfactory`` command (and
+every render worker it starts) sets ``OPENBLAS_CORETYPE`` to the SSE3 (Prescott) kernel, which
+every x86-64 CPU runs and which made the published paper dataset; it takes effect only when set
+before numpy loads, so a render checks the kernel actually loaded (``check_label_blas``).
 
 numpy computes float64 sin, cos, arcsin, power... with Intel's SVML on CPUs with AVX-512 and with
 libm on the others; the two round the last bits of some inputs differently, and a frame's sampled
 scene (its angles) then differs in the last bits (the labels of the shipped configs differed on
-about 80 % of their frames between an AVX-512 and an AVX2 machine). ``import dockfactory``
+about 80 % of their frames between an AVX-512 and an AVX2 machine). The same pin
 switches numpy's AVX-512 paths off (``NPY_DISABLE_CPU_FEATURES``), so every CPU takes libm's; the
 same check refuses a render when numpy was loaded earlier with them on.
 """
@@ -31,6 +31,8 @@ except ImportError:   # numpy < 2
 from dockfactory import LABEL_BLAS_CORE, LABEL_SIMD_ENV, LABEL_SIMD_OFF, pin_label_arithmetic
 from dockfactory import LABEL_BLAS_ENV as ENV
 from dockfactory.core.errors import DockfactoryError
+
+_HOW_TO_PIN = "run the dockfactory command, or call dockfactory.pin_label_arithmetic(os.environ) before numpy loads"
 
 
 def pin_label_blas(environ=os.environ) -> None:
@@ -71,10 +73,10 @@ def check_label_blas() -> None:
     simd = numpy_simd_on()
     if simd:
         raise DockfactoryError(f"numpy runs its {simd[0]} paths: labels' sin and cos would differ in the last bits "
-                               f"from other machines' (import dockfactory before numpy, or set "
+                               f"from other machines' ({_HOW_TO_PIN}, or set "
                                f"{LABEL_SIMD_ENV}=\"{' '.join(LABEL_SIMD_OFF)}\")")
     core = openblas_core()
     if core is not None and core.lower() != LABEL_BLAS_CORE.lower():
         raise DockfactoryError(f"numpy's OpenBLAS runs its {core} kernel, not {LABEL_BLAS_CORE}: labels would "
-                               f"differ in the last bits from other machines' (import dockfactory before "
-                               f"numpy, or set {ENV}={LABEL_BLAS_CORE})")
+                               f"differ in the last bits from other machines' ({_HOW_TO_PIN}, or set "
+                               f"{ENV}={LABEL_BLAS_CORE})")

@@ -6,8 +6,12 @@ One import root; the subpackages live in the repository's folders (package-dir m
 ``dockfactory.eval`` (eval/, the judge); the app (command line, run, measure, ablate) is the
 modules of this folder; shipped configs and weights are ``dockfactory.configs`` and
 ``dockfactory.models``. Layers: core <- generator, blender_scenes, solver, detector <- eval <- app.
+
+Importing it, or any subpackage, changes no environment variable: the ``dockfactory`` command
+(:mod:`dockfactory.entry`) sets what the app needs (:func:`set_app_environment`) before numpy
+loads; a program that renders datasets through the library calls :func:`pin_label_arithmetic`
+on ``os.environ`` before it imports numpy, or a render is refused in one line (core.blas).
 """
-import os
 from importlib import metadata
 
 # numpy's OpenBLAS kernel, set before numpy loads it: label geometry is float64 matrix products,
@@ -31,12 +35,14 @@ def pin_label_arithmetic(environ) -> None:
     environ[LABEL_SIMD_ENV] = " ".join(dict.fromkeys(off + list(LABEL_SIMD_OFF)))
 
 
-pin_label_arithmetic(os.environ)
-# one OpenBLAS thread unless the user asks for more: the solver's linear systems have at most a few
-# dozen unknowns, where a second BLAS thread only adds its wake-up, and on busy cores (measure's two
-# worker processes, a render beside) each small solve then waits milliseconds for it
-# (bench/results/stream_speed/README.md)
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+def set_app_environment(environ) -> None:
+    """What the command line needs in ``environ`` before numpy and torch load: the label pins;
+    one OpenBLAS thread unless the user asks for more (the solver's linear systems have a few
+    dozen unknowns, where a second BLAS thread only adds its wake-up on busy cores); a passive
+    OpenMP wait unless set (the machine is shared with renders and worker processes)."""
+    pin_label_arithmetic(environ)
+    environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 try:
     __version__ = metadata.version("dockfactory")

@@ -1,6 +1,6 @@
 """``python -m dockfactory``: the command line (same as the ``dockfactory`` script)."""
 import sys
 
-from dockfactory.cli import main
+from dockfactory.entry import main
 
 sys.exit(main())

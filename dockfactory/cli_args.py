@@ -86,11 +86,10 @@ thread_count = int_in(1, MAX_THREADS)
 
 
 def torch_threads(threads: int | None):
-    """Import torch with a passive OpenMP wait policy (the machine is shared) and set the threads
-    (``threads`` in [1, MAX_THREADS]; None: one per core, at most MAX_THREADS)."""
+    """Import torch and set its threads (``threads`` in [1, MAX_THREADS]; None: one per core, at
+    most MAX_THREADS); the command's entry point chose the OpenMP wait policy."""
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise DockfactoryError(f"--threads: expected an integer in [1, {MAX_THREADS}], got {threads}")
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
     torch.set_num_threads(threads or min(MAX_THREADS, os.cpu_count() or 1))
     return torch

@@ -76,7 +76,6 @@ def say(msg: str) -> None:
 
 def detect_stage(ds, workdir: Path, dets_path: Path, weights, train: bool, epochs, stages: Stages):
     """Detections for every frame (shipped weights, given weights, or a detector trained here)."""
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch  # only this stage needs torch
 
     from dockfactory.detector.infer import detect_dataset

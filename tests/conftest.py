@@ -4,7 +4,11 @@ from pathlib import Path
 
 import pytest
 
-import dockfactory  # noqa: F401  (first, before any test module loads numpy: core/blas.py)
+import dockfactory
+
+# the environment the command line runs in, set before any test module loads numpy (core/blas.py):
+# tests render and compare label bytes in this process
+dockfactory.set_app_environment(os.environ)
 
 # the repository (configs, README); the code is imported as the installed `dockfactory` package
 ROOT = Path(__file__).resolve().parent.parent

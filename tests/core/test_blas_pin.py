@@ -3,7 +3,7 @@
 The published paper dataset was rendered on a CPU whose OpenBLAS ran its SSE3 kernel; on an
 AVX2/AVX-512 machine the default kernel gave other last bits in every label's geometry, and
 ``dataset verify --manifest`` refused the re-render. These tests check the pin where it is set
-(package import, every render worker), the refusal when it could not take effect, and, with
+(the command's entry point, every render worker), the refusal when it could not take effect, and, with
 Cycles, that a re-rendered published frame verifies on this machine. numpy's AVX-512 sin and cos
 (which the published generator took) round otherwise than libm's: with them pinned off, the frame
 matches the published geometry as libm gives it (fingerprints_v3.npz), on every CPU.
@@ -33,15 +33,17 @@ def _needs_openblas():
         pytest.skip("numpy does not use OpenBLAS here: nothing to pin")
 
 
-def test_importing_dockfactory_before_numpy_runs_the_label_kernel():
+def test_the_pin_set_before_numpy_loads_runs_the_label_kernel():
     _needs_openblas()
-    out = _python("import dockfactory, numpy\nfrom dockfactory.core.blas import openblas_core\nprint(openblas_core())")
+    out = _python("import os, dockfactory\ndockfactory.pin_label_arithmetic(os.environ)\nimport numpy\n"
+                  "from dockfactory.core.blas import openblas_core\nprint(openblas_core())")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == blas.LABEL_BLAS_CORE
 
 
-def test_importing_dockfactory_before_numpy_switches_its_avx512_paths_off_and_keeps_the_callers():
-    code = ("import os, dockfactory, numpy\nfrom dockfactory.core.blas import numpy_simd_on\n"
+def test_the_pin_switches_numpys_avx512_paths_off_and_keeps_the_callers():
+    code = ("import os, dockfactory\ndockfactory.pin_label_arithmetic(os.environ)\nimport numpy\n"
+            "from dockfactory.core.blas import numpy_simd_on\n"
             "from numpy.core._multiarray_umath import __cpu_features__ as f\n"
             "print(os.environ['NPY_DISABLE_CPU_FEATURES']); print(numpy_simd_on(), f['AVX2'])")
     out = _python(code, NPY_DISABLE_CPU_FEATURES="AVX2")

@@ -1,2 +1,2 @@
-from dockfactory.cli import main   # allowed: the entry point
+from dockfactory.entry import main   # allowed: the entry point
 main()
