@@ -204,12 +204,18 @@ def calibration_text(cal: Calibration, fmt: str) -> str:
                 + _ros_matrix("distortion_coefficients", 1, 5, cal.dist)
                 + _ros_matrix("rectification_matrix", 3, 3, np.eye(3).ravel()) + _ros_matrix("projection_matrix", 3, 4, p))
     if fmt == "colmap":
-        model = "FULL_OPENCV" if cal.dist[4] != 0.0 else "OPENCV"
-        params = [cal.fx, cal.fy, cal.cx + COLMAP_CENTRE, cal.cy + COLMAP_CENTRE, *cal.dist[:4]] \
-            + ([cal.dist[4], 0.0, 0.0, 0.0] if model == "FULL_OPENCV" else [])
         return ("# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
-                f"1 {model} {cal.width} {cal.height} " + " ".join(repr(float(v)) for v in params) + "\n")
+                + colmap_line(cal, 1))
     raise CalibrationError(f"format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
+
+
+def colmap_line(cal: Calibration, camera_id: int) -> str:
+    """One ``cameras.txt`` line of ``cal`` (OPENCV, or FULL_OPENCV with k3; COLMAP's principal
+    point is OpenCV's + 0.5 px), newline-terminated."""
+    model = "FULL_OPENCV" if cal.dist[4] != 0.0 else "OPENCV"
+    params = [cal.fx, cal.fy, cal.cx + COLMAP_CENTRE, cal.cy + COLMAP_CENTRE, *cal.dist[:4]] \
+        + ([cal.dist[4], 0.0, 0.0, 0.0] if model == "FULL_OPENCV" else [])
+    return f"{camera_id} {model} {cal.width} {cal.height} " + " ".join(repr(float(v)) for v in params) + "\n"
 
 
 def write_calibration(cal: Calibration, path, fmt: str) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from dockfactory.core import layout as layout_mod
 from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
+from dockfactory.core.config_calibration import resolve_calibration
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
@@ -133,6 +134,7 @@ class CameraUnitsConfig:
     jpeg: bool = False                               # JPEG-encode the delivered image
     jpeg_quality: tuple[int, int] = (85, 95)         # [min, max] JPEG quality per frame, 1-100
     jpeg_subsampling: str = "420"                    # 420 (libjpeg's and most cameras' default) | 444
+    calibration: str = ""                            # a calibration file (OpenCV, ROS, COLMAP): every unit is that camera
 
 
 @dataclass(frozen=True)
@@ -261,7 +263,7 @@ class ExportConfig:
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
                     ("render", "marker_adaptive_threshold"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
-                    ("markers", "form"): "puck"}
+                    ("markers", "form"): "puck", ("camera_units", "calibration"): ""}
 RENDER_DEVICES = ("cpu", "gpu")
 
 
@@ -419,6 +421,7 @@ def load_config(path) -> Config:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
+    data, _ = resolve_calibration(data, path)
     return config_from_dict(data, str(path))
 
 
@@ -540,6 +543,9 @@ def _check_symmetric(source, table, key, rng, limit, name: str) -> None:
 def _validate_camera_units(cfg: Config, source: str) -> None:
     """[camera_units]: count, principal point, distortion and aberration ranges."""
     u, t = cfg.camera_units, "camera_units"
+    if u.calibration:
+        raise _err(source, t, "calibration", f"{u.calibration!r} is read when a config file is loaded (load_config), "
+                   "relative to its folder: a config built from data has none")
     if not 1 <= u.count <= MAX_CAMERA_UNITS:
         raise _err(source, t, "count", f"must be in [1, {MAX_CAMERA_UNITS}] (MAX_CAMERA_UNITS), got {u.count}")
     for key, side in (("principal_offset_x_px", cfg.image.width), ("principal_offset_y_px", cfg.image.height)):

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from dockfactory.core import config as config_mod
 from dockfactory.core.config import Config, ConfigError, config_from_dict
+from dockfactory.core.config_calibration import resolve_calibration
 from dockfactory.core.user_files import check_regular_file
 
 
@@ -91,9 +92,10 @@ def apply_overrides(data: dict, sets, source: str) -> dict:
 
 
 def load_config_text(path, sets=()) -> tuple[Config, str]:
-    """(config, its text) of the TOML file ``path`` with ``--set`` overrides ``sets`` applied:
-    the text is the file's own without overrides, else the resolved TOML (so a dataset's
-    config.toml always reproduces it). ConfigError (file, key, value) on any problem."""
+    """(config, its text) of the TOML file ``path`` with ``--set`` overrides ``sets`` applied and
+    its calibration file resolved (core.config_calibration): the text is the file's own without
+    either, else the resolved TOML (so a dataset's config.toml always reproduces it).
+    ConfigError or CalibrationError (file, key, value) on any problem."""
     path = Path(path)
     check_regular_file(path, "config")
     try:
@@ -107,11 +109,13 @@ def load_config_text(path, sets=()) -> tuple[Config, str]:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
-    if not sets:
+    merged = apply_overrides(data, sets, str(path)) if sets else data
+    merged, note = resolve_calibration(merged, path)
+    if not sets and note is None:
         return config_from_dict(data, str(path)), text
-    merged = apply_overrides(data, sets, str(path))
-    cfg = config_from_dict(merged, f"{path} with --set {' '.join(sets)}")
-    return cfg, f"# {path.name} with --set {' '.join(sets)}\n" + to_toml(cfg.resolved_dict())
+    changes = " and ".join(c for c in (f"--set {' '.join(sets)}" if sets else "", note) if c)
+    cfg = config_from_dict(merged, f"{path} with {changes}")
+    return cfg, f"# {path.name} with {changes}\n" + to_toml(cfg.resolved_dict())
 
 
 # ----------------------------------------------------------------------------- the reference

@@ -15,7 +15,7 @@ CLASS_NAMES = ("RedA", "BlueB")       # detector class ids 0 and 1
 CLASS_CHANNELS = (0, 2)               # RGB channel of each class's colour: RedA -> R, BlueB -> B
 
 SPLITS = ("train", "val", "test", "repeat")   # a dataset's splits; repeat = the repeatability captures
-EXPORT_FORMATS = ("coco", "yolo", "yolo-pose", "bop")        # what `dataset export` and [export] formats write
+EXPORT_FORMATS = ("coco", "yolo", "yolo-pose", "bop", "cameras")   # what `dataset export` and [export] formats write
 
 COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 UNITS = {"x": "mm", "y": "mm", "z": "mm", "alpha": "deg", "beta": "deg", "gamma": "deg"}

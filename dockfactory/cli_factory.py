@@ -158,7 +158,8 @@ def _add_dataset_actions(d) -> None:
                                        "dataset (under its exports/)")
     e.add_argument("dirs", nargs="+", metavar="DIR")
     e.add_argument("--format", default="coco,yolo,bop",
-                   help="coco, yolo, yolo-pose, bop, video (each docking run as an MP4 with its labels), video_lossless "
+                   help="coco, yolo, yolo-pose, bop, cameras (every frame's camera as OpenCV / ROS / COLMAP "
+                        "calibration files), video (each docking run as an MP4 with its labels), video_lossless "
                         "(FFV1 .mkv) (comma-separated; default coco,yolo,bop)")
     e.add_argument("--out", default=None, metavar="FOLDER",
                    help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from dockfactory.core.config import load_config
+from dockfactory.core.config_text import load_config_text
 from dockfactory.core.io import folder_lock, sha256_file, write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.eval.acceptance import load_acceptance, verdict_exit_status
@@ -119,7 +119,7 @@ def _write_noise_card(ds, weights: Path) -> None:
     say(f"train: centre noise {card['centre_noise_px']:.3f} px on {card['n']} val centres -> {card['card']}")
 
 
-def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages) -> str | None:
+def _render_stage(cfg, config_path, config_text: str, data_dir: Path, workers: int, stages: Stages) -> str | None:
     """Render the dataset (itself resumable: only missing frames are rendered); its version id,
     or None when the render is incomplete."""
     version = identity(cfg)["version_id"]
@@ -130,7 +130,7 @@ def _render_stage(cfg, config_path, data_dir: Path, workers: int, stages: Stages
     say(f"render: dataset {version} -> {data_dir}")
     t = time.monotonic()
     check_focal_fits(cfg, str(config_path))
-    summary = run_render(cfg, data_dir, Path(config_path).read_text(), JobOptions(workers=workers))
+    summary = run_render(cfg, data_dir, config_text, JobOptions(workers=workers))
     print_summary(summary)
     if not summary.complete:
         say("render incomplete: run the same command again")
@@ -199,13 +199,13 @@ def run_pipeline(config_path, workdir, acceptance_path, weights=None, train: boo
     t_all = time.monotonic()
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
-    cfg = load_config(config_path)
+    cfg, config_text = load_config_text(config_path)
     spec = load_acceptance(acceptance_path)
     stages = Stages(workdir)
     data_dir = workdir / "dataset"
     commands = [f"dockfactory run {config_path} --out {workdir}"]
 
-    version = _render_stage(cfg, config_path, data_dir, workers, stages)   # 1. render
+    version = _render_stage(cfg, config_path, config_text, data_dir, workers, stages)   # 1. render
     if version is None:
         return 1
     # every byte checked before anything downstream is trusted, skipped stages included

@@ -23,6 +23,7 @@ from dockfactory.generator.dataset_diff import diff, diff_text  # noqa: F401  (t
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dvc_links import outside_exports
 from dockfactory.generator.export_bop import export_bop
+from dockfactory.generator.export_cameras import export_cameras
 from dockfactory.generator.export_coco import export_coco
 from dockfactory.generator.export_files import folder_built_aside
 from dockfactory.generator.export_video import export_video, export_video_lossless
@@ -30,8 +31,9 @@ from dockfactory.generator.export_yolo import export_yolo
 from dockfactory.generator.export_yolo_pose import export_yolo_pose
 from dockfactory.generator.sampler import frame_plan
 
-# coco, yolo, yolo-pose, bop: also written by render ([export] formats); the videos only on demand (dataset export)
+# coco, yolo, yolo-pose, bop, cameras: also written by render ([export] formats); the videos only on demand (dataset export)
 EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "yolo-pose": export_yolo_pose, "bop": export_bop,
+                  "cameras": export_cameras,
                   "video": export_video, "video_lossless": export_video_lossless}
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one

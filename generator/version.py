@@ -24,10 +24,11 @@ def blender_version() -> str:
 # the modules whose code decides what a rendered dataset contains: every dockfactory module the
 # render worker process imports (tests/generator/test_version.py checks the list against a real worker)
 OUTPUT_SOURCES = (
-    "dockfactory.core.camera_chain", "dockfactory.core.cfa", "dockfactory.core.config", "dockfactory.core.demosaic",
+    "dockfactory.core.calibration_files", "dockfactory.core.camera_chain", "dockfactory.core.cfa",
+    "dockfactory.core.config", "dockfactory.core.config_calibration", "dockfactory.core.demosaic",
     "dockfactory.core.distortion", "dockfactory.core.emva", "dockfactory.core.errors", "dockfactory.core.geometry",
     "dockfactory.core.io", "dockfactory.core.isp", "dockfactory.core.layout", "dockfactory.core.names",
-    "dockfactory.core.scene", "dockfactory.core.sensor_presets",
+    "dockfactory.core.scene", "dockfactory.core.sensor_presets", "dockfactory.core.user_files",
     "dockfactory.generator.camera_units", "dockfactory.generator.random_draws", "dockfactory.generator.exr",
     "dockfactory.generator.frame_output", "dockfactory.generator.labels", "dockfactory.generator.motion",
     "dockfactory.generator.silhouette", "dockfactory.generator.marker_regions",

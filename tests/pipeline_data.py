@@ -26,7 +26,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.core.config import Config, load_config
+from dockfactory.core.config import Config
+from dockfactory.core.config_text import load_config_text
 from dockfactory.core.geometry import intrinsics, invert_transform, project_points, transform_points
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
@@ -113,8 +114,8 @@ def write_painted_dataset(root, config_path, exact: bool = False) -> Config:
     """A complete dataset of ``config_path`` in ``root`` (every planned frame, manifest);
     ``exact``: see :func:`painted_passes`."""
     root = Path(root)
-    cfg = load_config(config_path)
-    prepare(root, cfg, Path(config_path).read_text())
+    cfg, text = load_config_text(config_path)
+    prepare(root, cfg, text)
     static = static_scene(cfg)
     with tempfile.TemporaryDirectory(prefix="painted-") as scratch:
         for spec in frame_plan(cfg):

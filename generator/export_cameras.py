@@ -1,0 +1,66 @@
+"""Cameras export: every frame's true intrinsics as calibration files the user's own tools read
+(OpenCV YAML, ROS camera_info, COLMAP cameras.txt; :mod:`dockfactory.core.calibration_files`).
+
+exports/cameras/
+  opencv/<frame_id>.yaml      the frame's camera: its label's K and distortion (OpenCV's order and
+  ros/<frame_id>.yaml         pixel convention), the image size
+  colmap/cameras.txt          one camera per frame, CAMERA_ID = 1 + the frame's index in plan order
+                              (COLMAP's principal point: OpenCV's + 0.5 px)
+  colmap/frame_ids.json       CAMERA_ID -> frame id
+  units/unit_<k>.yaml, unit_<k>.ros.yaml, unit_<k>.cameras.txt
+                              a camera unit whose frames all share one camera (a fixed focal, e.g.
+                              a config rendered from ``[camera_units] calibration``): that camera
+                              once; a unit that zooms has none here (its frames differ)
+
+The intrinsics are the pinhole K and Brown-Conrady lens the frame was rendered through: the
+labels' marker centres are these cameras' projections of the markers (tests hold it to
+cv2.projectPoints). The renderer's pixels are square (fx = fy).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dockfactory.core.calibration_files import Calibration, calibration_text, colmap_line
+from dockfactory.core.io import write_text_atomic
+from dockfactory.generator.dataset_open import Dataset
+
+UNIT_FILES = (("opencv-yaml", "unit_{unit:02d}.yaml"), ("ros", "unit_{unit:02d}.ros.yaml"),
+              ("colmap", "unit_{unit:02d}.cameras.txt"))
+
+
+def label_calibration(label: dict) -> Calibration:
+    """The camera of one frame's label: image size, K's focal and principal point (px, OpenCV's
+    convention) and the unit's distortion (k1, k2, p1, p2, k3)."""
+    k, cam = label["camera"]["K"], label["camera"]
+    return Calibration(int(label["image"]["width"]), int(label["image"]["height"]), float(k[0][0]),
+                       float(k[1][1]), float(k[0][2]), float(k[1][2]), tuple(float(v) for v in cam["distortion"]))
+
+
+def _write_units(out: Path, cameras: dict[int, set]) -> None:
+    """The unit files of every unit whose frames share one camera."""
+    for unit, cals in sorted(cameras.items()):
+        if len(cals) == 1:
+            cal = next(iter(cals))
+            for fmt, name in UNIT_FILES:
+                write_text_atomic(out / "units" / name.format(unit=unit), calibration_text(cal, fmt))
+
+
+def export_cameras(root, out) -> Path:
+    """Write the cameras export of dataset ``root`` (a folder or an opened Dataset) into ``out``
+    (module docstring)."""
+    out = Path(out)
+    ds = root if isinstance(root, Dataset) else Dataset.open(root)
+    lines, ids, cameras = [], {}, {}
+    for index, label in enumerate(ds.labels_of()):
+        fid, cal = label["frame_id"], label_calibration(label)
+        for fmt, sub in (("opencv-yaml", "opencv"), ("ros", "ros")):
+            write_text_atomic(out / sub / f"{fid}.yaml", calibration_text(cal, fmt))
+        lines.append(colmap_line(cal, index + 1))
+        ids[str(index + 1)] = fid
+        cameras.setdefault(int(label["camera"]["unit"]), set()).add(cal)
+    header = "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
+    write_text_atomic(out / "colmap" / "cameras.txt", header + "".join(lines))
+    write_text_atomic(out / "colmap" / "frame_ids.json", json.dumps(ids, indent=1) + "\n")
+    _write_units(out, cameras)
+    return out

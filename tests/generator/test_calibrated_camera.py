@@ -1,0 +1,151 @@
+"""A calibration file in the factory (core.config_calibration) and every frame's true camera out
+(generator.export_cameras), without Blender: a config naming a calibration file renders that
+camera (the file's image size, focal, principal point and lens on every frame), the dataset's
+stored config reproduces it without the file, a key set twice or non-square pixels are one line;
+the cameras export is read by OpenCV's own FileStorage and COLMAP's format back to the labels'
+camera, and cv2.projectPoints through it lands on the labels' marker centres (1e-6 px)."""
+from __future__ import annotations
+
+import json
+import tomllib
+
+import cv2
+import numpy as np
+import pytest
+from pipeline_data import write_painted_dataset
+
+from dockfactory.core.calibration_files import Calibration, CalibrationError, read_calibration, write_calibration
+from dockfactory.core.config import ConfigError, config_from_dict, load_config
+from dockfactory.core.config_text import load_config_text
+from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
+from dockfactory.generator.version import dataset_version_id
+
+CAL = Calibration(640, 480, 700.2, 700.5, 326.3, 236.9, (-0.08, 0.05, 0.0004, -0.0003, 0.01))
+SMALL = """[dataset]
+name = "calibrated"
+seed = 4
+frames = 4
+[conditions]
+normal = 1
+low_light = 0
+occlusion = 0
+glare = 0
+[camera]
+distance_mm = [900, 1000]
+margin_px = 10
+[render]
+keep_exr = false
+[export]
+formats = []
+"""
+
+
+def _config(tmp_path, extra: str = "", cal: Calibration = CAL, name: str = "cam.yaml"):
+    write_calibration(cal, tmp_path / name, "opencv-yaml" if name.endswith(".yaml") else "colmap")
+    path = tmp_path / "c.toml"
+    path.write_text(SMALL + f'[camera_units]\ncalibration = "{name}"\n' + extra)
+    return path
+
+
+@pytest.mark.parametrize("name", ["cam.yaml", "cameras.txt"])
+def test_every_frame_is_the_calibrated_camera(tmp_path, name):
+    path = _config(tmp_path, name=name)
+    cfg, text = load_config_text(path)
+    check_focal_fits(cfg, str(path))
+    f = np.sqrt(CAL.fx * CAL.fy)
+    for spec in frame_plan(cfg):
+        cam = sample_frame(cfg, spec).camera
+        assert (cam.width, cam.height) == (640, 480)
+        assert cam.focal_px == pytest.approx(f, abs=1e-9)
+        assert cam.principal_point == pytest.approx((CAL.cx, CAL.cy), abs=1e-9)
+        assert cam.distortion == pytest.approx(CAL.dist, abs=1e-15)
+    assert load_config(path) == cfg   # every loader resolves it
+    assert text.startswith(f"# c.toml with [camera_units] calibration = '{name}' (sha256 ")
+    # the stored text reproduces the config without the file: the same version id
+    (tmp_path / name).unlink()
+    again = config_from_dict(tomllib.loads(text))
+    assert again == cfg
+    assert dataset_version_id(again.canonical_json()) == dataset_version_id(cfg.canonical_json())
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("k1 = [-0.1, 0.0]\n", "[camera_units] k1: set by [camera_units] calibration = 'cam.yaml' too"),
+    ("[camera]\nfocal_px = [600, 800]\n", None),
+    ("[image]\nwidth = 1280\n", "[image] width: 1280, but the calibration file 'cam.yaml' is 640 x 480 px"),
+])
+def test_a_key_set_twice_is_one_line(tmp_path, extra, message):
+    path = _config(tmp_path)
+    if extra.startswith("[camera]"):   # SMALL already has [camera]: add the key to it
+        path.write_text(path.read_text().replace("margin_px = 10\n", "margin_px = 10\nfocal_px = [600, 800]\n"))
+        message = "[camera] focal_px: set by [camera_units] calibration = 'cam.yaml' too"
+    else:
+        path.write_text(path.read_text() + extra)
+    with pytest.raises(CalibrationError) as err:
+        load_config_text(path)
+    assert message in str(err.value) and str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_equal_image_size_a_missing_file_and_non_square_pixels(tmp_path):
+    path = _config(tmp_path, "[image]\nwidth = 640\nheight = 480\n")
+    assert load_config_text(path)[0].image.width == 640
+    (tmp_path / "cam.yaml").unlink()
+    with pytest.raises(CalibrationError, match=r"c.toml: \[camera_units\] calibration: .*cam.yaml: calibration file not found"):
+        load_config(path)
+    path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 702.0, 320.0, 240.0))
+    with pytest.raises(CalibrationError, match=r"fx 700 and fy 702 px differ by 0.29 %: the factory renders square"):
+        load_config(path)
+
+
+def test_a_config_built_from_data_cannot_name_a_file():
+    with pytest.raises(ConfigError, match=r"\[camera_units\] calibration: 'cam.yaml' is read when a config file is loaded"):
+        config_from_dict({"camera_units": {"calibration": "cam.yaml"}})
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    root = tmp_path_factory.mktemp("calibrated")
+    path = _config(root)
+    write_painted_dataset(root / "ds", path)
+    return root / "ds", dt.export(root / "ds", "cameras")
+
+
+def _markers_in_camera(label: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(centres in the camera frame (N, 3) mm, their label centres (N, 2) px)."""
+    cam_from_d = np.array(label["camera"]["cam_from_d"])
+    pts = np.array([m["center_d_mm"] for m in label["markers"]])
+    pc = pts @ cam_from_d[:3, :3].T + cam_from_d[:3, 3]
+    return pc, np.array([m["center_px"] for m in label["markers"]])
+
+
+def test_the_cameras_export_projects_onto_the_labels(calibrated):
+    root, out = calibrated
+    ds = Dataset.open(root)
+    ids = json.loads((out / "colmap" / "frame_ids.json").read_text())
+    colmap_lines = [ln for ln in (out / "colmap" / "cameras.txt").read_text().splitlines() if not ln.startswith("#")]
+    assert len(colmap_lines) == len(ids) == len(ds.frames())
+    for line in colmap_lines:
+        fid = ids[line.split()[0]]
+        label = ds.read_label(fid)
+        fs = cv2.FileStorage(str(out / "opencv" / f"{fid}.yaml"), cv2.FILE_STORAGE_READ)
+        k, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat().ravel()
+        fs.release()
+        pc, uv = _markers_in_camera(label)
+        proj, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), k, dist)
+        assert np.max(np.abs(proj.reshape(-1, 2) - uv)) < 1e-6, fid
+        assert read_calibration(out / "ros" / f"{fid}.yaml") == read_calibration(out / "opencv" / f"{fid}.yaml")
+        (out / "one.txt").write_text(line + "\n")
+        assert read_calibration(out / "one.txt") == read_calibration(out / "opencv" / f"{fid}.yaml")
+        (out / "one.txt").unlink()
+
+
+def test_a_fixed_unit_is_written_once_and_is_the_calibration_file(calibrated):
+    root, out = calibrated
+    unit = read_calibration(out / "units" / "unit_00.yaml")
+    f = float(np.sqrt(CAL.fx * CAL.fy))
+    assert (unit.width, unit.height) == (CAL.width, CAL.height)
+    assert (unit.fx, unit.fy) == pytest.approx((f, f), abs=1e-9)
+    assert (unit.cx, unit.cy) == pytest.approx((CAL.cx, CAL.cy), abs=1e-9) and unit.dist == pytest.approx(CAL.dist)
+    assert read_calibration(out / "units" / "unit_00.ros.yaml") == unit
+    assert read_calibration(out / "units" / "unit_00.cameras.txt") == unit
