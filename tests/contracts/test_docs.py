@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from dockfactory.core.config import Config, config_from_dict
+from dockfactory.core.config import Config, config_from_dict, load_config
 from dockfactory.core.config_text import apply_overrides, defaults_toml, reference_markdown, to_toml
 from dockfactory.core.resources import shipped_config, shipped_configs
 from dockfactory.cli import main
@@ -36,7 +36,7 @@ def test_defaults_print_a_config_that_is_the_defaults(capsys):
 def test_the_resolved_toml_of_each_shipped_config_reads_back_as_it(name, capsys):
     if name == "acceptance":
         pytest.skip("an acceptance spec, not a dataset config")
-    cfg = config_from_dict(tomllib.loads(shipped_config(name).read_text()))
+    cfg = load_config(shipped_config(name))   # a calibration file resolved beside it
     assert config_from_dict(tomllib.loads(to_toml(cfg.resolved_dict()))) == cfg
     assert main(["check-config", name, "--resolved"]) == 0
     assert config_from_dict(tomllib.loads(capsys.readouterr().out)) == cfg
@@ -121,7 +121,7 @@ def test_the_readme_frame_counts_are_the_configs_plans(repo_root):
     rows = re.findall(r"^\| `(\w+)` \| ([\d,]+) frames", (repo_root / "README.md").read_text(), re.M)
     assert {"smoke", "quick"} <= {name for name, _ in rows}
     for name, count in rows:
-        cfg = config_from_dict(tomllib.loads(shipped_config(name).read_text()))
+        cfg = load_config(shipped_config(name))
         assert len(frame_plan(cfg)) == int(count.replace(",", "")), name
 
 

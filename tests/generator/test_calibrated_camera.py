@@ -149,3 +149,30 @@ def test_a_fixed_unit_is_written_once_and_is_the_calibration_file(calibrated):
     assert (unit.cx, unit.cy) == pytest.approx((CAL.cx, CAL.cy), abs=1e-9) and unit.dist == pytest.approx(CAL.dist)
     assert read_calibration(out / "units" / "unit_00.ros.yaml") == unit
     assert read_calibration(out / "units" / "unit_00.cameras.txt") == unit
+
+
+@pytest.mark.render
+def test_cycles_renders_the_calibrated_camera(tmp_path):
+    """The lens check of tests/generator/test_render.py (LENS_CHECK's scene at 320 x 240) with its
+    lens from a calibration file instead of ranges, rendered by Cycles: the index pass's marker
+    pixels are the exact rasterisation of the calibrated camera's outlines (at most 0.5 % differ)
+    and their centroids within 0.25 px of the labels' centres, which the cameras export projects."""
+    from pipeline_data import LENS_CHECK, label_vs_index
+
+    from dockfactory.generator.render_job import JobOptions, run_render
+    cal = Calibration(320, 240, 338.0, 338.1, 166.4, 115.2, (-0.12, 0.03, 8e-4, -6e-4, 0.0))
+    write_calibration(cal, tmp_path / "cam.json", "opencv-json")
+    lens_keys = ("principal_offset", "k1 ", "k2 ", "p1 ", "p2 ", "aberration", "count", "focal_px", "jpeg")
+    text = "".join(ln + "\n" for ln in LENS_CHECK.splitlines() if not ln.startswith(lens_keys))
+    text = text.replace("frames = 4", "frames = 2").replace("[camera_units]\n", '[camera_units]\ncalibration = "cam.json"\n')
+    (tmp_path / "c.toml").write_text(text)
+    cfg, stored = load_config_text(tmp_path / "c.toml")
+    summary = run_render(cfg, tmp_path / "ds", stored, JobOptions(progress=False))
+    assert summary.ok and summary.complete, summary.text()
+    got = label_vs_index(tmp_path / "ds", cfg)
+    assert got["markers"] >= 16 and len(got["centre_err"]) >= 8
+    assert got["mismatch"] <= 0.005 * got["pixels"], f"{got['mismatch']} of {got['pixels']} marker pixels differ"
+    assert got["centre_err"].max() < 0.25, f"median {np.median(got['centre_err']):.3f} px"
+    out = dt.export(tmp_path / "ds", "cameras")
+    unit = read_calibration(out / "units" / "unit_00.yaml")
+    assert (unit.cx, unit.cy, unit.dist) == (pytest.approx(cal.cx), pytest.approx(cal.cy), pytest.approx(cal.dist))
