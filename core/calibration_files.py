@@ -9,6 +9,9 @@ order (k1, k2, p1, p2, k3). The formats:
 - **OpenCV** (``.yaml`` / ``.yml`` with ``!!opencv-matrix``, or ``.json``; what
   ``cv2.FileStorage`` and OpenCV's calibration sample write): ``image_width``, ``image_height``,
   ``camera_matrix`` (3 x 3), ``distortion_coefficients`` (4, 5 or 8 values; beyond k3 must be 0).
+  Optional ``std_deviations_intrinsics``: the 1-sigma uncertainties in the layout of OpenCV's
+  ``calibrateCameraExtended`` (fx, fy, cx, cy, then the distortion coefficients), read into
+  ``Calibration.std`` and written back.
 - **ROS camera_info** (``.yaml`` without the OpenCV tags): the same key names, each matrix as
   ``{rows, cols, data}``, and ``distortion_model`` ``plumb_bob`` (or ``rational_polynomial`` with
   its extra terms 0).
@@ -39,6 +42,7 @@ COLMAP_PARAMS = {"SIMPLE_PINHOLE": ("f", "cx", "cy"), "PINHOLE": ("fx", "fy", "c
                  "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
                  "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")}
 COLMAP_CENTRE = 0.5   # COLMAP's coordinate of the top-left pixel's centre (OpenCV's: 0)
+STD_KEY = "std_deviations_intrinsics"   # optional, OpenCV YAML / JSON: calibrateCameraExtended's layout
 
 
 class CalibrationError(DockfactoryError):
@@ -48,7 +52,8 @@ class CalibrationError(DockfactoryError):
 @dataclass(frozen=True)
 class Calibration:
     """A calibrated camera: ``width`` x ``height`` px, ``fx``, ``fy``, ``cx``, ``cy`` px (OpenCV's
-    pixel convention), ``dist`` (k1, k2, p1, p2, k3)."""
+    pixel convention), ``dist`` (k1, k2, p1, p2, k3); ``std``: their 1-sigma uncertainties
+    (fx, fy, cx, cy, k1, k2, p1, p2, k3) when the file states them, else None."""
     width: int
     height: int
     fx: float
@@ -56,6 +61,7 @@ class Calibration:
     cx: float
     cy: float
     dist: tuple = (0.0, 0.0, 0.0, 0.0, 0.0)
+    std: tuple | None = None
 
     @property
     def K(self) -> np.ndarray:
@@ -72,6 +78,9 @@ def _checked(cal: Calibration, where: str) -> Calibration:
                                f"{cal.width} x {cal.height}, fx {cal.fx:g}, fy {cal.fy:g}")
     if len(cal.dist) != 5:
         raise CalibrationError(f"{where}: expected 5 distortion coefficients (k1, k2, p1, p2, k3)")
+    if cal.std is not None and (len(cal.std) != 9 or not all(math.isfinite(v) and v >= 0 for v in cal.std)):
+        raise CalibrationError(f"{where}: std_deviations_intrinsics: expected 9 finite values >= 0 (fx, fy, cx, cy, "
+                               f"k1, k2, p1, p2, k3), got {cal.std}")
     return cal
 
 
@@ -113,6 +122,17 @@ def _numbers(fs, key: str, where: str) -> list[float]:
     return [float(it.real()) for it in items]
 
 
+def _stds(fs, where: str) -> tuple | None:
+    """The optional ``std_deviations_intrinsics`` (fx, fy, cx, cy, then 4, 5, 8, 12 or 14
+    distortion terms, those beyond k3 0 or absent) as 9 values, or None."""
+    if fs.getNode(STD_KEY).empty():
+        return None
+    values = _numbers(fs, STD_KEY, where)
+    if len(values) < 8:
+        raise CalibrationError(f"{where}: {STD_KEY}: expected fx, fy, cx, cy and the distortion terms, got {len(values)} values")
+    return tuple(values[:4]) + _five(values[4:], f"{where}: {STD_KEY}")
+
+
 def _size(fs, key: str, where: str) -> int:
     node = fs.getNode(key)
     if node.empty() or not (node.isInt() or node.isReal()) or node.real() != int(node.real()) or node.real() < 1:
@@ -137,7 +157,8 @@ def _read_filestorage(path: Path, text: str) -> Calibration:
         if len(k) != 9 or k[1] != 0.0 or k[3] != 0.0 or k[6:] != [0.0, 0.0, 1.0]:
             raise CalibrationError(f"{where}: camera_matrix: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {k}")
         dist = _five(_numbers(fs, "distortion_coefficients", where), where)
-        cal = Calibration(_size(fs, "image_width", where), _size(fs, "image_height", where), k[0], k[4], k[2], k[5], dist)
+        cal = Calibration(_size(fs, "image_width", where), _size(fs, "image_height", where), k[0], k[4], k[2], k[5], dist,
+                          _stds(fs, where))
     finally:
         fs.release()
     return _checked(cal, where)
@@ -196,6 +217,8 @@ def calibration_text(cal: Calibration, fmt: str) -> str:
         fs.write("image_height", int(cal.height))
         fs.write("camera_matrix", cal.K)
         fs.write("distortion_coefficients", np.array([cal.dist], dtype=np.float64))
+        if cal.std is not None:
+            fs.write(STD_KEY, np.array([cal.std], dtype=np.float64))
         return fs.releaseAndGetString()
     if fmt == "ros":
         p = [cal.fx, 0, cal.cx, 0, 0, cal.fy, cal.cy, 0, 0, 0, 1, 0]

@@ -74,6 +74,20 @@ NO_MARKERS = "no markers detected"   # the category of a frame without one detec
 CALIBRATED_LENS = LensPrior(marginalise=False)   # a calibrated camera's lens: known, nothing marginalised
 
 
+def calibration_lens(cal: Calibration) -> LensPrior:
+    """What the solve takes for the lens of calibrated camera ``cal``: known (nothing marginalised)
+    when its file states no uncertainty; else the stated 1-sigma of the principal point, k1, k2
+    and p1 / p2 as the uniform half-ranges of the same std (sqrt(3) sigma; the principal point's
+    the larger of cx's and cy's), marginalised into the pose's covariance. The focal is solved,
+    so its own uncertainty does not enter; k3 has no term in the prior."""
+    if cal.std is None:
+        return CALIBRATED_LENS
+    root3 = 3.0 ** 0.5
+    _, _, s_cx, s_cy, s_k1, s_k2, s_p1, s_p2, _ = cal.std
+    return LensPrior(pp_fraction=root3 * max(s_cx, s_cy) / (2.0 * cal.cx + 1.0), k1=root3 * s_k1, k2=root3 * s_k2,
+                     p=root3 * max(s_p1, s_p2), marginalise=True)
+
+
 @dataclass
 class Frame:
     """One image on its way through measure: its record and what the overlay needs."""
@@ -194,7 +208,8 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     """(record, used points, used edges) of one image of a calibrated camera: its centres (and
     boxes) taken to the ideal square-pixel pinhole camera (core.calibration_files.ideal_pixels),
     solved with the calibration's principal point, the lens known (nothing marginalised) and the
-    pinhole model; the focal is solved and the record's ``calibration`` gives the calibrated one.
+    pinhole model (the file's stated uncertainty marginalised: :func:`calibration_lens`); the focal
+    is solved and the record's ``calibration`` gives the calibrated one.
     An image of another size than the calibration's is not ok (category "calibration size")."""
     if tuple(size) != (cal.width, cal.height):
         why = f"{path}: the image is {size[0]}x{size[1]}, the calibration is for {cal.width}x{cal.height}"
@@ -204,10 +219,11 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     if boxes is not None:
         lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
         boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
-    options = docking_options(detector.centre_noise_px, CALIBRATED_LENS, detector.section_shift_px)
+    options = docking_options(detector.centre_noise_px, calibration_lens(cal), detector.section_shift_px)
     record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
                                       "pinhole", options)
-    record["calibration"] = {"focal_px": focal, "principal_point": [cal.cx, cal.cy], "distortion": list(cal.dist)}
+    record["calibration"] = {"focal_px": focal, "principal_point": [cal.cx, cal.cy], "distortion": list(cal.dist),
+                             **({"std": list(cal.std)} if cal.std is not None else {})}
     return record, used, edges
 
 

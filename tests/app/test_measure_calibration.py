@@ -72,3 +72,44 @@ def test_the_cli_refuses_estimating_what_the_calibration_states(tmp_path, capsys
     assert code == 2 and "--calibration: the camera is calibrated" in one_line_error(err)
     code, _, err = run_cli(["measure", "--video", "x.mp4", "--layout", "l.json", "--calibration", "cam.yaml"], capsys)
     assert code == 2 and "--calibration: for images" in one_line_error(err)
+
+
+def test_a_calibrations_stated_uncertainty_is_in_the_budget():
+    """A calibration whose principal point is off by its stated std (cx +10, cy -10 px with sigma
+    10 px; k1 off by 0.03 with sigma 0.03): without the stated std the pose's reported uncertainty
+    ignores it and the errors run beyond it (measured RMS z of X / Y / Z / alpha 0.73 / 1.26 /
+    4.29 / 2.59); with it they stay within (0.65 / 0.92 / 1.29 / 1.09), the reported std grown."""
+    rng = np.random.default_rng(21)
+    z_with, z_without, grew = [], [], []
+    for _ in range(20):
+        sc, centres, cal = _frame(rng)
+        truth = pose_components(sc.d_from_b)
+        off = Calibration(cal.width, cal.height, cal.fx, cal.fy, cal.cx + 10.0, cal.cy - 10.0,
+                          (cal.dist[0] + 0.03, *cal.dist[1:]))
+        stated = Calibration(*[getattr(off, k) for k in ("width", "height", "fx", "fy", "cx", "cy", "dist")],
+                             std=(2.0, 2.0, 10.0, 10.0, 0.03, 0.005, 1e-4, 1e-4, 0.0))
+        recs = [calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, c)[0] for c in (off, stated)]
+        if not all(r["ok"] for r in recs):
+            continue
+        for rec, out in zip(recs, (z_without, z_with)):
+            std = np.sqrt(np.diag(rec["covariance"]))
+            out.append([(rec["pose"][k] - truth[k]) / s for k, s in zip(("x_mm", "y_mm", "z_mm", "alpha_deg"), std[:4])])
+        grew.append(np.sqrt(np.diag(recs[1]["covariance"]))[2] / np.sqrt(np.diag(recs[0]["covariance"]))[2])
+        assert recs[1]["calibration"]["std"][2] == 10.0 and "std" not in recs[0]["calibration"]
+    assert len(z_with) >= 15
+    rms_with, rms_without = np.sqrt(np.mean(np.square(z_with), axis=0)), np.sqrt(np.mean(np.square(z_without), axis=0))
+    assert np.all(rms_with <= 1.5) and np.max(rms_without) > 3.0, (rms_with, rms_without)
+    assert np.median(grew) > 1.5
+
+
+def test_the_stated_uncertainty_round_trips_and_is_checked(tmp_path):
+    from dockfactory.core.calibration_files import CalibrationError, read_calibration
+    cal = Calibration(1280, 960, 2000.0, 2000.5, 640.2, 480.1, (-0.1, 0.02, 0.0, 0.0, 0.0),
+                      std=(1.5, 1.6, 0.8, 0.9, 0.004, 0.01, 1e-4, 2e-4, 0.0))
+    for suffix, fmt in ((".yaml", "opencv-yaml"), (".json", "opencv-json")):
+        write_calibration(cal, tmp_path / f"c{suffix}", fmt)
+        assert read_calibration(tmp_path / f"c{suffix}") == cal
+    text = (tmp_path / "c.yaml").read_text().replace("data: [ 1.5,", "data: [ -1.5,")
+    (tmp_path / "bad.yaml").write_text(text)
+    with pytest.raises(CalibrationError, match="std_deviations_intrinsics: expected 9 finite values >= 0"):
+        read_calibration(tmp_path / "bad.yaml")
