@@ -63,8 +63,6 @@ def _check_inputs(args) -> bool:
         raise DockfactoryError("measure: --out is needed with images")
     if stream and args.out is not None:
         raise DockfactoryError("--out: a stream writes JSON lines (--jsonl FILE or - for standard output)")
-    if stream and args.calibration:
-        raise DockfactoryError("--calibration: for images (files or folders); a stream does not take it yet")
     return stream
 
 
@@ -76,7 +74,8 @@ def cmd_measure_stream(args) -> int:
                             input_scale=args.input_scale, roi_refresh=args.roi, window=window,
                             freeze_after=args.freeze_after, workers=args.workers or 1,
                             prefetch=PREFETCH if (args.workers or 1) == 1 else 0,   # workers overlap the reads
-                            lens=args.lens_prior)
+                            lens=args.lens_prior,
+                            calibration=read_calibration(args.calibration) if args.calibration else None)
     decide = stream_decider(args.acceptance) if args.acceptance else None
     weights = _weights(args)
     torch_threads(args.threads)
@@ -171,7 +170,7 @@ def _add_stream_args(m) -> None:
                         "frames and whenever the window loses a marker (faster; default: every frame whole)")
     m.add_argument("--calibration", default=None, metavar="FILE",
                    help="the camera's calibration (OpenCV YAML / JSON, ROS camera_info YAML, COLMAP cameras.txt): "
-                        "its principal point and distortion are known (files; not with a stream yet)")
+                        "its principal point and distortion are known (its std_deviations_intrinsics, if stated, in the budget)")
     m.add_argument("--lens-prior", type=lens_prior, default=None,
                    help="what is plausible for the intrinsics the camera model does not estimate, carried into "
                         "every pose's uncertainty: default (principal point within 0.04 x the image width, "

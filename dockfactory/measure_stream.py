@@ -13,7 +13,7 @@ Each frame line (format :data:`STREAM_FORMAT`) holds: ``type`` "frame", ``frame`
 read order), ``timestamp_ms`` (the source's position; frames / fps, else the wall clock, when it
 gives none), ``ok``; with a pose: ``pose`` (X, Y, Z mm, alpha, beta, gamma deg: d_from_b), ``std``
 (their 1-sigma standard deviations, the solver's covariance), ``focal_px``, ``camera_model`` (and
-``intrinsics``, ``intrinsics_std`` for a model richer than pinhole), ``rmse_px``,
+``intrinsics``, ``intrinsics_std`` for a model richer than pinhole; ``calibration`` with ``--calibration``), ``rmse_px``,
 ``n_detections``; without: ``category`` and ``reason``; always ``timing_ms`` (read: decoding the
 frame, detect, solve, total: from the start of the frame's read to the line being serialised).
 With a display filter (``filter="kalman"``, dockfactory.measure_filter) the line adds
@@ -45,6 +45,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from dockfactory.core.calibration_files import Calibration
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.histogram import LogHistogram
 from dockfactory.core.layout_file import read_layout_file
@@ -89,7 +90,9 @@ class StreamOptions:
     ``freeze_after`` (with a window: freeze them after this many joint solves), ``workers``
     (processes measuring frames at once: dockfactory.measure_stream_pool; 1: this process),
     ``lens`` (the lens prior marginalised into every pose's uncertainty, solver.options.LensPrior;
-    None: an uncalibrated camera's)."""
+    None: an uncalibrated camera's), ``calibration`` (the camera's, core.calibration_files:
+    every frame solved as ``measure --calibration`` solves an image; not with a camera model, a
+    lens prior or a self-calibrating window, which estimate what it states)."""
     backend: str = "auto"
     camera_model: str | None = None
     min_score: float = MIN_SCORE
@@ -104,8 +107,13 @@ class StreamOptions:
     freeze_after: int | None = None
     workers: int = 1
     lens: LensPrior | None = None
+    calibration: Calibration | None = None
 
     def __post_init__(self):
+        if self.calibration is not None and (self.lens is not None or self.window
+                                             or self.camera_model not in (None, "pinhole")):
+            raise DockfactoryError("--calibration: the camera is calibrated; --lens-prior, --camera-model and "
+                                   "--self-calibrate estimate what it states")
         if not 1 <= self.workers <= MAX_WORKERS:
             raise DockfactoryError(f"--workers: expected 1 to {MAX_WORKERS} for a stream, got {self.workers}")
         if self.workers > 1 and (self.roi_refresh or self.window):
@@ -263,7 +271,7 @@ def frame_line(index: int, timestamp_ms: float, record: dict) -> dict:
         std = np.sqrt(np.clip(np.diag(np.asarray(record["covariance"], float)), 0.0, None))
         line.update(pose=record["pose"], std=dict(zip(POSE_NAMES, std.tolist())), focal_px=record["focal_px"],
                     camera_model=record.get("camera_model", "pinhole"))
-        for key in ("intrinsics", "intrinsics_std"):
+        for key in ("intrinsics", "intrinsics_std", "calibration"):
             if key in record:
                 line[key] = record[key]
         line.update(rmse_px=record["rmse_px"], n_detections=record["n_detections"], marker_ids=record["marker_ids"])
@@ -398,13 +406,14 @@ class StreamMeasurer:
         o = self.options
         model = "pinhole" if self.calibration is not None else resolve_camera_model(o.camera_model, None)
         args = (self.detector, self.markers, index, name, image, model, o.min_score, o.cfa, o.jpeg)
+        camera = {"lens": o.lens, "calibration": o.calibration}
         if self.tracker is None:
-            return solve_image(*args, lens=o.lens)
+            return solve_image(*args, **camera)
         roi = self.tracker.region()
-        frame = solve_image(*args, roi, lens=o.lens)
+        frame = solve_image(*args, roi, **camera)
         if roi is not None and self.tracker.lost(frame.detections, roi):
             spent = frame.record["timing_ms"]
-            frame = solve_image(*args, lens=o.lens)
+            frame = solve_image(*args, **camera)
             frame.record["timing_ms"] = {k: round(v + spent[k], 2) for k, v in frame.record["timing_ms"].items()}
             roi = None
         self.tracker.update(frame.detections, roi)

@@ -378,3 +378,35 @@ def test_stream_statistics_use_constant_memory_and_keep_percentiles_within_1_per
     assert s["frames"] == 200_000 and s["failures"] == {"no_pose": 28_572}
     with pytest.raises(ValueError, match=">= 0"):
         stats.latency_ms.add(float("nan"))
+
+
+def test_a_calibrated_camera_streamed_is_measured_as_its_images(tmp_path_factory, capsys):
+    """The painted run rendered through a calibrated camera (principal point 15 / -10 px off, k1
+    -0.08; [camera_units] calibration), exported lossless and streamed with --calibration: every
+    frame's pose is measure's own on the PNGs with --calibration (to 1e-9) and within 3 mm / 0.1
+    deg of its label."""
+    from pipeline_data import write_painted_dataset
+
+    from dockfactory.core.calibration_files import Calibration, write_calibration
+    from dockfactory.cli import main
+    root = tmp_path_factory.mktemp("calibrated-stream")
+    write_calibration(Calibration(1280, 960, 1500.0, 1500.0, 654.5, 469.5, (-0.08, 0.02, 0.0, 0.0, 0.0)),
+                      root / "cam.yaml", "opencv-yaml")
+    (root / "c.toml").write_text(CONFIG + '\n[camera]\ndistance_mm = [1300, 1500]\n'
+                                 '[camera_units]\ncalibration = "cam.yaml"\n')
+    write_painted_dataset(root / "ds", root / "c.toml")
+    assert main(["dataset", "export", str(root / "ds"), "--format", "video_lossless"]) == 0
+    layout, cal = root / "ds" / "layout.json", root / "cam.yaml"
+    code, lines, _ = _stream(["--video", root / "ds" / "exports" / "video_lossless" / "unit0_run00.mkv",
+                              "--layout", layout, "--calibration", cal], capsys, root)
+    assert code == 0
+    images = [root / "ds" / "images" / f"00000{k}.png" for k in range(4)]
+    assert run_cli(["measure", *images, "--layout", layout, "--calibration", cal, "--out", root / "m", "--workers",
+                    "1", "--threads", "1", "--backend", "torch", "--overlay-size", "0", "--quiet"], capsys)[0] == 0
+    measured = json.loads((root / "m" / "measurements.json").read_text())["images"]
+    labels = [json.loads((root / "ds" / "labels" / f"00000{k}.json").read_text())["pose_b_in_d"] for k in range(4)]
+    for k in range(4):
+        assert max(abs(lines[k]["pose"][n] - v) for n, v in measured[k]["pose"].items()) < 1e-9
+        assert lines[k]["calibration"]["principal_point"] == [654.5, 469.5]
+        assert abs(lines[k]["pose"]["x_mm"] - labels[k]["x_mm"]) < 3 and abs(lines[k]["pose"]["y_mm"] - labels[k]["y_mm"]) < 3
+        assert abs(lines[k]["pose"]["alpha_deg"] - labels[k]["alpha_deg"]) < 0.1
