@@ -170,7 +170,8 @@ def _add_stream_args(m) -> None:
                         "frames and whenever the window loses a marker (faster; default: every frame whole)")
     m.add_argument("--calibration", default=None, metavar="FILE",
                    help="the camera's calibration (OpenCV YAML / JSON, ROS camera_info YAML, COLMAP cameras.txt): "
-                        "its principal point and distortion are known (its std_deviations_intrinsics, if stated, in the budget)")
+                        "its principal point and distortion are known (its std_deviations_intrinsics, if "
+                        "stated, in the budget)")
     m.add_argument("--lens-prior", type=lens_prior, default=None,
                    help="what is plausible for the intrinsics the camera model does not estimate, carried into "
                         "every pose's uncertainty: default (principal point within 0.04 x the image width, "
