@@ -129,7 +129,8 @@ def _stds(fs, where: str) -> tuple | None:
         return None
     values = _numbers(fs, STD_KEY, where)
     if len(values) < 8:
-        raise CalibrationError(f"{where}: {STD_KEY}: expected fx, fy, cx, cy and the distortion terms, got {len(values)} values")
+        raise CalibrationError(f"{where}: {STD_KEY}: expected fx, fy, cx, cy and the distortion terms, "
+                               f"got {len(values)} values")
     return tuple(values[:4]) + _five(values[4:], f"{where}: {STD_KEY}")
 
 

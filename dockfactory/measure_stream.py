@@ -13,7 +13,8 @@ Each frame line (format :data:`STREAM_FORMAT`) holds: ``type`` "frame", ``frame`
 read order), ``timestamp_ms`` (the source's position; frames / fps, else the wall clock, when it
 gives none), ``ok``; with a pose: ``pose`` (X, Y, Z mm, alpha, beta, gamma deg: d_from_b), ``std``
 (their 1-sigma standard deviations, the solver's covariance), ``focal_px``, ``camera_model`` (and
-``intrinsics``, ``intrinsics_std`` for a model richer than pinhole; ``calibration`` with ``--calibration``), ``rmse_px``,
+``intrinsics``, ``intrinsics_std`` for a model richer than pinhole; ``calibration`` with
+``--calibration``), ``rmse_px``,
 ``n_detections``; without: ``category`` and ``reason``; always ``timing_ms`` (read: decoding the
 frame, detect, solve, total: from the start of the frame's read to the line being serialised).
 With a display filter (``filter="kalman"``, dockfactory.measure_filter) the line adds

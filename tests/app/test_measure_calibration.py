@@ -94,7 +94,8 @@ def test_a_calibrations_stated_uncertainty_is_in_the_budget():
             continue
         for rec, out in zip(recs, (z_without, z_with)):
             std = np.sqrt(np.diag(rec["covariance"]))
-            out.append([(rec["pose"][k] - truth[k]) / s for k, s in zip(("x_mm", "y_mm", "z_mm", "alpha_deg"), std[:4])])
+            keys = ("x_mm", "y_mm", "z_mm", "alpha_deg")
+            out.append([(rec["pose"][k] - truth[k]) / s for k, s in zip(keys, std[:4])])
         grew.append(np.sqrt(np.diag(recs[1]["covariance"]))[2] / np.sqrt(np.diag(recs[0]["covariance"]))[2])
         assert recs[1]["calibration"]["std"][2] == 10.0 and "std" not in recs[0]["calibration"]
     assert len(z_with) >= 15

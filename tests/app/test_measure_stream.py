@@ -408,5 +408,6 @@ def test_a_calibrated_camera_streamed_is_measured_as_its_images(tmp_path_factory
     for k in range(4):
         assert max(abs(lines[k]["pose"][n] - v) for n, v in measured[k]["pose"].items()) < 1e-9
         assert lines[k]["calibration"]["principal_point"] == [654.5, 469.5]
-        assert abs(lines[k]["pose"]["x_mm"] - labels[k]["x_mm"]) < 3 and abs(lines[k]["pose"]["y_mm"] - labels[k]["y_mm"]) < 3
+        pose = lines[k]["pose"]
+        assert abs(pose["x_mm"] - labels[k]["x_mm"]) < 3 and abs(pose["y_mm"] - labels[k]["y_mm"]) < 3
         assert abs(lines[k]["pose"]["alpha_deg"] - labels[k]["alpha_deg"]) < 0.1

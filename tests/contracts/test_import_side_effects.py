@@ -65,7 +65,8 @@ def test_the_command_entry_point_sets_the_apps_environment_before_numpy_loads():
     code = ("import os, sys\nimport dockfactory.entry as entry\nsys.argv = ['dockfactory', '--version']\n"
             "try:\n    entry.main()\nexcept SystemExit:\n    pass\n"
             "from dockfactory.core.blas import numpy_simd_on, openblas_core\n"
-            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_WAIT_POLICY'], numpy_simd_on(), openblas_core())")
+            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_WAIT_POLICY'], numpy_simd_on(), "
+            "openblas_core())")
     env = {k: v for k, v in os.environ.items()
            if k not in ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_NUM_THREADS", "OMP_WAIT_POLICY")}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
