@@ -1,0 +1,134 @@
+"""Part meshes in (core.mesh_files, mesh_gltf, mesh_ply) and markers on them (core.mesh_markers),
+without Blender: every format round trips a part (glTF in metres, the others in the stated unit);
+hand-written files of each format (a glTF node transform, an OBJ quad and negative indices, an
+ASCII STL, a binary PLY) read as written; bad files are one line naming the file; markers cast onto
+a cylinder mesh sit where the parametric layout puts them (within the facets' sagitta and angle),
+onto a box face with the face's normal, and a marker over an edge or under a rib is refused."""
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from dockfactory.core.layout import place_marker
+from dockfactory.core.mesh_base import MeshError, TriMesh
+from dockfactory.core.mesh_files import mesh_bytes, read_mesh, write_mesh
+from dockfactory.core.mesh_markers import place_on_mesh, ray_hits
+
+BOX = TriMesh(np.array([[x, y, z] for x in (0.0, 10.0) for y in (0.0, 20.0) for z in (0.0, 30.0)]),
+              np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                        [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]))
+
+
+def cylinder(radius=300.0, x0=-600.0, x1=0.0, n=256) -> TriMesh:
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    v = np.array([[x, radius * np.sin(t), radius * np.cos(t)] for x in (x0, x1) for t in a])
+    tris = [t for i in range(n) for t in ([i, (i + 1) % n, n + (i + 1) % n], [i, n + (i + 1) % n, n + i])]
+    return TriMesh(v, np.array(tris))
+
+
+def _same(a: TriMesh, b: TriMesh) -> float:
+    return float(np.abs(np.sort(a.corners().reshape(-1, 9), axis=0) - np.sort(b.corners().reshape(-1, 9), axis=0)).max())
+
+
+@pytest.mark.parametrize("suffix, tol", [(".glb", 1e-6), (".stl", 1e-5), (".obj", 0.0), (".ply", 0.0)])
+def test_every_format_round_trips(tmp_path, suffix, tol):
+    write_mesh(BOX, tmp_path / f"p{suffix}")
+    assert _same(read_mesh(tmp_path / f"p{suffix}"), BOX) <= tol
+
+
+def test_units_scale_all_but_gltf(tmp_path):
+    write_mesh(BOX, tmp_path / "p.obj")
+    assert _same(read_mesh(tmp_path / "p.obj", units="cm"), TriMesh(BOX.vertices * 10, BOX.triangles)) == 0.0
+    write_mesh(BOX, tmp_path / "p.glb")   # glTF: metres by its specification, whatever units says
+    assert _same(read_mesh(tmp_path / "p.glb", units="in"), BOX) < 1e-6
+
+
+def test_hand_written_files_read_as_written(tmp_path):
+    (tmp_path / "q.obj").write_text("# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3 4/4/4\nf -4 -3 -1\n")
+    m = read_mesh(tmp_path / "q.obj")
+    assert m.triangles.tolist() == [[0, 1, 2], [0, 2, 3], [0, 1, 3]]
+    (tmp_path / "t.stl").write_text("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 2 0 0\n"
+                                    "vertex 0 3 0\nendloop\nendfacet\nendsolid t\n")
+    assert read_mesh(tmp_path / "t.stl", units="m").vertices.tolist() == [[0, 0, 0], [2000, 0, 0], [0, 3000, 0]]
+    head = (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            b"property float z\nproperty uchar red\nelement face 1\nproperty list uchar uint vertex_indices\nend_header\n")
+    body = b"".join(struct.pack("<fffB", *p, 7) for p in ((0, 0, 0), (1, 0, 0), (0, 1, 0))) + struct.pack("<BIII", 3, 0, 1, 2)
+    (tmp_path / "b.ply").write_bytes(head + body)
+    assert read_mesh(tmp_path / "b.ply").vertices[1].tolist() == [1, 0, 0]
+
+
+def test_a_gltf_node_transform_is_applied(tmp_path):
+    glb = mesh_bytes(BOX, ".glb")
+    length = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20:20 + length])
+    doc["nodes"] = [{"children": [1], "translation": [1.0, 0.0, 0.0]},
+                    {"mesh": 0, "rotation": [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)], "scale": [2.0, 2.0, 2.0]}]
+    doc["buffers"][0]["uri"] = "p.bin"
+    binary = glb[28 + length:]
+    (tmp_path / "p.bin").write_bytes(binary)
+    (tmp_path / "p.gltf").write_text(json.dumps(doc))
+    m = read_mesh(tmp_path / "p.gltf")
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # 90 deg about Z
+    want = 2.0 * BOX.vertices @ rz.T + [1000.0, 0.0, 0.0]
+    assert np.abs(m.vertices - want).max() < 1e-4
+
+
+@pytest.mark.parametrize("name, data, message", [
+    ("p.step", b"ISO-10303-21;", "expected a mesh file (.glb, .gltf, .obj, .stl, .ply; STEP: convert it"),
+    ("p.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 5\n", "a triangle names vertex 4, but there are 2"),
+    ("p.obj", b"v 0 0\n", "p.obj:1: a vertex is not three numbers"),
+    ("p.stl", b"\x00" * 90, "not an STL file"),
+    ("p.glb", b"glTF" + b"\x01\x00\x00\x00" * 2, "not a glTF 2.0 binary"),
+    ("p.gltf", b'{"asset": {"version": "2.0"}, "buffers": [{"uri": "../x.bin"}]}', "the glTF's scene holds no mesh"),
+    ("p.ply", b"ply\nformat binary_big_endian 1.0\nend_header\n", "only ascii and binary_little_endian"),
+    ("p.obj", b"", "no triangles"),
+])
+def test_a_bad_file_is_one_line(tmp_path, name, data, message):
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(MeshError) as err:
+        read_mesh(tmp_path / name)
+    assert message in str(err.value) and name in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_buffer_outside_the_gltfs_folder_is_refused(tmp_path):
+    doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}], "buffers": [{"uri": "../x.bin"}],
+           "bufferViews": [{"buffer": 0}], "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}]}
+    (tmp_path / "p.gltf").write_text(json.dumps(doc))
+    with pytest.raises(MeshError, match=r"buffer 0 points outside the glTF's folder"):
+        read_mesh(tmp_path / "p.gltf")
+
+
+def test_markers_on_a_cylinder_mesh_are_the_parametric_ones():
+    mesh, radius = cylinder(), 300.0
+    half_facet = np.pi / 256
+    for s, phi in ((50.0, -53.0), (100.0, -32.0), (62.0, -7.0), (150.0, 61.0)):
+        got, drop = place_on_mesh(mesh, "A", 0, s, phi, 20.0, 1.0, "cyl")
+        want = place_marker("A", 0, s, phi, radius, 20.0, 1.0)
+        # the facet lies up to R (1 - cos(half facet)) inside the circle, its normal up to half a facet off
+        assert np.linalg.norm(np.subtract(got.center_mm, want.center_mm)) < radius * (1 - np.cos(half_facet)) + 0.02
+        assert np.degrees(np.arccos(np.clip(np.dot(got.normal, want.normal), -1, 1))) <= np.degrees(half_facet) + 1e-6
+        ring = 10.0 + 2.5
+        assert radius - np.sqrt(radius ** 2 - ring ** 2) - 0.01 < drop < radius - np.sqrt(radius ** 2 - ring ** 2) + 0.5
+
+
+def test_a_marker_on_a_box_face_and_over_an_edge_or_under_a_rib():
+    box = TriMesh(BOX.vertices * [-20.0, 10.0, 10.0] + [0.0, -100.0, 0.0], BOX.triangles)   # x -200..0, y -100..100, z 0..300
+    got, drop = place_on_mesh(box, "A", 3, 100.0, 0.0, 20.0, 1.0, "box")
+    assert np.allclose(got.center_mm, [-100.0, 0.0, 301.0]) and np.allclose(got.normal, [0, 0, 1]) and drop == 0.0
+    with pytest.raises(MeshError, match=r"box: marker A3 \(s 5 mm, phi 0 deg\): its ring overhangs an edge"):
+        place_on_mesh(box, "A", 3, 5.0, 0.0, 20.0, 1.0, "box")
+    rib = TriMesh(BOX.vertices * [0.5, 20.0, 1.0] + [-101.0, -200.0, 300.0], BOX.triangles)   # 5 mm wide, 30 high
+    both = TriMesh(np.vstack([box.vertices, rib.vertices]), np.vstack([box.triangles, rib.triangles + 8]))
+    with pytest.raises(MeshError, match=r"marker A0 \(s 92 mm, phi 0 deg\): the part rises 30.00 mm"):
+        place_on_mesh(both, "A", 0, 92.0, 0.0, 20.0, 1.0, "ribbed")
+    with pytest.raises(MeshError, match="its ray from the section's axis meets no surface"):
+        place_on_mesh(box, "B", 0, 100.0, 0.0, 20.0, 1.0, "box")
+
+
+def test_ray_hits_both_faces_and_only_ahead():
+    t, i = ray_hits(BOX.corners(), [3.0, 12.0, -10.0], [0.0, 0.0, 1.0])
+    assert sorted(np.round(t, 9).tolist()) == [10.0, 40.0] and len(set(i.tolist())) == 2
