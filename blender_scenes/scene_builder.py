@@ -117,9 +117,23 @@ def _section_cradles(static: StaticScene, sec: str, sign: int, support) -> list:
     return cradles
 
 
+def _build_part(static: StaticScene, sec: str, paint, parent) -> None:
+    """A section's part mesh (core.scene.PartMesh, its section frame), flat-shaded in the paint:
+    exactly the triangles the labels use; no flange, band or cradles of the parametric section."""
+    part = static.part(sec)
+    obj = meshes.mesh_object(f"section_{sec}", np.asarray(part.vertices) * MM, part.triangles)
+    obj.data.materials.append(paint)
+    obj.pass_index = SECTION_PASS_INDEX[sec]
+    if parent is not None:
+        obj.parent = parent
+
+
 def _build_section(static: StaticScene, sec: str, sign: int, paint, face, support, parent) -> None:
     """Body, flange, paint band and cradles of one section; section A in D: x in [-L, 0], section
-    B in its own frame: x in [0, L] (parented to ``parent``)."""
+    B in its own frame: x in [0, L] (parented to ``parent``); a part mesh instead when it has one."""
+    if static.part(sec) is not None:
+        _build_part(static, sec, paint, parent)
+        return
     r_m, l_m = static.radius_mm * MM, static.length_mm * MM
     fh, fw = static.flange_height_mm * MM, static.flange_width_mm * MM
     body = meshes.tube_x(f"section_{sec}", min(0, sign * l_m), max(0, sign * l_m), r_m)

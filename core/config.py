@@ -19,6 +19,10 @@ from pathlib import Path
 from dockfactory.core import layout as layout_mod
 from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
 from dockfactory.core.config_calibration import resolve_calibration
+from dockfactory.core.config_parts import resolve_parts
+from dockfactory.core.mesh_base import MeshError
+from dockfactory.core.mesh_files import UNITS_MM
+from dockfactory.core.mesh_markers import layout_on_parts
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
@@ -161,6 +165,13 @@ class SectionsConfig:
     length_mm: float = 1200.0       # length of each section
     flange_width_mm: float = 20.0   # flange at each docking face: axial width
     flange_height_mm: float = 8.0   # and radial height
+    mesh_a: str = ""                # A's part from a mesh file (glTF, OBJ, STL, PLY; its frame is A's, docs/configuration.md): read at load
+    mesh_b: str = ""                # B's part the same way (in B's frame); empty: the parametric cylinder
+    mesh_units: str = "mm"          # unit of OBJ, STL and PLY coordinates: mm | cm | m | in (glTF is in metres)
+    mesh_a_vertices: tuple[tuple[float, float, float], ...] = ()  # A's part as loaded (mm; written by the load of mesh_a)
+    mesh_a_triangles: tuple[tuple[int, int, int], ...] = ()       # its triangles (vertex indices)
+    mesh_b_vertices: tuple[tuple[float, float, float], ...] = ()  # B's part as loaded (mm, B's frame)
+    mesh_b_triangles: tuple[tuple[int, int, int], ...] = ()       # its triangles
 
 
 @dataclass(frozen=True)
@@ -263,7 +274,10 @@ class ExportConfig:
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
                     ("render", "marker_adaptive_threshold"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
-                    ("markers", "form"): "puck", ("camera_units", "calibration"): ""}
+                    ("markers", "form"): "puck", ("camera_units", "calibration"): "",
+                    ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
+                    ("sections", "mesh_a_vertices"): [], ("sections", "mesh_a_triangles"): [],
+                    ("sections", "mesh_b_vertices"): [], ("sections", "mesh_b_triangles"): []}
 RENDER_DEVICES = ("cpu", "gpu")
 
 
@@ -312,9 +326,8 @@ class Config:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
     def markers_layout(self):
-        return layout_mod.build_layout(self.markers.layout_a, self.markers.layout_b,
-                                       self.sections.radius_mm, self.markers.diameter_mm,
-                                       self.markers.raise_mm)
+        """Every marker, A's then B's: on the cylinder, or cast onto a section's part mesh."""
+        return layout_on_parts(self.sections, self.markers)[0]
 
 
 # ----------------------------------------------------------------------------- loading
@@ -422,6 +435,7 @@ def load_config(path) -> Config:
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     data, _ = resolve_calibration(data, path)
+    data, _ = resolve_parts(data, path)
     return config_from_dict(data, str(path))
 
 
@@ -601,6 +615,24 @@ def _validate_pose_sections(cfg: Config, source: str) -> None:
     _check_positive(source, "sections", "length_mm", s.length_mm)
     _check_positive(source, "sections", "flange_width_mm", s.flange_width_mm, allow_zero=True)
     _check_positive(source, "sections", "flange_height_mm", s.flange_height_mm, allow_zero=True)
+    _validate_parts(s, source)
+
+
+def _validate_parts(s: SectionsConfig, source: str) -> None:
+    """[sections] part meshes: a file name is read at load (never left in a built config); the
+    loaded triangles index their vertices."""
+    if s.mesh_units not in UNITS_MM:
+        raise _err(source, "sections", "mesh_units", f"{s.mesh_units!r} is not one of {', '.join(UNITS_MM)}")
+    for sec in ("a", "b"):
+        name, verts, tris = (getattr(s, f"mesh_{sec}{k}") for k in ("", "_vertices", "_triangles"))
+        if name:
+            raise _err(source, "sections", f"mesh_{sec}", f"{name!r} is read when a config file is loaded "
+                       "(load_config), relative to its folder: a config built from data has none")
+        if tris and not all(0 <= i < len(verts) for t in tris for i in t):
+            raise _err(source, "sections", f"mesh_{sec}_triangles", f"a triangle names a vertex beyond the "
+                       f"{len(verts)} of mesh_{sec}_vertices")
+        if bool(verts) != bool(tris):
+            raise _err(source, "sections", f"mesh_{sec}_vertices", "vertices and triangles come together")
 
 
 def _validate_markers(cfg: Config, source: str) -> None:
@@ -617,14 +649,18 @@ def _validate_markers(cfg: Config, source: str) -> None:
     reach = m.diameter_mm / 2 + layout_mod.RING_EXTRA_MM
     lo, hi = s.flange_width_mm + reach + 2.0, s.length_mm - reach
     for key, pattern in (("layout_a", m.layout_a), ("layout_b", m.layout_b)):
+        on_part = bool(getattr(s, f"mesh_{key[-1]}_triangles"))   # a part: its surface decides (placement)
         for i, (s_mm, phi) in enumerate(pattern):
-            if not lo <= s_mm <= hi:
+            if not on_part and not lo <= s_mm <= hi:
                 raise _err(source, "markers", f"{key}[{i}]",
                            f"axial offset {s_mm} mm puts the marker on the flange or off the section "
                            f"(allowed: {lo:g} to {hi:g} mm)")
             if not -80 <= phi <= 80:
                 raise _err(source, "markers", f"{key}[{i}]", f"angle {phi} deg is not on the camera side")
-    problems = layout_mod.layout_problems(cfg.markers_layout())
+    try:
+        problems = layout_mod.layout_problems(cfg.markers_layout())
+    except MeshError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
     if problems:
         raise _err(source, "markers", "layout_a/layout_b", "; ".join(problems))
 

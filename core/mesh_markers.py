@@ -7,18 +7,23 @@ the facets' angle.
 
 The surface under the marker is checked along its ring's rim (``RIM_SAMPLES`` rays cast back
 along the normal): the part may not rise above the disc's plane there (a rib or an inside corner
-would pierce the marker) by more than ``raise_mm``, and the deepest drop below the plane is
-returned so the marker's base can reach down to the part (it never floats). Pure numpy.
+would pierce the marker) by more than ``raise_mm``, nor fall away by more than ``MAX_DROP`` of the
+ring's radius (a step or an edge: a marker is mounted flat; a cylinder's curvature falls 0.26 mm
+under a 12.5 mm ring on 300 mm); the deepest drop is returned so the marker's base can reach down
+to the part (it never floats). Pure numpy.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
-from dockfactory.core.layout import RING_EXTRA_MM, Marker
+from dockfactory.core.layout import RING_EXTRA_MM, Marker, place_marker
 from dockfactory.core.mesh_base import MeshError, TriMesh
 
 RIM_SAMPLES = 24
 EPS = 1e-12
+MAX_DROP = 0.25   # the part may fall away under a ring by at most this fraction of its radius
 
 
 def ray_hits(corners: np.ndarray, origin, direction) -> tuple[np.ndarray, np.ndarray]:
@@ -82,6 +87,9 @@ def place_on_mesh(mesh: TriMesh, section: str, index: int, s_mm: float, phi_deg:
     heights = _rim_heights(corners, surface, normal, diameter_mm / 2.0 + RING_EXTRA_MM)
     if not np.all(np.isfinite(heights)):
         raise MeshError(f"{name}: its ring overhangs an edge of the part: move it or use a smaller marker")
+    if -heights.min() > MAX_DROP * (diameter_mm / 2.0 + RING_EXTRA_MM):
+        raise MeshError(f"{name}: the part falls {-heights.min():.2f} mm away under its ring (a step or an edge; "
+                        f"at most {MAX_DROP:g} of the ring's radius): a marker stands flat on the part; move it")
     if heights.max() > raise_mm:
         raise MeshError(f"{name}: the part rises {heights.max():.2f} mm above its disc's plane within its ring "
                         f"(more than raise_mm {raise_mm:g}): a rib or a corner would pierce it; move it")
@@ -90,3 +98,29 @@ def place_on_mesh(mesh: TriMesh, section: str, index: int, s_mm: float, phi_deg:
                     center_mm=tuple(float(v) for v in centre), normal=tuple(float(v) for v in normal),
                     diameter_mm=float(diameter_mm))
     return marker, float(max(0.0, -heights.min()))
+
+
+def _section_mesh(sections, section: str) -> TriMesh | None:
+    v, t = (getattr(sections, f"mesh_{section.lower()}_{k}") for k in ("vertices", "triangles"))
+    return TriMesh(np.array(v, dtype=np.float64), np.array(t, dtype=np.int64)) if t else None
+
+
+@lru_cache(maxsize=32)
+def layout_on_parts(sections, markers) -> tuple[tuple[Marker, ...], dict[str, float]]:
+    """(markers of A then B, {section: the largest drop under a ring, mm}) of a config's
+    [sections] and [markers] tables: a section with a part mesh (``mesh_a_vertices`` ...) gets
+    its markers cast onto it (:func:`place_on_mesh`), the others the cylinder's
+    (:func:`dockfactory.core.layout.place_marker`; no drop entry). MeshError names the marker."""
+    out, drops = [], {}
+    for section, pattern in (("A", markers.layout_a), ("B", markers.layout_b)):
+        mesh = _section_mesh(sections, section)
+        for i, (s_mm, phi) in enumerate(pattern):
+            if mesh is None:
+                out.append(place_marker(section, i, s_mm, phi, sections.radius_mm, markers.diameter_mm,
+                                        markers.raise_mm))
+                continue
+            marker, drop = place_on_mesh(mesh, section, i, s_mm, phi, markers.diameter_mm, markers.raise_mm,
+                                         f"[sections] mesh_{section.lower()}")
+            out.append(marker)
+            drops[section] = max(drops.get(section, 0.0), drop)
+    return tuple(out), drops

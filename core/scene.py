@@ -224,8 +224,21 @@ class MotionParams:
 
 
 @dataclass(frozen=True)
+class PartMesh:
+    """A section's part from a mesh file (core.config_parts): vertices (mm, the section's frame)
+    and triangles (vertex indices)."""
+    vertices: tuple[tuple[float, float, float], ...]
+    triangles: tuple[tuple[int, int, int], ...]
+
+    def corners(self) -> np.ndarray:
+        """(M, 3, 3) mm: each triangle's three vertices."""
+        return np.asarray(self.vertices, dtype=np.float64)[np.asarray(self.triangles, dtype=np.int64)]
+
+
+@dataclass(frozen=True)
 class StaticScene:
-    """What stays the same for a whole dataset (built once per render worker)."""
+    """What stays the same for a whole dataset (built once per render worker); ``part_a``,
+    ``part_b``: a section's part mesh in place of the parametric cylinder and flange."""
     radius_mm: float
     length_mm: float
     flange_width_mm: float
@@ -235,6 +248,11 @@ class StaticScene:
     clutter_slots: int
     # how far each marker's base reaches below its disc's top face (core.layout.base_depth_mm)
     marker_base_depth_mm: float = dataclasses.field(default=RING_BASE_DEPTH_MM, metadata={OMIT_IF_DEFAULT: True})
+    part_a: PartMesh | None = dataclasses.field(default=None, metadata={OMIT_IF_NONE: True})
+    part_b: PartMesh | None = dataclasses.field(default=None, metadata={OMIT_IF_NONE: True})
+
+    def part(self, section: str) -> PartMesh | None:
+        return self.part_a if section == "A" else self.part_b
 
 
 @dataclass(frozen=True)

@@ -91,6 +91,16 @@ def section_mesh(radius: float, length: float, flange_w: float, flange_h: float,
     return np.vstack(verts), np.vstack(normals), np.vstack(tris)
 
 
+def part_model(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (3 F, 3) mm, unit normals (3 F, 3) and triangles (F, 3) of a part mesh
+    (core.config_parts) for the BOP models: each triangle with its own three vertices carrying its
+    face normal (the part is drawn flat-shaded, as the factory renders it)."""
+    corners = np.asarray(vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return corners.reshape(-1, 3), np.repeat(n, 3, axis=0), np.arange(3 * len(corners)).reshape(-1, 3)
+
+
 def write_ply(path: Path, verts: np.ndarray, normals: np.ndarray, faces: np.ndarray) -> None:
     """ASCII PLY of a triangle mesh with vertex normals (mm), atomically."""
     head = (f"ply\nformat ascii 1.0\ncomment dockfactory section model, mm\nelement vertex {len(verts)}\n"

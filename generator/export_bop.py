@@ -34,7 +34,7 @@ import numpy as np
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import SECTIONS
 from dockfactory.generator.bop_images import depth_png, gt_info, section_mask, visible_mask
-from dockfactory.generator.bop_models import section_mesh, write_ply
+from dockfactory.generator.bop_models import part_model, section_mesh, write_ply
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.exr import read_compact
@@ -100,7 +100,9 @@ def _write_models(sec: dict, out: Path) -> None:
     """models/obj_*.ply of both sections and models_info.json (extents, bounding-box diagonal)."""
     info = {}
     for s in SECTIONS:
-        v, n, f = section_mesh(sec["radius_mm"], sec["length_mm"], sec["flange_width_mm"], sec["flange_height_mm"], s)
+        part = sec.get(f"mesh_{s.lower()}_triangles")
+        v, n, f = (part_model(sec[f"mesh_{s.lower()}_vertices"], part) if part else
+                   section_mesh(sec["radius_mm"], sec["length_mm"], sec["flange_width_mm"], sec["flange_height_mm"], s))
         write_ply(out / "models" / f"obj_{OBJ_ID[s]:06d}.ply", v, n, f)
         # models_eval/: where bop_toolkit's evaluation and vis_poses look by default; the same mesh
         place_file(out / "models" / f"obj_{OBJ_ID[s]:06d}.ply", out / "models_eval" / f"obj_{OBJ_ID[s]:06d}.ply")

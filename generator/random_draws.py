@@ -21,8 +21,9 @@ from dockfactory.core.geometry import (
     transform_from_pose_components,
     transform_points,
 )
-from dockfactory.core.layout import base_depth_mm, marker_points
-from dockfactory.core.scene import CLUTTER_SLOTS, StaticScene
+from dockfactory.core.layout import BASE_EMBED_MM, RING_BASE_DEPTH_MM, base_depth_mm, marker_points
+from dockfactory.core.mesh_markers import layout_on_parts
+from dockfactory.core.scene import CLUTTER_SLOTS, PartMesh, StaticScene
 
 STREAM_PLAN, STREAM_GEOMETRY, STREAM_LOOK, STREAM_REPEAT_GEOMETRY, STREAM_REPEAT_LOOK = range(5)
 # camera units and docking runs (their own streams: configs without them draw what they drew before)
@@ -46,13 +47,21 @@ def uniform(rng, lo_hi) -> float:
 @lru_cache(maxsize=8)
 def static_scene(cfg: Config) -> StaticScene:
     """What stays fixed for a whole dataset, from [sections], [markers] and [occlusion] occluders
-    (lengths in mm): built once from the config, then passed down to every frame and worker."""
-    return StaticScene(radius_mm=cfg.sections.radius_mm, length_mm=cfg.sections.length_mm,
-                       flange_width_mm=cfg.sections.flange_width_mm,
-                       flange_height_mm=cfg.sections.flange_height_mm, markers=cfg.markers_layout(),
+    (lengths in mm): built once from the config, then passed down to every frame and worker. A
+    section with a part mesh carries it, and the markers' base reaches down to the deepest drop of
+    the part under a ring (core.mesh_markers)."""
+    s, m = cfg.sections, cfg.markers
+    markers, drops = layout_on_parts(s, m)
+    depth = base_depth_mm(m.form, m.raise_mm, m.diameter_mm, s.radius_mm)
+    for drop in drops.values():
+        reach = m.raise_mm + drop + BASE_EMBED_MM
+        depth = max(depth, max(RING_BASE_DEPTH_MM, reach) if m.form == "puck" else reach)
+    parts = {f"part_{k}": PartMesh(getattr(s, f"mesh_{k}_vertices"), getattr(s, f"mesh_{k}_triangles"))
+             for k in ("a", "b") if getattr(s, f"mesh_{k}_triangles")}
+    return StaticScene(radius_mm=s.radius_mm, length_mm=s.length_mm, flange_width_mm=s.flange_width_mm,
+                       flange_height_mm=s.flange_height_mm, markers=markers,
                        max_occluders=cfg.occlusion.occluders[1], clutter_slots=CLUTTER_SLOTS,
-                       marker_base_depth_mm=base_depth_mm(cfg.markers.form, cfg.markers.raise_mm,
-                                                          cfg.markers.diameter_mm, cfg.sections.radius_mm))
+                       marker_base_depth_mm=depth, **parts)
 
 
 def markers_in_d(static: StaticScene, d_from_b: np.ndarray) -> np.ndarray:

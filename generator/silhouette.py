@@ -1,12 +1,14 @@
 """A section's silhouette as a renderer samples it (pure numpy): its solids' points and the pixels
 whose centre lies inside their images.
 
-A section is two convex solids of revolution sharing the docking axis: the flange (radius R + the
+A parametric section is two convex solids of revolution sharing the docking axis: the flange (radius R + the
 flange height, from the docking face over the flange width) and the body (radius R, from the
 flange's back to the far end). Their union is not convex: the convex hull of all their circles
 also covers the sliver between the flange's rim and the far end, which no renderer draws
 (bench/results/tool_checks/README.md measures it). So the silhouette is the union of the images of the two solids, each the convex hull of its
 projected circles (through a lens: that hull's outline, distorted), filled at pixel centres.
+
+A section from a part mesh is the union of its triangles' images.
 
 Pixel convention (OpenCV): pixel (c, r) has its centre at x = c, y = r.
 """
@@ -22,7 +24,11 @@ SEGMENTS = 128   # points on each circle: the vertices of the BOP export's model
 def section_silhouette(static: StaticScene, section: str, n: int = SEGMENTS) -> np.ndarray:
     """Points (3 n, 3) mm in the section frame: the flange's two rim circles (radius R + flange
     height, at the docking face and the flange's back) and the body's far-end circle (radius R).
-    Every point of the section projects inside the convex hull of their images."""
+    Every point of the section projects inside the convex hull of their images. A part mesh: its
+    vertices."""
+    part = static.part(section)
+    if part is not None:
+        return np.asarray(part.vertices, dtype=np.float64)
     a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
     sign = -1.0 if section == "A" else 1.0
     rings = []
@@ -36,7 +42,10 @@ def section_silhouette(static: StaticScene, section: str, n: int = SEGMENTS) -> 
 def silhouette_parts(static: StaticScene, sec: str) -> list[np.ndarray]:
     """The section's two convex solids as points (2 n, 3) mm in its frame, each the convex hull of
     its points: the flange (its two rim circles) and the body (circles of radius R at the flange's
-    back and at the far end)."""
+    back and at the far end). A part mesh: its triangles (each convex; their union is the part)."""
+    part = static.part(sec)
+    if part is not None:
+        return list(part.corners())
     pts = section_silhouette(static, sec)
     n = len(pts) // 3
     far = pts[2 * n:]

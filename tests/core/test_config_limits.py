@@ -38,8 +38,10 @@ def _float_slots():
                 args = typing.get_args(hint)
                 if float in args:                                   # a [min, max] range
                     out.append((table.name, f.name, [list(value), 0]))
-                elif args and typing.get_origin(args[0]) is tuple:  # a list of float pairs
-                    out.append((table.name, f.name, [[list(p) for p in value], 0, 1]))
+                elif args and typing.get_origin(args[0]) is tuple and float in typing.get_args(args[0]):
+                    # a list of float pairs or triples (a part's vertices: empty by default)
+                    rows = [list(p) for p in value] or [[0.0] * len(typing.get_args(args[0]))]
+                    out.append((table.name, f.name, [rows, 0, 1]))
     return out
 
 

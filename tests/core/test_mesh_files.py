@@ -132,3 +132,33 @@ def test_a_marker_on_a_box_face_and_over_an_edge_or_under_a_rib():
 def test_ray_hits_both_faces_and_only_ahead():
     t, i = ray_hits(BOX.corners(), [3.0, 12.0, -10.0], [0.0, 0.0, 1.0])
     assert sorted(np.round(t, 9).tolist()) == [10.0, 40.0] and len(set(i.tolist())) == 2
+
+
+def test_the_shipped_example_parts_are_what_their_script_writes(repo_root, tmp_path):
+    from dockfactory.generator.example_parts import FILES, write_example_parts
+    write_example_parts(tmp_path)
+    for name in FILES.values():
+        assert (tmp_path / name).read_bytes() == (repo_root / "configs" / "parts" / name).read_bytes(), name
+
+
+def test_a_config_names_a_part_and_holds_it(repo_root, tmp_path):
+    import tomllib
+
+    from dockfactory.core.config import ConfigError, config_from_dict, load_config
+    from dockfactory.core.config_text import load_config_text
+    cfg, text = load_config_text(repo_root / "configs" / "octagon_part.toml")
+    assert len(cfg.sections.mesh_a_triangles) == len(cfg.sections.mesh_b_triangles) == 84
+    assert text.startswith("# octagon_part.toml with [sections] mesh_a = 'parts/octagon_a.glb' (sha256 ")
+    assert config_from_dict(tomllib.loads(text)) == cfg == load_config(repo_root / "configs" / "octagon_part.toml")
+    a0 = cfg.markers_layout()[0]
+    assert a0.normal == pytest.approx((0.0, 0.0, 1.0)) and a0.center_mm[2] == pytest.approx(300 * np.cos(np.pi / 8) + 1)
+    (tmp_path / "c.toml").write_text('[sections]\nmesh_a = "nope.glb"\n')
+    with pytest.raises(MeshError, match=r"c.toml: \[sections\] mesh_a: .*nope.glb: mesh file not found"):
+        load_config(tmp_path / "c.toml")
+    with pytest.raises(ConfigError, match=r"\[sections\] mesh_a: 'x.glb' is read when a config file is loaded"):
+        config_from_dict({"sections": {"mesh_a": "x.glb"}})
+    for s_mm, why in (("245.0", "the part rises 10.00 mm"), ("258.0", "the part falls 10.00 mm away")):
+        bad = text.replace("layout_a = [[60.0, -6.0]", f"layout_a = [[{s_mm}, -6.0]")   # beside the rib, on it
+        (tmp_path / "rib.toml").write_text(bad)
+        with pytest.raises(ConfigError, match=rf"marker A0 \(s {s_mm[:-2]} mm, phi -6 deg\): {why}"):
+            load_config(tmp_path / "rib.toml")
