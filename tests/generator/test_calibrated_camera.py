@@ -22,7 +22,7 @@ from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.generator.version import dataset_version_id
 
-CAL = Calibration(640, 480, 700.2, 700.5, 326.3, 236.9, (-0.08, 0.05, 0.0004, -0.0003, 0.01))
+CAL = Calibration(640, 480, 700.3, 700.3, 326.3, 236.9, (-0.08, 0.05, 0.0004, -0.0003, 0.01))
 SMALL = """[dataset]
 name = "calibrated"
 seed = 4
@@ -95,8 +95,10 @@ def test_an_equal_image_size_a_missing_file_and_non_square_pixels(tmp_path):
     with pytest.raises(CalibrationError, match=missing):
         load_config(path)
     path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 702.0, 320.0, 240.0))
-    with pytest.raises(CalibrationError, match=r"fx 700 and fy 702 px differ by 0.29 %: the factory renders square"):
+    with pytest.raises(CalibrationError, match=r"fx 700 and fy 702 px differ by 0.285 %: the factory renders square"):
         load_config(path)
+    path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 700.0 * (1 + 5e-6), 320.0, 240.0))
+    assert load_config(path).camera.focal_px[0] == pytest.approx(700.0 * (1 + 2.5e-6))   # within 1e-5: sqrt(fx fy)
 
 
 def test_a_config_built_from_data_cannot_name_a_file():
@@ -161,7 +163,7 @@ def test_cycles_renders_the_calibrated_camera(tmp_path):
     from pipeline_data import LENS_CHECK, label_vs_index
 
     from dockfactory.generator.render_job import JobOptions, run_render
-    cal = Calibration(320, 240, 338.0, 338.1, 166.4, 115.2, (-0.12, 0.03, 8e-4, -6e-4, 0.0))
+    cal = Calibration(320, 240, 338.0, 338.0, 166.4, 115.2, (-0.12, 0.03, 8e-4, -6e-4, 0.0))
     write_calibration(cal, tmp_path / "cam.json", "opencv-json")
     lens_keys = ("principal_offset", "k1 ", "k2 ", "p1 ", "p2 ", "aberration", "count", "focal_px", "jpeg")
     text = "".join(ln + "\n" for ln in LENS_CHECK.splitlines() if not ln.startswith(lens_keys))
