@@ -26,7 +26,7 @@ from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.dataset import CONVENTIONS
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.hf_view import HF_DIR, HF_SPLIT_NAMES, write_hf_view
+from dockfactory.generator.hf_view import HF_DIR, HF_FEATURES, HF_SPLIT_NAMES, write_hf_view
 
 CARD_NAME = "README.md"
 SIZE_BUCKETS = ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M"))
@@ -36,6 +36,20 @@ TAGS = ("synthetic", "dockfactory", "blender", "pose-estimation", "camera-calibr
 def size_category(frames: int) -> str:
     """The hub's ``size_categories`` bucket of ``frames`` examples."""
     return next((name for limit, name in SIZE_BUCKETS if frames < limit), "1M<n<10M")
+
+
+def feature_schema(spec):
+    """One feature of hf_view.HF_FEATURES as datasets' card schema writes it (the value beside
+    ``dtype``, ``list``, ``struct`` or ``class_label``): (key, value)."""
+    if isinstance(spec, str):
+        return "dtype", spec
+    kind, body = spec
+    if kind == "struct":
+        return "struct", [{"name": k, **dict([feature_schema(v)])} for k, v in body]
+    if kind == "class_label":
+        return "class_label", {"names": {str(i): n for i, n in enumerate(body)}}
+    key, value = feature_schema(body)
+    return "list", (value if key == "dtype" else {key: value})
 
 
 def front_matter(ds: Dataset, license_id: str, counts: dict[str, int]) -> str:
@@ -51,6 +65,9 @@ def front_matter(ds: Dataset, license_id: str, counts: dict[str, int]) -> str:
     for split in SPLITS:
         if counts.get(split):
             lines += [f"  - split: {HF_SPLIT_NAMES[split]}", f"    path: {q(f'{HF_DIR}/{split}/**')}"]
+    # the config's features (datasets reads them into imagefolder's config; JSON flow mappings are
+    # valid YAML): what imagefolder would infer, objects.category a ClassLabel
+    lines += ["  features:"] + [f"  - {q({'name': k, **dict([feature_schema(v)])})}" for k, v in HF_FEATURES]
     return "\n".join(lines + ["---"]) + "\n"
 
 

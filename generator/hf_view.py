@@ -19,7 +19,7 @@ whose inferred features differ): floats are written as floats, no field is ever 
 - the pose: ``d_from_b`` (4 x 4, mm) and ``pose`` {x_mm, y_mm, z_mm, alpha_deg, beta_deg,
   gamma_deg};
 - ``objects``: every marker whose projected outline is in the image, as parallel lists:
-  ``marker_id``, ``category`` (0 RedA, 1 BlueB), ``bbox`` [x, y, w, h] in continuous coordinates
+  ``marker_id``, ``category`` (0 RedA, 1 BlueB: a ClassLabel, the card declares the features), ``bbox`` [x, y, w, h] in continuous coordinates
   (COCO's: the label's ``bbox_px`` + 0.5), ``center_px`` [x, y] (the label's, OpenCV pixel
   centres), ``visibility`` (COCO's 0/1/2), ``visible_fraction``, ``legible``;
 - ``label_file`` (the full label, relative to the dataset) and ``label_sha256`` (its manifest
@@ -36,13 +36,26 @@ import shutil
 from pathlib import Path
 
 from dockfactory.core.io import TMP_MARK, stale_temp, write_text_atomic
-from dockfactory.core.names import SPLITS
+from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SPLITS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.export_coco import COCO_SHIFT   # OpenCV pixel centres -> continuous coordinates
 from dockfactory.generator.export_files import folder_built_aside, place_file, source_image
 
 HF_DIR = "hf"
+# the metadata's features as the card declares them (datasets' YAML schema): what imagefolder would
+# infer, with ``objects.category`` a ClassLabel of the markers' class names
+F64, I64, STR = "float64", "int64", "string"
+HF_FEATURES = (("image", "image"), ("frame_id", STR), ("split", STR), ("condition", STR), ("camera_unit", I64),
+               ("width", I64), ("height", I64), ("focal_px", F64), ("principal_point", ("list", F64)),
+               ("K", ("list", ("list", F64))), ("dist_coeffs", ("list", F64)),
+               ("cam_from_d", ("list", ("list", F64))), ("d_from_b", ("list", ("list", F64))),
+               ("pose", ("struct", tuple((k, F64) for k in POSE_NAMES))),
+               ("objects", ("struct", (("marker_id", ("list", STR)), ("category", ("list", ("class_label", CLASS_NAMES))),
+                                       ("bbox", ("list", ("list", F64))), ("center_px", ("list", ("list", F64))),
+                                       ("visibility", ("list", I64)), ("visible_fraction", ("list", F64)),
+                                       ("legible", ("list", "bool"))))),
+               ("label_file", STR), ("label_sha256", STR))
 HF_SPLIT_NAMES = {"train": "train", "val": "validation", "test": "test", "repeat": "repeat"}   # ours -> the hub's
 STALE_VIEW_S = 6 * 3600.0
 

@@ -101,6 +101,9 @@ def test_hugging_face_datasets_loads_every_split_and_the_labels(painted, tmp_pat
     by_folder = load_dataset("imagefolder", data_dir=str(painted), data_files=files, cache_dir=str(tmp_path / "c2"))
     ds = Dataset.open(painted)
     sha = {rec["path"]: rec["sha256"] for rec in ds.manifest["files"]}
+    category = by_card["train"].features["objects"]["category"].feature   # the card declares the features
+    assert type(category).__name__ == "ClassLabel" and category.names == ["RedA", "BlueB"]
+    assert by_card["train"].features["objects"]["marker_id"] == by_folder["train"].features["objects"]["marker_id"]
     for loaded in (by_card, by_folder):
         assert {k: len(v) for k, v in loaded.items()} == SMOKE_SPLITS
         for split, rows in loaded.items():
