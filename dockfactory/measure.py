@@ -222,7 +222,8 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     options = docking_options(detector.centre_noise_px, calibration_lens(cal), detector.section_shift_px)
     record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
                                       "pinhole", options)
-    record["calibration"] = {"focal_px": focal, "principal_point": [cal.cx, cal.cy], "distortion": list(cal.dist),
+    record["calibration"] = {"focal_px": focal, "fx": cal.fx, "fy": cal.fy, "principal_point": [cal.cx, cal.cy],
+                             "distortion": list(cal.dist),
                              **({"std": list(cal.std)} if cal.std is not None else {})}
     return record, used, edges
 

@@ -15,11 +15,17 @@ _LABEL = {"x": "X", "y": "Y", "z": "Z"}             # pose components as the ove
 
 
 def project_layout(record: dict, markers) -> np.ndarray:
-    """(N, 2) pixels of every layout marker centre under the record's pose and camera."""
+    """(N, 2) pixels of every layout marker centre under the record's pose and camera: a
+    calibrated camera's (``calibration``: its fx, fy, principal point and lens), else the solved
+    one's (focal, the principal point and lens it estimated or assumed)."""
     cam_from_a = np.array(record["cam_from_a"])
     a_from_b = np.array(record["d_from_b"])
     pts = np.array([transform_points(cam_from_a if m.section == "A" else cam_from_a @ a_from_b,
                                      np.array([m.center_mm]))[0] for m in markers])
+    cal = record.get("calibration")
+    if cal is not None and "fx" in cal:
+        xy = distort_normalized(pts[:, :2] / pts[:, 2:3], cal["distortion"])
+        return xy * [cal["fx"], cal["fy"]] + cal["principal_point"]
     intr = record.get("intrinsics") or {}
     size = record["image_size"]
     cx, cy = intr.get("cx", (size[0] - 1) / 2.0), intr.get("cy", (size[1] - 1) / 2.0)

@@ -115,3 +115,22 @@ def test_the_stated_uncertainty_round_trips_and_is_checked(tmp_path):
     (tmp_path / "bad.yaml").write_text(text)
     with pytest.raises(CalibrationError, match="std_deviations_intrinsics: expected 9 finite values >= 0"):
         read_calibration(tmp_path / "bad.yaml")
+
+
+def test_the_overlay_reprojects_through_the_calibrated_lens():
+    """The overlay's reprojected layout of a calibrated image is the calibrated camera's projection
+    (OpenCV's projectPoints with its K and lens, from the solved pose), not the ideal pinhole's."""
+    import cv2
+
+    from dockfactory.measure_overlay import project_layout
+    sc, centres, cal = _frame(np.random.default_rng(12))
+    rec, _, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
+    got = project_layout(rec, LAYOUT)
+    cam_from_a, a_from_b = np.array(rec["cam_from_a"]), np.array(rec["d_from_b"])
+    want = []
+    for m in LAYOUT:
+        t = cam_from_a if m.section == "A" else cam_from_a @ a_from_b
+        p, _ = cv2.projectPoints(np.array([m.center_mm]), cv2.Rodrigues(t[:3, :3])[0], t[:3, 3], cal.K, np.array(cal.dist))
+        want.append(p.ravel())
+    assert np.abs(got - np.array(want)).max() < 1e-6
+    assert np.abs(got - np.vstack([sc.uv_a, sc.uv_b])).max() < 1.0   # near the true image points
