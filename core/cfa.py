@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.cfa import channel_map

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Protocol
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 import torch
 

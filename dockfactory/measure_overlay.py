@@ -2,7 +2,7 @@
 camera (distortion included), and the pose in text."""
 from __future__ import annotations
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.distortion import distort_normalized

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.calibration_files import Calibration

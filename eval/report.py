@@ -13,7 +13,7 @@ import os
 import subprocess
 from pathlib import Path
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.geometry import intrinsics, project_points

@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import cv2
+from dockfactory.core.cv import cv2
 
 from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.dataset import DatasetError

@@ -13,7 +13,7 @@ import json
 import zipfile
 from pathlib import Path
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.io import write_bytes_atomic

@@ -19,7 +19,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.io import (

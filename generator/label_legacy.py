@@ -12,7 +12,7 @@ two fields by what this module computes for the same frame and compares again, a
 """
 from __future__ import annotations
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.layout import SECTIONS

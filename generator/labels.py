@@ -15,7 +15,7 @@ come from a sample of the blurred marker; ``bbox_swept_px`` bounds the blur.
 """
 from __future__ import annotations
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.distortion import COEFF_NAMES, coeffs_array, distort_pixels

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 COUNT_RATIO = (0.5, 3.0)

@@ -39,7 +39,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.config import config_from_identity

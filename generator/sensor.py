@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core import isp

@@ -26,6 +26,7 @@ def blender_version() -> str:
 OUTPUT_SOURCES = (
     "dockfactory.core.calibration_files", "dockfactory.core.camera_chain", "dockfactory.core.cfa",
     "dockfactory.core.config", "dockfactory.core.config_calibration", "dockfactory.core.config_parts",
+    "dockfactory.core.cv",
     "dockfactory.core.demosaic", "dockfactory.core.mesh_base", "dockfactory.core.mesh_files",
     "dockfactory.core.mesh_gltf", "dockfactory.core.mesh_markers", "dockfactory.core.mesh_ply",
     "dockfactory.core.distortion", "dockfactory.core.emva", "dockfactory.core.errors", "dockfactory.core.geometry",

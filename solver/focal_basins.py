@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-import cv2
+from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.solver.errors import SolverError
