@@ -18,8 +18,7 @@ from pathlib import Path
 
 from dockfactory.core import layout as layout_mod
 from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
-from dockfactory.core.config_calibration import resolve_calibration
-from dockfactory.core.config_parts import resolve_parts
+from dockfactory.core.config_files import resolve_config_files
 from dockfactory.core.mesh_base import MeshError
 from dockfactory.core.mesh_files import UNITS_MM
 from dockfactory.core.mesh_markers import layout_on_parts
@@ -434,8 +433,7 @@ def load_config(path) -> Config:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
-    data, _ = resolve_calibration(data, path)
-    data, _ = resolve_parts(data, path)
+    data, _ = resolve_config_files(data, path)
     return config_from_dict(data, str(path))
 
 

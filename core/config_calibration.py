@@ -18,11 +18,10 @@ CALIB_FIX_ASPECT_RATIO) or a file with one value for both renders. A key the fil
 """
 from __future__ import annotations
 
-import hashlib
 import math
-from pathlib import Path
 
 from dockfactory.core.calibration_files import CalibrationError, read_calibration
+from dockfactory.core.user_files import beside_config, short_digest
 
 MAX_ASPECT_DIFF = 1e-5   # |fx - fy| / sqrt(fx fy) the square-pixel renderer accepts (0.07 % moved X 0.45 mm)
 LENS_KEYS = ("principal_offset_x_px", "principal_offset_y_px", "k1", "k2", "k3", "p1", "p2")
@@ -77,7 +76,7 @@ def resolve_calibration(data: dict, config_path) -> tuple[dict, str | None]:
         raise CalibrationError(f"{source}: [camera_units] calibration: expected a file name, got {name!r}")
     if name == "":
         return data, None
-    path = Path(name) if Path(name).is_absolute() else Path(config_path).parent / name
+    path = beside_config(name, config_path)
     try:
         cal = read_calibration(path)
         f = square_focal(cal, str(path))
@@ -92,5 +91,5 @@ def resolve_calibration(data: dict, config_path) -> tuple[dict, str | None]:
         **{k: [float(v)] * 2 for k, v in zip(("k1", "k2", "p1", "p2", "k3"), cal.dist)}})
     out["image"] = {**out.get("image", {}), "width": cal.width, "height": cal.height}
     out["camera"] = {**out.get("camera", {}), "focal_px": [f, f]}
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    digest = short_digest(path)
     return out, f"[camera_units] calibration = {name!r} (sha256 {digest}...) resolved"

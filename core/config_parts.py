@@ -10,11 +10,10 @@ onto it, silhouettes, the worker's scene, BOP models) reads the same triangles.
 """
 from __future__ import annotations
 
-import hashlib
-from pathlib import Path
 
 from dockfactory.core.mesh_base import MeshError
 from dockfactory.core.mesh_files import read_mesh
+from dockfactory.core.user_files import beside_config, short_digest
 
 
 def resolve_parts(data: dict, config_path) -> tuple[dict, str | None]:
@@ -34,7 +33,7 @@ def resolve_parts(data: dict, config_path) -> tuple[dict, str | None]:
             raise MeshError(f"{source}: [sections] mesh_{sec}: expected a file name, got {name!r}")
         if f"mesh_{sec}_vertices" in sections or f"mesh_{sec}_triangles" in sections:
             raise MeshError(f"{source}: [sections] mesh_{sec}: the config states its triangles too; give one")
-        path = Path(name) if Path(name).is_absolute() else Path(config_path).parent / name
+        path = beside_config(name, config_path)
         try:
             mesh = read_mesh(path, sections.get("mesh_units", "mm") if isinstance(sections.get("mesh_units"), str)
                              else "mm")
@@ -43,6 +42,6 @@ def resolve_parts(data: dict, config_path) -> tuple[dict, str | None]:
         out.pop(f"mesh_{sec}")
         out[f"mesh_{sec}_vertices"] = mesh.vertices.tolist()
         out[f"mesh_{sec}_triangles"] = mesh.triangles.tolist()
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        digest = short_digest(path)
         notes.append(f"[sections] mesh_{sec} = {name!r} (sha256 {digest}..., {len(mesh.triangles)} triangles)")
     return {**data, "sections": out}, " and ".join(notes) + " resolved"

@@ -18,8 +18,7 @@ from pathlib import Path
 
 from dockfactory.core import config as config_mod
 from dockfactory.core.config import Config, ConfigError, config_from_dict
-from dockfactory.core.config_calibration import resolve_calibration
-from dockfactory.core.config_parts import resolve_parts
+from dockfactory.core.config_files import resolve_config_files
 from dockfactory.core.user_files import check_regular_file
 
 
@@ -111,11 +110,10 @@ def load_config_text(path, sets=()) -> tuple[Config, str]:
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     merged = apply_overrides(data, sets, str(path)) if sets else data
-    merged, note = resolve_calibration(merged, path)
-    merged, parts = resolve_parts(merged, path)
-    if not sets and note is None and parts is None:
+    merged, note = resolve_config_files(merged, path)
+    if not sets and note is None:
         return config_from_dict(data, str(path)), text
-    changes = " and ".join(c for c in (f"--set {' '.join(sets)}" if sets else "", note, parts) if c)
+    changes = " and ".join(c for c in (f"--set {' '.join(sets)}" if sets else "", note) if c)
     cfg = config_from_dict(merged, f"{path} with {changes}")
     return cfg, f"# {path.name} with {changes}\n" + to_toml(cfg.resolved_dict())
 

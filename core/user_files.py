@@ -6,6 +6,7 @@ folder or a device gives an OS error deep inside a reader; each reader calls
 """
 from __future__ import annotations
 
+import hashlib
 import stat
 from pathlib import Path
 
@@ -25,3 +26,13 @@ def check_regular_file(path, what: str) -> None:
     if not stat.S_ISREG(mode):
         kind = "fifo" if stat.S_ISFIFO(mode) else "socket" if stat.S_ISSOCK(mode) else "device"
         raise DockfactoryError(f"{path}: is a {kind}, not a {what} file")
+
+
+def beside_config(name: str, config_path) -> Path:
+    """The file ``name`` a config names: absolute as given, else relative to the config's folder."""
+    return Path(name) if Path(name).is_absolute() else Path(config_path).parent / name
+
+
+def short_digest(path: Path) -> str:
+    """The first 16 hex digits of a file's sha256 (the one-line note a resolved config carries)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]

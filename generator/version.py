@@ -25,7 +25,8 @@ def blender_version() -> str:
 # render worker process imports (tests/generator/test_version.py checks the list against a real worker)
 OUTPUT_SOURCES = (
     "dockfactory.core.calibration_files", "dockfactory.core.camera_chain", "dockfactory.core.cfa",
-    "dockfactory.core.config", "dockfactory.core.config_calibration", "dockfactory.core.config_parts",
+    "dockfactory.core.config", "dockfactory.core.config_calibration", "dockfactory.core.config_files",
+    "dockfactory.core.config_parts",
     "dockfactory.core.cv",
     "dockfactory.core.demosaic", "dockfactory.core.mesh_base", "dockfactory.core.mesh_files",
     "dockfactory.core.mesh_gltf", "dockfactory.core.mesh_markers", "dockfactory.core.mesh_ply",
