@@ -19,7 +19,7 @@ from pathlib import Path
 from dockfactory.core import layout as layout_mod
 from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
 from dockfactory.core.config_files import resolve_config_files
-from dockfactory.core.mesh_base import MeshError
+from dockfactory.core.mesh_base import MAX_TRIANGLES, MeshError
 from dockfactory.core.mesh_files import UNITS_MM
 from dockfactory.core.mesh_markers import layout_on_parts
 from dockfactory.core.demosaic import DEMOSAICS
@@ -626,7 +626,9 @@ def _validate_parts(s: SectionsConfig, source: str) -> None:
         if name:
             raise _err(source, "sections", f"mesh_{sec}", f"{name!r} is read when a config file is loaded "
                        "(load_config), relative to its folder: a config built from data has none")
-        if tris and not all(0 <= i < len(verts) for t in tris for i in t):
+        if len(tris) > MAX_TRIANGLES:
+            raise _err(source, "sections", f"mesh_{sec}_triangles", f"{len(tris)} triangles, more than {MAX_TRIANGLES}")
+        if tris and not (0 <= min(map(min, tris)) and max(map(max, tris)) < len(verts)):
             raise _err(source, "sections", f"mesh_{sec}_triangles", f"a triangle names a vertex beyond the "
                        f"{len(verts)} of mesh_{sec}_vertices")
         if bool(verts) != bool(tris):

@@ -162,3 +162,13 @@ def test_a_config_names_a_part_and_holds_it(repo_root, tmp_path):
         (tmp_path / "rib.toml").write_text(bad)
         with pytest.raises(ConfigError, match=rf"marker A0 \(s {s_mm[:-2]} mm, phi -6 deg\): {why}"):
             load_config(tmp_path / "rib.toml")
+
+
+def test_a_config_holding_a_bad_part_is_one_line():
+    from dockfactory.core.config import ConfigError, config_from_dict
+    v, t = BOX.vertices.tolist(), BOX.triangles.tolist()
+    for sections, message in (({"mesh_a_vertices": v, "mesh_a_triangles": [[0, 1, 8]] + t}, "a vertex beyond the 8"),
+                              ({"mesh_a_vertices": v}, "vertices and triangles come together"),
+                              ({"mesh_units": "furlong"}, "'furlong' is not one of mm, cm, m, in")):
+        with pytest.raises(ConfigError, match=message):
+            config_from_dict({"sections": sections})
