@@ -16,6 +16,12 @@ with their quality, condition, visible fraction and edge width.
 """
 from __future__ import annotations
 
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
 import argparse
 import json
 import math
@@ -25,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-import dockfactory  # noqa: F401  (first: the label arithmetic pins)
 from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.dataset_open import Dataset
 

@@ -14,7 +14,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import dockfactory  # noqa: F401  (first: the label arithmetic pins)
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
 from dockfactory.generator.fingerprints_libm import derive
 
 

@@ -26,9 +26,14 @@ import copy
 import json
 from pathlib import Path
 
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
 import numpy as np
 
-import dockfactory  # noqa: F401  (first: pins numpy's BLAS kernel)
 from dockfactory.core.io import write_bytes_atomic
 from dockfactory.generator.fingerprints import FINGERPRINTS_NAME, fingerprints_v2
 from dockfactory.generator.label_prints import label_geometry_sha256

@@ -23,13 +23,18 @@ bench/results/fit_gate/README.md.
 """
 from __future__ import annotations
 
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
 import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 
-import dockfactory  # noqa: F401  (first: the label arithmetic pins)
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import build_layout
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame

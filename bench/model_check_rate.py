@@ -21,9 +21,14 @@ import argparse
 import json
 from pathlib import Path
 
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
 import numpy as np
 
-import dockfactory  # noqa: F401  (first: the label arithmetic pins)
 from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.generator.dataset_open import Dataset

@@ -15,7 +15,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import dockfactory  # noqa: F401  (first: the label BLAS kernel)
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
 from dockfactory.core.config import load_config
 from dockfactory.core.scene import to_dict
 from dockfactory.generator.random_draws import static_scene

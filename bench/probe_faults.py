@@ -30,7 +30,6 @@ from pathlib import Path
 
 import cv2
 
-import dockfactory  # noqa: F401  (first: the label arithmetic pins)
 from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.dataset import layout_record
 from dockfactory.generator.dataset_open import Dataset

@@ -14,6 +14,12 @@ Run: python bench/solver_real_frames.py DATASET [--splits test,val] [--weights W
 """
 from __future__ import annotations
 
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
 import argparse
 import json
 import sys
@@ -21,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-import dockfactory  # noqa: F401  (first: pins numpy's BLAS kernel)
 
 AXES = (("x_mm", "X mm"), ("y_mm", "Y mm"), ("alpha_deg", "alpha deg"))
 
