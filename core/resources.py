@@ -10,6 +10,7 @@ from dockfactory.core.user_files import check_regular_file
 
 WEIGHTS_NAME = "yolov5n_se_rings_markers.pt"   # the default detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
+DESIGN_CARD_NAME = "design_predictor.json"   # the design predictor's card (bench/design_fit.py)
 
 
 def _shipped(package: str, name: str) -> Path:
@@ -39,6 +40,25 @@ def shipped_config(name: str) -> Path:
 def shipped_weights() -> Path:
     """Path of the shipped detector weights."""
     return _shipped("dockfactory.models", WEIGHTS_NAME)
+
+
+def shipped_design_card() -> Path:
+    """Path of the design predictor's card (eval.design_card)."""
+    return _shipped("dockfactory.models", DESIGN_CARD_NAME)
+
+
+def resolve_design_space(arg: str | Path) -> Path:
+    """A design space given on the command line: an existing file, else a shipped one named by
+    ``NAME`` or ``NAME.toml`` (configs/designs/). DockfactoryError (one line) when there is none."""
+    path = Path(arg)
+    if path.is_file():
+        return path
+    stem = path.name[:-5] if path.name.endswith(".toml") else path.name
+    try:
+        return _shipped("dockfactory.configs", f"designs/{stem}.toml")
+    except DockfactoryError:
+        raise DockfactoryError(f"{arg}: no such design space file (nor a shipped one: "
+                               f"configs/designs/)") from None
 
 
 def default_acceptance() -> Path:

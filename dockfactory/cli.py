@@ -1,7 +1,7 @@
 """The ``dockfactory`` command line: the root parser and ``main``. The command groups live in one
 module each (``cli_factory``: render, dataset, check-config, show; ``cli_judge``: solve,
 evaluate, report, run; ``cli_detector``: train, detect, ablate, export-onnx, noise-card;
-``cli_measure``: measure; ``cli_plan``: plan-frames; ``cli_layout``: layout, schema) and share their
+``cli_measure``: measure; ``cli_plan``: plan-frames; ``cli_design``: design; ``cli_layout``: layout, schema) and share their
 argument types (``cli_args``). Bad input (DockfactoryError) is one line and exit 2; argparse's
 own errors too."""
 from __future__ import annotations
@@ -12,6 +12,7 @@ import sys
 
 from dockfactory import __version__
 from dockfactory.cli_args import output_path
+from dockfactory.cli_design import add_subcommand as add_design_command
 from dockfactory.cli_detector import add_subcommands as add_detector_commands
 from dockfactory.cli_factory import add_subcommands as add_factory_commands
 from dockfactory.cli_judge import add_eval_commands
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_detector_commands(sub)
     add_measure_command(sub)
     add_plan_command(sub)
+    add_design_command(sub)
     add_layout_command(sub)
     add_schema_subcommand(sub)
     for parser in _all_parsers(sub):

@@ -1,0 +1,91 @@
+"""``dockfactory design``: which camera, lens and markers pass? Every design of a space predicted
+(eval.design_rank), ranked, written as design.json / .md / .html (eval.design_report), and with
+``--verify K`` the top K rendered and judged beside their predictions (design_verify)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from dockfactory.cli_args import float_in, positive_int
+from dockfactory.core.config import load_config
+from dockfactory.core.io import write_json_atomic
+from dockfactory.design_verify import comparison_lines, verify_designs
+from dockfactory.core.resources import (
+    default_acceptance,
+    resolve_config,
+    resolve_design_space,
+    shipped_design_card,
+)
+from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.design_card import load_design_card
+from dockfactory.eval.design_rank import design_id, design_row, rank_rows
+from dockfactory.eval.design_report import table_lines, write_design_outputs
+from dockfactory.eval.design_space import designs_of, load_design_space
+
+NOTES = (
+    "Predicted for frames in normal light: occlusion and glare add errors the predictor does not model.",
+    "P(accept) covers the gated pose criteria (chi-square bound, components independent); the detection "
+    "and failure gates are not predicted: --verify renders and judges them.",
+    "The sensor's temporal noise (EMVA preset) is not a term of the model: it enters only through the "
+    "renders of --verify.",
+)
+
+
+def _card_summary(card) -> str:
+    fitted = card.data.get("fitted_on", {})
+    return (f"centre noise {card.scale_px} px at a 10 px disc, section offset {list(card.shift_px)} px, "
+            f"Bayer x{card.cfa_factor['rggb']}, JPEG x{card.jpeg_factor}, white ring x{card.ring_factor['white']}; "
+            f"fitted on {len(fitted.get('renders', []))} renders of {fitted.get('frames_each', '?')} frames; "
+            f"provisional: {', '.join(card.provisional) or 'none'}")
+
+
+def design_answer(args) -> tuple[dict, dict, object, object, Path]:
+    """(result, designs by id, space, scene config, spec path) of ``args``."""
+    t0 = time.monotonic()
+    space = load_design_space(resolve_design_space(args.space), resolve_config)
+    scene = load_config(space.scene)
+    spec_path = space.spec or default_acceptance()
+    spec = load_acceptance(spec_path)
+    card = load_design_card(args.card or shipped_design_card())
+    designs = designs_of(space, scene)
+    rows = rank_rows([design_row(d, space, scene, spec, card) for d in designs], args.min_probability)
+    result = {"format": "dockfactory.design/1", "space": space.source, "scene": str(space.scene),
+              "spec": str(spec_path), "decision_rule": spec.decision_rule, "confidence": spec.confidence,
+              "test_frames": space.test_frames, "repeatability": list(space.repeatability),
+              "min_probability": args.min_probability, "seconds": round(time.monotonic() - t0, 2),
+              "card": {"path": card.path, "summary": _card_summary(card)}, "notes": list(NOTES),
+              "designs": rows}
+    return result, {design_id(d): d for d in designs}, space, scene, spec_path
+
+
+def cmd_design(args) -> int:
+    result, by_id, space, scene, spec_path = design_answer(args)
+    print("\n".join(table_lines(result["designs"], args.top)))
+    print(f"{len(result['designs'])} designs predicted in {result['seconds']:.1f} s")
+    paths = write_design_outputs(args.out, result)   # the predictions stand before any render
+    if args.verify:
+        result["verify"] = verify_designs(result["designs"], by_id, space, scene, spec_path, args.out,
+                                          args.verify, args.verify_frames, args.weights, args.workers)
+        print("\n".join(comparison_lines(result["verify"])))
+        paths = write_design_outputs(args.out, result)
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def add_subcommand(sub) -> None:
+    p = sub.add_parser("design", help="which camera, lens and markers pass: every design of a space "
+                                      "predicted against the tolerance, ranked (--verify K: rendered)")
+    p.add_argument("space", help="design space TOML (docs/design.md), or a shipped one by name "
+                                 "(docking_cell)")
+    p.add_argument("--out", default="out/design", help="folder for design.json / .md / .html (default out/design)")
+    p.add_argument("--top", type=positive_int, default=15, help="designs shown in the table (default 15)")
+    p.add_argument("--min-probability", type=float_in(0.0, 1.0, low_open=True), default=0.9,
+                   help="P(accept) a passing design needs (default 0.9)")
+    p.add_argument("--card", help="a predictor card (default: the shipped models/design_predictor.json)")
+    p.add_argument("--verify", type=positive_int, default=0, metavar="K",
+                   help="render and judge the top K designs (dockfactory run each; minutes per design)")
+    p.add_argument("--verify-frames", type=positive_int, default=24,
+                   help="test frames rendered per verified design (default 24)")
+    p.add_argument("--weights", help="detector weights for --verify (default: the shipped ones)")
+    p.add_argument("--workers", type=positive_int, default=1, help="render workers for --verify")
+    p.set_defaults(func=cmd_design)

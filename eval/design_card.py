@@ -1,0 +1,103 @@
+"""The design predictor's card: the centre-noise figures a prediction uses, what they were fitted
+on and the error they showed (written by bench/design_fit.py; models/design_predictor.json).
+
+Fields::
+
+    format              "dockfactory.design_predictor/1"
+    scale_px            disc-model centre noise per axis at REFERENCE_RADIUS_PX (monochrome /
+                        three-chip camera, dark ring, lossless image)
+    shift_px            [u, v] section offset per axis of that camera class
+    cfa_factor          {"none": 1, "rggb": g}: both figures scale by it
+    ring_factor         {"dark": 1, "white": w}
+    jpeg_factor         {"none": j0, "rggb": j1}: at quality >= jpeg_min_quality
+    jpeg_min_quality    below it the card has no figure (the design is not predicted)
+    bound_factor        {component: k}: the RMSE over the model's figure
+    provisional         [factor names] measured on older renders or not on renders at all
+    fitted_on, error    where the figures come from and how far off they were
+
+A factor listed in ``provisional`` is reported beside every design that uses it.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.names import COMPONENTS
+from dockfactory.eval.design_predict import NoiseClass
+from dockfactory.eval.design_space import Design, jpeg_quality
+
+CARD_FORMAT = "dockfactory.design_predictor/1"
+
+__all__ = ["DesignCard", "load_design_card", "CARD_FORMAT"]
+
+
+@dataclass(frozen=True)
+class DesignCard:
+    path: str
+    scale_px: float
+    shift_px: tuple[float, float]
+    cfa_factor: dict
+    ring_factor: dict
+    jpeg_factor: dict
+    jpeg_min_quality: int
+    bound_factor: dict
+    provisional: tuple[str, ...]
+    data: dict
+
+    def noise_of(self, design: Design) -> tuple[NoiseClass | None, list[str], str]:
+        """(noise class, provisional factors used, reason) of ``design``: the class None with
+        the reason when the card has no figure for it."""
+        q = jpeg_quality(design.image_format)
+        if q is not None and q < self.jpeg_min_quality:
+            return None, [], f"the predictor's card has no JPEG figure below quality {self.jpeg_min_quality}"
+        g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring]
+        used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}"]
+        if q is not None:
+            g *= self.jpeg_factor[design.camera.cfa]
+            used.append(f"jpeg_factor.{design.camera.cfa}")
+        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g))
+        return noise, [u for u in used if u in self.provisional], ""
+
+
+def _positive(path, key, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise DockfactoryError(f"{path}: {key}: expected a positive number, got {value!r}")
+    return float(value)
+
+
+def _factors(path, data, key, names) -> dict:
+    table = data.get(key)
+    if not isinstance(table, dict) or set(table) != set(names):
+        raise DockfactoryError(f"{path}: {key}: expected a table of {', '.join(names)}, got {table!r}")
+    return {n: _positive(path, f"{key}.{n}", table[n]) for n in names}
+
+
+def load_design_card(path) -> DesignCard:
+    """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise DockfactoryError(f"{path}: cannot read the predictor card: {exc.strerror}") from None
+    except ValueError as exc:
+        raise DockfactoryError(f"{path}: not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != CARD_FORMAT:
+        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r}")
+    shift = data.get("shift_px")
+    if not (isinstance(shift, list) and len(shift) == 2):
+        raise DockfactoryError(f"{path}: shift_px: expected [u, v] px, got {shift!r}")
+    q = data.get("jpeg_min_quality")
+    if isinstance(q, bool) or not isinstance(q, int) or not 1 <= q <= 100:
+        raise DockfactoryError(f"{path}: jpeg_min_quality: expected an integer in 1-100, got {q!r}")
+    prov = data.get("provisional", [])
+    if not (isinstance(prov, list) and all(isinstance(p, str) for p in prov)):
+        raise DockfactoryError(f"{path}: provisional: expected a list of factor names, got {prov!r}")
+    return DesignCard(str(path), _positive(path, "scale_px", data.get("scale_px")),
+                      (_positive(path, "shift_px[0]", shift[0]), _positive(path, "shift_px[1]", shift[1])),
+                      _factors(path, data, "cfa_factor", ("none", "rggb")),
+                      _factors(path, data, "ring_factor", ("dark", "white")),
+                      _factors(path, data, "jpeg_factor", ("none", "rggb")), q,
+                      _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data)

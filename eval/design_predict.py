@@ -1,0 +1,136 @@
+"""Predicted pose errors of a design, in milliseconds: the solver's own covariance model evaluated
+at the true geometry of the design's pose distribution, with the centre noise its camera class is
+known to have.
+
+For each of ``geometry_frames`` pose draws of the design's scene (generator.sampler, the test
+frames of the design's config; normal light) and each marker of the layout, the centre noise is
+the disc model's (solver.disc_noise): a round disc of REFERENCE_RADIUS_PX errs ``scale_px`` per
+axis, a smaller or slanted one more, in the shape of its image. The solver's fit is least squares
+over every centre (its covariance is the sandwich of that fit: solver.disc_noise.with_disc_noise),
+so the pose covariance is A J^T C J A (A = (J^T J)^-1, J the joint Jacobian over (w_A, t_A, w_B,
+t_B, f): the focal is estimated, the camera is uncalibrated), propagated to d_from_b; the section
+offset (a common shift of each section's centres, solver.section_shift) adds G G^T. Per
+component, the predicted RMSE is ``bound_factor`` x the RMS over the draws of the predicted std
+(noise and offset); the predicted repeatability spread leaves the offset out (a static pose
+keeps it: solver.section_shift).
+
+The scale, offset and factors come from the predictor's card (eval.design_card): fitted on
+renders, with the error it showed on renders it was not fitted on.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dockfactory.core.config import config_from_dict
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.layout_patterns import pattern_pair
+from dockfactory.core.names import COMPONENTS
+from dockfactory.eval.design_space import Design, DesignSpace, jpeg_quality
+from dockfactory.generator.random_draws import static_scene
+from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.solver.disc_noise import section_noise_shapes
+from dockfactory.solver.refine import (
+    d_from_b_jacobian,
+    inverse_spd,
+    joint_jacobian,
+    residuals_and_jacobian,
+)
+from dockfactory.solver.section_shift import section_shift_covariance
+
+__all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "mean_variances", "Prediction"]
+
+
+@dataclass(frozen=True)
+class NoiseClass:
+    """The centre noise of one design's camera class: disc-model scale (px per axis at
+    REFERENCE_RADIUS_PX) and section offset (px per axis)."""
+    scale_px: float
+    shift_px: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """``rmse`` and ``repeat`` {component: mm or deg}; ``frames`` pose draws used."""
+    rmse: dict
+    repeat: dict
+    frames: int
+
+
+def design_config(scene_cfg, design: Design, space: DesignSpace, frames: int, repeat=(1, 2)):
+    """The dataset config of ``design`` in the space's scene: its image size, fixed focal,
+    working distance, markers (core.layout_patterns), CFA, sensor preset and JPEG; ``frames``
+    test frames in normal light, ``repeat`` (poses, captures). ConfigError (one line) when the
+    design cannot be rendered (e.g. its markers do not fit)."""
+    d = scene_cfg.resolved_dict()
+    f = design.focal_px
+    pa, pb = pattern_pair(design.markers_per_section, scene_cfg.sections.radius_mm,
+                          design.marker_diameter_mm, space.seed)
+    q = jpeg_quality(design.image_format)
+    d["dataset"].update(name="design", frames=frames, train_fraction=0.0, val_fraction=0.0)
+    d["conditions"] = {"normal": 1.0, "low_light": 0.0, "occlusion": 0.0, "glare": 0.0, "ideal": 0.0}
+    d["repeatability"].update(poses=repeat[0], captures=repeat[1])
+    d["image"] = {"width": design.camera.width, "height": design.camera.height}
+    d["camera"].update(distance_mm=list(design.distance_mm), focal_px=[f, f])
+    d["camera_units"].update(calibration="", jpeg=q is not None, jpeg_quality=[q or 90, q or 90])
+    d["markers"].update(diameter_mm=design.marker_diameter_mm, ring=design.ring,
+                        layout_a=[list(p) for p in pa], layout_b=[list(p) for p in pb])
+    d["sensor"].update(cfa=[design.camera.cfa.upper() if design.camera.cfa != "none" else "none"],
+                       presets=[design.camera.preset] if design.camera.preset else [])
+    return config_from_dict(d, f"{space.source}: design {design.label()}")
+
+
+def _section_jac(markers, cam, focal, pp):
+    pts = np.array([m.center_mm for m in markers], dtype=np.float64)
+    _, jac, z = residuals_and_jacobian(pts, np.zeros((len(pts), 2)), pp, cam[:3, :3], cam[:3, 3], focal)
+    if np.any(z <= 0):
+        raise DockfactoryError("a marker is behind the camera")
+    return jac
+
+
+def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass):
+    """(noise (6,), offset (6,)) variances of d_from_b (POSE_NAMES order, mm^2 / deg^2) of one
+    frame: the fit's sandwich covariance under the disc noise and the section offset."""
+    ma = [m for m in markers if m.section == "A"]
+    mb = [m for m in markers if m.section == "B"]
+    jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
+    shapes = np.concatenate([section_noise_shapes(ma, cam_a, focal), section_noise_shapes(mb, cam_b, focal)])
+    a = inverse_spd(jac.T @ jac)
+    jr = jac.reshape(-1, 2, jac.shape[1])
+    middle = noise.scale_px ** 2 * np.einsum("nap,nab,nbq->pq", jr, shapes, jr)
+    cov_noise = a @ middle @ a
+    groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
+    cov_shift = section_shift_covariance(jac, groups, noise.shift_px)
+    prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])
+    return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))
+
+
+def mean_variances(cfg, noise: NoiseClass, max_frames: int):
+    """(noise (6,), offset (6,), frames): :func:`frame_variances` averaged over the first
+    ``max_frames`` test frames of ``cfg``. ConfigError / DockfactoryError when a frame cannot be
+    drawn (the markers do not fit the image) or its geometry is degenerate."""
+    markers = static_scene(cfg).markers
+    specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
+    if not specs:
+        raise DockfactoryError("the config plans no test frame: no geometry to predict on")
+    parts = []
+    for spec in specs:
+        f = sample_frame(cfg, spec)
+        cam_a = f.camera.cam_from_d_array()
+        parts.append(frame_variances(markers, cam_a, cam_a @ f.d_from_b_array(), f.camera.focal_px,
+                                     np.asarray(f.camera.principal_point, dtype=float), noise))
+    vn, vs = np.mean(parts, axis=0)
+    if not (np.all(np.isfinite(vn)) and np.all(np.isfinite(vs))):
+        raise DockfactoryError("the pose is not observable from these markers (degenerate geometry)")
+    return vn, vs, len(specs)
+
+
+def predict_design(cfg, noise: NoiseClass, bound_factor: dict, max_frames: int) -> Prediction:
+    """Predicted RMSE and repeatability (module docstring) over the first ``max_frames`` test
+    frames of ``cfg`` (a :func:`design_config`); errors as :func:`mean_variances`."""
+    vn, vs, n = mean_variances(cfg, noise, max_frames)
+    rmse = {c: bound_factor[c] * math.sqrt(vn[i] + vs[i]) for i, c in enumerate(COMPONENTS)}
+    repeat = {c: bound_factor[c] * math.sqrt(vn[i]) for i, c in enumerate(COMPONENTS)}
+    return Prediction(rmse, repeat, n)

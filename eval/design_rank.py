@@ -1,0 +1,120 @@
+"""Every design of a space predicted and ranked against the acceptance spec.
+
+The probability that the guarded rule proves a gated component conforms, with n degrees of
+freedom and a true RMSE r against the threshold T (statistic "mse": T its square root): the
+chi-square upper bound sqrt(S / chi2_{1-c}(n)) is within T when the sum of squares S = r^2
+chi2(n) is at most T^2 chi2_{1-c}(n), so P = F_{chi2(n)}(T^2 chi2_{1-c}(n) / r^2) (the Gaussian
+model of eval.confidence; the bootstrap bound, which also decides from 5 frames, is more cautious
+on heavy tails and is not modelled). Components are taken as independent: P(accept) is the
+product over the gated components of both blocks. Localization: n = test frames; estimation:
+n = poses x (captures - 1). Detection and failure gates are not predicted (the renders of
+``--verify`` measure them).
+
+A design passes when P(accept) >= ``min_probability``. Ranking: the passing designs first, the
+cheapest first when the space gives costs (else the largest margin first), then the rest by
+P(accept). The Pareto front (passing designs no other passing design beats on margin, pixels,
+focal length and markers at once) is flagged.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+
+from dockfactory.core.config import ConfigError
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.eval.confidence import chi2_cdf, chi2_quantile, frames_to_decide
+from dockfactory.eval.design_card import DesignCard
+from dockfactory.eval.design_predict import design_config, predict_design
+from dockfactory.eval.design_space import Design, DesignSpace
+
+__all__ = ["pass_probability", "design_row", "rank_rows", "design_id"]
+
+
+def pass_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
+    """P(the guarded rule proves rmse <= threshold) with ``dof`` degrees of freedom (module
+    docstring); 1.0 for rmse 0."""
+    if rmse <= 0:
+        return 1.0
+    return chi2_cdf(threshold ** 2 * chi2_quantile(1 - confidence, dof) / rmse ** 2, dof)
+
+
+def design_id(design: Design) -> str:
+    return hashlib.sha256(design.label().encode()).hexdigest()[:10]
+
+
+def _base_row(design: Design, space: DesignSpace) -> dict:
+    c = design.camera
+    return {"id": design_id(design), "design": design.label(), "camera": c.name, "width": c.width,
+            "height": c.height, "pixel_um": c.pixel_um, "cfa": c.cfa, "focal_mm": design.lens.focal_mm,
+            "focal_px": round(design.focal_px, 1), "distance_mm": list(design.distance_mm),
+            "marker_diameter_mm": design.marker_diameter_mm, "ring": design.ring,
+            "markers_per_section": design.markers_per_section, "image_format": design.image_format,
+            "cost": design.cost(space.marker_cost)}
+
+
+def _block(spec, block: str, figures: dict, dof: int) -> dict:
+    """Per gated component of ``block``: predicted, threshold, margin, probability, frames."""
+    gate = getattr(spec, block)
+    root = math.sqrt if gate.statistic == "mse" else float
+    out = {}
+    for comp, thr in gate.thresholds().items():
+        t, r = root(thr), figures[comp]
+        out[comp] = {"predicted": r, "threshold": t, "margin": r / t,
+                     "probability": pass_probability(r, t, dof, spec.confidence),
+                     "frames_to_prove": frames_to_decide(r, t, 1, spec.confidence) if r < t else None}
+    return out
+
+
+def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: DesignCard) -> dict:
+    """One design predicted: the base fields, ``status`` ("passes" / "fails" once ranked;
+    "infeasible" / "not predicted" with ``reason``), the predicted RMSE and repeatability per
+    component, the localization and estimation blocks and P(accept)."""
+    row = _base_row(design, space)
+    noise, provisional, why = card.noise_of(design)
+    if noise is None:
+        return {**row, "status": "not predicted", "reason": why}
+    try:
+        cfg = design_config(scene_cfg, design, space, space.geometry_frames)
+        pred = predict_design(cfg, noise, card.bound_factor, space.geometry_frames)
+    except (ConfigError, DockfactoryError) as exc:
+        prefix = f"{space.source}: design {design.label()}: "
+        return {**row, "status": "infeasible", "reason": str(exc).replace(prefix, "")}
+    loc = _block(spec, "localization", pred.rmse, space.test_frames)
+    poses, captures = space.repeatability
+    est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
+    p_loc = math.prod(v["probability"] for v in loc.values())
+    probs = [v["probability"] for v in (*loc.values(), *est.values())]
+    margins = [v["margin"] for v in (*loc.values(), *est.values())]
+    return {**row, "status": "predicted", "reason": "", "provisional": provisional,
+            "predicted_rmse": pred.rmse, "predicted_repeatability": pred.repeat,
+            "localization": loc, "estimation": est, "estimation_predicted": bool(poses),
+            "p_accept": math.prod(probs) if probs else None, "p_localization": p_loc if loc else None,
+            "worst_margin": max(margins) if margins else None, "geometry_frames": pred.frames}
+
+
+def _dominates(a: dict, b: dict) -> bool:
+    keys = (("worst_margin", 1), ("pixels", 1), ("focal_mm", 1), ("markers_per_section", 1))
+    va = [a[k] if k != "pixels" else a["width"] * a["height"] for k, _ in keys]
+    vb = [b[k] if k != "pixels" else b["width"] * b["height"] for k, _ in keys]
+    return all(x <= y for x, y in zip(va, vb)) and any(x < y for x, y in zip(va, vb))
+
+
+def rank_rows(rows: list[dict], min_probability: float) -> list[dict]:
+    """``rows`` with status passes / fails, ``rank`` and ``pareto`` set, in rank order (module
+    docstring); infeasible and unpredicted designs last, unranked."""
+    if not 0 < min_probability < 1:
+        raise DockfactoryError(f"min probability must be in (0, 1), got {min_probability}")
+    done = [r for r in rows if r["status"] == "predicted"]
+    for r in done:
+        r["status"] = "passes" if r["p_accept"] is not None and r["p_accept"] >= min_probability else "fails"
+    passing = [r for r in done if r["status"] == "passes"]
+    costed = any(r["cost"] > 0 for r in rows)
+    passing.sort(key=lambda r: (r["cost"], r["worst_margin"]) if costed else (r["worst_margin"], r["cost"]))
+    failing = sorted((r for r in done if r["status"] == "fails"), key=lambda r: -(r["p_accept"] or 0.0))
+    for r in passing:
+        r["pareto"] = not any(_dominates(o, r) for o in passing if o is not r)
+    for i, r in enumerate(passing + failing):
+        r["rank"] = i + 1
+        r.setdefault("pareto", False)
+    rest = [r for r in rows if r["status"] not in ("passes", "fails")]
+    return passing + failing + rest

@@ -1,0 +1,138 @@
+"""``dockfactory design``: the shipped space answered end to end, bad spaces refused in one line,
+the answer deterministic, and a design's config what its renders would use."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cli_run import run_cli
+from dockfactory.core.config import load_config
+from dockfactory.core.config_text import to_toml
+from dockfactory.core.resources import resolve_config
+from dockfactory.eval.design_predict import design_config
+from dockfactory.eval.design_space import designs_of, load_design_space
+from dockfactory.generator.sampler import frame_plan, sample_frame
+
+SPACE = """\
+[design]
+scene = "quick"
+test_frames = 30
+seed = 0
+marker_cost = 2.0
+
+[[camera]]
+name = "mono"
+width = 1440
+height = 1080
+pixel_um = 3.45
+cfa = "none"
+cost = 400
+
+[[camera]]
+name = "colour"
+width = 1440
+height = 1080
+pixel_um = 3.45
+cfa = "rggb"
+preset = "imx273"
+cost = 300
+
+[[lens]]
+focal_mm = 6.0
+cost = 100
+
+[space]
+distance_mm = [[1000, 1800]]
+marker_diameter_mm = [16, 24]
+markers_per_section = [6, 9]
+"""
+
+
+def _space(tmp_path, text=SPACE):
+    (tmp_path / "space.toml").write_text(text)
+    (tmp_path / "tight.toml").write_text('decision_rule = "guarded"\nconfidence = 0.95\n[localization]\n'
+                                         'statistic = "rmse"\nx = 0.25\ny = 0.25\nalpha = 0.02\n')
+    return tmp_path / "space.toml"
+
+
+def test_the_shipped_space_is_answered_with_its_files(tmp_path, capsys):
+    code, out, err = run_cli(["design", "docking_cell", "--out", tmp_path / "d"], capsys)
+    assert code == 0, err
+    res = json.loads((tmp_path / "d" / "design.json").read_text())
+    ranked = [r for r in res["designs"] if r.get("rank") is not None]
+    assert [r["rank"] for r in ranked] == list(range(1, len(ranked) + 1))
+    assert {r["status"] for r in ranked} == {"passes", "fails"}
+    assert all(r["status"] in ("infeasible", "not predicted") and r["reason"] for r in res["designs"][len(ranked):])
+    passing = [r for r in ranked if r["status"] == "passes"]
+    assert [r["cost"] for r in passing] == sorted(r["cost"] for r in passing)   # cheapest first
+    assert all(r["p_accept"] >= 0.9 for r in passing) and any(r["pareto"] for r in passing)
+    html = (tmp_path / "d" / "design.html").read_text()
+    assert "data:image/png;base64," in html and passing[0]["design"] in html
+    assert passing[0]["design"].replace("|", "\\|") in (tmp_path / "d" / "design.md").read_text()
+    assert "designs predicted in" in out
+
+
+def test_the_answer_is_deterministic_and_cheapest_passing_first(tmp_path, capsys):
+    space = _space(tmp_path, SPACE.replace('scene = "quick"', 'scene = "quick"\nspec = "tight.toml"'))
+    runs = []
+    for k in (1, 2):
+        assert run_cli(["design", space, "--out", tmp_path / f"o{k}"], capsys)[0] == 0
+        res = json.loads((tmp_path / f"o{k}" / "design.json").read_text())
+        res.pop("seconds")
+        runs.append(res)
+    assert runs[0] == runs[1]
+    rows = runs[0]["designs"]
+    passing = [r for r in rows if r["status"] == "passes"]
+    assert passing and passing[0]["cost"] == min(r["cost"] for r in passing)
+    # more markers and larger discs never predict a worse X for the same camera
+    by = {(r["camera"], r["marker_diameter_mm"], r["markers_per_section"]): r["predicted_rmse"]["x"] for r in rows}
+    for cam in ("mono", "colour"):
+        assert by[(cam, 24.0, 9)] < by[(cam, 16.0, 6)]
+        assert by[("colour", 24.0, 9)] > by[("mono", 24.0, 9)]
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (("pixel_um = 3.45\ncfa = \"none\"", "pixel_um = 3.45\ncfa = \"rgb\""), "[[camera]] 1 cfa: expected one of none, rggb"),
+    (("[[lens]]\nfocal_mm = 6.0", "[[lens]]\nfocal = 6.0"), "[[lens]] 1: unknown key 'focal'"),
+    (("[[1000, 1800]]", "[[1800, 1000]]"), "[space] distance_mm: near 1800 mm is beyond far 1000 mm"),
+    (("markers_per_section = [6, 9]", "markers_per_section = [4]"), "[space] markers_per_section: expected an integer in [6, 16]"),
+    (("marker_diameter_mm = [16, 24]", "marker_diameter_mm = []"), "[space] marker_diameter_mm: expected a non-empty list"),
+    (('scene = "quick"', 'scene = "nowhere.toml"'), "[design] scene: no file 'nowhere.toml' beside the space"),
+    (("[space]", "[spaces]"), "unknown key 'spaces'"),
+    (('preset = "imx273"\n', ""), "[[camera]] 2 preset: a colour (rggb) camera needs a sensor preset"),
+    (("test_frames = 30", "test_frames = 1"), "[design] test_frames: expected an integer in [2, 100000]"),
+])
+def test_a_bad_space_is_one_line_and_exit_2(tmp_path, capsys, edit, needle):
+    space = _space(tmp_path, SPACE.replace(*edit, 1))
+    code, out, err = run_cli(["design", space, "--out", tmp_path / "o"], capsys)
+    assert code == 2
+    assert needle in err and str(space) in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_design_that_cannot_see_its_markers_is_infeasible_with_the_reason(tmp_path, capsys):
+    space = _space(tmp_path, SPACE.replace("focal_mm = 6.0", "focal_mm = 25.0"))
+    assert run_cli(["design", space, "--out", tmp_path / "o"], capsys)[0] == 0
+    rows = json.loads((tmp_path / "o" / "design.json").read_text())["designs"]
+    assert all(r["status"] == "infeasible" and "cannot fit its markers" in r["reason"] for r in rows)
+
+
+def test_a_design_s_config_renders_its_camera_and_markers(tmp_path):
+    space = load_design_space(_space(tmp_path), resolve_config)
+    scene = load_config(space.scene)
+    design = [d for d in designs_of(space, scene) if d.camera.cfa == "rggb" and d.markers_per_section == 9][0]
+    cfg = design_config(scene, design, space, 6)
+    (tmp_path / "d.toml").write_text(to_toml(cfg.resolved_dict()))
+    again = load_config(tmp_path / "d.toml")
+    assert again == cfg
+    assert (cfg.image.width, cfg.image.height) == (1440, 1080) and cfg.sensor.cfa == ("RGGB",)
+    assert len(cfg.markers.layout_a) == 9 and cfg.markers.diameter_mm == design.marker_diameter_mm
+    distances = []
+    for spec in [s for s in frame_plan(cfg) if s.split == "test"]:
+        frame = sample_frame(cfg, spec)
+        assert frame.camera.focal_px == pytest.approx(6.0 * 1000 / 3.45)
+        distances.append(float(np.linalg.norm(frame.camera.cam_from_d_array()[:3, 3])))
+    # camera to A's axis: the working distance to the seam plus up to the radius (300 mm) and jitter
+    assert 1000.0 <= min(distances) and max(distances) <= 1800.0 + 300.0 + 50.0

@@ -1,0 +1,118 @@
+"""The design predictor against the solver: its covariance model on synthetic centres, the guarded
+rule's pass probability against a simulation of the rule, and the layouts it draws."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.geometry import pose_components
+from dockfactory.core.layout import DEFAULT_LAYOUT_A, build_layout, layout_problems
+from dockfactory.core.layout_patterns import pattern_pair
+from dockfactory.eval.confidence import chi2_bounds
+from dockfactory.eval.design_predict import NoiseClass, frame_variances
+from dockfactory.eval.design_rank import pass_probability
+from dockfactory.solver import crb_d_from_b, solve_docking
+from dockfactory.solver.disc_noise import section_noise_shapes
+from dockfactory.solver.synthetic import default_layout, docking_scene
+
+LAYOUT = default_layout()
+IDS = [m.id for m in LAYOUT]
+COMPS = (("x_mm", 0), ("y_mm", 1), ("alpha_deg", 3))
+
+
+def _scene_noise(sc):
+    ma = [m for m in LAYOUT if m.section == "A"]
+    mb = [m for m in LAYOUT if m.section == "B"]
+    return np.concatenate([section_noise_shapes(ma, sc.cam_from_d, sc.focal_px),
+                           section_noise_shapes(mb, sc.cam_from_b, sc.focal_px)])
+
+
+def _draw_centres(rng, sc, shapes, noise: NoiseClass):
+    """The scene's exact centres plus disc noise (covariance scale^2 T_i) and a common shift per
+    section and axis."""
+    uv = np.vstack([sc.uv_a, sc.uv_b])
+    chol = np.linalg.cholesky(noise.scale_px ** 2 * shapes)
+    uv = uv + np.einsum("nab,nb->na", chol, rng.standard_normal(uv.shape))
+    na = len(sc.uv_a)
+    for rows in (slice(0, na), slice(na, None)):
+        uv[rows] += rng.standard_normal(2) * np.asarray(noise.shift_px)
+    return uv
+
+
+@pytest.mark.slow
+def test_predicted_rmse_matches_the_solver_on_synthetic_centres():
+    """300 synthetic frames, disc noise 0.02 px and a section offset (0.08, 0.06) px: the solver's
+    RMSE of X, Y, alpha is within 0.8-1.25x of the predicted one (the RMS over the frames of the
+    predicted std; sampling error of an RMSE over 300 frames about 4 %); left without the offset
+    term, the prediction of X or Y is more than 1.25x off."""
+    rng = np.random.default_rng(48)
+    noise = NoiseClass(0.02, (0.08, 0.06))
+    err, var, var_noise = [], [], []
+    for _ in range(300):
+        sc = docking_scene(rng)
+        vn, vs = frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point, noise)
+        uv = _draw_centres(rng, sc, _scene_noise(sc), noise)
+        res = solve_docking(LAYOUT, sc.principal_point, correspondences=(IDS, uv))
+        truth = pose_components(sc.d_from_b)
+        err.append([getattr(res, k) - truth[k] for k, _ in COMPS])
+        var.append([vn[i] + vs[i] for _, i in COMPS])
+        var_noise.append([vn[i] for _, i in COMPS])
+    rmse = np.sqrt(np.mean(np.square(err), axis=0))
+    ratio = rmse / np.sqrt(np.mean(var, axis=0))
+    assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
+    assert np.max(rmse / np.sqrt(np.mean(var_noise, axis=0))) > 1.25
+
+
+def test_without_offset_the_prediction_is_the_fit_s_sandwich_at_or_above_the_bound():
+    """With no section offset and every disc alike the prediction is the Cramer-Rao bound; with
+    the discs' own shapes it is at or above the bound (an unweighted fit) and within 1.5x."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        sc = docking_scene(rng)
+        shapes = _scene_noise(sc)
+        vn, vs = frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point,
+                                 NoiseClass(0.05, (0.0, 0.0)))
+        assert np.all(vs == 0)
+        sigma = 0.05 * math.sqrt(np.trace(shapes, axis1=1, axis2=2).mean() / 2)
+        b = crb_d_from_b(sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px,
+                         sc.principal_point, sigma, noise_shapes=(shapes[:7], shapes[7:]))
+        for key, i in COMPS:
+            assert b.std[key] ** 2 * (1 - 1e-9) <= vn[i] <= 1.5 ** 2 * b.std[key] ** 2, key
+
+
+@pytest.mark.parametrize("rmse,dof", [(0.25, 40), (0.28, 24), (0.2, 10), (0.31, 60)])
+def test_pass_probability_is_the_guarded_rule_s_frequency(rmse, dof):
+    """Simulated test campaigns: the share whose chi-square upper bound is within the threshold
+    (0.3) equals the predicted probability within 0.03 (4000 campaigns, sd <= 0.008)."""
+    rng = np.random.default_rng(int(rmse * 1000) + dof)
+    errors = rng.standard_normal((4000, dof)) * rmse
+    passed = [chi2_bounds(float(np.sum(e ** 2)), dof, 0.95)[1] <= 0.3 for e in errors]
+    assert abs(np.mean(passed) - pass_probability(rmse, 0.3, dof, 0.95)) < 0.03
+
+
+def test_pass_probability_grows_with_frames_and_margin():
+    p = [pass_probability(0.25, 0.3, n, 0.95) for n in (5, 20, 80, 320)]
+    assert all(a < b for a, b in zip(p, p[1:])) and p[-1] > 0.99
+    assert pass_probability(0.35, 0.3, 320, 0.95) < 0.01
+    assert pass_probability(0.0, 0.3, 5, 0.95) == 1.0
+
+
+@pytest.mark.parametrize("n", [6, 8, 9, 12])
+def test_patterns_are_clean_irregular_and_seeded(n):
+    a, b = pattern_pair(n, 300.0, 20.0, seed=5)
+    assert len(a) == len(b) == n
+    assert layout_problems(build_layout(a, b, 300.0, 20.0)) == []
+    assert pattern_pair(n, 300.0, 20.0, seed=5) == (a, b)
+    assert all(45.0 <= s <= 160.0 and -60.0 <= phi <= 60.0 for s, phi in a + b)
+
+
+def test_seven_markers_is_the_shipped_layout_and_bad_counts_are_one_line():
+    assert pattern_pair(7, 300.0, 20.0)[0] == DEFAULT_LAYOUT_A
+    for n in (5, 17, 7.0):
+        with pytest.raises(DockfactoryError, match="markers per section must be an integer"):
+            pattern_pair(n, 300.0, 20.0)
+    with pytest.raises(DockfactoryError, match="no irregular pattern of 16 markers of 90 mm"):
+        pattern_pair(16, 300.0, 90.0)
