@@ -12,6 +12,11 @@ dof = 2 n - p (n points used, p = 13 pose and focal parameters plus the free int
 camera model), and its p-value; the frame ``explains`` the residuals when p >= GATE_P. Without a
 known noise, or without degrees of freedom, nothing is tested (``explains`` None).
 
+``run_misfits``: the same test on each frame of a docking run solved with shared intrinsics
+(eval.solve_frames.solve_run), whose frames each passed ``gate`` alone: a frame the run's
+intrinsics cannot explain is left out of the run (its camera is not the run's), the run solved
+again without it.
+
 ``gate``: a frame that fails is solved again without one centre (each in turn; the one whose
 removal leaves the smallest statistic), then without a second, at most MAX_LEFT_OUT: a bad
 centre (a glare spot, an occluder) explains a misfit that one point carries. The first fit that
@@ -36,9 +41,18 @@ MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
 
 
-def fit_parameters(record: dict) -> int:
-    """The number of parameters the solve of ``record`` estimated (13 + its model's free ones)."""
-    return POSE_AND_FOCAL + model_named(record.get("camera_model", "pinhole")).n_extra
+def fit_parameters(record: dict) -> float:
+    """The parameters the solve of ``record`` estimated for its frame: 13 + its model's free ones;
+    a frame of a docking run solved with shared intrinsics (``run_frames`` F) has its two poses
+    and a 1 / F share of the intrinsics."""
+    shared = 1 + model_named(record.get("camera_model", "pinhole")).n_extra
+    frames = record.get("run_frames") if record.get("self_calibrated") in ("sequence", "window") else None
+    return POSE_AND_FOCAL - 1 + shared / frames if frames else POSE_AND_FOCAL - 1 + shared
+
+
+def _dof(dof: float) -> int | float:
+    """An integral count as an int, a run's share of the intrinsics to 3 decimals."""
+    return int(dof) if float(dof).is_integer() else round(float(dof), 3)
 
 
 def fit_test(record: dict, sigma_px: float | None) -> dict:
@@ -48,12 +62,12 @@ def fit_test(record: dict, sigma_px: float | None) -> dict:
     n = {s: record["n_markers"][s] for s in ("A", "B")}
     rss = sum(record["rmse_px"][s] ** 2 * n[s] for s in n)
     dof = 2 * sum(n.values()) - fit_parameters(record)
-    if sigma_px is None or not sigma_px > 0 or dof <= 0:
+    if sigma_px is None or not sigma_px > 0 or dof < 1:
         why = "no known centre noise" if dof > 0 else "no degrees of freedom"
-        return {"explains": None, "not_tested": why, "dof": max(dof, 0)}
+        return {"explains": None, "not_tested": why, "dof": _dof(max(dof, 0))}
     stat = rss / sigma_px ** 2
     log_p = chi2_logsf(stat, dof)
-    return {"explains": bool(log_p >= math.log(GATE_P)), "statistic": float(stat), "dof": int(dof),
+    return {"explains": bool(log_p >= math.log(GATE_P)), "statistic": float(stat), "dof": _dof(dof),
             "p_value": float(math.exp(log_p)), "ratio": float(math.sqrt(rss / dof) / sigma_px)}
 
 
@@ -61,7 +75,7 @@ def misfit_reason(test: dict, sigma_px: float, left_out: int) -> str:
     """One line: why the gate refused a frame."""
     tried = f" (and with up to {left_out} centres left out)" if left_out else ""
     return (f"residuals {test['ratio']:.1f}x the camera's centre noise ({sigma_px:.3g} px; chi-square "
-            f"{test['statistic']:.3g} over {test['dof']} dof, p {test['p_value']:.2g}){tried}: wrong layout, "
+            f"{test['statistic']:.3g} over {test['dof']:g} dof, p {test['p_value']:.2g}){tried}: wrong layout, "
             "wrong image geometry or a bad centre")
 
 
@@ -97,6 +111,27 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None):
             best[0]["fit_test"]["before"] = {"ratio": test["ratio"], "p_value": test["p_value"]}
             return best[:3]
     return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}, {}
+
+
+def run_misfits(records: dict, sigma_px: float | None) -> dict:
+    """{frame id: fit_test} of the solved frames of a docking run solved with shared intrinsics
+    (records with ``run_frames``) whose residuals the known noise cannot explain: a frame whose
+    camera is not the run's (zoom, focus or image geometry changed) fits alone but not with the
+    run's intrinsics."""
+    out = {}
+    for fid, rec in records.items():
+        if rec.get("ok"):
+            test = rec["fit_test"] = fit_test(rec, sigma_px)
+            if test["explains"] is False:
+                out[fid] = test
+    return out
+
+
+def run_misfit_reason(test: dict, sigma_px: float) -> str:
+    """One line: why the run gate left a frame out of its docking run."""
+    return (f"docking run solve: residuals {test['ratio']:.1f}x the camera's centre noise ({sigma_px:.3g} px) with "
+            "the run's shared intrinsics (the frame fits alone): not the run's camera (zoom, focus or image "
+            "geometry changed) or a bad frame; left out of the run")
 
 
 def _worst_row(refit, keep: np.ndarray, ids, sigma_px: float) -> int | None:

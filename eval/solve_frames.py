@@ -24,7 +24,7 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.random_draws import rng_for
-from dockfactory.eval.fit_gate import gate
+from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
 from dockfactory.solver import (
     AmbiguousIdentification,
     DockingOptions,
@@ -352,7 +352,32 @@ def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, ca
               options: DockingOptions = DEFAULT_DOCKING, edges: dict | None = None) -> dict:
     """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
     the joint solve fails, every frame of the run says why. ``used`` / ``edges``: per frame id the
-    centres and edge widths :func:`solve_frame` returned (``edges`` None: no widths told)."""
+    centres and edge widths :func:`solve_frame` returned (``edges`` None: no widths told).
+    Through the run gate (eval.fit_gate.run_misfits, against the noise card's centre noise, else
+    ``sigma``): the worst frame the run's intrinsics cannot explain is left out (not ok, the reason
+    in one line) and the rest solved again, at most a quarter of the run (at least one frame)
+    while three remain; frames still unexplained after that are not ok either."""
+    known = options.refine.sigma_floor_px if options.refine.sigma_floor_px is not None else sigma
+    left: dict = {}
+    while True:
+        members = [f for f in group if f not in left]
+        out = _joint_records(markers, pp, members, frames, used, sigma, camera_model, options, edges)
+        bad = run_misfits(out, known)
+        if not bad or len(members) <= 2 or len(left) >= max(1, len(group) // 4):
+            left.update({f: _left_out(test, known) for f, test in bad.items()})
+            return {f: left.get(f) or out[f] for f in group}
+        worst = max(bad, key=lambda f: bad[f]["ratio"])
+        left[worst] = _left_out(bad[worst], known)
+
+
+def _left_out(test: dict, known: float) -> dict:
+    """The record of a frame the run gate refused."""
+    return {"ok": False, "category": MISFIT, "reason": run_misfit_reason(test, known), "self_calibrated": "sequence",
+            "fit_test": test}
+
+
+def _joint_records(markers, pp, group, frames, used, sigma, camera_model, options, edges) -> dict:
+    """:func:`solve_run`'s joint solve of the frames ``group`` (no gate)."""
     widths = None if edges is None else [edges.get(f) or None for f in group]
     try:
         run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma,

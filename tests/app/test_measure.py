@@ -17,6 +17,8 @@ from dockfactory.detector.onnx_runtime import onnxruntime_available
 from dockfactory.cli import main
 
 CONFIG = painted_config("measure-test", 11, 4, 0.5)
+# the same scene as one docking run: every frame through one camera (--self-calibrate sequence's premise)
+RUN_CONFIG = CONFIG + "\n[runs]\nframes_per_run = 4\n"
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +104,28 @@ def test_measure_gives_the_poses_of_detect_and_solve(big, tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_bad_images_are_reported_not_dropped_and_self_calibration_runs(big, tmp_path, capsys):
+def test_frames_of_different_cameras_are_not_solved_as_one_run(big, tmp_path, capsys):
+    """The frames of ``big`` each have their own camera (focal 1200-3000 px): solved as one docking
+    run with shared intrinsics, the run's fit cannot explain them (before the run gate: every one
+    ok, with one focal length for all)."""
+    images = sorted(str(p) for p in (big / "images").glob("*.png"))
+    out = tmp_path / "m"
+    rc = main(["measure", *images, "--layout", str(big / "layout.json"), "--self-calibrate", "sequence",
+               "--out", str(out), "--threads", "1", "--quiet"])
+    doc = json.loads((out / "measurements.json").read_text())
+    recs = [r for r in doc["images"]]
+    assert rc == 1 and sum(r["ok"] for r in recs) <= 1
+    assert all("with the run's shared intrinsics" in r["reason"] for r in recs if not r["ok"])
+
+
+@pytest.fixture(scope="module")
+def one_camera(tmp_path_factory):
+    return painted_from_text(tmp_path_factory, "measure-run", RUN_CONFIG)
+
+
+@pytest.mark.slow
+def test_bad_images_are_reported_not_dropped_and_self_calibration_runs(one_camera, tmp_path, capsys):
+    big = one_camera
     broken = tmp_path / "broken.png"
     broken.write_bytes(b"not a png")
     images = sorted(str(p) for p in (big / "images").glob("*.png"))

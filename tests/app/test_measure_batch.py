@@ -42,13 +42,25 @@ height = 960
 [render]
 keep_exr = false
 """
+# the same scene as one docking run (every frame through one camera: --self-calibrate sequence's premise)
+RUN_CONFIG = CONFIG.replace("seed = 5", "seed = 6") + "\n[runs]\nframes_per_run = 3\n"
 
 
 @pytest.fixture(scope="module")
 def source(tmp_path_factory):
     """(folder of three 640 x 480 frames, layout path)."""
+    return _small_frames(tmp_path_factory, "batch", CONFIG)
+
+
+@pytest.fixture(scope="module")
+def run_source(tmp_path_factory):
+    """(folder of three 640 x 480 frames of one docking run, layout path)."""
+    return _small_frames(tmp_path_factory, "batch-run", RUN_CONFIG)
+
+
+def _small_frames(tmp_path_factory, name: str, config: str):
     from pipeline_data import painted_from_text
-    ds = painted_from_text(tmp_path_factory, "batch", CONFIG)
+    ds = painted_from_text(tmp_path_factory, name, config)
     small = tmp_path_factory.mktemp("small")
     for p in sorted((ds / "images").glob("0*.png"))[:3]:
         cv2.imwrite(str(small / p.name), cv2.resize(cv2.imread(str(p)), (640, 480), interpolation=cv2.INTER_AREA))
@@ -227,11 +239,11 @@ def test_results_are_written_as_they_finish_and_a_rerun_measures_only_the_rest(s
 
 
 @pytest.mark.slow   # measure three times in this process
-def test_a_resumed_docking_run_keeps_the_edge_widths(source, tmp_path, monkeypatch):
+def test_a_resumed_docking_run_keeps_the_edge_widths(run_source, tmp_path, monkeypatch):
     """--self-calibrate sequence: each entry keeps the edge widths of the centres its frame used
     (the run's covariance takes them), so a resumed run reports the covariance of a fresh one
     (to 1e-9 relative), not the one of centres without widths."""
-    folder, layout = source
+    folder, layout = run_source
     real, calls = measure_mod.measure_and_draw, []
 
     def stops_at_third(*args):
