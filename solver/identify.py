@@ -59,6 +59,9 @@ from dockfactory.solver.options import (
     RefineOptions,
 )
 from dockfactory.solver.refine import DEFAULT_REFINE
+from dockfactory.solver.stats import chi2_logsf
+
+RIVAL_P = 1e-6   # a rival the known noise explains at a lower p-value is none (eval.fit_gate.GATE_P's level)
 
 __all__ = ["Identification", "identify_markers", "parse_detections"]
 
@@ -546,6 +549,7 @@ def _settle_rivals(hyps, ids, pts, sel, uv, pp, search: _Search) -> None:
             rmse = _joint_rmse(s, h, other, anchor, pts, sel, uv, pp, search)
             if rmse <= search.max_rmse:
                 judged.append((rmse, h))
+        judged = _explained(judged, len(anchor.pairs), search.refine.sigma_floor_px)
         if len(judged) != 1:
             if not judged:
                 raise IdentificationFailed(f"section {s}: no assignment is consistent with "
@@ -553,6 +557,23 @@ def _settle_rivals(hyps, ids, pts, sel, uv, pp, search: _Search) -> None:
             judged.sort(key=lambda x: x[0])
             _raise_ambiguous(s, judged[0][1], judged[1][1], ids, sel[s])
         hyps[s] = [judged[0][1]]
+
+
+def _explained(judged: list, n_other: int, sigma_px: float | None) -> list:
+    """The (joint rmse, hypothesis) pairs of ``judged`` whose joint fit the known centre noise
+    ``sigma_px`` explains (chi-square of the residuals over 2 n - 13 dof, p >= RIVAL_P), when at
+    least one is; all of them without a known noise or when none is. Why: a rival whose fit is
+    many times the camera's noise is no explanation of the detections (the goodness-of-fit gate
+    would refuse its pose), so it cannot make the identification ambiguous."""
+    if sigma_px is None or not sigma_px > 0:
+        return judged
+    keep = []
+    for rmse, h in judged:
+        n = len(h.pairs) + n_other
+        dof = 2 * n - 13
+        if dof >= 1 and chi2_logsf(n * rmse ** 2 / sigma_px ** 2, dof) >= np.log(RIVAL_P):
+            keep.append((rmse, h))
+    return keep or judged
 
 
 def _unclaimed_joint_fit(best, pts, sel, uv, pp, search: _Search) -> JointFit:
