@@ -4,8 +4,9 @@
 Per design: predicted and rendered RMSE of X, Y, alpha (test frames), their ratio, the predicted
 localization status (P >= the run's min probability) and the rendered localization decision
 (the guarded rule on the rendered frames). Summary: per component the median and worst of
-|predicted / rendered - 1|, and the share of designs whose predicted pass / fail agrees with the
-rendered localization decision (undecided renders counted as disagreeing).
+|predicted / rendered - 1|, and the share of designs whose predicted outcome (pass: P(accept) at
+least the run's min probability, fail: P(reject) at least it, else undecided) is the rendered
+one.
 
 The rendered RMSE over n frames has its own sampling error, about 1 / sqrt(2 n) relative (14 %
 at 24 frames): the table prints the chi-square 95 % interval of each rendered RMSE beside it.
@@ -34,6 +35,16 @@ def _decision(criteria, block: str) -> str:
     return "fail" if any(c.get("decision") == "fail" for c in mine) else "undecided"
 
 
+def _predicted(row: dict, min_p: float) -> str:
+    """pass / fail / undecided of the localization block alone (what the renders decide)."""
+    loc = row["localization"].values()
+    if math.prod(v["probability"] for v in loc) >= min_p:
+        return "pass"
+    if 1 - math.prod(1 - v["reject_probability"] for v in loc) >= min_p:
+        return "fail"
+    return "undecided"
+
+
 def records(folder: Path) -> list[dict]:
     """One record per design of ``folder``/design.json whose run finished."""
     result = json.loads((folder / "design.json").read_text())
@@ -47,7 +58,7 @@ def records(folder: Path) -> list[dict]:
         n = loc["n_solved"]
         rec = {"scene": folder.name, "id": row["id"], "design": row["design"], "frames": n,
                "solved": f"{n}/{loc['n_frames']}",
-               "predicted_status": "pass" if (row["p_localization"] or 0) >= result["min_probability"] else "fail",
+               "predicted_status": _predicted(row, result["min_probability"]),
                "p_localization": row["p_localization"],
                "rendered_decision": _decision(m["acceptance"]["criteria"], "localization")}
         for c in COMPS:

@@ -10,9 +10,11 @@ product over the gated components of both blocks. Localization: n = test frames;
 n = poses x (captures - 1). Detection and failure gates are not predicted (the renders of
 ``--verify`` measure them).
 
-A design passes when P(accept) >= ``min_probability``. Ranking: the passing designs first, the
-cheapest first when the space gives costs (else the largest margin first), then the rest by
-P(accept). The Pareto front (passing designs no other passing design beats on margin, pixels,
+The rule has three outcomes and so has the prediction: a design passes when P(accept) >=
+``min_probability``, fails when P(reject) (the lower bound of some component proven beyond its
+threshold) is, and is undecided otherwise (near a threshold: the frames are a coin toss).
+Ranking: the passing designs first, the cheapest first when the space gives costs (else the
+largest margin first), then the undecided and the failing by P(accept). The Pareto front (passing designs no other passing design beats on margin, pixels,
 focal length and markers at once) is flagged.
 """
 from __future__ import annotations
@@ -27,7 +29,7 @@ from dockfactory.eval.design_card import DesignCard
 from dockfactory.eval.design_predict import design_config, predict_design
 from dockfactory.eval.design_space import Design, DesignSpace
 
-__all__ = ["pass_probability", "design_row", "rank_rows", "design_id"]
+__all__ = ["pass_probability", "reject_probability", "design_row", "rank_rows", "design_id"]
 
 
 def pass_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
@@ -36,6 +38,14 @@ def pass_probability(rmse: float, threshold: float, dof: int, confidence: float)
     if rmse <= 0:
         return 1.0
     return chi2_cdf(threshold ** 2 * chi2_quantile(1 - confidence, dof) / rmse ** 2, dof)
+
+
+def reject_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
+    """P(the guarded rule proves rmse > threshold): its lower bound sqrt(S / chi2_c(n)) beyond
+    the threshold, S = rmse^2 chi2(n); 0.0 for rmse 0."""
+    if rmse <= 0:
+        return 0.0
+    return 1.0 - chi2_cdf(threshold ** 2 * chi2_quantile(confidence, dof) / rmse ** 2, dof)
 
 
 def design_id(design: Design) -> str:
@@ -61,6 +71,7 @@ def _block(spec, block: str, figures: dict, dof: int) -> dict:
         t, r = root(thr), figures[comp]
         out[comp] = {"predicted": r, "threshold": t, "margin": r / t,
                      "probability": pass_probability(r, t, dof, spec.confidence),
+                     "reject_probability": reject_probability(r, t, dof, spec.confidence),
                      "frames_to_prove": frames_to_decide(r, t, 1, spec.confidence) if r < t else None}
     return out
 
@@ -84,11 +95,13 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
     p_loc = math.prod(v["probability"] for v in loc.values())
     probs = [v["probability"] for v in (*loc.values(), *est.values())]
+    rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())]
     margins = [v["margin"] for v in (*loc.values(), *est.values())]
     return {**row, "status": "predicted", "reason": "", "provisional": provisional,
             "predicted_rmse": pred.rmse, "predicted_repeatability": pred.repeat,
             "localization": loc, "estimation": est, "estimation_predicted": bool(poses),
             "p_accept": math.prod(probs) if probs else None, "p_localization": p_loc if loc else None,
+            "p_reject": 1.0 - math.prod(1.0 - p for p in rejects) if rejects else None,
             "worst_margin": max(margins) if margins else None, "geometry_frames": pred.frames}
 
 
@@ -99,22 +112,30 @@ def _dominates(a: dict, b: dict) -> bool:
     return all(x <= y for x, y in zip(va, vb)) and any(x < y for x, y in zip(va, vb))
 
 
+def _status(row: dict, min_probability: float) -> str:
+    if row["p_accept"] is not None and row["p_accept"] >= min_probability:
+        return "passes"
+    if row["p_reject"] is not None and row["p_reject"] >= min_probability:
+        return "fails"
+    return "undecided"
+
+
 def rank_rows(rows: list[dict], min_probability: float) -> list[dict]:
-    """``rows`` with status passes / fails, ``rank`` and ``pareto`` set, in rank order (module
-    docstring); infeasible and unpredicted designs last, unranked."""
+    """``rows`` with status passes / undecided / fails, ``rank`` and ``pareto`` set, in rank
+    order (module docstring); infeasible and unpredicted designs last, unranked."""
     if not 0 < min_probability < 1:
         raise DockfactoryError(f"min probability must be in (0, 1), got {min_probability}")
     done = [r for r in rows if r["status"] == "predicted"]
     for r in done:
-        r["status"] = "passes" if r["p_accept"] is not None and r["p_accept"] >= min_probability else "fails"
+        r["status"] = _status(r, min_probability)
     passing = [r for r in done if r["status"] == "passes"]
     costed = any(r["cost"] > 0 for r in rows)
     passing.sort(key=lambda r: (r["cost"], r["worst_margin"]) if costed else (r["worst_margin"], r["cost"]))
-    failing = sorted((r for r in done if r["status"] == "fails"), key=lambda r: -(r["p_accept"] or 0.0))
+    rest = sorted((r for r in done if r["status"] != "passes"),
+                  key=lambda r: (r["status"] == "fails", -(r["p_accept"] or 0.0), r["worst_margin"]))
     for r in passing:
         r["pareto"] = not any(_dominates(o, r) for o in passing if o is not r)
-    for i, r in enumerate(passing + failing):
+    for i, r in enumerate(passing + rest):
         r["rank"] = i + 1
         r.setdefault("pareto", False)
-    rest = [r for r in rows if r["status"] not in ("passes", "fails")]
-    return passing + failing + rest
+    return passing + rest + [r for r in rows if r["status"] not in ("passes", "undecided", "fails")]

@@ -4,7 +4,7 @@ each written atomically.
 
 The plot: one point per predicted design, its worst margin (predicted RMSE over threshold, the
 largest over the gated components) against its cost when the space gives costs, else its pixel
-count; passing designs filled, Pareto designs ringed, the threshold at margin 1.
+count; passing designs green, undecided orange, failing red, Pareto designs ringed, the threshold at margin 1.
 """
 from __future__ import annotations
 
@@ -76,7 +76,8 @@ def _plot_png(rows: list[dict]) -> str | None:
     costed = any(r["cost"] > 0 for r in pts)
     xs = [r["cost"] if costed else r["width"] * r["height"] / 1e6 for r in pts]
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for status, style in (("passes", dict(c="tab:green")), ("fails", dict(c="tab:red", alpha=0.5))):
+    for status, style in (("passes", dict(c="tab:green")), ("undecided", dict(c="tab:orange", alpha=0.7)),
+                          ("fails", dict(c="tab:red", alpha=0.5))):
         sel = [i for i, r in enumerate(pts) if r["status"] == status]
         ax.scatter([xs[i] for i in sel], [pts[i]["worst_margin"] for i in sel], s=18, label=status, **style)
     par = [i for i, r in enumerate(pts) if r.get("pareto")]

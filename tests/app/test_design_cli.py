@@ -63,7 +63,9 @@ def test_the_shipped_space_is_answered_with_its_files(tmp_path, capsys):
     res = json.loads((tmp_path / "d" / "design.json").read_text())
     ranked = [r for r in res["designs"] if r.get("rank") is not None]
     assert [r["rank"] for r in ranked] == list(range(1, len(ranked) + 1))
-    assert {r["status"] for r in ranked} == {"passes", "fails"}
+    assert {r["status"] for r in ranked} == {"passes", "undecided", "fails"}
+    order = [r["status"] for r in ranked]
+    assert order == sorted(order, key=["passes", "undecided", "fails"].index)
     assert all(r["status"] in ("infeasible", "not predicted") and r["reason"] for r in res["designs"][len(ranked):])
     passing = [r for r in ranked if r["status"] == "passes"]
     assert [r["cost"] for r in passing] == sorted(r["cost"] for r in passing)   # cheapest first

@@ -13,7 +13,7 @@ from dockfactory.core.layout import DEFAULT_LAYOUT_A, build_layout, layout_probl
 from dockfactory.core.layout_patterns import pattern_pair
 from dockfactory.eval.confidence import chi2_bounds
 from dockfactory.eval.design_predict import NoiseClass, frame_variances
-from dockfactory.eval.design_rank import pass_probability
+from dockfactory.eval.design_rank import pass_probability, reject_probability
 from dockfactory.solver import crb_d_from_b, solve_docking
 from dockfactory.solver.disc_noise import section_noise_shapes
 from dockfactory.solver.synthetic import default_layout, docking_scene
@@ -83,14 +83,16 @@ def test_without_offset_the_prediction_is_the_fit_s_sandwich_at_or_above_the_bou
             assert b.std[key] ** 2 * (1 - 1e-9) <= vn[i] <= 1.5 ** 2 * b.std[key] ** 2, key
 
 
-@pytest.mark.parametrize("rmse,dof", [(0.25, 40), (0.28, 24), (0.2, 10), (0.31, 60)])
+@pytest.mark.parametrize("rmse,dof", [(0.25, 40), (0.28, 24), (0.2, 10), (0.31, 60), (0.36, 24), (0.45, 10)])
 def test_pass_probability_is_the_guarded_rule_s_frequency(rmse, dof):
     """Simulated test campaigns: the share whose chi-square upper bound is within the threshold
-    (0.3) equals the predicted probability within 0.03 (4000 campaigns, sd <= 0.008)."""
+    (0.3) equals the predicted probability within 0.03 (4000 campaigns, sd <= 0.008), and the
+    share whose lower bound is beyond it the predicted probability of a rejection."""
     rng = np.random.default_rng(int(rmse * 1000) + dof)
     errors = rng.standard_normal((4000, dof)) * rmse
-    passed = [chi2_bounds(float(np.sum(e ** 2)), dof, 0.95)[1] <= 0.3 for e in errors]
-    assert abs(np.mean(passed) - pass_probability(rmse, 0.3, dof, 0.95)) < 0.03
+    bounds = [chi2_bounds(float(np.sum(e ** 2)), dof, 0.95) for e in errors]
+    assert abs(np.mean([b[1] <= 0.3 for b in bounds]) - pass_probability(rmse, 0.3, dof, 0.95)) < 0.03
+    assert abs(np.mean([b[0] > 0.3 for b in bounds]) - reject_probability(rmse, 0.3, dof, 0.95)) < 0.03
 
 
 def test_pass_probability_grows_with_frames_and_margin():
