@@ -57,6 +57,7 @@ def _space(tmp_path, text=SPACE):
     return tmp_path / "space.toml"
 
 
+@pytest.mark.slow   # 216 designs: about 20 s
 def test_the_shipped_space_is_answered_with_its_files(tmp_path, capsys):
     code, out, err = run_cli(["design", "docking_cell", "--out", tmp_path / "d"], capsys)
     assert code == 0, err
