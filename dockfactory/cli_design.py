@@ -8,7 +8,6 @@ from pathlib import Path
 
 from dockfactory.cli_args import float_in, positive_int
 from dockfactory.core.config import load_config
-from dockfactory.core.io import write_json_atomic
 from dockfactory.design_verify import comparison_lines, verify_designs
 from dockfactory.core.resources import (
     default_acceptance,

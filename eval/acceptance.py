@@ -21,6 +21,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dockfactory.eval.gate_statistic import STATISTICS, gate_statistic
 from dockfactory.core.config import CONDITIONS, ConfigError, build_dataclass
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
 from dockfactory.core.user_files import check_regular_file
@@ -135,8 +136,8 @@ def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
         raise ConfigError(f"{source}: confidence: must be in [0.5, 1), got {spec.confidence}")
     for name in ("estimation", "localization"):
         gate = getattr(spec, name)
-        if gate.statistic not in ("rmse", "mse"):
-            raise _bad(source, name, "statistic", f"{gate.statistic!r} is not rmse or mse")
+        if gate.statistic not in STATISTICS:
+            raise _bad(source, name, "statistic", f"{gate.statistic!r} is not {' or '.join(STATISTICS)}")
         given = data.get(name, {})
         _check_gates_something(source, name, gate, data)
         for c in COMPONENTS:
@@ -198,7 +199,7 @@ def _pose_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
                 stat, note = None, f"{lacking} of {n} {what} without a pose"
             elif stat is None:
                 note = ("no pose captured twice" if block == "estimation" else "no test frame") + ": nothing to measure"
-            unit = UNITS[c] + ("^2" if gate.statistic == "mse" else "")
+            unit = gate_statistic(gate.statistic).unit(UNITS[c])
             row = {"name": f"{label}: {c}", "block": block, "component": c, "statistic": gate.statistic,
                    "value": stat, "threshold": thr, "unit": unit, "note": note,
                    "paper": getattr(spec.paper, f"{block}_{c}", None)}
@@ -215,7 +216,7 @@ def _more_frames_note(blk: dict, c: str, value: float, thr: float, statistic: st
                       block: str) -> str:
     """What would decide an undecided criterion: how many more frames (captures) the chi-square
     bound needs if the measured value holds (eval.confidence.frames_to_decide)."""
-    root = (lambda v: math.sqrt(v)) if statistic == "mse" else (lambda v: v)
+    root = gate_statistic(statistic).to_rms
     dof = blk.get("dof") if block == "estimation" else blk["overall"][c].get("n")
     needed = frames_to_decide(root(value), root(thr), int(dof or 0), confidence)
     what = "repeatability captures" if block == "estimation" else "test frames"
@@ -230,7 +231,7 @@ def _bounds_of(metrics: dict, block: str, c: str, statistic: str, value) -> dict
     b = ((metrics.get("bounds") or {}).get(block) or {}).get(c) or {}
     if value is None or b.get("upper") is None:
         return {"lower": None, "upper": None, "bounds_by": None}
-    power = 2 if statistic == "mse" else 1
+    power = gate_statistic(statistic).power
     tails = (f"; heavy tails (kurtosis {b['kurtosis']:.1f}): the upper bound may undercover"
              if b.get("heavy_tailed") else "")
     return {"lower": b["lower"] ** power, "upper": b["upper"] ** power,

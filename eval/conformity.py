@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import POSE_KEYS
 from dockfactory.eval.acceptance import EXIT_NOT_PROVEN, AcceptanceSpec
@@ -77,7 +78,7 @@ def pose_tolerances(spec: AcceptanceSpec, source: str = "acceptance spec") -> di
     if not thresholds:
         raise DockfactoryError(f"{source}: [localization] gates no component: a single pose has no tolerance "
                                "to be judged against (give x, y or alpha there)")
-    root = math.sqrt if gate.statistic == "mse" else float
+    root = gate_statistic(gate.statistic).to_rms
     return {POSE_KEYS[c]: root(t) for c, t in thresholds.items()}
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import math
 
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.config import ConfigError
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.eval.confidence import chi2_cdf, chi2_quantile, frames_to_decide
@@ -65,7 +66,7 @@ def _base_row(design: Design, space: DesignSpace) -> dict:
 def _block(spec, block: str, figures: dict, dof: int) -> dict:
     """Per gated component of ``block``: predicted, threshold, margin, probability, frames."""
     gate = getattr(spec, block)
-    root = math.sqrt if gate.statistic == "mse" else float
+    root = gate_statistic(gate.statistic).to_rms
     out = {}
     for comp, thr in gate.thresholds().items():
         t, r = root(thr), figures[comp]

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.eval.acceptance import AcceptanceSpec
@@ -99,7 +100,7 @@ def camera_envelope(ds, spec: AcceptanceSpec, sigma_px: float, grid: EnvelopeGri
 def _envelope_record(grid: EnvelopeGrid, frames, sigma_px: float, spec: AcceptanceSpec, rmse: dict) -> dict:
     gated = spec.localization.thresholds()
     statistic = spec.localization.statistic
-    value = {c: (r ** 2 if statistic == "mse" else r) for c, r in rmse.items()}
+    value = {c: gate_statistic(statistic).from_rms(r) for c, r in rmse.items()}
     passes = np.ones((len(grid.pp_offsets_px), len(grid.k1)), dtype=bool)
     for c, thr in gated.items():
         passes &= value[c] <= thr

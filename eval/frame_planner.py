@@ -20,10 +20,10 @@ given centre noise (solver.crb, joint problem: shared unknown focal), times ``bo
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout import marker_points
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS
@@ -45,7 +45,7 @@ def plan_frames(spec: AcceptanceSpec, expected: dict[str, dict[str, float]]) -> 
     rows = []
     for block, figures in expected.items():
         gate = getattr(spec, block)
-        root = math.sqrt if gate.statistic == "mse" else float
+        root = gate_statistic(gate.statistic).to_rms
         for c, thr in gate.thresholds().items():
             if c not in figures:
                 raise DockfactoryError(f"plan-frames: [{block}] gates {c} but no expected figure for it was given")

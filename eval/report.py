@@ -13,6 +13,7 @@ import os
 import subprocess
 from pathlib import Path
 
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.cv import cv2
 import numpy as np
 
@@ -131,7 +132,7 @@ def localization_tolerances(metrics: dict) -> dict:
     out = {}
     for c in (metrics.get("acceptance") or {}).get("criteria", []):
         if c.get("block") == "localization" and c["threshold"] is not None:
-            out[c["component"]] = c["threshold"] ** 0.5 if c["statistic"] == "mse" else c["threshold"]
+            out[c["component"]] = gate_statistic(c["statistic"]).to_rms(c["threshold"])
     return out
 
 
