@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast venv clean-demo paper
+.PHONY: demo test test-fast lint venv clean-demo paper
 
 venv: $(STAMP)
 
@@ -28,6 +28,9 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 # everything that neither renders nor trains for long (pyproject.toml: markers): < 60 s on 2 cores
+lint: $(STAMP)
+	$(BIN)/ruff check .   # the rules of [tool.ruff.lint] in pyproject.toml
+
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 -m "not render and not slow"   # both cores (pytest-xdist)
 

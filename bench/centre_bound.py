@@ -46,7 +46,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from sensor_effects import delivered   # noqa: E402  (bench sibling)
 
 from dockfactory.core.cfa import channel_map                        # noqa: E402
-from dockfactory.core.names import POSE_NAMES                       # noqa: E402
 from dockfactory.detector.centre import CLASS_CHANNEL, _SRGB_TO_LINEAR   # noqa: E402
 from dockfactory.generator.dataset_open import Dataset              # noqa: E402
 from dockfactory.generator.exr import read_passes                   # noqa: E402

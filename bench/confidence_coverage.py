@@ -63,7 +63,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=1000)
     ap.add_argument("--confidence", type=float, default=0.95)
     args = ap.parse_args()
-    print(f"| errors | n | chi-square upper / lower | bootstrap upper / lower | deciding pair upper / lower |")
+    print("| errors | n | chi-square upper / lower | bootstrap upper / lower | deciding pair upper / lower |")
     print("| --- | --- | --- | --- | --- |")
     case = 0
     for model in ("gauss", "bias", "t4"):

@@ -13,7 +13,6 @@ from __future__ import annotations
 import os
 import stat
 import struct
-from pathlib import Path
 
 MAX_HEADER_BYTES = 1 << 20   # a JPEG's frame header may follow up to 1 MB of EXIF / ICC segments
 FORMATS = "PNG, JPEG, TIFF or BMP"

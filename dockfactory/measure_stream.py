@@ -56,7 +56,7 @@ from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, 
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
 from dockfactory.image_header import image_size
-from dockfactory.measure import MAX_WORKERS, NO_MARKERS, solve_image
+from dockfactory.measure import MAX_WORKERS, solve_image
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration

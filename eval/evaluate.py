@@ -17,7 +17,7 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.uncertainty_budget import budget_block
-from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, UNITS, AcceptanceSpec, verdict
+from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, AcceptanceSpec, verdict
 from dockfactory.eval.confidence import chi2_bounds, pooled_spread_bounds, rmse_bounds
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.model_check import model_check_block

@@ -8,7 +8,6 @@ import pytest
 
 from cli_run import one_line_error, run_cli
 
-from dockfactory.cli import main
 from dockfactory.generator.dataset_open import Dataset
 
 

@@ -40,7 +40,7 @@ def test_ideal_pixels_undo_the_lens():
 
 def test_a_calibrated_camera_solves_within_its_uncertainty():
     rng = np.random.default_rng(8)
-    z_cal, z_plain, e_cal, e_plain = [], [], [], []
+    z_cal, e_cal, e_plain = [], [], []
     for _ in range(20):
         sc, centres, cal = _frame(rng)
         truth = pose_components(sc.d_from_b)

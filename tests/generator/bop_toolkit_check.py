@@ -67,7 +67,6 @@ def calc_gt_info(script: Path, split: str) -> None:
 def masks_vs_render(data: Path, width: int, height: int) -> dict:
     """{split: {im: [[render only, mask only] per gt]}}: bop_toolkit's depth render of each model
     in its pose (cam_K as given) against the export's full masks."""
-    import numpy as np
     from bop_toolkit_lib import inout
     from bop_toolkit_lib.rendering import renderer
     ren = renderer.create_renderer(width, height, "vispy", mode="depth")
