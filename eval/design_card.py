@@ -9,6 +9,8 @@ Fields::
     shift_px            [u, v] section offset per axis of that camera class
     cfa_factor          {"none": 1, "rggb": g}: both figures scale by it
     ring_factor         {"dark": 1, "white": w}
+    edge_px             {"none": e0, "rggb": e1}: the edge width of each camera class (0: no
+                        thin-disc term)
     jpeg_factor         {"none": j0, "rggb": j1}: at quality >= jpeg_min_quality
     jpeg_min_quality    below it the card has no figure (the design is not predicted)
     bound_factor        {component: k}: the RMSE over the model's figure
@@ -42,6 +44,7 @@ class DesignCard:
     cfa_factor: dict
     ring_factor: dict
     jpeg_factor: dict
+    edge_px: dict
     jpeg_min_quality: int
     bound_factor: dict
     provisional: tuple[str, ...]
@@ -58,7 +61,8 @@ class DesignCard:
         if q is not None:
             g *= self.jpeg_factor[design.camera.cfa]
             used.append(f"jpeg_factor.{design.camera.cfa}")
-        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g))
+        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g),
+                           self.edge_px[design.camera.cfa])
         return noise, [u for u in used if u in self.provisional], ""
 
 
@@ -73,6 +77,17 @@ def _factors(path, data, key, names) -> dict:
     if not isinstance(table, dict) or set(table) != set(names):
         raise DockfactoryError(f"{path}: {key}: expected a table of {', '.join(names)}, got {table!r}")
     return {n: _positive(path, f"{key}.{n}", table[n]) for n in names}
+
+
+def _edges(path, table) -> dict:
+    if not isinstance(table, dict) or set(table) != {"none", "rggb"}:
+        raise DockfactoryError(f"{path}: edge_px: expected a table of none, rggb, got {table!r}")
+    out = {}
+    for k, v in table.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 <= v <= 20:
+            raise DockfactoryError(f"{path}: edge_px.{k}: expected a number in [0, 20] px, got {v!r}")
+        out[k] = float(v)
+    return out
 
 
 def load_design_card(path) -> DesignCard:
@@ -99,5 +114,6 @@ def load_design_card(path) -> DesignCard:
                       (_positive(path, "shift_px[0]", shift[0]), _positive(path, "shift_px[1]", shift[1])),
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _factors(path, data, "ring_factor", ("dark", "white")),
-                      _factors(path, data, "jpeg_factor", ("none", "rggb")), q,
+                      _factors(path, data, "jpeg_factor", ("none", "rggb")),
+                      _edges(path, data.get("edge_px")), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data)

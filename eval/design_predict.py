@@ -5,7 +5,8 @@ known to have.
 For each of ``geometry_frames`` pose draws of the design's scene (generator.sampler, the test
 frames of the design's config; normal light) and each marker of the layout, the centre noise is
 the disc model's (solver.disc_noise): a round disc of REFERENCE_RADIUS_PX errs ``scale_px`` per
-axis, a smaller or slanted one more, in the shape of its image. The solver's fit is least squares
+axis, a smaller or slanted one more, in the shape of its image, and one only a few of its camera
+class's edge widths thick more across it (the thin-disc term). The solver's fit is least squares
 over every centre (its covariance is the sandwich of that fit: solver.disc_noise.with_disc_noise),
 so the pose covariance is A J^T C J A (A = (J^T J)^-1, J the joint Jacobian over (w_A, t_A, w_B,
 t_B, f): the focal is estimated, the camera is uncalibrated), propagated to d_from_b; the section
@@ -46,9 +47,12 @@ __all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "
 @dataclass(frozen=True)
 class NoiseClass:
     """The centre noise of one design's camera class: disc-model scale (px per axis at
-    REFERENCE_RADIUS_PX) and section offset (px per axis)."""
+    REFERENCE_RADIUS_PX), section offset (px per axis) and the edge width (px, Gaussian std) its
+    discs' edges have in the refinement's fit (0: no thin-disc term; solver.disc_noise.
+    thin_disc_factor widens the noise across a disc only a few edge widths thick)."""
     scale_px: float
     shift_px: tuple[float, float]
+    edge_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,9 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass):
     ma = [m for m in markers if m.section == "A"]
     mb = [m for m in markers if m.section == "B"]
     jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
-    shapes = np.concatenate([section_noise_shapes(ma, cam_a, focal), section_noise_shapes(mb, cam_b, focal)])
+    edges = (None, None) if not noise.edge_px > 0 else (np.full(len(ma), noise.edge_px), np.full(len(mb), noise.edge_px))
+    shapes = np.concatenate([section_noise_shapes(ma, cam_a, focal, edges[0]),
+                             section_noise_shapes(mb, cam_b, focal, edges[1])])
     a = inverse_spd(jac.T @ jac)
     jr = jac.reshape(-1, 2, jac.shape[1])
     middle = noise.scale_px ** 2 * np.einsum("nap,nab,nbq->pq", jr, shapes, jr)
