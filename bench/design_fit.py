@@ -4,9 +4,9 @@ how far the fitted model is from them (in the fit and leaving each scene out).
 Inputs (committed results, no render needed): the sensor bench at label-aware sampling
 (bench/results/sensor_effects/sampling32_48.json: scenes A, B, C, 48 test frames each, three-chip,
 Bayer bilinear / VNG, Bayer + JPEG q90) with the scenes' configs (bench/configs/sensor_scene_*.toml,
-whose test frames' geometry the predictor redraws exactly), and for two provisional factors the
-2-sample renders of the sensor bench (current_48.json: three-chip JPEG q90; ring/white_48.json:
-a white ring).
+whose test frames' geometry the predictor redraws exactly), and for the white ring and a
+three-chip camera's JPEG the same bench on white-ring renders of scenes A and B and on scene A
+again (ring/white32_48.json, jpeg32_a_48.json; label-aware sampling).
 
 The model (eval.design_predict): RMSE^2 = s0^2 Vn + su^2 Vu + sv^2 Vv per component, Vn the
 disc-noise variance at unit scale and Vu, Vv the section offset's at unit shift per axis, mean
@@ -105,19 +105,20 @@ def ratio_rows(name, pairs_by_scene) -> list[dict]:
             for s, (m, p) in pairs_by_scene.items()]
 
 
-def provisional_factors(sampling_tc: dict) -> dict:
-    """Three-chip JPEG q90 and white-ring factors from the 2-sample renders (X, Y, alpha ratios
-    to the three-chip dark-ring PNG of the same renders, geometric mean over components and
-    scenes A and B)."""
-    cur = json.loads((RESULTS / "current_48.json").read_text())["datasets"]
-    white = json.loads((RESULTS / "ring" / "white_48.json").read_text())["datasets"]
-    jpeg, ring = [], []
-    for s in ("a", "b"):
-        tc = measured(cur, s, "three-chip")
-        jpeg.append((measured(cur, s, "three-chip-jpeg90"), tc))
-        [wk] = [k for k in white if k.startswith(f"sensor-scene-{s}-white@")]
-        ring.append((measured({f"sensor-scene-{s}@": white[wk]}, s, "three-chip"), tc))
-    return {"jpeg_none": geo_factor(jpeg), "ring_white": geo_factor(ring)}
+def ring_and_jpeg_factors(results: dict) -> dict:
+    """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
+    geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
+    sampling: white-ring renders of scenes A and B (ring/white32_48.json) over the dark-ring ones
+    (sampling32_48.json), three-chip for "none", Bayer bilinear and VNG for "rggb"; JPEG over PNG
+    on the dark scene A (jpeg32_a_48.json) and the two white-ring scenes."""
+    white = json.loads((RESULTS / "ring" / "white32_48.json").read_text())["datasets"]
+    jpeg_a = json.loads((RESULTS / "jpeg32_a_48.json").read_text())["datasets"]
+    as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
+    ring = {"none": [(measured(as_scene, s, "three-chip"), measured(results, s, "three-chip")) for s in ("a", "b")],
+            "rggb": [(measured(as_scene, s, e), measured(results, s, e)) for s in ("a", "b") for e in BAYER]}
+    jpeg = [(measured(as_scene, s, "three-chip-jpeg90"), measured(as_scene, s, "three-chip")) for s in ("a", "b")]
+    jpeg.append((measured(jpeg_a, "a", "three-chip-jpeg90"), measured(jpeg_a, "a", "three-chip")))
+    return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
 
 
 def _three_chip(results: dict, by_edge: dict):
@@ -156,22 +157,23 @@ def fit() -> dict:
     jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in SCENES])
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
                                             g * jpeg * predicted(bayer_bases[s], p)) for s in SCENES})
-    prov = provisional_factors(tc)
+    other = ring_and_jpeg_factors(results)
     versions = sorted(results)
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
             "shift_px": [round(float(p[1]), 5), round(float(p[2]), 5)],
             "cfa_factor": {"none": 1.0, "rggb": round(g, 3)},
-            "ring_factor": {"dark": 1.0, "white": round(prov["ring_white"], 3)},
-            "jpeg_factor": {"none": round(prov["jpeg_none"], 3), "rggb": round(jpeg, 3)},
+            "ring_factor": {"dark": {"none": 1.0, "rggb": 1.0},
+                            "white": {c: round(v, 3) for c, v in other["ring_white"].items()}},
+            "jpeg_factor": {"none": round(other["jpeg_none"], 3), "rggb": round(jpeg, 3)},
             "edge_px": {"none": e0, "rggb": e1},
             "jpeg_min_quality": 90,
             "bound_factor": {c: 1.0 for c in ("x", "y", "z", "alpha", "beta", "gamma")},
-            "provisional": ["ring_factor.white", "jpeg_factor.none"],
+            "provisional": [],
             "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
                           "weights": "yolov5n_se_rings_markers.pt",
                           "source": "bench/results/sensor_effects/sampling32_48.json",
-                          "provisional_source": ["bench/results/sensor_effects/current_48.json (2 samples)",
-                                                 "bench/results/sensor_effects/ring/white_48.json (2 samples)"],
+                          "ring_and_jpeg_source": ["bench/results/sensor_effects/ring/white32_48.json",
+                                                   "bench/results/sensor_effects/jpeg32_a_48.json"],
                           "components_checked": list(FIT)},
             "error": {"predicted_over_measured": rows}}
 

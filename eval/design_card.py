@@ -8,7 +8,9 @@ Fields::
                         three-chip camera, dark ring, lossless image)
     shift_px            [u, v] section offset per axis of that camera class
     cfa_factor          {"none": 1, "rggb": g}: both figures scale by it
-    ring_factor         {"dark": 1, "white": w}
+    ring_factor         {"dark": {"none": 1, "rggb": 1}, "white": {"none": w0, "rggb": w1}}: per
+                        camera class (a white ring shows a Bayer camera the disc's edge in more
+                        of its samples)
     edge_px             {"none": e0, "rggb": e1}: the edge width of each camera class (0: no
                         thin-disc term)
     jpeg_factor         {"none": j0, "rggb": j1}: at quality >= jpeg_min_quality
@@ -56,8 +58,8 @@ class DesignCard:
         q = jpeg_quality(design.image_format)
         if q is not None and q < self.jpeg_min_quality:
             return None, [], f"the predictor's card has no JPEG figure below quality {self.jpeg_min_quality}"
-        g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring]
-        used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}"]
+        g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring][design.camera.cfa]
+        used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}.{design.camera.cfa}"]
         if q is not None:
             g *= self.jpeg_factor[design.camera.cfa]
             used.append(f"jpeg_factor.{design.camera.cfa}")
@@ -72,11 +74,18 @@ def _positive(path, key, value) -> float:
     return float(value)
 
 
-def _factors(path, data, key, names) -> dict:
+def _factors(path, data, key, names, where: str = "") -> dict:
     table = data.get(key)
+    name = f"{where}{key}"
     if not isinstance(table, dict) or set(table) != set(names):
-        raise DockfactoryError(f"{path}: {key}: expected a table of {', '.join(names)}, got {table!r}")
-    return {n: _positive(path, f"{key}.{n}", table[n]) for n in names}
+        raise DockfactoryError(f"{path}: {name}: expected a table of {', '.join(names)}, got {table!r}")
+    return {n: _positive(path, f"{name}.{n}", table[n]) for n in names}
+
+
+def _rings(path, table) -> dict:
+    if not isinstance(table, dict) or set(table) != {"dark", "white"}:
+        raise DockfactoryError(f"{path}: ring_factor: expected a table of dark, white, got {table!r}")
+    return {ring: _factors(path, table, ring, ("none", "rggb"), "ring_factor.") for ring in ("dark", "white")}
 
 
 def _edges(path, table) -> dict:
@@ -113,7 +122,7 @@ def load_design_card(path) -> DesignCard:
     return DesignCard(str(path), _positive(path, "scale_px", data.get("scale_px")),
                       (_positive(path, "shift_px[0]", shift[0]), _positive(path, "shift_px[1]", shift[1])),
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
-                      _factors(path, data, "ring_factor", ("dark", "white")),
+                      _rings(path, data.get("ring_factor")),
                       _factors(path, data, "jpeg_factor", ("none", "rggb")),
                       _edges(path, data.get("edge_px")), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data)
