@@ -185,7 +185,7 @@ class MarkersConfig:
 
 @dataclass(frozen=True)
 class RenderConfig:
-    samples: int = 1                # 1 meets 2 s/frame at 1280x960 on 2 cores; 2 gives cleaner edges
+    samples: int = 1                # per pixel outside the marker regions (marker_samples converges those); 1: about 5 s a frame at 1280x960 on 2 cores (bench/results/speeds)
     denoise: str = "fast"           # off | fast | balanced | high (OpenImageDenoise quality)
     max_bounces: int = 2            # light path bounces of Cycles
     adaptive_threshold: float = 0.0  # > 0: adaptive sampling up to `samples` (noise threshold)
