@@ -31,7 +31,7 @@ from dockfactory.core.layout_patterns import pattern_pair
 from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_space import Design, DesignSpace, jpeg_quality
 from dockfactory.generator.random_draws import static_scene
-from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.eval.frame_cameras import cameras_of_test_frames
 from dockfactory.solver.disc_noise import section_noise_shapes
 from dockfactory.solver.refine import (
     d_from_b_jacobian,
@@ -118,19 +118,13 @@ def mean_variances(cfg, noise: NoiseClass, max_frames: int):
     ``max_frames`` test frames of ``cfg``. ConfigError / DockfactoryError when a frame cannot be
     drawn (the markers do not fit the image) or its geometry is degenerate."""
     markers = static_scene(cfg).markers
-    specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
-    if not specs:
-        raise DockfactoryError("the config plans no test frame: no geometry to predict on")
-    parts = []
-    for spec in specs:
-        f = sample_frame(cfg, spec)
-        cam_a = f.camera.cam_from_d_array()
-        parts.append(frame_variances(markers, cam_a, cam_a @ f.d_from_b_array(), f.camera.focal_px,
-                                     np.asarray(f.camera.principal_point, dtype=float), noise))
+    frames = cameras_of_test_frames(cfg, max_frames, "design")
+    parts = [frame_variances(markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise)
+             for f in frames]
     vn, vs = np.mean(parts, axis=0)
     if not (np.all(np.isfinite(vn)) and np.all(np.isfinite(vs))):
         raise DockfactoryError("the pose is not observable from these markers (degenerate geometry)")
-    return vn, vs, len(specs)
+    return vn, vs, len(frames)
 
 
 def predict_design(cfg, noise: NoiseClass, bound_factor: dict, max_frames: int) -> Prediction:

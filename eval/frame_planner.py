@@ -30,7 +30,7 @@ from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS
 from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.confidence import frames_to_decide
 from dockfactory.generator.random_draws import static_scene
-from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.eval.frame_cameras import cameras_of_test_frames
 from dockfactory.solver.crb import crb_d_from_b
 
 BLOCKS = {"localization": "test frames", "estimation": "repeatability degrees of freedom (captures - poses)"}
@@ -83,14 +83,9 @@ def expected_from_config(cfg, sigma_px: float, bound_factor: float = 1.0, max_fr
     config plans no test frame."""
     st = static_scene(cfg)
     pa, pb = marker_points(st.markers, "A"), marker_points(st.markers, "B")
-    specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
-    if not specs:
-        raise DockfactoryError("plan-frames: the config plans no test frame: no geometry to bound")
     stds = []
-    for spec in specs:
-        f = sample_frame(cfg, spec)
-        cam = f.camera.cam_from_d_array()
-        b = crb_d_from_b(pa, cam, pb, cam @ f.d_from_b_array(), f.camera.focal_px, f.camera.principal_point, sigma_px)
+    for f in cameras_of_test_frames(cfg, max_frames, "plan-frames"):
+        b = crb_d_from_b(pa, f.cam_from_a, pb, f.cam_from_b, f.focal_px, f.principal_point, sigma_px)
         stds.append([b.std[POSE_KEYS[c]] for c in COMPONENTS])
     rms = np.sqrt(np.mean(np.square(stds), axis=0)) * bound_factor
     return {c: float(v) for c, v in zip(COMPONENTS, rms)}

@@ -1,0 +1,38 @@
+"""The true cameras of a config's test frames, as a bound or a prediction needs them (pure, no
+render): what eval.frame_planner and eval.design_predict propagate their noise through."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dockfactory.core.errors import DockfactoryError
+from dockfactory.generator.sampler import frame_plan, sample_frame
+
+__all__ = ["FrameCameras", "cameras_of_test_frames"]
+
+
+@dataclass(frozen=True)
+class FrameCameras:
+    """One test frame: ``cam_from_a`` and ``cam_from_b`` (4, 4; A's frame is D), ``focal_px``,
+    ``principal_point`` (2,) px."""
+    cam_from_a: np.ndarray
+    cam_from_b: np.ndarray
+    focal_px: float
+    principal_point: np.ndarray
+
+
+def cameras_of_test_frames(cfg, max_frames: int, what: str) -> list[FrameCameras]:
+    """The first ``max_frames`` test frames of ``cfg`` (generator.sampler: the frames a render of
+    it would draw). DockfactoryError "``what``: the config plans no test frame" when there is
+    none; ConfigError when a frame cannot fit its markers."""
+    specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
+    if not specs:
+        raise DockfactoryError(f"{what}: the config plans no test frame")
+    out = []
+    for spec in specs:
+        f = sample_frame(cfg, spec)
+        cam = f.camera.cam_from_d_array()
+        out.append(FrameCameras(cam, cam @ f.d_from_b_array(), float(f.camera.focal_px),
+                                np.asarray(f.camera.principal_point, dtype=float)))
+    return out
