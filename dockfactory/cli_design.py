@@ -47,12 +47,16 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     spec = load_acceptance(spec_path)
     card = load_design_card(args.card or shipped_design_card())
     designs = designs_of(space, scene)
+    notes = list(NOTES)
+    if spec.estimation.thresholds() and not space.repeatability[0]:
+        notes.append("The spec gates repeatability but the space gives no repeatability captures: "
+                     "P(accept) covers localization only ([design] repeatability_poses / _captures).")
     rows = rank_rows([design_row(d, space, scene, spec, card) for d in designs], args.min_probability)
     result = {"format": "dockfactory.design/1", "space": space.source, "scene": str(space.scene),
               "spec": str(spec_path), "decision_rule": spec.decision_rule, "confidence": spec.confidence,
               "test_frames": space.test_frames, "repeatability": list(space.repeatability),
               "min_probability": args.min_probability, "seconds": round(time.monotonic() - t0, 2),
-              "card": {"path": card.path, "summary": _card_summary(card)}, "notes": list(NOTES),
+              "card": {"path": card.path, "summary": _card_summary(card)}, "notes": notes,
               "designs": rows}
     return result, {design_id(d): d for d in designs}, space, scene, spec_path
 

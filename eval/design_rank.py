@@ -78,9 +78,10 @@ def _block(spec, block: str, figures: dict, dof: int) -> dict:
 
 
 def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: DesignCard) -> dict:
-    """One design predicted: the base fields, ``status`` ("passes" / "fails" once ranked;
-    "infeasible" / "not predicted" with ``reason``), the predicted RMSE and repeatability per
-    component, the localization and estimation blocks and P(accept)."""
+    """One design predicted: the base fields, ``status`` ("predicted", made passes / undecided /
+    fails by :func:`rank_rows`; "infeasible" / "not predicted" with ``reason``), the predicted
+    RMSE and repeatability per component, the localization and estimation blocks (estimation
+    only when the space gives repeatability captures), P(accept) and P(reject)."""
     row = _base_row(design, space)
     noise, provisional, why = card.noise_of(design)
     if noise is None:
@@ -106,10 +107,13 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
             "worst_margin": max(margins) if margins else None, "geometry_frames": pred.frames}
 
 
+def _pareto_key(r: dict) -> tuple:
+    """What a design spends, each the less the better: margin, pixels, focal length, markers."""
+    return r["worst_margin"], r["width"] * r["height"], r["focal_mm"], r["markers_per_section"]
+
+
 def _dominates(a: dict, b: dict) -> bool:
-    keys = (("worst_margin", 1), ("pixels", 1), ("focal_mm", 1), ("markers_per_section", 1))
-    va = [a[k] if k != "pixels" else a["width"] * a["height"] for k, _ in keys]
-    vb = [b[k] if k != "pixels" else b["width"] * b["height"] for k, _ in keys]
+    va, vb = _pareto_key(a), _pareto_key(b)
     return all(x <= y for x, y in zip(va, vb)) and any(x < y for x, y in zip(va, vb))
 
 
@@ -124,8 +128,8 @@ def _status(row: dict, min_probability: float) -> str:
 def rank_rows(rows: list[dict], min_probability: float) -> list[dict]:
     """``rows`` with status passes / undecided / fails, ``rank`` and ``pareto`` set, in rank
     order (module docstring); infeasible and unpredicted designs last, unranked."""
-    if not 0 < min_probability < 1:
-        raise DockfactoryError(f"min probability must be in (0, 1), got {min_probability}")
+    if not 0 < min_probability <= 1:
+        raise DockfactoryError(f"min probability must be in (0, 1], got {min_probability}")
     done = [r for r in rows if r["status"] == "predicted"]
     for r in done:
         r["status"] = _status(r, min_probability)

@@ -139,3 +139,19 @@ def test_a_design_s_config_renders_its_camera_and_markers(tmp_path):
         distances.append(float(np.linalg.norm(frame.camera.cam_from_d_array()[:3, 3])))
     # camera to A's axis: the working distance to the seam plus up to the radius (300 mm) and jitter
     assert 1000.0 <= min(distances) and max(distances) <= 1800.0 + 300.0 + 50.0
+
+
+def test_an_estimation_gate_without_captures_is_said(tmp_path, capsys):
+    """The shipped spec gates repeatability: a space without repeatability captures says its
+    P(accept) covers localization only; with captures every predicted design has the block."""
+    space = _space(tmp_path)
+    assert run_cli(["design", space, "--out", tmp_path / "o"], capsys)[0] == 0
+    res = json.loads((tmp_path / "o" / "design.json").read_text())
+    assert any("covers localization only" in n for n in res["notes"])
+    assert all(r["estimation"] == {} for r in res["designs"] if "estimation" in r)
+    with_caps = SPACE.replace("test_frames = 30", "test_frames = 30\nrepeatability_poses = 3\nrepeatability_captures = 5")
+    space = _space(tmp_path, with_caps)
+    assert run_cli(["design", space, "--out", tmp_path / "o2"], capsys)[0] == 0
+    res = json.loads((tmp_path / "o2" / "design.json").read_text())
+    assert not any("covers localization only" in n for n in res["notes"])
+    assert all(set(r["estimation"]) == {"x", "y", "alpha"} for r in res["designs"] if "estimation" in r)
