@@ -36,6 +36,23 @@ def _cells(r: dict) -> list[str]:
             r["design"] + prov + (f" ({r['reason']})" if r.get("reason") else "")]
 
 
+VERIFY_HEAD = ["id", "X mm: predicted / rendered", "Y mm", "alpha deg", "predicted", "rendered", "design"]
+
+
+def _pair(rec: dict, c: str) -> str:
+    p, r = rec["predicted"]["rmse"][c], rec["rendered"]["rmse"][c]
+    return f"{p:.3g} / -" if r is None else f"{p:.3g} / {r:.3g} ({p / r:.2f})" if r else f"{p:.3g} / 0"
+
+
+def _verify_cells(rec: dict) -> list[str]:
+    """A verified design: predicted / rendered RMSE (their ratio), the predicted status and the
+    rendered verdict with its localization decision."""
+    got = rec["rendered"]
+    return [rec["id"], *(_pair(rec, c) for c in ("x", "y", "alpha")), rec["predicted"]["status"],
+            f"{got['verdict']} (localization {got.get('blocks', {}).get('localization', '-')}, {got['solved']} solved)",
+            rec["design"]]
+
+
 def table_lines(rows: list[dict], top: int) -> list[str]:
     """The first ``top`` ranked designs, then a count of the rest by status."""
     head = ["rank", "status", "P(accept)", "margin", "X mm", "Y mm", "alpha deg", "cost", "design"]
@@ -61,6 +78,10 @@ def markdown(result: dict) -> str:
            "| rank | status | P(accept) | margin | X mm | Y mm | alpha deg | cost | design |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     out += ["| " + " | ".join(c.replace("|", "\\|") for c in _cells(r)) + " |" for r in rows]
+    if result.get("verify"):
+        out += ["", "## Predicted against rendered (--verify)", "",
+                "| " + " | ".join(VERIFY_HEAD) + " |", "|" + " --- |" * len(VERIFY_HEAD)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in _verify_cells(v)) + " |" for v in result["verify"]]
     out += ["", f"Predictor card `{result['card']['path']}`: " + result["card"]["summary"], "",
             *[f"- {n}" for n in result["notes"]], ""]
     return "\n".join(out)
@@ -99,13 +120,17 @@ def _html(result: dict, png: str | None) -> str:
     rows = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in _cells(r)) + "</tr>" for r in result["designs"])
     img = f'<img alt="margin against cost" src="data:image/png;base64,{png}">' if png else ""
     notes = "".join(f"<li>{esc(n)}</li>" for n in result["notes"])
+    verify = "" if not result.get("verify") else (
+        "<h2>Predicted against rendered (--verify)</h2><table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in VERIFY_HEAD)
+        + "</tr>" + "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in _verify_cells(v)) + "</tr>"
+                            for v in result["verify"]) + "</table>")
     return ("<!doctype html><html><head><meta charset='utf-8'><title>dockfactory design</title>"
             "<style>body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:2px 6px;"
             "font-size:13px}table{border-collapse:collapse}</style></head><body>"
             f"<h1>Design answer: {esc(result['space'])}</h1><p>Scene <code>{esc(result['scene'])}</code>, "
             f"spec <code>{esc(result['spec'])}</code>, {result['test_frames']} test frames, passing at "
             f"P(accept) &ge; {result['min_probability']}.</p>{img}<table><tr>"
-            + "".join(f"<th>{esc(h)}</th>" for h in head) + f"</tr>{rows}</table>"
+            + "".join(f"<th>{esc(h)}</th>" for h in head) + f"</tr>{rows}</table>{verify}"
             f"<p>Predictor card <code>{esc(result['card']['path'])}</code>: {esc(result['card']['summary'])}</p>"
             f"<ul>{notes}</ul></body></html>\n")
 

@@ -155,3 +155,24 @@ def test_an_estimation_gate_without_captures_is_said(tmp_path, capsys):
     res = json.loads((tmp_path / "o2" / "design.json").read_text())
     assert not any("covers localization only" in n for n in res["notes"])
     assert all(set(r["estimation"]) == {"x", "y", "alpha"} for r in res["designs"] if "estimation" in r)
+
+
+def test_the_answer_shows_predicted_beside_rendered_after_verify(tmp_path, capsys):
+    """What --verify adds (its records: eval/design_verify) is in design.md and design.html: one
+    row per verified design, predicted / rendered RMSE with their ratio and both verdicts. The
+    records here are written by hand (a render takes minutes); bench/results/design/ has real ones."""
+    from dockfactory.eval.design_report import write_design_outputs
+    assert run_cli(["design", _space(tmp_path), "--out", tmp_path / "o"], capsys)[0] == 0
+    result = json.loads((tmp_path / "o" / "design.json").read_text())
+    top = result["designs"][0]
+    result["verify"] = [{"id": top["id"], "design": top["design"], "frames": 24,
+                         "predicted": {"rmse": top["predicted_rmse"], "status": top["status"]},
+                         "rendered": {"rmse": {**{c: 2 * v for c, v in top["predicted_rmse"].items()}, "alpha": None},
+                                      "verdict": "ACCEPTED", "blocks": {"localization": "pass"}, "solved": "24/24"}}]
+    write_design_outputs(tmp_path / "o", result)
+    md = (tmp_path / "o" / "design.md").read_text()
+    assert "## Predicted against rendered (--verify)" in md
+    row = [line for line in md.splitlines() if line.startswith(f"| {top['id']} |")]
+    assert len(row) == 1 and "(0.50)" in row[0] and "ACCEPTED (localization pass, 24/24 solved)" in row[0]
+    assert f"{top['predicted_rmse']['alpha']:.3g} / -" in row[0]
+    assert "Predicted against rendered" in (tmp_path / "o" / "design.html").read_text()
