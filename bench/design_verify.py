@@ -21,18 +21,10 @@ import math
 from pathlib import Path
 
 from dockfactory.core.io import write_json_atomic
+from dockfactory.design_verify import block_decision
 from dockfactory.eval.confidence import chi2_bounds
 
 COMPS = ("x", "y", "alpha")
-
-
-def _decision(criteria, block: str) -> str:
-    mine = [c for c in criteria if c.get("block") == block]
-    if not mine:
-        return "-"
-    if all(c["pass"] for c in mine):
-        return "pass"
-    return "fail" if any(c.get("decision") == "fail" for c in mine) else "undecided"
 
 
 def _predicted(row: dict, min_p: float) -> str:
@@ -60,7 +52,7 @@ def records(folder: Path) -> list[dict]:
                "solved": f"{n}/{loc['n_frames']}",
                "predicted_status": _predicted(row, result["min_probability"]),
                "p_localization": row["p_localization"],
-               "rendered_decision": _decision(m["acceptance"]["criteria"], "localization")}
+               "rendered_decision": block_decision(m["acceptance"]["criteria"], "localization") or "-"}
         for c in COMPS:
             r = loc["overall"][c]["rmse"]
             lo, hi = chi2_bounds(n * r * r, n, 0.975)

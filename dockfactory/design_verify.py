@@ -15,31 +15,43 @@ import json
 from pathlib import Path
 
 from dockfactory.core.config_text import to_toml
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_predict import design_config
 from dockfactory.pipeline import run_pipeline
 
-__all__ = ["verify_designs", "comparison_lines"]
+__all__ = ["verify_designs", "comparison_lines", "block_decision"]
 
 SHOWN = ("x", "y", "alpha")
 
 
+def block_decision(criteria: list[dict], block: str) -> str | None:
+    """The verdict's decision on one block: "pass" (every criterion passes), "fail" (one is proven
+    beyond its threshold), "undecided", or None when the spec gates nothing there."""
+    mine = [c for c in criteria if c.get("block") == block]
+    if not mine:
+        return None
+    if all(c["pass"] for c in mine):
+        return "pass"
+    return "fail" if any(c.get("decision") == "fail" for c in mine) else "undecided"
+
+
 def _block_decisions(criteria: list[dict]) -> dict:
-    """{block: "pass" (every criterion passes) / "fail" (one fails) / "undecided"}."""
-    out = {}
-    for block in ("localization", "estimation"):
-        mine = [c for c in criteria if c.get("block") == block]
-        if mine:
-            out[block] = ("pass" if all(c["pass"] for c in mine) else
-                          "fail" if any(c.get("decision") == "fail" for c in mine) else "undecided")
-    return out
+    """{block: :func:`block_decision`} of the gated pose blocks."""
+    out = {b: block_decision(criteria, b) for b in ("localization", "estimation")}
+    return {b: d for b, d in out.items() if d is not None}
 
 
 def _rendered(run_dir: Path) -> dict:
     """{"rmse": {component: mm / deg}, "repeat": {...}, "verdict", "blocks", "solved"} of a
-    finished run."""
-    metrics = json.loads((run_dir / "eval" / "metrics.json").read_text(encoding="utf-8"))
+    finished run; DockfactoryError (one line) when the run left no metrics (its render or a later
+    stage failed: the run's own messages say why; the same command resumes it)."""
+    path = run_dir / "eval" / "metrics.json"
+    if not path.is_file():
+        raise DockfactoryError(f"design --verify: {run_dir} has no eval/metrics.json: the run of this design "
+                               "did not finish (see its messages above); run the same command again to resume")
+    metrics = json.loads(path.read_text(encoding="utf-8"))
     loc = metrics["localization"]
     pooled = metrics.get("estimation", {}).get("pooled", {})
     return {"rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},

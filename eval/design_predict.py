@@ -1,4 +1,4 @@
-"""Predicted pose errors of a design, in milliseconds: the solver's own covariance model evaluated
+"""Predicted pose errors of a design, computed in milliseconds: the solver's own covariance model evaluated
 at the true geometry of the design's pose distribution, with the centre noise its camera class is
 known to have.
 

@@ -176,3 +176,12 @@ def test_the_answer_shows_predicted_beside_rendered_after_verify(tmp_path, capsy
     assert len(row) == 1 and "(0.50)" in row[0] and "ACCEPTED (localization pass, 24/24 solved)" in row[0]
     assert f"{top['predicted_rmse']['alpha']:.3g} / -" in row[0]
     assert "Predicted against rendered" in (tmp_path / "o" / "design.html").read_text()
+
+
+def test_a_verified_run_that_left_no_metrics_is_one_line(tmp_path):
+    """A design whose run did not finish (its render failed) stops --verify with a one-line
+    error naming the run folder, never a traceback from a missing file."""
+    from dockfactory.core.errors import DockfactoryError
+    from dockfactory.design_verify import _rendered
+    with pytest.raises(DockfactoryError, match="has no eval/metrics.json: the run of this design did not finish"):
+        _rendered(tmp_path / "run")
