@@ -1,12 +1,6 @@
 """Camera models beyond the paper's pinhole, selected by name in the spirit of COLMAP's.
 
-Bottom layer of the solver (imports only core and :mod:`solver.errors`). Every model estimates
-the focal length f (px, square pixels, no skew); a model names the further intrinsics it
-estimates, in the fixed order ``EXTRA_NAMES`` = (cx, cy, k1, k2, p1, p2): principal point (px,
-OpenCV pixel convention) and OpenCV's Brown-Conrady coefficients (:mod:`core.distortion`,
-order k1, k2, p1, p2, k3). The intrinsics a model does not estimate keep the value they were
-given: the principal point the caller passes (the image centre for the paper's camera) and no
-distortion.
+Every model estimates f (px); the further intrinsics, in the order ``EXTRA_NAMES`` (cx, cy, k1, k2, p1, p2):
 
 - ``pinhole``: f only (the paper's camera; the default everywhere);
 - ``k1``: f, k1; ``k1k2``: f, k1, k2;
@@ -15,6 +9,8 @@ distortion.
 A model's parameter vector (after the poses, see :mod:`solver.refine`) is ``(f, *free)``.
 ``AUTO`` ("auto") asks the estimators to choose the model from the data
 (:mod:`solver.model_choice`).
+
+Why and how: docs/solver.md, "Camera models".
 """
 from __future__ import annotations
 

@@ -1,12 +1,6 @@
 """Cramer-Rao lower bounds under Gaussian pixel noise (std ``sigma_px`` per coordinate).
 
-For a model u = pi(theta) with i.i.d. N(0, sigma^2) noise on every pixel coordinate the Fisher
-information is J^T J / sigma^2 (J = d pi / d theta at the true theta), so every unbiased estimator
-has covariance >= sigma^2 (J^T J)^-1. With ``noise_shapes`` each point i has its own 2 x 2 noise
-covariance C_i = sigma^2 T_i / mean_j(tr T_j / 2) (``sigma_px`` stays the per-axis noise averaged
-over the points; T_i a relative shape, e.g. :func:`solver.disc_noise.noise_shapes` of the marker's
-disc) and the bound is (sum_i J_i^T C_i^-1 J_i)^-1 (J_i the point's two rows). Parameters are
-ordered as in :mod:`solver.refine`:
+Parameters are ordered as in :mod:`solver.refine`:
 
 - one section (7): ``(w, t, f)``, rotation vector w (rad, left perturbation in the camera
   frame), t (mm), f (px); ``focal_known=True`` drops f (6 parameters, calibrated camera);
@@ -16,15 +10,7 @@ ordered as in :mod:`solver.refine`:
 - a docking run (:func:`crb_sequence`): F frames, shared intrinsics, cam_from_a shared or one
   per frame, one cam_from_b per frame, as :func:`solver.solve_sequence` estimates them.
 
-The bound on ``d_from_b``'s (X, Y, Z, alpha, beta, gamma) follows by first-order propagation
-(exact for the bound of a smooth function of the parameters) through
-:func:`solver.refine.d_from_b_jacobian`. Two problems are offered for it:
-``"joint"`` (both sections in one estimation, shared focal: what :func:`solver.solve_docking`
-solves) and ``"independent"`` (each section solved on its own with its own focal: the bound for
-any single-section solver applied twice).
-
-A side branch of the solver: uses only the Jacobians and the covariance inverse of
-:mod:`solver.refine` (the same ones the estimators use) and the input checks.
+Why and how: docs/solver.md, "Cramer-Rao bounds".
 """
 from __future__ import annotations
 
@@ -118,11 +104,30 @@ def _pair(noise_shapes, n_a: int, n_b: int):
 
 def crb_pnpf(points_3d, cam_from_world, focal_px: float, principal_point, sigma_px: float,
              focal_known: bool = False, noise_shapes=None) -> np.ndarray:
-    """Bound on the covariance of (w, t, f) for one section: (7, 7) ((6, 6) if focal_known).
+    """Cramer-Rao bound on the covariance of (w, t, f) for one section.
 
-    ``points_3d``: (N, 3) float64, mm, world frame; ``cam_from_world``: (4, 4) true pose;
-    ``focal_px``: true focal (px); ``principal_point``: (2,) px; ``sigma_px``: noise std (px);
-    ``noise_shapes``: None (isotropic) or (N, 2, 2) relative noise shapes (module docstring).
+    Parameters
+    ----------
+    points_3d : (N, 3) float64, mm, world frame
+    cam_from_world : (4, 4) true pose
+    focal_px, principal_point, sigma_px : float px, (2,) px, float px
+        The true focal, the principal point and the pixel noise std.
+    focal_known : bool
+        The focal is known: the bound over (w, t) only.
+    noise_shapes : (N, 2, 2) or None
+        None (isotropic) or the relative noise shapes (docs/solver.md, "Cramer-Rao bounds").
+
+    Returns
+    -------
+    numpy.ndarray
+        (7, 7) ((6, 6) if ``focal_known``).
+
+    Raises
+    ------
+    InvalidSolverInput
+        Non-positive focal, negative or non-finite sigma, malformed noise shapes.
+    DegenerateGeometry
+        Points behind the camera, or a singular Fisher information.
     """
     jac = _jac(points_3d, cam_from_world, focal_px, principal_point)
     if focal_known:
@@ -160,13 +165,31 @@ def _blocks_jac(blocks, poses, intr, model):
 def crb_joint(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
               sigma_px: float, camera_model: str = "pinhole", coeffs=None,
               noise_shapes=None) -> np.ndarray:
-    """Bound on the covariance of (w_A, t_A, w_B, t_B, f[, *model.free]): (13 + e, 13 + e).
+    """Cramer-Rao bound on the covariance of (w_A, t_A, w_B, t_B, f[, *model.free]): (13 + e, 13 + e).
 
-    ``points_a`` (Na, 3) mm in A's frame, ``points_b`` (Nb, 3) mm in B's frame,
-    ``cam_from_a``/``cam_from_b`` (4, 4) true poses, shared ``focal_px``; ``camera_model``
-    the estimated model (:data:`solver.camera_models.MODELS`) and ``coeffs`` the true lens
-    distortion (k1, k2, p1, p2, k3; None: none) at ``principal_point``; ``noise_shapes``:
-    None (isotropic) or (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)) (module docstring).
+    Parameters
+    ----------
+    points_a, cam_from_a, points_b, cam_from_b : (Na, 3) mm in A's frame, (4, 4), (Nb, 3) mm in B's frame, (4, 4)
+        The points and the true poses.
+    focal_px, principal_point, sigma_px : float px, (2,) px, float px
+        The shared true focal, the principal point, the pixel noise std.
+    camera_model, coeffs : str, sequence or None
+        The estimated model (:data:`solver.camera_models.MODELS`) and the true lens distortion (k1, k2, p1, p2, k3;
+        None: none) at ``principal_point``.
+    noise_shapes : (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)) or None
+        None: isotropic (docs/solver.md, "Cramer-Rao bounds").
+
+    Returns
+    -------
+    numpy.ndarray
+        (13 + e, 13 + e), e the number of the model's free intrinsics besides f.
+
+    Raises
+    ------
+    InvalidSolverInput
+        Bad transforms, points, focal, sigma, model name, coefficients or noise shapes.
+    DegenerateGeometry
+        Points behind a camera, or a singular Fisher information.
     """
     shapes = _pair(noise_shapes, len(points_a), len(points_b))
     if camera_model == PINHOLE.name and coeffs is None:
@@ -205,16 +228,32 @@ def _intrinsics_std(cov_intr: np.ndarray, model) -> dict:
 def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
                  sigma_px: float, problem: str = "joint", camera_model: str = "pinhole",
                  coeffs=None, noise_shapes=None) -> DockingBound:
-    """Bound on (X, Y, Z mm, alpha, beta, gamma deg) of ``d_from_b`` (see module docstring).
+    """Cramer-Rao bound on (X, Y, Z mm, alpha, beta, gamma deg) of ``d_from_b`` (docs/solver.md, "Cramer-Rao bounds").
 
-    ``problem``: "joint" (13 parameters, shared focal; with ``camera_model`` and the true
-    ``coeffs``: 13 + e), "independent" (7 + 7, a focal per section) or "calibrated" (6 + 6,
-    focal known); the last two for the pinhole only. ``noise_shapes``: None (isotropic noise of
-    std ``sigma_px``) or (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)): per-point noise shapes,
-    ``sigma_px`` then the per-axis noise averaged over all the points (module docstring; the
-    "independent" and "calibrated" problems average over each section's points). Returns a
-    :class:`DockingBound`; X, Y, alpha are ``std["x_mm"]``, ``std["y_mm"]``,
-    ``std["alpha_deg"]``.
+    Parameters
+    ----------
+    points_a, cam_from_a, points_b, cam_from_b : (Na, 3) mm in A's frame, (4, 4), (Nb, 3) mm in B's frame, (4, 4)
+    focal_px, principal_point, sigma_px : float px, (2,) px, float px
+    problem : {"joint", "independent", "calibrated"}
+        "joint": 13 parameters, shared focal (with ``camera_model`` and the true ``coeffs``: 13 + e); "independent":
+        7 + 7, a focal per section; "calibrated": 6 + 6, focal known. The last two for the pinhole only.
+    camera_model, coeffs : str, sequence or None
+        As :func:`crb_joint`.
+    noise_shapes : (shapes_a (Na, 2, 2), shapes_b (Nb, 2, 2)) or None
+        None: isotropic noise of std ``sigma_px``; else per-point noise shapes, ``sigma_px`` then the per-axis noise
+        averaged over all the points ("independent" and "calibrated" average over each section's points).
+
+    Returns
+    -------
+    DockingBound
+        X, Y, alpha are ``std["x_mm"]``, ``std["y_mm"]``, ``std["alpha_deg"]``.
+
+    Raises
+    ------
+    InvalidSolverInput
+        An unknown ``problem``, a non-pinhole model with "independent" / "calibrated", or bad input.
+    DegenerateGeometry
+        Points behind a camera, or a singular Fisher information.
     """
     ca = _check_transform("cam_from_a", cam_from_a)
     cb = _check_transform("cam_from_b", cam_from_b)
@@ -268,10 +307,29 @@ class SequenceBound:
 def crb_sequence(points_a, cam_from_a, points_b, cams_from_b, focal_px: float,
                  principal_point, sigma_px: float, camera_model: str = "pinhole", coeffs=None,
                  share_cam_from_a: bool = True) -> SequenceBound:
-    """Bound for a docking run solved as :func:`solver.solve_sequence` does: ``cams_from_b``
-    (F, 4, 4) true camera-from-B poses, one fixed ``cam_from_a`` (4, 4) estimated once
-    (``share_cam_from_a``) or once per frame, shared intrinsics (``camera_model``, true
-    ``coeffs``). Every frame sees all of ``points_a`` (Na, 3) and ``points_b`` (Nb, 3)."""
+    """Cramer-Rao bound for a docking run solved as :func:`solver.solve_sequence` does.
+
+    Parameters
+    ----------
+    points_a, cam_from_a, points_b, cams_from_b : (Na, 3) mm, (4, 4), (Nb, 3) mm, (F, 4, 4)
+        Every frame sees all of ``points_a`` and ``points_b``; ``cams_from_b`` the true camera-from-B poses.
+    focal_px, principal_point, sigma_px : float px, (2,) px, float px
+    camera_model, coeffs : str, sequence or None
+        The shared intrinsics' model and the true ``coeffs``.
+    share_cam_from_a : bool
+        One fixed ``cam_from_a`` estimated once, or once per frame.
+
+    Returns
+    -------
+    SequenceBound
+
+    Raises
+    ------
+    InvalidSolverInput
+        Bad transforms, points, focal, sigma, model name or coefficients.
+    DegenerateGeometry
+        Points behind a camera, or a singular Fisher information.
+    """
     model, intr = _camera(camera_model, focal_px, principal_point, coeffs)
     ca = _check_transform("cam_from_a", cam_from_a)
     cbs = [_check_transform(f"cams_from_b[{k}]", c) for k, c in enumerate(cams_from_b)]

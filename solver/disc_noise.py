@@ -1,24 +1,6 @@
 """Centre noise of a marker's image: the shape of its 2 x 2 covariance, from the disc's ellipse.
 
-The detector's centre (detector.centre) is a least-squares fit of the edge of the disc's image,
-an ellipse with semi-axes a >= b (axis ratio rho = b / a). An edge point fixes the centre only
-along the edge normal n, so the information about the centre along a direction e is the edge
-integral of (n . e)^2 ds: relative to the minor axis it falls along the major axis as
-rho^SHAPE_EXPONENT (the exact integral: 8.3, 2.68, 1.35 at rho 0.25, 0.52, 0.82 against
-rho^-1.5 = 8.0, 2.67, 1.35), and it grows with the length of the edge (SIZE_EXPONENT: ~ a).
-Hence the relative covariance of a disc's centre, ``noise_shapes``:
-
-    T = (REFERENCE_RADIUS_PX / a)^SIZE_EXPONENT (rho^-SHAPE_EXPONENT u u^T + v v^T),
-
-u, v the major and minor axis directions; T = I for a round disc of REFERENCE_RADIUS_PX. The
-scale (px) is measured, never assumed here. The exponents are the edge fit's, checked against
-the refinement's errors on two scenes of different geometry (results/README.md, "Measurements
-behind the code's constants"). The discs of a docking camera's view are squeezed vertically (the
-sections are cylinders seen from the side), so the centres' x noise is larger than their y noise.
-
-The ellipse is the first-order (affine) image of the disc at its centre, lens distortion left
-out. :func:`with_disc_noise` is the docking pipeline's step that gives a fit the covariance of
-this noise model (layer 5, beside :mod:`solver.eccentricity`).
+Why and how: docs/solver.md, "Disc noise".
 """
 from __future__ import annotations
 

@@ -1,26 +1,10 @@
 """``solve_docking``: relative pose of B in A (``d_from_b``) from one uncalibrated image.
 
-The docking pipeline, top layer of the solver:
+Detections are identified (correspondences taken as given, or cleaned by LO-RANSAC); both sections are fitted
+jointly with one unknown focal; for detections, suspects are left out, the eccentricity corrected and each centre's
+noise modelled by its disc's image. Options: :class:`solver.options.DockingOptions`.
 
-1. input: detections (class + pixel centre, no id) are identified by :mod:`solver.identify`;
-   correspondences (marker id + pixel centre) are taken as given, or, with ``robust=True``,
-   cleaned of outliers by LO-RANSAC (:func:`solver.ransac.ransac_docking`);
-2. fit: the joint estimator (:mod:`solver.joint`): both sections seen by one camera with one
-   (unknown) focal length, closed-form starts (for detections: identification's joint fit,
-   already verified on them), one joint Levenberg-Marquardt over 13
-   parameters (cam_from_a, cam_from_b, f): the maximum-likelihood estimate under Gaussian pixel
-   noise, its covariance sigma^2 (J^T J)^-1, and ``d_from_b = inv(cam_from_a) @ cam_from_b``
-   with the covariance of (X, Y, Z, alpha, beta, gamma) propagated to first order;
-3. detections only: suspects left out (:mod:`solver.suspects`) and the perspective
-   eccentricity of the detected centres corrected (:mod:`solver.eccentricity`), each refit
-   started from the previous fit; with the noise estimated from the residuals, each centre's
-   noise is modelled by its disc's image (:mod:`solver.disc_noise`), plus, for a kept centre
-   whose box is short of its predicted outline (a partly hidden disc that a section's
-   ``MIN_POINTS`` floor, or a box just above ``min_extent``, kept in the fit), the variance of
-   its occlusion bias (:func:`solver.suspects.occlusion_variances`): the last fit is
-   reweighted with Student-t tails (a gross centre loses its pull) and its covariance follows
-   that model.
-Options: :class:`solver.options.DockingOptions`.
+Why and how: docs/solver.md, "The docking pipeline".
 """
 from __future__ import annotations
 
@@ -172,34 +156,41 @@ def _intrinsics_report(fit: JointFit):
     return fit.intrinsics.values(), std
 
 
-def solve_docking(markers, principal_point, *, detections=None, correspondences=None,
-                  boxes=None, refined=None, edge_px=None, sigma_px: float | None = None,
-                  robust: bool = False, rng: np.random.Generator | None = None,
-                  camera_model: str = PINHOLE.name,
+def solve_docking(markers, principal_point, *, detections=None, correspondences=None, boxes=None, refined=None,
+                  edge_px=None, sigma_px: float | None = None, robust: bool = False,
+                  rng: np.random.Generator | None = None, camera_model: str = PINHOLE.name,
                   options: DockingOptions = DEFAULT_DOCKING) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
 
-    ``markers``: the layout (:class:`core.layout.Marker` of both sections, ``center_mm`` in each
-    marker's own section frame). ``principal_point``: (2,) px. Exactly one of:
-    - ``detections = (class_ids, points_2d)``: class ids (N,) (0 / "A" red, 1 / "B" blue), pixels
-      (N, 2). Ids come from :func:`solver.identify.identify_markers` (missing markers, strays and
-      swapped classes tolerated; AmbiguousIdentification when two assignments fit equally).
-      Suspect centres are then left out while each section keeps ``MIN_POINTS``
-      (:mod:`solver.suspects`): ``boxes`` (N, 4) [x0, y0, x1, y1] px, the detected outlines;
-      ``refined`` (N,) bool, False where the detector could not refine the centre; ``edge_px``
-      (N,) px, the edge width of each centre's edge fit (NaN: none; None: unknown), which widens
-      the noise of a disc thin for its blur (:func:`solver.disc_noise.noise_shapes`). With
-      ``options.eccentricity`` centres are corrected by their perspective offset and refitted.
-    - ``correspondences``: dict marker id -> (u, v), or (marker_ids (N,), points_2d (N, 2));
-      ``robust=True`` (with ``rng``, a numpy Generator) rejects outliers by LO-RANSAC.
-    ``sigma_px``: pixel noise std for the covariances (None: from the residuals).
-    ``camera_model``: "pinhole" (the paper's: f only, no distortion), a model of
-    :data:`solver.camera_models.MODELS` (refined from the pinhole fit) or "auto" (the model the
-    frame determines, :mod:`solver.model_choice`); identification and RANSAC use the pinhole.
+    Parameters
+    ----------
+    markers, principal_point : layout, (2,) px
+        :class:`core.layout.Marker` of both sections, ``center_mm`` in each marker's own section frame.
+    detections, boxes, refined, edge_px : (class_ids (N,), points_2d (N, 2) px), (N, 4) px, (N,) bool, (N,) px
+        Exactly one of ``detections`` / ``correspondences``. Classes 0 / "A" red, 1 / "B" blue; ids from
+        :func:`solver.identify.identify_markers` (missing markers, strays, swapped classes tolerated); suspect centres
+        left out while each section keeps ``MIN_POINTS`` (:mod:`solver.suspects`): ``boxes`` the outlines [x0, y0, x1,
+        y1]; ``refined`` False where the detector could not refine the centre; ``edge_px`` each centre's edge-fit
+        width (NaN: none; None: unknown), widening the noise of a disc thin for its blur (disc_noise.noise_shapes).
+        With ``options.eccentricity`` centres are corrected by their perspective offset and refitted.
+    correspondences, robust, rng : dict marker id -> (u, v) or (marker_ids (N,), points_2d (N, 2)); bool; Generator
+        ``robust=True`` (with ``rng``, a numpy Generator) rejects outliers by LO-RANSAC.
+    sigma_px : float or None
+        Pixel noise std for the covariances (None: from the residuals).
+    camera_model, options : str, DockingOptions
+        "pinhole" (the paper's: f only, no distortion), a model of :data:`solver.camera_models.MODELS` (refined from the
+        pinhole fit) or "auto" (the model the frame determines, :mod:`solver.model_choice`); identification and RANSAC
+        use the pinhole.
 
-    Returns a :class:`DockingResult`; raises a :class:`SolverError` subclass on bad input
-    (InvalidSolverInput), too few points (TooFewPoints), degenerate geometry, an unobservable
-    focal length, or a failed or ambiguous identification.
+    Returns
+    -------
+    DockingResult
+
+    Raises
+    ------
+    SolverError : InvalidSolverInput (bad input, not one of detections / correspondences, boxes etc. without detections,
+        robust without rng), TooFewPoints, DegenerateGeometry, FocalNotObservable, IdentificationFailed,
+        AmbiguousIdentification (two assignments fit equally), NoValidCamera, NoConsensus.
     """
     if (detections is None) == (correspondences is None):
         raise InvalidSolverInput("give exactly one of detections= or correspondences=")
@@ -211,13 +202,10 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     if detections is not None:
         return _solve_detections(markers, layout, detections, (boxes, refined, edge_px), fitter, options)
     if boxes is not None or refined is not None or edge_px is not None:
-        raise InvalidSolverInput("boxes=, refined= and edge_px= describe detections: give them with "
-                                 "detections=")
+        raise InvalidSolverInput("boxes=, refined= and edge_px= describe detections: give them with detections=")
     if robust and not isinstance(rng, np.random.Generator):
-        raise InvalidSolverInput("robust=True needs rng, a numpy.random.Generator (explicit "
-                                 "seed)")
-    return _solve_correspondences(layout, correspondences, rng if robust else None, fitter,
-                                  options)
+        raise InvalidSolverInput("robust=True needs rng, a numpy.random.Generator (explicit seed)")
+    return _solve_correspondences(layout, correspondences, rng if robust else None, fitter, options)
 
 
 def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,

@@ -1,16 +1,13 @@
 """The exception types of the solver package (bottom layer: imports only core).
 
-Every failure the solver reports is a :class:`SolverError` (a ``DockfactoryError``, hence a
-``ValueError``); callers that need to tell failures apart catch a subclass, never match the
-message text:
+Every failure the solver reports is a :class:`SolverError` (a ``DockfactoryError``, hence a ``ValueError``);
+callers that need to tell failures apart catch a subclass, never match the message text:
 
-- :class:`InvalidSolverInput`: malformed arguments (shapes, NaN/inf, unknown ids or classes,
-  option values out of range);
-- :class:`TooFewPoints`: fewer usable points (in a section) than a pose needs;
-- :class:`DegenerateGeometry`: the points do not determine a pose (collinear points, a singular
-  Fisher information);
-- :class:`NoValidCamera`: neither the closed form nor the refinement reaches a valid camera
-  (points behind it, a negative squared focal, a diverging refinement);
+- :class:`InvalidSolverInput`: malformed arguments (shapes, NaN/inf, unknown ids or classes, option values out of
+  range); :class:`TooFewPoints`: fewer usable points (in a section) than a pose needs;
+- :class:`DegenerateGeometry`: the points do not determine a pose (collinear points, a singular Fisher information);
+- :class:`NoValidCamera`: neither the closed form nor the refinement reaches a valid camera (points behind it, a
+  negative squared focal, a diverging refinement);
 - :class:`FocalNotObservable`: a pose was found but its focal length is not determined;
 - :class:`NoConsensus`: RANSAC found no model with enough inliers;
 - :class:`IdentificationFailed`: detections could not be assigned to layout markers;

@@ -1,26 +1,6 @@
 """Another basin of the focal: choose it by evidence, or say the focal is undetermined.
 
-One section's focal and its depth trade off, and for a few near-planar points the reprojection
-error over f can have separate minima (a short, wide camera close by against a long one far
-away). The closed form and its refinement can stop in the worse one and report a covariance
-that is tight about it: a wrong pose, stated with confidence (the measured cases:
-bench/results/solver_random_geometry/README.md).
-
-The check walks the profile of the residual sum of squares (RSS) over f: on a geometric grid of
-``BASIN_FOCALS`` focals, the calibrated pose at each focal held fixed (OpenCV's SQPnP, the global
-minimum of the calibrated problem, and its Levenberg-Marquardt). Then:
-
-1. **Evidence.** When a grid point's RSS is below the estimate's, the full refinement (f free)
-   from the lowest one replaces the estimate if it ends lower: the estimate was a local minimum.
-2. **Ambiguity.** Every other local minimum of the profile (an end of the grid included: f
-   running to the grid's edge is a basin too) is refined in full; one that stays in a separate
-   basin (its focal more than ``BASIN_MIN_SEPARATION`` in log f and 3 standard deviations of f
-   from the chosen one) with an RSS within ``BASIN_DELTA_CHI2`` sigma^2 of the chosen one
-   explains the points about as well: the focal is not determined (``focal_determined`` False,
-   so ``uncertainty_determined`` is False) and ``other_focal_px`` names it.
-
-A layer-3 step of the single-section solver (beside :mod:`solver.focal_profile`), used by
-:func:`solver.pnpf.solve_pnpf`.
+Why and how: docs/solver.md, "Focal basins".
 """
 from __future__ import annotations
 

@@ -1,23 +1,6 @@
 """A covariance that covers the error when the focal length is weakly determined.
 
-One section's focal and its depth trade off: for near-planar points at a large noise the
-likelihood along that valley is long and bent, and the covariance linearised at the maximum
-(sigma^2 (J^T J)^-1) can be several times too narrow on the side the valley runs to: the maximum
-likelihood itself then sits many reported standard deviations from the truth (the measured
-counts: results/README.md, "Measurements behind the code's constants").
-
-The likelihood's own interval does not need the linearisation: the profile of the residual sum
-of squares over f (the pose refined at each fixed f) rises by ``PROFILE_DELTA_CHI2`` sigma^2 at
-the ends of a 3-sigma likelihood-ratio interval. When an end lies farther than 3 linearised
-standard deviations of f, the covariance is widened along the path the profile takes (the pose
-and f at that end, relative to the estimate), by the rank-one term that makes that end sit at 3
-standard deviations: cov + (d d^T / 9) (1 - 1 / s^2), s = |df| / (3 std_f) > 1, from the end
-that lies farther (one term: the valley is one path). Each end is
-walked in steps of growing multiples of the linearised std of log f, each refinement starting
-from the previous one.
-
-A layer-3 step of the single-section solver (beside :mod:`solver.focal_prior`), used by
-:func:`solver.pnpf.solve_pnpf`.
+Why and how: docs/solver.md, "Focal profile".
 """
 from __future__ import annotations
 

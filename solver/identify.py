@@ -3,32 +3,7 @@
 A detector reports, per marker it sees, a class (section A or B) and a 2D centre, but no id.
 Ids follow from the known layout:
 
-1. Hypothesise (per section, vectorised): the camera faces the markers, so to first order the
-   image of a section's markers is a similarity of their (X, -Y) coordinates (weak perspective,
-   small roll). Every pair of detections labelled with the section and every ordered pair of the
-   section's markers fixes one similarity; those with a plausible scale and roll project all the
-   section's markers, and a hypothesis scores the markers that land within a loose gate of some
-   detection (of any class: labels may be swapped).
-2. Verify (full perspective): the best-scoring hypotheses are fitted by the uncalibrated solver
-   (UPnP + Levenberg-Marquardt) on their matches, all markers are re-projected, re-matched
-   within a tight gate, and refitted. A verified hypothesis is the set of (marker, detection)
-   pairs it explains and its reprojection RMS. Hypotheses that those verified already settle
-   (part of one; or contradicting one that explains every marker) are not verified, and
-   those contradicting one that explains the section well get no rescue of a failed fit
-   (see ``_identify_section``).
-3. Decide: the hypothesis explaining the most trusted detections (those whose centre the
-   detector refined, when the caller says which), then the most detections, wins (ties: smaller
-   RMS). If another verified hypothesis that gives some detection a different marker explains as
-   many, the identification is ambiguous and SolverError is raised: the solver reports
-   ambiguity instead of guessing. Hypotheses that differ only in which of two nearby
-   detections (a duplicate) serves a marker agree on every identity; the better fit is kept.
-4. Both sections: one joint fit (shared focal) re-projects all markers and assigns every
-   detection to the nearest projected marker within the tight gate, one to one; detections
-   left over are spurious (inlier mask False); a detection whose class label disagrees with its
-   marker's section is flagged as swapped.
-
-Layer 4 of the solver (beside RANSAC): fits through the estimators :mod:`solver.estimate` and
-:mod:`solver.joint`; options: :class:`solver.options.IdentifyOptions`.
+Why and how: docs/solver.md, "Identification".
 """
 from __future__ import annotations
 
@@ -443,28 +418,38 @@ def _rivals(hyps, search: _Search):
 def identify_markers(markers, principal_point, detections,
                      options: IdentifyOptions = DEFAULT_IDENTIFY,
                      refine_options: RefineOptions = DEFAULT_REFINE, trusted=None) -> Identification:
-    """Assign layout marker ids to detections (see the module docstring).
+    """Assign layout marker ids to detections (the search: docs/solver.md, "Identification").
 
-    ``markers``: sequence of :class:`core.layout.Marker` (both sections).
-    ``principal_point``: (2,) px. ``detections``: pair (class_ids (N,), points_2d (N, 2) px),
-    classes 0/1 or "A"/"B" (or "RedA"/"BlueB"). ``options``: gates, prior and budgets
-    (:class:`IdentifyOptions`); ``refine_options``: the refinement of every fit.
+    When identification fails for another reason than ambiguity, it is tried once more with hypotheses that may shed
+    one pair: the loose similarity gate can pair a marker missing from the image with a stray detection, and that one
+    wrong pair spoils the fit of the others (the retry costs time only on frames that would otherwise be refused; its
+    effect: results/README.md).
 
-    Raises IdentificationFailed (or TooFewPoints) when a section cannot be identified with
-    ``min_matches`` markers, AmbiguousIdentification when two conflicting assignments explain
-    the detections equally well, even with the focal length shared between the sections.
+    Parameters
+    ----------
+    markers, principal_point : sequence of :class:`core.layout.Marker` (both sections), (2,) px
+    detections : (class_ids (N,), points_2d (N, 2) px)
+        Classes 0/1 or "A"/"B" (or "RedA"/"BlueB").
+    options, refine_options : IdentifyOptions, RefineOptions
+        Gates, prior and budgets; the refinement of every fit.
+    trusted : (N,) bool or None
+        Detections whose centre the detector could refine (None: every detection). Between hypotheses, the one
+        explaining more trusted detections wins before the one explaining more detections: a partly hidden marker's
+        unrefined centre sits pixels off, and a hypothesis bent to take in two of them can beat the one that explains
+        a fully visible marker instead, leaving that marker out of the fit (the case that showed it: results/README.md).
 
-    When identification fails for another reason, it is tried once more with hypotheses that
-    may shed one pair: the loose similarity gate can pair a marker missing from the image with
-    a stray detection, and that one wrong pair spoils the fit of the others (the retry costs
-    time only on frames that would otherwise be refused; its effect: results/README.md).
+    Returns
+    -------
+    Identification
 
-    ``trusted`` (N,) bool or None: detections whose centre the detector could refine. Between
-    hypotheses, the one explaining more trusted detections wins before the one explaining more
-    detections: a partly hidden marker's unrefined centre sits pixels off, and a hypothesis
-    bent to take in two of them can beat the one that explains a fully visible marker instead,
-    leaving that marker out of the fit (the case that showed it: results/README.md). None:
-    every detection is trusted.
+    Raises
+    ------
+    IdentificationFailed, TooFewPoints
+        When a section cannot be identified with ``min_matches`` markers.
+    AmbiguousIdentification
+        When two conflicting assignments explain the detections equally well, even with the focal shared.
+    InvalidSolverInput
+        Bad input (shapes, classes, sizes).
     """
     ids, sections, pts = layout_arrays(markers)
     pp = as_principal_point(principal_point)

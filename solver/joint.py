@@ -240,14 +240,30 @@ def _grown(fit: JointFit, added: np.ndarray) -> tuple[JointFit, np.ndarray]:
 
 def fit_joint(points_a, uv_a, points_b, uv_b, pp, sigma_px=None, start=None, accept_rmse=None,
               options: RefineOptions = DEFAULT_REFINE) -> JointFit:
-    """Joint solve on validated arrays: ``points_a`` (Na, 3) mm in A, ``uv_a`` (Na, 2) px, same
-    for B; ``pp`` (2,) px.
+    """Joint solve (two sections, one shared focal) on validated arrays.
 
-    ``start`` (a :class:`JointStart`) replaces the closed-form start. If the joint LM does not
-    converge, or ends with an RMS above ``accept_rmse`` px, each section is first solved on its
-    own (:func:`solver.estimate.estimate_pnpf`) and the joint LM restarts from those; the lowest
-    cost wins. Raises NoValidCamera when no start refines, FocalNotObservable when the shared
-    focal ran off (``options.max_joint_focal_rel_std``).
+    Parameters
+    ----------
+    points_a, uv_a, points_b, uv_b, pp : (Na, 3) mm in A, (Na, 2) px, (Nb, 3) mm in B, (Nb, 2) px, (2,) px
+    sigma_px : float or None
+        Pixel noise std for the covariance (None: from the residuals).
+    start : JointStart or None
+        Replaces the closed-form start.
+    accept_rmse : float or None
+        If the joint LM does not converge, or ends with an RMS above ``accept_rmse`` px, each section is first solved
+        on its own (:func:`solver.estimate.estimate_pnpf`) and the joint LM restarts from those; the lowest cost wins.
+    options : RefineOptions
+
+    Returns
+    -------
+    JointFit
+
+    Raises
+    ------
+    NoValidCamera
+        When no start refines.
+    FocalNotObservable
+        When the shared focal ran off (``options.max_joint_focal_rel_std``).
     """
     data = (points_a, uv_a, points_b, uv_b, pp)
     starts = [start.params()] if start is not None else _closed_form_starts(*data)

@@ -1,25 +1,6 @@
 """Which camera model the data support: forward selection over nested models.
 
-Bottom layer of the solver (imports :mod:`solver.camera_models`, :mod:`solver.stats`,
-:mod:`solver.options`): pure logic on the summaries of fits already made
-(:class:`ModelFitSummary`), so that the per-frame and the per-sequence estimators choose the
-same way. Starting from the pinhole, every model that nests the current one (the current one
-with more parameters freed) is tested against it; a candidate is acceptable when
-
-1. its fit converged to a valid camera with an observable focal length;
-2. every parameter it adds is determined: standard deviation (from the same covariance the
-   estimate reports) at most ``max_std_fraction`` of the parameter's plausible half-range
-   (:class:`solver.options.ModelChoiceOptions`); an ill-conditioned fit has infinite ones; and
-   it does not confound the parameters of a model it nests: none of their standard deviations
-   grows by more than ``max_std_inflation`` (p1, p2 against the principal point);
-3. it explains the data significantly better: the likelihood-ratio statistic
-   (cost_current - cost_candidate) / sigma^2 exceeds the chi-square quantile 1 - ``lr_alpha``
-   with the added parameters as degrees of freedom when sigma is known; with sigma estimated,
-   the F statistic ((cost_current - cost_candidate) / q) / (cost_candidate / dof) exceeds its
-   F(q, dof) quantile (dof = residuals - parameters of the candidate).
-
-Of the acceptable candidates the one with the smallest p-value (in log space; ties: fewer
-parameters) becomes current, and the search repeats from it; it ends when none is acceptable.
+Why and how: docs/solver.md, "Model choice".
 """
 from __future__ import annotations
 

@@ -1,37 +1,7 @@
 """Model error: what the intrinsics a camera model does not estimate do to its pose, and whether
 the residuals show them.
 
-A solve assumes values for the intrinsics its camera model does not estimate (the principal
-point it is given, no k1 / k2 / p1 / p2 beyond the model's). A real lens has others, and the
-estimate moves with them: to first order, for the estimator's (whitened) Jacobian J_e over the
-parameters it estimates and J_u over the ones it does not, the estimate is off by G theta with
-G = (J_e^T J_e)^-1 J_e^T J_u and theta the unestimated intrinsics' departure from the assumed
-values.
-
-Marginalising theta over its plausible range (:class:`solver.options.LensPrior`: uniform over
-each half-range h, variance h^2 / 3, a diagonal prior P) conditioned on the frame's own data:
-with F = J_u^T (I - H) J_u / k^2 (H the estimator's hat matrix, k^2 the noise scale of the
-whitened residuals) the information the data carry on theta beyond what the estimated
-parameters absorb, and s = J_u^T r / k^2 (r the whitened residuals at the estimate, made
-orthogonal to J_e), theta's posterior is N(mu, S) with S = (P^-1 + F)^-1 and mu = -S s. The
-estimate's expected squared error given the data is then the noise term plus
-G (S + mu mu^T) G^T: over lenses drawn from the prior it averages G P G^T, and a frame whose
-residuals show a lens defect carries it in mu.
-
-The misfit test (a Rao score test, no extra fit): T = s^T F^+ s over the directions of theta
-the data determine to better than their plausible range (eigenvalues of the prior-scaled F
-above 1), chi-square with that many degrees of freedom when the noise is known, F-distributed
-(T / q against (q, residual dof)) when it was estimated from the same residuals. A p-value
-below ``LensPrior.misfit_alpha`` says the assumed model does not explain the residuals.
-
-A docking run has a model error of its own: a fixed camera repeats its lighting, blur and colour
-effects on the detector in every frame, so part of the centre errors persists over the run and is
-shared by nearby markers of a section, which averaging the frames does not shrink. Its variance
-comes from the run's residuals by moments and enters the covariance when they show it
-(:func:`persistent_bias_covariance`, the field's correlation :func:`spatial_bias_factor`).
-
-Layer 3 of the solver (estimators), beside :mod:`solver.model_fit`: imports
-:mod:`solver.refine`, :mod:`solver.camera_models`, :mod:`solver.stats` and the options.
+Why and how: docs/solver.md, "Model error".
 """
 from __future__ import annotations
 

@@ -1,20 +1,17 @@
 """Options of every solver layer as frozen dataclasses (bottom layer: imports only errors).
 
-As PoseLib passes ``RansacOptions`` and ``BundleOptions``, each layer here takes one options
-object; every threshold and budget is a documented default defined only here:
+Each layer takes one options object (as PoseLib's ``RansacOptions`` and ``BundleOptions``); every threshold and
+budget is a documented default defined only here; invalid values raise :class:`solver.errors.InvalidSolverInput`
+when the object is built:
 
-- :class:`RefineOptions`: the one Levenberg-Marquardt refinement and the acceptance of its
-  result (focal observability);
-- :class:`FacingPrior`: what "the camera faces the markers" allows (image roll and scale of the
-  weak-perspective similarity), shared by RANSAC's and identification's hypotheses;
-- :class:`RansacOptions`: the robust layer (single section and docking);
-- :class:`IdentifyOptions`: marker identification (hypothesise and verify);
-- :class:`ModelChoiceOptions`: the automatic camera-model choice (``camera_model="auto"``);
-- :class:`LensPrior`: the plausible range of the intrinsics a camera model does not estimate
-  (the model error of :mod:`solver.model_error`);
-- :class:`DockingOptions`: the docking pipeline (holds the five above).
-
-Invalid values raise :class:`solver.errors.InvalidSolverInput` when the object is built.
+- :class:`RefineOptions`: the one Levenberg-Marquardt refinement and the acceptance of its result (focal
+  observability); :class:`RansacOptions`: the robust layer (single section and docking);
+- :class:`FacingPrior`: what "the camera faces the markers" allows (image roll and scale of the weak-perspective
+  similarity), shared by RANSAC's and identification's hypotheses;
+- :class:`IdentifyOptions`: marker identification (hypothesise and verify); :class:`ModelChoiceOptions`: the
+  automatic camera-model choice (``camera_model="auto"``);
+- :class:`LensPrior`: the plausible range of the intrinsics a camera model does not estimate (the model error of
+  :mod:`solver.model_error`); :class:`DockingOptions`: the docking pipeline (holds the five above).
 """
 from __future__ import annotations
 

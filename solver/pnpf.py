@@ -34,30 +34,33 @@ def solve_pnpf(points_3d, points_2d, principal_point, *, sigma_px: float | None 
                focal_range_px: tuple[float, float] | None = None) -> PnPfResult:
     """Pose and focal length from 3D-2D correspondences (UPnP closed form + Levenberg-Marquardt).
 
-    ``points_3d``: (N, 3) float64, mm, N >= 4, in the world frame.
-    ``points_2d``: (N, 2) float64, pixels, OpenCV convention (centre of the top-left pixel is
-    (0, 0)). ``principal_point``: (2,) float64, pixels (e.g. ((W - 1) / 2, (H - 1) / 2)).
-    ``sigma_px``: pixel noise std for the covariance; None estimates it from the residuals.
-    ``robust``: reject outliers by LO-RANSAC (``ransac_options``); needs ``rng`` (a numpy
-    Generator) for its samples. ``focal_range_px``: the camera's known focal range (lo, hi) px
-    (its zoom range); an estimate outside it is refined at the nearer bound
-    (:mod:`solver.focal_prior`, ``focal_at_bound``).
+    Parameters
+    ----------
+    points_3d, points_2d, principal_point : (N, 3) mm, world frame, N >= 4; (N, 2) px; (2,) px; float64
+        Pixels: OpenCV convention (top-left pixel centre (0, 0)); principal point e.g. ((W - 1) / 2, (H - 1) / 2).
+    sigma_px : float or None
+        Pixel noise std for the covariance; None estimates it from the residuals.
+    robust, rng, ransac_options, refine_options : bool, numpy.random.Generator, RansacOptions, RefineOptions
+        Reject outliers by LO-RANSAC (``ransac_options``); ``rng`` draws its samples.
+    all_candidates : bool
+        ``candidates`` holds every closed-form candidate; otherwise those computed: the smallest determined null-
+        space dimension (K = 1 for N >= 6), refined; all (K = 1, 2, 3, planar, focal sweep) if that fails.
+    focal_range_px : (lo, hi) px or None
+        The zoom range; an estimate outside it is refined at the nearer bound (solver.focal_prior.focal_at_bound).
 
-    The closed form first tries the smallest determined null-space dimension only (K = 1 for
-    N >= 6), refines it, and falls back to every candidate (K = 1, 2, 3, planar, focal sweep)
-    if that gives no valid camera or the refinement fails; ``candidates`` holds the candidates
-    that were computed (``all_candidates=True``: always every one).
+    Returns
+    -------
+    PnPfResult
+        An undetermined focal (near-planar, fronto-parallel points at this noise, or a second basin of the focal
+        explaining the points about as well: :mod:`solver.focal_basins`, ``other_focal_px``) gives
+        ``focal_determined=False``, not a refusal: gate the covariance on ``uncertainty_determined`` (focal determined,
+        noise given, floored or from enough residuals). A weak focal's covariance is widened along its likelihood
+        profile where the linearised one is too narrow (:mod:`solver.focal_profile`).
 
-    Returns a :class:`PnPfResult`; an undetermined focal (near-planar, fronto-parallel points at
-    this noise, or a second basin of the focal that explains the points about as well:
-    :mod:`solver.focal_basins`, ``other_focal_px``) is returned with ``focal_determined=False``,
-    not refused; gate the covariance on
-    ``uncertainty_determined`` (focal determined, noise given, floored or from enough residuals).
-    A weakly determined focal's covariance is widened along its likelihood profile where the
-    linearised one is too narrow (:mod:`solver.focal_profile`).
-    Raises a :class:`SolverError` subclass: InvalidSolverInput (shape mismatch, NaN/inf),
-    TooFewPoints (fewer than 4 points), DegenerateGeometry (collinear points), NoValidCamera
-    (no camera in front of the points fits).
+    Raises
+    ------
+    SolverError : InvalidSolverInput (shape mismatch, NaN/inf; ``robust`` without ``rng``), TooFewPoints (N < 4),
+        DegenerateGeometry (collinear points), NoValidCamera (no camera in front of the points fits), NoConsensus.
     """
     sigma_px = check_sigma(sigma_px)
     p3, p2 = check_correspondences(points_3d, points_2d)

@@ -8,14 +8,7 @@ closed form alone too coarse to classify points at a few pixels); the model is s
 optimised (Chum, Matas, Kittler 2003): LM on its inliers, re-scored, repeated while the inlier
 set changes. The number of iterations adapts to the inlier ratio for the requested confidence.
 
-Two sections (:func:`ransac_docking`): the same with samples drawn from both sections and the
-joint model (one shared focal length), which is far better conditioned than either section.
-Randomness comes only from the ``rng`` passed in. Thresholds and budgets:
-:class:`solver.options.RansacOptions`.
-
-Layer 4 of the solver (robust estimation): uses the closed form (:mod:`solver.upnp`), the one
-refinement (:mod:`solver.refine`) and the estimators (:mod:`solver.estimate`,
-:mod:`solver.joint`); used by the public :func:`solver.solve_pnpf` and the docking pipeline.
+Why and how: docs/solver.md, "LO-RANSAC".
 """
 from __future__ import annotations
 
@@ -73,13 +66,31 @@ def _closed_form_refined(q3, q2, pp, options: RefineOptions):
 def ransac_pnpf(p3, p2, pp, rng: np.random.Generator, options: RansacOptions = DEFAULT_RANSAC,
                 refine_options: RefineOptions = DEFAULT_REFINE, *,
                 sigma_px: float | None = None, refine: bool = True) -> PnPfResult:
-    """Robust pose + focal from correspondences with outliers.
+    """Robust pose + focal from correspondences with outliers (LO-RANSAC).
 
-    ``p3`` (N, 3) mm, ``p2`` (N, 2) px, ``pp`` (2,) px (validated by the caller or by
-    :func:`solver.solve_pnpf`); ``rng``: numpy Generator (the only source of randomness).
-    Returns a :class:`PnPfResult` whose ``inliers`` (N,) marks the points used; with
-    ``refine=False`` the pose is the LO estimate (inliers are still final). Raises NoConsensus
-    if fewer than 4 inliers support any model.
+    Parameters
+    ----------
+    p3, p2, pp : (N, 3) mm, (N, 2) px, (2,) px
+        Validated by the caller or by :func:`solver.solve_pnpf`.
+    rng : numpy.random.Generator
+        The only source of randomness.
+    options, refine_options : RansacOptions, RefineOptions
+    sigma_px : float or None
+        Pixel noise std for the covariance (None: from the residuals).
+    refine : bool
+        False: the pose is the LO estimate (inliers are still final).
+
+    Returns
+    -------
+    PnPfResult
+        Its ``inliers`` (N,) marks the points used.
+
+    Raises
+    ------
+    NoConsensus
+        If fewer than 4 inliers support any model.
+    InvalidSolverInput
+        If ``rng`` is not a numpy Generator.
     """
     _check_rng(rng)
     model, inl = _pnpf_consensus(p3, p2, pp, rng, options, refine_options)
@@ -272,19 +283,31 @@ def ransac_docking(p3a, p2a, p3b, p2b, pp, rng: np.random.Generator,
                    refine_options: RefineOptions = DEFAULT_REFINE) -> DockingConsensus:
     """LO-RANSAC for a docking frame (two sections, shared focal length).
 
-    Hypotheses come from 2-point samples per section: the camera faces the markers (the
-    docking setup), so two correspondences fix a weak-perspective similarity of the markers'
-    (X, -Y) coordinates (roll and scale within ``options.prior``); points it predicts within
-    the prior's loose gate are fitted by UPnP + LM, and the model is scored by MSAC at
-    ``options.threshold_px``. A two-point sample is clean far more often than a five-point one
-    (a section may keep only 4 of its 7 markers), which is what makes 20 % outliers cheap.
-    Every new best is locally optimised on its inliers; the number of samples adapts to the
-    inlier ratio. Finally the two sections are refitted jointly (shared focal) and every point
-    is re-classified against the joint model.
+    Hypotheses come from 2-point samples per section: the camera faces the markers (the docking setup), so two
+    correspondences fix a weak-perspective similarity of the markers' (X, -Y) coordinates (roll and scale within
+    ``options.prior``); points it predicts within the prior's loose gate are fitted by UPnP + LM, and the model is
+    scored by MSAC at ``options.threshold_px``. A two-point sample is clean far more often than a five-point one (a
+    section may keep only 4 of its 7 markers), which is what makes 20 % outliers cheap. Every new best is locally
+    optimised on its inliers; the number of samples adapts to the inlier ratio. Finally the two sections are refitted
+    jointly (shared focal) and every point is re-classified against the joint model.
 
-    ``p3a`` (Na, 3) mm in A's frame with pixels ``p2a`` (Na, 2); same for B; ``pp`` (2,) px.
-    Returns a :class:`DockingConsensus`. Raises NoConsensus when a section has no model with
-    4 or more inliers.
+    Parameters
+    ----------
+    p3a, p2a, p3b, p2b, pp : (Na, 3) mm in A's frame, (Na, 2) px; the same for B; (2,) px
+    rng : numpy.random.Generator
+        The only source of randomness.
+    options, refine_options : RansacOptions, RefineOptions
+
+    Returns
+    -------
+    DockingConsensus
+
+    Raises
+    ------
+    NoConsensus
+        When a section has no model with 4 or more inliers.
+    InvalidSolverInput
+        If ``rng`` is not a numpy Generator.
     """
     _check_rng(rng)
     res = {}

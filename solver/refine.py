@@ -8,21 +8,7 @@ identification, Cramer-Rao bounds) uses the one Jacobian :func:`residuals_and_ja
 LM loop (:func:`refine_pnpf`, :func:`refine_joint`) and the one covariance
 :func:`covariance_from_jacobian`.
 
-Parameters and their order (every covariance in the package uses it):
-- one section, 7 parameters: ``(w_x, w_y, w_z, t_x, t_y, t_z, f)``: ``w`` (rad) a left
-  perturbation of the rotation, ``R <- exp([w]x) R`` (camera frame), ``t`` (mm), ``f`` (px);
-- two sections in one image, 13 parameters: ``(w_A, t_A, w_B, t_B, f)`` with one shared focal;
-- any number of residual blocks (:class:`Block`: one section's points in one frame, each seen
-  from one of P poses) with a camera model (:mod:`solver.camera_models`):
-  ``(w_0, t_0, ..., w_{P-1}, t_{P-1}, f, *model.free)``, 6 P + 1 + e parameters
-  (:func:`refine_blocks`; the joint fit is its two-block pinhole case, a docking run with
-  shared intrinsics its 2F-block case).
-
-The covariance is ``sigma^2 (J^T J)^-1`` with J the Jacobian of the pixel residuals at the
-estimate; ``sigma`` (px) is the pixel noise if the caller knows it, else it is estimated from the
-residuals (``sum r^2 / (2N - p)``). The relative pose ``d_from_b = inv(cam_from_a) cam_from_b``
-and its components (X, Y, Z mm; alpha, beta, gamma deg, R = Rz(alpha) Ry(beta) Rx(gamma)) get
-their covariance by first-order propagation (:func:`d_from_b_jacobian`).
+Why and how: docs/solver.md, "The refinement".
 """
 from __future__ import annotations
 

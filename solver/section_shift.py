@@ -9,11 +9,7 @@ and axis) and no residual-based noise estimate sees it. With a prior std per axi
 measured on other labelled frames of the camera class: eval.section_shift), the covariance
 grows by G diag(shift^2) G^T.
 
-A docking run's camera repeats its colour and blur effects in every frame: the shift is taken as
-the same over the run (one per section and axis); a single frame has one per section and axis.
-
-Layer 3 of the solver (estimators), beside :mod:`solver.model_error`: imports
-:mod:`solver.refine`.
+Why and how: docs/solver.md, "Section shift".
 """
 from __future__ import annotations
 

@@ -5,26 +5,7 @@ is fixed in the world: every frame shares the camera's intrinsics (f, principal 
 distortion) and, physically, the camera's pose relative to A. The run is solved as one
 least-squares problem (top layer of the solver, beside :mod:`solver.docking`):
 
-1. each frame is fitted on its own with the pinhole joint estimator (:func:`solver.fit_joint`,
-   closed form + LM) for a start;
-2. the starts are merged: one focal (the median), one cam_from_a (chordal mean of the rotations,
-   mean of the translations rescaled to that focal), each frame's cam_from_b rescaled likewise;
-3. the one LM (:func:`solver.refine.refine_blocks`) refines, over the 2F residual blocks, the
-   pinhole first and then the requested camera model (``"auto"``: the model the run's data
-   determine, :mod:`solver.model_choice`) with shared intrinsics, one cam_from_a for the run
-   (``share_cam_from_a``, the default; else one per frame) and one cam_from_b per frame.
-
-The covariance of every parameter comes from the same Jacobian: sigma^2 (J^T J)^-1, or with
-``options.run_marker_bias`` the sandwich of white noise plus a bias field that persists across
-the run and correlates between nearby centres of a section
-(:func:`solver.model_error.persistent_bias_covariance`; a fixed camera repeats its lighting,
-blur and colour effects on the detector in every frame, so averaging the frames does not shrink
-them), plus the model error of the intrinsics the run does not estimate
-(:mod:`solver.model_error`), plus, with ``options.section_shift_px``, one common offset of each
-section's centres over the whole run (:mod:`solver.section_shift`); each frame's
-``d_from_b`` gets its covariance by first-order propagation from its block (with a shared
-cam_from_a the frames' errors are correlated through it: the per-frame covariances are
-marginals).
+Why and how: docs/solver.md, "Docking runs (self-calibration)".
 """
 from __future__ import annotations
 
@@ -121,21 +102,34 @@ class _Frame:
 def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINHOLE.name,
                    sigma_px: float | None = None, share_cam_from_a: bool = True,
                    edge_px=None, options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
-    """Poses of B in A for every frame of one docking run, with the camera's intrinsics
-    estimated once for the run (see the module docstring).
+    """Poses of B in A for every frame of one docking run, the camera's intrinsics estimated once for the run.
 
-    ``markers``: the layout (as :func:`solver.solve_docking`); ``principal_point`` (2,) px: the
-    assumed principal point (the image centre), the start of an estimated one; ``frames``: a
-    sequence of F >= 1 correspondences, each a dict marker id -> (u, v) px or a pair
-    (marker_ids (N,), points_2d (N, 2)), every section with at least 4 points per frame;
-    ``camera_model``: a name of :data:`solver.camera_models.MODELS` or "auto";
-    ``sigma_px``: the pixel noise std, or None (estimated from the residuals);
-    ``share_cam_from_a``: one camera pose relative to A for the whole run (the camera and A
-    are fixed) or one per frame; ``edge_px``: None, or per frame None or a mapping marker id ->
-    the detector's edge width of that centre (px, NaN: none; :func:`solver.solve_docking`'s
-    ``edge_px``), which widens the noise of centres on discs thin for their blur in the run's
-    covariance (:func:`solver.disc_noise.thin_disc_factor`). Returns a :class:`SequenceResult`; raises a SolverError
-    subclass (bad input, too few points, no valid camera, an unobservable focal).
+    Parameters
+    ----------
+    markers, principal_point : layout (as :func:`solver.solve_docking`), (2,) px
+        The assumed principal point (the image centre), the start of an estimated one.
+    frames : sequence of F >= 1 correspondences
+        Each a dict marker id -> (u, v) px or a pair (marker_ids (N,), points_2d (N, 2)), every section with at least
+        4 points per frame.
+    camera_model : str
+        A name of :data:`solver.camera_models.MODELS` or "auto".
+    sigma_px : float or None
+        The pixel noise std, or None (estimated from the residuals).
+    share_cam_from_a : bool
+        One camera pose relative to A for the whole run (the camera and A are fixed) or one per frame.
+    edge_px : None, or per frame None or a mapping marker id -> edge width (px, NaN: none)
+        The detector's edge width of that centre (:func:`solver.solve_docking`'s ``edge_px``), which widens the noise
+        of centres on discs thin for their blur in the run's covariance (:func:`solver.disc_noise.thin_disc_factor`).
+    options : DockingOptions
+
+    Returns
+    -------
+    SequenceResult
+
+    Raises
+    ------
+    SolverError : bad input (InvalidSolverInput), too few points (TooFewPoints), no valid camera (NoValidCamera), an
+        unobservable focal (FocalNotObservable).
     """
     layout = LayoutArrays.of(markers)
     pp = as_principal_point(principal_point)

@@ -1,25 +1,11 @@
 """Detections whose centre should not shape the pose, although they were identified.
 
-Identification accepts a detection within a few pixels of where its marker projects. A partly
-hidden marker passes that gate, yet the centre of its visible part is pixels away from the
-marker's centre, and with 5-7 markers per section one such point moves X by millimetres. Two
-kinds of evidence find them (their measured strength: results/README.md, "Measurements behind
-the code's constants"):
-
-- the detector's own: a detection whose centre could not be refined (``refined`` False) is a
-  box centre, good to about a pixel;
-- the geometry's: the first fit predicts each marker's outline (the projected circle); a
-  detected box much narrower or lower than that outline sees only part of the disc.
-
 ``leave_out_suspects`` removes these, worst first, while each section keeps ``MIN_POINTS``, and
 refits once. A purely statistical rule (leave out the point farthest from where the fit of all
 the others projects its marker) did worse: with 5-7 points per section it as often removes a
 good point at the edge of the layout as the bad one.
 
-It takes the points of the first fit (:class:`solver.joint.SectionPoints`), that fit
-(:class:`solver.joint.JointFit`) and the :class:`solver.joint.JointFitter` of the frame, and
-returns (the refitted :class:`JointFit`, inliers (N,) bool). A step of the docking pipeline
-(layer 5, beside :mod:`solver.eccentricity`).
+Why and how: docs/solver.md, "Suspects".
 """
 from __future__ import annotations
 

@@ -5,40 +5,7 @@
 Model: square pixels, no skew, known principal point ``c``; the unknowns are the rotation R,
 the translation t and the focal length f of ``u = f * (R X + t)_xy / (R X + t)_z + c``.
 
-Method (all in normalised units: world points centred on their centroid and divided by their
-largest principal spread, image points centred on ``c`` and divided by their RMS radius):
-
-1. EPnP control points: the centroid plus one point along each principal axis, at one standard
-   deviation; every world point is a barycentric combination of them (coefficients ``alphas``).
-2. The camera-frame control points (x_j, y_j, z_j) enter the projection equations linearly once
-   the focal length is folded into the depths (w_j = z_j / f): ``M v = 0`` with
-   ``v = (x_1, y_1, w_1, ..., x_4, y_4, w_4)``, two rows per point.
-3. v lies in the null space of M: ``v = sum_k beta_k n_k`` (k <= K). The rigid distances between
-   control points, ``|dx|^2 + |dy|^2 + f^2 |dw|^2 = d^2``, are quadratic in beta and linear in
-   the monomials ``beta_k beta_l`` and ``f^2 beta_k beta_l`` (exhaustive linearisation):
-   - K = 1: two unknowns, six equations: least squares;
-   - K = 2: six unknowns, six equations: one linear solve;
-   - K = 3: twelve unknowns, six equations: the solution space (6-dim, affine) is pinned down by
-     relinearisation, i.e. the 33 quadratic identities that monomials of one rank-one family
-     satisfy (b_ij b_kl = b_ik b_jl, with and without f^2), linear in the 27 products of the
-     six free coefficients.
-4. Each (beta, f) gives camera-frame control points, hence camera-frame world points, and the
-   pose by orthogonal Procrustes; its reprojection error ranks the candidates.
-
-Planar and near-planar point sets (markers on one side of a cylinder): besides the general
-branch above, a planar branch uses three control points in the best-fit plane (points projected
-onto it), where the null space is one-dimensional (it is a homography). For a planar set only
-the planar branch runs; for a near-planar one both run and reprojection error decides.
-Exactly four non-coplanar points leave a 4-dimensional null space: there a DLT camera matrix is
-pinned down by the four constraints ``K^-1 M`` orthogonal with equal row norms, again solved
-by relinearisation.
-
-The closed form is an initialiser: it is exact on noise-free data for general configurations and
-close enough for :mod:`solver.refine` otherwise.
-
-Layer 1 of the solver (closed form: every candidate, no refinement, no choice beyond sorting by
-reprojection RMS); imports only :mod:`solver.checks` and :mod:`solver.errors`. Near fronto-parallel planar scenes carry almost
-no information on the focal length (only f / depth is seen); no closed form can fix that.
+Why and how: docs/solver.md, "UPnP".
 """
 from __future__ import annotations
 
@@ -461,21 +428,29 @@ def upnp(points_3d, points_2d, principal_point, *, checked: bool = False,
          sweep_above_px: float | None = None, first_only: bool = False) -> list:
     """Every closed-form candidate (R, t, f) for a 3D-2D correspondence set, best first.
 
-    ``points_3d``: (N, 3) float64, mm, N >= 4. ``points_2d``: (N, 2) float64, pixels.
-    ``principal_point``: (2,) float64, pixels. Returns a list of :class:`Candidate`, sorted by
-    reprojection RMS; candidates that are not valid cameras (f^2 <= 0, points behind the camera,
-    non-finite numbers) are dropped. Raises InvalidSolverInput / TooFewPoints /
-    DegenerateGeometry on bad input, NoValidCamera when no candidate is valid. ``checked=True`` skips input validation (internal callers that already did it).
+    Parameters
+    ----------
+    points_3d, points_2d, principal_point, checked : (N, 3) float64 mm, N >= 4; (N, 2) float64 px; (2,) px; bool
+        ``checked=True`` skips input validation (internal callers that already did it).
+    sweep_above_px : float or None
+        Branches: N >= 6 general K = 1, 2, 3; N = 5 general K = 2, 3; N = 4 DLT relinearisation; planar sets the
+        planar branch only, near-planar ones (spread ratio < NEAR_PLANAR_TOL) both. If no branch gives a valid camera,
+        or the best reprojection RMS exceeds ``sweep_above_px`` (when given), a focal sweep adds a fallback candidate
+        (method "sweep").
+    first_only : bool
+        The cheap path used before refinement: only the smallest null-space dimension that determines the problem
+        (K = 1 for N >= 6, K = 2 for N = 5, the DLT for N = 4, planar K = 1 for planar sets); it returns an empty list
+        instead of raising when that gives no valid camera, so that the caller can fall back to the full set.
 
-    Branches: N >= 6 general K = 1, 2, 3; N = 5 general K = 2, 3; N = 4 DLT relinearisation;
-    planar sets the planar branch only, near-planar ones (spread ratio < NEAR_PLANAR_TOL) both.
-    If no branch gives a valid camera, or the best reprojection RMS exceeds ``sweep_above_px``
-    (when given), a focal sweep adds a fallback candidate (method "sweep").
+    Returns
+    -------
+    list of Candidate
+        Sorted by reprojection RMS; candidates that are not valid cameras (f^2 <= 0, points behind the camera,
+        non-finite numbers) are dropped.
 
-    ``first_only=True`` is the cheap path used before refinement: only the smallest null-space
-    dimension that determines the problem (K = 1 for N >= 6, K = 2 for N = 5, the DLT for N = 4,
-    planar K = 1 for planar sets); it returns an empty list instead of raising when that gives
-    no valid camera, so that the caller can fall back to the full set.
+    Raises
+    ------
+    SolverError : InvalidSolverInput / TooFewPoints / DegenerateGeometry (bad input), NoValidCamera (none valid).
     """
     if checked:
         p3 = points_3d
