@@ -28,18 +28,41 @@ LABEL_SIMD_OFF = ("AVX512F", "AVX512CD", "AVX512_KNL", "AVX512_KNM", "AVX512_SKX
 
 
 def pin_label_arithmetic(environ) -> None:
-    """Set both pins in ``environ`` (a process's environment, before numpy loads); numpy features
-    the caller already switched off stay off."""
+    """Set both label-arithmetic pins (OpenBLAS kernel, numpy's SIMD paths off) in a process's environment.
+
+    Parameters
+    ----------
+    environ : mutable mapping
+        A process's environment (``os.environ`` or a worker's), before numpy loads; numpy features the caller
+        already switched off stay off.
+
+    Returns
+    -------
+    None
+        ``environ`` is changed in place.
+    """
     environ[LABEL_BLAS_ENV] = LABEL_BLAS_CORE
     off = environ.get(LABEL_SIMD_ENV, "").split()
     environ[LABEL_SIMD_ENV] = " ".join(dict.fromkeys(off + list(LABEL_SIMD_OFF)))
 
 
 def set_app_environment(environ) -> None:
-    """What the command line needs in ``environ`` before numpy and torch load: the label pins;
-    one OpenBLAS thread unless the user asks for more (the solver's linear systems have a few
-    dozen unknowns, where a second BLAS thread only adds its wake-up on busy cores); a passive
-    OpenMP wait unless set (the machine is shared with renders and worker processes)."""
+    """Set what the command line needs in ``environ`` before numpy and torch load.
+
+    The label pins (:func:`pin_label_arithmetic`); one OpenBLAS thread unless the user asks for more (the solver's
+    linear systems have a few dozen unknowns, where a second BLAS thread only adds its wake-up on busy cores); a passive
+    OpenMP wait unless set (the machine is shared with renders and worker processes).
+
+    Parameters
+    ----------
+    environ : mutable mapping
+        The process's environment (``os.environ``).
+
+    Returns
+    -------
+    None
+        ``environ`` is changed in place; values the user set are kept (the pins excepted).
+    """
     pin_label_arithmetic(environ)
     environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

@@ -460,12 +460,50 @@ def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, op
 def measure(images, layout_path, weights, out, camera_model: str | None = None,
             self_calibrate: str | None = None, min_score: float = MIN_SCORE, progress=None,
             options: MeasureOptions = MeasureOptions(), acceptance=None) -> dict:
-    """Measure every image (see the module docstring); returns the summary written to
-    OUT/measurements.json (without the per-image records). ``frames_per_s`` counts the images
-    measured by this run over everything after the detector is loaded: reading, detection,
-    solve, overlays. ``progress(done, total)`` after each image. Every pose gets its uncertainty
-    budget; ``acceptance`` (an acceptance spec's path) adds the conformity decisions
-    (dockfactory.measure_verdict; the summary's ``conformity``)."""
+    """Measure the pose of B in A on every image (the pipeline: the module docstring).
+
+    Parameters
+    ----------
+    images : sequence of paths
+        PNG/JPEG/TIFF/BMP files or folders of them.
+    layout_path, weights : path, path
+        The marker layout file (its sigmas, when given, feed the uncertainty budget) and the detector's weights
+        (their noise card: the centre-noise floor, section shift and bias).
+    out : path
+        The output folder, held under its writer lock for the whole run; a rerun with the same images and options
+        measures only what is missing.
+    camera_model, self_calibrate : str or None, {None, "frame", "sequence"}
+        A solver camera model or "auto" (default: "auto" when self-calibrating, else "pinhole"); "sequence" solves
+        the images as one docking run of one camera with shared intrinsics (their sizes must agree).
+    min_score : float
+        The detection score threshold.
+    progress : callable(done, total) or None
+        Called after each image.
+    options : MeasureOptions
+        Backend, workers, overlay size, camera input, largest image (megapixels).
+    acceptance : path or None
+        An acceptance spec: adds the conformity decisions (dockfactory.measure_verdict; the summary's ``conformity``).
+
+    Returns
+    -------
+    dict
+        The summary written to OUT/measurements.json (without the per-image records). ``frames_per_s`` counts the
+        images measured by this run over everything after the detector is loaded: reading, detection, solve,
+        overlays. Every pose gets its uncertainty budget.
+
+    Raises
+    ------
+    DockfactoryError
+        One line, before anything is measured: an empty image path, a folder without images, a bad camera model or
+        ``self_calibrate``, sizes that differ under "sequence", a bad layout file or acceptance spec, a busy OUT.
+    """
+    return _measure(images, layout_path, weights, out, camera_model, self_calibrate, min_score, progress, options,
+                    acceptance)
+
+
+def _measure(images, layout_path, weights, out, camera_model, self_calibrate, min_score, progress,
+             options: MeasureOptions, acceptance) -> dict:
+    """:func:`measure`'s work."""
     paths = collect_images(images)
     markers, sigmas = read_layout_file(layout_path), read_layout_sigmas(layout_path)
     spec = _spec(acceptance)

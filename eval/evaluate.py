@@ -239,10 +239,49 @@ def statistic_bounds(test: list[dict], rep: list[dict], confidence: float) -> di
 def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None,
              min_score: float = MIN_SCORE, oracle: bool = True, oracle_sigma_px: float | None = None,
              envelope: EnvelopeGrid | None = None, camera_models: bool = False) -> tuple[dict, list[dict]]:
-    """Metrics and per-frame rows of a poses file on the opened dataset ``ds``; with ``envelope``
-    also the tolerance envelope of uncalibrated cameras (eval.envelope) at the measured centre
-    noise, with ``camera_models`` the test split solved with the pinhole and self-calibrated
-    camera models side by side (eval.camera_models_eval); both reported, not gated."""
+    """Metrics and per-frame rows of a poses file on an opened dataset, with the acceptance verdict.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened dataset (generator.dataset_open).
+    poses_path, detections_path : path, path or None
+        The poses file (``dockfactory solve``) and the detections file (``dockfactory detect``; every detection
+        needs ``bbox_px`` and ``score``: mAP and the measured centre noise); both made for ``ds``'s version.
+    spec : AcceptanceSpec
+        The tolerances and the confidence the verdict and the bounds use.
+    min_score : float
+        The detection score threshold of the centre-noise measurements and of the camera models' solves.
+    oracle, oracle_sigma_px : bool, float px or None
+        ``oracle``: the test split also solved from its labels at the used centre noise (``metrics["oracle"]``);
+        ``oracle_sigma_px``: the noise used when no detections measure it (eval.centre_noise.used_sigma).
+    envelope : EnvelopeGrid or None
+        Also the tolerance envelope of uncalibrated cameras (eval.envelope) at the measured centre noise.
+    camera_models : bool
+        Also the test split solved with the pinhole and self-calibrated camera models side by side
+        (eval.camera_models_eval). The envelope and the camera models are reported, not gated.
+
+    Returns
+    -------
+    metrics : dict
+        metrics.json's content (``metrics["acceptance"]`` the verdict). Every planned frame counts: a frame without a
+        pose (failed, absent from the poses file or from the dataset) is a failure with its reason.
+    rows : list of dict
+        One row per frame (frames.csv).
+
+    Raises
+    ------
+    DatasetError
+        A poses or detections file made for another dataset version, or malformed or unreadable (one line naming file and key).
+    """
+    return _evaluate(ds, poses_path, spec, detections_path, min_score, oracle, oracle_sigma_px, envelope,
+                     camera_models)
+
+
+def _evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path, min_score: float, oracle: bool,
+              oracle_sigma_px: float | None, envelope: EnvelopeGrid | None,
+              camera_models: bool) -> tuple[dict, list[dict]]:
+    """:func:`evaluate`'s work."""
     poses = read_json_for(poses_path, "poses", ds)
     detections = None
     if detections_path:   # mAP needs every detection's box and score

@@ -113,7 +113,35 @@ def select_frames(cfg: Config, opts: JobOptions) -> list[FrameSpec]:
 
 
 def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOptions()) -> JobSummary:
-    """Render (the missing frames of) a dataset into ``root``."""
+    """Render (the missing frames of) a dataset into ``root``.
+
+    Resumable (finished frames are never touched), sharded, fault tolerant (a crashed or hung worker is restarted and
+    its frame retried up to ``opts.retries`` times) and memory bounded (module docstring). Every scene is sampled, the
+    render device and the target folder are checked before anything is written.
+
+    Parameters
+    ----------
+    cfg, config_text : Config, str
+        The dataset config and its resolved TOML text (stored with the dataset, which it reproduces alone).
+    root : path
+        The dataset folder: new, empty, or holding this very config's version.
+    opts : JobOptions
+        Workers, shard (k, n), frame ids, retries, worker recycling, threads, progress, executor (local | ray).
+
+    Returns
+    -------
+    JobSummary
+        Frames planned, skipped, rendered, retried, failed (with why), completeness, damage found, wall time; its
+        ``ok`` is False when a frame failed or the complete dataset is damaged.
+
+    Raises
+    ------
+    DockfactoryError
+        ``workers`` < 1, a bad shard, a frame id outside the plan, numpy's arithmetic not the labels' (core.blas), a
+        GPU device without a GPU.
+    DatasetError
+        ``root`` is not a directory, holds something else or another dataset version, or another writer holds its lock.
+    """
     t_start = time.monotonic()
     if opts.workers < 1:
         raise DockfactoryError(f"--workers must be >= 1, got {opts.workers}")
