@@ -35,9 +35,9 @@ test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 -m "not render and not slow"   # both cores (pytest-xdist)
 
 # issue 13, the paper at full scale: hours of rendering and training on 2 cores, resumable
-# (bench/paper.sh says what each step costs); results land in results/paper/
+# (bench/paper/paper.sh says what each step costs); results land in results/paper/
 paper: $(STAMP)
-	sh bench/paper.sh all
+	sh bench/paper/paper.sh all
 
 clean-demo:
 	rm -rf out/quick

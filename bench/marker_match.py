@@ -1,5 +1,5 @@
 """Matching a detection to its labelled marker, for the bench studies on rendered datasets
-(imported by the scripts beside it: run them as ``python bench/<script>.py``)."""
+(shared by the topics: ``from bench.marker_match import nearest_marker``)."""
 from __future__ import annotations
 
 import numpy as np

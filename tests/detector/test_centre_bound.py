@@ -1,17 +1,13 @@
-"""bench/centre_bound.py: the Fisher information of a disc's centre, against the closed form of a
+"""bench/sensor/centre_bound.py: the Fisher information of a disc's centre, against the closed form of a
 blurred circular edge, and what a Bayer sensor's sampling leaves of it."""
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dockfactory.core.cfa import channel_map
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import centre_bound as cb  # noqa: E402
+from bench.sensor import centre_bound as cb
 
 R, WIDTH, CONTRAST, VAR = 8.0, 0.6, 0.3, 1e-4
 
@@ -54,10 +50,10 @@ def test_three_channels_add_their_information():
 
 
 def test_no_refinement_beats_the_bound():
-    """bench/centre_efficiency.py on 40 noisy synthetic circles: the shipped three-chip fit and the
+    """bench/sensor/centre_efficiency.py on 40 noisy synthetic circles: the shipped three-chip fit and the
     RGGB joint fit are at or above their bounds (measured 1.3-1.6x and 1.9-2.5x; asserted >= 0.85x,
     the RMS of 40 trials being within about 11 % of its expectation), and not absurdly far (<= 4x)."""
-    import centre_efficiency as ce
+    from bench.sensor import centre_efficiency as ce
     rng = np.random.default_rng(9)
     errs, where = ce.trial_errors(8.0, 8.0, 40, 0.004, rng)
     bound = ce.bound_std(8.0, 8.0, where, 0.004)

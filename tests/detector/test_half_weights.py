@@ -1,15 +1,12 @@
-"""bench/half_weights.py: the fp16 copy of a weights file loads to (nearly) the same network."""
+"""bench/detector/half_weights.py: the fp16 copy of a weights file loads to (nearly) the same network."""
 import os
-import sys
-from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import pytest
 
 torch = pytest.importorskip("torch")
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-from half_weights import half_weights, largest_centre_change  # noqa: E402
+from bench.detector.half_weights import half_weights, largest_centre_change  # noqa: E402
 
 
 def test_half_copy_is_smaller_and_gives_the_same_outputs(tmp_path, repo_root):

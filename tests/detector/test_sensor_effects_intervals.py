@@ -1,17 +1,14 @@
-"""bench/sensor_effects.py's paired bootstrap intervals: the ratio of two RMSEs over the same frames
+"""bench/sensor/sensor_effects.py's paired bootstrap intervals: the ratio of two RMSEs over the same frames
 (an effect over the three-chip reference, or new weights over shipped ones) with the interval the
 frames allow."""
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import sensor_effects as se  # noqa: E402
+from bench.sensor import sensor_effects as se
 
 
 def rows(errors: np.ndarray, names=None) -> list[dict]:

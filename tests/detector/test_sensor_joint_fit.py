@@ -1,10 +1,7 @@
-"""bench/sensor_joint_fit.py, the Bayer refinements tried and not shipped (coverage moments less
+"""bench/sensor/sensor_joint_fit.py, the Bayer refinements tried and not shipped (coverage moments less
 the demosaic's widening): what they do on synthetic discs (the bench's figures on rendered frames
 are in bench/results/sensor_effects/)."""
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -14,8 +11,7 @@ from dockfactory.core.cfa import mosaic
 from dockfactory.core.demosaic import DEMOSAICS, demosaic
 from dockfactory.detector.centre_camera import refine_centre_camera
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import sensor_joint_fit as sj  # noqa: E402
+from bench.sensor import sensor_joint_fit as sj
 
 RED = (0.6, 0.03, 0.03)   # the marker's red (linear): little contrast with its dark ring in G and B
 

@@ -1,15 +1,11 @@
-"""bench/thin_disc_noise.py's law fit: z_minor^2 drawn from a known thin-disc law gives back its
+"""bench/sensor/thin_disc_noise.py's law fit: z_minor^2 drawn from a known thin-disc law gives back its
 constants, and the normalisation takes out the input's own noise scale."""
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import thin_disc_noise as tdn  # noqa: E402
+from bench.sensor import thin_disc_noise as tdn
 
 
 def draws(rng, big_r: float, p: float, n: int, scale: float) -> np.ndarray:

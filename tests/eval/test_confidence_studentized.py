@@ -1,5 +1,5 @@
 """eval.confidence.studentized_rmse_bounds: the bootstrap-t bound of an RMSE (log mean square).
-Its coverage is measured by bench/confidence_coverage.py (bench/results/confidence/); here its
+Its coverage is measured by bench/verdict/confidence_coverage.py (bench/results/confidence/); here its
 contract: it brackets the measured RMSE, is equivariant to the unit, is reproducible from its
 seed, widens with heavy tails, and is not computed where it cannot be."""
 import math

@@ -1,12 +1,9 @@
-"""bench/paper_results.py: render figures of an interrupted render, Table 1 and the ranking check."""
+"""bench/paper/paper_results.py: render figures of an interrupted render, Table 1 and the ranking check."""
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-from paper_results import main, ranking_check, render_figures, table1  # noqa: E402
+from bench.paper.paper_results import main, ranking_check, render_figures, table1
 
 from dockfactory.core.io import sha256_file  # noqa: E402
 

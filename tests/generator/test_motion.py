@@ -2,7 +2,7 @@
 
 - configs: defaults off, one-line errors naming the file, [motion] and the key;
 - a config without [motion] samples and labels the bytes it did before motion existed
-  (tests/data/motion_off_golden.json, made by bench/motion_off_golden.py at commit 0724401);
+  (tests/data/motion_off_golden.json, made by bench/render/motion_off_golden.py at commit 0724401);
 - the draws: B's velocity from the frame's own stream, whatever the frame order, nothing else
   drawn; the exposure is the colour chain's exposure time;
 - the label holds B at mid-exposure; a global shutter's geometry is the static frame's;

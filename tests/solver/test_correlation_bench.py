@@ -1,15 +1,11 @@
-"""bench/model_error_runs.py's correlation table (what the run bias field's length rests on): errors
+"""bench/cli/model_error_runs.py's correlation table (what the run bias field's length rests on): errors
 drawn with a known structure give it back."""
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import model_error_runs as mer  # noqa: E402
+from bench.cli import model_error_runs as mer
 
 
 def _row_value(table: str, label: str) -> tuple[float, float]:

@@ -1,4 +1,4 @@
-"""The docking pipeline's fast paths give what the plain paths give (bench/solve_speed.py
+"""The docking pipeline's fast paths give what the plain paths give (bench/solver/solve_speed.py
 measures the speed; issue 11, ``measure``: identification + solve <= 15 ms per frame).
 
 - identification: verifying only the seeds that the hypotheses found so far leave open

@@ -3,15 +3,12 @@ section's markers; markers within +-20 deg of the line facing the camera: near-p
 neither refused nor stuck in wrong minima. Before the fix, near-planar 10-point sets at 1 px were
 refused 32 % of the time ("focal length is not observable") and 5-point sets at 1 px returned
 wrong minima (RMS 30-55 px, 100-240 bound-sigmas in rotation) once the refusal was lifted.
-The full figures (5000 trials per case) come from ``bench/solver_bench.py --hard-only``."""
-import sys
-from pathlib import Path
+The full figures (5000 trials per case) come from ``bench/solver/solver_bench.py --hard-only``."""
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-from solver_bench import run_hard  # noqa: E402
+from bench.solver.solver_bench import run_hard
 
 
 @pytest.mark.slow   # 200 seeded solves per case, ~20 s in all
@@ -90,7 +87,7 @@ def test_a_self_estimated_noise_from_few_points_is_flagged_and_a_given_one_is_no
     False, ``noise_dof`` 3); told the noise, or a floor for it, it does not."""
     from dataclasses import replace
 
-    from solver_bench import hard_trial
+    from bench.solver.solver_bench import hard_trial
 
     from dockfactory.solver import solve_pnpf
     from dockfactory.solver.estimate import MIN_NOISE_DOF
@@ -117,9 +114,9 @@ def test_a_self_estimated_noise_from_few_points_is_flagged_and_a_given_one_is_no
 
 @pytest.mark.slow   # 3 x 400 seeded solves, ~5 s
 def test_no_unflagged_solve_is_beyond_six_of_its_stds():
-    """The honesty criterion on the hard sets at 1 px, as bench/solver_honesty.py counts it over
+    """The honesty criterion on the hard sets at 1 px, as bench/solver/solver_honesty.py counts it over
     5,000 trials: no solve that the solver does not flag is wrong by more than 6 of its stds."""
-    from solver_honesty import run_set
+    from bench.solver.solver_honesty import run_set
     for kind, mode in (("5-point", "estimated"), ("5-point", "given"), ("near-planar-10", "floor")):
         r = run_set(kind, 1.0, mode, 400, seed=3)
         assert r["rot"] == 0 and r["trans"] == 0 and r["focal"] == 0, r

@@ -1,0 +1,1 @@
+"""Design: the design predictor's card, its check against renders, its speed."""

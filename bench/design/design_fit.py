@@ -1,0 +1,197 @@
+"""Fit the design predictor's card (models/design_predictor.json) on measured renders, and print
+how far the fitted model is from them (in the fit and leaving each scene out).
+
+Inputs (committed results, no render needed): the sensor bench at label-aware sampling
+(bench/results/sensor_effects/sampling32_48.json: scenes A, B, C, 48 test frames each, three-chip,
+Bayer bilinear / VNG, Bayer + JPEG q90) with the scenes' configs (bench/configs/sensor_scene_*.toml,
+whose test frames' geometry the predictor redraws exactly), and for the white ring and a
+three-chip camera's JPEG the same bench on white-ring renders of scenes A and B and on scene A
+again (ring/white32_48.json, jpeg32_a_48.json; label-aware sampling).
+
+The model (eval.design_predict): RMSE^2 = s0^2 Vn + su^2 Vu + sv^2 Vv per component, Vn the
+disc-noise variance at unit scale and Vu, Vv the section offset's at unit shift per axis, mean
+over the frames. (s0, su, sv) by non-negative least squares on the relative squared error of the
+three-chip camera's X, Y and alpha on the three scenes; each camera class's edge width (the
+thin-disc term of solver.disc_noise: a disc a few edge widths thick errs more across it) from
+EDGES_PX, the one whose prediction fits best (three-chip: with the least squares; Bayer: the
+shape a single factor fits best); each factor as the geometric mean of measured over predicted.
+
+Run: python -m bench.design.design_fit [--write]   (--write: models/design_predictor.json)
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+from pathlib import Path
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)
+
+import numpy as np  # noqa: E402
+
+from dockfactory.core.config import load_config  # noqa: E402
+from dockfactory.core.io import write_json_atomic  # noqa: E402
+from dockfactory.eval.design_card import CARD_FORMAT  # noqa: E402
+from dockfactory.eval.design_predict import NoiseClass, mean_variances  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "bench" / "results" / "sensor_effects"
+SCENES = ("a", "b", "c")
+FIT = ("x", "y", "alpha")
+IDX = {"x": 0, "y": 1, "alpha": 3}
+BAYER = ("bayer-bilinear", "bayer-vng")
+
+
+EDGES_PX = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)   # the edge widths tried per camera class
+
+
+def basis(scene: str, edge_px: float = 0.0) -> np.ndarray:
+    """(3, 3): rows Vn, Vu, Vv; columns X, Y, alpha (mean over the scene's 48 test frames), the
+    discs' edges ``edge_px`` wide (0: no thin-disc term)."""
+    cfg = load_config(ROOT / "bench" / "configs" / f"sensor_scene_{scene}.toml")
+    rows = []
+    for shift in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)):
+        vn, vs, _ = mean_variances(cfg, NoiseClass(1.0, shift, edge_px), 48)
+        rows.append(vn if shift == (0.0, 0.0) else vs)
+    return np.array(rows)[:, [IDX[c] for c in FIT]]
+
+
+def _rms_log(pairs) -> float:
+    """RMS of log(measured / predicted) about its mean (what a factor cannot absorb)."""
+    logs = np.array([np.log(m / p) for m, p in pairs])
+    return float(np.sqrt(np.mean((logs - logs.mean()) ** 2)))
+
+
+def measured(results: dict, scene: str, effect: str) -> np.ndarray:
+    [ds] = [k for k in results if k.startswith(f"sensor-scene-{scene}@")]
+    rec = results[ds][effect]
+    return np.array([rec[f"rmse_{c}"] for c in FIT])
+
+
+def nnls_relative(bases: dict, targets: dict) -> np.ndarray:
+    """(s0, su, sv) >= 0 minimising sum ((V p^2) / m^2 - 1)^2 (active sets enumerated)."""
+    a = np.concatenate([bases[s].T / targets[s][:, None] ** 2 for s in targets])
+    b = np.ones(len(a))
+    best = None
+    for active in itertools.product((0, 1), repeat=3):
+        idx = [i for i in range(3) if active[i]]
+        if not idx:
+            continue
+        x = np.zeros(3)
+        sol, *_ = np.linalg.lstsq(a[:, idx], b, rcond=None)
+        if np.any(sol < 0):
+            continue
+        x[idx] = sol
+        res = float(np.sum((a @ x - b) ** 2))
+        if best is None or res < best[0]:
+            best = (res, x)
+    return np.sqrt(best[1])
+
+
+def predicted(base: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return np.sqrt(p[0] ** 2 * base[0] + p[1] ** 2 * base[1] + p[2] ** 2 * base[2])
+
+
+def geo_factor(pairs) -> float:
+    """Geometric mean of measured / predicted over (measured (3,), predicted (3,)) pairs."""
+    return float(np.exp(np.mean([np.log(m / p) for m, p in pairs])))
+
+
+def ratio_rows(name, pairs_by_scene) -> list[dict]:
+    return [{"what": name, "scene": s, **{c: round(float(p[i] / m[i]), 3) for i, c in enumerate(FIT)}}
+            for s, (m, p) in pairs_by_scene.items()]
+
+
+def ring_and_jpeg_factors(results: dict) -> dict:
+    """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
+    geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
+    sampling: white-ring renders of scenes A and B (ring/white32_48.json) over the dark-ring ones
+    (sampling32_48.json), three-chip for "none", Bayer bilinear and VNG for "rggb"; JPEG over PNG
+    on the dark scene A (jpeg32_a_48.json) and the two white-ring scenes."""
+    white = json.loads((RESULTS / "ring" / "white32_48.json").read_text())["datasets"]
+    jpeg_a = json.loads((RESULTS / "jpeg32_a_48.json").read_text())["datasets"]
+    as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
+    ring = {"none": [(measured(as_scene, s, "three-chip"), measured(results, s, "three-chip")) for s in ("a", "b")],
+            "rggb": [(measured(as_scene, s, e), measured(results, s, e)) for s in ("a", "b") for e in BAYER]}
+    jpeg = [(measured(as_scene, s, "three-chip-jpeg90"), measured(as_scene, s, "three-chip")) for s in ("a", "b")]
+    jpeg.append((measured(jpeg_a, "a", "three-chip-jpeg90"), measured(jpeg_a, "a", "three-chip")))
+    return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
+
+
+def _three_chip(results: dict, by_edge: dict):
+    """(edge, (s0, su, sv)) of the three-chip fit with the smallest relative error."""
+    tc = {s: measured(results, s, "three-chip") for s in SCENES}
+    best = None
+    for e, bases in by_edge.items():
+        p = nnls_relative(bases, tc)
+        err = float(np.sqrt(np.mean([np.log(predicted(bases[s], p) / tc[s]) ** 2 for s in SCENES])))
+        if best is None or err < best[0]:
+            best = (err, e, p)
+    return best[1], best[2]
+
+
+def _bayer_edge(results: dict, by_edge: dict, p) -> float:
+    """The Bayer camera's edge width: the one whose shape a single factor fits best."""
+    return min(by_edge, key=lambda e: _rms_log([(measured(results, s, x), predicted(by_edge[e][s], p))
+                                                for s in SCENES for x in BAYER]))
+
+
+def fit() -> dict:
+    results = json.loads((RESULTS / "sampling32_48.json").read_text())["datasets"]
+    by_edge = {e: {s: basis(s, e) for s in SCENES} for e in EDGES_PX}
+    e0, p = _three_chip(results, by_edge)
+    e1 = _bayer_edge(results, by_edge, p)
+    bases, bayer_bases = by_edge[e0], by_edge[e1]
+    tc = {s: measured(results, s, "three-chip") for s in SCENES}
+    rows = ratio_rows("three-chip (fit)", {s: (tc[s], predicted(bases[s], p)) for s in SCENES})
+    for out in SCENES:
+        q = nnls_relative(bases, {s: tc[s] for s in SCENES if s != out})
+        rows += ratio_rows(f"three-chip, scene {out.upper()} left out", {out: (tc[out], predicted(bases[out], q))})
+    bayer = [(measured(results, s, e), predicted(bayer_bases[s], p)) for s in SCENES for e in BAYER]
+    g = geo_factor(bayer)
+    for e in BAYER:
+        rows += ratio_rows(e, {s: (measured(results, s, e), g * predicted(bayer_bases[s], p)) for s in SCENES})
+    jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in SCENES])
+    rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
+                                            g * jpeg * predicted(bayer_bases[s], p)) for s in SCENES})
+    other = ring_and_jpeg_factors(results)
+    versions = sorted(results)
+    return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
+            "shift_px": [round(float(p[1]), 5), round(float(p[2]), 5)],
+            "cfa_factor": {"none": 1.0, "rggb": round(g, 3)},
+            "ring_factor": {"dark": {"none": 1.0, "rggb": 1.0},
+                            "white": {c: round(v, 3) for c, v in other["ring_white"].items()}},
+            "jpeg_factor": {"none": round(other["jpeg_none"], 3), "rggb": round(jpeg, 3)},
+            "edge_px": {"none": e0, "rggb": e1},
+            "jpeg_min_quality": 90,
+            "bound_factor": {c: 1.0 for c in ("x", "y", "z", "alpha", "beta", "gamma")},
+            "provisional": [],
+            "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
+                          "weights": "yolov5n_se_rings_markers.pt",
+                          "source": "bench/results/sensor_effects/sampling32_48.json",
+                          "ring_and_jpeg_source": ["bench/results/sensor_effects/ring/white32_48.json",
+                                                   "bench/results/sensor_effects/jpeg32_a_48.json"],
+                          "components_checked": list(FIT)},
+            "error": {"predicted_over_measured": rows}}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--write", action="store_true", help="write models/design_predictor.json")
+    args = ap.parse_args()
+    card = fit()
+    print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, edge {card['edge_px']} px, "
+          f"rggb x{card['cfa_factor']['rggb']}, "
+          f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
+    print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")
+    for r in card["error"]["predicted_over_measured"]:
+        print(f"| {r['what']} | {r['scene'].upper()} | {r['x']:.2f} | {r['y']:.2f} | {r['alpha']:.2f} |")
+    if args.write:
+        write_json_atomic(ROOT / "models" / "design_predictor.json", card)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Detector: inference and training speed, mAP, box edges, centre bias."""

@@ -1,0 +1,1 @@
+"""The paper's commands (paper.sh) and the assembly of results/paper/."""

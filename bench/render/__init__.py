@@ -1,0 +1,1 @@
+"""Rendering and datasets: render cost and quality, label-aware sampling, re-render checks."""

@@ -1,0 +1,136 @@
+"""The goodness-of-fit gate (eval.fit_gate) on rendered frames: false alarms, and the faults it catches.
+
+    python -m bench.render.fit_gate DATASET [DATASET ...] [--out table.json]
+
+Each DATASET is a rendered dataset whose test frames have cached detections of the shipped
+detector (``<dataset>.detections_bench.json`` beside it, as bench/render/marker_sampling.py writes
+them; their ``centre_noise_px`` is the noise card's, the noise the gate tests against). Per
+dataset, the same detections solved as they are and after each fault a user really produces:
+
+- as is: frames ok, left one or two centres out, refused; the residual ratio (per-axis RMS over
+  the card's noise) median / 90th percentile / max;
+- another layout: the markers of a section of radius 450 mm and 30 mm discs (300 mm and 20 mm
+  for a dataset of the former);
+- stretched: the centres' u stretched 1.5x about the image centre;
+- cropped: the principal point assumed 160 / 120 px off (the centres shifted);
+- mirrored: u -> W - 1 - u (refused: no camera gives it);
+- rotated 90, 180, 270: the image turned about its centre (a camera mounted at that roll; the
+  principal point the turned image's centre): a right pose expected.
+
+For every fault: frames ok, and of those the ones whose X, Y or Z error is beyond 3 of their
+reported standard deviations ("ok and wrong": the target is 0). Figures and their reading:
+bench/results/fit_gate/README.md.
+"""
+from __future__ import annotations
+
+import os
+
+import dockfactory
+
+dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from dockfactory.core.io import write_json_atomic
+from dockfactory.core.layout import build_layout
+from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame
+from dockfactory.generator.dataset_open import Dataset
+
+MIN_SCORE = 0.25
+AXES = ("x_mm", "y_mm", "z_mm")
+
+
+def faults(w: int, h: int, layout_other):
+    """{name: (markers or None, centre transform, image size after it)}: the inputs of the table.
+    The rotations turn the image about its centre (a camera mounted at that roll): a right pose
+    is the expected answer there, not a refusal."""
+    c = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    return {"as is": (None, lambda uv: uv, (w, h)),
+            "another layout": (layout_other, lambda uv: uv, (w, h)),
+            "stretched 1.5x": (None, lambda uv: c + (uv - c) * np.array([1.5, 1.0]), (w, h)),
+            "cropped 160/120 px": (None, lambda uv: uv + np.array([160.0, 120.0]), (w, h)),
+            "mirrored": (None, lambda uv: np.column_stack([w - 1 - uv[:, 0], uv[:, 1]]), (w, h)),
+            "rotated 90": (None, lambda uv: np.column_stack([uv[:, 1], w - 1 - uv[:, 0]]), (h, w)),
+            "rotated 180": (None, lambda uv: np.column_stack([w - 1 - uv[:, 0], h - 1 - uv[:, 1]]), (w, h)),
+            "rotated 270": (None, lambda uv: np.column_stack([h - 1 - uv[:, 1], uv[:, 0]]), (h, w))}
+
+
+def run(root: Path) -> dict:
+    ds = Dataset.open(root)
+    dets = json.loads((root.parent / f"{root.name}.detections_bench.json").read_text())
+    card = dets.get("centre_noise_px")
+    w, h = ds.config.image.width, ds.config.image.height
+    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
+    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)   # another scene's
+    other = build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
+    out = {"dataset": str(root), "version": ds.version_id, "card_px": card, "faults": {}}
+    for name, (markers, move, size) in faults(w, h, other).items():
+        rows = []
+        for fid in ds.frames(("test",)):
+            cls, uv, boxes, refined, edge = detection_arrays(dets["frames"].get(fid, []), MIN_SCORE)
+            if len(cls) == 0:
+                continue
+            rec, _, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
+                                    (cls, move(uv), _moved_boxes(boxes, move), refined, edge), None,
+                                    "pinhole", docking_options(card))
+            rows.append(_row(rec, ds.labels[fid]["pose_b_in_d"]))
+        out["faults"][name] = _summary(rows)
+    return out
+
+
+def _moved_boxes(boxes, move):
+    """Detection boxes (n, 4) x0, y0, x1, y1 after the centre transform ``move`` (its corners
+    moved, the box around them); None stays None."""
+    if boxes is None:
+        return None
+    lo, hi = move(boxes[:, :2]), move(boxes[:, 2:])
+    return np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
+
+
+def _row(rec: dict, truth: dict) -> dict:
+    if not rec["ok"]:
+        return {"ok": False, "category": rec.get("category")}
+    cov = np.array(rec["covariance"])
+    z = [abs(rec["pose"][k] - truth[k]) / np.sqrt(cov[i, i]) for i, k in enumerate(AXES)]
+    test = rec.get("fit_test", {})
+    return {"ok": True, "left_out": len(rec.get("left_out", [])), "ratio": test.get("ratio"),
+            "max_z": float(max(z)), "x_err": rec["pose"]["x_mm"] - truth["x_mm"]}
+
+
+def _summary(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["ok"]]
+    ratios = np.array([r["ratio"] for r in ok if r["ratio"] is not None])
+    spread = [float(np.median(ratios)), float(np.percentile(ratios, 90)), float(ratios.max())] if len(ratios) else []
+    return {"frames": len(rows), "ok": len(ok), "left_out": sum(r["left_out"] > 0 for r in ok),
+            "ok_beyond_3_sigma": sum(r["max_z"] > 3 for r in ok),
+            "refused": {c: sum(1 for r in rows if not r["ok"] and r["category"] == c)
+                        for c in sorted({r["category"] for r in rows if not r["ok"]})},
+            "ratio_median_p90_max": spread}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("datasets", nargs="+", type=Path)
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args()
+    print("| dataset | input | frames | ok | left a centre out | ok and beyond 3 sigma | refused | ratio median / p90 / max |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
+    results = []
+    for root in args.datasets:
+        results.append(res := run(root))
+        for name, s in res["faults"].items():
+            refused = ", ".join(f"{c} {n}" for c, n in s["refused"].items()) or "-"
+            print(f"| {Path(res['dataset']).name} | {name} | {s['frames']} | {s['ok']} | {s['left_out']} | "
+                  f"{s['ok_beyond_3_sigma']} | {refused} | " + " / ".join(f"{v:.2f}" for v in s["ratio_median_p90_max"])
+                  + " |", flush=True)
+    if args.out:
+        write_json_atomic(args.out, {"results": results})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

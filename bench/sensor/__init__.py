@@ -1,0 +1,1 @@
+"""Sensor and colour cameras: effects on centres and pose, Cramer-Rao bounds, demosaic cost."""

@@ -1,0 +1,1 @@
+"""Solver: accuracy and honesty on synthetic geometry, speed, memory, bounds, tool checks."""

@@ -1,0 +1,142 @@
+"""What the measured structure of the centre errors does to the pose's expected RMSE.
+
+The Cramer-Rao bound that ``dockfactory evaluate`` prints treats the centres of a frame as
+independent, each with the disc noise model's covariance C_i = s^2 T_i (solver.disc_noise). The
+centre errors of real detections are not quite that: each marker of the layout has its own
+variance relative to the model, and the errors of one frame are correlated. This study measures
+both on the frames of one split (default train: they evaluate nothing) and predicts, on the frames
+of another (default test), the covariance of the solver's weighted fit (weights C_i^-1) under the
+measured structure: the sandwich A^-1 J^T W Sigma W J A^-1 (A = J^T W J, J the Jacobian at the
+true poses, Sigma_ij = T_i^1/2 M_ij T_j^1/2 with M the measured second moments of the whitened
+errors T_i^-1/2 e_i over (marker id, axis), normalised to a mean variance of 1 so that the scale
+stays the model's). It prints, per pose component, the measured RMSE, the independent bound (the
+evaluate run's ``crb_*``) and the prediction with the measured structure, both as ratios.
+
+Inputs: the acceptance run's folder (``detections.json``, ``poses.json``, ``eval/frames.csv``, as
+``bench/paper/paper.sh accept_s`` writes them). Centres: refined detections at score >= 0.25 matched
+within 3 px to a marker at least 99 % visible; frames of one condition (default normal).
+
+Run: python -m bench.solver.correlated_bound DATASET RUN_DIR [--measure-split train] [--eval-split test]
+     [--condition normal]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+from bench.marker_match import nearest_marker
+
+from dockfactory.eval.centre_noise_disc import label_noise_shapes
+from dockfactory.solver.crb import _joint_jac
+from dockfactory.solver.refine import d_from_b_jacobian
+
+IDS = [f"{s}{i}" for s in "AB" for i in range(7)]
+SLOT = {k: i for i, k in enumerate(IDS)}
+POSE = ("x", "y", "z", "alpha", "beta", "gamma")
+MATCH_PX = 3.0
+
+
+def sqrt_spd(t: np.ndarray) -> np.ndarray:
+    w, v = np.linalg.eigh(t)
+    return (v * np.sqrt(w)) @ v.T
+
+
+def whitened_errors(label: dict, dets: list[dict]) -> dict:
+    """{marker id: T^-1/2 (centre - outline centroid)} of the matched refined detections."""
+    markers = [m for m in label["markers"] if m["in_frame"] and m.get("visible_fraction", 0) >= 0.99]
+    out = {}
+    for det in dets:
+        if not det.get("refined") or det["score"] < 0.25:
+            continue
+        best = nearest_marker(det, markers, MATCH_PX)
+        shape = None if best is None else label_noise_shapes(label, [best[1]])
+        if shape is not None and best[1]["id"] in SLOT:
+            out[best[1]["id"]] = np.linalg.solve(sqrt_spd(shape[0]), best[0])
+    return out
+
+
+def measured_moments(root: Path, frames: dict, split: str, condition: str) -> tuple[np.ndarray, int]:
+    """(28, 28) second moments of the whitened errors over (marker id, axis), pairwise over the
+    frames where both are present, normalised to a mean diagonal of 1; the frame count."""
+    total, count, n = np.zeros((28, 28)), np.zeros((28, 28)), 0
+    for fid, dets in sorted(frames.items()):
+        label = json.loads((root / "labels" / f"{fid}.json").read_text())
+        if label["spec"]["split"] != split or label["spec"]["condition"] != condition:
+            continue
+        v = np.full(28, np.nan)
+        for k, w in whitened_errors(label, dets).items():
+            v[2 * SLOT[k]:2 * SLOT[k] + 2] = w
+        ok = ~np.isnan(v)
+        total += np.outer(np.where(ok, v, 0), np.where(ok, v, 0))
+        count += np.outer(ok, ok)
+        n += 1
+    m = total / np.maximum(count, 1)
+    return m / np.diag(m).mean(), n
+
+
+def frame_stds(label: dict, ids: list[str], moments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(independent bound, the weighted fit's std under the measured structure, the bound under
+    it) of the 6 pose components, in the model's relative units (unit scale)."""
+    by = {m["id"]: m for m in label["markers"]}
+    order = [i for i in ids if i in by and i.startswith("A")] + [i for i in ids if i in by and i.startswith("B")]
+    pa, pb = ([by[i]["center_section_mm"] for i in order if i.startswith(s)] for s in "AB")
+    ca = np.asarray(label["camera"]["cam_from_d"])
+    cb = ca @ np.asarray(label["d_from_b"])
+    jac = _joint_jac(np.asarray(pa), ca, np.asarray(pb), cb, label["camera"]["focal_px"],
+                     label["camera"]["principal_point"])
+    shapes = label_noise_shapes(label, [by[i] for i in order])
+    roots = [sqrt_spd(t) for t in shapes]
+    n = len(order)
+    weight, sigma = np.zeros((2 * n, 2 * n)), np.zeros((2 * n, 2 * n))
+    for a in range(n):
+        weight[2 * a:2 * a + 2, 2 * a:2 * a + 2] = np.linalg.inv(shapes[a])
+        for b in range(n):
+            sa, sb = 2 * SLOT[order[a]], 2 * SLOT[order[b]]
+            sigma[2 * a:2 * a + 2, 2 * b:2 * b + 2] = roots[a] @ moments[sa:sa + 2, sb:sb + 2] @ roots[b]
+    a_inv = np.linalg.inv(jac.T @ weight @ jac)
+    sandwich = a_inv @ jac.T @ weight @ sigma @ weight @ jac @ a_inv
+    bound = np.linalg.inv(jac.T @ np.linalg.solve(sigma, jac))
+    prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
+    return tuple(np.sqrt(np.diag(prop @ c[:12, :12] @ prop.T)) for c in (a_inv, sandwich, bound))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("dataset", type=Path)
+    ap.add_argument("run", type=Path, help="acceptance run folder (detections.json, poses.json, eval/frames.csv)")
+    ap.add_argument("--measure-split", default="train")
+    ap.add_argument("--eval-split", default="test")
+    ap.add_argument("--condition", default="normal")
+    args = ap.parse_args()
+    dets = json.loads((args.run / "detections.json").read_text())["frames"]
+    poses = json.loads((args.run / "poses.json").read_text())["frames"]
+    moments, n = measured_moments(args.dataset, dets, args.measure_split, args.condition)
+    rows = [r for r in csv.DictReader((args.run / "eval" / "frames.csv").open())
+            if r["split"] == args.eval_split and r["condition"] == args.condition and r["ok"] == "True"]
+    if not n or not rows:
+        raise SystemExit(f"{args.run}: no {args.condition} frames of split {args.measure_split!r} or {args.eval_split!r}")
+    stats = []
+    for r in rows:
+        label = json.loads((args.dataset / "labels" / f"{r['frame_id']}.json").read_text())
+        ind, fit, bound = frame_stds(label, poses[r["frame_id"]]["marker_ids"], moments)
+        stats.append([[float(r[f"err_{c}"]), float(r[f"crb_{c}"]), ind[k], fit[k], bound[k]]
+                      for k, c in enumerate(POSE)])
+    s = np.asarray(stats)
+    rms = np.sqrt((s ** 2).mean(axis=0))  # (6, 5); columns 2-4 at unit scale: rescale to the run's
+    print(f"structure measured on {n} {args.measure_split} {args.condition} frames; "
+          f"{len(rows)} {args.eval_split} {args.condition} frames")
+    print("bound: the run's (independent centres); fit: the solver's weighted fit under the measured structure;")
+    print("bound*: the Cramer-Rao bound under the measured structure. Ratios: RMSE / each.")
+    print(f"{'':6s} {'RMSE':>8s} {'bound':>8s} {'ratio':>6s} {'fit':>8s} {'ratio':>6s} {'bound*':>8s} {'ratio':>6s}")
+    for k, c in enumerate(POSE):
+        fit, bound = (rms[k, 1] * rms[k, j] / rms[k, 2] for j in (3, 4))
+        print(f"{c:6s} {rms[k, 0]:8.4f} {rms[k, 1]:8.4f} {rms[k, 0] / rms[k, 1]:6.3f} {fit:8.4f} "
+              f"{rms[k, 0] / fit:6.3f} {bound:8.4f} {rms[k, 0] / bound:6.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

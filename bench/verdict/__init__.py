@@ -1,0 +1,1 @@
+"""The verdict: coverage of the confidence bounds and of a pose's U."""
