@@ -1,4 +1,4 @@
-"""Render-cost variants for bench/render_profile.py: the same scene rendered with one
+"""Render-cost variants for bench/render/render_profile.py: the same scene rendered with one
 Cycles or scene setting changed at a time, timed in this process (bpy stays in this package)."""
 from __future__ import annotations
 

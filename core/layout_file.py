@@ -35,7 +35,7 @@ from dockfactory.core.layout import Marker, layout_problems
 from dockfactory.core.names import SECTIONS
 from dockfactory.core.user_files import check_regular_file
 
-MAX_MARKERS_PER_SECTION = 32   # identification's time grows about as markers^5 (bench/solve_memory.py)
+MAX_MARKERS_PER_SECTION = 32   # identification's time grows about as markers^5 (bench/solver/solve_memory.py)
 MAX_MARKERS = 2 * MAX_MARKERS_PER_SECTION
 MAX_COORDINATE_MM = 1.0e5   # 100 m: a docking section is metres across, never more
 MAX_DIAMETER_MM = 1.0e3

@@ -10,7 +10,7 @@ from dockfactory.core.user_files import check_regular_file
 
 WEIGHTS_NAME = "yolov5n_se_rings_markers.pt"   # the default detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
-DESIGN_CARD_NAME = "design_predictor.json"   # the design predictor's card (bench/design_fit.py)
+DESIGN_CARD_NAME = "design_predictor.json"   # the design predictor's card (bench/design/design_fit.py)
 
 
 def _shipped(package: str, name: str) -> Path:

@@ -1,6 +1,6 @@
 """The detector network run by ONNX Runtime (the ``onnx`` extra): same inputs and outputs as the
 torch model in eval mode, about 2.4x faster on 2 CPU cores for a 640x480 input (18 ms against
-44 ms, bench/measure_speed.py).
+44 ms, bench/cli/measure_speed.py).
 
 The model is exported in memory from the loaded (BatchNorm-fused) torch model, once per input
 shape, so nothing is written and the weights file stays the only artefact. The export is checked

@@ -1,5 +1,5 @@
 """The design predictor's card: the centre-noise figures a prediction uses, what they were fitted
-on and the error they showed (written by bench/design_fit.py; models/design_predictor.json).
+on and the error they showed (written by bench/design/design_fit.py; models/design_predictor.json).
 
 Fields::
 
