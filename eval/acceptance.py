@@ -1,18 +1,16 @@
 """Acceptance spec (``configs/acceptance.toml``): what is gated, on which statistic, at what value.
 
-Thresholds apply to the components named in each table (x, y, z in mm; alpha, beta, gamma in deg);
-components not named are reported but not gated: leaving a component out is the one way to ungate
-it. A threshold that is given must be a finite number > 0 (NaN, inf, zero and negative values are
-refused, never read as "not gated"). A table that is given must gate at least one component, or
-say ``gated = false`` (and then name no threshold): an empty ``[estimation]`` table, or one with
-only a statistic, would otherwise switch the gate off without a word. Detection minima are in (0, 1]; ``[failures] max_rate`` is in
-[0, 1] and its ``conditions`` are names from ``core.config.CONDITIONS`` (case matters: "Normal" is
-refused), at least one, each once. With ``statistic = "rmse"`` (the default) a
-threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
-- estimation: repeatability, the pooled spread of repeated estimates of one static pose about
-  that pose's mean (RMS deviation; its square for mse);
-- localization: accuracy, the error of the estimate against the exact ground truth on the test
-  split.
+Thresholds apply to the components named in each table (x, y, z in mm; alpha, beta, gamma in deg); components not
+named are reported but not gated: leaving a component out is the one way to ungate it. A threshold that is given
+must be a finite number > 0 (NaN, inf, zero and negative values are refused, never read as "not gated"). A table
+that is given must gate at least one component, or say ``gated = false`` (and then name no threshold): an empty
+``[estimation]`` table, or one with only a statistic, would otherwise switch the gate off without a word. Detection
+minima are in (0, 1]; ``[failures] max_rate`` is in [0, 1] and its ``conditions`` are names from
+``core.config.CONDITIONS`` (case matters: "Normal" is refused), at least one, each once. With ``statistic =
+"rmse"`` (the default) a threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
+- estimation: repeatability, the pooled spread of repeated estimates of one static pose about that pose's mean (RMS
+  deviation; its square for mse);
+- localization: accuracy, the error of the estimate against the exact ground truth on the test split.
 """
 from __future__ import annotations
 

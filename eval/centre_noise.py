@@ -8,16 +8,7 @@ detection rows, so each used marker is matched to a detection of its class scori
 minus the exact centroid of the marker's image (label ``outline_centroid_px``: what a perfect
 detector measures; the solver itself corrects the perspective offset to the projected centre).
 
-Gate, in pixels only: a detection farther than ``GATE_RADIUS_FRACTION`` of the marker's apparent
-radius (sqrt(area_px / pi), the radius of a disc of the marker's projected area) from the centroid
-is no measurement of that marker's centre; a used marker without a detection inside its gate is
-counted (``outside_gate``), never silently dropped. Labels without ``area_px`` use
-``FALLBACK_GATE_PX``.
-
-Statistics are per axis (the std of one pixel coordinate, as the solver's covariance and the
-Cramer-Rao bound take it), over both axes pooled: ``rms_px`` (about zero: bias included, the
-second moment a least-squares fit propagates) and ``robust_px`` = 1.4826 x MAD (about each axis's
-median: the width of the core, blind to the tail); each also per axis (x, y).
+Why and how: docs/acceptance.md, "Centre noise".
 """
 from __future__ import annotations
 

@@ -5,14 +5,7 @@ label's ``outline_centroid_px``) and whitened by the relative covariance T_i of 
 (:func:`solver.disc_noise.noise_shapes` of the label's exact geometry): q_i = e_i^T T_i^-1 e_i,
 in px^2 of a round disc of ``REFERENCE_RADIUS_PX``.
 
-Scale: a Cramer-Rao bound is set by the Fisher information of the noise, not by its second moment
-(they agree for Gaussian noise only). The centre errors have heavy tails (a few partly hidden or
-glared discs pixels off among centres good to a few hundredths: results/README.md).
-A bivariate Student t (scale s, dof nu) is fitted to the whitened errors by maximum likelihood
-(EM for s at each nu of a grid, and the Gaussian limit) and the bound's scale is the Gaussian
-sigma with the same Fisher information about the centre, ``fisher_px`` = s sqrt((nu + 4) /
-(nu + 2)) (the location information of a bivariate t is (nu + 2) / ((nu + 4) s^2)); it equals
-the RMS scale for Gaussian errors. Both are reported, overall and per condition.
+Why and how: docs/acceptance.md, "Centre noise under the disc model".
 """
 from __future__ import annotations
 

@@ -1,23 +1,11 @@
 """Confidence bounds of the gated statistics: how far the true RMSE (or pooled spread) can be
 from the one measured on a few frames.
 
-Two methods, both one-sided at ``confidence`` (each bound alone holds with that probability):
-- chi-square, under a Gaussian error model: a sum of squares S over nu degrees of freedom
-  (the test frames' errors: nu = n, taken about zero, so a bias counts as error; a pooled
-  spread: nu = sum(n_i - 1) about each pose's mean) gives S / sigma^2 ~ chi2(nu), so
-  sigma <= sqrt(S / chi2_{1-c}(nu)) and sigma >= sqrt(S / chi2_c(nu)) with probability c;
-- bootstrap, distribution-free, over ``samples`` resamples with replacement. An RMSE: the
-  studentized (bootstrap-t) bound of log(mean e^2), each resample's t = (log m* - log m) / se*
-  with the delta-method standard error se = sd(e^2) / (sqrt(n) mean(e^2)); the bound is
-  log m - t_q se, q the (1 - c) quantile of t for the upper bound (c for the lower). The
-  percentile bootstrap it replaced saw no further than the frames drawn and undercovered, most
-  with few frames or heavy tails (bench/results/confidence/ has the coverage of both). A pooled
-  spread: the percentile bootstrap
-  of poses with all their captures (its (1 - c) and c quantiles). Few frames give few distinct
-  resamples: below ``MIN_BOOTSTRAP_N`` it is not computed.
-The bound that decides is the more cautious of the two: the larger upper bound and the smaller
-lower bound (``decide``). The chi-square quantile is computed here (regularized incomplete gamma,
-bisection): no scipy.
+Two methods, one-sided at ``confidence``: chi-square under a Gaussian error model, and the bootstrap (studentized
+for an RMSE, percentile for a pooled spread; not below ``MIN_BOOTSTRAP_N``); the more cautious bound decides
+(``decide``). No scipy.
+
+Why and how: docs/acceptance.md, "Confidence bounds".
 """
 from __future__ import annotations
 

@@ -8,16 +8,9 @@ about 95 % under a Gaussian):
 
 - IN when |y| + U <= T (conformity proven: the whole interval y +- U is in the zone);
 - OUT when |y| - U > T (non-conformity proven: the whole interval is outside);
-- UNDECIDED otherwise (the interval straddles a limit).
+- UNDECIDED otherwise (the interval straddles a limit), and when a value or its uncertainty is not finite.
 
-A value or uncertainty that is not a finite number (no pose, an undetermined covariance) is
-UNDECIDED: nothing is proven either way.
-
-The tolerance of a component is the acceptance spec's ``[localization]`` threshold (the square
-root of it for ``statistic = "mse"``): the accuracy the spec demands of a pose against the truth,
-read for one pose as its zone about the nominal docked pose (:func:`pose_tolerances`). The spec's
-``decision_rule = "simple"`` drops the guard band (k = 0: IN when |y| <= T, else OUT). Pure functions, no I/O: measure (per image) and a live
-stream call them alike. Exit statuses follow eval.acceptance (0 proven in, 1 out, 3 undecided).
+Why and how: docs/acceptance.md, "Conformity of one pose".
 """
 from __future__ import annotations
 

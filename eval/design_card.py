@@ -1,25 +1,9 @@
 """The design predictor's card: the centre-noise figures a prediction uses, what they were fitted
 on and the error they showed (written by bench/design/design_fit.py; models/design_predictor.json).
 
-Fields::
-
-    format              "dockfactory.design_predictor/1"
-    scale_px            disc-model centre noise per axis at REFERENCE_RADIUS_PX (monochrome /
-                        three-chip camera, dark ring, lossless image)
-    shift_px            [u, v] section offset per axis of that camera class
-    cfa_factor          {"none": 1, "rggb": g}: both figures scale by it
-    ring_factor         {"dark": {"none": 1, "rggb": 1}, "white": {"none": w0, "rggb": w1}}: per
-                        camera class (a white ring shows a Bayer camera the disc's edge in more
-                        of its samples)
-    edge_px             {"none": e0, "rggb": e1}: the edge width of each camera class (0: no
-                        thin-disc term)
-    jpeg_factor         {"none": j0, "rggb": j1}: at quality >= jpeg_min_quality
-    jpeg_min_quality    below it the card has no figure (the design is not predicted)
-    bound_factor        {component: k}: the RMSE over the model's figure
-    provisional         [factor names] measured on older renders or not on renders at all
-    fitted_on, error    where the figures come from and how far off they were
-
 A factor listed in ``provisional`` is reported beside every design that uses it.
+
+Why and how: docs/design.md, "The predictor's card".
 """
 from __future__ import annotations
 

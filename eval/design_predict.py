@@ -2,21 +2,10 @@
 at the true geometry of the design's pose distribution, with the centre noise its camera class is
 known to have.
 
-For each of ``geometry_frames`` pose draws of the design's scene (generator.sampler, the test
-frames of the design's config; normal light) and each marker of the layout, the centre noise is
-the disc model's (solver.disc_noise): a round disc of REFERENCE_RADIUS_PX errs ``scale_px`` per
-axis, a smaller or slanted one more, in the shape of its image, and one only a few of its camera
-class's edge widths thick more across it (the thin-disc term). The solver's fit is least squares
-over every centre (its covariance is the sandwich of that fit: solver.disc_noise.with_disc_noise),
-so the pose covariance is A J^T C J A (A = (J^T J)^-1, J the joint Jacobian over (w_A, t_A, w_B,
-t_B, f): the focal is estimated, the camera is uncalibrated), propagated to d_from_b; the section
-offset (a common shift of each section's centres, solver.section_shift) adds G G^T. Per
-component, the predicted RMSE is ``bound_factor`` x the RMS over the draws of the predicted std
-(noise and offset); the predicted repeatability spread leaves the offset out (a static pose
-keeps it: solver.section_shift).
-
 The scale, offset and factors come from the predictor's card (eval.design_card): fitted on
 renders, with the error it showed on renders it was not fitted on.
+
+Why and how: docs/design.md, "Predicting a design".
 """
 from __future__ import annotations
 

@@ -1,21 +1,6 @@
 """Every design of a space predicted and ranked against the acceptance spec.
 
-The probability that the guarded rule proves a gated component conforms, with n degrees of
-freedom and a true RMSE r against the threshold T (statistic "mse": T its square root): the
-chi-square upper bound sqrt(S / chi2_{1-c}(n)) is within T when the sum of squares S = r^2
-chi2(n) is at most T^2 chi2_{1-c}(n), so P = F_{chi2(n)}(T^2 chi2_{1-c}(n) / r^2) (the Gaussian
-model of eval.confidence; the bootstrap bound, which also decides from 5 frames, is more cautious
-on heavy tails and is not modelled). Components are taken as independent: P(accept) is the
-product over the gated components of both blocks. Localization: n = test frames; estimation:
-n = poses x (captures - 1). Detection and failure gates are not predicted (the renders of
-``--verify`` measure them).
-
-The rule has three outcomes and so has the prediction: a design passes when P(accept) >=
-``min_probability``, fails when P(reject) (the lower bound of some component proven beyond its
-threshold) is, and is undecided otherwise (near a threshold: the frames are a coin toss).
-Ranking: the passing designs first, the cheapest first when the space gives costs (else the
-largest margin first), then the undecided and the failing by P(accept). The Pareto front (passing designs no other passing design beats on margin, pixels,
-focal length and markers at once) is flagged.
+Why and how: docs/design.md, "Ranking designs".
 """
 from __future__ import annotations
 

@@ -1,41 +1,9 @@
 """A design space (TOML, data only): the cameras, lenses, distances, markers and image formats a
 user could buy or build, the scene they must work in and the tolerance they must pass.
 
-Format (every key checked; a bad key or value is one line naming the file, table and key)::
-
-    [design]
-    scene = "quick"             # a dataset config (file beside this one, or a shipped name): the
-                                # sections, pose ranges and tilt; each design replaces its camera,
-                                # lens, distance and markers
-    spec = "acceptance.toml"    # optional acceptance spec (default: the shipped one)
-    test_frames = 40            # the test frames the user will take (localization)
-    repeatability_poses = 3     # optional: static poses x captures each (estimation)
-    repeatability_captures = 10
-    geometry_frames = 24        # pose draws each prediction averages over
-    seed = 0
-    marker_cost = 0.0           # optional cost of one marker (both sections count)
-
-    [[camera]]                  # one table per camera
-    name = "IMX273 colour"
-    width = 1440                # px
-    height = 1080
-    pixel_um = 3.45             # pixel pitch, micrometres
-    cfa = "rggb"                # "rggb" (one-chip Bayer) or "none" (monochrome, three-chip)
-    preset = "imx273"           # optional sensor preset (core.sensor_presets), for renders
-    cost = 450.0                # optional
-
-    [[lens]]
-    focal_mm = 12.0
-    cost = 120.0                # optional
-
-    [space]                     # lists: every combination is a design
-    distance_mm = [[1000, 1800]]        # working distance ranges (mm, camera to the seam)
-    marker_diameter_mm = [16, 20]
-    ring = ["dark"]                     # "dark" / "white"
-    markers_per_section = [7]           # core.layout_patterns
-    image_format = ["png"]              # "png" (lossless) or "jpegQ" (Q in 1-100)
-
 A design is one camera x lens x one value of each [space] list.
+
+Why and how: docs/design.md, "The design space format".
 """
 from __future__ import annotations
 

@@ -1,12 +1,5 @@
 """A goodness-of-fit gate on every solved frame: residuals the camera's known noise cannot explain.
 
-A solve can converge on a wrong pose with an uncertainty that looks honest: the layout of another
-scene, an image stretched or cropped, a garbled stream frame give residuals tens of times the
-detector's centre noise, the covariance grows with them (it scales with the residuals' own
-estimate), and the pose is still hundreds of millimetres off. What the solve must be tested
-against is the noise the camera class is known to have: the noise card's centre noise (measured
-on labelled frames of that detector), or the noise a caller states.
-
 ``fit_test``: the chi-square of a solve's residuals against that noise, T = RSS / sigma^2 over
 dof = 2 n - p (n points used, p = 13 pose and focal parameters plus the free intrinsics of its
 camera model), and its p-value; the frame ``explains`` the residuals when p >= GATE_P. Without a
@@ -17,13 +10,7 @@ known noise, or without degrees of freedom, nothing is tested (``explains`` None
 intrinsics cannot explain is left out of the run (its camera is not the run's), the run solved
 again without it.
 
-``gate``: a frame that fails is solved again without one centre (each in turn; the one whose
-removal leaves the smallest statistic), then without a second, at most MAX_LEFT_OUT: a bad
-centre (a glare spot, an occluder) explains a misfit that one point carries. The first fit that
-passes is kept, and its record names the centres left out; if none passes, the frame is not ok,
-with the ratio of its residuals to the known noise in one line. A section shift of the card (a
-common offset of a section's centres) is absorbed by the pose and barely shows in the
-residuals: it is not part of the test.
+Why and how: docs/acceptance.md, "The goodness-of-fit gate".
 """
 from __future__ import annotations
 

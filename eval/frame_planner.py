@@ -1,22 +1,9 @@
 """How many test frames (repeatability degrees of freedom) prove conformance under the guarded rule.
 
-For a gated pose statistic whose true value is expected to be ``rmse`` (mm or deg) against a
-threshold T (the spec's; its square root for ``statistic = "mse"``), the number of frames n at
-which the one-sided chi-square bound at the spec's ``confidence`` decides
-(eval.confidence.frames_to_decide): for rmse < T the n at which the upper bound
-rmse sqrt(n / chi2_{1-c}(n)) falls within T (conformance proven: ACCEPTED on that criterion),
-for rmse > T the n at which the lower bound rises beyond it (REJECTED). It assumes the measured
-statistic comes out at its expected value and Gaussian errors (the chi-square model; from 5
-frames the bootstrap bound also decides, more cautious on heavy tails); the margin rmse / T says
-how hard the proof is (n grows without bound as the margin nears 1).
-
 Localization: n = test frames (nu = n). Estimation: nu = the repeatability captures minus the
 static poses (each pose's mean costs one degree of freedom).
 
-The expected figures come from the user, or from a config's geometry (:func:`expected_from_config`):
-the RMS over the config's test frames of the Cramer-Rao standard deviation of each component at a
-given centre noise (solver.crb, joint problem: shared unknown focal), times ``bound_factor``
-(a real solve sits above the bound: docs/acceptance.md gives the measured ratios).
+Why and how: docs/acceptance.md, "Planning frames".
 """
 from __future__ import annotations
 

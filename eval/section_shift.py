@@ -7,12 +7,7 @@ absorbs without a residual: it moves X and Y of the relative pose and no fit's r
 it. The solver carries it as a prior (solver.options.DockingOptions.section_shift_px) that has to
 be measured on other labelled frames of the camera class than the ones it is judged on.
 
-Estimator (per axis): for every solved frame and section with at least ``MIN_SECTION_MARKERS``
-matched centres (``eval.centre_noise.used_centre_matches``), m = the mean error of the section's
-centres, s^2 = their sample variance, n their number; the shift's variance is the mean of
-m^2 - s^2 / n over those groups (the part of the section mean that its markers' own scatter does
-not explain; a mean about zero: a bias of unknown sign is counted), floored at 0. A method of
-moments: unbiased when the markers' errors scatter independently about the common offset.
+Why and how: docs/acceptance.md, "Measuring the section shift".
 """
 from __future__ import annotations
 

@@ -2,41 +2,9 @@
 standard uncertainty of X, Y, Z (mm) and alpha, beta, gamma (deg), their combination and the
 expanded uncertainty U = k u (k = 2).
 
-Inputs and how each is propagated (first order, through the Jacobian of the solver's own
-residuals, :func:`solver.refine.stack_blocks`, at the solved pose and camera; J over
-(w_A, t_A, w_B, t_B, f, *free), the d_from_b propagation :func:`solver.refine.d_from_b_jacobian`):
-
-- **camera model**: what the solver added to the reported covariance for the intrinsics its
-  camera model does not estimate, marginalised over their plausible range
-  (:mod:`solver.model_error`; the record's ``model_check.pose_variance``; None when nothing was
-  marginalised, the lens taken as known);
-- **centre noise** and **intrinsics**: the rest of the pose's reported covariance (the solver's,
-  which carries the noise of the detected centres and the estimation of the focal length and
-  of the model's free intrinsics) is split. A frame solved alone: the share of the intrinsics
-  is 1 - C_cond / C_marg per component, C_marg the pose block of (J^T J)^-1 and C_cond that of
-  (J_pose^T J_pose)^-1 (the intrinsics held at their estimate: the Schur complement), so the
-  two terms add up to the reported variance exactly. A frame of a docking run solved with
-  shared intrinsics (``self_calibrated == "sequence"``): the run's intrinsics standard
-  deviations propagated through this frame's sensitivity S = -(J_p^T J_p)^-1 J_p^T J_i (at
-  most the reported variance), the rest to centre noise;
-- **marker layout**: the layout's ``sigma_mm`` per marker (core.layout_file), independent per
-  coordinate: a marker displaced by dX moves its residuals by J_t R dX (J_t the translation
-  columns of its section, R its section's rotation), so the parameters move by
-  -(J^T J)^-1 J^T G dX and their covariance is (J^T J)^-1 (sum_i s_i^2 J_i^T T_i T_i^T J_i)
-  (J^T J)^-1 with T_i = J_t,i (R R^T = I). Unweighted least squares (the last fit reweights
-  its centres; the layout term is a first-order figure, checked against a Monte Carlo of
-  perturbed layouts in tests/eval/test_uncertainty_budget.py). When the covariance's noise was
-  estimated from the frame's residuals, the part of the layout error that shows as misfit is
-  already in it: that share moves from the centre-noise term to the layout term (not counted
-  twice; bench/results/confidence/README.md has the coverage of U with and without it);
-- **section offset** (when the solve carried one, the record's ``section_shift_variance``): a
-  common offset of each section's centres (solver.section_shift), measured on labelled frames of
-  the camera class; what it added to the covariance;
-- **detector bias** (when measured, ``bias_px`` = the mean offset (2,) px of the detector's
-  centres): a common shift of every centre, each axis taken as a standard uncertainty of its
-  size (its sign unknown for another camera), propagated as a shift of all residuals.
-
 Combined u_c = sqrt(sum of the squares) (the inputs are independent), U = k u_c.
+
+Why and how: docs/acceptance.md, "The uncertainty budget".
 """
 from __future__ import annotations
 
