@@ -2,19 +2,10 @@
 
 Each maps ``x: (B, C, H, W) float32`` to a tensor of the same shape. The model inserts the
 chosen block after the last backbone C3, before SPPF (see ``detector.model``).
+Blocks: ``se`` (Squeeze-and-Excitation), ``eca`` (Efficient Channel Attention), ``cbam``, ``a2`` (double
+attention), ``none`` (identity).
 
-- ``se``: Squeeze-and-Excitation (Hu et al. 2018): global average pool, FC C -> C/r, ReLU,
-  FC C/r -> C, sigmoid, channel-wise scale; reduction r = 16, no FC biases.
-- ``eca``: Efficient Channel Attention (Wang et al. 2020): global average pool, 1-D convolution
-  across channels with the adaptive kernel size k = |log2(C)/2 + 1/2| made odd, sigmoid, scale.
-- ``cbam``: Convolutional Block Attention Module (Woo et al. 2018): channel attention (shared MLP
-  on average- and max-pooled features, r = 16) then spatial attention (7 x 7 conv on the
-  channel-wise mean and max).
-- ``a2``: double attention (Chen et al. 2018, "A^2-Nets"): feature gathering (bilinear pooling of
-  c_m feature maps with c_n softmax-over-space attention maps) and distribution (softmax over the
-  c_n descriptors at each position), projected back to C channels and added to the input
-  (residual).
-- ``none``: identity.
+Why and how: docs/detector.md, "Attention blocks".
 """
 from __future__ import annotations
 

@@ -1,24 +1,9 @@
 """Edge fit of one disc to every channel of a Bayer camera, each at the sensor's own samples of it.
 
-``detector.centre.fit_disc_edge`` fits one image with one disc and ring level. A Bayer sensor
-samples each pixel in one channel, and every demosaic keeps those samples. Here the disc's geometry
-(centre, ellipse, edge width) is shared and each channel has its own disc level (a plane: shading)
-and ring level, fitted at that channel's own sites only: R at R sites, G at both G sites, B at B
-sites. A red disc is bright in R and darker than its ring in G and B; a blue disc is bright in B
-and brighter than its ring in G. A channel whose contrast (disc against ring) is under
-``MIN_CHANNEL_CNR`` times its noise (robust spread over the disc and the ring at its sites) is left
-out: its levels would be fitted to noise.
-
-Weights, in two fits. The first weighs each sample by the inverse of its channel's noise, so a
-channel adds edge evidence in proportion to its contrast-to-noise squared, as least squares does.
-The second, started from the first, weighs each channel by the inverse RMS of its residual in the
-first: its noise plus what the model misses of it. The class channel's sharp, high-contrast
-rendered edge is not the model's logistic profile and leaves the largest residual, so the other
-channels' small but cleaner steps count for more than their noise alone says. The band, the usable
-mask and the acceptance checks are those of ``fit_disc_edge``, on the class's own channel.
-
 Pixel convention: OpenCV (the centre of the top-left pixel is (0, 0)); values are linear (8-bit
 sRGB through ``centre._SRGB_TO_LINEAR``).
+
+Why and how: docs/detector.md, "The joint edge fit of a Bayer camera".
 """
 from __future__ import annotations
 

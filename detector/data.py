@@ -8,11 +8,7 @@ every marker (clutter, flanges, occluders, glare). Inference runs on the whole s
 Coordinates: labels are in the OpenCV convention (pixel centres at integers); the network works
 in corner coordinates (``opencv + 0.5``) scaled by ``input_scale``, where resizing is exact.
 
-Augmentation (kornia, per sample, every parameter drawn from a seeded ``torch.Generator``):
-mild geometric changes (scale 0.8-1.25, rotation +-10 deg, left-right flip; markers are kept
-whole and their boxes follow the transformed disc outline) and photometric ones (gamma,
-contrast, brightness, Gaussian blur, Gaussian noise: the low-light look). Hue is never changed:
-colour is the class.
+Why and how: docs/detector.md, "Training data".
 """
 from __future__ import annotations
 

@@ -1,12 +1,5 @@
 """YOLOv5 v6/v7 detector (scales n and s) with an optional attention block and P2 head.
 
-Layout (YOLOv5 v6.0 ``yolov5{n,s}.yaml``; widths x0.25 for n, x0.5 for s; depths x0.33):
-
-    backbone: Conv 6x6/2, Conv 3x3/2, C3, Conv/2, C3 x2 (P3), Conv/2, C3 x3 (P4), Conv/2, C3 (P5),
-              [attention, after the last C3 and before SPPF], SPPF
-    neck:     PAN (top-down 1x1 Conv + upsample + concat + C3, bottom-up 3x3/2 Conv + concat + C3)
-    head:     Detect: one 1x1 conv per level, 3 anchors x (5 + classes) outputs
-
 Box decoding (YOLOv5 v6/v7): ``xy = (2 sigmoid(t_xy) - 0.5 + grid) * stride``,
 ``wh = (2 sigmoid(t_wh))^2 * anchor``. Coordinates of the network are continuous pixel
 coordinates of its input with (0, 0) at the top-left *corner* of the top-left pixel (the
@@ -15,9 +8,7 @@ conversion from/to the OpenCV convention lives in ``detector.infer``).
 With ``p2=True`` a fourth output at stride 4 is added: the P3 output is reduced (1x1 Conv),
 upsampled, concatenated with the stride-4 backbone feature and passed through a C3.
 
-Parameter counts for 2 classes without attention (BatchNorm not fused): n 1,766,623 and
-s 7,025,023, i.e. YOLOv5 v6's unfused 1,872,157 and 7,235,389 for 80 classes minus the smaller
-Detect convs ((sum of head channels + 3) x 234 fewer weights).
+Why and how: docs/detector.md, "The network".
 """
 from __future__ import annotations
 

@@ -3,23 +3,10 @@ to the weights (``<weights stem>.noise.json``) that names the weights by sha256 
 refinement (detector/centre.py) by the sha256 of its source: either changing makes the card stale
 (ignored, so no floor) until it is measured again (``dockfactory noise-card``).
 
-The solver estimates each frame's noise from its residuals. Those residuals underrate noise that
-is correlated between the markers of a frame, because it moves the pose without showing in them:
-on the test split of configs/detector.toml the reported std of X and alpha was 1.5x too small.
-
-- **Isotropic covariances** (a docking run's joint solve) are floored at the detector's own
-  measured noise (solver RefineOptions.sigma_floor_px).
-- **A single frame from detections** models each centre's noise by its disc's shape
-  (solver.disc_noise). That model's scale is the core of the errors, so the card's RMS, gross
-  errors included, is no floor there.
-
-The card also carries the common offset of a section's centres in a frame that no fit's
-residuals show (``section_shift_px``, eval.section_shift), measured on the same frames: the
-solver adds it to every covariance (solver.section_shift). It belongs to the camera class the
-card was measured on.
-
 ``detect`` copies both into the detections it writes, and ``solve`` and ``measure`` pass them
 to the solver.
+
+Why and how: docs/detector.md, "The noise card".
 """
 from __future__ import annotations
 

@@ -1,23 +1,12 @@
 """Training loop: YOLOv5's SGD parameter groups, warm-up, step schedule, EMA, checkpoints, resume.
 
-Hyper-parameters are the paper's: lr0 0.01 divided by 10 every 100 epochs, momentum 0.937
-(Nesterov), weight decay 5e-4 on conv/linear weights only, 3 warm-up epochs (bias lr from 0.1,
-momentum from 0.8), loss gains box 0.05, cls 0.5, obj 1.0, EMA of the weights (decay
-0.9999 x (1 - exp(-updates / 2000))). Gradients are accumulated to a nominal batch ``nbs``
-(YOLOv5: 64; default here 16 = the batch, so small CPU runs still take many steps) and clipped
-to norm 10.
-
 An epoch is ``crops_per_frame`` windows of every training frame (see ``detector.data``).
 After every epoch ``RUN/last.pt`` (full checkpoint) and ``RUN/history.json`` are written
 atomically; at the end ``RUN/weights.pt`` holds the EMA weights (fp32). ``resume=True``
 continues from ``RUN/last.pt``; the batches are functions of (seed, epoch, index), so an
 interrupted and resumed run equals an uninterrupted one.
 
-Fine-tuning (``init``): the run starts from the EMA weights of a weights file or checkpoint; the
-network (scale, attention, heads, anchors) and its input scale come from that file, so the boxes
-keep the anchors they were trained with; the warm-up ramps the biases from ``lr0`` rather than
-from 0.1, which would throw away a trained objectness prior. The file's sha256 is recorded in the
-config (a resumed fine-tune must name the same file) and in the weights' provenance.
+Why and how: docs/detector.md, "Training".
 """
 from __future__ import annotations
 

@@ -2,17 +2,10 @@
 split, and write the layout of the paper's Table 1 (mAP50 and mAP50:95, all and per class) with the mean
 and spread (sample standard deviation) over seeds and the budget stated.
 
-Runs live in ``OUT/<attention>_seed<k>/``; a finished run (weights.pt and metrics.json present) is
-not trained again, so an interrupted ablation continues where it stopped. With ``record_dir``
-every finished run's metrics are also written to ``RECORD/<attention>_seed<k>.json`` (a folder
-meant to be committed as each run lands), and a run recorded there for the same dataset version
-and training config is taken from the record, so the table survives the loss of ``OUT``. A record
-made before a figure was measured (YOLOv5's mAP, the mAP of the network's own boxes) gets it from
-the run's saved test detections while they are there. ``train=False`` only collects: runs not
-finished yet are left out of the table (and nothing is trained), e.g. beside a running ablation.
-
 Two scores per run: the boxes our pipeline outputs (refined by the edge fit, ``detector.centre``)
 and the network's own boxes (``network_boxes``): the paper's Table 1 scores a network.
+
+Why and how: docs/detector.md, "The attention ablation's runs".
 """
 from __future__ import annotations
 

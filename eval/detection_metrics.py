@@ -1,24 +1,8 @@
 """Detection metrics: COCO mAP (pycocotools COCOeval), centre error, recall of visible markers.
 
-- mAP50 and mAP50:95, overall and per class, from COCOeval (iouType 'bbox', area 'all',
-  100 detections) against the COCO dict of ``generator.export_coco.coco_from_labels``. Markers
-  below the dataset's visible threshold are crowd (ignore) regions there. Detections are in the
-  OpenCV pixel convention and are shifted by +0.5 px into COCO's (as the export does for labels).
-- Centre error: each ground-truth marker (visible fraction >= threshold) is matched to at most
-  one detection of its class (greedy by falling score, box IoU >= 0.5); the error is the distance
-  (px) between the detection's ``center_px`` and the label's exact projected centre. Reported for
-  normal frames (conditions normal, ideal) and challenging ones (low_light, occlusion, glare).
-- The same mAP50 and mAP50:95 as YOLOv5's val.py computes them (``yolov5_ap``), under
-  ``"yolov5"``: its interpolation tops out at 0.995, the paper's figures are on that scale.
-- The same two mAPs with the network's own boxes (``bbox_detector_px``, before the edge-fit
-  refinement of ``detector.centre``), under ``"network_boxes"``, when every detection has them:
-  the refined boxes are part of our pipeline, the network's are what a detector table such as
-  the paper's Table 1 scores.
-- Recall of visible markers: the share of markers with visible fraction >= 0.5 matched by a
-  detection with score >= ``recall_conf``.
-Markers whose label says ``legible`` false (colour washed out by glare or lost in the dark) are
-ignore regions in the COCO export and are left out of the centre error and the recall as well;
-labels without the field count as legible.
+Also YOLOv5's mAP (``"yolov5"``) and the network's own boxes' (``"network_boxes"``); illegible markers are ignored.
+
+Why and how: docs/detector.md, "Detection metrics".
 """
 from __future__ import annotations
 

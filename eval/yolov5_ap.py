@@ -1,20 +1,7 @@
 """mAP as YOLOv5's ``val.py`` computes it, beside the COCO figure, for comparing with papers that
 report YOLOv5's numbers (ours: reference.md, Table 1).
 
-The two definitions differ at the top of the scale:
-- COCOeval averages the interpolated precision at 101 recall points; a recall point the detector
-  never reaches counts 0, so one missed ground-truth box of thousands (recall 0.999) caps AP50 at
-  100/101 = 0.9901, and a perfect detector gets 1.0.
-- YOLOv5 (``utils/metrics.py``, ``compute_ap`` with ``method='interp'``) closes the precision
-  curve with the points (0, 1) and (1, 0), samples it at 101 recall points and integrates with the
-  trapezoid rule; the last interval (recall 0.99 to 1.00) always falls from the curve to 0, so a
-  perfect detector gets 0.995 and so does one that misses a few boxes of thousands.
-
-Matching follows YOLOv5's ``process_batch``: at each IoU threshold (0.50:0.05:0.95), every pair
-with IoU >= threshold and the same class is a candidate; pairs are taken by falling IoU, each
-detection and each ground truth at most once (confidence plays no part in the matching). Ground
-truth is the non-crowd annotations of the COCO dict; YOLOv5 has no ignore regions, so a detection
-on a crowd (ignored) marker is a false positive here, as it would be on our YOLO export.
+Why and how: docs/detector.md, "YOLOv5's mAP".
 """
 from __future__ import annotations
 
