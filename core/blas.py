@@ -1,20 +1,11 @@
 """The arithmetic behind labels pinned so they are the same bytes on every x86-64 CPU: numpy's
 BLAS kernel and its SIMD paths for sin, cos and kin.
 
-A label is float64 geometry (camera, poses, projected markers) and numpy hands its matrix products
-to OpenBLAS, which picks a kernel for the CPU it runs on. The Haswell, Zen and SkylakeX kernels
-round differently from the SSE3 one in the last bits, so the same config gave other label bytes on
-another machine (docs/datasets.md, "Publishing a dataset"). The ``dockfactory`` command (and
-every render worker it starts) sets ``OPENBLAS_CORETYPE`` to the SSE3 (Prescott) kernel, which
-every x86-64 CPU runs and which made the published paper dataset; it takes effect only when set
-before numpy loads, so a render checks the kernel actually loaded (``check_label_blas``).
+The ``dockfactory`` command and every render worker it starts set ``OPENBLAS_CORETYPE`` (the SSE3 Prescott kernel)
+and switch numpy's AVX-512 paths off (``NPY_DISABLE_CPU_FEATURES``) before numpy loads; ``check_label_blas``
+refuses a render when numpy was loaded otherwise.
 
-numpy computes float64 sin, cos, arcsin, power... with Intel's SVML on CPUs with AVX-512 and with
-libm on the others; the two round the last bits of some inputs differently, and a frame's sampled
-scene (its angles) then differs in the last bits (the labels of the shipped configs differed on
-about 80 % of their frames between an AVX-512 and an AVX2 machine). The same pin
-switches numpy's AVX-512 paths off (``NPY_DISABLE_CPU_FEATURES``), so every CPU takes libm's; the
-same check refuses a render when numpy was loaded earlier with them on.
+Why and how: docs/datasets.md, "Label arithmetic pinned".
 """
 from __future__ import annotations
 

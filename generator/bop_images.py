@@ -1,27 +1,11 @@
 """Per-image BOP data of one frame: the sections' masks, the depth image and scene_gt_info records.
 
-- ``mask``: the section's silhouette (body and flange, unoccluded) in the delivered image, the
-  label's own (generator.silhouette, generator.labels.part_outlines): the pixels whose centre lies
-  inside the image of the flange or of the body, each the convex hull of its projected circles
-  (the vertices of the exported model's rims), through the lens when the unit has distortion and
-  with B's points at their row times under a rolling shutter; recomputed from the label's camera
-  and the dataset's section dimensions, so it exists for every frame and its pixel count and box
-  are the label's ``pixels_all`` and ``bbox_obj_px``. Sampling pixel centres is what bop_toolkit's
-  renderer does: on a pinhole camera its render of the exported model in the exported pose is
-  this mask (tests/generator/test_export_bop.py).
-- ``mask_visib``: the pixels whose render index pass shows the section's body or one of its
-  markers (occluders, the other section and the image border cut out), within ``mask`` (BOP's
-  visible part of the silhouette; the index pass's pixels just outside it are edge samples of a
-  pixel whose centre is outside, or marker discs standing proud of the body, which the model does
-  not have). Needs the index pass, which a dataset keeps only with ``[render] keep_exr``.
-- ``depth``: the render's depth pass (planar depth along the optical axis, mm, in the delivered
-  geometry) as BOP's 16-bit PNG: ``mm = value * depth_scale``, 0 where nothing was hit; also only
-  with the kept EXR.
-
 BOP boxes (``bbox_obj``, ``bbox_visib``) follow bop_toolkit's ``misc.calc_2d_bbox`` on the masks'
 pixel indices: ``[x_min, y_min, x_max - x_min, y_max - y_min]``, ``[-1, -1, -1, -1]`` for an empty
 mask. Without the kept EXR, ``px_count_visib`` and ``bbox_visib`` are the label's (counted on the
 index pass at render time, not cut to ``mask``), and ``px_count_valid`` is ``px_count_all``.
+
+Why and how: docs/datasets.md, "BOP masks and depth".
 """
 from __future__ import annotations
 

@@ -2,18 +2,12 @@
 then a body generated from the dataset's identity), and the ``hf/`` view it points at
 (``generator.hf_view``).
 
-Front matter: ``license`` (the config's ``[dataset] license``, or the caller's override),
-``pretty_name``, ``task_categories``, ``tags``, ``size_categories`` (the hub's buckets of frame
-counts), and ``configs``: one config whose ``data_files`` name every non-empty split's folder
-under ``hf/`` (train, validation, test, repeat), so ``load_dataset(DIR)`` keeps every split.
-Body: version id, generator and Blender versions, seed, frames per split and condition, size,
-a summary of the config, the camera units and sensors, the label conventions, the files, how to
-load and how to verify the dataset.
-
 The card and the view are derived, like ``exports/``: they are not in the manifest (``dataset
 verify`` neither needs nor checks them; a dataset rendered before cards existed stays valid),
 they are written when a dataset completes and again by ``dockfactory dataset card DIR``, and a
 file whose bytes would not change is not rewritten (a DVC-tracked dataset stays clean).
+
+Why and how: docs/datasets.md, "The dataset card's content".
 """
 from __future__ import annotations
 

@@ -3,18 +3,10 @@ manifest. ``verify`` reports every problem; ``Dataset.open`` (generator.dataset_
 checks and refuses the dataset naming its first problems. With ``hash_bulk=False`` images and EXR
 are compared by size only (the small files, labels included, are always hashed).
 
-The chain of trust: dataset.json's config gives its version id (recomputed, so an edited config is
-caught) -> the config gives the frame plan -> the manifest must list exactly the plan's frames and
-files -> every file must match its manifest record (size, sha256) -> nothing else may sit among the
-content (a stray label+image pair, a symlink).
-
-Symlinks: refused, except the links a DVC cache puts in place (``generator.dvc_links``): a file
-symlink that resolves to a regular file inside the DVC cache of the dataset's project (or one the
-user names in ``DOCKFACTORY_DVC_CACHE``); a listed file behind such a link must still have its
-manifest size and sha256. Symlinked folders are always refused.
-
 Derived files (not content, never in the manifest, regenerable): ``logs/``, ``exports/``, the
 dataset card ``README.md`` and its Hugging Face view ``hf/`` (``generator.dataset_card``).
+
+Why and how: docs/datasets.md, "The chain of trust".
 """
 from __future__ import annotations
 

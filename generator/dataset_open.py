@@ -1,18 +1,11 @@
 """The dataset contract: every consumer (detect, train, solve, evaluate, export, run) reads a dataset
 through ``Dataset.open``.
 
-- The frame set is the manifest's, which must equal the plan of the dataset's own config; a file
-  in the folder that the manifest does not list (a stray label+image pair) is never a frame, and it
-  makes the dataset refused.
-- On open, the checks of ``generator.dataset_check``: identity (its config gives its version id),
-  manifest against plan, every file present with its size, no symlink, nothing unlisted, and the
-  sha256 of every file (the default, what every command does: about 240 MB/s on the 2-core
-  machine, 2 s for the 330 frames of configs/detector.toml, ~20 s for the paper's 3200).
-  ``full=False`` hashes only the small files (labels, meta records, identity, config, layout) and
-  compares images and EXR by size: for library callers that re-open a dataset they just checked.
-- A damaged, incomplete or foreign dataset raises DatasetError: one line naming its first problems.
-- A label is read when first asked for; its bytes are checked against the manifest's sha256 again
-  as it is read (a file changed after open is refused, not used).
+``Dataset.open`` runs the checks of ``generator.dataset_check`` (``full=False``: images and EXR by size only) and
+refuses a damaged, incomplete or foreign dataset with a one-line DatasetError; a label's bytes are checked against
+the manifest again when it is read.
+
+Why and how: docs/datasets.md, "The dataset contract".
 """
 from __future__ import annotations
 

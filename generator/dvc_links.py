@@ -10,13 +10,7 @@ to a regular file inside a DVC cache. The caches are
   that holds ``.dvc/``; its cache is ``.dvc/cache`` unless ``.dvc/config`` (or ``config.local``)
   sets ``[cache] dir`` (relative to ``.dvc/``, as DVC reads it).
 
-The caller checks the linked file's size and sha256 against the manifest (a link to any other
-cached file is a corrupt file, not a trusted one); every other symlink stays refused.
-
-Exports: DVC refuses a ``.dvcignore`` inside a folder it adds, so a dataset cannot ship one. An
-export written inside a tracked dataset makes ``dvc status`` report it modified unless the DVC
-project's ``.dvcignore`` ignores ``exports/``; otherwise exports go beside the tracked folder
-(``outside_exports``).
+Why and how: docs/datasets.md, "DVC links and exports".
 """
 from __future__ import annotations
 

@@ -1,28 +1,6 @@
 """BOP export (the layout bop_toolkit reads). Objects: 1 = section A, 2 = section B.
 
-exports/bop/
-  camera.json                     nominal camera (focal varies per frame: see scene_camera.json)
-  models/obj_000001.ply, obj_000002.ply, models_info.json   (mm, vertex normals: generator.bop_models)
-  models_eval/                    the same files (bop_toolkit's evaluation and vis_poses read this folder)
-  test_targets_bop19.json         the test scene's instances at least 10 % visible (BOP's target list)
-  <split>/000000/                 one BOP scene per split; image ids are frame order
-    rgb/<im>.png                  the dataset's images
-    mask/<im>_<gt>.png            each section's silhouette, 0 / 255 (gt: 0 = A, 1 = B, scene_gt's order)
-    mask_visib/<im>_<gt>.png      its visible part, from the index pass  } only for a dataset that keeps
-    depth/<im>.png                the depth pass, uint16, mm = value *    } its EXR ([render] keep_exr)
-                                  depth_scale (scene_camera.json)
-    scene_camera.json, scene_gt.json, scene_gt_info.json, frame_ids.json (image id -> frame id),
-    scene_camera_lens.json
-cam_R_w2c / cam_t_w2c use D as the world; model frames are the section frames (A: D; B: B's
-frame); translations in mm. Masks, depth and scene_gt_info: generator.bop_images (what each one
-is, how exact, and which need the kept EXR). px_count_all and bbox_obj are counted within the
-image (bop_toolkit's calc_gt_info renders on a canvas three times the image size, so for a
-section that leaves the image its figures are larger; the in-image ones are what mask/ holds).
-cam_K is the label's K (its principal point, + 0.5 for BOP's pixel corners). BOP has no place
-for lens distortion: scene_camera_lens.json beside scene_camera.json holds, per image id, the
-camera unit and its distortion coefficients in OpenCV's order (k1, k2, p1, p2, k3), which map
-the pinhole image of cam_K to the delivered one (undistort the images or keypoints with them
-before using cam_K as a pinhole camera; masks and depth are in the delivered image, like rgb).
+Why and how: docs/datasets.md, "The BOP export's files".
 """
 from __future__ import annotations
 

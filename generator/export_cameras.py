@@ -1,20 +1,11 @@
 """Cameras export: every frame's true intrinsics as calibration files the user's own tools read
 (OpenCV YAML, ROS camera_info, COLMAP cameras.txt; :mod:`dockfactory.core.calibration_files`).
 
-exports/cameras/
-  opencv/<frame_id>.yaml      the frame's camera: its label's K and distortion (OpenCV's order and
-  ros/<frame_id>.yaml         pixel convention), the image size
-  colmap/cameras.txt          one camera per frame, CAMERA_ID = 1 + the frame's index in plan order
-                              (COLMAP's principal point: OpenCV's + 0.5 px)
-  colmap/frame_ids.json       CAMERA_ID -> frame id
-  units/unit_<k>.yaml, unit_<k>.ros.yaml, unit_<k>.cameras.txt
-                              a camera unit whose frames all share one camera (a fixed focal, e.g.
-                              a config rendered from ``[camera_units] calibration``): that camera
-                              once; a unit that zooms has none here (its frames differ)
-
 The intrinsics are the pinhole K and Brown-Conrady lens the frame was rendered through: the
 labels' marker centres are these cameras' projections of the markers (tests hold it to
 cv2.projectPoints). The renderer's pixels are square (fx = fy).
+
+Why and how: docs/datasets.md, "The cameras export's files".
 """
 from __future__ import annotations
 

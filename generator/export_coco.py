@@ -1,43 +1,10 @@
 """COCO keypoint JSON from a dataset's labels (loads in pycocotools, detectron2 and datumaro).
 
-Layout (datumaro's COCO layout; pycocotools and detectron2 take the paths as given)::
-
     exports/coco/
       annotations/person_keypoints_<split>.json   split: train, val, test, repeat (when not empty)
       images/<split>/<frame_id>.png               hard links to the dataset's images (else copies)
 
-- one image per frame; image and annotation ids run on across the split files (train, val, test,
-  repeat, in that order), so the files of one export can be merged without collisions;
-- categories 1 RedA and 2 BlueB (ids start at 1: pycocotools treats 0 as unmatched), each with
-  the one keypoint ``centre``;
-- one annotation per marker that has visible pixels: ``bbox`` [x, y, w, h] is the projected
-  marker outline clipped to the image, ``segmentation`` that clipped outline as one polygon
-  (amodal: occluders are not cut out; ``[]`` when the dataset has no layout.json), ``area`` its
-  area, ``keypoints`` [x, y, v] the projected centre; a marker whose visible fraction is below the
-  dataset's ``visible_threshold``, or whose colour is washed out (label ``legible`` false), gets
-  ``iscrowd`` 1 (an ignore region: finding it neither helps nor hurts mAP); fully hidden and
-  out-of-frame markers get no annotation; a marker whose centre is outside the image (only part
-  of its disc in view) gets the keypoint [0, 0, 0] and ``num_keypoints`` 0.
-
-Pixel conventions (stated again in each file's ``info``):
-
-- ``bbox`` and ``segmentation``: continuous coordinates, (0, 0) is the top-left corner of the
-  top-left pixel: the label's (OpenCV) coordinates + 0.5;
-- ``keypoints``: pixel indices, the OpenCV convention of the labels ((0, 0) is the centre of the
-  top-left pixel): the label's ``center_px`` unchanged. Keypoint consumers (detectron2 and its
-  forks, MMPose) add 0.5 when they load COCO keypoints, which gives the continuous centre;
-  a converter that takes them as continuous (ultralytics' ``convert_coco(use_keypoints=True)``)
-  must add 0.5 to x and y of every keypoint with v > 0 first (``info.keypoints_to_continuous``),
-  or the keypoints land half a pixel up and left of the centres: the yolo-pose export has them
-  right.
-
-Cameras: each image record carries its camera unit (``camera_unit``), ``K`` (OpenCV pixels, with
-its principal point) and ``dist_coeffs`` (the unit's lens distortion, OpenCV's order k1, k2, p1,
-p2, k3; ``core.distortion.undistort_pixels`` undoes it); ``info.cameras`` lists every unit
-of the split with its distortion, chromatic aberration and principal point.
-
-``info.kpt_oks_sigmas`` holds the OKS sigma of the ``centre`` keypoint for keypoint COCOeval
-(``COCOeval(gt, dt, 'keypoints')`` needs ``params.kpt_oks_sigmas`` set to it).
+Why and how: docs/datasets.md, "The COCO export's annotations".
 """
 from __future__ import annotations
 

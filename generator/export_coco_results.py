@@ -5,21 +5,7 @@ One row per detection::
 
     {"image_id", "category_id", "bbox": [x, y, w, h], "score", "keypoints": [x, y, v]}
 
-- ``image_id``: the frame's image id in the COCO export (generator.export_coco.coco_image_ids:
-  ids run over train, val, test, repeat), so the rows of ``detect --split test`` load against
-  ``exports/coco/annotations/person_keypoints_test.json`` as they are (``COCO.loadRes`` refuses
-  rows whose image is not in the file: filter the rows of ``--split all`` by the file's image ids);
-- ``category_id``: class id + 1 (1 RedA, 2 BlueB), as in the export;
-- ``bbox``: the detection's box in continuous coordinates ((0, 0) is the top-left corner of the
-  top-left pixel: the detection's OpenCV ``bbox_px`` + 0.5), like the export's boxes;
-- ``keypoints``: the detection's (refined) centre in pixel indices, the convention of the export's
-  keypoints (OpenCV: the detection's ``center_px`` unchanged), with v = 2; COCOeval reads only x, y
-  of a result's keypoints;
-- ``score``: the detector's confidence.
-
-Keypoint COCOeval needs the OKS sigma of the ``centre`` keypoint, which the export states in
-``info.kpt_oks_sigmas`` (``[0.025]``, generator.export_coco.KPT_OKS_SIGMAS):
-``ev = COCOeval(gt, gt.loadRes(rows), "keypoints"); ev.params.kpt_oks_sigmas = np.array(sigmas)``.
+Why and how: docs/datasets.md, "COCO results rows".
 """
 from __future__ import annotations
 

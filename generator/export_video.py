@@ -1,23 +1,14 @@
 """Video export: each docking run of a dataset as one video, with its per-frame labels, so the stream
 path of measure (``measure --video``) is tested on real video decoding against exact ground truth.
 
-exports/video/ (format "video": MPEG-4 part 2, OpenCV's 'mp4v', lossy) or exports/video_lossless/
-(format "video_lossless": FFV1 in Matroska, lossless: the decoded frames are the PNGs' pixels):
-  videos.json                       the codec, the frame rate, the runs (file names, unit, run, frames)
-  unit<U>_run<RR>.mp4 | .mkv        the run's frames in run order, at :data:`VIDEO_FPS` frames/s
-  unit<U>_run<RR>.jsonl             one line per video frame: ``frame`` (0-based, the video's frame
-                                    index), ``timestamp_ms`` (frame / fps), ``frame_id``, ``split``,
-                                    ``condition``, ``unit``, ``run``, ``run_frame``, ``pose`` (B in D:
-                                    X, Y, Z mm, alpha, beta, gamma deg: the label's pose_b_in_d),
-                                    ``d_from_b`` (4x4), ``focal_px``, ``principal_point``,
-                                    ``distortion`` (OpenCV's k1, k2, p1, p2, k3), ``image_size``
-
 A run is the frames of one camera unit and one run of the labels (generator.docking_runs: the
 camera and zoom fixed, B approaching A); repeatability captures (run -1) are not runs and are left
 out. A dataset without docking runs ([runs] frames_per_run = 0) is refused (DatasetError): its
 frames share no camera, so they are no video. The run's time is not simulated: frames are spaced
 1 / VIDEO_FPS s apart. Needs OpenCV's FFmpeg video I/O (opencv-python-headless ships it): a codec
 it cannot open is a DatasetError naming it.
+
+Why and how: docs/datasets.md, "The video export's files".
 """
 from __future__ import annotations
 

@@ -6,15 +6,7 @@ exports/yolo/
   images/{train,val,test,repeat}/<id>.png   hard links to the dataset's images (else copies)
   labels/{train,val,test,repeat}/<id>.txt   one line per marker: class cx cy w h (normalised)
 
-``images/train``, ``images/val`` and ``images/test`` always exist (empty when the split is);
-ultralytics finds each image's label by replacing ``/images/`` with ``/labels/`` and the
-extension with ``.txt``. ``val`` is the dataset's validation split (``[dataset] val_fraction``,
-carved from train), never the test split while there are train frames: without a val split it
-falls back to the train split (and to the test split for a dataset with no train frames, which can
-only be evaluated). Boxes are the projected marker outlines clipped to the image, in continuous
-coordinates ((0, 0) is the top-left corner of the top-left pixel: label + 0.5) divided by the
-image size; markers whose visible fraction is below the dataset's visible_threshold, or whose
-colour is washed out (``legible`` false), are left out (YOLO has no ignore regions).
+Why and how: docs/datasets.md, "The YOLO export's splits and boxes".
 """
 from __future__ import annotations
 

@@ -7,14 +7,7 @@ exports/yolo-pose/
   images/{train,val,test,repeat}/<id>.png   hard links to the dataset's images (else copies)
   labels/{train,val,test,repeat}/<id>.txt   one line per marker: class cx cy w h kx ky v
 
-The markers, box fields and split folders are the YOLO export's (generator.export_yolo: markers
-below the visible threshold or washed out are left out). ``kx ky`` is the marker's projected
-centre (label ``center_px``) in ultralytics' convention: normalised continuous coordinates,
-(0, 0) the top-left corner of the top-left pixel, so ``kx = (center_px[0] + 0.5) / W`` (the label
-is in OpenCV's convention, pixel centres at integers: dropping the 0.5 puts every keypoint half a
-pixel up and left of the centre). ``v`` is COCO's visibility as the label gives it: 2 visible,
-1 labelled but occluded, and ``0 0 0`` for a marker whose centre is outside the image (part of
-its disc in view), which ultralytics masks out of the keypoint loss and of OKS.
+Why and how: docs/datasets.md, "The YOLO-pose keypoints".
 """
 from __future__ import annotations
 

@@ -1,31 +1,12 @@
 """The Hugging Face view of a dataset: ``hf/<split>/metadata.jsonl`` beside hard links to the
 split's images, the layout ``datasets``' ``imagefolder`` reads.
 
-One folder per split (train, val, test, repeat; an empty split has none), each with its images
-(``<frame_id>.png``: hard links to ``images/``, copies across file systems) and one metadata
-line per frame. ``imagefolder`` reads the metadata as the example's fields and the image named
-by ``file_name`` (relative to the metadata file: ``datasets`` refuses ``..``, so the images sit
-beside it). The dataset card's ``configs`` name every split's folder, so
-``load_dataset(DIR)`` keeps them all, ``repeat`` included (the split names ``imagefolder`` infers
-by itself are train, validation and test only).
-
 A line has one schema for every frame of every split (``imagefolder`` refuses metadata files
 whose inferred features differ): floats are written as floats, no field is ever null.
 
-- ``frame_id``, ``split`` (the dataset's: train, val, test, repeat), ``condition``,
-  ``camera_unit``, ``width``, ``height``;
-- the camera: ``focal_px``, ``principal_point`` [cx, cy], ``K`` (3 x 3), ``dist_coeffs`` (k1, k2,
-  p1, p2, k3: OpenCV's order), ``cam_from_d`` (4 x 4, mm);
-- the pose: ``d_from_b`` (4 x 4, mm) and ``pose`` {x_mm, y_mm, z_mm, alpha_deg, beta_deg,
-  gamma_deg};
-- ``objects``: every marker whose projected outline is in the image, as parallel lists:
-  ``marker_id``, ``category`` (0 RedA, 1 BlueB: a ClassLabel, the card declares the features), ``bbox`` [x, y, w, h] in continuous coordinates
-  (COCO's: the label's ``bbox_px`` + 0.5), ``center_px`` [x, y] (the label's, OpenCV pixel
-  centres), ``visibility`` (COCO's 0/1/2), ``visible_fraction``, ``legible``;
-- ``label_file`` (the full label, relative to the dataset) and ``label_sha256`` (its manifest
-  sha256).
-
 The view is derived (never in the manifest): ``dockfactory dataset card DIR`` writes it again.
+
+Why and how: docs/datasets.md, "The Hugging Face view's fields".
 """
 from __future__ import annotations
 

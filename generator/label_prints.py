@@ -1,22 +1,13 @@
 """Fingerprints of a label that another CPU's Cycles must reproduce (``dataset verify --manifest``).
 
-A label holds three kinds of fields:
-
-- analytic ones (projections, poses, areas, classes), computed from the config alone: the same
-  bytes on every machine (with numpy's BLAS kernel pinned, ``dockfactory.core.blas``);
-- measurements on the rendered image (each marker's ``chroma``, ``derived.auto_exposure_scale``):
-  other bits on another CPU;
-- pixel counts and boxes read from Cycles' index pass (each marker's ``visible_pixels`` and
-  ``bbox_visible_px``, each section's ``pixels_visible`` and ``bbox_visible_px``, and the
-  ``visible_fraction`` computed from the counts): on another CPU a pixel on an object's edge can
-  go to its neighbour (the measurement: docs/datasets.md, "Publishing a dataset").
-
 Fingerprint v1 (``label_geometry_sha256``) is the sha256 of the label without the image
 measurements. Fingerprint v2 is the sha256 of the label without the image measurements and the
 index-pass fields (``label_core_sha256``), plus the index-pass numbers themselves
 (``index_measurements``), compared within ``INDEX_TOLERANCE_PX``. Classes decided from those
 numbers (``visibility``, ``legible``) stay in the digest: they change what the exports call
 ground truth, so they must match exactly.
+
+Why and how: docs/datasets.md, "Label fingerprints".
 """
 from __future__ import annotations
 

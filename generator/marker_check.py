@@ -1,27 +1,9 @@
 """Do a frame's markers show in its image where its label says? (``dataset verify --manifest``.)
 
-A re-render on another CPU gives other image bits, so a published dataset checks images by tile
-means; a tile mean barely moves when one marker is painted out, moved or recoloured, yet the
-markers are what the dataset is about. This check compares each marker's colour in the image
-with the label's geometry, which the manifest verifies byte for byte (``generator.published``):
+Each fully visible, legible marker's pixels of its colour must count within ``COUNT_RATIO`` of its label's
+``visible_pixels`` and their centroid lie within ``CENTROID_TOLERANCE_PX`` of its ``outline_centroid_px``.
 
-- the pixels of the marker's window (its visible box ``bbox_visible_px`` grown by
-  ``SEARCH_MARGIN`` of its size, so that a moved disc stays whole in it) whose colour excess (red minus the
-  larger of green and blue for A, blue minus the larger of red and green for B, in [0, 1], the
-  measure of the label's ``chroma``) reaches half-way from the surroundings' excess to the label's
-  ``chroma`` (a marker whose surroundings come within ``CONTRAST`` of its chroma is not judged:
-  a red disc on a reddish surface), in connected blobs
-  whose centroid lies inside the visible box, are the marker's colour; their count over the label's ``visible_pixels`` must lie within ``COUNT_RATIO`` (erased or
-  recoloured: near 0);
-- the centroid of those pixels must lie within ``CENTROID_TOLERANCE_PX`` of the label's
-  ``outline_centroid_px`` (a marker moved by more is caught).
-
-Only fully visible (``visible_fraction`` at least ``FULL_FRACTION``), legible (``legible``: their
-colour stands out of the image) markers with at least ``MIN_PIXELS`` visible pixels are checked:
-a partly hidden marker's visible centroid is not in the label, and an occluder of its own colour
-adds to its count; the others carry too little colour to judge. The
-bounds hold on four rendered datasets of different geometry, sensors and lens effects with wide
-margins (bench/results/marker_check/README.md).
+Why and how: docs/datasets.md, "The marker check".
 """
 from __future__ import annotations
 

@@ -4,32 +4,9 @@ Anyone can re-render any subset of a published dataset (``dockfactory render CON
 --frames ...`` or ``--shard K/N``) and check it against the published ``manifest.json`` (every
 file's sha256) and its fingerprints (``fingerprints.npz`` beside the manifest):
 
-- the re-render must carry the published version id (same config, generator and Blender), or
-  differ from it only by the generator: the same config (resolved with today's defaults) and
-  Blender, whose frames a newer generator must reproduce (said in a note), or only by the
-  generator and ``[render] device`` (a GPU render checked against a CPU one, or the reverse: its
-  images are never byte-identical, so they pass within ``tolerance``; config.toml, which names the
-  device, is not compared byte for byte; said in a note);
-- every re-rendered frame must be a frame of the manifest; its label must match byte for byte
-  or, where Cycles on another CPU gives other bits (``generator.label_prints``):
-  - v1 (``fingerprints.npz``): everything but the two measurements a label takes from the
-    rendered image (each marker's ``chroma``, the frame's ``auto_exposure_scale``) must match
-    byte for byte (the sha256 of the label without them);
-  - v2 (``fingerprints_v2.npz``, when published): everything but those and the pixel counts and
-    boxes read from Cycles' index pass must match byte for byte, and those counts and box edges
-    must be within ``INDEX_TOLERANCE_PX`` of the published ones;
-  - v3 (``fingerprints_v3.npz``, beside v2 for the frames it holds): the same check against the
-    label core as a generator whose numpy computes sin and cos with libm (``dockfactory.core.blas``)
-    gives it, for a dataset published by one that took numpy's AVX-512 paths (the two differ in
-    the last bits; every other part of the label must still match, and the index-pass numbers are
-    v2's);
-- its image must match byte for byte or its fingerprint (the mean of every 80 x 80 px tile per
-  channel, in 8-bit levels) must be within ``tolerance`` levels of the published one, and its
-  markers must show where the label (whose geometry matched) says, in their colour
-  (``generator.marker_check``: an erased, moved or recoloured marker barely moves a tile mean);
-- the config (but see the device above) and layout files must match byte for byte.
-
 Frames of the manifest that were not re-rendered are not checked (a subset is the point).
+
+Why and how: docs/datasets.md, "Checking a re-render".
 """
 from __future__ import annotations
 
