@@ -1,26 +1,11 @@
 """Layout files from measured marker coordinates: a CSV from a CMM or a laser tracker.
 
-One row per marker, a header row naming the columns (any order, case and surrounding spaces
-ignored; ``#`` starts a comment line)::
-
-  id,section,x,y,z,diameter,nx,ny,nz,sigma_mm
-  A0,A,-40.0,0.0,301.0,20.0,0,0,1,0.02
-
-- ``id`` (text), ``section`` (A or B), ``x``, ``y``, ``z`` (the centre of the disc's top face
-  in the section's own frame: A in D, B in B's frame; conventions.md), ``diameter``
-  (``diameter_mm`` too): required.
-- ``nx``, ``ny``, ``nz``: the disc's outward normal (normalised here). Optional: a row that
-  leaves all three empty, or a file without them, takes the normal of the section's surface at
-  the marker, ``surface = "cylinder"``: the outward radial (0, y, z) / sqrt(y^2 + z^2) of a
-  cylinder about the section's X axis (the factory's sections).
-- ``index`` (the marker's number within its section, from 0): optional, else the rows' order.
-- ``sigma_mm``: optional, the marker's own 1-sigma coordinate uncertainty (the layout file's
-  ``sigma_mm``, carried into the uncertainty budget); a whole-layout one is given apart.
-
 ``units`` scales coordinates, diameters and sigmas to millimetres (mm, cm, m, in). The result
 is a layout object in the format of ``core.layout_file`` and passes its checks before anything
 is written (:func:`write_layout`); every problem is a one-line LayoutFileError naming the file,
 the line and the column.
+
+Why and how: docs/measure.md, "The layout CSV format".
 """
 from __future__ import annotations
 

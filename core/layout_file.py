@@ -1,28 +1,12 @@
 """Reading a marker layout file: the measured positions of the markers on a real pair of sections.
 
-The format is a dataset's ``layout.json`` (written by ``generator.dataset.layout_record``), so a
-rendered dataset's layout works as is and a measured one is written the same way::
-
-  {"markers": [{"id": "A0", "section": "A", "index": 0,
-                "center_mm": [x, y, z], "normal": [nx, ny, nz], "diameter_mm": 12.0}, ...]}
-
-Each marker's ``center_mm`` (the centre of its disc's top face) and unit ``normal`` are in its own
-section's frame (A: D, the frame at the centre of A's docking face, +X along A's axis toward B;
-B: B's frame, the same construction on B); other keys (``class_id``, ``class_name``,
-``pass_index``) are ignored. ``index`` counts the markers of a section from 0.
-
 A layout is refused (LayoutFileError, one line naming the file, key and value) unless every
 number is finite and of a docking section's size, each section's markers lie on its side of the
 seam (A at x <= 0, B at x >= 0: swapped section labels are caught), and each section passes the
 checks a config's layout passes (``core.layout.layout_problems``: at least 6 markers, no
 overlapping discs, not coplanar, no symmetry that makes two markers interchangeable).
 
-How well the marker positions themselves are known (a CMM-measured layout: hundredths of a mm) may be
-stated as ``"sigma_mm"``: the standard uncertainty (1 sigma, mm, per coordinate, independent
-between markers and coordinates) of every ``center_mm``, at the top level (the whole layout) and/or
-in a marker's object (that marker; it overrides the top level). A number in [0, MAX_SIGMA_MM];
-:func:`read_layout_sigmas` returns them (None when the file states none), and
-eval.uncertainty_budget propagates them to the pose.
+Why and how: docs/measure.md, "The layout file format".
 """
 from __future__ import annotations
 

@@ -6,20 +6,7 @@ OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT
 Every pose carries its uncertainty budget (U = 2 u); with an acceptance spec each image is judged
 IN / OUT / UNDECIDED against its tolerances (dockfactory.measure_verdict).
 
-Every image given gets a record: a file that is missing or unreadable, or a frame without a pose,
-is reported with its reason and category, never dropped; the exit status is 1 when any image has
-no pose. The principal point assumed (and the start of an estimated one) is each image's centre.
-With ``--self-calibrate sequence`` the images are one camera unit (one docking run: the camera,
-its zoom and A fixed, B moving): each frame is identified on its own, then every identified frame
-is solved jointly with shared intrinsics (solver.solve_sequence); their sizes are checked (from
-the headers: one size) before anything is measured.
-
-A batch is never lost: every image's size is read from its header and checked against
-``MeasureOptions.max_megapixels`` before it is decoded; each image's result is written as it
-finishes (eval.measure_store: a rerun into the same folder with the same images and options
-measures only what is missing; with others it starts over); an image that fails, or whose worker
-process dies (eval.measure_pool), is recorded with its reason and the others go on; OUT holds its
-writer lock for the whole run.
+Why and how: docs/measure.md, "Measure: records and batches".
 """
 from __future__ import annotations
 

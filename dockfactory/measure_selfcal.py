@@ -2,19 +2,13 @@
 camera's intrinsics refined over a sliding window of the last N frames with a pose, as ``measure
 --self-calibrate sequence`` does for a whole docking run, and frozen on request.
 
-A stream is one camera unit (one camera, fixed zoom and focus, A fixed, B moving). Each frame is
-first solved alone with the pinhole model (measure.solve_image); its identified centres join the
-window, and the window's frames are solved jointly with shared intrinsics
-(eval.solve_frames.solve_run over solver.solve_sequence, the ``camera_model`` given or "auto"):
-the frame's record becomes the window's record of it (``self_calibrated``: "window",
-``run_frames``: the frames in the window). Until the window holds ``MIN_FRAMES`` frames, and when
-the joint solve fails, the frame keeps its own record (with ``self_calibration``: why).
-
 ``freeze_after`` F: after F frames solved jointly, the principal point and distortion of the last
 joint solve are frozen (``frozen_intrinsics`` in the record): each later frame's identified centres
 are undistorted with them and solved alone with the pinhole model around the frozen principal
 point (the focal length is still estimated per frame: the solver always estimates it). Freezing
 stops the window's cost (a joint solve per frame) and the drift of intrinsics on a long stream.
+
+Why and how: docs/measure.md, "Online self-calibration".
 """
 from __future__ import annotations
 

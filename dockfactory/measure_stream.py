@@ -9,25 +9,7 @@ network and the solve). Each frame goes through measure's per-image path
 (``dockfactory.measure.solve_image``: detect, identify, solve with its own camera model fit,
 principal point assumed at the image centre).
 
-Each frame line (format :data:`STREAM_FORMAT`) holds: ``type`` "frame", ``frame`` (0-based, in
-read order), ``timestamp_ms`` (the source's position; frames / fps, else the wall clock, when it
-gives none), ``ok``; with a pose: ``pose`` (X, Y, Z mm, alpha, beta, gamma deg: d_from_b), ``std``
-(their 1-sigma standard deviations, the solver's covariance), ``focal_px``, ``camera_model`` (and
-``intrinsics``, ``intrinsics_std`` for a model richer than pinhole; ``calibration`` with
-``--calibration``), ``rmse_px``,
-``n_detections``; without: ``category`` and ``reason``; always ``timing_ms`` (read: decoding the
-frame, detect, solve, total: from the start of the frame's read to the line being serialised).
-With a display filter (``filter="kalman"``, dockfactory.measure_filter) the line adds
-``filtered``: the raw pose above is never replaced. With an acceptance hook (``decide``: any
-callable taking the frame line and returning a JSON value) the line adds ``acceptance``;
-:func:`stream_decider` makes the hook of ``--acceptance SPEC``: the decision itself is
-``eval.conformity``'s (IN / OUT / UNDECIDED per gated component, guard band U = k u).
-
-The last line is the summary (``type`` "summary"): frames read and with a pose, failures by
-category, frames/s over the run (after the detector is loaded), latency from a frame's read to its
-line written and flushed (p50, p95, max), the median timings. Ctrl-C ends the stream cleanly
-(the summary says ``stopped``: "interrupted"). A source that cannot be opened, or yields no frame,
-is a DockfactoryError (one line, exit 2) raised before anything is written.
+Why and how: docs/measure.md, "The stream's lines".
 """
 from __future__ import annotations
 
@@ -39,7 +21,7 @@ import sys
 import threading
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -57,6 +39,7 @@ from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
 from dockfactory.image_header import image_size
 from dockfactory.measure import MAX_WORKERS, solve_image
+from dockfactory.measure_chroma import source_chroma
 from dockfactory.measure_filter import PoseKalman
 from dockfactory.measure_roi import RoiTracker
 from dockfactory.measure_selfcal import WindowCalibration
@@ -81,8 +64,9 @@ class StreamOptions:
     """How the stream is measured: the detector's ``backend`` (auto, torch, onnx), the solver's
     ``camera_model`` (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto), ``min_score``, the camera's Bayer
     pattern ``cfa`` (steers the centre refinement; None: unknown), ``filter`` (None or "kalman"),
-    ``max_frames`` (None: until the source ends), ``jpeg`` (the frames were JPEG-compressed, as
-    a camera streaming MJPEG does), ``prefetch`` (frames decoded ahead by a reader thread, 0: none;
+    ``max_frames`` (None: until the source ends), ``jpeg`` (the frames' colour is subsampled, as
+    JPEG and lossy video keep it: the centre's edge fitted on the luma; also set when the source
+    says so, dockfactory.measure_chroma), ``prefetch`` (frames decoded ahead by a reader thread, 0: none;
     :class:`FrameReader`) and ``input_scale`` (network px per image px; None: the weights' own,
     smaller is faster and sees smaller markers worse) and ``roi_refresh`` (None: every frame
     detected whole; N: a window around the previous frame's markers, the full frame every N
@@ -487,7 +471,8 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
     markers = read_layout_file(layout_path)
     sink = LineSink(jsonl)
     cap, name = open_capture(video, camera)
-    pool = None
+    pool, chroma = None, source_chroma(cap, video)
+    options = replace(options, jpeg=options.jpeg or chroma.subsampled)
     try:
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         if options.workers > 1:
@@ -508,7 +493,8 @@ def measure_stream(layout_path, weights, jsonl: str = "-", video=None, camera: i
                    "self_calibrate": f"window:{options.window}" if options.window else None,
                    "freeze_after": options.freeze_after, "backend": detector.backend if pool is None else pool.backend,
                    "workers": options.workers, "prefetch": options.prefetch, "filter": options.filter,
-                   "roi_refresh": options.roi_refresh,
+                   "roi_refresh": options.roi_refresh, "chroma": "subsampled" if options.jpeg else "full",
+                   "chroma_source": chroma.why,
                    "acceptance": decide is not None, "layout": str(layout_path),
                    "weights": str(weights), **stats.summary(time.perf_counter() - t0)}
         sink.write(summary)

@@ -7,12 +7,7 @@ the solve of two frames run on two cores without sharing an interpreter lock. Th
 everything that is sequential: reading, the display filter, the acceptance hook, the lines (in
 frame order).
 
-Workers are spawned (never forked from a process that has imported torch), load the detector with
-one thread, and wait at a barrier with the parent, so the stream's clock starts when every worker
-is ready. At most ``workers`` frames are in flight: a frame waits for at most the ones read before
-it, which bounds its latency to about two frames' work. A worker that dies (the out-of-memory
-killer, a crash in native code) breaks the pool: the frames in flight become failure records
-("measure error", naming the worker's death) and the pool is started again.
+Why and how: docs/measure.md, "Stream workers".
 """
 from __future__ import annotations
 
