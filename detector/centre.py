@@ -1,50 +1,22 @@
 """Sub-pixel marker centre (and outline box) at full resolution inside a detected box.
 
-A marker is a red or blue disc inside a dark ring. Inside a window around the detector's box:
+A marker is a red or blue disc inside a dark ring. Two coverage passes in a window around the
+detector's box (linear light, a colour score normalised between ring and disc into a soft
+coverage of the disc's connected component, its moments) give a first ellipse, the window, the
+quality and the fallback; :func:`edge_fit` then fits the projected disc to the score in a band
+around that ellipse's edge (an ellipse, a blurred edge, a shaded disc level, a ring level) and
+gives the centre and the edge width; :func:`finish_refined` judges it. The quality in [0, 1]
+combines contrast, shape, agreement with the detector's box and the disc's point symmetry about
+its centre; below ``min_quality`` the centre is not refined, and a refused edge fit is never kept
+at full quality.
 
-1. the image is converted to linear light (8-bit sRGB -> linear), where partial pixel coverage
-   at the disc edge mixes linearly;
-2. a colour score per pixel: the class channel minus the mean of the other two (red for RedA,
-   blue for BlueB); near 0 on the dark ring and on grey/white surfaces, large on the disc;
-3. the score is normalised between the ring level (median over a thin annulus just outside the
-   box) and the disc level (lower quartile over the inner half of the box) into a soft coverage
-   w in [0, 1];
-4. w is restricted to the connected component (w > 0.5) holding the box centre, dilated by two
-   pixels so that the soft edge pixels count;
-5. coverage-weighted centroid and second moments: a first ellipse of the disc (for a uniform
-   ellipse the half-extent along x is 2 sqrt(var_x), var including the 1/12 of the pixel
-   footprint), the window and the quality, the fallback centre and box;
-6. the centre: a least-squares fit of the projected disc to the score in a band around that
-   ellipse's edge (:func:`fit_disc_edge`): an ellipse (centre and shape), a blurred edge
-   (logistic profile of fitted width: the optics' and the pixel filter's blur), a disc level
-   that may vary linearly across the disc (shading) and a ring level; a disc only a few edge
-   widths thick is refitted with that shading along its major axis only (:func:`edge_fit`), and
-   the fitted edge width goes with the centre (``Refined.edge_px``: the solver widens a thin
-   disc's noise across it, ``solver.disc_noise.thin_disc_factor``). The refined outline box
-   is the moment box, half-extents 2 sqrt(var) + ``edge_bias_px``, around the fitted centre
-   (the fitted ellipse's own box falls inside the true outline, the moment box closer to it:
-   ``bench/centre_bias.py``).
-
-Why a fit and not the centroid. The centroid integrates every pixel of the soft coverage, so
-whatever changes the level of the band just inside the edge unevenly around the disc moves it:
-the clipped coverage turns a shading gradient into an offset toward the brighter side, and the
-renderer's denoiser lowers that band unevenly. The fit puts the edge where the profile is
-steepest and takes the disc level as a plane, so neither moves it much; it also weighs each edge
-pixel by what it says about the centre, where the centroid gives the noisy top and bottom pixels
-of a foreshortened disc the lever of its long axis. An offset the denoiser puts at the edge itself
-is an image property no refinement can tell from the disc. The measured sizes of each of these:
-results/README.md, "Measurements behind the code's constants".
-
-Quality in [0, 1] combines the contrast between disc and ring (against the spread of the score
-over the disc: noise and shading), and how well
-the segmented area matches the area of the ellipse that its own moments imply and the area of
-the detector's box (occluded or merged markers score low). Below ``min_quality`` the
-detector's box is kept and its centre returned. When the fit fails its checks
-(:func:`_fit_accepted`) the centroid and the moment box are returned.
+The module's sha256 names the refinement of the weights' noise cards (``detector.noise_card``).
+Why and how: docs/detector.md, "The centre refinement".
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -59,7 +31,8 @@ CLASS_CHANNEL = dict(enumerate(CLASS_CHANNELS))  # class id -> RGB channel of it
 @dataclass(frozen=True)
 class Refined:
     """``center: (2,) float64 px`` and ``box: (4,) float64 px`` (OpenCV convention), quality in [0, 1],
-    ``refined``: False when the detector's box was kept; ``edge_px`` the edge fit's edge width
+    ``refined``: False when the centre is no trusted sub-pixel measurement (the detector's box
+    kept, or the quality below the gate); ``edge_px`` the edge fit's edge width
     (Gaussian std, px; :class:`EdgeFit`), NaN when no edge fit gave the centre."""
     center: np.ndarray
     box: np.ndarray
@@ -109,7 +82,7 @@ class _Window:
     """What one coverage pass measured in its window: the score ``s``, its purity ``pur``, the
     pixel coordinates ``xs``, ``ys`` and the normalised radius ``rho`` of the pass's box (all
     (h, w)), the first ellipse (centre (2,) px and covariance (2, 2) px^2 of the coverage), the
-    disc and ring levels of the score."""
+    disc and ring levels of the score, the soft coverage ``w`` (h, w) of the disc's component."""
     s: np.ndarray
     pur: np.ndarray
     xs: np.ndarray
@@ -119,19 +92,39 @@ class _Window:
     cov: np.ndarray
     fg: float
     bg: float
+    w: np.ndarray | None = None
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
                   edge_bias_px: float = EDGE_BIAS_PX) -> Refined:
-    """Refine one detection. ``image: (H, W, 3) uint8`` RGB at full resolution,
-    ``box: (4,) [x0, y0, x1, y1]`` px (OpenCV convention).
+    """Refine one detection: its sub-pixel centre, outline box and quality.
 
-    Two coverage passes, then the edge fit: the window, the inner and ring masks of the first
-    pass come from the detector's box; when that box is a few tenths of the radius too small the
-    ring mask lands on the disc and the cut at 1.3 box radii clips it. The second pass repeats
-    the measurement in the window of the first refined ellipse (kept if it is refined too).
-    :func:`fit_disc_edge` then fits the disc in the kept pass's window and gives the centre; the
-    box keeps the moment half-extents (plus ``edge_bias_px``) around it."""
+    Parameters
+    ----------
+    image : (H, W, 3) uint8
+        RGB at full resolution (a three-chip camera's; other cameras: ``centre_camera``).
+    box : (4,) array_like
+        The detector's box [x0, y0, x1, y1], px, OpenCV convention (pixel centres at integers).
+    class_id : int
+        0 (RedA) or 1 (BlueB): the disc colour scored.
+    min_quality : float
+        The gate: below it the centre is returned not refined.
+    edge_bias_px : float
+        px added to the moment half-extents of the refined box (it moves no centre).
+
+    Returns
+    -------
+    Refined
+        Two coverage passes (the second in the window of the first refined ellipse, kept when
+        refined too), then :func:`edge_fit` in the kept pass's window gives the centre and
+        :func:`finish_refined` judges it; the box is the moment box around the centre.
+
+    Raises
+    ------
+    ValueError
+        An image that is not (H, W, 3) uint8, a box that is not finite with x1 > x0 and y1 > y0,
+        or a class_id other than 0 or 1.
+    """
     first, win = _refine_once(image, box, class_id, min_quality, edge_bias_px)
     if not first.refined:
         return first
@@ -139,7 +132,54 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     if second.refined:
         first, win = second, win2
     fit = edge_fit(win)
-    return first if fit is None else refined_at(image, fit.centre, win, first.quality, edge_bias_px, fit.edge_px)
+    return finish_refined(image, first, win, None if fit is None else (fit.centre, fit.edge_px),
+                          min_quality, edge_bias_px)
+
+
+# A refused edge fit leaves the coverage centroid at this share of the coverage pass's quality; the
+# symmetry term is 1 up to ASYM_OK_PX of asymmetry and 0 from ASYM_BAD_PX, the coverage binarised and
+# smoothed by SYMMETRY_BLUR_PX first so that neither shading nor pixel noise counts. One set for every
+# camera class, checked on two scenes through three-chip, Bayer and JPEG cameras and on a video
+# stream: bench/results/centre_quality/README.md.
+REFUSED_FIT_QUALITY = 0.5
+SYMMETRY_BLUR_PX = 1.0
+ASYM_OK_PX = 0.30
+ASYM_BAD_PX = 0.45
+
+
+def finish_refined(image: np.ndarray, first: Refined, win: _Window, fitted, min_quality: float,
+                   edge_bias_px: float) -> Refined:
+    """The detection from the kept coverage pass (``first``, ``win``) and the edge fit's
+    ``fitted`` (centre (2,) px, edge width px; None when the fit was refused: the coverage
+    centroid, at ``REFUSED_FIT_QUALITY`` of the quality). The quality takes the disc's point
+    symmetry about the centre (:func:`symmetry_quality`): a part hidden by an occluder or eaten
+    by glare moves the centre toward what is left. Below ``min_quality`` the centre is returned
+    not refined."""
+    if fitted is None:
+        centre, edge_px, quality = first.center, float("nan"), first.quality * REFUSED_FIT_QUALITY
+    else:
+        (centre, edge_px), quality = fitted, first.quality
+    quality *= symmetry_quality(asymmetry_px(win, centre))
+    out = refined_at(image, centre, win, quality, edge_bias_px, edge_px)
+    return out if quality >= min_quality else replace(out, refined=False)
+
+
+def asymmetry_px(win: _Window, centre: np.ndarray) -> float:
+    """Mean distance (px) between the disc's edge and the edge of its copy turned 180 degrees about
+    ``centre`` (2,) px: the summed absolute difference of the smoothed binarised coverage and its
+    turned copy over the perimeter of a disc of the coverage's area, halved (0 for an ellipse
+    centred there; a centre e px off an ellipse gives about 0.64 e)."""
+    w = cv2.GaussianBlur((win.w > 0.5).astype(np.float32), (0, 0), SYMMETRY_BLUR_PX)
+    cx, cy = centre[0] - win.xs[0, 0], centre[1] - win.ys[0, 0]
+    turn = np.float32([[-1, 0, 2 * cx], [0, -1, 2 * cy]])
+    turned = cv2.warpAffine(w, turn, (w.shape[1], w.shape[0]), flags=cv2.INTER_LINEAR, borderValue=0)
+    area = max(float(win.w.sum()), 1.0)
+    return float(np.abs(w - turned).sum()) / (4.0 * math.sqrt(math.pi * area))
+
+
+def symmetry_quality(asymmetry: float) -> float:
+    """The quality's symmetry term in [0, 1] of an ``asymmetry`` (px, :func:`asymmetry_px`)."""
+    return float(np.clip((ASYM_BAD_PX - asymmetry) / (ASYM_BAD_PX - ASYM_OK_PX), 0.0, 1.0))
 
 
 def refined_at(image: np.ndarray, centre: np.ndarray, win: _Window, quality: float, edge_bias_px: float,
@@ -272,7 +312,7 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     rbox = np.array([mx - ex, my - ey, mx + ex, my + ey])
     rbox = np.clip(rbox, -0.5, np.array([w_img, h_img, w_img, h_img]) - 0.5)
     window = _Window(s=s, pur=pur, xs=xs, ys=ys, rho=rho, centre=np.array([mx, my]),
-                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg)
+                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg, w=w)
     return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True), window
 
 

@@ -1,34 +1,12 @@
-"""Sub-pixel marker centre with what is known of the camera: its Bayer pattern, JPEG encoding.
+"""Sub-pixel marker centre with what is known of the camera: its Bayer pattern, its colour
+subsampling (JPEG, lossy video).
 
-A Bayer sensor samples a red disc's colour at one pixel in four (blue too); every demosaic keeps
-those samples and interpolates the rest. The interpolated values misplace a sharp edge by a
-fraction of a pixel that depends on where the edge falls on the 2-pixel lattice of the samples, and
-``detector.centre.refine_centre``, which fits every pixel, inherits that error (its size:
-bench/results/sensor_effects/README.md). Here the
-coverage passes are the same, but the edge fit sees only the values the sensor sampled: every
-channel at its own sites (``detector.centre_joint``, below) or, with a JPEG, the class's own
-channel at its sites (``fit_evidence``, then ``centre.fit_disc_edge``), the channel itself (linear)
-rather than the colour score: a gradient-corrected demosaic (Malvar-He-Cutler) adds the class
-channel's high-pass to the other channels it interpolates at those sites, which the score would
-subtract. The pixels left out carry NaN, which the fit's own usable-pixel mask drops.
-
-A JPEG (4:2:0, as cameras write it) keeps the luma at full resolution and the chroma at half: the
-colour score, made of chroma, loses the edge, the luma keeps it. With ``jpeg`` (and no pattern)
-the edge fit takes the luma (linearised) as its data; the coverage passes still segment by
-colour, and the fit's band (2.5 px inside, 1 px outside the disc edge) stays on the disc and its
-dark ring, where the luma step is the disc's. With a pattern as well, the fit keeps the class's
-own channel at its own sites (the luma there was no better on the sensor bench's two scenes:
-bench/results/sensor_effects/README.md).
-
-With a pattern and no ``jpeg``, the edge fit is ``detector.centre_joint.fit_disc_joint``: one disc
-geometry fitted to every channel at its own sites (R at R, G at both G sites, B at B), each channel
-with its own disc and ring levels and weight, so that the other channels add the edge evidence they
-hold (little: the markers' colours are saturated on a dark ring; the weights give their cleaner
-steps their due). With ``jpeg`` as well the fit keeps the class's own channel at its own sites: the
-encoding mixes the samples of neighbouring sites.
-
-The module keeps ``detector/centre.py`` untouched: its sha256 names the refinement of the weights'
-noise cards (``detector.noise_card``).
+The coverage passes, quality and box are ``detector.centre``'s; the edge fit sees only the values
+the sensor sampled: with a Bayer pattern every channel at its own sites
+(``detector.centre_joint``), with a JPEG (or any 4:2:0 source) the luma, with both the class's own
+channel at its own sites. ``detector/centre.py`` stays untouched by camera handling: its sha256
+names the refinement of the weights' noise cards.
+Why and how: docs/detector.md, "The centre refinement of a colour camera".
 """
 from __future__ import annotations
 
@@ -103,6 +81,4 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
         own = fit_evidence(image, win, class_id, cfa, jpeg)
         fit = None if own is None else centre.edge_fit(own)
         fitted = None if fit is None else (fit.centre, fit.edge_px)
-    if fitted is None:
-        return first
-    return centre.refined_at(image, fitted[0], win, first.quality, edge_bias_px, fitted[1])
+    return centre.finish_refined(image, first, win, fitted, min_quality, edge_bias_px)

@@ -113,6 +113,7 @@ def test_video_measured_back_against_labels_and_measure(run_ds, videos, tmp_path
     labels = _lines(videos / "video" / "unit0_run00.jsonl")
     summary = mp4[-1]
     assert summary["type"] == "summary" and summary["frames"] == summary["frames_with_pose"] == 4
+    assert (summary["chroma"], lossless[-1]["chroma"]) == ("subsampled", "full")   # the edge fitted on the luma
     assert summary["latency_ms"]["p95"] >= summary["latency_ms"]["p50"] > 0
     for k in range(4):
         raw, ref, truth = lossless[k], measured[k], labels[k]["pose"]

@@ -10,8 +10,7 @@ import re
 from pathlib import Path
 
 # files at bench/'s top level besides the topic folders: the package, the helper the topics share
-TOP_LEVEL = {"__init__.py", "README.md", "marker_match.py",
-             "centre_quality.py"}   # not moved yet (being edited elsewhere); its folder: bench/detector/
+TOP_LEVEL = {"__init__.py", "README.md", "marker_match.py"}
 KEPT_FOLDERS = {"results", "configs"}   # records and the benches' configs, not scripts
 
 # sys.path edits that put a third-party checkout on the path (never bench/ or tests/ code)

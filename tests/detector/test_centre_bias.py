@@ -127,8 +127,9 @@ def test_box_is_the_moment_box_around_the_fitted_centre():
         assert np.abs(r.box - box).max() < 0.2
 
 
-def test_refused_fit_keeps_the_coverage_centroid(monkeypatch):
-    """When the fit is refused the coverage centroid and the moment box are returned, refined."""
+def test_refused_fit_keeps_the_coverage_centroid_at_a_share_of_the_quality(monkeypatch):
+    """When the fit is refused the coverage centroid and the moment box are returned, refined but
+    never at full quality: at REFUSED_FIT_QUALITY of the coverage pass's (before: at all of it)."""
     rng = np.random.default_rng(5)
     img, truth, box = render_marker(rng, 0, 12.0, 9.0, 0.3, 0.0, 0.35, 0.002)
     first, _ = centre._refine_once(img, box, 0, 0.3, centre.EDGE_BIAS_PX)
@@ -136,4 +137,6 @@ def test_refused_fit_keeps_the_coverage_centroid(monkeypatch):
     monkeypatch.setattr(centre, "FIT_MAX_SHIFT_PX", 0.0)
     r = centre.refine_centre(img, box, 0)
     assert r.refined and np.allclose(r.center, second.center) and np.allclose(r.box, second.box)
+    assert second.quality > 0.9 and r.quality == pytest.approx(centre.REFUSED_FIT_QUALITY * second.quality)
+    assert np.isnan(r.edge_px)
     assert fit_disc_edge(None) is None

@@ -93,12 +93,13 @@ def test_one_bad_centre_is_left_out_and_named(frames):
 
 def test_fit_test_is_the_chi_square_of_the_residuals_or_says_not_tested():
     rec = {"n_markers": {"A": 7, "B": 7}, "rmse_px": {"A": 0.1, "B": 0.2}, "camera_model": "pinhole"}
-    got = fit_test(rec, 0.1)
+    got = fit_test(rec, 0.1 / fit_gate.GATE_NOISE_FACTOR)           # the test's noise: 0.1 px
     rss = 0.1 ** 2 * 7 + 0.2 ** 2 * 7
     assert got["dof"] == 28 - 13 and got["statistic"] == pytest.approx(rss / 0.01)
     assert got["p_value"] == pytest.approx(1 - chi2_cdf(rss / 0.01, 15), rel=1e-6)
-    assert got["ratio"] == pytest.approx(math.sqrt(rss / 15) / 0.1) and got["explains"] is True
-    assert fit_test(rec, 0.02)["explains"] is False                       # 5x the noise: p ~ 1e-40
+    assert got["ratio"] == pytest.approx(math.sqrt(rss / 15) / (0.1 / fit_gate.GATE_NOISE_FACTOR))
+    assert got["explains"] is True
+    assert fit_test(rec, 0.02 / fit_gate.GATE_NOISE_FACTOR)["explains"] is False   # 5x the test's noise: p ~ 1e-40
     assert fit_test(rec, None) == {"explains": None, "not_tested": "no known centre noise", "dof": 15}
     few = {**rec, "n_markers": {"A": 3, "B": 3}}
     assert fit_test(few, 0.1) == {"explains": None, "not_tested": "no degrees of freedom", "dof": 0}

@@ -2,10 +2,17 @@
 against the exact centroid of the marker it belongs to: how many are over 1 px off at a quality
 above the refinement's gate, by condition and by how much of the marker is hidden.
 
-    python bench/centre_quality.py DATASET DETECTIONS.json [DATASET DETECTIONS.json ...]
+    python -m bench.detector.centre_quality DATASET DETECTIONS.json [DATASET DETECTIONS.json ...]
         [--min-score 0.25] [--out FILE.json]
+    python -m bench.detector.centre_quality DATASET [DATASET ...] --camera three-chip|bayer|jpeg90|mp4v|mp4v-colour
+        [--weights W] [--out FILE.json]
 
-Detections: a ``dockfactory detect --split all`` document of the dataset (refined centres).
+Detections: a ``dockfactory detect --split all`` document of the dataset (refined centres); with
+``--camera`` the bench detects every frame itself after the camera's effect (``bayer``: an RGGB
+mosaic demosaiced by VNG, refined with the pattern known, as ``measure --cfa RGGB``; ``jpeg90``:
+a JPEG of quality 90 with 4:2:0 chroma, refined as ``measure`` refines a .jpg; ``three-chip``:
+the frame as rendered; ``mp4v``: one frame of an MPEG-4 video, 4:2:0, refined on the luma as
+``measure --video`` refines a lossy stream, ``mp4v-colour`` the same frame refined on the colour).
 A detection is matched to the nearest label marker of its class (visibility >= 1) whose
 ``outline_centroid_px`` lies within the marker's apparent radius (sqrt(area_px / pi)); unmatched
 detections are counted apart (false positives or centres more than a radius off). Per dataset
@@ -26,12 +33,17 @@ import argparse
 import json
 import math
 import sys
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
+from dockfactory.core.cfa import mosaic
+from dockfactory.core.cv import cv2
+from dockfactory.core.demosaic import demosaic
 from dockfactory.core.io import write_json_atomic
+from dockfactory.core.isp import jpeg_round_trip
 from dockfactory.generator.dataset_open import Dataset
 
 
@@ -78,19 +90,65 @@ def summary(rows: list) -> dict:
     over1 = sum(r["error_px"] > 1.0 for r in ref)
     return {"refined": len(ref), "over_1px": over1, "share_over_1px": over1 / max(len(ref), 1),
             "wilson95": wilson(over1, len(ref)), "over_0_5px": sum(r["error_px"] > 0.5 for r in ref),
+            "median_px": float(np.median([r["error_px"] for r in ref])) if ref else None,
+            "p90_px": float(np.percentile([r["error_px"] for r in ref], 90)) if ref else None,
             "unrefined": len(rows) - len(ref),
             "unrefined_over_1px": sum(r["error_px"] > 1.0 for r in rows if not r["refined"])}
 
 
-def dataset_rows(root: Path, det_path: Path, min_score: float) -> tuple[list, int]:
+def dataset_rows(root: Path, dets: dict, min_score: float) -> tuple[list, int]:
+    """(matched rows, unmatched detections) of the dataset at ``root`` and its detections
+    ``dets`` ({frame id: [detection]})."""
     ds = Dataset.open(root)
-    dets = json.loads(det_path.read_text())["frames"]
     rows, unmatched = [], 0
     for fid, frame_dets in sorted(dets.items()):
         r, u = match_rows(ds.labels[fid], frame_dets, min_score)
         rows += r
         unmatched += u
     return rows, unmatched
+
+
+CAMERAS = ("three-chip", "bayer", "jpeg90", "mp4v", "mp4v-colour")
+
+
+def mp4v_round_trip(image: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 RGB as one frame of an MPEG-4 Part 2 video (OpenCV's mp4v, 4:2:0
+    chroma, as ``dataset export --format video`` writes runs) decodes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = str(Path(tmp) / "f.mp4")
+        writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (image.shape[1], image.shape[0]))
+        writer.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        writer.release()
+        ok, frame = cv2.VideoCapture(path).read()
+    if not ok:
+        raise RuntimeError("OpenCV could not round-trip a frame through mp4v")
+    return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+
+
+def camera_image(image: np.ndarray, camera: str) -> tuple[np.ndarray, str | None, bool]:
+    """(the frame ``image`` (H, W, 3) uint8 RGB through ``camera``, its Bayer pattern, whether
+    the refinement is told the colour is subsampled). ``mp4v`` is refined as a stream of it is
+    (dockfactory.measure_chroma), ``mp4v-colour`` on the colour score as it was before."""
+    if camera == "bayer":
+        return demosaic(mosaic(image, "RGGB"), "RGGB", "vng"), "RGGB", False
+    if camera == "jpeg90":
+        return jpeg_round_trip(image, 90, "420"), None, True
+    if camera.startswith("mp4v"):
+        return mp4v_round_trip(image), None, camera == "mp4v"
+    return image, None, False
+
+
+def camera_detections(root: Path, camera: str, weights: Path | None) -> dict:
+    """{frame id: detections} of every frame of the dataset at ``root`` through ``camera``."""
+    from dockfactory.detector.infer import MarkerDetector
+    from dockfactory.core.resources import shipped_weights
+    detector = MarkerDetector(weights or shipped_weights())
+    out = {}
+    for fid in sorted(Dataset.open(root).labels):
+        bgr = cv2.imread(str(root / "images" / f"{fid}.png"), cv2.IMREAD_COLOR)
+        image, cfa, jpeg = camera_image(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera)
+        out[fid] = detector.detect(image, cfa=cfa, jpeg=jpeg)
+    return out
 
 
 def report(name: str, rows: list, unmatched: int) -> dict:
@@ -116,19 +174,25 @@ def report(name: str, rows: list, unmatched: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("pairs", nargs="+", help="DATASET DETECTIONS.json, repeated")
+    ap.add_argument("pairs", nargs="+", help="DATASET DETECTIONS.json, repeated (with --camera: DATASET ...)")
+    ap.add_argument("--camera", choices=CAMERAS, help="detect every frame through this camera")
+    ap.add_argument("--weights", type=Path, help="with --camera (default: the shipped weights)")
     ap.add_argument("--min-score", type=float, default=0.25)
     ap.add_argument("--out", type=Path)
     args = ap.parse_args(argv)
-    if len(args.pairs) % 2:
+    if args.camera is None and len(args.pairs) % 2:
         ap.error("give DATASET DETECTIONS.json pairs")
-    result, every = {}, []
-    for root, det in zip(args.pairs[0::2], args.pairs[1::2]):
-        rows, unmatched = dataset_rows(Path(root), Path(det), args.min_score)
+    sources = ([(root, lambda r=root: camera_detections(Path(r), args.camera, args.weights)) for root in args.pairs]
+               if args.camera else
+               [(root, lambda d=det: json.loads(Path(d).read_text())["frames"])
+                for root, det in zip(args.pairs[0::2], args.pairs[1::2])])
+    result, every = {"camera": args.camera or "detections files"}, []
+    for root, dets in sources:
+        rows, unmatched = dataset_rows(Path(root), dets(), args.min_score)
         every += rows
         result[root] = report(root, rows, unmatched)
-    if len(result) > 1:
-        result["overall"] = report("overall", every, sum(r["unmatched"] for r in result.values()))
+    if len(result) > 2:
+        result["overall"] = report("overall", every, sum(r["unmatched"] for r in result.values() if isinstance(r, dict)))
     if args.out:
         write_json_atomic(args.out, result)
     return 0
