@@ -16,8 +16,7 @@ from dockfactory.eval.acceptance import criterion_lines, load_acceptance, verdic
 from dockfactory.eval.dataset_access import read_json_for
 from dockfactory.eval.envelope import EnvelopeGrid
 from dockfactory.eval.evaluate import evaluate, portable_path, write_outputs
-from dockfactory.eval.report import build_report
-from dockfactory.eval.report_pdf import NO_ENGINE, pdf_engine, write_pdf
+from dockfactory.eval.report import NO_ENGINE, build_report, pdf_engine, write_pdf
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset

@@ -406,7 +406,7 @@ def json_safe(obj):
 def portable_path(path, folder) -> str:
     """``path`` as the evaluation in ``folder`` records it: relative to that folder, so the tree
     (dataset, poses, detections, evaluation) can move as one and ``report`` finds its inputs from
-    any current folder (eval.report.input_path); absolute where no relative path exists."""
+    any current folder (eval.report.document.input_path); absolute where no relative path exists."""
     try:
         return os.path.relpath(os.path.abspath(path), os.path.abspath(folder))
     except ValueError:   # another drive

@@ -213,7 +213,7 @@ def test_run_stage_on_a_complete_dataset(painted_root, tmp_path, monkeypatch, ca
     gates poses only). The second run skips the render and the solve (current) but evaluates
     again (the acceptance spec changed). The report's plots (two thirds of this test's time) are
     left out here: test_report_stage draws them."""
-    import dockfactory.eval.report as report
+    import dockfactory.eval.report.document as report
     import dockfactory.generator.render_job as render_job
     monkeypatch.setattr(render_job, "_render", _no_render)
     monkeypatch.setattr(report, "plots", lambda rows, metrics, detections_pr=None: {})

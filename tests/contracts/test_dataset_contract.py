@@ -31,7 +31,7 @@ from pathlib import Path
 import pytest
 
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval import report
+from dockfactory.eval.report import document as report
 from dockfactory.cli import main
 from dockfactory.generator import render_job
 from dockfactory.generator.dataset import frame_files

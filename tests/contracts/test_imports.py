@@ -16,8 +16,10 @@ PACKAGES = ("core", "generator", "detector", "solver", "eval")
 def test_modules_import_without_bpy(repo_root, tmp_path):
     modules = ["dockfactory"]
     for pkg in PACKAGES:
-        for path in sorted((repo_root / pkg).glob("*.py")):
-            modules.append(f"dockfactory.{pkg}" if path.stem == "__init__" else f"dockfactory.{pkg}.{path.stem}")
+        for path in sorted((repo_root / pkg).rglob("*.py")):   # subpackages too (eval/report/)
+            parts = path.relative_to(repo_root / pkg).with_suffix("").parts
+            parts = parts[:-1] if parts[-1] == "__init__" else parts
+            modules.append(".".join(("dockfactory", pkg, *parts)))
     code = BLOCK_BPY + "\nimport importlib\n" + "".join(f"importlib.import_module({m!r})\n" for m in modules)
     code += "assert 'bpy' not in sys.modules\nprint('ok', len(%r))\n" % (modules,)
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)

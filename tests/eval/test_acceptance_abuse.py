@@ -351,7 +351,7 @@ def rejected_eval(smoke, tmp_path_factory):
 
 @pytest.fixture
 def no_plots(monkeypatch):
-    import dockfactory.eval.report as report
+    import dockfactory.eval.report.document as report
     monkeypatch.setattr(report, "plots", lambda rows, metrics, detections_pr=None: {})
 
 

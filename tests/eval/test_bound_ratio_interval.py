@@ -9,7 +9,7 @@ import pytest
 from dockfactory.eval.acceptance import COMPONENTS
 from dockfactory.eval.confidence import chi2_quantile
 from dockfactory.eval.evaluate import bound_ratios
-from dockfactory.eval.report_calibration import _ratio_note, _ratio_text
+from dockfactory.eval.report.calibration import _ratio_note, _ratio_text
 
 
 def _crb(rmse: float, n: int) -> dict:

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from dockfactory.eval.confidence import chi2_quantile
-from dockfactory.eval.report_calibration import calibration_note, rms_z_interval
+from dockfactory.eval.report.calibration import calibration_note, rms_z_interval
 
 
 def cal(rms_z: float, n: int, within: float = 0.95) -> dict:

@@ -193,7 +193,7 @@ def test_run_smoke_end_to_end_and_report(repo_root, tmp_path):
 
 
 def test_the_report_shows_the_networks_own_boxes_beside_the_refined_ones():
-    from dockfactory.eval.report import _html_detection
+    from dockfactory.eval.report.document import _html_detection
     det = {"map50": 0.995, "map50_95": 0.975, "per_class": {"RedA": {"map50": 1.0, "map50_95": 0.977}}}
     plain = "".join(_html_detection(det))
     assert "0.975" in plain and "network" not in plain          # detections without the network's boxes
@@ -224,8 +224,8 @@ def test_an_undecided_criterion_says_how_many_frames_would_decide_it():
 
 def test_tables_say_n_too_small_instead_of_a_std_of_zero():
     from dockfactory.eval.pose_metrics import error_stats
-    from dockfactory.eval.report import MIN_N_STATS, _stats_table
-    from dockfactory.eval.report_calibration import _z_cells
+    from dockfactory.eval.report.calibration import _z_cells
+    from dockfactory.eval.report.document import MIN_N_STATS, _stats_table
     comps = ("x", "y", "z", "alpha", "beta", "gamma")
     one = {c: error_stats([0.3]) for c in comps}
     three = {c: error_stats([0.3, -0.1, 0.2]) for c in comps}
@@ -238,7 +238,7 @@ def test_tables_say_n_too_small_instead_of_a_std_of_zero():
 
 
 def test_error_plots_draw_the_tolerance():
-    from dockfactory.eval.report import localization_tolerances
+    from dockfactory.eval.report.document import localization_tolerances
     metrics = {"acceptance": {"criteria": [
         {"block": "localization", "component": "x", "statistic": "rmse", "threshold": 5.0},
         {"block": "localization", "component": "alpha", "statistic": "mse", "threshold": 0.01},

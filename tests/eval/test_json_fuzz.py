@@ -69,7 +69,7 @@ def cheap_extras(world):
     exercised by test_stages; here they cost time only: the figures are left out and the oracle's
     poses are computed once per noise level."""
     import dockfactory.eval.evaluate as evaluate_mod
-    import dockfactory.eval.report as report
+    import dockfactory.eval.report.document as report
     saved = report.plots, evaluate_mod.solve_dataset
     cache = {}
 

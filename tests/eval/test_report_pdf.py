@@ -9,7 +9,7 @@ from cli_run import one_line_error, run_cli
 from pipeline_data import write_painted_dataset
 
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval import report_pdf
+from dockfactory.eval.report import pdf as report_pdf
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.eval.acceptance import AcceptanceSpec
@@ -101,7 +101,7 @@ def test_the_print_stylesheet_keeps_each_heading_with_its_plot():
     import cv2
     import numpy as np
 
-    from dockfactory.eval.report import _html_document, _img
+    from dockfactory.eval.report.document import _html_document, _img
     weasyprint = _weasyprint()
     ok, png = cv2.imencode(".png", np.full((300, 400, 3), 90, np.uint8))
     plot = f"<section class='plot'><h3>Errors</h3>{_img(base64.b64encode(png.tobytes()).decode(), 'plot')}</section>"

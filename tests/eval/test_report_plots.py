@@ -1,10 +1,10 @@
-"""eval.report's error plots: every panel that shows an error draws its localization tolerance (a
+"""eval.report.document's error plots: every panel that shows an error draws its localization tolerance (a
 quality engineer reads the errors against what is allowed, not against an axis of their own)."""
 import matplotlib
 import numpy as np
 import pytest
 
-from dockfactory.eval import report
+from dockfactory.eval.report import document as report
 
 
 @pytest.fixture(autouse=True)

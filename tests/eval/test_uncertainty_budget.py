@@ -138,7 +138,7 @@ def test_a_docking_runs_intrinsics_term_is_its_focal_std_propagated():
 
 
 def test_budget_block_is_the_rms_over_frames_and_the_report_shows_the_gated_components():
-    from dockfactory.eval.report_budget import html_budget
+    from dockfactory.eval.report.budget import html_budget
     from dockfactory.eval.uncertainty_budget import budget_block
     recs = [_record(s) for s in (21, 22, 23)]
     sizes = {tuple(r.pop("image_size")) for r in recs}

@@ -70,7 +70,7 @@ def _status_clean(proj):
 def test_symlink_cache_every_consumer(finished, tmp_path, capsys, monkeypatch):
     """Without a .dvcignore DVC links logs/ and exports/ too: verify, run, card and every export
     (beside the dataset by default, or --out) work, and ``dvc status`` stays clean."""
-    import dockfactory.eval.report as report
+    import dockfactory.eval.report.document as report
     monkeypatch.setattr(report, "plots", lambda rows, metrics, detections_pr=None: {})
     proj, ds = _tracked(finished, tmp_path, dvcignore="")
     assert (ds / "logs" / ".dockfactory.lock").is_symlink() and (ds / "hf" / "train" / "metadata.jsonl").is_symlink()

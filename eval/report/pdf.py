@@ -1,6 +1,6 @@
 """The acceptance report as a PDF, through a real layout engine: WeasyPrint when it imports (a
 PyPI package; it needs the Pango library of the system), else a headless Chromium on the PATH
-(Debian's ``chromium``). The HTML's print stylesheet (``eval.report``) keeps each heading with its
+(Debian's ``chromium``). The HTML's print stylesheet (``eval.report.document``) keeps each heading with its
 plot or table and each figure on one page.
 
 ``pdf_engine()`` says which engine this machine has (None: neither); ``write_pdf`` writes the PDF
@@ -30,16 +30,42 @@ def _weasyprint():
 
 
 def pdf_engine() -> str | None:
-    """"weasyprint", the path of a Chromium executable, or None."""
+    """The PDF engine this machine has.
+
+    Parameters
+    ----------
+    None
+
+    Returns
+    -------
+    str or None
+        "weasyprint", the path of a Chromium executable, or None (neither is there).
+    """
     if _weasyprint() is not None:
         return "weasyprint"
     return next((p for p in map(shutil.which, CHROMIUM_NAMES) if p), None)
 
 
 def write_pdf(html_path, pdf_path) -> str:
-    """Render the report ``html_path`` to ``pdf_path`` (atomic: the old file or the new one, never
-    a partial one); returns the engine used. DockfactoryError when no engine is there or the
-    engine fails (its message, one line)."""
+    """Render a report's HTML to PDF, atomically (the old file or the new one, never a partial one).
+
+    Parameters
+    ----------
+    html_path : path
+        The report's HTML file (:func:`build_report`).
+    pdf_path : path
+        The PDF file to write.
+
+    Returns
+    -------
+    str
+        The engine used (:func:`pdf_engine`).
+
+    Raises
+    ------
+    DockfactoryError
+        When no engine is there or the engine fails (its message, one line).
+    """
     engine = pdf_engine()
     if engine is None:
         raise DockfactoryError(NO_ENGINE)

@@ -22,7 +22,7 @@ from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
 from dockfactory.eval.acceptance import DECISION_RULES, criterion_passes, decide_criterion, overall_verdict
-from dockfactory.eval.report_calibration import (
+from dockfactory.eval.report.calibration import (
     CALIBRATION_SCHEMA,
     CENTRE_NOISE_SCHEMA,
     html_bound,
@@ -31,8 +31,8 @@ from dockfactory.eval.report_calibration import (
     markdown_honesty,
     plot_qq,
 )
-from dockfactory.eval.report_budget import html_budget
-from dockfactory.eval.report_cameras import (
+from dockfactory.eval.report.budget import html_budget
+from dockfactory.eval.report.cameras import (
     CAMERA_MODELS_SCHEMA,
     ENVELOPE_SCHEMA,
     html_camera_models,
@@ -72,8 +72,22 @@ ROW_NEEDED = ("frame_id", "split", "condition", "ok")
 
 
 def read_rows(eval_dir: Path) -> list[dict]:
-    """The rows of EVAL/frames.csv, typed; a DatasetError naming the file, row and column when a
-    column the report uses is missing or not a number."""
+    """The rows of EVAL/frames.csv, typed: ``ok`` a bool, the text columns text, the others float or None.
+
+    Parameters
+    ----------
+    eval_dir : Path
+        The evaluation folder holding frames.csv.
+
+    Returns
+    -------
+    list of dict
+
+    Raises
+    ------
+    DatasetError
+        Naming the file, row and column: a missing or unreadable file, a missing or bad value.
+    """
     path = eval_dir / "frames.csv"
     try:
         with open(path, newline="", encoding="utf-8") as fh:
@@ -361,9 +375,29 @@ PROVENANCE_SCHEMA = {"detections?": "str?", "commands?": ("list", "str"), "model
 
 
 def check_schema(value, schema, path, key: str = "") -> None:
-    """Raise DatasetError("PATH: KEY: problem") where ``value`` does not follow ``schema``: a dict
-    of keys (``name?`` optional), ("map", sub) / ("list", sub) / ("pair", sub) (a list of exactly
-    two), "any", or a leaf type ("num", "int", "str", "bool"; with "?" also null)."""
+    """Check that a parsed JSON value follows a schema.
+
+    Parameters
+    ----------
+    value : object
+        The parsed JSON value.
+    schema : dict, tuple or str
+        A dict of keys (``name?`` optional), ("map", sub) / ("list", sub) / ("pair", sub) (a list of
+        exactly two), "any", or a leaf type ("num", "int", "str", "bool"; with "?" also null).
+    path : path
+        The file the value was read from (named in the error).
+    key : str
+        The value's place in that file (named in the error).
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    DatasetError
+        "PATH: KEY: problem" where ``value`` does not follow ``schema``.
+    """
     if isinstance(schema, dict):
         _check_object(value, schema, path, key)
     elif isinstance(schema, tuple):
@@ -584,7 +618,7 @@ def _html_localization(metrics: dict) -> list[str]:
 
 
 def _html_calibration(metrics: dict, rows: list[dict]) -> list[str]:
-    """The covariance-calibration section with its QQ plot (eval.report_calibration)."""
+    """The covariance-calibration section with its QQ plot (eval.report.calibration)."""
     if not metrics["localization"].get("calibration"):
         return []
     import matplotlib
@@ -722,20 +756,34 @@ def _html_sign_off(sign: dict) -> str:
 
 
 def build_report(eval_dir, out_html, commands: list[str] | None = None, signers: dict | None = None) -> dict:
-    """Build the report of the evaluation folder ``eval_dir`` into ``out_html`` (and report.json,
-    report.md beside it); ``signers``: see :func:`sign_off`. Returns the summary."""
+    """Build the report of an evaluation folder: ``out_html`` and report.json, report.md beside it.
+
+    Parameters
+    ----------
+    eval_dir : path
+        The evaluation folder (metrics.json, frames.csv, provenance.json of ``dockfactory evaluate``).
+    out_html : path
+        The HTML file to write.
+    commands : list of str, optional
+        The commands that made the inputs (the provenance's own when None).
+    signers : dict, optional
+        The sign-off block's names: see :func:`sign_off`.
+
+    Returns
+    -------
+    dict
+        The summary written to report.json (verdict, criteria, provenance, headline figures).
+
+    Raises
+    ------
+    DatasetError
+        When the folder, a file of it or an input it names is missing, broken or of another shape.
+    """
     eval_dir = Path(eval_dir)
     if not eval_dir.is_dir():
         raise DatasetError(f"{eval_dir}: no such evaluation folder (run dockfactory evaluate first)")
     metrics_path = eval_dir / "metrics.json"
-    metrics = read_json_file(metrics_path, "metrics")
-    check_schema(metrics, METRICS_SCHEMA, metrics_path)
-    for name, curve in ((metrics.get("detection") or {}).get("pr_curves") or {}).items():
-        if len(curve) != 2 or len(curve[0]) != len(curve[1]):
-            raise DatasetError(f"{metrics_path}: detection.pr_curves.{name}: expected [recall list, precision list] "
-                               "of equal length")
-    for i, unit in enumerate((metrics.get("simulated_cameras") or {}).get("units", [])):
-        check_schema(unit["sensor"], sensor_schema(unit["sensor"]), metrics_path, f"simulated_cameras.units[{i}].sensor")
+    metrics = _read_metrics(metrics_path)
     acc = metrics["acceptance"]
     verdict = checked_verdict(acc, metrics_path)
     rows = read_rows(eval_dir)
@@ -744,6 +792,31 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None, signers:
     prov = read_json_file(prov_path, "provenance") if prov_path.exists() else {}
     check_schema(prov, PROVENANCE_SCHEMA, prov_path)
     dataset_root = input_path(metrics["dataset"]["root"], eval_dir, f"{metrics_path}: dataset.root")
+    poses, detections = _read_observations(metrics, metrics_path, prov, prov_path, eval_dir)
+    provenance = _report_provenance(metrics, prov, commands)
+    figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
+    worst = gallery(dataset_root, rows, poses, detections)
+    sign = sign_off(eval_dir, signers)
+    parts = _html_parts(metrics, rows, verdict, sign) + _html_figures(figs, worst) + [_html_provenance(provenance)]
+    write_text_atomic(out_html, _html_document(parts))
+    return write_summary(out_html, metrics, verdict, provenance, sign)
+
+
+def _read_metrics(metrics_path: Path) -> dict:
+    """metrics.json, checked against METRICS_SCHEMA (its PR curves and simulated sensors too)."""
+    metrics = read_json_file(metrics_path, "metrics")
+    check_schema(metrics, METRICS_SCHEMA, metrics_path)
+    for name, curve in ((metrics.get("detection") or {}).get("pr_curves") or {}).items():
+        if len(curve) != 2 or len(curve[0]) != len(curve[1]):
+            raise DatasetError(f"{metrics_path}: detection.pr_curves.{name}: expected [recall list, precision list] "
+                               "of equal length")
+    for i, unit in enumerate((metrics.get("simulated_cameras") or {}).get("units", [])):
+        check_schema(unit["sensor"], sensor_schema(unit["sensor"]), metrics_path, f"simulated_cameras.units[{i}].sensor")
+    return metrics
+
+
+def _read_observations(metrics: dict, metrics_path: Path, prov: dict, prov_path: Path, eval_dir: Path):
+    """(poses, detections or None) the evaluation names, validated; errors name the file that named them."""
     poses = _input_json(metrics["poses"]["path"], eval_dir, "poses", f"{metrics_path}: poses.path")
     try:
         validate_poses(poses, metrics["poses"]["path"])
@@ -756,20 +829,19 @@ def build_report(eval_dir, out_html, commands: list[str] | None = None, signers:
             validate_detections(detections, det_path)
         except DatasetError as exc:
             raise DatasetError(f"{prov_path}: detections: {exc}") from None
-    provenance = _report_provenance(metrics, prov, commands)
-    figs = plots(rows, metrics, (metrics.get("detection") or {}).get("pr_curves"))
-    worst = gallery(dataset_root, rows, poses, detections)
-    sign = sign_off(eval_dir, signers)
-    parts = (_html_verdict(metrics, acc, verdict) + [_html_sign_off(sign)] + _html_localization(metrics)
-             + html_budget(metrics) + _html_calibration(metrics, rows)
-             + (html_model_check(metrics["model_check"]) if metrics.get("model_check") else [])
-             + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
-             + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
-             + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
-             + (html_simulated_cameras(metrics["simulated_cameras"]) if metrics.get("simulated_cameras") else [])
-             + _html_figures(figs, worst) + [_html_provenance(provenance)])
-    write_text_atomic(out_html, _html_document(parts))
-    return write_summary(out_html, metrics, verdict, provenance, sign)
+    return poses, detections
+
+
+def _html_parts(metrics: dict, rows: list[dict], verdict: str, sign: dict) -> list[str]:
+    """The report's sections before its figures, in order."""
+    acc = metrics["acceptance"]
+    return (_html_verdict(metrics, acc, verdict) + [_html_sign_off(sign)] + _html_localization(metrics)
+            + html_budget(metrics) + _html_calibration(metrics, rows)
+            + (html_model_check(metrics["model_check"]) if metrics.get("model_check") else [])
+            + [_html_estimation(metrics["estimation"])] + _html_failures(metrics)
+            + _html_detection(metrics.get("detection")) + _html_camera_envelope(metrics.get("camera_envelope"))
+            + (html_camera_models(metrics["camera_models"]) if metrics.get("camera_models") else [])
+            + (html_simulated_cameras(metrics["simulated_cameras"]) if metrics.get("simulated_cameras") else []))
 
 
 def write_summary(out_html, metrics: dict, verdict: str, provenance: dict, sign: dict | None = None) -> dict:
