@@ -23,7 +23,7 @@ from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.cli_args import input_scale, int_in, learning_rate, non_negative_int, thread_count, torch_threads, unit_float
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_coco_results import coco_results
+from dockfactory.generator.exports import coco_results
 
 # Named limits of the training flags: beyond them a run asks for gigabytes (1e9 crops per frame
 # wanted a 30 GB index array) or years, not for a detector.

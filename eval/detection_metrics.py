@@ -19,7 +19,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.boxes import iou_matrix
 from dockfactory.eval.yolov5_ap import yolov5_map
-from dockfactory.generator.export_coco import coco_from_labels
+from dockfactory.generator.exports import coco_from_labels
 
 COCO_SHIFT = 0.5
 NORMAL_CONDITIONS = ("normal", "ideal")

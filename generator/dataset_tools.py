@@ -22,13 +22,16 @@ from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CL
 from dockfactory.generator.dataset_diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.dvc_links import outside_exports
-from dockfactory.generator.export_bop import export_bop
-from dockfactory.generator.export_cameras import export_cameras
-from dockfactory.generator.export_coco import export_coco
-from dockfactory.generator.export_files import folder_built_aside
-from dockfactory.generator.export_video import export_video, export_video_lossless
-from dockfactory.generator.export_yolo import export_yolo
-from dockfactory.generator.export_yolo_pose import export_yolo_pose
+from dockfactory.generator.exports import (
+    export_bop,
+    export_cameras,
+    export_coco,
+    export_video,
+    export_video_lossless,
+    export_yolo,
+    export_yolo_pose,
+)
+from dockfactory.generator.exports.files import folder_built_aside
 from dockfactory.generator.sampler import frame_plan
 
 # coco, yolo, yolo-pose, bop, cameras: also written by render ([export] formats); the videos only on demand (dataset export)

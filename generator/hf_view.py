@@ -20,8 +20,8 @@ from dockfactory.core.io import TMP_MARK, stale_temp, write_text_atomic
 from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SPLITS
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_coco import COCO_SHIFT   # OpenCV pixel centres -> continuous coordinates
-from dockfactory.generator.export_files import folder_built_aside, place_file, source_image
+from dockfactory.generator.exports.coco import COCO_SHIFT   # OpenCV pixel centres -> continuous coordinates
+from dockfactory.generator.exports.files import folder_built_aside, place_file, source_image
 
 HF_DIR = "hf"
 # the metadata's features as the card declares them (datasets' YAML schema): what imagefolder would

@@ -54,7 +54,7 @@ GATED = ("x_mm", "y_mm", "alpha_deg")
 
 
 def _write_videos(ds, run: int, frames: int, folder: Path) -> tuple[list[str], dict[str, Path]]:
-    from dockfactory.generator.export_video import CODECS, video_runs, write_run_video
+    from dockfactory.generator.exports.video import CODECS, video_runs, write_run_video
     runs = video_runs(ds)
     if not 0 <= run < len(runs):
         raise SystemExit(f"{ds.root}: run {run} does not exist ({len(runs)} runs)")

@@ -20,7 +20,7 @@ import numpy as np
 
 from dockfactory.eval.detection_metrics import coco_map, coco_results
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_coco import coco_from_labels
+from dockfactory.generator.exports.coco import coco_from_labels
 
 
 def noisy_ground_truth(coco_gt: dict, sigma: float, rng: np.random.Generator) -> dict:

@@ -98,7 +98,7 @@ def test_wheel_holds_one_package_with_configs_and_weights(wheel, repo_root):
         assert shipped, (folder, pattern)
         for name in shipped:
             assert f"dockfactory/{folder}/{name}" in names, name
-    for sub in ("core", "generator", "blender_scenes", "solver", "detector", "eval", "eval/report"):
+    for sub in ("core", "generator", "blender_scenes", "solver", "detector", "eval", "eval/report", "generator/exports"):
         assert f"dockfactory/{sub}/__init__.py" in names, sub
     assert "dockfactory/__main__.py" in names
     assert not any(n.startswith("dockfactory/tests/") or "/bench/" in n for n in names)

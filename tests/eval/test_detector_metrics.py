@@ -11,7 +11,7 @@ from dockfactory.eval.detection_metrics import (
     network_boxes,
 )
 from dockfactory.eval.yolov5_ap import correct_matrix, yolov5_map
-from dockfactory.generator.export_coco import coco_from_labels
+from dockfactory.generator.exports.coco import coco_from_labels
 
 SIZE = 20.0
 

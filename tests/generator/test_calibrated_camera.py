@@ -1,5 +1,5 @@
 """A calibration file in the factory (core.config_calibration) and every frame's true camera out
-(generator.export_cameras), without Blender: a config naming a calibration file renders that
+(generator.exports.cameras), without Blender: a config naming a calibration file renders that
 camera (the file's image size, focal, principal point and lens on every frame), the dataset's
 stored config reproduces it without the file, a key set twice or non-square pixels are one line;
 the cameras export is read by OpenCV's own FileStorage and COLMAP's format back to the labels'

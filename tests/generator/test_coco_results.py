@@ -16,8 +16,8 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import SPLITS
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_coco import KPT_OKS_SIGMAS
-from dockfactory.generator.export_coco_results import coco_results
+from dockfactory.generator.exports.coco import KPT_OKS_SIGMAS
+from dockfactory.generator.exports.coco_results import coco_results
 
 SHIFT = 0.1        # boxes moved by a tenth of their width: IoU (1 - 0.1) / (1 + 0.1) = 0.818
 TARGET_OKS = 0.725  # keypoints moved so that OKS is 0.725: matched at thresholds 0.50 .. 0.70

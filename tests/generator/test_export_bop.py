@@ -20,7 +20,7 @@ from bop_toolkit_check import RENDERER_MISSING
 from test_exports import write_dataset
 
 from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator import export_bop
+from dockfactory.generator.exports import bop as export_bop
 from dockfactory.generator.bop_images import NO_HIT_MM, bop_box, depth_png, label_box, section_outlines
 from dockfactory.generator.bop_models import SEGMENTS, read_ply, section_mesh, write_ply
 from dockfactory.generator.dataset import DatasetError

@@ -19,9 +19,9 @@ from test_exports import THRESHOLD, ultralytics_dataset, write_dataset
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_coco import KEYPOINTS_TO_CONTINUOUS
-from dockfactory.generator.export_yolo import parse_yolo_line
-from dockfactory.generator.export_yolo_pose import parse_pose_keypoint
+from dockfactory.generator.exports.coco import KEYPOINTS_TO_CONTINUOUS
+from dockfactory.generator.exports.yolo import parse_yolo_line
+from dockfactory.generator.exports.yolo_pose import parse_pose_keypoint
 
 HERE = Path(__file__).resolve().parent
 CENTRE_TOL_PX = 1e-6          # our file: 10 decimals of a normalised coordinate

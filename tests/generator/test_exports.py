@@ -30,13 +30,13 @@ from dockfactory.generator import dataset_tools as dt
 from dockfactory.generator.dataset import prepare
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.random_draws import static_scene
-from dockfactory.generator.export_coco import (
+from dockfactory.generator.exports.coco import (
     KPT_OKS_SIGMAS,
     POLYGON_TOLERANCE_PX,
     outline_px,
     read_layout,
 )
-from dockfactory.generator.export_yolo import data_yaml, parse_yolo_line
+from dockfactory.generator.exports.yolo import data_yaml, parse_yolo_line
 from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.sampler import frame_plan, sample_frame
 
@@ -349,7 +349,7 @@ def test_yolo_val_is_never_test_while_there_is_training_data():
 
 
 def test_empty_splits_leave_existing_empty_folders(tmp_path):
-    from dockfactory.generator.export_yolo import export_yolo
+    from dockfactory.generator.exports.yolo import export_yolo
     root = write_dataset(tmp_path / "ds", {**CONFIG, "dataset": {**CONFIG["dataset"], "frames": 0}})
     out = export_yolo(root, tmp_path / "yolo")   # the repeatability frames only: no YOLO split
     _, splits = ultralytics_dataset(out / "data.yaml")
@@ -368,7 +368,7 @@ def test_bop_has_one_scene_per_split(moved):
 
 
 def test_polygon_simplification_stays_within_tolerance():
-    from dockfactory.generator.export_coco import simplify_closed
+    from dockfactory.generator.exports.coco import simplify_closed
     a = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     circle = np.stack([100 + 30 * np.cos(a), 80 + 12 * np.sin(a)], 1)
     simple = simplify_closed(circle, POLYGON_TOLERANCE_PX)

@@ -177,7 +177,7 @@ def test_frame_that_keeps_failing_is_reported(tmp_path):
 
 
 def test_yolo_round_trip(job):
-    from dockfactory.generator.export_yolo import parse_yolo_line
+    from dockfactory.generator.exports.yolo import parse_yolo_line
     _, _, clean = job
     yolo = clean / "exports" / "yolo"
     text = (yolo / "data.yaml").read_text()

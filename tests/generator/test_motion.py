@@ -423,7 +423,7 @@ def test_rolling_labels_use_row_times_for_centres_boxes_and_silhouettes():
 
 
 def test_coco_outlines_of_a_rolling_frame_are_the_labels():
-    from dockfactory.generator.export_coco import outline_px
+    from dockfactory.generator.exports.coco import outline_px
     cfg = motion_cfg(frames=2, rolling_ms=30.0, camera_units={"k1": [-0.1, -0.1]})
     static = static_scene(cfg)
     frame = sample_frame(cfg, frame_plan(cfg)[0])

@@ -20,7 +20,7 @@ from dockfactory.core.cv import cv2
 from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_files import source_image
+from dockfactory.generator.exports.files import source_image
 
 VIDEO_FPS = 10.0
 CODECS = {"video": ("mp4v", ".mp4", True), "video_lossless": ("FFV1", ".mkv", False)}   # fourcc, suffix, lossy
@@ -88,10 +88,46 @@ def export_video_as(ds: Dataset, out, fmt: str) -> Path:
 
 
 def export_video(ds: Dataset, out) -> Path:
-    """exports/video: MPEG-4 part 2 ('mp4v') in .mp4, lossy."""
+    """exports/video: MPEG-4 part 2 ('mp4v') in .mp4, lossy.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened dataset (its frames in runs: a config with ``[runs]``).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When an image of the dataset is not a colour image of the dataset's size.
+    """
     return export_video_as(ds, out, "video")
 
 
 def export_video_lossless(ds: Dataset, out) -> Path:
-    """exports/video_lossless: FFV1 in .mkv, the PNGs' pixels exactly."""
+    """exports/video_lossless: FFV1 in .mkv, the PNGs' pixels exactly.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened dataset (its frames in runs: a config with ``[runs]``).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When an image of the dataset is not a colour image of the dataset's size.
+    """
     return export_video_as(ds, out, "video_lossless")

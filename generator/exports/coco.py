@@ -17,7 +17,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_files import place_file, source_image
+from dockfactory.generator.exports.files import place_file, source_image
 from dockfactory.generator.labels import clip_polygon, image_px, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view
 
@@ -183,7 +183,31 @@ def _image_record(image_id: int, lab: dict) -> dict:
 
 def coco_from_labels(labels: list[dict], visible_threshold: float = 0.5, *, layout: dict | None = None,
                      first_image_id: int = 1, first_annotation_id: int = 1, info: dict | None = None) -> dict:
-    """The COCO dict of ``labels``; ``layout`` (marker id -> Marker) gives the polygons."""
+    """The COCO keypoints dict of dataset labels.
+
+    Parameters
+    ----------
+    labels : list of dict
+        The frames' labels (``labels/<frame_id>.json``), in image id order.
+    visible_threshold : float
+        The visible fraction from which a marker is annotated as visible.
+    layout : dict, optional
+        Marker id -> Marker: gives the polygons (no polygons without it).
+    first_image_id, first_annotation_id : int
+        The ids of the first image and of the first annotation.
+    info : dict, optional
+        The ``info`` block (``coco_info()`` without it).
+
+    Returns
+    -------
+    dict
+        ``info``, ``images``, ``annotations``, ``categories``.
+
+    Raises
+    ------
+    KeyError
+        When a label lacks a field the export reads.
+    """
     images, annotations = [], []
     for image_id, lab in enumerate(labels, start=first_image_id):
         images.append(_image_record(image_id, lab))
@@ -205,7 +229,25 @@ def coco_image_ids(splits: dict[str, str]) -> dict[str, int]:
 
 
 def export_coco(root, out) -> Path:
-    """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring)."""
+    """Write the COCO export of dataset ``root`` into ``out`` (layout in the module docstring).
+
+    Parameters
+    ----------
+    root : path or Dataset
+        The dataset: its folder, or a Dataset already opened (by a caller writing several formats).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is not intact and complete, or a file of it cannot be read.
+    """
     out = Path(out)
     # intact and complete (opened here, or by the caller that exports several formats): its
     # frames are the plan's, ids and splits checked

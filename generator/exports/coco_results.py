@@ -10,7 +10,7 @@ Why and how: docs/datasets.md, "COCO results rows".
 from __future__ import annotations
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.generator.export_coco import COCO_SHIFT, coco_image_ids
+from dockfactory.generator.exports.coco import COCO_SHIFT, coco_image_ids
 
 RESULT_DECIMALS = 4   # 1e-4 px: far below any detector's error, and a compact file
 
@@ -27,11 +27,25 @@ def detection_row(image_id: int, det: dict) -> dict:
 
 
 def coco_results(splits: dict[str, str], detections: dict) -> list[dict]:
-    """The COCO results rows of a detections document (``{"frames": {frame_id: [det, ...]}}``,
-    detector.infer.detect_dataset's JSON) on the dataset whose frame splits are ``splits``
-    (frame id -> split in plan order, ``Dataset.splits``): frames in image id order, each frame's
-    detections in their order. DockfactoryError naming the frame when a frame id is not one of
-    the dataset's."""
+    """The COCO results rows of a detections document.
+
+    Parameters
+    ----------
+    splits : dict
+        Frame id -> split in plan order (``Dataset.splits``) of the dataset detected on.
+    detections : dict
+        The detections document (``{"frames": {frame_id: [det, ...]}}``, detector.infer.detect_dataset's JSON).
+
+    Returns
+    -------
+    list of dict
+        One row per detection: frames in image id order, each frame's detections in their order.
+
+    Raises
+    ------
+    DockfactoryError
+        When the document has no frames object, or naming the frame when a frame id is not one of the dataset's.
+    """
     ids = coco_image_ids(splits)
     frames = detections.get("frames") if isinstance(detections, dict) else None
     if not isinstance(frames, dict):

@@ -14,8 +14,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator.export_coco import KEYPOINTS, centre_in_image
-from dockfactory.generator.export_yolo import box_fields, exported_markers, write_yolo_layout
+from dockfactory.generator.exports.coco import KEYPOINTS, centre_in_image
+from dockfactory.generator.exports.yolo import box_fields, exported_markers, write_yolo_layout
 
 KEYPOINT_DECIMALS = 10   # normalised: 1e-10 of a 10,000 px image is 1e-6 px
 
@@ -48,5 +48,23 @@ def pose_yaml_keys() -> str:
 
 
 def export_yolo_pose(root, out) -> Path:
-    """Write the YOLO-pose export of dataset ``root`` (a folder, or an opened Dataset) into ``out``."""
+    """Write the YOLO-pose export of dataset ``root`` into ``out``.
+
+    Parameters
+    ----------
+    root : path or Dataset
+        The dataset: its folder, or a Dataset already opened (by a caller writing several formats).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is not intact and complete, or a file of it cannot be read.
+    """
     return write_yolo_layout(root, out, pose_lines, pose_yaml_keys())

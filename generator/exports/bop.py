@@ -16,7 +16,7 @@ from dockfactory.generator.bop_models import part_model, section_mesh, write_ply
 from dockfactory.generator.dataset import DatasetError
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.exr import read_compact
-from dockfactory.generator.export_files import place_file, source_exr, source_image
+from dockfactory.generator.exports.files import place_file, source_exr, source_image
 from dockfactory.generator.random_draws import static_scene
 
 OBJ_ID = {"A": 1, "B": 2}
@@ -33,10 +33,27 @@ def lens_record(cam: dict) -> dict:
 
 
 def export_bop(root, out) -> Path:
-    """The BOP layout of the dataset ``root`` (a folder, or an opened Dataset) under ``out``: the
-    two sections' models, a camera.json, and per split one scene with its images, masks (and
-    with the kept EXR depth and visible masks), cameras, ground truth and frame ids (module
-    docstring for the conventions)."""
+    """The BOP layout of the dataset ``root`` under ``out``: the two sections' models, a camera.json,
+    and per split one scene with its images, masks (and with the kept EXR depth and visible masks),
+    cameras, ground truth and frame ids (module docstring for the conventions).
+
+    Parameters
+    ----------
+    root : path or Dataset
+        The dataset: its folder, or a Dataset already opened (by a caller writing several formats).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is not intact and complete, or a file of it cannot be read.
+    """
     out = Path(out)
     # intact and complete (opened here, or by the caller that exports several formats): its
     # frames are the plan's, ids and splits checked

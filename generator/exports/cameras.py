@@ -38,8 +38,25 @@ def _write_units(out: Path, cameras: dict[int, set]) -> None:
 
 
 def export_cameras(root, out) -> Path:
-    """Write the cameras export of dataset ``root`` (a folder or an opened Dataset) into ``out``
-    (module docstring)."""
+    """Write the cameras export of dataset ``root`` into ``out`` (module docstring).
+
+    Parameters
+    ----------
+    root : path or Dataset
+        The dataset: its folder, or a Dataset already opened (by a caller writing several formats).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is not intact and complete, or a file of it cannot be read.
+    """
     out = Path(out)
     ds = root if isinstance(root, Dataset) else Dataset.open(root)
     lines, ids, cameras = [], {}, {}

@@ -15,7 +15,7 @@ from pathlib import Path
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.export_files import place_file, source_image
+from dockfactory.generator.exports.files import place_file, source_image
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
@@ -88,5 +88,23 @@ def write_yolo_layout(root, out, lines_of, yaml_extra: str = "") -> Path:
 
 
 def export_yolo(root, out) -> Path:
-    """Write the YOLO (detection) export of dataset ``root`` into ``out`` (module docstring)."""
+    """Write the YOLO (detection) export of dataset ``root`` into ``out`` (module docstring).
+
+    Parameters
+    ----------
+    root : path or Dataset
+        The dataset: its folder, or a Dataset already opened (by a caller writing several formats).
+    out : path
+        The export's folder (created; files in it are replaced).
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is not intact and complete, or a file of it cannot be read.
+    """
     return write_yolo_layout(root, out, yolo_lines)
