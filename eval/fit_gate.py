@@ -21,14 +21,11 @@ import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.solver.camera_models import camera_model as model_named
+from dockfactory.solver.options import GATE_NOISE_FACTOR
 from dockfactory.solver.stats import chi2_logsf
 
 GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms: bench/results/fit_gate/README.md)
-# The card's noise is the core centre noise of clean three-chip renders; the cameras users have
-# deliver residuals 1-5x it (Bayer, JPEG, blur, a white ring: measured on two scenes,
-# bench/results/fit_gate/README.md), the faults the gate exists for 10-100x: it tests against this
-# many times the card's noise.
-GATE_NOISE_FACTOR = 3.0
+
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length

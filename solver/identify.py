@@ -29,6 +29,7 @@ from dockfactory.solver.estimate import estimate_pnpf
 from dockfactory.solver.joint import JointFit, JointStart, fit_joint
 from dockfactory.solver.options import (
     DEFAULT_IDENTIFY,
+    GATE_NOISE_FACTOR,
     FacingPrior,
     IdentifyOptions,
     RefineOptions,
@@ -546,7 +547,8 @@ def _settle_rivals(hyps, ids, pts, sel, uv, pp, search: _Search) -> None:
 
 def _explained(judged: list, n_other: int, sigma_px: float | None) -> list:
     """The (joint rmse, hypothesis) pairs of ``judged`` whose joint fit the known centre noise
-    ``sigma_px`` explains (chi-square of the residuals over 2 n - 13 dof, p >= RIVAL_P), when at
+    ``sigma_px`` explains (chi-square of the residuals against ``GATE_NOISE_FACTOR`` times it over
+    2 n - 13 dof, p >= RIVAL_P: the gate's test, eval.fit_gate), when at
     least one is; all of them without a known noise or when none is. Why: a rival whose fit is
     many times the camera's noise is no explanation of the detections (the goodness-of-fit gate
     would refuse its pose), so it cannot make the identification ambiguous."""
@@ -556,7 +558,7 @@ def _explained(judged: list, n_other: int, sigma_px: float | None) -> list:
     for rmse, h in judged:
         n = len(h.pairs) + n_other
         dof = 2 * n - 13
-        if dof >= 1 and chi2_logsf(n * rmse ** 2 / sigma_px ** 2, dof) >= np.log(RIVAL_P):
+        if dof >= 1 and chi2_logsf(n * rmse ** 2 / (GATE_NOISE_FACTOR * sigma_px) ** 2, dof) >= np.log(RIVAL_P):
             keep.append((rmse, h))
     return keep or judged
 

@@ -21,6 +21,12 @@ from dataclasses import dataclass, field
 from dockfactory.solver.checks import check_shift_px, check_sigma
 from dockfactory.solver.errors import InvalidSolverInput
 
+# A known centre noise (the noise card's: the core centre noise of clean three-chip renders) is tested
+# at this many times itself wherever a fit must be explained by the camera's noise (the goodness-of-fit
+# gate, eval.fit_gate; a rival identification, solver.identify): the cameras users have give residuals
+# 1-5x the card (Bayer, JPEG, blur, a white ring), the faults 10-100x (bench/results/fit_gate/README.md).
+GATE_NOISE_FACTOR = 3.0
+
 __all__ = ["RefineOptions", "FacingPrior", "RansacOptions", "IdentifyOptions",
            "ModelChoiceOptions", "LensPrior", "DockingOptions", "DEFAULT_IDENTIFY",
            "DEFAULT_MODEL_CHOICE", "DEFAULT_LENS_PRIOR", "DEFAULT_DOCKING"]
