@@ -77,11 +77,6 @@ def detection_arrays(dets: list[dict], min_score: float):
     return cls, uv, boxes, refined, edge
 
 
-def solve_one(markers, principal_point, cls, uv, sigma_px: float | None, boxes=None,
-              refined=None, camera_model: str = "pinhole") -> dict:
-    return solve_frame(markers, principal_point, (cls, uv, boxes, refined, None), sigma_px, camera_model)[0]
-
-
 def pose_record(res, n_detections: int) -> dict:
     """The poses-file record of a solved frame (a solver.DockingResult); with a section shift in
     its covariance, ``section_shift_variance`` (6,) over POSE_NAMES: what the shift added."""

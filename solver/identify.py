@@ -91,15 +91,6 @@ class _Hyp:
     rmse: float
     model: tuple         # (cam_from_section (4, 4), focal)
 
-    def conflicts(self, other) -> bool:
-        inv_a = {d: m for m, d in self.pairs.items()}
-        for m, d in other.pairs.items():
-            if m in self.pairs and self.pairs[m] != d:
-                return True
-            if d in inv_a and inv_a[d] != m:
-                return True
-        return False
-
     def identity_conflicts(self, other) -> bool:
         """True when some detection is given a different marker by ``other``.
 
