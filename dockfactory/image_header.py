@@ -4,7 +4,7 @@ decoding (a 1 MB PNG can claim 20000 x 20000 px: decoding it first costs 12 GB).
 ``path_kind(path)``: None for a regular file (symlinks followed), else what the path is instead
 ("a folder", "a named pipe (FIFO)", ...): a FIFO is never opened (opening one blocks).
 ``image_size(path)``: (format, width, height) from the header of a PNG, JPEG, TIFF or BMP file;
-:class:`ImageHeaderError` (a ValueError) says why not for anything else. At most
+:class:`ImageHeaderError` (a DockfactoryError) says why not for anything else. At most
 ``MAX_HEADER_BYTES`` of the file are read (and a TIFF's directory). ``check_size(path,
 max_pixels)`` adds the limit (:class:`ImageTooLarge`).
 """
@@ -14,6 +14,8 @@ import os
 import stat
 import struct
 
+from dockfactory.core.errors import DockfactoryError
+
 MAX_HEADER_BYTES = 1 << 20   # a JPEG's frame header may follow up to 1 MB of EXIF / ICC segments
 FORMATS = "PNG, JPEG, TIFF or BMP"
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"),
@@ -22,8 +24,9 @@ _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe (FIFO)"), (s
 _SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
 
-class ImageHeaderError(ValueError):
-    """The file is not an image whose size its header states (the message says what it is)."""
+class ImageHeaderError(DockfactoryError):
+    """The file is not an image whose size its header states (the message says what it is): bad
+    input, so the CLI reports it in one line with exit status 2; still a ValueError."""
 
 
 class ImageTooLarge(ImageHeaderError):
