@@ -14,8 +14,10 @@ minima are in (0, 1]; ``[failures] max_rate`` is in [0, 1] and its ``conditions`
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,24 +32,24 @@ from dockfactory.eval.confidence import frames_to_decide
 class Gate:
     statistic: str = "rmse"
     gated: bool = True     # false: the table is reported only (it must then name no threshold)
-    x: float = -1.0        # -1: not gated (the default of a component a spec leaves out)
-    y: float = -1.0
-    z: float = -1.0
-    alpha: float = -1.0
-    beta: float = -1.0
-    gamma: float = -1.0
+    x: float | None = None   # None: not gated (the default of a component a spec leaves out)
+    y: float | None = None
+    z: float | None = None
+    alpha: float | None = None
+    beta: float | None = None
+    gamma: float | None = None
 
     def thresholds(self) -> dict[str, float]:
         """Component -> threshold of every gated component (none when ``gated`` is false)."""
         if not self.gated:
             return {}
-        return {c: getattr(self, c) for c in COMPONENTS if getattr(self, c) != -1.0}
+        return {c: getattr(self, c) for c in COMPONENTS if getattr(self, c) is not None}
 
 
 @dataclass(frozen=True)
 class DetectionGate:
-    map50_min: float = -1.0
-    map50_95_min: float = -1.0
+    map50_min: float | None = None      # None: not gated (mAP is reported only)
+    map50_95_min: float | None = None
 
 
 @dataclass(frozen=True)
@@ -98,9 +100,34 @@ def load_acceptance(path) -> AcceptanceSpec:
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     # a table that is given replaces the default gates wholesale: only what it names is gated
-    spec = build_dataclass(AcceptanceSpec, data, str(path))
+    form = build_dataclass(_SPEC_TABLES, data, str(path))
+    spec = AcceptanceSpec(**{f.name: _from_table(getattr(form, f.name)) for f in dataclasses.fields(form)})
     validate_acceptance(spec, data, str(path))
     return spec
+
+
+def _number_table(cls):
+    """The gate dataclass ``cls`` as its TOML table is read (core.config.build_dataclass): an
+    optional threshold (``float | None``) is a number there, and None when the table leaves it out."""
+    hints = typing.get_type_hints(cls)
+    return dataclasses.make_dataclass(f"{cls.__name__}Table", [
+        (f.name, float if hints[f.name] == (float | None) else hints[f.name], field(default=f.default))
+        for f in dataclasses.fields(cls)], frozen=True)
+
+
+_TABLE_OF = {cls: _number_table(cls) for cls in (Gate, DetectionGate)}
+_GATE_OF = {table: cls for cls, table in _TABLE_OF.items()}
+_SPEC_HINTS = typing.get_type_hints(AcceptanceSpec)
+_SPEC_TABLES = dataclasses.make_dataclass("AcceptanceSpecTables", [
+    (f.name, _TABLE_OF.get(_SPEC_HINTS[f.name], _SPEC_HINTS[f.name]),
+     field(default=f.default, default_factory=f.default_factory)) for f in dataclasses.fields(AcceptanceSpec)],
+    frozen=True)
+
+
+def _from_table(value):
+    """A gate read through its table form (:func:`_number_table`) as the gate itself."""
+    cls = _GATE_OF.get(type(value))
+    return value if cls is None else cls(**{f.name: getattr(value, f.name) for f in dataclasses.fields(value)})
 
 
 def _bad(source: str, table: str, key: str, msg: str) -> ConfigError:
@@ -121,7 +148,7 @@ def ungated_components(spec: AcceptanceSpec) -> list[str]:
     """What the spec reports without gating: pose components and detection minima it leaves out."""
     out = [f"{name}: {c}" for name in ("estimation", "localization")
            for c in COMPONENTS if c not in getattr(spec, name).thresholds()]
-    out += [f"detection: {m[:-4]}" for m in ("map50_min", "map50_95_min") if getattr(spec.detection, m) == -1.0]
+    out += [f"detection: {m[:-4]}" for m in ("map50_min", "map50_95_min") if getattr(spec.detection, m) is None]
     return out
 
 
@@ -253,7 +280,7 @@ def _detection_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
     det, out = metrics.get("detection") or {}, []
     for key, thr, paper in (("map50", spec.detection.map50_min, spec.paper.map50),
                             ("map50_95", spec.detection.map50_95_min, spec.paper.map50_95)):
-        if thr != -1.0:
+        if thr is not None:
             v = det.get(key)
             out.append({"name": f"detection: {key}", "block": "detection", "component": key, "statistic": "min",
                         "value": v, "threshold": thr, "unit": "", "note": "" if v is not None else "no detections",

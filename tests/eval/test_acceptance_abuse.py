@@ -22,7 +22,15 @@ from pipeline_data import write_painted_dataset
 
 from dockfactory.core.config import ConfigError
 from dockfactory.core.resources import shipped_config
-from dockfactory.eval.acceptance import AcceptanceSpec, FailureGate, load_acceptance, ungated_components
+from dockfactory.eval.acceptance import (
+    COMPONENTS,
+    AcceptanceSpec,
+    DetectionGate,
+    FailureGate,
+    Gate,
+    load_acceptance,
+    ungated_components,
+)
 from dockfactory.cli import main
 from dockfactory.eval.evaluate import (
     estimation_block,
@@ -279,7 +287,7 @@ def test_finding3_leaving_a_component_out_is_the_way_to_ungate_it(tmp_path):
     p.write_text("[localization]\nx = 2.5\n[estimation]\ngated = false\n[detection]\n[failures]\nmax_rate = 0\n")
     s = load_acceptance(p)
     assert s.localization.thresholds() == {"x": 2.5} and s.estimation.thresholds() == {}
-    assert s.detection.map50_min == -1.0 and s.failures.max_rate == 0.0   # zero failures allowed
+    assert s.detection.map50_min is None and s.failures.max_rate == 0.0   # zero failures allowed
     assert ungated_components(s) == ["estimation: x", "estimation: y", "estimation: z", "estimation: alpha",
                                      "estimation: beta", "estimation: gamma", "localization: y", "localization: z",
                                      "localization: alpha", "localization: beta", "localization: gamma",
@@ -474,3 +482,17 @@ def test_valid_inputs_still_work(smoke, tmp_path, poses_only_spec, capsys):
                "--out", str(tmp_path / "e")])
     assert rc == 0 and "verdict: ACCEPTED" in capsys.readouterr().out
     assert math.isfinite(json.loads((tmp_path / "e" / "metrics.json").read_text())["localization"]["overall"]["x"]["rmse"])
+
+
+def test_a_component_left_out_is_none_not_a_number(tmp_path):
+    """Not gated is None (issue 49, item 7: it was the number -1.0), in the dataclasses and as read
+    from a file; a threshold the file gives is still a float."""
+    assert Gate().thresholds() == {} and all(getattr(Gate(), c) is None for c in COMPONENTS)
+    assert DetectionGate() == DetectionGate(map50_min=None, map50_95_min=None)
+    p = tmp_path / "spec.toml"
+    p.write_text("[localization]\nx = 2\n[detection]\nmap50_min = 1\n")
+    s = load_acceptance(p)
+    assert type(s.localization) is Gate and type(s.detection) is DetectionGate
+    assert s.localization.x == 2.0 and type(s.localization.x) is float and s.localization.y is None
+    assert s.detection == DetectionGate(map50_min=1.0, map50_95_min=None)
+    assert s.estimation == AcceptanceSpec().estimation and s.estimation.z is None
