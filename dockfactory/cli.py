@@ -6,12 +6,11 @@ argument types (``cli_args``). Bad input (DockfactoryError) is one line and exit
 own errors too."""
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
 from dockfactory import __version__
-from dockfactory.cli_args import output_path
+from dockfactory.cli_args import CommandParser
 from dockfactory.cli_design import add_subcommand as add_design_command
 from dockfactory.cli_detector import add_subcommands as add_detector_commands
 from dockfactory.cli_factory import add_subcommands as add_factory_commands
@@ -25,9 +24,9 @@ from dockfactory.core.errors import DockfactoryError
 EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 2, 130, 141   # 141: 128 + SIGPIPE, as a shell reports it
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dockfactory", description="Synthetic data factory and judge "
-                                "for uncalibrated monocular docking of cylindrical sections.")
+def build_parser() -> CommandParser:
+    p = CommandParser(prog="dockfactory", description="Synthetic data factory and judge "
+                      "for uncalibrated monocular docking of cylindrical sections.")
     p.add_argument("--version", action="version", version=f"dockfactory {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     add_factory_commands(sub)
@@ -38,22 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_design_command(sub)
     add_layout_command(sub)
     add_schema_subcommand(sub)
-    for parser in _all_parsers(sub):
-        for action in parser._actions:
-            if action.dest == "out" and action.type is None:
-                action.type = output_path
     return p
-
-
-def _all_parsers(sub) -> list:
-    """Every parser below ``sub`` (nested sub-commands included)."""
-    out = []
-    for parser in sub.choices.values():
-        out.append(parser)
-        for action in parser._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                out += _all_parsers(action)
-    return out
 
 
 def main(argv=None) -> int:

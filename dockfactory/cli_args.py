@@ -1,6 +1,6 @@
 """Argument types and helpers shared by the command groups (one place): counts, ranges, paths,
-shards, tolerances, config overrides, torch threads. Each type raises argparse's error, so a
-bad flag is one line and exit 2 before any work."""
+shards, tolerances, config overrides, torch threads; the parser class (CommandParser). Each type
+raises argparse's error, so a bad flag is one line and exit 2 before any work."""
 from __future__ import annotations
 
 import argparse
@@ -11,6 +11,36 @@ from dataclasses import replace
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.solver.errors import InvalidSolverInput
 from dockfactory.solver.options import LensPrior
+
+
+class CommandParser(argparse.ArgumentParser):
+    """The ArgumentParser of dockfactory and of each of its sub-commands: it also keeps what it is
+    given in public attributes, so a walk over every command and flag (tests, bench/cli) reads none
+    of argparse's private ones. ``arguments``: the actions of ``add_argument``, in order (--help
+    first; argument groups are not used); ``subcommands``: the action of ``add_subparsers`` (its
+    ``choices``: name -> parser). Parsing and help are argparse's own."""
+
+    subcommands = None
+
+    def __init__(self, *args, **kwargs):
+        self.arguments = []
+        super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        self.arguments.append(action)
+        return action
+
+    def add_subparsers(self, **kwargs):
+        self.subcommands = super().add_subparsers(**kwargs)   # parser_class: this class, by default
+        return self.subcommands
+
+    def command_parsers(self) -> list[CommandParser]:
+        """The parser of every sub-command below this one, nested ones after their parent's."""
+        out = []
+        for parser in (self.subcommands.choices.values() if self.subcommands is not None else ()):
+            out += [parser, *parser.command_parsers()]
+        return out
 
 
 def int_at_least(low: int):

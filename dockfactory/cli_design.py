@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from dockfactory.cli_args import float_in, positive_int
+from dockfactory.cli_args import float_in, output_path, positive_int
 from dockfactory.core.config import load_config
 from dockfactory.design_verify import comparison_lines, verify_designs
 from dockfactory.core.resources import (
@@ -80,7 +80,8 @@ def add_subcommand(sub) -> None:
                                       "predicted against the tolerance, ranked (--verify K: rendered)")
     p.add_argument("space", help="design space TOML (docs/design.md), or a shipped one by name "
                                  "(docking_cell)")
-    p.add_argument("--out", default="out/design", help="folder for design.json / .md / .html (default out/design)")
+    p.add_argument("--out", type=output_path, default="out/design",
+                   help="folder for design.json / .md / .html (default out/design)")
     p.add_argument("--top", type=positive_int, default=15, help="designs shown in the table (default 15)")
     p.add_argument("--min-probability", type=float_in(0.0, 1.0, low_open=True), default=0.9,
                    help="P(accept) a passing design needs (default 0.9)")

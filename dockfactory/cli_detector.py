@@ -20,7 +20,16 @@ from dockfactory.eval.detection_metrics import (
 )
 from dockfactory.eval.noise_calibration import calibrate_noise_card
 from dockfactory.eval.simulated_cameras import dataset_camera
-from dockfactory.cli_args import input_scale, int_in, learning_rate, non_negative_int, thread_count, torch_threads, unit_float
+from dockfactory.cli_args import (
+    input_scale,
+    int_in,
+    learning_rate,
+    non_negative_int,
+    output_path,
+    thread_count,
+    torch_threads,
+    unit_float,
+)
 from dockfactory.generator.dataset import writer_lock
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.generator.exports import coco_results
@@ -133,7 +142,7 @@ def _add_training_options(p) -> None:
 def _add_train_parser(subparsers) -> None:
     t = subparsers.add_parser("train", help="train the marker detector on a dataset's train split")
     t.add_argument("dataset", help="dataset directory (dockfactory render --out)")
-    t.add_argument("--out", required=True, help="run directory (checkpoints, history, weights)")
+    t.add_argument("--out", type=output_path, required=True, help="run directory (checkpoints, history, weights)")
     t.add_argument("--attention", choices=("se", "eca", "cbam", "a2", "none"), default="se",
                    help="attention block after the last backbone C3 (default se)")
     t.add_argument("--seed", type=non_negative_int, default=0, help="seed of initial weights, crops and augmentation")
@@ -151,7 +160,7 @@ def _add_detect_parser(subparsers) -> None:
     d.add_argument("--weights",
                    help="weights.pt / last.pt of a run (default: the shipped models/yolov5n_se_rings_markers.pt)")
     d.add_argument("--split", default="test", choices=("train", "test", "repeat", "all"), help="default test")
-    d.add_argument("--out", required=True, help="detections JSON")
+    d.add_argument("--out", type=output_path, required=True, help="detections JSON")
     d.add_argument("--format", choices=("dockfactory", "coco-results"), default="dockfactory",
                    help="dockfactory: the detections document (default); coco-results: a COCO results list "
                         "(image and category ids of the dataset's COCO export) for COCOeval")
@@ -169,7 +178,8 @@ def _add_ablate_parser(subparsers) -> None:
     a.add_argument("dataset")
     a.add_argument("--attention", default="none,se,eca,cbam,a2", help="comma-separated variants")
     a.add_argument("--seeds", type=int_in(1, MAX_SEEDS), default=1, help=f"number of seeds (0..S-1), 1-{MAX_SEEDS}")
-    a.add_argument("--out", default="out/ablation", help="folder for runs and tables (default out/ablation)")
+    a.add_argument("--out", type=output_path, default="out/ablation",
+                   help="folder for runs and tables (default out/ablation)")
     a.add_argument("--conf", type=unit_float, default=0.001, help="score threshold for mAP")
     a.add_argument("--record", help="also write each finished run's metrics to RECORD/<variant>_seed<k>.json and "
                    "take runs recorded there (same dataset version and config) without training them again")
@@ -183,7 +193,7 @@ def _add_ablate_parser(subparsers) -> None:
 def _add_export_parser(subparsers) -> None:
     e = subparsers.add_parser("export-onnx", help="export weights to ONNX and check against torch")
     e.add_argument("--weights", help="default: the shipped weights")
-    e.add_argument("--out", required=True, help="ONNX file")
+    e.add_argument("--out", type=output_path, required=True, help="ONNX file")
     e.add_argument("--height", type=int_in(32, MAX_INPUT_PX), default=480, help="network input height (default 480)")
     e.add_argument("--width", type=int_in(32, MAX_INPUT_PX), default=640, help="network input width (default 640)")
     e.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")

@@ -7,7 +7,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from dockfactory.cli_args import add_set_flag, int_at_least, shard_spec, tolerance_levels
+from dockfactory.cli_args import add_set_flag, int_at_least, output_path, shard_spec, tolerance_levels
 from dockfactory.core.config import LICENSE_ID
 from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
@@ -161,7 +161,7 @@ def _add_dataset_actions(d) -> None:
                    help="coco, yolo, yolo-pose, bop, cameras (every frame's camera as OpenCV / ROS / COLMAP "
                         "calibration files), video (each docking run as an MP4 with its labels), video_lossless "
                         "(FFV1 .mkv) (comma-separated; default coco,yolo,bop)")
-    e.add_argument("--out", default=None, metavar="FOLDER",
+    e.add_argument("--out", type=output_path, default=None, metavar="FOLDER",
                    help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "
                         "tracked by DVC whose project does not ignore exports/, T.exports/ beside its tracked folder T)")
     e.set_defaults(func=cmd_export)
@@ -172,7 +172,8 @@ def _add_dataset_actions(d) -> None:
     c.set_defaults(func=cmd_card)
     p = acts.add_parser("publish", help="verify a complete dataset and write its manifest and fingerprints")
     p.add_argument("dirs", nargs="+", metavar="DIR")
-    p.add_argument("--out", required=True, help="folder for manifest.json, fingerprints.npz, fingerprints_v2.npz")
+    p.add_argument("--out", type=output_path, required=True,
+                   help="folder for manifest.json, fingerprints.npz, fingerprints_v2.npz")
     p.set_defaults(func=cmd_publish)
 
 
@@ -182,7 +183,7 @@ def add_subcommands(sub) -> None:
     r = sub.add_parser("render", help="render (the missing frames of) a dataset from a TOML config")
     r.add_argument("config", help="TOML config file, or the name of a shipped one "
                                   f"({', '.join(shipped_dataset_configs())})")
-    r.add_argument("--out", required=True, help="dataset directory")
+    r.add_argument("--out", type=output_path, required=True, help="dataset directory")
     r.add_argument("--workers", type=int_at_least(1), default=1, help="render processes sharing the cores")
     r.add_argument("--shard", type=shard_spec, default=(1, 1), metavar="K/N",
                    help="render only shard K of N (frames with index %% N == K-1)")
@@ -212,5 +213,5 @@ def add_subcommands(sub) -> None:
     s = sub.add_parser("show", help="draw a frame's labels over its image (PNG or JPEG, by the suffix of --out)")
     s.add_argument("dataset")
     s.add_argument("frame_id")
-    s.add_argument("--out", required=True)
+    s.add_argument("--out", type=output_path, required=True)
     s.set_defaults(func=cmd_show)

@@ -6,7 +6,7 @@ import math
 import sys
 from pathlib import Path
 
-from dockfactory.cli_args import add_set_flag
+from dockfactory.cli_args import add_set_flag, output_path
 from dockfactory.cli_factory import load_checked
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import write_json_atomic, write_text_atomic
@@ -187,7 +187,7 @@ def _add_solve_parser(sub) -> None:
     s.add_argument("--section-shift", metavar="PX[,PX]",
                    help="the common offset of a section's centres (x,y px; one number: both axes) measured on "
                         "labelled frames of the camera class (default: the detections' noise card)")
-    s.add_argument("--out", required=True)
+    s.add_argument("--out", type=output_path, required=True)
     s.set_defaults(func=cmd_solve)
 
 
@@ -204,14 +204,14 @@ def _add_evaluate_parser(sub) -> None:
     e.add_argument("--camera-models", action="store_true",
                    help="also solve the test split with the pinhole and self-calibrated camera models side by "
                         "side (per frame, per docking run): pose and intrinsics errors (reported, not gated)")
-    e.add_argument("--out", required=True)
+    e.add_argument("--out", type=output_path, required=True)
     e.set_defaults(func=cmd_evaluate)
 
 
 def _add_report_parser(sub) -> None:
     r = sub.add_parser("report", help="self-contained HTML acceptance report (+ report.json, report.md)")
     r.add_argument("eval_dir")
-    r.add_argument("--out", required=True)
+    r.add_argument("--out", type=output_path, required=True)
     r.add_argument("--prepared-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
     r.add_argument("--approved-by", metavar="NAME", help="name in the report's sign-off block (default: a line to sign)")
     r.add_argument("--pdf", action="store_true",
@@ -223,7 +223,7 @@ def _add_run_parser(sub) -> None:
     u = sub.add_parser("run", help="render -> detect -> solve -> evaluate -> report (resumable)")
     u.add_argument("config", help="TOML config file, or the name of a shipped one "
                                   f"({', '.join(shipped_dataset_configs())})")
-    u.add_argument("--out", required=True, help="work directory")
+    u.add_argument("--out", type=output_path, required=True, help="work directory")
     u.add_argument("--acceptance", help="acceptance spec TOML (default: the shipped one, the paper's criteria)")
     u.add_argument("--weights", help="detector checkpoint (default: the shipped one; not with --train)")
     u.add_argument("--train", action="store_true", help="train a detector on the dataset's train split first")

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dockfactory.cli_args import float_in
+from dockfactory.cli_args import float_in, output_path
 from dockfactory.core.config import load_config
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.label_schema import SCHEMAS
@@ -49,7 +49,7 @@ def add_subcommand(sub) -> None:
                            description="Columns: id, section, x, y, z, diameter; optional nx, ny, nz (else the "
                                        "surface's normal), index, sigma_mm. docs/measure.md, 'Your markers'.")
     c.add_argument("csv", help="the marker table (a header row, one row per marker)")
-    c.add_argument("--out", required=True, help="the layout file to write (JSON)")
+    c.add_argument("--out", type=output_path, required=True, help="the layout file to write (JSON)")
     c.add_argument("--units", choices=tuple(UNITS_MM), default="mm", help="unit of coordinates, diameters, sigmas")
     c.add_argument("--surface", choices=SURFACES, default="cylinder",
                    help="the normal of a row without nx, ny, nz: the outward radial of a cylinder about X")
@@ -58,7 +58,7 @@ def add_subcommand(sub) -> None:
     c.set_defaults(func=cmd_from_csv)
     f = actions.add_parser("from-config", help="the layout file of a config's factory scene")
     f.add_argument("config", help="TOML config file or a shipped config's name")
-    f.add_argument("--out", required=True, help="the layout file to write (JSON)")
+    f.add_argument("--out", type=output_path, required=True, help="the layout file to write (JSON)")
     f.set_defaults(func=cmd_from_config)
 
 
@@ -75,5 +75,5 @@ def add_schema_subcommand(sub) -> None:
     """Register ``schema FORMAT [--out FILE]`` on ``sub``."""
     p = sub.add_parser("schema", help="the JSON Schema of a file format (labels): print it or write it")
     p.add_argument("format", choices=tuple(SCHEMAS), help="labels: labels/<frame_id>.json")
-    p.add_argument("--out", default=None, help="write it here (default: standard output)")
+    p.add_argument("--out", type=output_path, default=None, help="write it here (default: standard output)")
     p.set_defaults(func=cmd_schema)

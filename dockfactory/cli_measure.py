@@ -17,6 +17,7 @@ from dockfactory.cli_args import (
     float_in,
     int_in,
     lens_prior,
+    output_path,
     positive_int,
     thread_count,
     torch_threads,
@@ -224,7 +225,8 @@ def add_subcommand(sub) -> None:
                         "UNDECIDED against the [localization] tolerances about the docked pose, with the guard "
                         "band U = 2 u (ISO 14253-1); exit 0 all IN, 1 any OUT, 3 otherwise undecided")
     m.add_argument("--quiet", action="store_true")
-    m.add_argument("--out", help="images: output folder (locked while measure runs); a rerun with the same "
+    m.add_argument("--out", type=output_path,
+                   help="images: output folder (locked while measure runs); a rerun with the same "
                                                 "images and options measures only what is missing, with others "
                                                 "it starts over")
     m.set_defaults(func=cmd_measure)

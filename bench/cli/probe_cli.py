@@ -81,12 +81,12 @@ def odd_paths(w: dict) -> tuple[str, ...]:
             str(b / "readonly" / "x"), "/proc/self/x")
 
 
-def attempts(parser: argparse.ArgumentParser, w: dict):
-    """(command, argv) pairs: every option and positional of every sub-command, each odd value."""
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    for name, sp in sub.choices.items():
+def attempts(parser, w: dict):
+    """(command, argv) pairs: every option and positional of every sub-command of ``parser``
+    (dockfactory's: a cli_args.CommandParser), each odd value."""
+    for name, sp in parser.subcommands.choices.items():
         base = base_args(name, w)
-        for action in sp._actions:
+        for action in sp.arguments:
             if action.option_strings and action.option_strings[0] in ("-h", "--help"):
                 continue
             yield from _values_for(name, base, action, w)

@@ -43,12 +43,13 @@ def test_each_dataset_action_has_its_own_help(capsys, action, flag):
 
 
 def _out_commands():
-    import argparse
+    from dockfactory.cli import build_parser
+    return sorted(p.prog.replace("dockfactory ", "") for p in build_parser().command_parsers()
+                  if any(a.dest == "out" for a in p.arguments))
 
-    from dockfactory.cli import _all_parsers, build_parser
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    return sorted(p.prog.replace("dockfactory ", "") for p in _all_parsers(sub)
-                  if any(a.dest == "out" for a in p._actions))
+
+def test_the_walk_finds_every_command_with_an_out_flag():
+    assert len(_out_commands()) == 17 and {"render", "dataset export", "layout from-csv", "schema"} <= set(_out_commands())
 
 
 @pytest.mark.parametrize("command", _out_commands())

@@ -10,10 +10,8 @@ ON_DEMAND = ("video", "video_lossless")   # written by `dataset export` only (da
 
 
 def _export_help() -> str:
-    sub = next(a for a in build_parser()._subparsers._group_actions if a.dest == "command")
-    dataset = sub.choices["dataset"]
-    actions = next(a for a in dataset._subparsers._group_actions).choices
-    return next(a.help for a in actions["export"]._actions if "--format" in a.option_strings)
+    export = build_parser().subcommands.choices["dataset"].subcommands.choices["export"]
+    return next(a.help for a in export.arguments if "--format" in a.option_strings)
 
 
 def test_names_writers_and_help_agree():
