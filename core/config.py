@@ -342,7 +342,7 @@ def _convert(value, hint, where: str):
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{where}: expected an integer, got {value!r}")
         return value
-    if hint is float:
+    if hint is float or hint == (float | None):   # TOML has no null: an optional number given is a number
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
         return float(value)

@@ -14,10 +14,8 @@ minima are in (0, 1]; ``[failures] max_rate`` is in [0, 1] and its ``conditions`
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import tomllib
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -100,34 +98,9 @@ def load_acceptance(path) -> AcceptanceSpec:
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML: its arrays or tables nest too deeply") from None
     # a table that is given replaces the default gates wholesale: only what it names is gated
-    form = build_dataclass(_SPEC_TABLES, data, str(path))
-    spec = AcceptanceSpec(**{f.name: _from_table(getattr(form, f.name)) for f in dataclasses.fields(form)})
+    spec = build_dataclass(AcceptanceSpec, data, str(path))
     validate_acceptance(spec, data, str(path))
     return spec
-
-
-def _number_table(cls):
-    """The gate dataclass ``cls`` as its TOML table is read (core.config.build_dataclass): an
-    optional threshold (``float | None``) is a number there, and None when the table leaves it out."""
-    hints = typing.get_type_hints(cls)
-    return dataclasses.make_dataclass(f"{cls.__name__}Table", [
-        (f.name, float if hints[f.name] == (float | None) else hints[f.name], field(default=f.default))
-        for f in dataclasses.fields(cls)], frozen=True)
-
-
-_TABLE_OF = {cls: _number_table(cls) for cls in (Gate, DetectionGate)}
-_GATE_OF = {table: cls for cls, table in _TABLE_OF.items()}
-_SPEC_HINTS = typing.get_type_hints(AcceptanceSpec)
-_SPEC_TABLES = dataclasses.make_dataclass("AcceptanceSpecTables", [
-    (f.name, _TABLE_OF.get(_SPEC_HINTS[f.name], _SPEC_HINTS[f.name]),
-     field(default=f.default, default_factory=f.default_factory)) for f in dataclasses.fields(AcceptanceSpec)],
-    frozen=True)
-
-
-def _from_table(value):
-    """A gate read through its table form (:func:`_number_table`) as the gate itself."""
-    cls = _GATE_OF.get(type(value))
-    return value if cls is None else cls(**{f.name: getattr(value, f.name) for f in dataclasses.fields(value)})
 
 
 def _bad(source: str, table: str, key: str, msg: str) -> ConfigError:
