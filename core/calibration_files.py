@@ -4,23 +4,13 @@ COLMAP ``cameras.txt``.
 One in-memory form, :class:`Calibration`: image size, focal lengths and principal point in
 pixels with OpenCV's pixel convention (the centre of the top-left pixel at (0, 0): what the
 factory's labels and solver use, conventions.md), and the Brown-Conrady distortion in OpenCV's
-order (k1, k2, p1, p2, k3). The formats:
-
-- **OpenCV** (``.yaml`` / ``.yml`` with ``!!opencv-matrix``, or ``.json``; what
-  ``cv2.FileStorage`` and OpenCV's calibration sample write): ``image_width``, ``image_height``,
-  ``camera_matrix`` (3 x 3), ``distortion_coefficients`` (4, 5 or 8 values; beyond k3 must be 0).
-  Optional ``std_deviations_intrinsics``: the 1-sigma uncertainties in the layout of OpenCV's
-  ``calibrateCameraExtended`` (fx, fy, cx, cy, then the distortion coefficients), read into
-  ``Calibration.std`` and written back.
-- **ROS camera_info** (``.yaml`` without the OpenCV tags): the same key names, each matrix as
-  ``{rows, cols, data}``, and ``distortion_model`` ``plumb_bob`` (or ``rational_polynomial`` with
-  its extra terms 0).
-- **COLMAP** ``cameras.txt``: ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS...`` for SIMPLE_PINHOLE,
-  PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV (k4-k6 0). COLMAP puts the centre of the
-  top-left pixel at (0.5, 0.5): its principal point is OpenCV's plus 0.5 px, converted both ways.
+order (k1, k2, p1, p2, k3). COLMAP's principal point (the top-left pixel's centre at (0.5, 0.5))
+is converted both ways; OpenCV's ``std_deviations_intrinsics`` are read into ``Calibration.std``.
 
 Files are parsed as data (``cv2.FileStorage`` for YAML / JSON, a line reader for COLMAP), at most
 MAX_BYTES; every problem is a one-line CalibrationError naming the file and the key.
+
+Why and how: docs/configuration.md, "Calibration files".
 """
 from __future__ import annotations
 

@@ -2,21 +2,12 @@
 
 ``develop`` takes the exposure-normalised linear image (linear sRGB primaries, 1.0 = the level
 that fills the green pixels' full well) and returns what the camera delivers (8-bit RGB) and the
-raw frame it read out (DN). The stages, in the order light travels:
+raw frame it read out (DN). The stages, in the order light travels: colour filters (a 3x3 camera
+response, ``camera_response``, sampled through the CFA ``pattern`` of ``core.cfa``), the sensor
+(``core.emva.expose``) and the ISP (``core.isp``; demosaic ``core.demosaic``; colour correction with the
+inverse of the true camera response). JPEG encoding is the lens unit's (``isp.jpeg_round_trip``).
 
-1. colour filters: a 3x3 camera response (``camera_response``: channel crosstalk, then each
-   channel's quantum efficiency relative to green), sampled through the CFA ``pattern``
-   (``core.cfa``; "none": a three-chip sensor, every pixel sees all three channels);
-2. sensor: mean photo-electrons = response x saturation capacity, then ``core.emva.expose``
-   (PRNU, dark current, shot and dark noise, full well, gain, black level, DSNU, ADC);
-3. ISP (``core.isp``): black level and normalisation, white balance on the mosaic with the
-   frame's estimation error, demosaic (``core.demosaic``), colour correction (the inverse of
-   the true camera response, so with an exact white balance a colour comes out as it went in),
-   digital gain, tone curve, denoise, sharpening. JPEG encoding is the lens unit's (``isp.jpeg_round_trip``).
-
-Why the response is normalised to green: a neutral surface at linear 1.0 saturates the green
-pixels, as the three-chip model saturates at 1.0; red and blue, less sensitive, need white-balance
-gains above 1 and carry more noise after them, as on a real Bayer sensor.
+Why and how: docs/colour_cameras.md, "The camera chain".
 """
 from __future__ import annotations
 

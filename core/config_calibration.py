@@ -1,20 +1,17 @@
 """``[camera_units] calibration = "cam.yaml"``: render the camera of a calibration file.
 
 A config names a calibration file (OpenCV YAML / JSON, ROS camera_info, COLMAP cameras.txt;
-:mod:`dockfactory.core.calibration_files`), relative to the config's folder. Loading the config
-resolves it into the keys the factory already has, so everything downstream (the plan, the
-labels, the version id) is the same code: ``[image]`` width and height are the file's,
-``[camera] focal_px`` is ``[f, f]`` (every frame at the calibrated focal; the working distance
-and the pose still vary), and every unit's principal offset and Brown-Conrady coefficients are
-the file's (ranges of one value). The dataset stores the resolved config, which reproduces it
-without the file.
+:mod:`dockfactory.core.calibration_files`), relative to the config's folder. Loading the config resolves it
+into the keys the factory already has, so everything downstream (the plan, the labels, the version id) is the
+same code: ``[image]`` width and height are the file's, ``[camera] focal_px`` is ``[f, f]`` (every frame at the
+calibrated focal; the working distance and the pose still vary), and every unit's principal offset and
+Brown-Conrady coefficients are the file's (ranges of one value). The dataset stores the resolved config, which
+reproduces it without the file.
 
-The factory renders square pixels: ``fx`` and ``fy`` may differ by at most ``MAX_ASPECT_DIFF``
-(relative; ``f`` is then sqrt(fx fy)). Rendering a file whose focal lengths differ more as square
-pixels would make a camera other than the file's, and frames measured with the file would carry
-the difference as a pose bias (measured: fx and fy 0.068 % apart moved X by 0.35-0.53 mm on every
-frame): such a file is refused; a calibration made with fx = fy (OpenCV's
-CALIB_FIX_ASPECT_RATIO) or a file with one value for both renders. A key the file sets may not be set in the config too (one line naming both).
+Square pixels only: a file whose ``fx`` and ``fy`` differ by more than ``MAX_ASPECT_DIFF`` (relative) is refused
+(``f`` is sqrt(fx fy)); a key the file sets may not be set in the config too (one line naming both).
+
+Why and how: docs/configuration.md, "A calibration file in a config".
 """
 from __future__ import annotations
 

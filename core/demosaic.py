@@ -1,26 +1,14 @@
 """Demosaicing: the ISP side of a Bayer camera (a full RGB image from the one-channel raw frame).
 
 ``demosaic(raw, pattern, method)`` with ``pattern`` one of ``dockfactory.core.cfa.PATTERNS``
-(colours of the top-left 2x2 block) and ``method`` one of :data:`DEMOSAICS`:
+(colours of the top-left 2x2 block) and ``method`` one of :data:`DEMOSAICS`: OpenCV's ``"bilinear"``,
+``"edge_aware"`` and ``"vng"`` (8-bit only: other inputs are companded to 8 bits), and ``"mhc"`` (Malvar,
+He, Cutler, ICASSP 2004, as four 5x5 linear filters). Every method returns the raw samples unchanged at
+their own sites and fills the frame border as if the frame were mirrored about its edge pixels
+(``BORDER_REFLECT_101``). The results are RGB; OpenCV's Bayer names (``_CV_BAYER``) and its VNG
+displacement (:func:`vng_displacement`) are translated here.
 
-* ``"bilinear"``: OpenCV's bilinear interpolation (``cv2.demosaicing``, ``COLOR_Bayer*2BGR``);
-* ``"edge_aware"``: OpenCV's edge-aware interpolation (the ``_EA`` codes);
-* ``"vng"``: OpenCV's variable number of gradients (the ``_VNG`` codes, 8-bit only: other
-  inputs are companded to 8 bits, see :func:`demosaic`);
-* ``"mhc"``: Malvar, He, Cutler, "High-quality linear interpolation for demosaicing of
-  Bayer-patterned color images", ICASSP 2004: bilinear plus a Laplacian correction from the
-  pixel's own channel, as four 5x5 linear filters.
-
-Every method returns the raw samples unchanged at their own sites (``cfa.mosaic`` of the result
-is the input, bit for bit) and fills the frame border as if the frame were mirrored about its
-edge pixels (``BORDER_REFLECT_101``, which keeps the Bayer phase): OpenCV's own border handling
-(copied edge rows and columns, which overwrite samples) is replaced by demosaicing a padded copy.
-
-OpenCV names a Bayer pattern by the 2nd and 3rd pixels of its *second* row, so the layout this
-package calls RGGB is OpenCV's ``BayerBG`` (table ``_CV_BAYER``, held by the tests to the flat
-colours it must give back), and OpenCV writes BGR: the results here are RGB. OpenCV's VNG writes
-its output displaced by two rows in some releases: :func:`vng_displacement` finds the displacement
-of the installed OpenCV once, and the wrapper undoes it.
+Why and how: docs/colour_cameras.md, "Demosaicing".
 """
 from __future__ import annotations
 

@@ -1,17 +1,8 @@
 """An image sensor described by its EMVA 1288 (release 4.0, linear) parameters, and the standard's
 photon transfer method to measure them back.
 
-The signal chain of :func:`expose`, per pixel, with the unit of every stage::
-
-    mean photo-electrons mu_e [e-]   (the caller's (H, W) map: photons x quantum efficiency)
-      x PRNU gain [1]                 fixed pattern, mean 1  (:func:`fixed_patterns`)
-      + dark current x exposure [e-]
-      shot noise: N(mu, mu) [e-]      Gaussian with the Poisson mean and variance (see expose)
-      min(., saturation_e) [e-]       the full well
-      + temporal dark noise N(0, dark_noise_e^2) [e-]
-      x system gain K [DN/e-]  + black level [DN]  + DSNU [DN]   fixed pattern, mean 0
-      round, clip to [0, 2**adc_bits - 1]  -> uint16 [DN]
-
+:func:`expose` takes mean photo-electrons per pixel and returns the raw frame (uint16 DN): PRNU, dark
+current, shot noise, the full well, temporal dark noise, system gain, black level, DSNU and the ADC.
 All DN figures (``gain_dn_per_e``, ``dsnu_dn``, ``black_level_dn``) are at the sensor's
 ``adc_bits``; :func:`with_adc_bits` moves them to another depth. Quantum efficiency is carried for
 the caller that turns photons into electrons; :func:`expose` takes electrons and never applies it.
@@ -19,6 +10,8 @@ the caller that turns photons into electrons; :func:`expose` takes electrons and
 Randomness: the fixed patterns come from the camera unit's integer seed (the same seed is the same
 unit, bit for bit); every temporal draw comes from the ``numpy.random.Generator`` the caller passes
 to :func:`expose`. There is no global random state and no default generator.
+
+Why and how: docs/colour_cameras.md, "The EMVA 1288 sensor".
 """
 from __future__ import annotations
 

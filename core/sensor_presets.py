@@ -3,21 +3,12 @@ figures (cited beside each preset), for :mod:`dockfactory.core.emva`.
 
 Every preset is at 12 ADC bits (``emva.with_adc_bits`` moves it) and at the camera's base gain.
 Where the sources found give a figure only indirectly, the comment shows the derivation; where
-they give none, the comment says what was assumed and why. Two derivations recur:
-
-* Saturation capacity from the maximum SNR: EMVA 1288 gives SNR_max = sqrt(mu_e.sat), so
-  mu_e.sat = 10 ** (SNR_max_dB / 10) electrons.
-* Temporal dark noise from the dynamic range: DR = mu_e.sat / mu_e.min with the absolute
-  sensitivity threshold mu_e.min = sqrt(sigma_d^2 + (1/12) / K^2) + 1/2 electrons (EMVA 1288
-  release 4.0, linear), so sigma_d = sqrt((mu_e.sat / DR - 1/2)^2 - (1/12) / K^2).
-
-Colour quantum efficiencies: vendors publish EMVA data for the monochrome versions only (Basler
-says so explicitly, see below). Following Basler's method, the green peak of the colour version is
-the monochrome QE times an IR-cut filter transmittance of 0.93; red and blue peaks are taken as
-0.80 and 0.85 of green. Those two ratios are assumptions (no per-channel figure was found), to be
-replaced by measured colour QE when available.
+they give none, the comment says what was assumed and why. The colour quantum efficiencies come
+from the monochrome versions' figures (the red and blue ratios assumed).
 
 Nothing here is downloaded or read at run time.
+
+Why and how: docs/colour_cameras.md, "The sensor presets' figures".
 """
 from __future__ import annotations
 

@@ -8,16 +8,10 @@ blended into the frame (:func:`composite`): the markers, whose edges the centre 
 measures, are as clean as an N-sample render, at the cost of N samples on a few per cent of the
 pixels. docs/rendering.md ("Label-aware sampling") gives the figures.
 
-What is blended is shaped by the markers, not by the rectangles rendered: each marker's *halo*
-(its disc, its ring base with the puck's side, and the paint out to HALO_RADII disc radii, which
-the refinement reads) plus HALO_PX takes the crop; the weight falls to 0 over the next FEATHER_PX;
-the rest of the frame, paint between markers included, stays the main render's. A rectangle
-covers each halo and REGION_MARGIN_PX around it (the feather and the pixel filter's reach);
-rectangles of nearby markers are merged when one crop costs less than two (:func:`merge_boxes`,
-each crop's fixed cost counted in pixels at N samples); they never overlap, so the composite does
-not depend on their order. Everything is in render-canvas pixels (``CameraModel.canvas``: the
-pinhole render before the lens). The labels are untouched: geometry, the index and depth passes
-come from the main render.
+Each marker's halo (HALO_RADII, HALO_PX, FEATHER_PX) is blended from non-overlapping rectangles
+(:func:`merge_boxes`), in render-canvas pixels; the labels are untouched.
+
+Why and how: docs/rendering.md, "Label-aware sampling: the regions".
 """
 from __future__ import annotations
 

@@ -5,16 +5,11 @@ Time t (seconds here, ms in configs and labels) runs from the middle of the expo
 is the frame's ``d_from_b``, and B at t is ``d_from_b`` translated by ``velocity * t`` (constant
 velocity in D, no rotation; ``core.scene.MotionParams``).
 
-- Global shutter: every row is exposed over [-E/2, E/2]. For a constant velocity the image of a
-  point moves along a path symmetric about its t = 0 projection, so the blurred image's centroid
-  is the mid-exposure projection (exactly for a straight image path; the image of a straight 3D
-  path is projective, which leaves a second-order term, docs/motion.md). Labels are those of B at
-  t = 0.
-- Rolling shutter (readout R): row v of the render canvas (OpenCV rows, top = 0, H rows) is
-  exposed over [t(v) - E/2, t(v) + E/2] with t(v) = R ((v + 1) / H - 1/2): Cycles' rolling
-  shutter gives its pixel row y (bottom-up, y = H - 1 - v) the time 1 - y / H of the shutter
-  interval. A point of B is imaged where its projection at its own row's time lands: the fixed
-  point v = row(project(B(t(v)))), solved here by Newton's method.
+A global shutter exposes every row over [-E/2, E/2] (labels: B at t = 0); a rolling shutter (readout R)
+exposes each row of the render canvas at its own time t(v), and a point of B is imaged where its projection
+at its own row's time lands (a fixed point, solved by Newton's method).
+
+Why and how: docs/motion.md, "Global and rolling shutter".
 """
 from __future__ import annotations
 

@@ -1,21 +1,13 @@
 """Render worker process: ``python -m dockfactory.generator.render_worker``.
 
 Builds the Blender scene once (through the bpy adapter, ``dockfactory.blender_scenes.render``),
-then renders frame after frame by updating it and post-processes each EXR (sensor model, labels). Requests arrive as
-JSON lines on stdin; replies go as JSON lines to the original stdout, while everything Blender
-prints is sent to stderr (the job's log). Requests:
-  {"op": "init", "static": ..., "width": W, "height": H, "threads": T, "root": DIR,
-   "keep_exr": bool, "visible_threshold": x}
-  {"op": "render", "frame": <FrameScene dict>}
-  {"op": "state", "frame": <FrameScene dict>, "full": bool}  apply the frame without rendering;
-      reply "digest" (sha256 of the Blender state a render would read) and, if full, "state"
-  {"op": "quit"}
-Replies: {"ok": true, ...} or {"ok": false, "error": "..."}.
-Fault injection for tests: DOCKFACTORY_FAULT="crash:<frame_id>" or "hang:<frame_id>" acts once per
-frame (a marker file in DOCKFACTORY_FAULT_DIR remembers it); "crash-always:<frame_id>" every time.
-The worker dies with the process that started it (``DOCKFACTORY_WORKER_PARENT``, polled every
-0.5 s and checked again before a frame's files are written): that process held the dataset
-folder's lock.
+then renders frame after frame by updating it and post-processes each EXR (sensor model, labels). Requests
+arrive as JSON lines on stdin (``init``, ``render``, ``state``, ``quit``); replies go as JSON lines to the
+original stdout, while everything Blender prints is sent to stderr (the job's log). Fault injection for
+tests: ``DOCKFACTORY_FAULT``. The worker dies with the process that started it
+(``DOCKFACTORY_WORKER_PARENT``).
+
+Why and how: docs/rendering.md, "The render worker's requests".
 """
 from __future__ import annotations
 

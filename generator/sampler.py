@@ -6,15 +6,12 @@ frame's look (light, noise, occluders) each draw from their own stream, so a fra
 whatever the shard, worker count or render order, and the captures of a repeatability pose share
 their geometry while their lighting and noise differ.
 
-This module holds the frame plan and the per-frame sampling; the streams and the draws it shares
-are in ``generator.random_draws``, the camera units' lenses in ``generator.camera_units`` and the docking
-runs in ``generator.docking_runs``.
+This module holds the frame plan and the per-frame sampling: its entry points ``frame_plan``, ``sample_frame``
+and the checks (``check_focal_fits``, ``check_rolling_fits``) alone read the whole ``Config``. The streams and
+the draws it shares are in ``generator.random_draws``, the camera units' lenses in ``generator.camera_units``
+and the docking runs in ``generator.docking_runs``.
 
-Only the entry points read the whole ``Config``: ``frame_plan`` (the plan), ``sample_frame`` (one
-frame's scene) and the checks (``check_focal_fits``, ``check_rolling_fits``). They read the config
-once and hand each helper the sections it needs ([pose], [camera], [sensor], ...), the dataset
-seed, and what a frame shares with others (the static scene, its unit's lens); the scene they
-return is plain frozen data that goes to the render worker as is.
+Why and how: docs/datasets.md, "Sampling a frame".
 """
 from __future__ import annotations
 

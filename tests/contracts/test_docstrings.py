@@ -28,14 +28,7 @@ FACADES = ("dockfactory.solver", "dockfactory.eval.report", "dockfactory.generat
 RAISE_NOTHING = {"dockfactory.pin_label_arithmetic", "dockfactory.set_app_environment",
                  "dockfactory.eval.report.pdf_engine"}
 
-# Files whose module docstring may stay longer for now, because they may not be edited here:
-EXEMPT_FROM_DOC_LENGTH = {
-    # modules in generator.version.OUTPUT_SOURCES: their source bytes are in every dataset version id, so an
-    # edit of a docstring re-versions every dataset (shorten them with the next change that re-versions anyway)
-    "core/calibration_files.py", "core/camera_chain.py", "core/config_calibration.py", "core/demosaic.py",
-    "core/emva.py", "core/sensor_presets.py", "generator/marker_regions.py", "generator/motion.py",
-    "generator/render_worker.py", "generator/sampler.py",
-}
+EXEMPT_FROM_DOC_LENGTH: set[str] = set()
 
 
 def _entry_points():
