@@ -7,7 +7,6 @@ first part, so every part is read. The kept EXR is one ZIP-compressed part with 
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,10 +90,3 @@ def write_compact(path, passes: RenderPasses) -> None:
 def read_compact(path) -> RenderPasses:
     """Read an EXR written by :func:`write_compact` (depth already in mm)."""
     return read_passes(path, depth_scale_mm=1.0)
-
-
-def remove_quietly(path) -> None:
-    try:
-        os.unlink(path)
-    except FileNotFoundError:
-        pass
