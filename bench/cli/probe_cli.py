@@ -12,7 +12,7 @@ folder, a file where a folder is expected, the fifo, /dev/null, the junk file, a
 folder), choices (an unknown one); and every positional argument replaced the same way. Each
 attempt is its own process with a timeout. An attempt passes when it exits 0, 1, 2 or 3 (not proven) without
 "Traceback" on stderr; a timeout is a pass only for commands that start real work (render, run,
-train, ablate, detect, noise-card, measure, export-onnx), where a valid odd value may well start
+train, ablate, detect, noise-card, measure, export-onnx, design), where a valid odd value may well start
 it. Prints one line per failing attempt and a summary; writes them to ``--out``.
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 NUMBERS = ("nan", "inf", "-1", "0", "1e308", "1000000000", "abc", "")
-WORKING = {"render", "run", "train", "ablate", "detect", "noise-card", "measure", "export-onnx"}
+WORKING = {"render", "run", "train", "ablate", "detect", "noise-card", "measure", "export-onnx", "design"}
 
 
 def build_world(base: Path) -> dict:
@@ -72,7 +72,10 @@ def base_args(command: str, w: dict) -> list[str]:
             "train": [w["dataset"], "--out", out, "--epochs", "1"], "detect": [w["dataset"], "--out", out + ".json"],
             "ablate": [w["dataset"], "--out", out, "--epochs", "1", "--seeds", "1"],
             "export-onnx": ["--out", out + ".onnx"], "noise-card": [w["dataset"]],
-            "measure": [w["images"], "--layout", w["layout"], "--out", out]}[command]
+            "measure": [w["images"], "--layout", w["layout"], "--out", out],
+            "plan-frames": ["--config", w["config"]], "design": ["docking_cell", "--out", out],
+            "layout": ["from-config", w["config"], "--out", out + ".json"], "schema": ["labels", "--out", out + ".json"]
+            }[command]
 
 
 def odd_paths(w: dict) -> tuple[str, ...]:
