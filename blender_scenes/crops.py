@@ -33,9 +33,10 @@ def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     """Render each of ``regions`` (generator.marker_regions.Region) of the frame already applied to
     ``scene`` at ``frame.render.marker_samples`` samples (with ``marker_adaptive_threshold`` > 0:
     adaptive sampling up to that many, Cycles' automatic minimum), denoised by ``marker_denoise``
-    (off: not at all), into :func:`crop_path` files cropped to the region; returns their paths. The render
-    settings are put back as ``apply_frame`` set them (no border, the frame's samples and
-    denoiser), so what a frame leaves behind does not depend on its crops."""
+    (off: not at all), with Cycles' light tree unless ``light_tree`` is off (it picks the light a
+    sample goes to by its contribution there: less noise per sample at the markers), into :func:`crop_path` files cropped to the region; returns their paths. The render
+    settings are put back as ``apply_frame`` set them (no border, the frame's samples,
+    denoiser and light tree), so what a frame leaves behind does not depend on its crops."""
     r, c, rs = scene.render, scene.cycles, frame.render
     wc, hc = r.resolution_x, r.resolution_y
     paths = []
@@ -44,6 +45,7 @@ def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     c.adaptive_threshold = rs.marker_adaptive_threshold
     c.adaptive_min_samples = 0
     c.use_denoising = rs.marker_denoise != "off"
+    c.use_light_tree = rs.light_tree != "off"
     if c.use_denoising:
         c.denoising_quality = DENOISE_QUALITY[rs.marker_denoise]
     r.use_border = r.use_crop_to_border = True

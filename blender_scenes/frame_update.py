@@ -53,6 +53,7 @@ def apply_render_settings(scene, frame: FrameScene) -> None:
     c.denoising_quality = DENOISE_QUALITY.get(rs.denoise, PARKED_DENOISE_QUALITY)
     c.denoising_prefilter = rs.denoise_prefilter.upper()
     c.sampling_pattern = rs.sampling_pattern.upper()
+    c.use_light_tree = rs.light_tree == "on"
     park_border(scene.render)
 
 

@@ -197,9 +197,15 @@ class RenderConfig:
     marker_samples: int = 32         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
+    light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
     device: str = "cpu"             # cpu | gpu (Cycles on CUDA, OptiX or HIP; its frames differ from the CPU's)
+
+    def rendered_light_tree(self) -> str:
+        """The light tree the frames are rendered with: ``markers`` without label-aware sampling
+        renders as ``off`` (no marker regions to use it in)."""
+        return "off" if self.light_tree == "markers" and self.marker_samples == 0 else self.light_tree
 
 
 @dataclass(frozen=True)
@@ -271,13 +277,14 @@ class ExportConfig:
 # (or, for the licence, at the default those datasets are published under): left out of the
 # identity's config at that value (Config.to_dict), so their version ids stay
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
-                    ("render", "marker_adaptive_threshold"): 0.0,
+                    ("render", "marker_adaptive_threshold"): 0.0, ("render", "light_tree"): "off",
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
                     ("sections", "mesh_a_vertices"): [], ("sections", "mesh_a_triangles"): [],
                     ("sections", "mesh_b_vertices"): [], ("sections", "mesh_b_triangles"): []}
 RENDER_DEVICES = ("cpu", "gpu")
+LIGHT_TREE_CHOICES = ("off", "markers", "on")
 
 
 @dataclass(frozen=True)
@@ -306,6 +313,8 @@ class Config:
         (:data:`IDENTITY_NEUTRAL`) is left out, so the datasets made before it keep their version
         ids; ``full``: every key."""
         d = json.loads(json.dumps(dataclasses.asdict(self)))
+        if not full:
+            d["render"]["light_tree"] = self.render.rendered_light_tree()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
             if d[table][key] == neutral:
                 del d[table][key]
@@ -396,10 +405,13 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
-    """Build and validate a :class:`Config`; errors name ``source``."""
+    """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` is
+    the one the frames render with (``markers`` without label-aware sampling is ``off``), so a
+    config and its stored identity read back equal."""
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
-    return cfg
+    render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree())
+    return dataclasses.replace(cfg, render=render)
 
 
 def _default_of(table: str, key: str):
@@ -691,6 +703,8 @@ def _validate_render(cfg: Config, source: str) -> None:
     _check_positive(source, "render", "marker_samples", rc.marker_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_samples", rc.marker_samples, MAX_SAMPLES, "Cycles' limit")
     _check_positive(source, "render", "marker_adaptive_threshold", rc.marker_adaptive_threshold, allow_zero=True)
+    if rc.light_tree not in LIGHT_TREE_CHOICES:
+        raise _err(source, "render", "light_tree", f"{rc.light_tree!r} is not one of {', '.join(LIGHT_TREE_CHOICES)}")
     if rc.marker_denoise not in ("off", "fast", "balanced", "high"):
         raise _err(source, "render", "marker_denoise", f"{rc.marker_denoise!r} is not one of off, fast, balanced, high")
     if not 0.01 <= rc.filter_width_px <= 10:

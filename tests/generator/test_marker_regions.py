@@ -25,7 +25,7 @@ from dockfactory.generator.marker_regions import (
     merge_boxes,
 )
 from dockfactory.generator.random_draws import static_scene
-from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.generator.sampler import frame_plan, render_settings, sample_frame
 
 
 def _cfg(**render):
@@ -237,3 +237,24 @@ def test_a_config_set_off_writes_a_text_that_reads_back_off(tmp_path):
     again = tmp_path / "again.toml"
     again.write_text(text)
     assert load_config(again) == cfg and cfg.canonical_json() == load_config(again).canonical_json()
+
+
+def test_the_light_tree_is_in_the_identity_only_where_it_renders():
+    """``light_tree = "markers"`` (the default) without label-aware sampling renders as off: the
+    config reads back off and its identity is that of before the key; with the crops it is in the
+    identity, and the frames' render settings carry it."""
+    assert _cfg().render.light_tree == "markers" and "light_tree" in _cfg().to_dict()["render"]
+    no_crops = _cfg(marker_samples=0)
+    assert no_crops.render.light_tree == "off" and "light_tree" not in no_crops.to_dict()["render"]
+    assert identity(no_crops) == identity(_cfg(marker_samples=0, light_tree="off"))
+    assert identity(_cfg(light_tree="off")) != identity(_cfg())
+    assert identity(_cfg(light_tree="on")) != identity(_cfg())
+    assert config_from_identity(json.loads(_cfg().canonical_json())) == _cfg()
+    assert render_settings(_cfg().render).light_tree == "markers"
+    assert render_settings(no_crops.render).light_tree == "off"
+    assert "light_tree" not in to_dict(render_settings(no_crops.render))     # label bytes of before
+
+
+def test_a_light_tree_value_not_known_is_refused_naming_the_key():
+    with pytest.raises(ConfigError, match=r"\[render\] light_tree.*'always'"):
+        _cfg(light_tree="always")

@@ -40,7 +40,8 @@ def setup():
     frame = sample_frame(cfg, frame_plan(cfg)[0])
     return cfg, {"crops": _variant(frame, "crops"),
                  "plain": _variant(frame, "plain", marker_samples=0),
-                 "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off"),
+                 "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off",
+                                             light_tree="on"),
                  "adaptive": _variant(frame, "adaptive", marker_samples=4 * SAMPLES, marker_adaptive_threshold=0.1)}
 
 
@@ -74,8 +75,8 @@ def _exr(root, name):
 
 def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(setup, rendered):
     """Pixel for pixel (the kept EXR, half floats): where the blend is 1 the crops equal a whole
-    frame rendered at the crops' samples without the denoiser (so the border lands on the right
-    pixels), and wherever the blend is 0 the frame is the one rendered without crops."""
+    frame rendered at the crops' samples without the denoiser and with the light tree (so the
+    border lands on the right pixels, and the crops were rendered with the tree), and wherever the blend is 0 the frame is the one rendered without crops."""
     cfg, frames = setup
     root, _ = rendered
     crops, plain, uniform = (_exr(root, n).rgb for n in ("crops", "plain", "uniform"))
