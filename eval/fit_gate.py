@@ -4,7 +4,7 @@
 dof = 2 n - p (n points used, p = 13 pose and focal parameters plus the free intrinsics of its
 camera model; k = GATE_NOISE_FACTOR), and its p-value; the frame ``explains`` the residuals when
 p >= GATE_P. Without a known noise, or without degrees of freedom, nothing is tested (``explains``
-None).
+None). ``camera_misfit``: the camera-model check (solver.model_error) against the same noise.
 
 ``run_misfits``: the same test on each frame of a docking run solved with shared intrinsics
 (eval.solve_frames.solve_run), whose frames each passed ``gate`` alone: a frame the run's
@@ -70,19 +70,39 @@ def misfit_reason(test: dict, sigma_px: float, left_out: int) -> str:
             f"{tried}: wrong layout, wrong image geometry or a bad centre")
 
 
+def camera_misfit(record: dict) -> float | None:
+    """The p-value of ``record``'s camera-model check against the known centre noise when it is
+    below GATE_P, else None (explained, or not tested: no known noise, nothing testable). Below
+    GATE_P the residuals show the model's unestimated intrinsics (principal point, distortion)
+    departing from what the lens prior allows (from none when the lens is stated known): a
+    principal point off centre the chi-square alone cannot tell from a noisier camera."""
+    p = (record.get("model_check") or {}).get("known_noise_p_value")
+    return p if p is not None and p < GATE_P else None
+
+
+def camera_misfit_reason(record: dict, p_value: float) -> str:
+    """One line: why the gate refused a frame its camera model does not explain."""
+    model = record.get("camera_model", "pinhole")
+    return (f"the {model} camera does not explain the residuals (camera-model check against the known centre "
+            f"noise, p {p_value:.2g}): principal point off centre (a crop) or a lens; give --calibration, "
+            "or --camera-model pp_k1")
+
+
 def gate(solve, refit, n_rows: int, sigma_px: float | None):
     """Run ``solve(keep)`` through the gate. ``keep`` (n_rows,) bool: the detection rows to use;
     ``solve`` returns (record, used, widths, ids) with ids (n_rows,) the marker id of each row the
     fit used, else None; ``refit(keep, ids)`` the record of a quick fit of the rows ``keep`` as
     the markers ``ids`` (no identification; raises or returns a not-ok record when it fails),
     which picks the centre to leave out. Returns (record, used, widths) of the first fit that
-    passes (its ``fit_test``; with ``left_out``, the ids of the centres it left out), else a
-    not-ok record."""
+    passes (its ``fit_test`` and :func:`camera_misfit`; with ``left_out``, the ids of the centres it
+    left out), else a not-ok record; a first fit :func:`camera_misfit` flags is refused at once."""
     keep = np.ones(n_rows, dtype=bool)
     first = solve(keep)
     if not first[0].get("ok"):
         return first[:3]
     test = first[0]["fit_test"] = fit_test(first[0], sigma_px)
+    if (lens_p := camera_misfit(first[0])) is not None:
+        return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}, {}
     if test["explains"] is not False:
         return first[:3]
     ids, left = first[3], []
@@ -97,7 +117,7 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None):
             break
         ids = best[3]
         best[0]["fit_test"] = fit_test(best[0], sigma_px)
-        if best[0]["fit_test"]["explains"]:
+        if best[0]["fit_test"]["explains"] and camera_misfit(best[0]) is None:
             best[0]["left_out"] = left
             best[0]["fit_test"]["before"] = {"ratio": test["ratio"], "p_value": test["p_value"]}
             return best[:3]

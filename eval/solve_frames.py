@@ -105,11 +105,14 @@ def model_check_record(check) -> dict:
     ``warning`` sentence ("" when the model explains the residuals; ``explains`` None when no
     intrinsic was testable: dof 0, nothing tested) and whether the intrinsics
     it does not estimate were ``marginalised`` into the covariance (:func:`pose_record` adds
-    ``pose_variance``, (6,) over POSE_NAMES: what that added to the pose's variances)."""
+    ``pose_variance``, (6,) over POSE_NAMES: what that added to the pose's variances);
+    ``known_noise_p_value`` the same test against the known centre noise (None: none known; the
+    goodness-of-fit gate reads it, eval.fit_gate)."""
     explains = bool(check.explains) if check.dof > 0 else None    # nothing the data determine: not tested
+    known = None if check.known_log_p is None else float(math.exp(check.known_log_p))
     return {"explains": explains, "p_value": float(check.p_value), "statistic": float(check.statistic),
             "dof": int(check.dof), "tested": list(check.tested), "warning": check.warning(),
-            "marginalised": bool(np.any(check.added != 0.0))}
+            "marginalised": bool(np.any(check.added != 0.0)), "known_noise_p_value": known}
 
 
 SELF_CALIBRATE = ("frame", "sequence")

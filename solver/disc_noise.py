@@ -13,6 +13,7 @@ from dockfactory.solver.camera_models import Intrinsics, camera_model
 from dockfactory.solver.errors import SolverError
 from dockfactory.solver.joint import JointFit, JointFitter, SectionPoints, with_added_covariance, with_model_check
 from dockfactory.solver.model_error import model_check
+from dockfactory.solver.options import GATE_NOISE_FACTOR
 from dockfactory.solver.refine import (
     Block,
     covariance_from_jacobian,
@@ -141,10 +142,22 @@ def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, k
 def _checked(fit: JointFit, blocks, poses, intr, model, sqrt_w, k2: float, fitter: JointFitter) -> JointFit:
     """``fit`` with the model error of its camera model (:func:`solver.model_error.model_check`
     with the fitter's lens prior; ``sqrt_w`` (n, 2, 2) or None the estimator's whitening of the
-    points, ``k2`` the noise scale of the whitened residuals)."""
+    points, ``k2`` the noise scale of the whitened residuals, ``fit.sigma_px`` the per-axis px
+    noise it stands for). The check is also made against the known noise
+    (:func:`_known_noise_px` times ``GATE_NOISE_FACTOR``), when there is one."""
+    known = _known_noise_px(fitter)
+    known_k2 = None if known is None or not fit.sigma_px > 0 else k2 * (GATE_NOISE_FACTOR * known / fit.sigma_px) ** 2
     check = model_check(blocks, poses, intr, model, fit.covariance_params.shape[0], sqrt_w, k2,
-                        fitter.lens, fitter.principal_point, fitter.sigma_px is not None)
+                        fitter.lens, fitter.principal_point, fitter.sigma_px is not None, known_k2)
     return _with_shift(with_model_check(fit, check), blocks, poses, intr, model, sqrt_w, fitter.section_shift_px)
+
+
+def _known_noise_px(fitter: JointFitter) -> float | None:
+    """The centre noise (px per axis) the fitter's caller knows: the detector's noise floor
+    (``RefineOptions.sigma_floor_px``, the noise card) when set, else the given ``sigma_px``;
+    None when neither is (the goodness-of-fit gate's noise, eval.fit_gate, before its factor)."""
+    floor = fitter.options.sigma_floor_px
+    return float(floor) if floor is not None else fitter.sigma_px
 
 
 def _with_shift(fit: JointFit, blocks, poses, intr, model, sqrt_w, shift_px) -> JointFit:

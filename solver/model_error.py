@@ -31,7 +31,9 @@ class ModelCheck:
     (natural log of its p-value; 0.0 when nothing was testable), ``explains`` (False: the
     assumed model does not explain the residuals at the prior's ``misfit_alpha``), ``added``
     (p, p) the covariance added to the estimator's parameters (zeros unless marginalised),
-    ``theta`` {name: posterior mean} of the unestimated intrinsics' departure."""
+    ``theta`` {name: posterior mean} of the unestimated intrinsics' departure, ``known_log_p``
+    the log p-value of the same score test with the noise a caller knows (chi-square; None when
+    no known noise was given: :func:`model_check`'s ``known_k2``)."""
 
     model: str
     tested: tuple
@@ -41,6 +43,7 @@ class ModelCheck:
     explains: bool
     added: np.ndarray
     theta: dict
+    known_log_p: float | None = None
 
     @property
     def p_value(self) -> float:
@@ -63,9 +66,11 @@ def _split_columns(n_params: int, model: IntrinsicsModel):
     return est, [n_pose_f + EXTRA_NAMES.index(n) for n in names], names
 
 
-def _score_test(f_info, score, half, sigma_known: bool, dof_res: int):
+def _score_test(f_info, score, half, sigma_known: bool, dof_res: int, within_prior: bool = False):
     """(statistic, dof, log_p, tested mask) of the score test over the directions of the
-    prior-scaled information ``f_info`` with eigenvalue above 1 (see the module docstring)."""
+    prior-scaled information ``f_info`` with eigenvalue above 1 (see the module docstring);
+    ``within_prior``: the null is a departure drawn from the prior, not none (the score's
+    covariance F + F P F: eigenvalues lam (1 + lam) of the prior-scaled one)."""
     d = half / math.sqrt(3.0)
     lam, vec = np.linalg.eigh(f_info * d[:, None] * d[None, :])
     keep = lam > 1.0
@@ -73,15 +78,15 @@ def _score_test(f_info, score, half, sigma_known: bool, dof_res: int):
     if q == 0:
         return 0.0, 0, 0.0, np.zeros(len(half), dtype=bool)
     proj = vec[:, keep].T @ (d * score)
-    t = float(np.sum(proj ** 2 / lam[keep]))
+    t = float(np.sum(proj ** 2 / (lam[keep] * (1.0 + lam[keep]) if within_prior else lam[keep])))
     tested = np.sum(vec[:, keep] ** 2 * lam[keep], axis=1) > 1.0 / len(half)
     if sigma_known or dof_res <= 0:
         return t, q, chi2_logsf(t, q), tested
     return t / q, q, f_logsf(t / q, q, dof_res), tested
 
 
-def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_params: int,
-                sqrt_w, k2: float, lens: LensPrior, principal_point, sigma_known: bool) -> ModelCheck:
+def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_params: int, sqrt_w, k2: float,
+                lens: LensPrior, principal_point, sigma_known: bool, known_k2: float | None = None) -> ModelCheck:
     """The :class:`ModelCheck` of a fit of ``blocks`` (:class:`solver.refine.Block`, unweighted)
     at ``poses`` and ``intr`` with ``model`` (``n_params`` = 6 P + 1 + e estimated parameters).
 
@@ -89,7 +94,10 @@ def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_param
     noise is taken as k^2 W^-1); ``k2`` the noise scale of the whitened residuals (px^2 when
     unweighted); ``lens`` the plausible ranges; ``principal_point`` (2,) px the assumed one
     (the image width for the principal point's range); ``sigma_known``: the noise was given,
-    not estimated from these residuals. ``added`` is zeros when ``lens.marginalise`` is False or
+    not estimated from these residuals; ``known_k2`` (None: not tested) the noise scale of the
+    whitened residuals a known noise implies, against which the score test is made again
+    (``known_log_p``; with ``lens.marginalise`` against a departure drawn from the prior, not
+    none). ``added`` is zeros when ``lens.marginalise`` is False or
     nothing can be computed (a point behind the camera, a singular information).
 
     The residuals are taken orthogonal to the estimated parameters' columns before the score:
@@ -123,8 +131,10 @@ def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_param
     mu = -post @ score
     added = g @ (post + np.outer(mu, mu)) @ g.T if lens.marginalise else np.zeros((n_params,) * 2)
     explains = not log_p <= math.log(lens.misfit_alpha)
+    known = None if known_k2 is None else _score_test(f_info * (k2 / known_k2), score * (k2 / known_k2), half,
+                                                      True, 0, lens.marginalise)[2]
     return ModelCheck(model.name, tuple(n for n, t in zip(names, tested) if t), float(stat), q,
-                      float(log_p), explains, added, dict(zip(names, mu.tolist())))
+                      float(log_p), explains, added, dict(zip(names, mu.tolist())), known)
 
 
 def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:

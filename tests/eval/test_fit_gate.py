@@ -9,12 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from dockfactory.core.layout import build_layout
+from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, build_layout
 from dockfactory.eval import fit_gate
 from dockfactory.eval.confidence import chi2_cdf
 from dockfactory.eval.fit_gate import MISFIT, fit_test
-from dockfactory.eval.solve_frames import docking_options, solve_frame
+from dockfactory.eval.solve_frames import KNOWN_LENS, UNCALIBRATED_LENS, docking_options, solve_frame
 from dockfactory.generator.dataset_open import Dataset
+from dockfactory.solver.synthetic import default_layout, docking_scene
 
 SIGMA = 0.05
 
@@ -105,3 +106,61 @@ def test_fit_test_is_the_chi_square_of_the_residuals_or_says_not_tested():
     assert fit_test(few, 0.1) == {"explains": None, "not_tested": "no degrees of freedom", "dof": 0}
     k1k2 = fit_test({**rec, "camera_model": "k1k2"}, 0.1)
     assert k1k2["dof"] == 13
+
+
+CARD = 0.0258                           # the default weights' noise card (px per axis)
+FAR = dict(radius_mm=450.0, distance_range=(2000.0, 2500.0), focal_range=(2000.0, 3600.0))   # scene B's geometry
+
+
+def _synthetic(seed: int, pp_offset_px, lens=KNOWN_LENS, coeffs=None, far: bool = True):
+    """One frame of a camera (principal point ``pp_offset_px`` off the image centre, distortion
+    ``coeffs``) seeing a docking layout of radius 450 mm and 30 mm discs from 2.0-2.5 m (``far``;
+    else the default layout and geometry of solver.synthetic), its centres + N(0, CARD^2), solved
+    with the principal point at the image centre and the lens prior ``lens`` through the gate."""
+    layout = build_layout(DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, 450.0, 30.0) if far else default_layout()
+    sc = docking_scene(np.random.default_rng(seed), markers=layout, pp_offset_px=pp_offset_px, coeffs=coeffs,
+                       **(FAR if far else {}))
+    n_a, n_b = len(sc.uv_a), len(sc.uv_b)
+    uv = np.vstack([sc.uv_a, sc.uv_b]) + CARD * np.random.default_rng(seed + 1000).standard_normal((n_a + n_b, 2))
+    cls = np.r_[np.zeros(n_a, dtype=int), np.ones(n_b, dtype=int)]
+    return solve_frame(layout, sc.image_centre, (cls, uv, None, None, None), None, "pinhole",
+                       docking_options(CARD, lens))[0]
+
+
+@pytest.mark.parametrize("seed", [3, 6])
+def test_a_principal_point_off_centre_is_refused_by_the_camera_model_check(seed, monkeypatch):
+    """A crop (principal point 160 / 120 px off centre) of a camera whose lens is stated known, at the
+    card's noise: without the camera-model check the chi-square passes after two centres are left
+    out (residuals about 6x the card); with it the frame is refused in one line. Centred, the same
+    frame is ok as is."""
+    with monkeypatch.context() as m:                                      # the gate without the check
+        m.setattr(fit_gate, "camera_misfit", lambda record: None)
+        before = _synthetic(seed, (160.0, 120.0))
+    assert before["ok"] and before["left_out"], before.get("reason")
+    cropped = _synthetic(seed, (160.0, 120.0))
+    assert not cropped["ok"] and cropped["category"] == MISFIT
+    assert "camera-model check" in cropped["reason"] and "principal point" in cropped["reason"]
+    assert "\n" not in cropped["reason"]
+    centred = _synthetic(seed, (0.0, 0.0))
+    assert centred["ok"] and "left_out" not in centred, centred.get("reason")
+    assert centred["model_check"]["known_noise_p_value"] > 1e-3
+
+
+def test_lenses_within_the_uncalibrated_prior_are_not_refused_by_the_camera_model_check():
+    """An uncalibrated camera (the lens prior marginalised), the default geometry: a lens drawn within
+    the prior's ranges is what the covariance already carries, so the check tests the departure
+    against it, not against none (which refuses about half of these frames)."""
+    rng = np.random.default_rng(4)
+    for seed in range(6):
+        pp, coeffs = tuple(rng.uniform(-40.0, 40.0, 2)), (rng.uniform(-0.15, 0.05), 0.0, *rng.uniform(-1e-3, 1e-3, 2))
+        rec = _synthetic(seed, pp, UNCALIBRATED_LENS, coeffs, far=False)
+        assert rec["ok"] or "camera-model check" not in rec["reason"], rec["reason"]
+        assert not rec["ok"] or rec["model_check"]["known_noise_p_value"] >= fit_gate.GATE_P
+
+
+def test_camera_misfit_reads_the_known_noise_p_value():
+    assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": 1e-9}}) == 1e-9
+    assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": 0.0}}) == 0.0
+    assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": 0.2}}) is None
+    assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": None}}) is None
+    assert fit_gate.camera_misfit({}) is None

@@ -134,3 +134,17 @@ def test_the_misfit_test_does_not_depend_on_where_the_estimator_stopped():
         ratios.append((again.statistic + 1.0) / (check.statistic + 1.0))
     assert flagged <= 2, flagged
     assert np.all(np.abs(np.array(ratios) - 1.0) < 0.05), (min(ratios), max(ratios))
+
+
+def test_the_check_is_made_again_against_the_known_noise():
+    """Without a known noise (no sigma, no floor) there is no second test; with the noise card as
+    the floor it is made at GATE_NOISE_FACTOR times it: a principal point 40 / -30 px off with k1
+    -0.15 far below 1e-6, the ideal frame well above 1e-3."""
+    floor = DockingOptions(refine=replace(DockingOptions().refine, sigma_floor_px=0.03))
+    for pp, coeffs, flagged in (((0.0, 0.0), None, False), ((40.0, -30.0), (-0.15,), True)):
+        sc = docking_scene(np.random.default_rng(11), pp_offset_px=pp, coeffs=coeffs)
+        uv = np.vstack([sc.uv_a, sc.uv_b]) + 0.03 * np.random.default_rng(5).standard_normal((len(IDS), 2))
+        plain = solve_docking(LAYOUT, sc.image_centre, correspondences=(IDS, uv))
+        assert plain.model_check.known_log_p is None
+        known = solve_docking(LAYOUT, sc.image_centre, correspondences=(IDS, uv), options=floor).model_check
+        assert (known.known_log_p < math.log(1e-6)) if flagged else (known.known_log_p > math.log(1e-3)), known
