@@ -25,11 +25,11 @@ from dockfactory.cli_args import (
 )
 from dockfactory.core.calibration_files import read_calibration
 from dockfactory.measure import MAX_WORKERS, CameraInput, MeasureOptions, measure
-from dockfactory.measure_verdict import budget_lines, pose_lines, summary_line
+from dockfactory.measure.verdict import budget_lines, pose_lines, summary_line
 from dockfactory.eval.conformity import exit_status
-from dockfactory.measure_read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
-from dockfactory.measure_selfcal import parse_window
-from dockfactory.measure_stream import FILTERS, PREFETCH, StreamOptions, measure_stream, stream_decider
+from dockfactory.measure.read import DEFAULT_MAX_MEGAPIXELS, MAX_MEGAPIXELS
+from dockfactory.measure.selfcal import parse_window
+from dockfactory.measure.stream import FILTERS, PREFETCH, StreamOptions, measure_stream, stream_decider
 from dockfactory.eval.solve_frames import SELF_CALIBRATE
 
 MAX_CAMERA_INDEX = 1023   # capture device numbers (V4L2 /dev/videoN, DirectShow, AVFoundation) are small
@@ -153,7 +153,7 @@ def _self_calibration(text: str) -> str:
 
 
 def _add_stream_args(m) -> None:
-    """The flags of measure on a stream (--video, --camera; dockfactory.measure_stream)."""
+    """The flags of measure on a stream (--video, --camera; dockfactory.measure.stream)."""
     m.add_argument("--video", help="measure the frames of a video file (any OpenCV reads) or an image-sequence "
                                    "pattern such as frames/%%06d.png: one JSON line per frame (--jsonl)")
     m.add_argument("--camera", type=int_in(0, MAX_CAMERA_INDEX), metavar="INDEX",

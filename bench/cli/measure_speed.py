@@ -43,7 +43,7 @@ def main() -> None:
     import json
 
     from dockfactory.core.resources import shipped_weights
-    from dockfactory.measure import MeasureOptions, measure
+    from dockfactory.measure.images import MeasureOptions, measure
     opts = MeasureOptions(args.backend, args.workers, args.overlay_size or None)
     print(f"load average before: {os.getloadavg()[0]:.2f}; torch threads {args.threads}")
     with tempfile.TemporaryDirectory() as tmp:

@@ -81,7 +81,7 @@ def _png_sequence(ds, ids: list[str], folder: Path) -> str:
 
 def _today(ds, ids, layout, weights, folder: Path) -> dict:
     """Today's measure on the PNGs (one worker, ONNX Runtime when installed, no overlays)."""
-    from dockfactory.measure import MeasureOptions, measure
+    from dockfactory.measure.images import MeasureOptions, measure
     out = folder / "measure"
     head = measure([ds.image_path(f) for f in ids], layout, weights, out,
                    options=MeasureOptions("auto", 1, None))
@@ -99,7 +99,7 @@ def _pct(values, q):
 
 def _stream(source: str, layout, weights, detector, folder: Path, name: str, prefetch: int = 1,
             roi: int | None = None, workers: int = 1) -> dict:
-    from dockfactory.measure_stream import StreamOptions, measure_stream
+    from dockfactory.measure.stream import StreamOptions, measure_stream
     out = folder / f"{name}.jsonl"
     summary = measure_stream(layout, weights, str(out), video=source,
                              options=StreamOptions(prefetch=prefetch, roi_refresh=roi, workers=workers),
@@ -112,7 +112,7 @@ def _stream(source: str, layout, weights, detector, folder: Path, name: str, pre
 
 def _detector(weights, backend: str, scale: float | None, size: tuple[int, int]):
     """A loaded detector, warmed up at the frames' size (ONNX Runtime: torch's thread count)."""
-    from dockfactory.measure_stream import StreamOptions, load_detector
+    from dockfactory.measure.stream import StreamOptions, load_detector
     return load_detector(weights, StreamOptions(backend=backend, input_scale=scale), size)
 
 
@@ -141,8 +141,8 @@ def _components(ds, ids, mp4: str, onnx, torch_det, small) -> dict:
     the centre refinement, and identification + solve."""
     import cv2
 
-    from dockfactory.measure import detect_in, solve_image
-    from dockfactory.measure_roi import RoiTracker
+    from dockfactory.measure.images import detect_in, solve_image
+    from dockfactory.measure.roi import RoiTracker
     k = len(ids) // 2
     data = ds.image_path(ids[k]).read_bytes()
     rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)

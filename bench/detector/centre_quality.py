@@ -128,7 +128,7 @@ def mp4v_round_trip(image: np.ndarray) -> np.ndarray:
 def camera_image(image: np.ndarray, camera: str) -> tuple[np.ndarray, str | None, bool]:
     """(the frame ``image`` (H, W, 3) uint8 RGB through ``camera``, its Bayer pattern, whether
     the refinement is told the colour is subsampled). ``mp4v`` is refined as a stream of it is
-    (dockfactory.measure_chroma), ``mp4v-colour`` on the colour score as it was before."""
+    (dockfactory.measure.chroma), ``mp4v-colour`` on the colour score as it was before."""
     if camera == "bayer":
         return demosaic(mosaic(image, "RGGB"), "RGGB", "vng"), "RGGB", False
     if camera == "jpeg90":

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dockfactory import measure as measure_mod
+from dockfactory.measure import images as measure_mod
 from dockfactory.cli import main
 
 CONFIG = """
@@ -114,7 +114,7 @@ def _measure(images, layout, out, *extra):
 # ----------------------------------------------------------------------------- headers
 
 def test_image_sizes_come_from_the_header_of_every_supported_format(tmp_path):
-    from dockfactory.image_header import image_size
+    from dockfactory.measure.image_header import image_size
     img = np.random.default_rng(0).integers(0, 255, (23, 37, 3), dtype=np.uint8)
     for ext, fmt in ((".png", "PNG"), (".jpg", "JPEG"), (".tif", "TIFF"), (".bmp", "BMP")):
         cv2.imwrite(str(tmp_path / f"a{ext}"), img)
@@ -129,7 +129,7 @@ def test_image_sizes_come_from_the_header_of_every_supported_format(tmp_path):
 @settings(max_examples=300, deadline=None)
 @given(st.sampled_from([b"\x89PNG\r\n\x1a\n", b"\xff\xd8", b"II*\x00", b"MM\x00*", b"BM", b""]), st.binary(max_size=200))
 def test_a_damaged_header_is_an_image_header_error_never_another_exception(tmp_path_factory, magic, tail):
-    from dockfactory.image_header import ImageHeaderError, image_size
+    from dockfactory.measure.image_header import ImageHeaderError, image_size
     path = tmp_path_factory.getbasetemp() / "fuzz.img"
     path.write_bytes(magic + tail)
     try:
@@ -141,7 +141,7 @@ def test_a_damaged_header_is_an_image_header_error_never_another_exception(tmp_p
 
 
 def test_an_image_over_the_limit_is_never_decoded(tmp_path, monkeypatch):
-    from dockfactory.measure import read_image
+    from dockfactory.measure.images import read_image
     def no_decoding(*a, **k):
         raise AssertionError("decoded")
     monkeypatch.setattr(cv2, "imread", no_decoding)

@@ -15,7 +15,7 @@ from cli_run import one_line_error, run_cli
 from dockfactory.core.calibration_files import Calibration, ideal_pixels, write_calibration
 from dockfactory.core.geometry import pose_components
 from dockfactory.eval.solve_frames import docking_options, solve_frame
-from dockfactory.measure import calibrated_solve
+from dockfactory.measure.images import calibrated_solve
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
@@ -122,7 +122,7 @@ def test_the_overlay_reprojects_through_the_calibrated_lens():
     (OpenCV's projectPoints with its K and lens, from the solved pose), not the ideal pinhole's."""
     import cv2
 
-    from dockfactory.measure_overlay import project_layout
+    from dockfactory.measure.overlay import project_layout
     sc, centres, cal = _frame(np.random.default_rng(12))
     rec, _, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
     got = project_layout(rec, LAYOUT)

@@ -1,10 +1,10 @@
-"""What a stream's source says of its colour resolution (dockfactory.measure_chroma): a lossy
+"""What a stream's source says of its colour resolution (dockfactory.measure.chroma): a lossy
 codec or a subsampled camera format is measured as a JPEG is (the edge fitted on the luma)."""
 import cv2
 import numpy as np
 import pytest
 
-from dockfactory.measure_chroma import SUBSAMPLED_FOURCC, fourcc_text, source_chroma
+from dockfactory.measure.chroma import SUBSAMPLED_FOURCC, fourcc_text, source_chroma
 
 
 class FakeCapture:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dockfactory.measure_overlay import _text_lines, draw_measurement, text_scale
+from dockfactory.measure.overlay import _text_lines, draw_measurement, text_scale
 
 
 def _record(conformity=None) -> dict:

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from cli_run import one_line_error, run_cli
-from dockfactory import measure_stream
-from dockfactory.measure_filter import PoseKalman
+from dockfactory.measure import stream as measure_stream
+from dockfactory.measure.kalman import PoseKalman
 
 CONFIG = """
 [dataset]
@@ -224,7 +224,7 @@ def test_roi_tracker_windows_the_markers_and_falls_back_to_full_frames():
     """The window holds every box of the last frame with its margin, keeps one size between full
     frames (one network input shape), has even corners, stays inside the image; a full frame comes
     every ``refresh`` frames, after a frame without detections, and when a marker is lost."""
-    from dockfactory.measure_roi import RoiTracker
+    from dockfactory.measure.roi import RoiTracker
     boxes = [[500.0, 400.0, 530.0, 430.0], [700.0, 420.0, 731.0, 451.0], [610.0, 500.0, 640.0, 530.0]]
     dets = [{"bbox_px": b, "score": 0.9} for b in boxes]
     t = RoiTracker(1280, 960, refresh=3, min_score=0.25)

@@ -21,7 +21,7 @@ def test_only_the_base_class_derives_from_value_error_itself(repo_root):
 
 def test_an_image_header_error_is_a_dockfactory_error_and_still_a_value_error():
     from dockfactory.core.errors import DockfactoryError
-    from dockfactory.image_header import ImageHeaderError, ImageTooLarge
+    from dockfactory.measure.image_header import ImageHeaderError, ImageTooLarge
     for cls in (ImageHeaderError, ImageTooLarge):
         assert issubclass(cls, DockfactoryError) and issubclass(cls, ValueError)
 
@@ -30,7 +30,7 @@ def test_the_cli_reports_an_image_header_error_in_one_line_with_exit_2(tmp_path,
     import argparse
 
     from dockfactory import cli
-    from dockfactory.image_header import image_size
+    from dockfactory.measure.image_header import image_size
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"\x89PNG\r\n\x1a\n")
 

@@ -24,7 +24,7 @@ from dockfactory.core.camera_chain import develop_raw
 from dockfactory.core.cfa import PATTERNS
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.image_header import ImageHeaderError, ImageTooLarge, check_size, path_kind
+from dockfactory.measure.image_header import ImageHeaderError, ImageTooLarge, check_size, path_kind
 from dockfactory.solver.options import LensPrior
 
 DEFAULT_MAX_MEGAPIXELS = 50.0   # e.g. 8160 x 6120: decoding one costs about 0.15 GB per copy of it

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.core.io import remove_stale_temps, sha256_file, write_json_atomic
-from dockfactory.image_header import path_kind
+from dockfactory.measure.image_header import path_kind
 
 RUN_NAME = "measure_run.json"
 RUN_FORMAT = "dockfactory.measure_run/1"

@@ -6,7 +6,7 @@ reads), an image-sequence pattern (``frames/%06d.png``) or a capture device (``-
 mapped to what VideoCapture opens by :func:`camera_source`). A reader thread decodes the next frame
 while the current one is measured (decoding releases the interpreter lock, so it overlaps the
 network and the solve). Each frame goes through measure's per-image path
-(``dockfactory.measure.solve_image``: detect, identify, solve with its own camera model fit,
+(``dockfactory.measure.images.solve_image``: detect, identify, solve with its own camera model fit,
 principal point assumed at the image centre).
 
 Why and how: docs/measure.md, "The stream's lines".
@@ -37,15 +37,15 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
-from dockfactory.image_header import image_size
-from dockfactory.measure import MAX_WORKERS, solve_image
-from dockfactory.measure_chroma import source_chroma
-from dockfactory.measure_filter import PoseKalman
-from dockfactory.measure_roi import RoiTracker
-from dockfactory.measure_selfcal import WindowCalibration
-from dockfactory.measure_stream_pool import StreamPool
-from dockfactory.measure_read import captured_stderr
-from dockfactory.measure_store import plain
+from dockfactory.measure.image_header import image_size
+from dockfactory.measure.images import MAX_WORKERS, solve_image
+from dockfactory.measure.chroma import source_chroma
+from dockfactory.measure.kalman import PoseKalman
+from dockfactory.measure.roi import RoiTracker
+from dockfactory.measure.selfcal import WindowCalibration
+from dockfactory.measure.stream_pool import StreamPool
+from dockfactory.measure.read import captured_stderr
+from dockfactory.measure.store import plain
 
 STREAM_FORMAT = "dockfactory.measure_stream/1"
 FILTERS = ("kalman",)
@@ -66,14 +66,14 @@ class StreamOptions:
     pattern ``cfa`` (steers the centre refinement; None: unknown), ``filter`` (None or "kalman"),
     ``max_frames`` (None: until the source ends), ``jpeg`` (the frames' colour is subsampled, as
     JPEG and lossy video keep it: the centre's edge fitted on the luma; also set when the source
-    says so, dockfactory.measure_chroma), ``prefetch`` (frames decoded ahead by a reader thread, 0: none;
+    says so, dockfactory.measure.chroma), ``prefetch`` (frames decoded ahead by a reader thread, 0: none;
     :class:`FrameReader`) and ``input_scale`` (network px per image px; None: the weights' own,
     smaller is faster and sees smaller markers worse) and ``roi_refresh`` (None: every frame
     detected whole; N: a window around the previous frame's markers, the full frame every N
-    frames and whenever the window loses a marker: dockfactory.measure_roi), ``window`` (None, or
-    N: intrinsics self-calibrated over the last N frames, dockfactory.measure_selfcal) and
+    frames and whenever the window loses a marker: dockfactory.measure.roi), ``window`` (None, or
+    N: intrinsics self-calibrated over the last N frames, dockfactory.measure.selfcal) and
     ``freeze_after`` (with a window: freeze them after this many joint solves), ``workers``
-    (processes measuring frames at once: dockfactory.measure_stream_pool; 1: this process),
+    (processes measuring frames at once: dockfactory.measure.stream_pool; 1: this process),
     ``lens`` (the lens prior marginalised into every pose's uncertainty, solver.options.LensPrior;
     None: an uncalibrated camera's), ``calibration`` (the camera's, core.calibration_files:
     every frame solved as ``measure --calibration`` solves an image; not with a camera model, a
@@ -356,8 +356,8 @@ class StreamMeasurer:
     """Measures one frame after another: the loaded ``detector``, the ``markers`` of the layout,
     the options, the display filter (None or a PoseKalman), the acceptance hook ``decide``
     (None or a callable: frame line -> JSON value; see the module docstring) and the window
-    tracker (None: every frame detected whole; dockfactory.measure_roi) and the online
-    self-calibration (None, or dockfactory.measure_selfcal.WindowCalibration)."""
+    tracker (None: every frame detected whole; dockfactory.measure.roi) and the online
+    self-calibration (None, or dockfactory.measure.selfcal.WindowCalibration)."""
     detector: object
     markers: tuple
     options: StreamOptions
@@ -437,7 +437,7 @@ def load_detector(weights, options: StreamOptions, size: tuple[int, int] | None 
 
 
 def worker_measurer(weights, options: StreamOptions, markers, size) -> StreamMeasurer:
-    """A worker process's measurer (dockfactory.measure_stream_pool): the detector of ``weights``
+    """A worker process's measurer (dockfactory.measure.stream_pool): the detector of ``weights``
     on one thread, warmed up at the frames' ``size``; frame by frame, no filter, hook or state."""
     detector = load_detector(weights, options, size)
     if detector.backend == "onnx":

@@ -2,7 +2,7 @@
 alpha, one independent two-state filter (value, rate) per component.
 
 It smooths what an operator watches; it never replaces a measurement: the stream writes the raw
-per-frame pose beside the filtered one (dockfactory.measure_stream). Its inputs are each frame's
+per-frame pose beside the filtered one (dockfactory.measure.stream). Its inputs are each frame's
 pose and its 1-sigma standard deviations (the solver's covariance) as the measurement noise, and
 the time between frames; a frame without a pose only predicts. Process noise: a white
 acceleration of spectral density ``accel`` per component (mm^2/s^3 for X and Y, deg^2/s^3 for

@@ -4,7 +4,7 @@ PNG/JPEG/TIFF/BMP images (files or folders) -> detector -> identification -> sol
 model, per frame, or self-calibrated over the whole set as one docking run of one camera) ->
 OUT/measurements.json, OUT/measurements.csv and one overlay PNG per image in OUT/overlays/.
 Every pose carries its uncertainty budget (U = 2 u); with an acceptance spec each image is judged
-IN / OUT / UNDECIDED against its tolerances (dockfactory.measure_verdict).
+IN / OUT / UNDECIDED against its tolerances (dockfactory.measure.verdict).
 
 Why and how: docs/measure.md, "Measure: records and batches".
 """
@@ -26,9 +26,9 @@ from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atom
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.detector.noise_card import card_figures
-from dockfactory.measure_overlay import draw_measurement
-from dockfactory.measure_pool import MeasurePool
-from dockfactory.measure_read import (
+from dockfactory.measure.overlay import draw_measurement
+from dockfactory.measure.pool import MeasurePool
+from dockfactory.measure.read import (
     DEFAULT_MAX_MEGAPIXELS,
     MAX_MEGAPIXELS,
     CameraInput,
@@ -36,8 +36,8 @@ from dockfactory.measure_read import (
     probe_image,
     read_image,
 )
-from dockfactory.measure_store import WRITE_ERROR, MeasureStore, image_identity
-from dockfactory.measure_verdict import add_conformity, add_uncertainty
+from dockfactory.measure.store import WRITE_ERROR, MeasureStore, image_identity
+from dockfactory.measure.verdict import add_conformity, add_uncertainty
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
 from dockfactory.eval.uncertainty_budget import TERMS
@@ -161,7 +161,7 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
                 lens: LensPrior | None = None, calibration: Calibration | None = None) -> Frame:
     """Detect and solve one decoded image ``(H, W, 3) uint8`` RGB (its own camera model fit; the
     principal point assumed is its centre): the per-image path of measure, shared with the stream
-    path (dockfactory.measure_stream). ``path`` names the frame in a failure's reason; ``cfa`` and
+    path (dockfactory.measure.stream). ``path`` names the frame in a failure's reason; ``cfa`` and
     ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect); ``roi``: detect in this
     region only (:func:`detect_in`); ``lens`` the lens prior marginalised into the covariance (None:
     an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS); ``calibration`` the camera's
@@ -342,7 +342,7 @@ def measure_and_draw(detector, markers, i: int, path: Path, model: str, min_scor
     """Read, detect, solve and (with ``size``) draw one image; the image is not kept. An error on
     the way becomes the image's failure record ("measure error", with the exception's words); an
     OSError writing its overlay (a full disk, a read-only folder) is a "write error", which a
-    rerun measures again (measure_store.RETRIED): the image is fine, the disk was not."""
+    rerun measures again (dockfactory.measure.store.RETRIED): the image is fine, the disk was not."""
     try:
         frame = measure_frame(detector, markers, i, path, model, min_score, camera, max_pixels)
         if size is not None and frame.image is not None:
@@ -364,7 +364,7 @@ def _words(exc: BaseException) -> str:
 def measure_all(weights, markers, jobs, model: str, min_score: float, out: Path, size: float | None,
                 options: MeasureOptions, on_done) -> tuple[float, int]:
     """Measure every job ``(index, path)``: in this process with one worker (or one job), else by
-    worker processes (eval.measure_pool, at most one per job). ``on_done(job, frame, error)`` is
+    worker processes (dockfactory.measure.pool, at most one per job). ``on_done(job, frame, error)`` is
     called as each finishes. Returns the wall time after the detector(s) were loaded and the
     number of workers used."""
     workers = max(1, min(options.workers, len(jobs)))
@@ -434,7 +434,7 @@ def _died(path: Path, error: BaseException) -> dict:
 
 
 def _made_with(paths, layout_path, weights, model, self_calibrate, min_score, options, card) -> dict:
-    """What the results depend on (the run's key in eval.measure_store); not the worker count."""
+    """What the results depend on (the run's key in dockfactory.measure.store); not the worker count."""
     from dockfactory.detector.onnx_runtime import resolve_backend
     return {"dockfactory": package_version("dockfactory"), "images": [image_identity(p) for p in paths],
             "layout_sha256": sha256_file(layout_path), "weights_sha256": sha256_file(weights),
@@ -469,7 +469,7 @@ def measure(images, layout_path, weights, out, camera_model: str | None = None,
     options : MeasureOptions
         Backend, workers, overlay size, camera input, largest image (megapixels).
     acceptance : path or None
-        An acceptance spec: adds the conformity decisions (dockfactory.measure_verdict; the summary's ``conformity``).
+        An acceptance spec: adds the conformity decisions (dockfactory.measure.verdict; the summary's ``conformity``).
 
     Returns
     -------

@@ -15,7 +15,7 @@ import os
 from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 
-from dockfactory.measure_pool import spawn_ready
+from dockfactory.measure.pool import spawn_ready
 
 _STATE: dict = {}
 
