@@ -25,12 +25,13 @@ demo: $(STAMP)
 	@echo "dataset: out/quick/dataset (images/, labels/, manifest.json); one frame with its labels: out/quick/overlay_000000.png"
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=20   # the 20 slowest tests listed at the end
 
-# everything that neither renders nor trains for long (pyproject.toml: markers): < 60 s on 2 cores
 lint: $(STAMP)
 	$(BIN)/ruff check .   # the rules of [tool.ruff.lint] in pyproject.toml
 
+# everything that neither renders nor trains for long (pyproject.toml: markers); its time on an
+# idle 2-core machine: bench/results/speeds/speeds.json
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 -m "not render and not slow"   # both cores (pytest-xdist)
 
