@@ -194,7 +194,7 @@ class RenderConfig:
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
-    marker_samples: int = 32         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
+    marker_samples: int = 24         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
