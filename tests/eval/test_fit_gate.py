@@ -108,7 +108,7 @@ def test_fit_test_is_the_chi_square_of_the_residuals_or_says_not_tested():
     assert k1k2["dof"] == 13
 
 
-CARD = 0.0258                           # the default weights' noise card (px per axis)
+CARD = 0.0258   # a card at which the chi-square alone passes the crop (the default weights' card before the light tree)
 FAR = dict(radius_mm=450.0, distance_range=(2000.0, 2500.0), focal_range=(2000.0, 3600.0))   # scene B's geometry
 
 
