@@ -46,12 +46,11 @@ settings.load_profile(os.environ["HYPOTHESIS_PROFILE"])
 @pytest.fixture(scope="session")
 def painted_source(tmp_path_factory):
     """A complete smoke dataset written without Blender (tests/pipeline_data.py): read it only."""
-    from pipeline_data import write_painted_dataset
+    from pipeline_data import painted_copy
 
     from dockfactory.core.resources import shipped_config
-    root = tmp_path_factory.mktemp("painted") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
-    return root
+    return painted_copy(tmp_path_factory, tmp_path_factory.mktemp("painted") / "dataset",
+                        shipped_config("smoke").read_text())
 
 
 @pytest.fixture

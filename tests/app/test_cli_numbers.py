@@ -92,7 +92,15 @@ def test_poses_of_impossible_size_are_refused_before_any_statistic(painted_sourc
     assert code == 2 and key in line and "big.json" in line and "ACCEPTED" not in out, line
 
 
-def test_report_refuses_a_frames_table_cut_to_its_header(painted_source, tmp_path, capsys):
+def _no_plots(monkeypatch):
+    """The report without its plots (they are most of its time; tests/app/test_stages.py::test_report_stage
+    draws and counts them): nothing these tests check is in a plot."""
+    import dockfactory.eval.report.document as report
+    monkeypatch.setattr(report, "plots", lambda rows, metrics, detections_pr=None: {})
+
+
+def test_report_refuses_a_frames_table_cut_to_its_header(painted_source, tmp_path, capsys, monkeypatch):
+    _no_plots(monkeypatch)
     _solved(painted_source, tmp_path, capsys)
     spec = tmp_path / "spec.toml"
     spec.write_text("[localization]\nx = 1000\n[estimation]\nx = 1000\n[failures]\nmax_rate = 1.0\n")
@@ -127,7 +135,8 @@ def test_a_fifo_or_a_folder_given_as_a_file_is_refused_without_opening_it(painte
             assert code == 2 and f"is a {kind}" in line and str(given) in line, (argv, line)
 
 
-def test_the_report_carries_an_id_of_its_inputs_and_a_sign_off_block(painted_source, tmp_path, capsys):
+def test_the_report_carries_an_id_of_its_inputs_and_a_sign_off_block(painted_source, tmp_path, capsys, monkeypatch):
+    _no_plots(monkeypatch)   # the id is of the evaluation's files (eval.report.document.sign_off), not of the plots
     _solved(painted_source, tmp_path, capsys)
     run_cli(["evaluate", painted_source, "--poses", tmp_path / "p.json", "--out", tmp_path / "ev"], capsys)
     assert run_cli(["report", tmp_path / "ev", "--out", tmp_path / "a.html", "--prepared-by", "A. Engineer"],

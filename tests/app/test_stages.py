@@ -15,7 +15,7 @@ import shutil
 
 import numpy as np
 import pytest
-from pipeline_data import write_painted_dataset
+from pipeline_data import painted_copy
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import default_acceptance, shipped_config
@@ -39,9 +39,8 @@ def _strict_json(path):
 
 @pytest.fixture(scope="module")
 def painted_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("painted") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
-    return root
+    return painted_copy(tmp_path_factory, tmp_path_factory.mktemp("painted") / "dataset",
+                        shipped_config("smoke").read_text())
 
 
 @pytest.fixture(scope="module")

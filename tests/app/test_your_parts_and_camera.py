@@ -11,6 +11,7 @@ import json
 import shutil
 
 import numpy as np
+import pytest
 
 from cli_run import run_cli
 from dockfactory.core.calibration_files import Calibration, write_calibration
@@ -18,6 +19,12 @@ from dockfactory.core.calibration_files import Calibration, write_calibration
 CAMERA = Calibration(1280, 960, 2211.2, 2211.2, 651.8, 472.3, (-0.092, 0.118, 3.1e-4, -2.4e-4, 0.0))
 
 
+# end to end (about 6 s idle): its steps have quicker tests in the fast lane: the parts' files
+# (tests/core/test_mesh_files.py), `layout from-csv` (tests/core/test_layout_csv.py), measuring painted
+# 1280 x 960 frames of a calibrated camera with --calibration within their labels
+# (tests/app/test_measure_stream.py::test_a_calibrated_camera_streamed_is_measured_as_its_images) and
+# the calibration's solve within its uncertainty (tests/app/test_measure_calibration.py)
+@pytest.mark.slow
 def test_parts_a_calibration_and_a_csv_from_render_to_measure(repo_root, tmp_path, capsys):
     from pipeline_data import write_painted_dataset
     shutil.copytree(repo_root / "configs" / "parts", tmp_path / "parts")

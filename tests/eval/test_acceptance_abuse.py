@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
-from pipeline_data import write_painted_dataset
+from pipeline_data import painted_copy
 
 from dockfactory.core.config import ConfigError
 from dockfactory.core.resources import shipped_config
@@ -52,7 +52,7 @@ POSES_ONLY = "[localization]\nx = 5.0\ny = 5.0\nalpha = 0.1\n[estimation]\nx = 1
 def smoke(tmp_path_factory):
     """(dataset root, EvalDataset, exact oracle poses) of the shipped smoke config."""
     root = tmp_path_factory.mktemp("smoke") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
+    painted_copy(tmp_path_factory, root, shipped_config("smoke").read_text())
     ds = Dataset.open(root)
     return root, ds, solve_dataset(ds, oracle_sigma_px=0.0)
 
@@ -66,7 +66,7 @@ def six(tmp_path_factory):
     cfg = base / "six.toml"
     cfg.write_text(text)
     root = base / "dataset"
-    write_painted_dataset(root, cfg)
+    painted_copy(tmp_path_factory, root, text)
     ds = Dataset.open(root)
     assert sorted(ds.frames(("repeat",))) == [f"rep{p:03d}_{c:02d}" for p in range(2) for c in range(3)]
     return root, ds, solve_dataset(ds, oracle_sigma_px=0.0)

@@ -6,7 +6,7 @@ import os
 
 import pytest
 from cli_run import one_line_error, run_cli
-from pipeline_data import write_painted_dataset
+from pipeline_data import painted_copy
 
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.report import pdf as report_pdf
@@ -34,7 +34,7 @@ def _keep_the_null_device():
 def eval_dir(tmp_path_factory):
     """The evaluation folder of the painted smoke dataset's noise-free oracle poses."""
     root = tmp_path_factory.mktemp("pdf") / "dataset"
-    write_painted_dataset(root, shipped_config("smoke"))
+    painted_copy(tmp_path_factory, root, shipped_config("smoke").read_text())
     ds = Dataset.open(root)
     path = root.parent / "poses.json"
     write_poses(path, solve_dataset(ds, oracle_sigma_px=0.0))

@@ -37,13 +37,19 @@ def hits_cylinder(o: np.ndarray, d: np.ndarray, x0: float, x1: float, r: float) 
     return hit
 
 
-def ray_silhouette(frame, static, sec: str) -> np.ndarray:
-    """(H, W) bool: the delivered pixels whose centre sees the section's flange or body."""
-    cam = frame.camera
+def pixel_rays(cam) -> np.ndarray:
+    """(H * W, 3): the camera-frame direction of each delivered pixel centre's ray, row by row."""
     vs, us = np.mgrid[0:cam.height, 0:cam.width]
     uv = np.stack([us.ravel(), vs.ravel()], 1).astype(np.float64)
     pin = undistort_pixels(uv, cam.focal_px, cam.principal_point, cam.distortion) if any(cam.distortion) else uv
-    d_cam = np.column_stack([(pin - np.asarray(cam.principal_point)) / cam.focal_px, np.ones(len(pin))])
+    return np.column_stack([(pin - np.asarray(cam.principal_point)) / cam.focal_px, np.ones(len(pin))])
+
+
+def ray_silhouette(frame, static, sec: str, d_cam: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) bool: the delivered pixels whose centre sees the section's flange or body (``d_cam``:
+    :func:`pixel_rays` of the frame's camera, computed once for both sections)."""
+    cam = frame.camera
+    d_cam = pixel_rays(cam) if d_cam is None else d_cam
     d_from_s = frame.d_from_b_array() if sec == "B" else np.eye(4)
     s_from_cam = invert_transform(cam.cam_from_d_array() @ d_from_s)
     o, d = s_from_cam[:3, 3], d_cam @ s_from_cam[:3, :3].T
@@ -65,8 +71,9 @@ def test_label_silhouette_is_what_rays_hit(case):
         frame = sample_frame(cfg, spec)
         assert any(frame.camera.distortion) == (case == "lens")
         lab = frame_labels(frame, static, None, 0.5)
+        d_cam = pixel_rays(frame.camera)
         for srec in lab["sections"]:
-            rays = ray_silhouette(frame, static, srec["section"])
+            rays = ray_silhouette(frame, static, srec["section"], d_cam)
             count, box = mask_pixels(rays)
             # the hull of all the circles (the label before the fix) also covers the sliver between
             # the flange's rim and the far end: about 2 % more pixels than the rays see
