@@ -16,7 +16,9 @@ thin-disc term of solver.disc_noise: a disc a few edge widths thick errs more ac
 EDGES_PX, the one whose prediction fits best (three-chip: with the least squares; Bayer: the
 shape a single factor fits best); each factor as the geometric mean of measured over predicted.
 
-Run: python -m bench.design.design_fit [--write]   (--write: models/design_predictor.json)
+Run: python -m bench.design.design_fit [--write] [--sources sampling.json white.json jpeg_a.json]
+(--write: models/design_predictor.json; --sources: the three inputs above by their names under
+bench/results/sensor_effects/, for renders at another render default).
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ from dockfactory.eval.design_predict import NoiseClass, mean_variances  # noqa: 
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "sensor_effects"
+SOURCES = ("sampling32_48.json", "ring/white32_48.json", "jpeg32_a_48.json")   # sampling, white ring, JPEG on A
 SCENES = ("a", "b", "c")
 FIT = ("x", "y", "alpha")
 IDX = {"x": 0, "y": 1, "alpha": 3}
@@ -105,14 +108,14 @@ def ratio_rows(name, pairs_by_scene) -> list[dict]:
             for s, (m, p) in pairs_by_scene.items()]
 
 
-def ring_and_jpeg_factors(results: dict) -> dict:
+def ring_and_jpeg_factors(results: dict, sources=SOURCES) -> dict:
     """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
     geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
     sampling: white-ring renders of scenes A and B (ring/white32_48.json) over the dark-ring ones
     (sampling32_48.json), three-chip for "none", Bayer bilinear and VNG for "rggb"; JPEG over PNG
     on the dark scene A (jpeg32_a_48.json) and the two white-ring scenes."""
-    white = json.loads((RESULTS / "ring" / "white32_48.json").read_text())["datasets"]
-    jpeg_a = json.loads((RESULTS / "jpeg32_a_48.json").read_text())["datasets"]
+    white = json.loads((RESULTS / sources[1]).read_text())["datasets"]
+    jpeg_a = json.loads((RESULTS / sources[2]).read_text())["datasets"]
     as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
     ring = {"none": [(measured(as_scene, s, "three-chip"), measured(results, s, "three-chip")) for s in ("a", "b")],
             "rggb": [(measured(as_scene, s, e), measured(results, s, e)) for s in ("a", "b") for e in BAYER]}
@@ -139,8 +142,9 @@ def _bayer_edge(results: dict, by_edge: dict, p) -> float:
                                                 for s in SCENES for x in BAYER]))
 
 
-def fit() -> dict:
-    results = json.loads((RESULTS / "sampling32_48.json").read_text())["datasets"]
+def fit(sources=SOURCES) -> dict:
+    """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)."""
+    results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
     by_edge = {e: {s: basis(s, e) for s in SCENES} for e in EDGES_PX}
     e0, p = _three_chip(results, by_edge)
     e1 = _bayer_edge(results, by_edge, p)
@@ -157,7 +161,7 @@ def fit() -> dict:
     jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in SCENES])
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
                                             g * jpeg * predicted(bayer_bases[s], p)) for s in SCENES})
-    other = ring_and_jpeg_factors(results)
+    other = ring_and_jpeg_factors(results, sources)
     versions = sorted(results)
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
             "shift_px": [round(float(p[1]), 5), round(float(p[2]), 5)],
@@ -171,9 +175,8 @@ def fit() -> dict:
             "provisional": [],
             "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
                           "weights": "yolov5n_se_rings_markers.pt",
-                          "source": "bench/results/sensor_effects/sampling32_48.json",
-                          "ring_and_jpeg_source": ["bench/results/sensor_effects/ring/white32_48.json",
-                                                   "bench/results/sensor_effects/jpeg32_a_48.json"],
+                          "source": f"bench/results/sensor_effects/{sources[0]}",
+                          "ring_and_jpeg_source": [f"bench/results/sensor_effects/{n}" for n in sources[1:]],
                           "components_checked": list(FIT)},
             "error": {"predicted_over_measured": rows}}
 
@@ -181,8 +184,10 @@ def fit() -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--write", action="store_true", help="write models/design_predictor.json")
+    ap.add_argument("--sources", nargs=3, default=SOURCES, metavar=("SAMPLING", "WHITE", "JPEG_A"),
+                    help="the inputs under bench/results/sensor_effects/ (default: %(default)s)")
     args = ap.parse_args()
-    card = fit()
+    card = fit(tuple(args.sources))
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, edge {card['edge_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
           f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
