@@ -18,7 +18,7 @@ __all__ = ["PROFILE_DELTA_CHI2", "PROFILE_MIN_RATIO", "PROFILE_MIN_REL_STD", "PR
 
 PROFILE_DELTA_CHI2 = 9.0      # chi-square rise of a 3-sigma likelihood-ratio interval (1 parameter)
 PROFILE_MIN_REL_STD = 0.01    # below this linearised relative std of f the valley is straight: no profile
-PROFILE_MIN_RATIO = 1.5     # widen only when the interval's end lies beyond this x 3 linearised stds
+PROFILE_MIN_RATIO = 1.25    # widen only when the interval's end lies beyond this x 3 linearised stds
 PROFILE_STEPS = (1.0, 2.0, 3.0, 4.5, 6.5, 9.0, 13.0, 18.0, 26.0, 36.0, 50.0)   # x std of log f
 PROFILE_MAX_FACTOR = 20.0     # the walk stays within f / 20 .. 20 f of the estimate
 
