@@ -2,11 +2,12 @@
 how far the fitted model is from them (in the fit and leaving each scene out).
 
 Inputs (committed results, no render needed): the sensor bench at label-aware sampling
-(bench/results/sensor_effects/sampling32_48.json: scenes A, B, C, 48 test frames each, three-chip,
-Bayer bilinear / VNG, Bayer + JPEG q90) with the scenes' configs (bench/configs/sensor_scene_*.toml,
-whose test frames' geometry the predictor redraws exactly), and for the white ring and a
-three-chip camera's JPEG the same bench on white-ring renders of scenes A and B and on scene A
-again (ring/white32_48.json, jpeg32_a_48.json; label-aware sampling).
+(bench/results/sensor_effects/sampling32_48.json by default; the shipped card: sampling24_48.json,
+at the render default: scenes A, B, C, 48 test frames each, three-chip, Bayer bilinear / VNG,
+Bayer + JPEG q90) with the scenes' configs (bench/configs/sensor_scene_*.toml, whose test frames'
+geometry the predictor redraws exactly), and for the white ring and a three-chip camera's JPEG
+the same bench on white-ring renders of scenes A and B and on scene A again (ring/white32_48.json,
+jpeg32_a_48.json by default; ring/white24_48.json, jpeg24_a_48.json for the shipped card).
 
 The model (eval.design_predict): RMSE^2 = s0^2 Vn + su^2 Vu + sv^2 Vv per component, Vn the
 disc-noise variance at unit scale and Vu, Vv the section offset's at unit shift per axis, mean
@@ -111,9 +112,9 @@ def ratio_rows(name, pairs_by_scene) -> list[dict]:
 def ring_and_jpeg_factors(results: dict, sources=SOURCES) -> dict:
     """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
     geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
-    sampling: white-ring renders of scenes A and B (ring/white32_48.json) over the dark-ring ones
-    (sampling32_48.json), three-chip for "none", Bayer bilinear and VNG for "rggb"; JPEG over PNG
-    on the dark scene A (jpeg32_a_48.json) and the two white-ring scenes."""
+    sampling: white-ring renders of scenes A and B (``sources[1]``) over the dark-ring ones
+    (``results``, read from ``sources[0]``), three-chip for "none", Bayer bilinear and VNG for
+    "rggb"; JPEG over PNG on the dark scene A (``sources[2]``) and the two white-ring scenes."""
     white = json.loads((RESULTS / sources[1]).read_text())["datasets"]
     jpeg_a = json.loads((RESULTS / sources[2]).read_text())["datasets"]
     as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
