@@ -68,8 +68,10 @@ def marker_noise(ref: np.ndarray, cands: list[np.ndarray], m: dict) -> dict | No
     contrast = np.percentile(vals, 95) - np.percentile(vals, 5)
     if contrast <= 0:
         return None
-    gx, gy = (cv2.Sobel(r, cv2.CV_64F, dx, dy, ksize=3) / 8 for dx, dy in ((1, 0), (0, 1)))
-    g = np.hypot(gx, gy)[ys, xs] / contrast
+    y0, x0 = ys.min() - 1, xs.min() - 1          # the marker's box and the Sobel kernel's 1 px reach
+    box = r[y0:ys.max() + 2, x0:xs.max() + 2]
+    gx, gy = (cv2.Sobel(box, cv2.CV_64F, dx, dy, ksize=3) / 8 for dx, dy in ((1, 0), (0, 1)))
+    g = np.hypot(gx, gy)[ys - y0, xs - x0] / contrast
     out = {}
     for ci, cand in enumerate(cands):
         d2 = ((cand[..., ch][ys, xs] - vals) / contrast) ** 2
