@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import bpy
 
+from dockfactory.blender_scenes.coverage import COVERAGE_MATERIAL
 from dockfactory.blender_scenes.frame_update import DENOISE_QUALITY, apply_render_settings
 
 # Blender turns the border (a share of the canvas) into pixels by truncation: a quarter pixel
@@ -14,10 +15,11 @@ from dockfactory.blender_scenes.frame_update import DENOISE_QUALITY, apply_rende
 BORDER_NUDGE_PX = 0.25
 
 
-def crop_path(exr_path: str, i: int) -> str:
-    """The scratch EXR of region ``i`` of the frame rendered into ``exr_path``."""
+def crop_path(exr_path: str, i: int, kind: str = "crop") -> str:
+    """The scratch EXR of region ``i`` of the frame rendered into ``exr_path`` (``kind`` "crop":
+    its colour; "cov": its coverage render)."""
     stem = exr_path[:-4] if exr_path.endswith(".exr") else exr_path
-    return f"{stem}_crop{i}.exr"
+    return f"{stem}_{kind}{i}.exr"
 
 
 def _set_border(render, region, wc: int, hc: int) -> None:
@@ -29,17 +31,31 @@ def _set_border(render, region, wc: int, hc: int) -> None:
     render.border_max_y = min(1.0, (hc - region.y0 + BORDER_NUDGE_PX) / hc)
 
 
+def _render_regions(scene, regions, exr_path: str, kind: str) -> list[str]:
+    """Border-render each region into its :func:`crop_path` of ``kind``; the paths."""
+    r = scene.render
+    wc, hc = r.resolution_x, r.resolution_y
+    r.use_border = r.use_crop_to_border = True
+    paths = []
+    for i, region in enumerate(regions):
+        _set_border(r, region, wc, hc)
+        r.filepath = crop_path(exr_path, i, kind)
+        bpy.ops.render.render(write_still=True)
+        paths.append(r.filepath)
+    return paths
+
+
 def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     """Render each of ``regions`` (generator.marker_regions.Region) of the frame already applied to
     ``scene`` at ``frame.render.marker_samples`` samples (with ``marker_adaptive_threshold`` > 0:
     adaptive sampling up to that many, Cycles' automatic minimum), denoised by ``marker_denoise``
-    (off: not at all), with Cycles' light tree unless ``light_tree`` is off (it picks the light a
-    sample goes to by its contribution there: less noise per sample at the markers), into :func:`crop_path` files cropped to the region; returns their paths. The render
-    settings are put back as ``apply_frame`` set them (no border, the frame's samples,
-    denoiser and light tree), so what a frame leaves behind does not depend on its crops."""
-    r, c, rs = scene.render, scene.cycles, frame.render
-    wc, hc = r.resolution_x, r.resolution_y
-    paths = []
+    (off: not at all; on, the file holds the colour before denoising too, "Noisy Image"), with
+    Cycles' light tree unless ``light_tree`` is off (it picks the light a sample goes to by its
+    contribution there: less noise per sample at the markers), into :func:`crop_path` files
+    cropped to the region; returns their paths in region order. The render settings are put back
+    as ``apply_frame`` set them (no border, the frame's samples, denoiser and light tree), so what
+    a frame leaves behind does not depend on its crops."""
+    c, rs = scene.cycles, frame.render
     c.samples = rs.marker_samples
     c.use_adaptive_sampling = rs.marker_adaptive_threshold > 0
     c.adaptive_threshold = rs.marker_adaptive_threshold
@@ -48,14 +64,28 @@ def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     c.use_light_tree = rs.light_tree != "off"
     if c.use_denoising:
         c.denoising_quality = DENOISE_QUALITY[rs.marker_denoise]
-    r.use_border = r.use_crop_to_border = True
     try:
-        for i, region in enumerate(regions):
-            _set_border(r, region, wc, hc)
-            r.filepath = crop_path(exr_path, i)
-            bpy.ops.render.render(write_still=True)
-            paths.append(r.filepath)
+        return _render_regions(scene, regions, exr_path, "crop")
     finally:
         apply_render_settings(scene, frame)
-        r.filepath = exr_path
-    return paths
+        scene.render.filepath = exr_path
+
+
+def render_coverage(scene, frame, regions, exr_path: str) -> list[str]:
+    """Each region again at ``frame.render.marker_coverage_samples`` samples with every shader
+    replaced by the coverage material (blender_scenes.coverage: the classes' exact coverage in
+    its AOV), no bounce, no denoiser, no adaptive sampling, no light tree; the "cov"
+    :func:`crop_path` files in region order. The override and every render setting are put back
+    as ``apply_frame`` set them, whatever happens."""
+    c, vl = scene.cycles, scene.view_layers[0]
+    c.samples = frame.render.marker_coverage_samples
+    c.use_adaptive_sampling = c.use_denoising = c.use_light_tree = False
+    c.max_bounces = 0
+    vl.material_override = bpy.data.materials[COVERAGE_MATERIAL]
+    try:
+        return _render_regions(scene, regions, exr_path, "cov")
+    finally:
+        vl.material_override = None
+        apply_render_settings(scene, frame)
+        scene.render.filepath = exr_path
+        vl.update()      # the evaluated scene too: nothing of the override left for the next frame

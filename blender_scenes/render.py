@@ -9,7 +9,7 @@ import time
 
 import bpy
 
-from dockfactory.blender_scenes.crops import render_crops
+from dockfactory.blender_scenes.crops import render_coverage, render_crops
 from dockfactory.blender_scenes.frame_update import apply_frame, scene_state
 from dockfactory.blender_scenes.scene_builder import build_scene
 from dockfactory.core.scene import FrameScene, StaticScene
@@ -69,18 +69,25 @@ class BlenderRenderer:
         self.handles = build_scene(static, width, height, threads, exr_path)
         self.device = use_device(self.handles.scene, device)
 
-    def render(self, frame: FrameScene, exr_path: str, regions=()) -> tuple[dict[str, float], list[str]]:
+    def render(self, frame: FrameScene, exr_path: str, regions=()) -> tuple[dict[str, float], list[tuple[str, str | None]]]:
         """Render ``frame`` into the multilayer EXR ``exr_path``, then its marker ``regions``
         (label-aware sampling, :func:`~dockfactory.blender_scenes.crops.render_crops`) into one
-        cropped EXR each; (wall seconds of each phase, the crops' paths in region order)."""
+        cropped EXR each (and a coverage EXR each with ``marker_coverage_samples``); (wall seconds
+        of each phase, the (colour, coverage or None) paths in region order)."""
         t0 = time.perf_counter()
         self.handles.scene.render.filepath = exr_path
         apply_frame(self.handles, frame)
         t1 = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         t2 = time.perf_counter()
-        crops = render_crops(self.handles.scene, frame, regions, exr_path) if regions else []
-        return {"scene_update": t1 - t0, "cycles": t2 - t1, "marker_crops": time.perf_counter() - t2}, crops
+        colour = render_crops(self.handles.scene, frame, regions, exr_path) if regions else []
+        t3 = time.perf_counter()
+        cover = (render_coverage(self.handles.scene, frame, regions, exr_path)
+                 if regions and frame.render.marker_coverage_samples else [None] * len(colour))
+        timings = {"scene_update": t1 - t0, "cycles": t2 - t1, "marker_crops": t3 - t2}
+        if frame.render.marker_coverage_samples:
+            timings["marker_coverage"] = time.perf_counter() - t3
+        return timings, list(zip(colour, cover))
 
     def state(self, frame: FrameScene) -> dict:
         """Apply ``frame`` without rendering; the Blender state a render would read (see

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from dockfactory.blender_scenes import coverage
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
 from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
@@ -94,6 +95,7 @@ def configure_render(scene, width, height, threads, exr_path):
     vl.use_pass_combined = True
     vl.use_pass_z = True
     vl.use_pass_object_index = True
+    coverage.register_coverage_pass(vl)
     s = r.image_settings
     s.media_type = "MULTI_LAYER_IMAGE"      # must precede file_format in Blender 5
     s.file_format = "OPEN_EXR_MULTILAYER"
@@ -152,9 +154,10 @@ def _build_section(static: StaticScene, sec: str, sign: int, paint, face, suppor
             o.parent = parent
 
 
-def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float) -> None:
+def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float) -> tuple[object, object]:
     """A marker's disc and the ring base under it, reaching ``base_depth_mm`` below the disc's top
-    face (a puck, or a flat plate: core.layout.base_depth_mm); B's markers are parented to ``b_root``."""
+    face (a puck, or a flat plate: core.layout.base_depth_mm); B's markers are parented to ``b_root``.
+    Returns (disc, ring base)."""
     rot = _basis_from_normal(m.normal)
     centre = np.array(m.center_mm) * MM
     disc = meshes.disc_z(f"marker_{m.id}", m.diameter_mm / 2 * MM)
@@ -169,6 +172,7 @@ def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float)
     if m.section == "B":
         disc.parent = b_root
         base.parent = b_root
+    return disc, base
 
 
 def _build_floor_and_wall(static: StaticScene) -> tuple[object, object]:
@@ -236,6 +240,8 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     red = mats.diffuse_material("marker_red", (0.6, 0.02, 0.02))
     blue = mats.diffuse_material("marker_blue", (0.02, 0.05, 0.6))
     ring = mats.diffuse_material("marker_ring", (0.02, 0.02, 0.02))
+    for mat, cls in ((red, coverage.DISC_CLASS), (blue, coverage.DISC_CLASS), (ring, coverage.RING_CLASS)):
+        coverage.add_class_output(mat, cls)
     face = mats.diffuse_material("docking_face", (0.08, 0.08, 0.09), gloss=0.6, roughness=0.3)
     support = mats.diffuse_material("cradle", (0.05, 0.12, 0.2))
 
@@ -243,8 +249,8 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
     scene.collection.objects.link(b_root)
     for sec, sign, paint, parent in (("A", -1, paint_a, None), ("B", 1, paint_b, b_root)):
         _build_section(static, sec, sign, paint, face, support, parent)
-    for m in static.markers:
-        _build_marker(m, red if m.section == "A" else blue, ring, b_root, static.marker_base_depth_mm)
+    pucks = [_build_marker(m, red if m.section == "A" else blue, ring, b_root, static.marker_base_depth_mm)
+             for m in static.markers]
     floor_mat, wall_mat = _build_floor_and_wall(static)
 
     handles = SceneHandles(scene=scene, camera=None, b_root=b_root, paint_a=paint_a, paint_b=paint_b,
@@ -252,4 +258,6 @@ def build_scene(static: StaticScene, width: int, height: int, threads: int, exr_
                            wall=wall_mat, world=world)
     _build_props(static, handles)
     _build_lights_and_camera(scene, handles)
+    coverage.coverage_material()
+    coverage.set_classes(scene.objects, [d for d, _ in pucks], [b for _, b in pucks])
     return handles

@@ -197,6 +197,7 @@ class RenderConfig:
     marker_samples: int = 24         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
+    marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
@@ -206,6 +207,11 @@ class RenderConfig:
         """The light tree the frames are rendered with: ``markers`` without label-aware sampling
         renders as ``off`` (no marker regions to use it in)."""
         return "off" if self.light_tree == "markers" and self.marker_samples == 0 else self.light_tree
+
+    def rendered_coverage_samples(self) -> int:
+        """The coverage correction's samples the frames are rendered with: 0 without label-aware
+        sampling (no marker regions to correct)."""
+        return self.marker_coverage_samples if self.marker_samples else 0
 
 
 @dataclass(frozen=True)
@@ -278,6 +284,7 @@ class ExportConfig:
 # identity's config at that value (Config.to_dict), so their version ids stay
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
                     ("render", "marker_adaptive_threshold"): 0.0, ("render", "light_tree"): "off",
+                    ("render", "marker_coverage_samples"): 0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
@@ -315,6 +322,7 @@ class Config:
         d = json.loads(json.dumps(dataclasses.asdict(self)))
         if not full:
             d["render"]["light_tree"] = self.render.rendered_light_tree()
+            d["render"]["marker_coverage_samples"] = self.render.rendered_coverage_samples()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
             if d[table][key] == neutral:
                 del d[table][key]
@@ -405,12 +413,14 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
-    """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` is
-    the one the frames render with (``markers`` without label-aware sampling is ``off``), so a
-    config and its stored identity read back equal."""
+    """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` and
+    ``marker_coverage_samples`` are the ones the frames render with (without label-aware sampling
+    ``markers`` is ``off`` and the coverage samples 0), so a config and its stored identity read
+    back equal."""
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
-    render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree())
+    render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree(),
+                                 marker_coverage_samples=cfg.render.rendered_coverage_samples())
     return dataclasses.replace(cfg, render=render)
 
 
@@ -493,6 +503,13 @@ def _validate_numbers(cfg: Config, source: str) -> None:
 def _check_at_most(source, table, key, value, limit, why: str) -> None:
     if value > limit:
         raise _err(source, table, key, f"{value} is above the limit {limit} ({why})")
+
+
+def _check_marker_coverage(source, rc: "RenderConfig") -> None:
+    """[render] marker_coverage_samples: 0 or a sample count (inert without label-aware sampling)."""
+    _check_positive(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, allow_zero=True)
+    _check_at_most(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, MAX_SAMPLES,
+                   "Cycles' limit")
 
 
 def validate(cfg: Config, source: str = "<config>") -> None:
@@ -703,6 +720,7 @@ def _validate_render(cfg: Config, source: str) -> None:
     _check_positive(source, "render", "marker_samples", rc.marker_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_samples", rc.marker_samples, MAX_SAMPLES, "Cycles' limit")
     _check_positive(source, "render", "marker_adaptive_threshold", rc.marker_adaptive_threshold, allow_zero=True)
+    _check_marker_coverage(source, rc)
     if rc.light_tree not in LIGHT_TREE_CHOICES:
         raise _err(source, "render", "light_tree", f"{rc.light_tree!r} is not one of {', '.join(LIGHT_TREE_CHOICES)}")
     if rc.marker_denoise not in ("off", "fast", "balanced", "high"):

@@ -25,3 +25,4 @@ POSE_NAMES = tuple(POSE_KEYS[c] for c in COMPONENTS)       # x_mm, y_mm, z_mm, a
 MIN_SCORE = 0.25     # detections below this score are not used (detect, solve, evaluate, recall)
 NMS_IOU = 0.45       # non-maximum suppression IoU of the detector
 MIN_CHROMA = 0.03    # a marker whose colour is washed out below this chroma is not legible
+MARKER_CLASS_AOV = "marker_class"   # the render's colour AOV of marker coverage: R disc, G ring (blender_scenes.coverage)

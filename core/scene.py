@@ -190,6 +190,9 @@ class RenderSettings:
     marker_adaptive_threshold: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
     # Cycles' light tree: off | markers (in the marker regions' renders only) | on (every render)
     light_tree: str = dataclasses.field(default="off", metadata={OMIT_IF_DEFAULT: True})
+    # > 0: the regions' antialiasing noise taken out by their coverage rendered at this many
+    # samples (generator.marker_coverage)
+    marker_coverage_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import OpenEXR
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import atomic_path
+from dockfactory.core.names import MARKER_CLASS_AOV
 
 
 class ExrError(DockfactoryError):
@@ -38,6 +39,41 @@ def read_rgb(path) -> np.ndarray:
     """(H, W, 3) float32 linear colour (the Combined pass) of a Blender multilayer EXR, such as a
     cropped marker region of label-aware sampling."""
     return _read_parts(path)[0]
+
+
+def _class_coverage(channels: dict, path, aov: str) -> np.ndarray:
+    packed = _find(channels, f"{aov}.RGB", f"{aov}.RGBA", f"{aov}")
+    if packed is not None and packed.ndim == 3:
+        return np.ascontiguousarray(packed[..., :2], dtype=np.float32)
+    comps = [_find(channels, f"{aov}.{c}") for c in "RG"]
+    if any(c is None for c in comps):
+        raise ExrError(f"{path}: no coverage pass {aov!r} (channels: {sorted(channels)})")
+    return np.stack(comps, axis=-1).astype(np.float32)
+
+
+def read_class_coverage(path, aov: str = MARKER_CLASS_AOV) -> np.ndarray:
+    """(H, W, 2) float32: the disc and ring coverage (the R and G of the colour AOV ``aov``,
+    blender_scenes.coverage) of a Blender multilayer EXR; ExrError when it has no such pass."""
+    return _class_coverage(_read_parts(path)[1], path, aov)
+
+
+@dataclass
+class RegionPasses:
+    """A marker region's render: its colour, the colour before the denoiser (None: not denoised)
+    and the disc and ring coverage of its samples (each float32, linear; (h, w, 3) / (h, w, 2))."""
+    rgb: np.ndarray
+    noisy: np.ndarray | None
+    coverage: np.ndarray
+
+
+def read_region(path) -> RegionPasses:
+    """The passes of a marker region's EXR the coverage correction needs (one read); ExrError
+    when it has no coverage pass."""
+    rgb, channels = _read_parts(path)
+    noisy = _find(channels, "Noisy Image", "Noisy Image.RGBA")
+    if noisy is not None:
+        noisy = np.ascontiguousarray(noisy[..., :3], dtype=np.float32)
+    return RegionPasses(rgb, noisy, _class_coverage(channels, path, MARKER_CLASS_AOV))
 
 
 def _read_parts(path) -> tuple[np.ndarray, dict]:

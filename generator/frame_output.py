@@ -30,8 +30,9 @@ from dockfactory.core.io import (
 )
 from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.exr import read_passes, read_rgb, write_compact
+from dockfactory.generator.exr import read_class_coverage, read_passes, read_region, read_rgb, write_compact
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
+from dockfactory.generator.marker_coverage import corrected_region
 from dockfactory.generator.marker_regions import composite, marker_halos
 from dockfactory.generator.sensor import expose_frame, jpeg_round_trip, resample_passes
 
@@ -75,16 +76,26 @@ def _file_record(rel: str, data: bytes) -> dict:
     return {"path": rel, "bytes": len(data), "sha256": sha256_bytes(data)}
 
 
+def region_colour(crop_exr, coverage_exr=None) -> np.ndarray:
+    """(h, w, 3) float32 linear colour of a marker region's render; with its coverage render,
+    corrected by the exact coverage (generator.marker_coverage)."""
+    if coverage_exr is None:
+        return read_rgb(crop_exr)
+    region = read_region(crop_exr)
+    return corrected_region(region.rgb, region.noisy, region.coverage, read_class_coverage(coverage_exr))
+
+
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
                  visible_threshold: float, timings: dict | None = None, min_chroma: float = MIN_CHROMA,
                  keep_raw: bool = False, crops=()) -> dict:
     """Write the frame's files from the render's scratch EXR, with ``crops`` ((marker region,
-    cropped EXR) pairs of label-aware sampling) blended into its colour; returns its meta record."""
+    cropped EXR, its coverage EXR or None) of label-aware sampling: :func:`region_colour`) blended
+    into its colour; returns its meta record."""
     t0 = time.perf_counter()
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
     if crops:
-        rgb = composite(passes.rgb, [read_rgb(p) for _, p in crops], tuple(r for r, _ in crops),
+        rgb = composite(passes.rgb, [region_colour(p, cov) for _, p, cov in crops], tuple(c[0] for c in crops),
                         marker_halos(frame, static))
         passes = replace(passes, rgb=rgb)
     passes = replace(passes, rgb=median_filtered(passes.rgb, frame.render.post_filter))

@@ -152,7 +152,7 @@ class _Session:
             fid = (req.get("frame") or {}).get("spec", {}).get("frame_id")
             self.replies.send({**_error(op, exc), "frame_id": fid})
             return
-        crops = tuple(zip(regions, crop_paths))
+        crops = tuple((r, colour, cover) for r, (colour, cover) in zip(regions, crop_paths))
         self.replies.start_post(lambda: self.post_process(frame, exr_path, t0, timings, render_cpu, crops))
 
     def handle_state(self, req: dict) -> None:
@@ -175,7 +175,7 @@ class _Session:
 
     def post_process(self, frame, exr_path: str, t0: float, timings: dict, render_cpu: float, crops=()) -> None:
         """Sensor model, labels and writes of a rendered frame (runs beside the next render);
-        ``crops``: (marker region, its cropped EXR) pairs of label-aware sampling."""
+        ``crops``: (marker region, its cropped EXR, its coverage EXR or None) of label-aware sampling."""
         init = self.init
         try:
             p0 = time.thread_time()

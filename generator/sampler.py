@@ -454,7 +454,8 @@ def render_settings(render: RenderConfig) -> RenderSettings:
     return RenderSettings(render.samples, render.denoise, render.max_bounces, render.adaptive_threshold,
                           render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
                           render.sampling_pattern, render.post_filter, render.marker_samples,
-                          render.marker_denoise, render.marker_adaptive_threshold, render.rendered_light_tree())
+                          render.marker_denoise, render.marker_adaptive_threshold, render.rendered_light_tree(),
+                          render.rendered_coverage_samples())
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):

@@ -36,6 +36,7 @@ OUTPUT_SOURCES = (
     "dockfactory.generator.camera_units", "dockfactory.generator.random_draws", "dockfactory.generator.exr",
     "dockfactory.generator.frame_output", "dockfactory.generator.labels", "dockfactory.generator.motion",
     "dockfactory.generator.silhouette", "dockfactory.generator.marker_regions",
+    "dockfactory.generator.marker_coverage", "dockfactory.blender_scenes.coverage",
     "dockfactory.generator.render_worker",
     "dockfactory.generator.docking_runs", "dockfactory.generator.sampler", "dockfactory.generator.sensor",
     "dockfactory.blender_scenes.crops",

@@ -50,11 +50,13 @@ def detections(root: Path, weights: str | None) -> dict:
 
 
 def render_seconds(root: Path) -> dict:
-    """Median wall seconds per frame: Cycles (frame + crops) and the whole frame."""
+    """Median wall seconds per frame: Cycles (frame + crops, with their coverage renders) and the
+    whole frame."""
     rows = [json.loads(line) for line in (root / "logs" / "timings.jsonl").read_text().splitlines() if line.strip()]
-    cyc = [r["cycles"] + r.get("marker_crops", 0.0) for r in rows]
+    crops = [r.get("marker_crops", 0.0) + r.get("marker_coverage", 0.0) for r in rows]
+    cyc = [r["cycles"] + c for r, c in zip(rows, crops)]
     return {"frames": len(rows), "cycles_s": float(np.median(cyc)), "total_s": float(np.median([r["total"] for r in rows])),
-            "crops_s": float(np.median([r.get("marker_crops", 0.0) for r in rows]))}
+            "crops_s": float(np.median(crops))}
 
 
 def measure(root: Path, weights: str | None) -> dict:
@@ -72,6 +74,7 @@ def measure(root: Path, weights: str | None) -> dict:
             "samples": ds.config.render.samples, "denoise": ds.config.render.denoise,
             "marker_denoise": ds.config.render.marker_denoise,
             "marker_adaptive_threshold": ds.config.render.marker_adaptive_threshold,
+            "marker_coverage_samples": ds.config.render.marker_coverage_samples,
             "sampling_pattern": ds.config.render.sampling_pattern,
             "rows": rows, "centres": centres, "timing": render_seconds(root),
             "true": {fid: ds.labels[fid]["pose_b_in_d"] for fid in ds.frames("test")}}
@@ -146,7 +149,8 @@ def table(results: dict) -> list[str]:
             c, p, r = e["cmp"]["centre"], e["cmp"]["pose"], e["cmp"]["ratio"]
             what = f"{e['marker_samples']}" + (f" + {e['marker_denoise']}" if e["marker_denoise"] != "off" else "") \
                 + (f", adaptive {e['marker_adaptive_threshold']:g}" if e["marker_adaptive_threshold"] else "") \
-                + (f", {e['sampling_pattern']}" if e["sampling_pattern"] != "tabulated_sobol" else "")
+                + (f", {e['sampling_pattern']}" if e["sampling_pattern"] != "tabulated_sobol" else "") \
+                + (f", coverage {e['marker_coverage_samples']}" if e.get("marker_coverage_samples") else "")
             lines.append(
                 f"| {scene} | {e['name']}@{e['version']} | {what} | {e['timing']['cycles_s']:.2f} | "
                 f"{e['timing']['cycles_s'] / base['timing']['cycles_s']:.2f} | {c['median_px']:.4f} / {c['rms_px']:.4f} | "
@@ -160,20 +164,20 @@ def table(results: dict) -> list[str]:
 def sample_fit(entries: list[dict]) -> dict | None:
     """The centre error's floor and sampling term, median^2 = floor^2 + c^2 / N, least squares over
     the entries rendered with N uniform samples at the markers (label-aware sampling without
-    adaptive sampling, the reference included); the samples a render needs for a median within
+    adaptive sampling or the coverage correction, the reference included); the samples a render needs for a median within
     1.2x of the reference's (None when fewer than two such entries). The reference's sampling
     pattern only."""
     pts = [(e["marker_samples"], e["cmp"]["centre"]["median_px"]) for e in entries
-           if e["marker_samples"] > 0 and not e["marker_adaptive_threshold"]
+           if e["marker_samples"] > 0 and not e["marker_adaptive_threshold"] and not e.get("marker_coverage_samples")
            and e["sampling_pattern"] == entries[0]["sampling_pattern"]]
     if len(set(n for n, _ in pts)) < 2:
         return None
     a = np.array([[1.0, 1.0 / n] for n, _ in pts])
     (f2, c2), *_ = np.linalg.lstsq(a, np.array([m * m for _, m in pts]), rcond=None)
     ref = entries[0]["cmp"]["centre"]["median_px"]
-    need = c2 / (1.44 * ref * ref - f2) if 1.44 * ref * ref > f2 else float("inf")
+    need = float(c2 / (1.44 * ref * ref - f2)) if 1.44 * ref * ref > f2 else None   # None: no count reaches it
     return {"points": pts, "floor_px": float(np.sqrt(max(f2, 0.0))), "c_px": float(np.sqrt(max(c2, 0.0))),
-            "samples_for_1p2x_ref": float(need)}
+            "samples_for_1p2x_ref": need}
 
 
 def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
@@ -185,7 +189,7 @@ def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
     out = []
     for m, d in zip(measured, dirs):
         entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise",
-                                   "marker_adaptive_threshold", "sampling_pattern", "timing")}
+                                   "marker_adaptive_threshold", "marker_coverage_samples", "sampling_pattern", "timing")}
         entry["name"] = Path(d).name
         entry["cmp"] = compare(ref, m, boot)
         out.append(entry)
@@ -211,7 +215,8 @@ def main() -> int:
         if fit:
             print(f"{scene}: median centre error^2 = {fit['floor_px']:.4f}^2 + {fit['c_px']:.4f}^2 / N px^2 "
                   f"over {len(fit['points'])} settings; a median within 1.2x of the reference needs "
-                  f"N = {fit['samples_for_1p2x_ref']:.0f} samples at the markers")
+                  + (f"N = {fit['samples_for_1p2x_ref']:.0f} samples at the markers" if fit["samples_for_1p2x_ref"]
+                     else "more samples than any count (the fitted floor is above 1.2x the reference)"))
     if args.out:
         fits = {scene: sample_fit(entries) for scene, entries in results.items()}
         write_json_atomic(args.out, {"command": " ".join(sys.argv), "scenes": results, "fits": fits})

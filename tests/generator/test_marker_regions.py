@@ -258,3 +258,29 @@ def test_the_light_tree_is_in_the_identity_only_where_it_renders():
 def test_a_light_tree_value_not_known_is_refused_naming_the_key():
     with pytest.raises(ConfigError, match=r"\[render\] light_tree.*'always'"):
         _cfg(light_tree="always")
+
+
+def test_the_coverage_correction_is_on_by_default_and_stored_off_without_crops():
+    """``marker_coverage_samples`` (default 128) is in the identity and the labels' render settings
+    while label-aware sampling is on; without it the config reads back 0 and leaves the key out
+    (the identity and the label bytes of before the key)."""
+    assert _cfg().render.marker_coverage_samples == 128
+    assert _cfg().to_dict()["render"]["marker_coverage_samples"] == 128
+    assert identity(_cfg(marker_coverage_samples=0)) != identity(_cfg())
+    assert "marker_coverage_samples" not in _cfg(marker_coverage_samples=0).to_dict()["render"]
+    no_crops = _cfg(marker_samples=0)
+    assert no_crops.render.marker_coverage_samples == 0
+    assert "marker_coverage_samples" not in no_crops.to_dict()["render"]
+    assert identity(no_crops) == identity(_cfg(marker_samples=0, marker_coverage_samples=0))
+    for cfg in (_cfg(), no_crops, _cfg(marker_coverage_samples=256)):
+        assert config_from_identity(json.loads(cfg.canonical_json())) == cfg
+        assert config_from_dict(cfg.resolved_dict()) == cfg
+    assert to_dict(render_settings(_cfg().render))["marker_coverage_samples"] == 128
+    assert "marker_coverage_samples" not in to_dict(render_settings(no_crops.render))
+
+
+@pytest.mark.parametrize("value, message", [(-1, "marker_coverage_samples"), (1 << 25, "Cycles' limit")])
+def test_a_coverage_sample_count_it_cannot_render_is_refused_in_one_line(value, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        _cfg(marker_coverage_samples=value)
+    assert "\n" not in str(err.value)

@@ -1,6 +1,7 @@
 """Label-aware sampling through Cycles (small frames): the crops land on the right pixels, the
 labels and the rest of the frame do not change, the worker's state does not remember the crops,
-and a re-render is the same bytes."""
+and a re-render is the same bytes; with the coverage correction too (its effect on the noise:
+test_marker_coverage_render.py)."""
 import dataclasses
 import json
 
@@ -20,6 +21,7 @@ pytestmark = pytest.mark.render
 
 TIMEOUT_S = 300
 SAMPLES = 8
+COVERAGE_SAMPLES = 64
 CONFIG = {
     "dataset": {"name": "marker-sampling-check", "seed": 31, "frames": 2},
     "conditions": {"normal": 1, "low_light": 0, "occlusion": 0, "glare": 0},
@@ -42,7 +44,9 @@ def setup():
                  "plain": _variant(frame, "plain", marker_samples=0),
                  "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off",
                                              light_tree="on"),
-                 "adaptive": _variant(frame, "adaptive", marker_samples=4 * SAMPLES, marker_adaptive_threshold=0.1)}
+                 "adaptive": _variant(frame, "adaptive", marker_samples=4 * SAMPLES, marker_adaptive_threshold=0.1),
+                 "coverage": _variant(frame, "coverage", marker_coverage_samples=COVERAGE_SAMPLES),
+}
 
 
 def _worker(cfg, root):
@@ -59,10 +63,10 @@ def rendered(setup, tmp_path_factory):
     proc = _worker(cfg, root)
     try:
         digests = []
-        for name in ("plain", "crops", "uniform", "adaptive"):
+        for name in ("plain", "crops", "uniform", "adaptive", "coverage"):
             reply = proc.request({"op": "render", "frame": to_dict(frames[name])}, TIMEOUT_S)
             assert reply.get("ok"), reply
-            if name in ("plain", "crops"):
+            if name in ("plain", "crops", "coverage"):
                 digests.append(proc.request({"op": "state", "frame": to_dict(frames["plain"])}, TIMEOUT_S)["digest"])
     finally:
         proc.close()
@@ -99,7 +103,7 @@ def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(s
 IMAGE_FIELDS = ("chroma", "legible")
 
 
-@pytest.mark.parametrize("name", ["crops", "adaptive"])
+@pytest.mark.parametrize("name", ["crops", "adaptive", "coverage"])
 def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name):
     """Every geometric label field is the plain render's; the image-measured ones may differ (and
     the cleaner markers do show more colour); with uniform and with adaptive sampling."""
@@ -111,7 +115,7 @@ def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name
     chroma = [(ma["chroma"], mb["chroma"]) for ma, mb in zip(a["markers"], b["markers"]) if ma["chroma"] is not None]
     assert np.mean([c[0] for c in chroma]) > np.mean([c[1] for c in chroma])
     for lab in (a, b):
-        for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold"):
+        for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold", "marker_coverage_samples"):
             lab["sampled"]["render"].pop(key, None)
         lab.pop("frame_id")
         lab["spec"].pop("frame_id")
@@ -125,18 +129,23 @@ def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name
 
 
 def test_the_crops_leave_no_trace_in_the_scene(rendered):
+    """Neither the crops nor the coverage render (its material override, no bounces) stay behind."""
     _, digests = rendered
-    assert digests[0] == digests[1]
+    assert digests[0] == digests[1] == digests[2]
 
 
 def test_a_second_worker_renders_the_same_bytes(setup, rendered, tmp_path):
+    """With the crops, and with their coverage correction (its coverage render in the same order
+    after a different history: the first worker rendered other frames between)."""
     cfg, frames = setup
     root, _ = rendered
     proc = _worker(cfg, tmp_path / "again")
     try:
-        reply = proc.request({"op": "render", "frame": to_dict(frames["crops"])}, TIMEOUT_S)
-        assert reply.get("ok"), reply
+        for name in ("coverage", "crops"):
+            reply = proc.request({"op": "render", "frame": to_dict(frames[name])}, TIMEOUT_S)
+            assert reply.get("ok"), reply
     finally:
         proc.close()
-    for kind in ("image", "exr", "label"):
-        assert frame_paths(root, "crops")[kind].read_bytes() == frame_paths(tmp_path / "again", "crops")[kind].read_bytes()
+    for name in ("crops", "coverage"):
+        for kind in ("image", "exr", "label"):
+            assert frame_paths(root, name)[kind].read_bytes() == frame_paths(tmp_path / "again", name)[kind].read_bytes()
