@@ -27,7 +27,8 @@ CONFIG = {
     "conditions": {"normal": 1, "low_light": 0, "occlusion": 0, "glare": 0},
     "image": {"width": 320, "height": 240},
     "camera": {"focal_px": [200.0, 280.0]},
-    "render": {"marker_samples": SAMPLES, "marker_denoise": "off", "keep_exr": True, "frame_timeout_s": TIMEOUT_S},
+    "render": {"marker_samples": SAMPLES, "marker_denoise": "off", "marker_coverage_samples": 0, "keep_exr": True,
+               "frame_timeout_s": TIMEOUT_S},
 }
 
 
