@@ -14,6 +14,7 @@ from __future__ import annotations
 import bpy
 
 from dockfactory.core.names import MARKER_CLASS_AOV as COVERAGE_AOV
+
 COVERAGE_MATERIAL = "marker_coverage"
 DISC_CLASS = (1.0, 0.0, 0.0, 1.0)
 RING_CLASS = (0.0, 1.0, 0.0, 1.0)
@@ -36,14 +37,15 @@ def add_class_output(mat, colour) -> None:
 
 
 def coverage_material():
-    """The override material of the coverage render: a black emitter (opaque; no light is
-    sampled, no ray bounces), the object's colour (its class: :func:`set_classes`) into the coverage AOV."""
+    """The override material of the coverage render: a holdout surface (opaque, no light is
+    sampled, no ray bounces; a material without a surface would let the rays through), the
+    object's colour (its class: :func:`set_classes`) into the coverage AOV."""
     mat = bpy.data.materials.new(COVERAGE_MATERIAL)
     mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
-    surface = nt.nodes.new("ShaderNodeHoldout")      # opaque, no light (no surface at all: transparent)
+    surface = nt.nodes.new("ShaderNodeHoldout")
     nt.links.new(surface.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     info = nt.nodes.new("ShaderNodeObjectInfo")
     out = nt.nodes.new("ShaderNodeOutputAOV")

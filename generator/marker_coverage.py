@@ -56,7 +56,8 @@ def class_radiance(rgb: np.ndarray, exact: np.ndarray, sigma_px: float = LOCAL_S
     cross = c[..., :, None] * rgb.astype(np.float64)[..., None, :]  # (h, w, 3 classes, 3 ch)
     eye = np.eye(3)
     global_l = np.linalg.solve(outer.mean(axis=(0, 1)) + 1e-6 * eye, cross.mean(axis=(0, 1)))   # (3, 3)
-    own = float(_kernel(sigma_px)[len(_kernel(sigma_px)) // 2, 0]) ** 2
+    k = _kernel(sigma_px)
+    own = float(k[len(k) // 2, 0]) ** 2                             # the pixel's own weight in the blur
     a = _blur(outer, sigma_px) - own * outer + ridge * eye
     b = _blur(cross, sigma_px) - own * cross + ridge * global_l
     return np.linalg.solve(a, b)
