@@ -351,12 +351,16 @@ def main(argv=None) -> int:
         return 0
     if not args.out:
         p.error("--out is required")
+    out = Path(args.out)
+    results = json.loads(out.read_text()) if out.is_file() else {"datasets": {}}
+    for flag in ("tell_cfa", "tell_jpeg"):   # rows already in the file were measured with its flags
+        if results.get(flag, getattr(args, flag)) != getattr(args, flag):
+            p.error(f"{out}: its rows were measured with {flag} = {results[flag]}; resume with the same "
+                    f"flags or write another --out")
     import torch
     torch.set_num_threads(2)
     from dockfactory.detector.infer import MarkerDetector
     detector = MarkerDetector(args.weights or shipped_weights())
-    out = Path(args.out)
-    results = json.loads(out.read_text()) if out.is_file() else {"datasets": {}}
     results.update(weights=str(args.weights or shipped_weights()), preset=PRESET, tell_cfa=args.tell_cfa,
                    tell_jpeg=args.tell_jpeg)
     for root in args.datasets:

@@ -79,3 +79,18 @@ def test_rms_z_interval_spans_the_sampling_noise_of_48_frames():
     assert lo < rms < hi
     assert 0.25 < hi - lo < 0.6
     assert se.rms_z_bootstrap_interval(z[:4]) is None
+
+
+@pytest.mark.parametrize("flags", [[], ["--tell-cfa", "--tell-jpeg"]])
+def test_a_results_file_is_not_resumed_with_other_flags(tmp_path, monkeypatch, capsys, flags):
+    """Rows measured with (or without) the refinement told the CFA and the JPEG are never relabelled:
+    resuming their file with the other flags exits 2 naming the file and the flag, before any work."""
+    out = tmp_path / "res.json"
+    told = not flags
+    out.write_text(json.dumps({"datasets": {}, "tell_cfa": told, "tell_jpeg": told}))
+    monkeypatch.setattr("sys.argv", ["sensor_effects", str(tmp_path / "no_dataset"), "--out", str(out), *flags])
+    with pytest.raises(SystemExit) as exc:
+        se.main()
+    assert exc.value.code == 2
+    assert f"{out}: its rows were measured with tell_cfa = {told}" in capsys.readouterr().err
+    assert json.loads(out.read_text())["tell_cfa"] is told
