@@ -4,8 +4,9 @@ Every marker disc and ring writes its class into the shader AOV :data:`COVERAGE_
 camera ray hits it (R: disc, G: ring; everything else writes nothing, 0). Cycles accumulates an
 AOV with the same samples and pixel filter as the colour, so a region's AOV holds the share of its
 samples that landed on each class: the coverage those samples saw. Rendered again with every
-shader replaced by :func:`coverage_material` (it writes the class and nothing else: no light, no
-bounce, a small part of a full sample's cost) at many samples, the AOV is the coverage the colour
+shader replaced by :func:`coverage_material` (it shows the class and nothing else: no light, no
+bounce, a small part of a full sample's cost) at many samples (adaptively: only the edges need
+them), the AOV is the coverage the colour
 converges to. ``dockfactory.generator.marker_coverage`` takes the colour's antialiasing noise out
 with the difference of the two.
 """
@@ -37,17 +38,21 @@ def add_class_output(mat, colour) -> None:
 
 
 def coverage_material():
-    """The override material of the coverage render: a holdout surface (opaque, no light is
-    sampled, no ray bounces; a material without a surface would let the rays through), the
-    object's colour (its class: :func:`set_classes`) into the coverage AOV."""
+    """The override material of the coverage render: the object's colour (its class:
+    :func:`set_classes`) as an emitter that is never sampled as a light (opaque, no light is
+    sampled, no ray bounces; a material without a surface would let the rays through) and into
+    the coverage AOV. The emitted class colour is what Cycles' adaptive sampling judges a pixel's
+    convergence by (it reads the colour, not the AOV)."""
     mat = bpy.data.materials.new(COVERAGE_MATERIAL)
     mat.use_nodes = True
+    mat.cycles.emission_sampling = "NONE"
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
-    surface = nt.nodes.new("ShaderNodeHoldout")
-    nt.links.new(surface.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     info = nt.nodes.new("ShaderNodeObjectInfo")
+    surface = nt.nodes.new("ShaderNodeEmission")
+    nt.links.new(info.outputs["Color"], surface.inputs["Color"])
+    nt.links.new(surface.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     out = nt.nodes.new("ShaderNodeOutputAOV")
     out.aov_name = COVERAGE_AOV
     nt.links.new(info.outputs["Color"], out.inputs["Color"])

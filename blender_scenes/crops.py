@@ -13,6 +13,11 @@ from dockfactory.blender_scenes.frame_update import DENOISE_QUALITY, apply_rende
 # Blender turns the border (a share of the canvas) into pixels by truncation: a quarter pixel
 # past each pixel boundary lands on that boundary whatever the float rounding.
 BORDER_NUDGE_PX = 0.25
+# The coverage render's adaptive minimum. Cycles' automatic one grows as the threshold falls (most
+# of the samples at the thresholds a coverage needs); a pixel whose first samples all land on one
+# class is inside it, and an edge pixel's neighbours keep sampling with it (Cycles' convergence
+# filter), so the edges still get every sample (bench/results/marker_sampling/README.md).
+COVERAGE_MIN_SAMPLES = 16
 
 
 def crop_path(exr_path: str, i: int, kind: str = "crop") -> str:
@@ -74,12 +79,17 @@ def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
 def render_coverage(scene, frame, regions, exr_path: str) -> list[str]:
     """Each region again at ``frame.render.marker_coverage_samples`` samples with every shader
     replaced by the coverage material (blender_scenes.coverage: the classes' exact coverage in
-    its AOV), no bounce, no denoiser, no adaptive sampling, no light tree; the "cov"
-    :func:`crop_path` files in region order. The override and every render setting are put back
-    as ``apply_frame`` set them, whatever happens."""
-    c, vl = scene.cycles, scene.view_layers[0]
-    c.samples = frame.render.marker_coverage_samples
-    c.use_adaptive_sampling = c.use_denoising = c.use_light_tree = False
+    its AOV), no bounce, no denoiser, no light tree; with ``marker_coverage_threshold`` > 0
+    adaptive sampling up to those samples from :data:`COVERAGE_MIN_SAMPLES`: the material shows each
+    class in its colour, so a pixel across an edge keeps sampling and one inside a class stops
+    early. The "cov" :func:`crop_path` files in region order. The override and every render
+    setting are put back as ``apply_frame`` set them, whatever happens."""
+    c, vl, rs = scene.cycles, scene.view_layers[0], frame.render
+    c.samples = rs.marker_coverage_samples
+    c.use_denoising = c.use_light_tree = False
+    c.use_adaptive_sampling = rs.marker_coverage_threshold > 0
+    c.adaptive_threshold = rs.marker_coverage_threshold
+    c.adaptive_min_samples = min(COVERAGE_MIN_SAMPLES, rs.marker_coverage_samples)
     c.max_bounces = 0
     vl.material_override = bpy.data.materials[COVERAGE_MATERIAL]
     try:

@@ -198,6 +198,7 @@ class RenderConfig:
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
     marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
+    marker_coverage_threshold: float = 0.005  # > 0: that coverage render with adaptive sampling up to marker_coverage_samples (the markers' edges get them, their insides stop early); 0 = every pixel all of them
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
@@ -212,6 +213,11 @@ class RenderConfig:
         """The coverage correction's samples the frames are rendered with: 0 without label-aware
         sampling (no marker regions to correct)."""
         return self.marker_coverage_samples if self.marker_samples else 0
+
+    def rendered_coverage_threshold(self) -> float:
+        """The coverage render's adaptive threshold the frames are rendered with: 0 without a
+        coverage render."""
+        return self.marker_coverage_threshold if self.rendered_coverage_samples() else 0.0
 
 
 @dataclass(frozen=True)
@@ -284,7 +290,7 @@ class ExportConfig:
 # identity's config at that value (Config.to_dict), so their version ids stay
 IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0, ("render", "marker_denoise"): "fast",
                     ("render", "marker_adaptive_threshold"): 0.0, ("render", "light_tree"): "off",
-                    ("render", "marker_coverage_samples"): 0,
+                    ("render", "marker_coverage_samples"): 0, ("render", "marker_coverage_threshold"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
@@ -323,6 +329,7 @@ class Config:
         if not full:
             d["render"]["light_tree"] = self.render.rendered_light_tree()
             d["render"]["marker_coverage_samples"] = self.render.rendered_coverage_samples()
+            d["render"]["marker_coverage_threshold"] = self.render.rendered_coverage_threshold()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
             if d[table][key] == neutral:
                 del d[table][key]
@@ -414,13 +421,15 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` and
-    ``marker_coverage_samples`` are the ones the frames render with (without label-aware sampling
-    ``markers`` is ``off`` and the coverage samples 0), so a config and its stored identity read
+    ``marker_coverage_samples`` / ``marker_coverage_threshold`` are the ones the frames render with
+    (without label-aware sampling ``markers`` is ``off`` and the coverage samples 0, and without
+    those samples the threshold 0), so a config and its stored identity read
     back equal."""
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
     render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree(),
-                                 marker_coverage_samples=cfg.render.rendered_coverage_samples())
+                                 marker_coverage_samples=cfg.render.rendered_coverage_samples(),
+                                 marker_coverage_threshold=cfg.render.rendered_coverage_threshold())
     return dataclasses.replace(cfg, render=render)
 
 
@@ -506,10 +515,15 @@ def _check_at_most(source, table, key, value, limit, why: str) -> None:
 
 
 def _check_marker_coverage(source, rc: "RenderConfig") -> None:
-    """[render] marker_coverage_samples: 0 or a sample count (inert without label-aware sampling)."""
+    """[render] marker_coverage_samples: 0 or a sample count (inert without label-aware sampling);
+    marker_coverage_threshold: 0 or an adaptive threshold below 1."""
     _check_positive(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, MAX_SAMPLES,
                    "Cycles' limit")
+    _check_positive(source, "render", "marker_coverage_threshold", rc.marker_coverage_threshold, allow_zero=True)
+    if rc.marker_coverage_threshold >= 1.0:
+        raise _err(source, "render", "marker_coverage_threshold",
+                   f"{rc.marker_coverage_threshold} is not below 1 (a noise threshold: 0.005 is the default, 0 = off)")
 
 
 def validate(cfg: Config, source: str = "<config>") -> None:

@@ -193,6 +193,8 @@ class RenderSettings:
     # > 0: the regions' antialiasing noise taken out by their coverage rendered at this many
     # samples (generator.marker_coverage)
     marker_coverage_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
+    # > 0: that coverage render with adaptive sampling up to marker_coverage_samples at this threshold
+    marker_coverage_threshold: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

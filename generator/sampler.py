@@ -455,7 +455,7 @@ def render_settings(render: RenderConfig) -> RenderSettings:
                           render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
                           render.sampling_pattern, render.post_filter, render.marker_samples,
                           render.marker_denoise, render.marker_adaptive_threshold, render.rendered_light_tree(),
-                          render.rendered_coverage_samples())
+                          render.rendered_coverage_samples(), render.rendered_coverage_threshold())
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):

@@ -284,3 +284,29 @@ def test_a_coverage_sample_count_it_cannot_render_is_refused_in_one_line(value, 
     with pytest.raises(ConfigError, match=message) as err:
         _cfg(marker_coverage_samples=value)
     assert "\n" not in str(err.value)
+
+
+def test_the_coverage_threshold_is_stored_only_where_a_coverage_render_uses_it():
+    """``marker_coverage_threshold`` (default 0.005: adaptive) is in the identity and the frames'
+    render settings beside a coverage render; without one (no coverage samples, or no crops) it
+    reads back 0 and leaves the key out: the identity and label bytes of the configs before it."""
+    assert _cfg().render.marker_coverage_threshold == 0.005
+    assert _cfg().to_dict()["render"]["marker_coverage_threshold"] == 0.005
+    assert identity(_cfg(marker_coverage_threshold=0.0)) != identity(_cfg())
+    for off in (_cfg(marker_coverage_samples=0), _cfg(marker_samples=0)):
+        assert off.render.marker_coverage_threshold == 0.0
+        assert "marker_coverage_threshold" not in off.to_dict()["render"]
+        assert "marker_coverage_threshold" not in to_dict(render_settings(off.render))
+    assert identity(_cfg(marker_coverage_samples=0)) == identity(_cfg(marker_coverage_samples=0,
+                                                                       marker_coverage_threshold=0.0))
+    for cfg in (_cfg(), _cfg(marker_coverage_threshold=0.003), _cfg(marker_samples=0)):
+        assert config_from_identity(json.loads(cfg.canonical_json())) == cfg
+        assert config_from_dict(cfg.resolved_dict()) == cfg
+    assert render_settings(_cfg().render).marker_coverage_threshold == 0.005
+
+
+@pytest.mark.parametrize("value", [-0.01, 1.0, 5.0])
+def test_a_coverage_threshold_out_of_range_is_refused_in_one_line(value):
+    with pytest.raises(ConfigError, match=r"\[render\] marker_coverage_threshold") as err:
+        _cfg(marker_coverage_threshold=value)
+    assert "\n" not in str(err.value)

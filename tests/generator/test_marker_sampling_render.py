@@ -46,7 +46,8 @@ def setup():
                  "uniform": _variant(frame, "uniform", marker_samples=0, samples=SAMPLES, denoise="off",
                                              light_tree="on"),
                  "adaptive": _variant(frame, "adaptive", marker_samples=4 * SAMPLES, marker_adaptive_threshold=0.1),
-                 "coverage": _variant(frame, "coverage", marker_coverage_samples=COVERAGE_SAMPLES),
+                 "coverage": _variant(frame, "coverage", marker_coverage_samples=COVERAGE_SAMPLES,
+                                      marker_coverage_threshold=0.005),
 }
 
 
@@ -116,7 +117,8 @@ def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name
     chroma = [(ma["chroma"], mb["chroma"]) for ma, mb in zip(a["markers"], b["markers"]) if ma["chroma"] is not None]
     assert np.mean([c[0] for c in chroma]) > np.mean([c[1] for c in chroma])
     for lab in (a, b):
-        for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold", "marker_coverage_samples"):
+        for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold", "marker_coverage_samples",
+                    "marker_coverage_threshold"):
             lab["sampled"]["render"].pop(key, None)
         lab.pop("frame_id")
         lab["spec"].pop("frame_id")
