@@ -200,14 +200,20 @@ def _finish(ds: Dataset, cfg: Config, summary: JobSummary) -> None:
     write_card(ds)                               # untouched when current (a DVC-tracked dataset stays clean)
 
 
+def worker_init_request(cfg, root: Path, threads: int, keep_exr: bool | None = None) -> dict:
+    """The init request of a render worker (generator.render_worker) for ``cfg``'s frames written
+    under ``root`` with ``threads`` Cycles threads; ``keep_exr`` None: the config's."""
+    return {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
+            "height": cfg.image.height, "threads": threads, "root": str(Path(root).resolve()),
+            "keep_exr": cfg.render.keep_exr if keep_exr is None else keep_exr,
+            "keep_raw": cfg.sensor.raw_output, "visible_threshold": cfg.labels.visible_threshold,
+            "min_chroma": cfg.labels.min_chroma, "device": cfg.render.device}
+
+
 def _render(cfg, root: Path, todo, scenes, opts: JobOptions, summary: JobSummary) -> None:
     n_workers = min(opts.workers, len(todo))
     threads = opts.threads or max(1, cores() // n_workers)
-    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
-            "height": cfg.image.height, "threads": threads, "root": str(root.resolve()),
-            "keep_exr": cfg.render.keep_exr, "keep_raw": cfg.sensor.raw_output,
-            "visible_threshold": cfg.labels.visible_threshold,
-            "min_chroma": cfg.labels.min_chroma, "device": cfg.render.device}
+    init = worker_init_request(cfg, root, threads)
     log_dir = root / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
     if opts.executor == "ray":

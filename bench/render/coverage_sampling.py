@@ -35,8 +35,8 @@ from dockfactory.blender_scenes.crops import crop_path
 from dockfactory.core.config import load_config
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.scene import to_dict
+from dockfactory.generator.render_job import worker_init_request
 from dockfactory.generator.exr import read_class_coverage
-from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.worker_pool import WorkerProcess
 
@@ -54,10 +54,7 @@ def parse_setting(text: str) -> tuple[str, int, float]:
 
 
 def _worker(cfg, root: Path) -> WorkerProcess:
-    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
-            "height": cfg.image.height, "threads": 2, "root": str(root), "keep_exr": False,
-            "visible_threshold": cfg.labels.visible_threshold, "min_chroma": cfg.labels.min_chroma}
-    proc = WorkerProcess(init, root / "logs" / "worker.log")
+    proc = WorkerProcess(worker_init_request(cfg, root, 2, keep_exr=False), root / "logs" / "worker.log")
     proc.start(TIMEOUT_S)
     return proc
 
