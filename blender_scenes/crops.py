@@ -53,7 +53,8 @@ def _render_regions(scene, regions, exr_path: str, kind: str) -> list[str]:
 def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     """Render each of ``regions`` (generator.marker_regions.Region) of the frame already applied to
     ``scene`` at ``frame.render.marker_samples`` samples (with ``marker_adaptive_threshold`` > 0:
-    adaptive sampling up to that many, Cycles' automatic minimum), denoised by ``marker_denoise``
+    adaptive sampling up to that many from ``marker_adaptive_min_samples``, 0: Cycles' automatic
+    minimum), denoised by ``marker_denoise``
     (off: not at all; on, the file holds the colour before denoising too, "Noisy Image"), with
     Cycles' light tree unless ``light_tree`` is off (it picks the light a sample goes to by its
     contribution there: less noise per sample at the markers), into :func:`crop_path` files
@@ -64,7 +65,7 @@ def render_crops(scene, frame, regions, exr_path: str) -> list[str]:
     c.samples = rs.marker_samples
     c.use_adaptive_sampling = rs.marker_adaptive_threshold > 0
     c.adaptive_threshold = rs.marker_adaptive_threshold
-    c.adaptive_min_samples = 0
+    c.adaptive_min_samples = rs.marker_adaptive_min_samples
     c.use_denoising = rs.marker_denoise != "off"
     c.use_light_tree = rs.light_tree != "off"
     if c.use_denoising:

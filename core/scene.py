@@ -188,6 +188,8 @@ class RenderSettings:
     marker_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
     marker_denoise: str = dataclasses.field(default="fast", metadata={OMIT_IF_DEFAULT: True})
     marker_adaptive_threshold: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
+    # with it, every pixel at least this many samples (0: Cycles' automatic minimum)
+    marker_adaptive_min_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
     # Cycles' light tree: off | markers (in the marker regions' renders only) | on (every render)
     light_tree: str = dataclasses.field(default="off", metadata={OMIT_IF_DEFAULT: True})
     # > 0: the regions' antialiasing noise taken out by their coverage rendered at this many

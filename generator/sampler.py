@@ -453,9 +453,13 @@ def render_settings(render: RenderConfig) -> RenderSettings:
     """What Cycles needs of [render], per frame."""
     return RenderSettings(render.samples, render.denoise, render.max_bounces, render.adaptive_threshold,
                           render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
-                          render.sampling_pattern, render.post_filter, render.marker_samples,
-                          render.marker_denoise, render.marker_adaptive_threshold, render.rendered_light_tree(),
-                          render.rendered_coverage_samples(), render.rendered_coverage_threshold())
+                          render.sampling_pattern, render.post_filter, marker_samples=render.marker_samples,
+                          marker_denoise=render.marker_denoise,
+                          marker_adaptive_threshold=render.marker_adaptive_threshold,
+                          marker_adaptive_min_samples=render.rendered_adaptive_min_samples(),
+                          light_tree=render.rendered_light_tree(),
+                          marker_coverage_samples=render.rendered_coverage_samples(),
+                          marker_coverage_threshold=render.rendered_coverage_threshold())
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):

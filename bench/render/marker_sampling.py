@@ -74,6 +74,7 @@ def measure(root: Path, weights: str | None) -> dict:
             "samples": ds.config.render.samples, "denoise": ds.config.render.denoise,
             "marker_denoise": ds.config.render.marker_denoise,
             "marker_adaptive_threshold": ds.config.render.marker_adaptive_threshold,
+            "marker_adaptive_min_samples": ds.config.render.marker_adaptive_min_samples,
             "marker_coverage_samples": ds.config.render.marker_coverage_samples,
             "sampling_pattern": ds.config.render.sampling_pattern,
             "rows": rows, "centres": centres, "timing": render_seconds(root),
@@ -149,6 +150,7 @@ def table(results: dict) -> list[str]:
             c, p, r = e["cmp"]["centre"], e["cmp"]["pose"], e["cmp"]["ratio"]
             what = f"{e['marker_samples']}" + (f" + {e['marker_denoise']}" if e["marker_denoise"] != "off" else "") \
                 + (f", adaptive {e['marker_adaptive_threshold']:g}" if e["marker_adaptive_threshold"] else "") \
+                + (f" from {e['marker_adaptive_min_samples']}" if e.get("marker_adaptive_min_samples") else "") \
                 + (f", {e['sampling_pattern']}" if e["sampling_pattern"] != "tabulated_sobol" else "") \
                 + (f", coverage {e['marker_coverage_samples']}" if e.get("marker_coverage_samples") else "")
             lines.append(
@@ -189,7 +191,8 @@ def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
     out = []
     for m, d in zip(measured, dirs):
         entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise",
-                                   "marker_adaptive_threshold", "marker_coverage_samples", "sampling_pattern", "timing")}
+                                   "marker_adaptive_threshold", "marker_adaptive_min_samples", "marker_coverage_samples",
+                                   "sampling_pattern", "timing")}
         entry["name"] = Path(d).name
         entry["cmp"] = compare(ref, m, boot)
         out.append(entry)

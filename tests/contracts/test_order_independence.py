@@ -15,9 +15,8 @@ import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.core.scene import to_dict
-from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
-from dockfactory.generator.render_job import JobOptions, run_render
+from dockfactory.generator.render_job import JobOptions, run_render, worker_init_request
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.worker_pool import WorkerProcess
 
@@ -63,11 +62,7 @@ class Worker:
     def __init__(self, smoke, root: Path):
         cfg, _, self.scenes, _ = smoke
         self.root = root
-        init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
-                "height": cfg.image.height, "threads": 2, "root": str(root),
-                "keep_exr": cfg.render.keep_exr, "visible_threshold": cfg.labels.visible_threshold,
-                "min_chroma": cfg.labels.min_chroma}
-        self.proc = WorkerProcess(init, root / "logs" / "worker.log")
+        self.proc = WorkerProcess(worker_init_request(cfg, root, 2), root / "logs" / "worker.log")
         self.proc.start(TIMEOUT_S)
 
     def render(self, fid: str) -> dict[str, bytes]:

@@ -209,8 +209,22 @@ def test_the_key_is_in_the_identity_only_when_on():
     assert identity(_cfg(marker_adaptive_threshold=0.02)) != identity(_cfg())
 
 
+def test_the_adaptive_minimum_counts_only_with_adaptive_sampling_at_the_markers():
+    """Without an adaptive threshold at the markers the minimum changes no pixel: it reads as 0 and
+    leaves the identity alone; with one it is the crops' minimum, in the identity and the frame."""
+    assert _cfg(marker_adaptive_min_samples=8).render.marker_adaptive_min_samples == 0
+    assert identity(_cfg(marker_adaptive_min_samples=8)) == identity(_cfg())
+    on = _cfg(marker_adaptive_threshold=0.02, marker_adaptive_min_samples=8)
+    assert on.render.marker_adaptive_min_samples == 8
+    assert identity(on) != identity(_cfg(marker_adaptive_threshold=0.02))
+    assert render_settings(on.render).marker_adaptive_min_samples == 8
+    assert "marker_adaptive_min_samples" not in to_dict(render_settings(_cfg().render))
+    assert config_from_identity(json.loads(on.canonical_json())) == on
+
+
 @pytest.mark.parametrize("key, value", [("marker_samples", -1), ("marker_samples", 1 << 25),
-                                        ("marker_denoise", "oidn"), ("marker_adaptive_threshold", -0.01)])
+                                        ("marker_denoise", "oidn"), ("marker_adaptive_threshold", -0.01),
+                                        ("marker_adaptive_min_samples", -1), ("marker_adaptive_min_samples", 25)])
 def test_bad_values_are_refused_naming_the_key(key, value):
     with pytest.raises(ConfigError, match=key):
         _cfg(**{key: value})

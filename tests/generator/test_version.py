@@ -23,7 +23,7 @@ import pytest
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import to_dict
-from dockfactory.generator.random_draws import static_scene
+from dockfactory.generator.render_job import worker_init_request
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.version import OUTPUT_SOURCES
 
@@ -76,9 +76,7 @@ def test_output_sources_cover_a_running_worker(tmp_path):
     cfg = load_config(shipped_config("smoke"))
     spec = frame_plan(cfg)[0]
     root = tmp_path / "dataset"
-    init = {"op": "init", "static": to_dict(static_scene(cfg)), "width": cfg.image.width,
-            "height": cfg.image.height, "threads": 1, "root": str(root), "keep_exr": False,
-            "visible_threshold": cfg.labels.visible_threshold, "min_chroma": cfg.labels.min_chroma}
+    init = worker_init_request(cfg, root, 1, keep_exr=False)
     requests = [init, {"op": "render", "frame": to_dict(sample_frame(cfg, spec))}, {"op": "quit"}]
     listing = tmp_path / "modules.txt"
     proc = subprocess.run([sys.executable, "-c", RUN_WORKER, str(listing)], cwd=tmp_path,
