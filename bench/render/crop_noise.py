@@ -126,10 +126,13 @@ def remove_reference_noise(summary: dict, ref_samples: int) -> None:
 
 
 def exponents(summary: dict) -> dict:
-    """Per class, log(own noise ratio) / log(samples ratio) between consecutive candidates by samples."""
+    """Per class, log(own noise ratio) / log(samples ratio) between consecutive candidates by
+    samples (candidates of equal samples, e.g. adaptive ones beside a uniform one, give none)."""
     items = sorted(summary.values(), key=lambda s: s["marker_samples"])
     out = {}
     for a, b in zip(items, items[1:]):
+        if a["marker_samples"] == b["marker_samples"]:
+            continue
         ratio = np.log(b["marker_samples"] / a["marker_samples"])
         out[f"{a['marker_samples']}->{b['marker_samples']}"] = {
             name: float(np.log(a["classes"][name]["own"] / b["classes"][name]["own"]) / ratio)
