@@ -132,7 +132,26 @@ def read_weights(path):
 
 
 def load_model(path, fuse: bool = True):
-    """(model in eval mode (float32), weights dict) from a checkpoint (its EMA) or a weights file."""
+    """Load a detector from a checkpoint (its EMA weights) or a weights file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (read with ``torch.load(weights_only=True)``).
+    fuse : bool
+        Fold each BatchNorm into its convolution (inference only).
+
+    Returns
+    -------
+    tuple
+        (the model in eval mode, float32; the weights dict: state, model and data configs, the
+        dataset version, provenance).
+
+    Raises
+    ------
+    CheckpointError
+        A missing, foreign or inconsistent file (one line naming it).
+    """
     from dockfactory.detector.model import build_model
     obj, mcfg, _ = read_weights(path)
     model = build_model(mcfg)

@@ -250,16 +250,44 @@ def drop_nested(dets: list[dict]) -> list[dict]:
 def detect_dataset(dataset, weights, out, split: str | None = "test", conf_threshold: float = MIN_SCORE,
                    iou_threshold: float = NMS_IOU, refine: bool = True, progress: bool = True,
                    camera=None) -> dict:
-    """Run the detector over the frames of ``split`` of the opened ``dataset`` (detector.data.FrameSource)
-    and write the detections JSON atomically to ``out`` (None: return it only, for a caller that
-    writes another format).
+    """Run the detector over the frames of one split of a dataset and write the detections JSON.
 
-    The JSON: ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
-    "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id: [det]}}``,
-    each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality, refined, edge_px,
-    bbox_detector_px}`` (``edge_px``: the edge fit's edge width, px, null without one).
-    ``camera``: frame id -> (Bayer pattern or None, JPEG-encoded?) of the camera that took it
-    (what its maker knows; ``MarkerDetector.detect``), None: three-chip PNG.
+    Parameters
+    ----------
+    dataset : detector.data.FrameSource
+        The opened dataset (generator.dataset_open.Dataset or a folder of frames).
+    weights : str or Path
+        A weights file or training checkpoint (loaded with ``weights_only=True``).
+    out : str, Path or None
+        Where the detections JSON is written atomically; None: returned only (a caller that writes
+        another format).
+    split : str or None
+        ``train``, ``val``, ``test``, or None for every frame.
+    conf_threshold, iou_threshold : float
+        The detection score kept and the NMS overlap (0-1).
+    refine : bool
+        Refine each centre on the image (detector.centre.refine_centre).
+    progress : bool
+        A progress line on stderr (and a note when the weights were trained on another version).
+    camera : callable or None
+        Frame id -> (Bayer pattern or None, JPEG-encoded?) of the camera that took it (what its
+        maker knows; ``MarkerDetector.detect``); None: three-chip PNG.
+
+    Returns
+    -------
+    dict
+        ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
+        "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id:
+        [det]}}``, each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality,
+        refined, edge_px, bbox_detector_px}`` (pixels in the OpenCV convention; ``edge_px``: the
+        edge fit's edge width, null without one).
+
+    Raises
+    ------
+    CheckpointError
+        Weights missing, foreign, inconsistent, or of a detector whose classes are not the markers'.
+    DockfactoryError
+        A split without frames, or a frame image that cannot be read (one line naming it).
     """
 
     from dockfactory.detector.data import load_frames, read_rgb

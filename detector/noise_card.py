@@ -61,9 +61,25 @@ class CardFigures(NamedTuple):
 
 
 def card_figures(weights) -> CardFigures:
-    """The figures of the noise card of ``weights`` (each None without a valid card: none next to
-    them, one for other weights or another centre refinement, or not a card), the card read and
-    the weights hashed once."""
+    """What the noise card of a weights file says, the card read and the weights hashed once.
+
+    Parameters
+    ----------
+    weights : str or Path
+        The weights file; its card is ``<stem>.noise.json`` beside it.
+
+    Returns
+    -------
+    CardFigures
+        ``centre_noise_px`` (px per axis), ``section_shift_px`` and ``bias_px`` ((x, y) px), each
+        None without a valid card: none beside the weights, one for other weights or another
+        centre refinement, or not a card.
+
+    Raises
+    ------
+    OSError
+        A card beside weights that cannot be read (the weights are hashed to check the card).
+    """
     doc = _card(weights)
     if doc is None:
         return CardFigures(None, None, None)
@@ -113,8 +129,29 @@ def _shift_of(doc: dict) -> tuple[float, float] | None:
 
 
 def write_noise_card(weights, centre_noise: float, details: dict) -> Path:
-    """Write ``<weights stem>.noise.json`` atomically: the measured ``centre_noise`` (px per axis)
-    of ``weights`` (named by sha256) and ``details`` (how, where and on how many detections)."""
+    """Write the noise card of a weights file, ``<weights stem>.noise.json``, atomically.
+
+    Parameters
+    ----------
+    weights : str or Path
+        The weights measured (named in the card by their sha256, with the centre refinement's).
+    centre_noise : float
+        The measured centre noise, px per axis.
+    details : dict
+        How, where and on how many detections it was measured (stored as given, JSON-able).
+
+    Returns
+    -------
+    Path
+        The card written.
+
+    Raises
+    ------
+    ValueError
+        A centre noise that is not a finite number above 0.
+    OSError
+        The weights cannot be read or the card cannot be written (an older card keeps its bytes).
+    """
     if not (math.isfinite(centre_noise) and centre_noise > 0):
         raise ValueError(f"centre noise must be a finite number of pixels > 0, got {centre_noise}")
     card = noise_card_path(weights)

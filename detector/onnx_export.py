@@ -19,6 +19,37 @@ from dockfactory.core.io import atomic_path
 
 def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool = True, seed: int = 0,
                 atol: float = 1e-3) -> dict:
+    """Export trained weights to ONNX (BatchNorm fused, decoded outputs) and check it against torch.
+
+    Parameters
+    ----------
+    weights : str or Path
+        A weights file or checkpoint.
+    out : str or Path
+        The ``.onnx`` file, written atomically (a failed export leaves the old file).
+    height, width : int
+        The fixed input size, positive multiples of 32 (network pixels).
+    check : bool
+        Run the model in onnxruntime on a random input and compare it with torch.
+    seed : int
+        The random input's seed.
+    atol : float
+        The check's tolerance, relative to the largest output (at least 1).
+
+    Returns
+    -------
+    dict
+        ``{"path", "input_shape"}``, and ``"max_abs_diff"`` with the check.
+
+    Raises
+    ------
+    DockfactoryError
+        A size that is not a positive multiple of 32.
+    CheckpointError
+        Unusable weights.
+    ValueError
+        The ONNX model's output differs from torch's in shape or beyond the tolerance.
+    """
     import torch
 
     from dockfactory.detector.checkpoint import load_model

@@ -321,12 +321,46 @@ def _save_epoch(t: _Training, cfg: TrainConfig, epoch: int, version: str, datase
 
 def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: bool = False, progress: bool = True,
           max_batches: int | None = None, log=print, init=None) -> dict:
-    """Train on the train split of the opened ``dataset``; checkpoints in ``out``. Returns a summary dict.
+    """Train the detector on the train split of a dataset, a checkpoint in ``out`` after every epoch.
 
-    ``max_batches`` limits the batches per epoch (tests). With ``resume`` the run continues from
-    ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the epoch count).
-    ``init`` (a weights file or checkpoint path) fine-tunes from those weights (module docstring).
-    Temporary checkpoints in ``out`` whose writer is gone (a killed run) are removed first.
+    Parameters
+    ----------
+    dataset : detector.data.FrameSource
+        The opened dataset; its train split is trained on.
+    out : str or Path
+        The run folder: the ``last.pt`` checkpoint and ``weights.pt`` (written atomically).
+        Temporary checkpoints a killed run left there are removed first.
+    cfg : TrainConfig
+        Model, data, schedule and seed (the same config and data give the same weights).
+    resume : bool
+        Continue from ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the
+        epoch count).
+    progress : bool
+        A progress line per epoch.
+    max_batches : int or None
+        At most this many batches per epoch (tests); None: all.
+    log : callable
+        Where the run's one-line messages go.
+    init : str, Path or None
+        A weights file or checkpoint to fine-tune from (docs/detector.md).
+
+    Returns
+    -------
+    dict
+        ``{"run", "epochs", "dataset_version", "weights", "seconds", "history", "config"}``: the
+        weights file written, the wall seconds of this call's epochs, each epoch's losses.
+
+    Raises
+    ------
+    CheckpointError
+        Nothing to resume, a checkpoint of another dataset version or other initial weights, or
+        unusable ``init`` weights.
+    DockfactoryError
+        A dataset without train frames, a frame that cannot be read, or a bad data config.
+    ValueError
+        A bad train config.
+    FloatingPointError
+        The loss became NaN or infinite.
     """
     out = Path(out)
     if out.is_dir():   # temporary checkpoints a killed run left (their writer is gone)

@@ -43,3 +43,19 @@ def test_a_foreign_folder_named_like_a_subpackage_cannot_shadow_ours(tmp_path):
     code = "import dockfactory.cli, dockfactory.solver, dockfactory.core.config; print('ok')"
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
+
+
+def test_the_detector_facade_names_resolve_and_load_torch_only_when_used(tmp_path):
+    """``import dockfactory.detector`` loads no torch; each name of its ``__all__`` resolves to its
+    owner's object (the lazy ones too), and an unknown name is an AttributeError."""
+    code = ("import sys, dockfactory.detector as d\n"
+            "assert 'torch' not in sys.modules\n"
+            "d.refine_centre, d.card_figures\n"
+            "assert 'torch' not in sys.modules\n"
+            "from dockfactory.detector import train, infer, checkpoint, centre\n"
+            "assert d.train_detector is train.train and d.detect_dataset is infer.detect_dataset\n"
+            "assert d.load_model is checkpoint.load_model and d.refine_centre is centre.refine_centre\n"
+            "assert all(getattr(d, n) is not None for n in d.__all__)\n"
+            "try:\n    d.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stdout.startswith("ok"), proc.stderr
