@@ -13,7 +13,7 @@ from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.cfa import channel_map
-from dockfactory.detector import centre
+import dockfactory.detector.centre as centre
 from dockfactory.detector.centre import CLASS_CHANNEL
 
 MIN_CHANNEL_CNR = 2.0   # another channel joins the fit when |disc - ring| is at least this many noise sigmas

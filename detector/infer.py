@@ -259,16 +259,13 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     weights : str or Path
         A weights file or training checkpoint (loaded with ``weights_only=True``).
     out : str, Path or None
-        Where the detections JSON is written atomically; None: returned only (a caller that writes
-        another format).
+        Where the detections JSON is written atomically; None: returned only.
     split : str or None
         ``train``, ``val``, ``test``, or None for every frame.
     conf_threshold, iou_threshold : float
         The detection score kept and the NMS overlap (0-1).
-    refine : bool
-        Refine each centre on the image (detector.centre.refine_centre).
-    progress : bool
-        A progress line on stderr (and a note when the weights were trained on another version).
+    refine, progress : bool
+        Refine each centre on the image (refine_centre); a progress line on stderr.
     camera : callable or None
         Frame id -> (Bayer pattern or None, JPEG-encoded?) of the camera that took it (what its
         maker knows; ``MarkerDetector.detect``); None: three-chip PNG.
@@ -289,14 +286,23 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     DockfactoryError
         A split without frames, or a frame image that cannot be read (one line naming it).
     """
-
-    from dockfactory.detector.data import load_frames, read_rgb
-    version = dataset.version_id
+    from dockfactory.detector.data import load_frames
     frames = load_frames(dataset, split)
     det = MarkerDetector(weights, conf_threshold, iou_threshold, refine=refine)
-    if det.meta["dataset_version"] != version and progress:
+    if det.meta["dataset_version"] != dataset.version_id and progress:
         print(f"note: weights trained on dataset version {det.meta['dataset_version']}, "
-              f"detecting on {version}", file=sys.stderr)
+              f"detecting on {dataset.version_id}", file=sys.stderr)
+    results, times = _detect_frames(det, frames, camera, progress)
+    doc = _detections_doc(dataset, split, weights, det, camera is not None, results, times)
+    if out is not None:
+        write_json_atomic(out, doc)
+    return doc
+
+
+def _detect_frames(det: "MarkerDetector", frames, camera, progress: bool) -> tuple[dict, list[float]]:
+    """Each frame's detections (frame id -> list) and each frame's seconds of detection (the
+    image read left out), the camera told as :func:`detect_dataset` says."""
+    from dockfactory.detector.data import read_rgb
     results, times = {}, []
     bar = Progress(len(frames), "detect", enabled=progress, per="s")
     for i, f in enumerate(frames):
@@ -307,15 +313,18 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
         times.append(time.perf_counter() - t)
         bar.update(i + 1, extra=f"{1000 * np.mean(times):.0f} ms/image")
     bar.close()
-    doc = {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": version,
-           "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
-           "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
-           "section_shift_px": det.section_shift_px and list(det.section_shift_px),
-           "conf_threshold": conf_threshold, "iou_threshold": iou_threshold, "camera_told": camera is not None,
-           "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
-           "timing": {"frames": len(frames), "mean_ms": round(1000 * float(np.mean(times)), 2),
-                      "median_ms": round(1000 * float(np.median(times)), 2)},
-           "frames": results}
-    if out is not None:
-        write_json_atomic(out, doc)
-    return doc
+    return results, times
+
+
+def _detections_doc(dataset, split, weights, det: "MarkerDetector", camera_told: bool, results: dict,
+                    times: list[float]) -> dict:
+    """The detections JSON of :func:`detect_dataset` (its Returns)."""
+    return {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": dataset.version_id,
+            "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
+            "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
+            "section_shift_px": det.section_shift_px and list(det.section_shift_px),
+            "conf_threshold": det.conf, "iou_threshold": det.iou, "camera_told": camera_told,
+            "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
+            "timing": {"frames": len(times), "mean_ms": round(1000 * float(np.mean(times)), 2),
+                       "median_ms": round(1000 * float(np.median(times)), 2)},
+            "frames": results}

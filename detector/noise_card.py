@@ -18,7 +18,7 @@ from typing import NamedTuple
 from pathlib import Path
 
 from dockfactory.core.io import sha256_file, write_json_atomic
-from dockfactory.detector import centre
+import dockfactory.detector.centre as centre
 
 NOISE_FORMAT = "dockfactory.centre_noise/1"
 MAX_CARD_NOISE_PX = 100.0   # px: a larger figure is no detector's (equal to solver.checks.MAX_SIGMA_PX, tested)

@@ -29,12 +29,9 @@ def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool =
         The ``.onnx`` file, written atomically (a failed export leaves the old file).
     height, width : int
         The fixed input size, positive multiples of 32 (network pixels).
-    check : bool
-        Run the model in onnxruntime on a random input and compare it with torch.
-    seed : int
-        The random input's seed.
-    atol : float
-        The check's tolerance, relative to the largest output (at least 1).
+    check, seed, atol : bool, int, float
+        Run the model in onnxruntime on a random input of that seed and compare it with torch,
+        within ``atol`` relative to the largest output (at least 1).
 
     Returns
     -------
@@ -64,15 +61,23 @@ def export_onnx(weights, out, height: int = 480, width: int = 640, check: bool =
                           opset_version=17, dynamo=False)
     info = {"path": str(out), "input_shape": [1, 3, height, width]}
     if check:
-        import onnxruntime as ort
-        sess = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
-        got = sess.run(None, {"images": x.numpy()})[0]
-        with torch.inference_mode():
-            ref = model(x).numpy()
-        if got.shape != ref.shape:
-            raise ValueError(f"ONNX output shape {got.shape} != torch {ref.shape}")
-        diff = float(np.abs(got - ref).max())
-        info["max_abs_diff"] = diff
-        if diff > atol * max(1.0, float(np.abs(ref).max())):
-            raise ValueError(f"ONNX output differs from torch by {diff:.3g} (tolerance {atol} relative)")
+        info["max_abs_diff"] = _check_against_torch(model, x, out, atol)
     return info
+
+
+def _check_against_torch(model, x, path: Path, atol: float) -> float:
+    """The largest absolute difference of the ONNX model at ``path`` (onnxruntime, CPU) from the
+    torch ``model`` on input ``x``; ValueError when the shapes differ or it is beyond ``atol``
+    relative to the largest output (at least 1)."""
+    import onnxruntime as ort
+    import torch
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got = sess.run(None, {"images": x.numpy()})[0]
+    with torch.inference_mode():
+        ref = model(x).numpy()
+    if got.shape != ref.shape:
+        raise ValueError(f"ONNX output shape {got.shape} != torch {ref.shape}")
+    diff = float(np.abs(got - ref).max())
+    if diff > atol * max(1.0, float(np.abs(ref).max())):
+        raise ValueError(f"ONNX output differs from torch by {diff:.3g} (tolerance {atol} relative)")
+    return diff

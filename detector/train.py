@@ -332,15 +332,11 @@ def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: b
         Temporary checkpoints a killed run left there are removed first.
     cfg : TrainConfig
         Model, data, schedule and seed (the same config and data give the same weights).
-    resume : bool
-        Continue from ``out/last.pt`` with the checkpoint's config (``cfg.epochs`` may raise the
-        epoch count).
-    progress : bool
-        A progress line per epoch.
-    max_batches : int or None
-        At most this many batches per epoch (tests); None: all.
-    log : callable
-        Where the run's one-line messages go.
+    resume, progress : bool
+        Continue from ``out/last.pt`` with its config (``cfg.epochs`` may raise the epoch count);
+        a progress line per epoch.
+    max_batches, log : int or None, callable
+        At most this many batches per epoch (tests; None: all); where one-line messages go.
     init : str, Path or None
         A weights file or checkpoint to fine-tune from (docs/detector.md).
 
@@ -355,34 +351,36 @@ def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: b
     CheckpointError
         Nothing to resume, a checkpoint of another dataset version or other initial weights, or
         unusable ``init`` weights.
-    DockfactoryError
-        A dataset without train frames, a frame that cannot be read, or a bad data config.
-    ValueError
-        A bad train config.
+    DockfactoryError, ValueError
+        A dataset without train frames, a frame that cannot be read, a bad data or train config.
     FloatingPointError
         The loss became NaN or infinite.
     """
     out = Path(out)
     if out.is_dir():   # temporary checkpoints a killed run left (their writer is gone)
         remove_stale_temps(out, max_age_s=STALE_CHECKPOINT_S)
-    version = dataset.version_id
     init_w = load_init_weights(init) if init is not None else None
     frames = load_frames(dataset, "train")
-    last = out / "last.pt"
-    ckpt = _load_resume_checkpoint(last, dataset, version) if resume else None
+    ckpt = _load_resume_checkpoint(out / "last.pt", dataset, dataset.version_id) if resume else None
     cfg = _run_config(cfg, ckpt, frames, log, init_w)
     t = _setup_training(cfg, frames, max_batches)
-    start_epoch, history = _restore(t, ckpt, last, cfg.epochs, log, init_w)
+    start_epoch, history = _restore(t, ckpt, out / "last.pt", cfg.epochs, log, init_w)
+    return _run_epochs(t, cfg, range(start_epoch, cfg.epochs), history, ckpt, dataset, out, progress)
+
+
+def _run_epochs(t, cfg: TrainConfig, epochs: range, history: list, ckpt, dataset, out: Path, progress: bool) -> dict:
+    """Train ``epochs`` (a checkpoint after each), write ``out/weights.pt`` from the last checkpoint
+    (``ckpt``, the resumed one, when no epoch is left) and return :func:`train`'s summary."""
+    version = dataset.version_id
     t_start = time.monotonic()
-    for epoch in range(start_epoch, cfg.epochs):
+    for epoch in epochs:
         history.append(_train_epoch(t, cfg, epoch, progress))
         ckpt = _save_epoch(t, cfg, epoch, version, dataset, history, out)
     if ckpt is None:  # resumed a finished run
-        ckpt = load_file(last, (CHECKPOINT_FORMAT,))
+        ckpt = load_file(out / "last.pt", (CHECKPOINT_FORMAT,))
     save_atomic(weights_from_checkpoint(ckpt, half=False), out / "weights.pt")
     return {"run": str(out), "epochs": cfg.epochs, "dataset_version": version, "weights": str(out / "weights.pt"),
             "seconds": round(time.monotonic() - t_start, 1), "history": history, "config": cfg.to_dict()}
-
 
 def _write_json(path: Path, obj) -> None:
     write_json_atomic(path, obj)
