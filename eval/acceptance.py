@@ -85,6 +85,23 @@ class AcceptanceSpec:
 
 
 def load_acceptance(path) -> AcceptanceSpec:
+    """Read and check an acceptance spec (TOML, never executed; docs/acceptance.md).
+
+    Parameters
+    ----------
+    path : str or Path
+        The spec file; a table it gives replaces the default gates wholesale.
+
+    Returns
+    -------
+    AcceptanceSpec
+
+    Raises
+    ------
+    ConfigError
+        A missing, unreadable, non-UTF-8 or invalid file, or a bad key or value (one line naming
+        the file, table and key).
+    """
     path = Path(path)
     check_regular_file(path, "acceptance spec")
     try:
@@ -310,7 +327,18 @@ def overall_verdict(criteria: list[dict]) -> str:
 
 
 def verdict_exit_status(verdict_text: str) -> int:
-    """0 ACCEPTED, 1 REJECTED, EXIT_NOT_PROVEN (3) NOT PROVEN."""
+    """The exit status of a verdict.
+
+    Parameters
+    ----------
+    verdict_text : str
+        ``ACCEPTED``, ``REJECTED`` or ``NOT PROVEN``.
+
+    Returns
+    -------
+    int
+        0 ACCEPTED, 1 REJECTED, EXIT_NOT_PROVEN (3) for NOT PROVEN (and anything else).
+    """
     return {"ACCEPTED": 0, "REJECTED": 1}.get(verdict_text, EXIT_NOT_PROVEN)
 
 

@@ -81,9 +81,28 @@ def coverage_k(spec: AcceptanceSpec) -> float:
 
 
 def pose_conformity(pose: dict, std: dict, tolerances: dict, k: float = COVERAGE_K) -> dict:
-    """{"components": {name: {"value", "u", "U", "tolerance", "decision"}}, "decision": worst}
-    of one pose (``pose`` and ``std``: pose name -> value and standard uncertainty) against
-    ``tolerances`` (pose name -> T)."""
+    """One pose's conformity with its tolerances under ISO 14253-1 (the uncertainty counted).
+
+    Parameters
+    ----------
+    pose, std : dict
+        Pose name -> value and its standard uncertainty (mm, deg; None: not known).
+    tolerances : dict
+        Pose name -> tolerance T (same units).
+    k : float
+        The coverage factor of the expanded uncertainty U = k u.
+
+    Returns
+    -------
+    dict
+        ``{"components": {name: {"value", "u", "U", "tolerance", "decision"}}, "decision": the
+        worst, "k"}``.
+
+    Raises
+    ------
+    ValueError
+        A tolerance or uncertainty that is not a finite number above 0.
+    """
     rows = {}
     for name, tol in tolerances.items():
         v, u = pose.get(name), std.get(name)

@@ -101,9 +101,28 @@ def match_frame(gt_boxes, gt_classes, det_boxes, det_scores, det_classes, iou_th
 
 
 def evaluate_detections(ds, detections, split: str | None = None, recall_conf: float = MIN_SCORE) -> dict:
-    """All metrics for a detections JSON (path or dict) on the opened dataset ``ds``
-    (generator.dataset_open.Dataset; the detections' split by default): the labelled frames are
-    the dataset's planned frames, never a directory listing."""
+    """Every detection metric of a detections document against a dataset's labels.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened dataset; its planned frames are the labelled ones (never a folder listing).
+    detections : dict, str or Path
+        A detections document (``detect``) or its file.
+    split, recall_conf : str or None, float
+        The split scored (None: the detections'); the score a detection needs to count for recall.
+
+    Returns
+    -------
+    dict
+        COCO mAP (and YOLOv5's), the network's boxes alone, centre errors and recall, with the
+        frame count, split and versions.
+
+    Raises
+    ------
+    DockfactoryError
+        Not a detections document, or no labelled frame of the split has detections (one line).
+    """
     doc = json.loads(Path(detections).read_text()) if isinstance(detections, (str, Path)) else detections
     if "frames" not in doc:
         raise DockfactoryError("detections: no 'frames' (not a dockfactory detections file?)")

@@ -414,8 +414,25 @@ def portable_path(path, folder) -> str:
 
 
 def write_outputs(out_dir, metrics: dict, rows: list[dict]) -> None:
-    """frames.csv and metrics.json into ``out_dir``; the metrics' dataset root and poses path
-    recorded relative to it (:func:`portable_path`)."""
+    """Write an evaluation's ``frames.csv`` and ``metrics.json`` (atomically) into a folder.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The folder (it exists); the metrics' dataset root and poses path are recorded relative to
+        it (:func:`portable_path`), so the folder can move.
+    metrics, rows : dict, list of dict
+        What :func:`evaluate` returned.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OSError
+        A file cannot be written (the one before keeps its bytes).
+    """
     out = Path(out_dir)
     metrics = {**metrics, "dataset": {**metrics["dataset"], "root": portable_path(metrics["dataset"]["root"], out)},
                "poses": {**metrics["poses"], "path": portable_path(metrics["poses"]["path"], out)}}

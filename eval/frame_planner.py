@@ -24,11 +24,27 @@ BLOCKS = {"localization": "test frames", "estimation": "repeatability degrees of
 
 
 def plan_frames(spec: AcceptanceSpec, expected: dict[str, dict[str, float]]) -> list[dict]:
-    """One row per gated component of each block in ``expected`` ({"localization" |
-    "estimation": {component: expected rmse}}): threshold (rmse units), margin, what the frames
-    would prove ("conformance" / "non-conformance" / None at the threshold) and how many (None:
-    no count up to 100,000 decides). A gated component without an expected figure is a
-    DockfactoryError (one line)."""
+    """How many frames would decide each gated criterion, given the error expected of it.
+
+    Parameters
+    ----------
+    spec : AcceptanceSpec
+        The gates (thresholds, statistics, confidence).
+    expected : dict
+        {"localization" | "estimation": {component: expected rmse}} (mm, deg).
+
+    Returns
+    -------
+    list of dict
+        One row per gated component: threshold (rmse units), margin, what the frames would prove
+        ("conformance" / "non-conformance" / None at the threshold) and how many (None: no count
+        up to 100,000 decides).
+
+    Raises
+    ------
+    DockfactoryError
+        A gated component without an expected figure (one line).
+    """
     rows = []
     for block, figures in expected.items():
         gate = getattr(spec, block)

@@ -22,10 +22,27 @@ from dockfactory.eval.solve_frames import solve_dataset
 
 def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN_SCORE,
                          progress: bool = False) -> dict:
-    """Detect and solve ``split`` of the opened dataset ``ds`` with ``weights``, write the card
-    next to the weights and return what it holds. DockfactoryError when the split has no frames
-    or no solved frame with a matched centre. The detector is told each frame's camera (Bayer pattern,
-    JPEG) as ``detect`` and ``run`` tell it."""
+    """Measure the centre noise of weights on labelled frames and write their noise card.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened dataset; the detector is told each frame's camera (Bayer, JPEG).
+    weights : str or Path
+        The weights measured; the card is written beside them.
+    split, min_score, progress : str, float, bool
+        The split detected and solved, the detection score kept, a progress line.
+
+    Returns
+    -------
+    dict
+        What the card holds: ``card`` (its path), ``centre_noise_px`` (px per axis) and details.
+
+    Raises
+    ------
+    DockfactoryError
+        No frames in the split, or no solved frame with a matched centre (one line).
+    """
     from dockfactory.detector.infer import detect_dataset  # torch
     if not ds.frames((split,)):
         raise DockfactoryError(f"{ds.root}: no frames in the {split} split to measure the centre noise on")

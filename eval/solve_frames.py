@@ -160,33 +160,63 @@ def true_camera_centres(label: dict, centres):
 
 
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
-                  oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE,
-                  sigma_px: float | None = None, camera_model: str = "pinhole",
-                  self_calibrate: str | None = None, sigma_floor_px: float | None = None,
-                  true_camera: bool = False, lens: LensPrior | None = None,
-                  section_shift_px=None) -> dict:
-    """Solve every frame of ``splits``; exactly one of ``detections`` / ``oracle_sigma_px``.
-    ``camera_model``: the solver's (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``self_calibrate``
-    "sequence" solves each docking run of the labels (one camera unit, one run) with shared
-    intrinsics, "frame" (or None) each frame alone. ``sigma_floor_px``: the detector's centre noise
-    measured on labelled frames, below which no frame's residual estimate of the noise is taken
-    (solver RefineOptions.sigma_floor_px; the covariance); default: the detections' own
-    ``centre_noise_px`` (detect copies it from the weights' noise card), if any. ``true_camera``:
-    each frame solved with its label's principal point and distortion (the reference of a
-    calibrated camera, :func:`true_camera_centres`; the pinhole model, per frame or per docking
-    run: a run is one camera unit, whose principal point its first frame's label gives).
-    ``lens``: see :func:`lens_prior_for` (None: its choice; known with ``true_camera``).
-    ``section_shift_px`` (x, y): the common offset of a section's centres measured on other
-    labelled frames of the camera class (eval.section_shift); default: the detections' own
-    ``section_shift_px`` (detect copies it from the weights' noise card), if any; the oracle's
-    centres have none."""
+                  oracle_sigma_px: float | None = None, min_score: float = MIN_SCORE, sigma_px: float | None = None,
+                  camera_model: str = "pinhole", self_calibrate: str | None = None, sigma_floor_px: float | None = None,
+                  true_camera: bool = False, lens: LensPrior | None = None, section_shift_px=None) -> dict:
+    """Solve the pose of every frame of a dataset's splits, from detections or from the labels.
+
+    Parameters
+    ----------
+    ds, splits : Dataset, tuple of str
+        The opened dataset (its layout, image size and labels); the splits solved.
+    detections, oracle_sigma_px : dict or None, float or None
+        Exactly one: a detections document (``detect``), or the labels' centres with Gaussian
+        noise of this sigma (px; 0: exact).
+    min_score, sigma_px, sigma_floor_px : float, float or None, float or None
+        The detection score kept; the centre noise the covariance assumes (None: estimated), and
+        no estimate below ``sigma_floor_px`` (default: the detections' noise card figure).
+    camera_model, self_calibrate : str, str or None
+        The solver's model (pinhole, k1, k1k2, pp_k1, pp_k1_p, auto); ``sequence`` solves each
+        docking run with shared intrinsics, ``frame`` (or None) each frame alone.
+    true_camera, lens, section_shift_px : bool, LensPrior or None, (float, float) or None
+        Each frame with its label's principal point and distortion (a calibrated camera's
+        reference); the lens prior (:func:`lens_prior_for`, None: its choice); the common offset
+        of a section's centres (eval.section_shift; default: the card's).
+
+    Returns
+    -------
+    dict
+        The poses document: its settings and ``frames`` (frame id -> solved record or
+        ``{"ok": False, "reason", "category"}``), mm and degrees, pixels in the OpenCV convention.
+
+    Raises
+    ------
+    ValueError
+        Both or neither of detections and oracle, an unknown mode, true_camera with another model.
+    DockfactoryError
+        A joint solve (``sequence``) of a dataset without docking runs (one line).
+    """
     _check_modes(ds, detections, oracle_sigma_px, self_calibrate, true_camera, camera_model)
-    markers = ds.markers()
     w, h = ds.config.image.width, ds.config.image.height
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
     sigma = sigma_px if sigma_px is not None or detections is not None else (oracle_sigma_px or None)
-    per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
     options = _dataset_options(ds, detections, sigma_floor_px, lens, true_camera, section_shift_px)
+    frames = _solve_frames(ds, splits, detections, oracle_sigma_px, min_score, pp, sigma, camera_model,
+                           self_calibrate, true_camera, options)
+    return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
+            "source": "detections" if detections is not None else "oracle", "oracle_sigma_px": oracle_sigma_px,
+            "min_score": min_score, "principal_point": list(pp), "camera_model": camera_model,
+            "self_calibrate": self_calibrate, "sigma_floor_px": options.refine.sigma_floor_px,
+            "section_shift_px": options.section_shift_px and list(options.section_shift_px),
+            "true_camera": bool(true_camera), "lens_prior": asdict(options.lens), "splits": list(splits), "frames": frames}
+
+
+def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, pp, sigma, camera_model,
+                  self_calibrate, true_camera: bool, options) -> dict:
+    """Frame id -> record of every frame of ``splits`` (:func:`solve_dataset`'s ``frames``): each
+    frame alone, then, with ``self_calibrate`` "sequence", each docking run with shared intrinsics."""
+    markers = ds.markers()
+    per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
     frames, used, edges = {}, {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
@@ -199,13 +229,7 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
             frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options, edges))
-    return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
-            "source": "detections" if detections is not None else "oracle",
-            "oracle_sigma_px": oracle_sigma_px, "min_score": min_score, "principal_point": list(pp),
-            "camera_model": camera_model, "self_calibrate": self_calibrate,
-            "sigma_floor_px": options.refine.sigma_floor_px,
-            "section_shift_px": options.section_shift_px and list(options.section_shift_px),
-            "true_camera": bool(true_camera), "lens_prior": asdict(options.lens), "splits": list(splits), "frames": frames}
+    return frames
 
 
 def _check_modes(ds: Dataset, detections, oracle_sigma_px, self_calibrate, true_camera: bool, camera_model) -> None:
@@ -392,6 +416,26 @@ def _joint_records(markers, pp, group, frames, used, sigma, camera_model, option
 
 
 def write_poses(path, poses: dict, detections_path=None) -> None:
+    """Write a poses document (:func:`solve_dataset`) atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The poses JSON.
+    poses : dict
+        The document.
+    detections_path : str, Path or None
+        The detections it was solved from, bound to it by their sha256.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OSError
+        The detections cannot be read or the file cannot be written (the one before stays).
+    """
     if detections_path is not None:
         poses = {**poses, "detections_sha256": sha256_file(detections_path)}
     write_json_atomic(path, poses, indent=None)
