@@ -194,10 +194,10 @@ class RenderConfig:
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
-    marker_samples: int = 24         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
+    marker_samples: int = 32         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
-    marker_adaptive_threshold: float = 0.0  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold); 0 = every pixel marker_samples
-    marker_adaptive_min_samples: int = 0  # with that adaptive sampling, every pixel at least this many samples; 0 = Cycles' automatic minimum (most of marker_samples at small thresholds)
+    marker_adaptive_threshold: float = 0.02  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold: the markers' edges get them all, flat paint stops early; docs/rendering.md); 0 = every pixel marker_samples
+    marker_adaptive_min_samples: int = 4  # with that adaptive sampling, every pixel at least this many samples; 0 = Cycles' automatic minimum (most of marker_samples at small thresholds)
     marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
     marker_coverage_threshold: float = 0.005  # > 0: that coverage render with adaptive sampling up to marker_coverage_samples (the markers' edges get them, their insides stop early); 0 = every pixel all of them
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
@@ -220,10 +220,15 @@ class RenderConfig:
         coverage render."""
         return self.marker_coverage_threshold if self.rendered_coverage_samples() else 0.0
 
+    def rendered_adaptive_threshold(self) -> float:
+        """The marker regions' adaptive threshold the frames are rendered with: 0 without
+        label-aware sampling (no marker regions to sample)."""
+        return self.marker_adaptive_threshold if self.marker_samples else 0.0
+
     def rendered_adaptive_min_samples(self) -> int:
         """The marker regions' adaptive minimum the frames are rendered with: 0 without adaptive
-        sampling there (no minimum to keep)."""
-        return self.marker_adaptive_min_samples if self.marker_samples and self.marker_adaptive_threshold else 0
+        sampling there (no minimum to keep), at most ``marker_samples``."""
+        return min(self.marker_adaptive_min_samples, self.marker_samples) if self.rendered_adaptive_threshold() else 0
 
 
 @dataclass(frozen=True)
@@ -337,6 +342,7 @@ class Config:
             d["render"]["light_tree"] = self.render.rendered_light_tree()
             d["render"]["marker_coverage_samples"] = self.render.rendered_coverage_samples()
             d["render"]["marker_coverage_threshold"] = self.render.rendered_coverage_threshold()
+            d["render"]["marker_adaptive_threshold"] = self.render.rendered_adaptive_threshold()
             d["render"]["marker_adaptive_min_samples"] = self.render.rendered_adaptive_min_samples()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
             if d[table][key] == neutral:
@@ -429,16 +435,17 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` and
-    ``marker_coverage_samples`` / ``marker_coverage_threshold`` / ``marker_adaptive_min_samples`` are
-    the ones the frames render with (without label-aware sampling ``markers`` is ``off`` and the
-    coverage samples 0, without those samples the threshold 0, without an adaptive threshold at the
-    markers their minimum 0), so a config and its stored identity read
-    back equal."""
+    ``marker_coverage_samples`` / ``marker_coverage_threshold`` / ``marker_adaptive_threshold`` /
+    ``marker_adaptive_min_samples`` are the ones the frames render with (without label-aware
+    sampling ``markers`` is ``off``, the coverage samples and the adaptive threshold 0, without
+    those samples the coverage threshold 0, without an adaptive threshold its minimum 0, and the
+    minimum at most ``marker_samples``), so a config and its stored identity read back equal."""
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
     render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree(),
                                  marker_coverage_samples=cfg.render.rendered_coverage_samples(),
                                  marker_coverage_threshold=cfg.render.rendered_coverage_threshold(),
+                                 marker_adaptive_threshold=cfg.render.rendered_adaptive_threshold(),
                                  marker_adaptive_min_samples=cfg.render.rendered_adaptive_min_samples())
     return dataclasses.replace(cfg, render=render)
 
@@ -745,8 +752,8 @@ def _validate_render(cfg: Config, source: str) -> None:
     _check_at_most(source, "render", "marker_samples", rc.marker_samples, MAX_SAMPLES, "Cycles' limit")
     _check_positive(source, "render", "marker_adaptive_threshold", rc.marker_adaptive_threshold, allow_zero=True)
     _check_positive(source, "render", "marker_adaptive_min_samples", rc.marker_adaptive_min_samples, allow_zero=True)
-    _check_at_most(source, "render", "marker_adaptive_min_samples", rc.marker_adaptive_min_samples,
-                   rc.marker_samples or MAX_SAMPLES, "marker_samples" if rc.marker_samples else "Cycles' limit")
+    _check_at_most(source, "render", "marker_adaptive_min_samples", rc.marker_adaptive_min_samples, MAX_SAMPLES,
+                   "Cycles' limit")
     _check_marker_coverage(source, rc)
     if rc.light_tree not in LIGHT_TREE_CHOICES:
         raise _err(source, "render", "light_tree", f"{rc.light_tree!r} is not one of {', '.join(LIGHT_TREE_CHOICES)}")

@@ -455,7 +455,7 @@ def render_settings(render: RenderConfig) -> RenderSettings:
                           render.adaptive_min_samples, render.filter_width_px, render.denoise_prefilter,
                           render.sampling_pattern, render.post_filter, marker_samples=render.marker_samples,
                           marker_denoise=render.marker_denoise,
-                          marker_adaptive_threshold=render.marker_adaptive_threshold,
+                          marker_adaptive_threshold=render.rendered_adaptive_threshold(),
                           marker_adaptive_min_samples=render.rendered_adaptive_min_samples(),
                           light_tree=render.rendered_light_tree(),
                           marker_coverage_samples=render.rendered_coverage_samples(),

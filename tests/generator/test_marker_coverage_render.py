@@ -22,6 +22,7 @@ CONFIG = {
     "image": {"width": 320, "height": 240},
     "camera": {"focal_px": [420.0, 460.0], "distance_mm": [1000.0, 1100.0], "margin_px": 8.0},
     "render": {"marker_samples": 8, "marker_denoise": "off", "marker_coverage_samples": 0, "keep_exr": True,
+               "marker_adaptive_threshold": 0.0,
                "frame_timeout_s": TIMEOUT_S},
 }
 NAMES = ("crops", "coverage", "coverage_denoised", "coverage_adaptive", "converged")

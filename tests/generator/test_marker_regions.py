@@ -29,7 +29,7 @@ from dockfactory.generator.sampler import frame_plan, render_settings, sample_fr
 
 
 def _cfg(**render):
-    return config_from_dict({"dataset": {"frames": 12, "seed": 7}, "render": {"marker_samples": 24, **render}})
+    return config_from_dict({"dataset": {"frames": 12, "seed": 7}, "render": {"marker_samples": 32, **render}})
 
 
 @pytest.fixture(scope="module")
@@ -199,32 +199,43 @@ def test_render_settings_leave_the_key_out_while_off():
 
 def test_the_key_is_in_the_identity_only_when_on():
     plain = config_from_dict({"dataset": {"frames": 12, "seed": 7}})
-    assert plain.render.marker_samples == 24                          # on by default
-    assert identity(_cfg(marker_samples=24)) == identity(plain)
+    assert plain.render.marker_samples == 32                          # on by default
+    assert identity(_cfg(marker_samples=32)) == identity(plain)
     assert "marker_samples" not in _cfg(marker_samples=0).to_dict()["render"]   # ids of before the key
     assert identity(_cfg(marker_samples=0)) != identity(plain)
     assert identity(_cfg(marker_samples=32)) != identity(_cfg(marker_samples=64))
     assert identity(_cfg(marker_denoise="off")) != identity(_cfg())
     assert identity(_cfg(marker_denoise="fast")) == identity(_cfg())
-    assert identity(_cfg(marker_adaptive_threshold=0.02)) != identity(_cfg())
+    assert identity(_cfg(marker_adaptive_threshold=0.05)) != identity(_cfg())
+    assert identity(_cfg(marker_adaptive_threshold=0.0)) != identity(_cfg())
 
 
-def test_the_adaptive_minimum_counts_only_with_adaptive_sampling_at_the_markers():
-    """Without an adaptive threshold at the markers the minimum changes no pixel: it reads as 0 and
-    leaves the identity alone; with one it is the crops' minimum, in the identity and the frame."""
-    assert _cfg(marker_adaptive_min_samples=8).render.marker_adaptive_min_samples == 0
-    assert identity(_cfg(marker_adaptive_min_samples=8)) == identity(_cfg())
-    on = _cfg(marker_adaptive_threshold=0.02, marker_adaptive_min_samples=8)
-    assert on.render.marker_adaptive_min_samples == 8
-    assert identity(on) != identity(_cfg(marker_adaptive_threshold=0.02))
+def test_the_adaptive_keys_count_only_where_they_change_a_pixel():
+    """The crops' adaptive threshold (0.02 from 4 samples by default) reads as 0 without crops and
+    its minimum as 0 without a threshold, leaving the identity of those configs as it was before
+    the keys; a minimum above the crops' samples is their count; with both they are the frame's."""
+    plain = _cfg()
+    assert (plain.render.marker_adaptive_threshold, plain.render.marker_adaptive_min_samples) == (0.02, 4)
+    off = _cfg(marker_samples=0)
+    assert (off.render.marker_adaptive_threshold, off.render.marker_adaptive_min_samples) == (0.0, 0)
+    assert identity(_cfg(marker_samples=0, marker_adaptive_threshold=0.05)) == identity(off)
+    fixed = _cfg(marker_adaptive_threshold=0.0)
+    assert fixed.render.marker_adaptive_min_samples == 0
+    assert identity(_cfg(marker_adaptive_threshold=0.0, marker_adaptive_min_samples=8)) == identity(fixed)
+    assert "marker_adaptive_threshold" not in fixed.to_dict()["render"]          # ids of before the keys
+    assert _cfg(marker_samples=2).render.marker_adaptive_min_samples == 2
+    on = _cfg(marker_adaptive_min_samples=8)
+    assert identity(on) != identity(plain)
     assert render_settings(on.render).marker_adaptive_min_samples == 8
-    assert "marker_adaptive_min_samples" not in to_dict(render_settings(_cfg().render))
+    assert render_settings(plain.render).marker_adaptive_threshold == 0.02
+    assert "marker_adaptive_min_samples" not in to_dict(render_settings(fixed.render))
+    assert "marker_adaptive_threshold" not in to_dict(render_settings(off.render))
     assert config_from_identity(json.loads(on.canonical_json())) == on
 
 
 @pytest.mark.parametrize("key, value", [("marker_samples", -1), ("marker_samples", 1 << 25),
                                         ("marker_denoise", "oidn"), ("marker_adaptive_threshold", -0.01),
-                                        ("marker_adaptive_min_samples", -1), ("marker_adaptive_min_samples", 25)])
+                                        ("marker_adaptive_min_samples", -1), ("marker_adaptive_min_samples", 1 << 25)])
 def test_bad_values_are_refused_naming_the_key(key, value):
     with pytest.raises(ConfigError, match=key):
         _cfg(**{key: value})
@@ -235,7 +246,7 @@ def test_a_stored_identity_without_the_key_reads_back_off():
     back, it is off, not today's default; a written config states it, so it reads back too."""
     off = _cfg(marker_samples=0)
     stored = json.loads(off.canonical_json())
-    assert config_from_dict(stored).render.marker_samples == 24        # a config file's reading
+    assert config_from_dict(stored).render.marker_samples == 32        # a config file's reading
     assert config_from_identity(stored) == off                         # a stored identity's
     assert config_from_identity(json.loads(_cfg().canonical_json())) == _cfg()
     assert off.resolved_dict()["render"]["marker_samples"] == 0

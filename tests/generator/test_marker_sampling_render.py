@@ -28,6 +28,7 @@ CONFIG = {
     "image": {"width": 320, "height": 240},
     "camera": {"focal_px": [200.0, 280.0]},
     "render": {"marker_samples": SAMPLES, "marker_denoise": "off", "marker_coverage_samples": 0, "keep_exr": True,
+               "marker_adaptive_threshold": 0.0,
                "frame_timeout_s": TIMEOUT_S},
 }
 

@@ -35,7 +35,7 @@ def test_the_default_device_keeps_every_config_hash():
     for name, before in BEFORE_DEVICE.items():
         cfg = load_config(shipped_config(name))
         if name in SAMPLING_BY_DEFAULT:
-            assert cfg.render.marker_samples == 24 and _vid(cfg) != before, name
+            assert cfg.render.marker_samples == 32 and _vid(cfg) != before, name
             cfg = _before_sampling(cfg)
         assert cfg.render.device == "cpu" and _vid(cfg) == before, name
         assert "device" not in cfg.to_dict()["render"] and cfg.to_dict(full=True)["render"]["device"] == "cpu"
