@@ -59,3 +59,22 @@ def test_the_detector_facade_names_resolve_and_load_torch_only_when_used(tmp_pat
             "try:\n    d.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("ok"), proc.stderr
+
+
+def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
+    """``import dockfactory.eval.evaluate as m`` must give the module: a facade that bound a
+    function of the same name as one of its package's modules would hand out the function. Two
+    older facades do (``solver.upnp``, ``generator.exports.coco_results``): listed, so no new one
+    can join them."""
+    code = ("import importlib, pkgutil, types\n"
+            "known = {('dockfactory.solver', 'upnp'), ('dockfactory.generator.exports', 'coco_results')}\n"
+            "for pkg in ('dockfactory.eval', 'dockfactory.detector', 'dockfactory.solver',\n"
+            "            'dockfactory.generator.exports', 'dockfactory.eval.report', 'dockfactory.measure'):\n"
+            "    p = importlib.import_module(pkg)\n"
+            "    for m in pkgutil.iter_modules(p.__path__):\n"
+            "        importlib.import_module(f'{pkg}.{m.name}')\n"
+            "        got = getattr(p, m.name)\n"
+            "        assert isinstance(got, types.ModuleType) or (pkg, m.name) in known, (pkg, m.name, got)\n"
+            "print('ok')\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stdout.startswith("ok"), proc.stderr
