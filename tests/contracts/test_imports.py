@@ -57,8 +57,7 @@ def test_the_detector_facade_names_resolve_and_load_torch_only_when_used(tmp_pat
             "assert d.load_model is checkpoint.load_model and d.refine_centre is centre.refine_centre\n"
             "assert all(getattr(d, n) is not None for n in d.__all__)\n"
             "try:\n    d.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
-    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
-    assert proc.returncode == 0 and proc.stdout.startswith("ok"), proc.stderr
+    _runs_ok(code, tmp_path)
 
 
 def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
@@ -76,5 +75,10 @@ def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
             "        got = getattr(p, m.name)\n"
             "        assert isinstance(got, types.ModuleType) or (pkg, m.name) in known, (pkg, m.name, got)\n"
             "print('ok')\n")
+    _runs_ok(code, tmp_path)
+
+
+def _runs_ok(code: str, tmp_path) -> None:
+    """Run ``code`` in a fresh interpreter; it must exit 0 and print a line starting with ``ok``."""
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("ok"), proc.stderr
