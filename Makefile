@@ -24,8 +24,10 @@ demo: $(STAMP)
 	@echo "report: out/quick/report.html  (summary: out/quick/report.md)"
 	@echo "dataset: out/quick/dataset (images/, labels/, manifest.json); one frame with its labels: out/quick/overlay_000000.png"
 
+# both cores (pytest-xdist), each test file on one worker (its module fixtures, a render or a
+# training, made once); the 20 slowest tests listed at the end
 test: $(STAMP)
-	$(BIN)/python -m pytest -q --durations=20   # the 20 slowest tests listed at the end
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
 
 lint: $(STAMP)
 	$(BIN)/ruff check .   # the rules of [tool.ruff.lint] in pyproject.toml

@@ -381,6 +381,7 @@ def test_stream_statistics_use_constant_memory_and_keep_percentiles_within_1_per
         stats.latency_ms.add(float("nan"))
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_a_calibrated_camera_streamed_is_measured_as_its_images(tmp_path_factory, capsys):
     """The painted run rendered through a calibrated camera (principal point 15 / -10 px off, k1
     -0.08; [camera_units] calibration), exported lossless and streamed with --calibration: every

@@ -11,6 +11,9 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.dataset_open import Dataset
 from dockfactory.pipeline import Stages, _solve_stage
 
+# painting 24 frames at 1280 x 960 and solving them: the full suite runs it, the fast lane leaves it out
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def painted(tmp_path_factory):

@@ -176,6 +176,7 @@ def test_report_still_reads_an_older_metrics_file(evaluated, tmp_path):
     assert "older metrics file" in html and "Is the reported covariance honest?" not in html
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_the_report_is_the_same_from_any_folder_or_one_line_without_its_inputs(evaluated, tmp_path, monkeypatch):
     """The evaluation records its inputs relative to its folder: report from inside the tree and
     from elsewhere gives the same bytes (the date pinned by SOURCE_DATE_EPOCH); the evaluation

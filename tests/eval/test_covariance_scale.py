@@ -29,6 +29,7 @@ def test_scaling_and_floor_of_the_estimated_sigma():
     assert np.allclose(low, cov)                                    # a floor below the estimate: no change
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_estimated_sigma_gives_standard_scores_on_six_point_sets():
     """600 seeded 6-point single-section solves at 0.3 px, sigma estimated from 5 dof: the
     translation's z has RMS 1 (it was sqrt(5/3) = 1.29 before the Student-t scaling)."""

@@ -55,6 +55,7 @@ def test_frames_with_the_stated_noise_pass_and_say_so(frames):
     assert 0.6 < float(np.median(ratios)) < 1.4            # the residuals follow the stated noise
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_another_scenes_layout_is_refused_in_one_line(frames, monkeypatch):
     ds, fs = frames
     other = build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, 450.0, 30.0)
@@ -70,6 +71,7 @@ def test_another_scenes_layout_is_refused_in_one_line(frames, monkeypatch):
                                      and "\n" not in r["reason"] for r in misfits)
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_a_stretched_image_is_refused(frames):
     ds, fs = frames
     for f in fs[:3]:

@@ -61,6 +61,7 @@ def _page_tags(page) -> list[str]:
     return tags
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_the_pdf_pages_render_and_no_heading_ends_a_page(eval_dir, tmp_path, capsys):
     weasyprint = _weasyprint()
     pdfium = pytest.importorskip("pypdfium2", reason="pypdfium2 renders the PDF's pages (pip install 'dockfactory[pdf]')")

@@ -117,7 +117,7 @@ def test_runs_and_repeatability_frames_move_too():
 
 # ----------------------------------------------------------------------------- motion off
 
-@pytest.mark.parametrize("name", ["quick", "realistic", "ideal"])
+@pytest.mark.parametrize("name", ["quick", pytest.param("realistic", marks=pytest.mark.slow), "ideal"])
 def test_configs_without_motion_sample_and_label_the_bytes_of_before(repo_root, name):
     """Every frame's scene (to_dict) and label text (no index pass) against their digests: the scenes' at
     0724401 (before motion), the labels' re-recorded when the section silhouette changed (the file's about);
@@ -373,6 +373,7 @@ def rolling_image_centroid(mb: MovingB, marker, step: float = 0.01) -> np.ndarra
     return np.array([mx, my]) / area
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_rolling_outline_centroid_matches_a_row_by_row_integration():
     cfg = motion_cfg(frames=2, rolling_ms=40.0, motion={"velocity_y_mm_s": [-200.0, 200.0]})
     static = static_scene(cfg)

@@ -227,6 +227,7 @@ def _image_centroids(sc):
     return np.array(out)
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_solve_docking_reports_an_honest_std_under_disc_shaped_noise():
     """Detections at the exact image centroids + disc-shaped noise (0.1 px per axis averaged),
     240 frames: RMS z of X, Y, alpha within 0.88-1.12 with the disc model (the default), off

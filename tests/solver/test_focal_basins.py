@@ -12,6 +12,9 @@ from dockfactory.solver.focal_basins import focal_profile_grid, settle_focal_bas
 from dockfactory.solver.lie import rotation_angle_deg
 from dockfactory.solver.synthetic import docking_scene
 
+# hundreds of five-point solves: the full suite runs them, the fast lane leaves them out
+pytestmark = pytest.mark.slow
+
 SIGMA = 0.1
 
 

@@ -34,6 +34,7 @@ def _lens(rng, prior: LensPrior, width: float):
                                    rng.uniform(-prior.p, prior.p), rng.uniform(-prior.p, prior.p))
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_lenses_from_the_prior_are_covered_by_the_marginalised_pinhole():
     """200 frames, each through its own lens drawn from the default prior, 0.1 px: without the
     model error RMS z of alpha is several times 1; with it X, Y and alpha are in [0.7, 1.2]

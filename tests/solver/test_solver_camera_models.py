@@ -283,6 +283,7 @@ def test_crb_of_models_is_a_lower_bound_that_grows_with_the_model():
         crb_d_from_b(*args, problem="independent", camera_model="k1")
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_k1_model_reaches_its_bound_and_its_covariance_is_consistent():
     """Well-conditioned case: k1 = -0.15 solved with the k1 model, 0.1 px, 150 frames.
     RMSE / CRB of X, Y, alpha in [0.9, 1.3] (measured 0.98, 0.98, 1.00); k1's normalised

@@ -175,6 +175,7 @@ def test_any_camera_roll_gives_the_right_pose():
             assert abs(getattr(res, k) - truth) < 4 * res.std[k], (roll, k)
 
 
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
 def test_a_mirrored_image_is_refused():
     """A mirrored image (a flipped stream, a wrong export) is no camera's: no pose, at any roll."""
     rng = np.random.default_rng(47)
