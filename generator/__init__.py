@@ -1,0 +1,45 @@
+"""The dataset factory (sampler, sensor model, labels, render jobs, dataset checks, tools and card),
+behind a small facade.
+
+Importing the package imports no other module: render workers import it, where the dataset tools
+must not load (and an eager facade would make import cycles). Each name is imported from its module
+when first used (PEP 562): ``run_render`` and ``JobOptions`` (:mod:`~dockfactory.generator.render_job`),
+``Dataset`` (``dataset_open``), ``verify_dataset`` (``dataset_check.verify``), ``export_dataset`` and
+``dataset_info`` (``dataset_tools.export``, ``.info``), ``diff_datasets`` (``dataset_diff.diff``),
+``write_card`` (``dataset_card``).
+"""
+
+__all__ = [
+    # rendering a dataset
+    "run_render", "JobOptions",
+    # reading, checking, describing, comparing and exporting a dataset; its card
+    "Dataset", "verify_dataset", "dataset_info", "diff_datasets", "export_dataset", "write_card",
+]
+
+
+def __getattr__(name: str):
+    """The facade's names, imported from their module on first use (PEP 562)."""
+    if name == "run_render":
+        from dockfactory.generator.render_job import run_render as value
+    elif name == "JobOptions":
+        from dockfactory.generator.render_job import JobOptions as value
+    elif name == "Dataset":
+        from dockfactory.generator.dataset_open import Dataset as value
+    elif name == "verify_dataset":
+        from dockfactory.generator.dataset_check import verify as value
+    elif name == "export_dataset":
+        from dockfactory.generator.dataset_tools import export as value
+    elif name == "dataset_info":
+        from dockfactory.generator.dataset_tools import info as value
+    elif name == "diff_datasets":
+        from dockfactory.generator.dataset_diff import diff as value
+    elif name == "write_card":
+        from dockfactory.generator.dataset_card import write_card as value
+    else:
+        raise AttributeError(f"module 'dockfactory.generator' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -165,8 +165,31 @@ def card_text(ds: Dataset, license_id: str | None = None, counts: dict[str, int]
 
 
 def write_card(ds: Dataset, license_id: str | None = None) -> Path:
-    """Write ``hf/`` and ``README.md`` of the complete dataset ``ds`` (each untouched when its
-    bytes would not change); returns the card's path."""
+    """Write the Hugging Face view ``hf/`` and the card ``README.md`` of the complete dataset ``ds``.
+
+    Each is left untouched when its bytes would not change (a DVC-tracked dataset stays clean); both are derived
+    files, outside the manifest (module docstring).
+
+    Parameters
+    ----------
+    ds : Dataset
+        The complete, checked dataset (``Dataset.open``); its labels are read (each checked against the manifest).
+    license_id : str, optional
+        The data's licence identifier written into the card; None: the config's ``[dataset] license``.
+
+    Returns
+    -------
+    Path
+        The card, ``ds.root / "README.md"``.
+
+    Raises
+    ------
+    DatasetError
+        ``hf/`` or an image is a symlink (not a DVC cache link), or a label changed since the dataset was finished
+        (its sha256 is not the manifest's).
+    OSError
+        The dataset folder cannot be written.
+    """
     counts = write_hf_view(ds)
     path = ds.root / CARD_NAME
     text = card_text(ds, license_id, counts)

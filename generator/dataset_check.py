@@ -301,5 +301,29 @@ def inspect(root, hash_bulk: bool = True) -> tuple[VerifyReport, Checked | None]
 
 
 def verify(root) -> VerifyReport:
-    """Every check, every byte hashed (``dockfactory dataset verify``)."""
+    """Check the dataset at ``root``, every byte hashed (``dockfactory dataset verify``).
+
+    Its identity (the version id recomputed from the stored config), its manifest against its plan,
+    every listed file's size and sha256 against the manifest, no unlisted file and no symlink but
+    DVC cache links (module docstring). A damaged dataset is a report, not an exception.
+
+    Parameters
+    ----------
+    root : path
+        The dataset folder (holding ``dataset.json``).
+
+    Returns
+    -------
+    VerifyReport
+        ``ok`` True when the dataset is complete and intact; else ``problems()`` lists each one
+        (incomplete: no manifest yet; inconsistent; unsafe; missing; corrupt; unexpected), one line
+        each; ``ignored`` names the temporaries of dead writers.
+
+    Raises
+    ------
+    DatasetError
+        ``root`` holds no ``dataset.json``: not a dataset at all.
+    OSError
+        A file of the dataset that exists but cannot be read (permissions).
+    """
     return inspect(root, hash_bulk=True)[0]

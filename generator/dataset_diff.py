@@ -90,8 +90,25 @@ def _label_fields(a: Path, b: Path) -> list[str]:
 
 
 def diff(root_a, root_b) -> dict:
-    """The differences of datasets ``root_a`` and ``root_b`` (module docstring); ``identical`` is
-    True when there are none. DatasetError for a folder that is not a dataset."""
+    """What differs between datasets ``root_a`` (A) and ``root_b`` (B), by content (module docstring).
+
+    Parameters
+    ----------
+    root_a, root_b : path
+        The two dataset folders, complete or not.
+
+    Returns
+    -------
+    dict
+        ``version`` [A's, B's], ``config`` and ``software`` (readable differences), ``only_in_a``, ``only_in_b``,
+        ``different`` (content paths), ``why`` (path -> why, in a few words), ``label_fields`` (label path -> its
+        field differences), ``same`` (identical files) and ``identical`` (True when nothing differs).
+
+    Raises
+    ------
+    DatasetError
+        A folder without ``dataset.json`` or whose identity is unreadable, or a ``manifest.json`` that is not one.
+    """
     a, b = Path(root_a), Path(root_b)
     ia, ib = load_identity(a), load_identity(b)
     for root in (a, b):

@@ -44,6 +44,28 @@ STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host
 
 
 def info(root) -> dict:
+    """Describe the dataset at ``root`` from its identity and manifest (``dockfactory dataset info``; no file hashed).
+
+    Parameters
+    ----------
+    root : path
+        The dataset folder, complete or not.
+
+    Returns
+    -------
+    dict
+        ``root``, ``name``, ``version_id``, ``seed``, ``generator_version``, ``blender_version``, ``image_size``
+        ([width, height] px), ``frames`` ({planned, done}: frames of the plan whose label exists) and ``complete``
+        (a manifest exists); when complete also ``counts`` (the manifest's) and ``bytes`` (its files' total size).
+
+    Raises
+    ------
+    DatasetError
+        ``root`` holds no ``dataset.json`` or not a dataset identity, or an unreadable manifest (no ``files`` list
+        of {path, bytes, sha256}, no ``counts`` with ``by_split_condition``).
+    ConfigError
+        The identity's config is not a config this version reads.
+    """
     root = Path(root)
     ident = load_identity(root)
     cfg = config_from_identity(ident["config"], str(root / "dataset.json"))
@@ -118,12 +140,37 @@ def write_export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
 
 
 def export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
-    """Write one export of a complete dataset as DIR/exports/<fmt>/ (or ``dest``/<fmt>/): built
-    aside, then swapped in by rename (an interrupted export leaves the old one, the new one or
-    none, never a partial one), under the lock of the folder written (the dataset's, or
-    ``dest``'s: a concurrent render or export is refused, naming it). For a dataset tracked by
-    DVC whose project does not ignore ``exports/``, ``dest`` defaults to a folder beside the
-    tracked one (``dvc_links.outside_exports``): ``dvc status`` stays clean."""
+    """Write one export of a complete dataset as DIR/exports/<fmt>/ (or ``dest``/<fmt>/).
+
+    Built aside, then swapped in by rename (an interrupted export leaves the old one, the new one or none, never a
+    partial one), under the lock of the folder written (the dataset's, or ``dest``'s). For a dataset tracked by DVC
+    whose project does not ignore ``exports/``, ``dest`` defaults to a folder beside the tracked one
+    (``dvc_links.outside_exports``): ``dvc status`` stays clean.
+
+    Parameters
+    ----------
+    root : path
+        The complete dataset folder.
+    fmt : str
+        A name of ``EXPORT_WRITERS``: coco, yolo, yolo-pose, bop, cameras, video, video_lossless.
+    ds : Dataset, optional
+        The dataset already opened (one check for several formats); None: opened (and checked) here.
+    dest : path, optional
+        The folder that receives ``<fmt>/``, outside the dataset; None: the dataset's ``exports/``.
+
+    Returns
+    -------
+    Path
+        The export folder ``<dest>/<fmt>``, holding its completion mark (format, version id, file count).
+
+    Raises
+    ------
+    DatasetError
+        An unknown ``fmt``; ``root`` not a dataset, incomplete (no manifest) or damaged; ``dest`` inside it; the
+        export folder a symlink; a dataset the format cannot export (a video without docking runs).
+    DockfactoryError
+        Another render or export holds the folder's lock (core.io.FolderBusy), or ``dest`` cannot be made.
+    """
     root = Path(root)
     if fmt not in EXPORT_WRITERS:
         raise DatasetError(f"unknown export format {fmt!r} (known: {', '.join(EXPORT_WRITERS)})")

@@ -137,10 +137,13 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     Raises
     ------
     DockfactoryError
-        ``workers`` < 1, a bad shard, a frame id outside the plan, numpy's arithmetic not the labels' (core.blas), a
-        GPU device without a GPU.
+        ``workers`` < 1, a bad shard, a frame id outside the plan, an executor other than local or ray, numpy's
+        arithmetic not the labels' (core.blas), a GPU device without a GPU, another writer holding the dataset's
+        lock (core.io.FolderBusy).
+    ConfigError
+        A frame the config cannot sample (its markers do not fit the image, a rolling shutter that does not fit).
     DatasetError
-        ``root`` is not a directory, holds something else or another dataset version, or another writer holds its lock.
+        ``root`` is not a directory, or holds something else or another dataset version.
     """
     t_start = time.monotonic()
     if opts.workers < 1:

@@ -11,7 +11,8 @@ How it works
    (``from . import x`` in ``dockfactory.solver.docking`` -> ``dockfactory.solver.x``). ``from P import
    n`` targets the module ``P.n`` when that is a module of the tree, else ``P``. Each import is
    recorded with its place: module level (including ``if``/``try`` blocks at module level),
-   inside a function (any ``def``/``lambda`` body, however nested, including methods), or under
+   inside a function (any ``def``/``lambda`` body, however nested, including methods), directly
+   in a package ``__init__``'s module-level ``__getattr__`` (a PEP 562 lazy facade), or under
    ``if TYPE_CHECKING:`` (never executed: layer-checked, but not an edge of the runtime graph).
 3. Layers: each module belongs to the subpackage its name starts with. The contract:
 
@@ -39,7 +40,10 @@ How it works
    other project modules' module-level imports (``dockfactory.blender_scenes.*`` through bpy,
    ``dockfactory.detector.model`` through torch). Everything else at function level is a
    violation (hiding a cycle, or a cheap import, inside a function), except ``dockfactory.entry``'s
-   import of ``dockfactory.cli``, which must run after the entry point has set the environment.
+   import of ``dockfactory.cli``, which must run after the entry point has set the environment, and
+   a lazy facade's imports of its own package's modules (``dockfactory.generator``'s ``__getattr__``:
+   importing the package loads none of them); a lazy facade importing anything else is a violation.
+   Neither is an edge of the runtime graph, nor makes its importer heavy.
 5. Cycles: the graph of module-level (runtime) imports between the tree's modules has no cycle.
    Strongly connected components are found with Tarjan's algorithm; any component of more than one
    module, or a module importing itself, is reported with one cycle through it. The implicit import
@@ -110,14 +114,17 @@ def _is_type_checking(test: ast.expr) -> bool:
 class _Collector(ast.NodeVisitor):
     def __init__(self, module: str, is_package: bool, known: set[str], path: str):
         self.module, self.known, self.path = module, known, path
+        self.is_package = is_package
         self.package = module if is_package else module.rpartition(".")[0]
         self.depth = 0
+        self.lazy = False   # directly in the package's module-level __getattr__ (PEP 562)
+        self.classes = 0    # a method named __getattr__ is not the module's
         self.type_checking = 0
         self.found: list[Import] = []
 
     def _where(self) -> str:
         if self.depth:
-            return "function"
+            return "lazy-facade" if self.lazy and self.depth == 1 else "function"
         return "type-checking" if self.type_checking else "module"
 
     def _add(self, target: str, line: int) -> None:
@@ -126,12 +133,20 @@ class _Collector(ast.NodeVisitor):
             self.found.append(imp)
 
     def visit_FunctionDef(self, node):
+        lazy = self.is_package and not (self.depth or self.classes) and getattr(node, "name", None) == "__getattr__"
         self.depth += 1
+        self.lazy |= lazy
         self.generic_visit(node)
+        self.lazy &= not lazy
         self.depth -= 1
 
     visit_AsyncFunctionDef = visit_FunctionDef
     visit_Lambda = visit_FunctionDef
+
+    def visit_ClassDef(self, node):
+        self.classes += 1
+        self.generic_visit(node)
+        self.classes -= 1
 
     def visit_If(self, node):
         if _is_type_checking(node.test):
@@ -217,6 +232,9 @@ def layer_violations(imports: list[Import], modules) -> list[str]:
     out = []
     for imp in imports:
         where = f"{imp.path}:{imp.line}: {imp.module} imports {imp.target}"
+        if imp.where == "lazy-facade" and not imp.target.startswith(imp.module + "."):
+            out.append(f"{where} in its lazy __getattr__ (PEP 562): a lazy facade imports only its own "
+                       f"package's modules")
         if imp.where == "function":
             top = imp.target.split(".")[0]
             if is_project(imp.target):

@@ -60,6 +60,26 @@ def test_the_detector_facade_names_resolve_and_load_torch_only_when_used(tmp_pat
     _runs_ok(code, tmp_path)
 
 
+def test_the_generator_facade_imports_nothing_and_its_names_resolve(tmp_path):
+    """``import dockfactory.generator`` loads no module beyond what ``import dockfactory`` loads (render
+    workers import it: the dataset tools must not load there), no torch, no bpy; each name of its
+    ``__all__`` resolves, on first use, to its owner's object, and an unknown name is an AttributeError."""
+    code = ("import sys, dockfactory\n"
+            "before = set(sys.modules)\n"
+            "import dockfactory.generator as g\n"
+            "assert set(sys.modules) - before == {'dockfactory.generator'}, sorted(set(sys.modules) - before)\n"
+            "assert 'torch' not in sys.modules and 'bpy' not in sys.modules\n"
+            "from dockfactory.generator import render_job, dataset_open, dataset_check, dataset_tools\n"
+            "from dockfactory.generator import dataset_diff, dataset_card\n"
+            "assert g.run_render is render_job.run_render and g.JobOptions is render_job.JobOptions\n"
+            "assert g.Dataset is dataset_open.Dataset and g.verify_dataset is dataset_check.verify\n"
+            "assert g.export_dataset is dataset_tools.export and g.dataset_info is dataset_tools.info\n"
+            "assert g.diff_datasets is dataset_diff.diff and g.write_card is dataset_card.write_card\n"
+            "assert all(getattr(g, n) is not None for n in g.__all__) and set(g.__all__) <= set(dir(g))\n"
+            "try:\n    g.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
+    _runs_ok(code, tmp_path)
+
+
 def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
     """``import dockfactory.eval.evaluate as m`` must give the module: a facade that bound a
     function of the same name as one of its package's modules would hand out the function. Two
@@ -68,7 +88,8 @@ def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
     code = ("import importlib, pkgutil, types\n"
             "known = {('dockfactory.solver', 'upnp'), ('dockfactory.generator.exports', 'coco_results')}\n"
             "for pkg in ('dockfactory.eval', 'dockfactory.detector', 'dockfactory.solver',\n"
-            "            'dockfactory.generator.exports', 'dockfactory.eval.report', 'dockfactory.measure'):\n"
+            "            'dockfactory.generator', 'dockfactory.generator.exports', 'dockfactory.eval.report',\n"
+            "            'dockfactory.measure'):\n"
             "    p = importlib.import_module(pkg)\n"
             "    for m in pkgutil.iter_modules(p.__path__):\n"
             "        importlib.import_module(f'{pkg}.{m.name}')\n"

@@ -7,7 +7,8 @@ imported; see tests/layercheck.py for how the walk, the contract and the cycle s
     dockfactory.cli inside its function, after setting the environment).
 
 Function-level imports only for heavy optional dependencies (torch, kornia, bpy, mathutils, ray,
-matplotlib, onnx, onnxruntime, weasyprint) or for a project module that imports one of them at module level.
+matplotlib, onnx, onnxruntime, weasyprint) or for a project module that imports one of them at module level,
+and in a package's lazy facade (PEP 562 ``__getattr__`` of its ``__init__``) for its own modules.
 The checker is shown to fail on a miniature tree with deliberate violations
 (tests/layer_fixture/), so a green run means something.
 """
@@ -74,6 +75,7 @@ def test_the_checker_fails_on_deliberate_violations():
         "detector/infer.py:7",       # function level: cv2 is not heavy
         "generator/sampler.py:2",    # generator -> blender_scenes at module level
         "generator/worker.py:5",     # upward, even under TYPE_CHECKING
+        "generator/__init__.py:9",   # a lazy facade's __getattr__ imports another package's module
         "dockfactory/cli.py:2",      # nothing imports the entry point
         "dockfactory/cli.py:6",      # function level, not heavy
         "eval/judge.py:2",           # upward: the judge imports the app layer
@@ -86,7 +88,8 @@ def test_the_checker_fails_on_deliberate_violations():
                "eval/report.py", "dockfactory/__main__.py", "dockfactory/entry.py", "solver/identify.py",
                "dockfactory/pipeline.py"):
         assert not any(b.startswith(ok) for b in bad), ok
-    assert {"detector/infer.py:5", "detector/infer.py:6", "generator/worker.py:9"}.isdisjoint(flagged)
+    assert {"detector/infer.py:5", "detector/infer.py:6", "generator/worker.py:9",
+            "generator/__init__.py:7"}.isdisjoint(flagged)   # (:7: a lazy facade's own module)
     assert heavy_modules(imports, modules) >= {"dockfactory.detector.model",
                                                "dockfactory.blender_scenes.render"}
 
