@@ -82,7 +82,7 @@ class Frame:
 
 class FrameSource(Protocol):
     """What the detector reads from a dataset: an opened dockfactory dataset
-    (``generator.dataset_open.Dataset``, the one contract every consumer goes through; the eval
+    (``generator.datasets.reader.Dataset``, the one contract every consumer goes through; the eval
     layer opens it) or, in tests, ``detector.synthetic.SyntheticDataset``."""
     root: Path
 

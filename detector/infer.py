@@ -255,7 +255,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     Parameters
     ----------
     dataset : detector.data.FrameSource
-        The opened dataset (generator.dataset_open.Dataset or a folder of frames).
+        The opened dataset (generator.datasets.reader.Dataset or a folder of frames).
     weights : str or Path
         A weights file or training checkpoint (loaded with ``weights_only=True``).
     out : str, Path or None

@@ -141,7 +141,7 @@ def _save(rec: dict, run: Path, name: str, record_dir) -> dict:
 
 def run_ablation(dataset, out, attentions, seeds, make_config, conf: float = 0.001, progress: bool = True,
                  record_dir=None, train: bool = True) -> dict:
-    """Train/evaluate every (attention, seed) on the opened ``dataset`` (generator.dataset_open.Dataset);
+    """Train/evaluate every (attention, seed) on the opened ``dataset`` (generator.datasets.reader.Dataset);
     ``make_config(attention, seed) -> TrainConfig``; ``record_dir``, ``train``: see the module
     docstring. ``DockfactoryError`` when no run is finished and ``train`` is False."""
     from dockfactory.detector.attention import ATTENTIONS

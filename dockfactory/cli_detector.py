@@ -30,8 +30,8 @@ from dockfactory.cli_args import (
     torch_threads,
     unit_float,
 )
-from dockfactory.generator.dataset import writer_lock
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import writer_lock
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports import coco_results
 
 # Named limits of the training flags: beyond them a run asks for gigabytes (1e9 crops per frame

@@ -12,11 +12,11 @@ from dockfactory.core.config import LICENSE_ID
 from dockfactory.core.config_text import defaults_toml, load_config_text, to_toml
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.resources import resolve_config, shipped_dataset_configs
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator import published
-from dockfactory.generator.dataset import dataset_lock, identity, writer_lock
-from dockfactory.generator.dataset_card import write_card
-from dockfactory.generator.dvc_links import outside_note
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets import published
+from dockfactory.generator.datasets.folder import dataset_lock, identity, writer_lock
+from dockfactory.generator.datasets.card import write_card
+from dockfactory.generator.datasets.dvc_links import outside_note
 from dockfactory.generator.label_overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan

@@ -18,8 +18,8 @@ from dockfactory.eval.envelope import EnvelopeGrid
 from dockfactory.eval.evaluate import evaluate, portable_path, write_outputs
 from dockfactory.eval.report import NO_ENGINE, build_report, pdf_engine, write_pdf
 from dockfactory.eval.solve_frames import SELF_CALIBRATE, resolve_camera_model, solve_dataset, write_poses
-from dockfactory.generator.dataset import writer_lock
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import writer_lock
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.pipeline import run_pipeline
 from dockfactory.solver.checks import MAX_SIGMA_PX
 

@@ -15,7 +15,7 @@ from dockfactory.core.label_schema import SCHEMAS
 from dockfactory.core.layout_csv import SURFACES, UNITS_MM, layout_from_csv, write_layout
 from dockfactory.core.layout_file import MAX_SIGMA_MM
 from dockfactory.core.resources import resolve_config
-from dockfactory.generator.dataset import layout_record
+from dockfactory.generator.datasets.folder import layout_record
 
 
 def _summary(out: Path, markers, layout: dict) -> str:

@@ -25,8 +25,8 @@ from dockfactory.eval.report import build_report
 from dockfactory.eval.section_shift import split_section_shift
 from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
-from dockfactory.generator.dataset import identity
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import identity
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits
 

@@ -1,5 +1,5 @@
 """JSON files made for a dataset (poses, detections): read, matched to the dataset version, and
-their shapes checked. The dataset itself is read through ``Dataset.open`` (generator.dataset_open)."""
+their shapes checked. The dataset itself is read through ``Dataset.open`` (generator.datasets.reader)."""
 from __future__ import annotations
 
 import json
@@ -7,8 +7,8 @@ import math
 from pathlib import Path
 
 from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SECTIONS
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver.checks import MAX_SIGMA_PX
 from dockfactory.core.user_files import check_regular_file
 

@@ -35,8 +35,8 @@ from dockfactory.eval.pose_metrics import error_stats, pose_error, repeatability
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.eval.simulated_cameras import simulated_cameras_block
 from dockfactory.eval.uncertainty import calibration_block, reported_std, standard_scores
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver import SolverError, crb_d_from_b
 
 METRICS_FORMAT = "dockfactory.metrics/1"
@@ -244,7 +244,7 @@ def evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path=None
     Parameters
     ----------
     ds : Dataset
-        The opened dataset (generator.dataset_open).
+        The opened dataset (generator.datasets.reader).
     poses_path, detections_path : path, path or None
         The poses file (``dockfactory solve``) and the detections file (``dockfactory detect``; every detection
         needs ``bbox_px`` and ``score``: mAP and the measured centre noise); both made for ``ds``'s version.

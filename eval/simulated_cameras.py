@@ -14,7 +14,7 @@ import numpy as np
 from dockfactory.core.camera_chain import white_dn
 from dockfactory.eval.acceptance import UNITS
 from dockfactory.generator.camera_units import unit_lens, unit_sensor
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 SHOWN = ("x", "y", "alpha")   # the components the paper's acceptance gates

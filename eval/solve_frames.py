@@ -22,7 +22,7 @@ from dockfactory.core.distortion import undistort_pixels
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import rng_for
 from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
 from dockfactory.solver import (

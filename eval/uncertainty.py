@@ -14,7 +14,7 @@ from collections import defaultdict
 import numpy as np
 
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, POSE_NAMES
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets.folder import DatasetError
 
 WITHIN = 2.0                                        # "within 2 sigma"
 ROBUST_SCALE = 1.4826                               # median |z| of N(0, 1) is 1 / 1.4826

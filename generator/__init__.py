@@ -4,9 +4,8 @@ behind a small facade.
 Importing the package imports no other module: render workers import it, where the dataset tools
 must not load (and an eager facade would make import cycles). Each name is imported from its module
 when first used (PEP 562): ``run_render`` and ``JobOptions`` (:mod:`~dockfactory.generator.render_job`),
-``Dataset`` (``dataset_open``), ``verify_dataset`` (``dataset_check.verify``), ``export_dataset`` and
-``dataset_info`` (``dataset_tools.export``, ``.info``), ``diff_datasets`` (``dataset_diff.diff``),
-``write_card`` (``dataset_card``).
+and the dataset room's (:mod:`~dockfactory.generator.datasets`): ``Dataset``, ``verify_dataset``,
+``export_dataset``, ``dataset_info``, ``diff_datasets``, ``write_card``.
 """
 
 __all__ = [
@@ -24,17 +23,17 @@ def __getattr__(name: str):
     elif name == "JobOptions":
         from dockfactory.generator.render_job import JobOptions as value
     elif name == "Dataset":
-        from dockfactory.generator.dataset_open import Dataset as value
+        from dockfactory.generator.datasets.reader import Dataset as value
     elif name == "verify_dataset":
-        from dockfactory.generator.dataset_check import verify as value
+        from dockfactory.generator.datasets.check import verify as value
     elif name == "export_dataset":
-        from dockfactory.generator.dataset_tools import export as value
+        from dockfactory.generator.datasets.tools import export as value
     elif name == "dataset_info":
-        from dockfactory.generator.dataset_tools import info as value
+        from dockfactory.generator.datasets.tools import info as value
     elif name == "diff_datasets":
-        from dockfactory.generator.dataset_diff import diff as value
+        from dockfactory.generator.datasets.diff import diff as value
     elif name == "write_card":
-        from dockfactory.generator.dataset_card import write_card as value
+        from dockfactory.generator.datasets.card import write_card as value
     else:
         raise AttributeError(f"module 'dockfactory.generator' has no attribute {name!r}")
     globals()[name] = value

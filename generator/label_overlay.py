@@ -9,8 +9,8 @@ import numpy as np
 
 from dockfactory.core.config import config_from_identity
 from dockfactory.core.io import write_bytes_atomic
-from dockfactory.generator.dataset import DatasetError, load_identity
-from dockfactory.generator.dvc_links import cache_link, dvc_caches
+from dockfactory.generator.datasets.folder import DatasetError, load_identity
+from dockfactory.generator.datasets.dvc_links import cache_link, dvc_caches
 from dockfactory.generator.sampler import frame_plan
 
 COLORS = {"A": (60, 60, 255), "B": (255, 160, 40)}  # BGR

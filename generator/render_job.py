@@ -19,12 +19,12 @@ from dockfactory.core.config import Config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import remove_stale_temps
 from dockfactory.core.scene import FrameSpec, to_dict
-from dockfactory.generator.dataset import check_target, dataset_lock, frame_done, prepare, write_manifest
-from dockfactory.generator.dataset_check import inspect
-from dockfactory.generator.dataset_card import write_card
-from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.dataset_tools import export_complete, write_export
-from dockfactory.generator.dvc_links import outside_note
+from dockfactory.generator.datasets.folder import check_target, dataset_lock, frame_done, prepare, write_manifest
+from dockfactory.generator.datasets.check import inspect
+from dockfactory.generator.datasets.card import write_card
+from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.datasets.tools import export_complete, write_export
+from dockfactory.generator.datasets.dvc_links import outside_note
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.render_device import check_render_device
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
@@ -58,7 +58,7 @@ class JobSummary:
     failed: dict = field(default_factory=dict)
     seconds: float = 0.0
     complete: bool = False
-    damaged: list = field(default_factory=list)   # problems of a complete dataset (dataset_check)
+    damaged: list = field(default_factory=list)   # problems of a complete dataset (datasets.check)
     notes: list = field(default_factory=list)     # what was left undone on purpose (an export refused)
     timings: list = field(default_factory=list)
 

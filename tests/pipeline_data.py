@@ -3,9 +3,9 @@ run stages (tests only).
 
 Everything but the render is the real code path: the config is loaded and planned by the factory
 (``frame_plan``, ``sample_frame``: real cameras, poses and focal lengths), the directory is prepared
-by ``generator.dataset.prepare`` (identity and version id of the config), each frame goes through
+by ``generator.datasets.folder.prepare`` (identity and version id of the config), each frame goes through
 ``generator.frame_output.finish_frame`` (sensor model, exact labels, PNG, meta, kept EXR) and the
-manifest is written by ``generator.dataset.write_manifest``. So ``Dataset.open`` and
+manifest is written by ``generator.datasets.folder.write_manifest``. So ``Dataset.open`` and
 ``run_pipeline`` take it for a rendered dataset of that config, and its render stage finds every
 frame done.
 
@@ -36,7 +36,7 @@ from dockfactory.core.geometry import intrinsics, invert_transform, project_poin
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.layout import SECTION_PASS_INDEX, SECTIONS, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
-from dockfactory.generator.dataset import frame_files, prepare, write_manifest
+from dockfactory.generator.datasets.folder import frame_files, prepare, write_manifest
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.exr import RenderPasses, write_compact
 from dockfactory.generator.frame_output import finish_frame

@@ -34,7 +34,7 @@ from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.section_shift import measure_section_shift
 from dockfactory.eval.solve_frames import config_lens_prior, docking_options, solve_dataset
 from dockfactory.eval.uncertainty import reported_std
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver.options import LensPrior
 
 METHODS = (("pinhole", "pinhole", None), ("auto", "auto", None), ("sequence", "auto", "sequence"))

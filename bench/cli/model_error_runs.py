@@ -44,7 +44,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.solve_frames import config_lens_prior, docking_runs, solve_dataset
 from dockfactory.eval.uncertainty import reported_std
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def frame_detections(dets: dict, fid: str) -> list[dict]:

@@ -40,7 +40,7 @@ def build_world(base: Path) -> dict:
     from dockfactory.eval.acceptance import AcceptanceSpec
     from dockfactory.eval.evaluate import evaluate, write_outputs
     from dockfactory.eval.solve_frames import solve_dataset
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ds_root = base / "dataset"
     write_painted_dataset(ds_root, shipped_config("smoke"))
     ds = Dataset.open(ds_root)

@@ -237,7 +237,7 @@ def main() -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
     torch.set_num_threads(args.threads)
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ds = Dataset.open(args.dataset, full=False)
     meta = {"machine": f"{platform.machine()} {_cpu()}", "cores": os.cpu_count(), "threads": args.threads,
             "load_before": os.getloadavg()[0], "dataset": args.dataset, "version": ds.version_id, "run": args.run,

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.detector.data import read_rgb
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 TARGET_MEAN_PX, TARGET_MIN_MARKERS, TARGET_RMS_PX = 0.01, 250, 0.07
 

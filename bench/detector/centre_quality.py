@@ -44,7 +44,7 @@ from dockfactory.core.cv import cv2
 from dockfactory.core.demosaic import demosaic
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.isp import jpeg_round_trip
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> list:

@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     import torch
     torch.set_num_threads(args.threads)
     from dockfactory.detector.data import load_frames
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     dataset = Dataset.open(args.dataset)
     from dockfactory.detector.infer import sha256_of
     test = load_frames(dataset, "test")

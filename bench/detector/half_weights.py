@@ -61,7 +61,7 @@ def main(argv=None) -> int:
     import torch
     torch.set_num_threads(args.threads)
     from dockfactory.core.io import sha256_file
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     half_weights(args.weights, args.out)
     dataset = Dataset.open(args.dataset)
     with tempfile.TemporaryDirectory() as tmp:

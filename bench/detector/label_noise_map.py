@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from dockfactory.eval.detection_metrics import coco_map, coco_results
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.coco import coco_from_labels
 
 

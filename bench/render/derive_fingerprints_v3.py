@@ -1,4 +1,4 @@
-"""Fingerprint v3 of a published dataset from a re-render of some of its frames (generator.fingerprints_libm).
+"""Fingerprint v3 of a published dataset from a re-render of some of its frames (generator.datasets.fingerprints_libm).
 
 The published paper dataset's labels were computed by a generator whose numpy took its AVX-512
 paths for sin and cos; dockfactory now pins libm's on every CPU, so a re-render differs from them
@@ -19,7 +19,7 @@ import os
 import dockfactory
 
 dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as the command computes them
-from dockfactory.generator.fingerprints_libm import derive
+from dockfactory.generator.datasets.fingerprints_libm import derive
 
 
 def main(argv=None) -> int:

@@ -2,7 +2,7 @@
 --manifest` says "differs beyond its image measurements".
 
 The published fingerprints hold, per frame, the sha256 of the label without chroma and
-auto-exposure (generator/published.py). The published labels themselves are not shipped, so this
+auto-exposure (generator/datasets/published.py). The published labels themselves are not shipped, so this
 searches for the smallest change of what the label reads from Cycles' index pass that gives the
 published digest back: one section's ``pixels_visible`` moved by +-1..4 px (its
 ``visible_fraction`` recomputed), then one marker's ``visible_pixels`` by +-1..3 (its fraction
@@ -10,7 +10,7 @@ and visibility recomputed, with or without its section's count). A frame it expl
 the published one only in that index-pass pixel count; "unexplained" means something else differs.
 
 With ``--derive-v2 OUT`` (a complete re-render only) it writes fingerprint v2 of the published
-labels (generator/label_prints.py) to OUT: each re-rendered label, with the index-pass change that
+labels (generator/datasets/label_prints.py) to OUT: each re-rendered label, with the index-pass change that
 gives the published v1 digest back applied where one is needed. Every label it uses thus has the
 published v1 digest, so its v2 fingerprint is the published label's; it refuses (exit 1, nothing
 written) if any frame is unexplained or missing.
@@ -35,8 +35,8 @@ dockfactory.pin_label_arithmetic(os.environ)   # before numpy loads: labels as t
 import numpy as np
 
 from dockfactory.core.io import write_bytes_atomic
-from dockfactory.generator.fingerprints import FINGERPRINTS_NAME, fingerprints_v2
-from dockfactory.generator.label_prints import label_geometry_sha256
+from dockfactory.generator.datasets.fingerprints import FINGERPRINTS_NAME, fingerprints_v2
+from dockfactory.generator.datasets.label_prints import label_geometry_sha256
 
 
 def _digest(label: dict) -> str:

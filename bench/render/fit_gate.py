@@ -42,7 +42,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.cli_args import lens_prior
 from dockfactory.core.layout import build_layout
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, solve_frame
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 MIN_SCORE = 0.25
 AXES = ("x_mm", "y_mm", "z_mm")

@@ -1,4 +1,4 @@
-"""How far a rendered dataset's images sit from the marker check's bounds (generator/marker_check.py).
+"""How far a rendered dataset's images sit from the marker check's bounds (generator/datasets/marker_check.py).
 
     python -m bench.render.marker_check DATASET [DATASET ...] [--frames N]
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.generator.marker_check import _checked, marker_colour, marker_problems
+from dockfactory.generator.datasets.marker_check import _checked, marker_colour, marker_problems
 
 
 def dataset_figures(root: Path, frames: int | None) -> str:

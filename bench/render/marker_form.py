@@ -34,7 +34,7 @@ import numpy as np
 from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.centre_noise import used_centre_matches
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 MIN_SCORE = 0.25
 OBLIQUE_PX = 0.3

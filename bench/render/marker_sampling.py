@@ -33,7 +33,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.centre_noise import used_centre_errors
 from dockfactory.eval.evaluate import per_frame_rows
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 POSE = ("x", "y", "alpha")
 MIN_SCORE = 0.25

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from dockfactory.core.io import write_json_atomic
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.core.geometry import project_points
 from dockfactory.core.layout import RING_EXTRA_MM
 from dockfactory.generator.marker_regions import halo_points, halo_weights, marker_halos, marker_regions

@@ -31,7 +31,7 @@ import numpy as np
 
 from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def rate(root: Path, noise_px: float | None) -> dict:

@@ -6,7 +6,7 @@ For every frame RERENDER holds (for example `dockfactory render CONFIG --out RER
 ...` in a new process, or on another machine): whether its label and image are byte for byte
 those of DATASET, and for the images the pixel differences (largest absolute difference in 8-bit
 levels, share of differing values) and the largest difference of the 80-px tile means that
-`dockfactory dataset verify --manifest` compares (generator/published.py).
+`dockfactory dataset verify --manifest` compares (generator/datasets/published.py).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.generator.fingerprints import image_tiles
+from dockfactory.generator.datasets.fingerprints import image_tiles
 
 
 def compare_frame(a: Path, b: Path, fid: str) -> dict:

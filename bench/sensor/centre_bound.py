@@ -46,7 +46,7 @@ from bench.sensor.sensor_effects import delivered
 
 from dockfactory.core.cfa import channel_map
 from dockfactory.detector.centre import CLASS_CHANNEL, _SRGB_TO_LINEAR
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_passes
 from dockfactory.solver.crb import crb_d_from_b
 from dockfactory.solver.disc_noise import disc_ellipses

@@ -148,7 +148,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import MarkerDetector
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     detector = MarkerDetector(shipped_weights(), refine=False)
     print("| dataset, effect | fit std px (bin) | markers | RMS error x / y px | RMS z x / y |")
     print("| --- | --- | --- | --- | --- |")

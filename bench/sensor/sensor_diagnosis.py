@@ -243,7 +243,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(2)
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import MarkerDetector
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     weights = args.weights or shipped_weights()
     ds = Dataset.open(args.dataset, full=False)
     frames = ds.frames("test")[: args.frames or None]

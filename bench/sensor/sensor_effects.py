@@ -42,7 +42,7 @@ from dockfactory.eval.confidence import bootstrap_bounds
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.eval.uncertainty import reported_std
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_passes
 from dockfactory.generator.sensor import expose_frame, jpeg_round_trip
 

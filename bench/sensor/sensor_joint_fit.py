@@ -121,7 +121,7 @@ def centre_table(roots: list[str], frames: int, effects=("three-chip", "bayer-bi
     from bench.sensor import sensor_effects as se
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import MarkerDetector
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     from dockfactory.generator.exr import read_passes
     detector = MarkerDetector(shipped_weights(), refine=False)
     lines = ["| scene | effect | refinement | unrefined | median px | RMS px |",

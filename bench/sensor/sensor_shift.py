@@ -24,7 +24,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.detector.noise_card import centre_noise_px
 from dockfactory.eval.section_shift import section_groups, section_shift_stats
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 from bench.sensor.sensor_effects import COMPONENTS, pose_errors, rms_z_bootstrap_interval
 

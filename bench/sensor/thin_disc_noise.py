@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(2)
     from dockfactory.core.resources import shipped_weights
     from dockfactory.detector.infer import MarkerDetector
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     detector = MarkerDetector(args.weights or shipped_weights())
     data, lines = [], []
     for root in args.datasets:

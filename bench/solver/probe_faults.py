@@ -31,8 +31,8 @@ from pathlib import Path
 import cv2
 
 from dockfactory.core.io import write_json_atomic
-from dockfactory.generator.dataset import layout_record
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import layout_record
+from dockfactory.generator.datasets.reader import Dataset
 
 AXES = ("x_mm", "y_mm", "z_mm", "alpha_deg")
 FAULTS = {

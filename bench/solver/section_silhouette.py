@@ -18,7 +18,7 @@ import numpy as np
 
 from dockfactory.core.layout import SECTION_PASS_INDEX
 from dockfactory.generator.bop_images import pinhole_px, section_mask
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_compact
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.silhouette import fill_centres, section_silhouette

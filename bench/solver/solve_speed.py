@@ -163,7 +163,7 @@ def hard_frame(seed: int, k: int, layout):
 def real_frames(limit: int | None):
     """Frames of out/detector_run/detections.json (empty when the folders are missing)."""
     from dockfactory.core.names import MIN_SCORE
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     det_path = ROOT / "out" / "detector_run" / "detections.json"
     roots = [ROOT / "out" / "detector_run" / "dataset", ROOT / "out" / "detector"]
     root = next((r for r in roots if r.is_dir()), None)

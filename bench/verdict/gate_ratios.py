@@ -24,7 +24,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.infer import MarkerDetector
 from dockfactory.eval import fit_gate
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 DEFAULT_EFFECTS = "three-chip,bayer-vng,three-chip-jpeg90,bayer-jpeg90,blur1.2"
 

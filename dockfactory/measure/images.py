@@ -49,7 +49,7 @@ from dockfactory.eval.solve_frames import (
     solve_frame,
     solve_run,
 )
-from dockfactory.generator.dataset import writer_lock
+from dockfactory.generator.datasets.folder import writer_lock
 from dockfactory.generator.version import package_version
 
 __all__ = ["CameraInput", "MeasureOptions", "collect_images", "measure", "read_image"]

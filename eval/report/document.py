@@ -43,7 +43,7 @@ from dockfactory.eval.model_check import BLOCK_SCHEMA as MODEL_CHECK_SCHEMA
 from dockfactory.eval.model_check import html_model_check, model_check_sentence
 from dockfactory.eval.simulated_cameras import BLOCK_SCHEMA as SIMULATED_CAMERAS_SCHEMA
 from dockfactory.eval.simulated_cameras import html_simulated_cameras, sensor_schema
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")

@@ -5,7 +5,7 @@ Modules: :mod:`~dockfactory.generator.exports.coco` (COCO keypoints), ``coco_res
 document as COCO results rows), ``yolo``, ``yolo_pose``, ``bop`` (the BOP layout with masks, depth
 and models), ``cameras`` (OpenCV, ROS and COLMAP calibrations per frame), ``video`` (each run as a
 video with its labels), ``files`` (placing a dataset's files in an export: hard links, DVC cache
-links or copies). The registry of names and writers is generator.dataset_tools.EXPORT_WRITERS.
+links or copies). The registry of names and writers is generator.datasets.tools.EXPORT_WRITERS.
 """
 from dockfactory.generator.exports.bop import export_bop
 from dockfactory.generator.exports.cameras import export_cameras

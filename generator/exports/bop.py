@@ -13,8 +13,8 @@ from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import SECTIONS
 from dockfactory.generator.bop_images import depth_png, gt_info, section_mask, visible_mask
 from dockfactory.generator.bop_models import part_model, section_mesh, write_ply
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_compact
 from dockfactory.generator.exports.files import place_file, source_exr, source_image
 from dockfactory.generator.random_draws import static_scene

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from dockfactory.core.calibration_files import Calibration, calibration_text, colmap_line
 from dockfactory.core.io import write_text_atomic
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 UNIT_FILES = (("opencv-yaml", "unit_{unit:02d}.yaml"), ("ros", "unit_{unit:02d}.ros.yaml"),
               ("colmap", "unit_{unit:02d}.cameras.txt"))

@@ -16,7 +16,7 @@ import numpy as np
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
 from dockfactory.core.names import SPLITS
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import place_file, source_image
 from dockfactory.generator.labels import clip_polygon, image_px, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view

@@ -2,7 +2,7 @@
 behind a DVC cache link is placed from the cached file (a hard link to it is read-only, as DVC
 makes its hardlink workspaces).
 
-The exporters read a dataset through ``Dataset.open`` (generator.dataset_open): every frame id and
+The exporters read a dataset through ``Dataset.open`` (generator.datasets.reader): every frame id and
 split that goes into an export path is a planned frame's, from a label whose bytes match the
 manifest. So a tampered label can never make an exporter write (or read) outside the dataset.
 """
@@ -14,13 +14,13 @@ import shutil
 from pathlib import Path
 
 from dockfactory.core.io import atomic_path, temp_name
-from dockfactory.generator.dataset import DatasetError, check_frame_id
-from dockfactory.generator.dvc_links import cache_link, dvc_caches
+from dockfactory.generator.datasets.folder import DatasetError, check_frame_id
+from dockfactory.generator.datasets.dvc_links import cache_link, dvc_caches
 
 
 def source_image(root, frame_id: str) -> Path:
     """The dataset's image of a (checked) frame id: the file itself, or the file a DVC cache link
-    resolves to (``generator.dvc_links``; its bytes were checked when the dataset was opened);
+    resolves to (``generator.datasets.dvc_links``; its bytes were checked when the dataset was opened);
     any other symlink is refused (it could point anywhere)."""
     return _linked_or_own(Path(root) / "images" / f"{check_frame_id(frame_id, root)}.png", root)
 

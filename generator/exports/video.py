@@ -18,8 +18,8 @@ from pathlib import Path
 from dockfactory.core.cv import cv2
 
 from dockfactory.core.io import write_json_atomic
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import source_image
 
 VIDEO_FPS = 10.0

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import place_file, source_image
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them

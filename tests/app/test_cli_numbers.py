@@ -8,7 +8,7 @@ import pytest
 
 from cli_run import one_line_error, run_cli
 
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def _label_detections(ds: Dataset) -> dict:

@@ -103,7 +103,7 @@ def test_ablate_runs_seed_by_seed(painted_source, tmp_path, monkeypatch):
     """An ablation stopped part-way has the first seeds of every variant, not all seeds of the first."""
     from dockfactory.detector.train import TrainConfig
     from dockfactory import ablate
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     order = []
 
     def fake_run(dataset, out, att, seed, cfg, conf, progress, record_dir, train):

@@ -8,7 +8,7 @@ import pytest
 from pipeline_data import SHIFT_SPLIT_CONFIG, offset_detections, painted_from_text
 
 from dockfactory.core.io import write_json_atomic
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.pipeline import Stages, _solve_stage
 
 # painting 24 frames at 1280 x 960 and solving them: the full suite runs it, the fast lane leaves it out

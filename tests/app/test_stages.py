@@ -25,7 +25,7 @@ from dockfactory.pipeline import run_pipeline
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 TOL_MM, TOL_DEG, TOL_FOCAL_PX = 1e-3, 1e-3, 0.01
 COMPS = ("x", "y", "z", "alpha", "beta", "gamma")

@@ -1,5 +1,5 @@
 """The dataset contract, consumer by consumer: a damaged, incomplete or foreign dataset is refused by
-every command that reads one (``Dataset.open``, generator/dataset_open.py), with exit status 2 and
+every command that reads one (``Dataset.open``, generator/datasets/reader.py), with exit status 2 and
 one line ``dockfactory: error: DATASET: ...`` naming the problem, and nothing is written.
 
 A damage x consumer matrix on the painted smoke dataset (tests/pipeline_data.py, no rendering):
@@ -34,7 +34,7 @@ from dockfactory.core.resources import shipped_config
 from dockfactory.eval.report import document as report
 from dockfactory.cli import main
 from dockfactory.generator import render_job
-from dockfactory.generator.dataset import frame_files
+from dockfactory.generator.datasets.folder import frame_files
 
 SMOKE = shipped_config("smoke")
 

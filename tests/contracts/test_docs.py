@@ -43,7 +43,7 @@ def test_the_resolved_toml_of_each_shipped_config_reads_back_as_it(name, capsys)
 
 
 def test_set_overrides_are_validated_like_the_file_and_change_the_version(capsys):
-    from dockfactory.generator.dataset import identity
+    from dockfactory.generator.datasets.folder import identity
     base = tomllib.loads(shipped_config("smoke").read_text())
     merged = apply_overrides(base, ["dataset.frames=10", "camera.focal_px=[1300, 2900]", "dataset.name=other"], "x")
     cfg = config_from_dict(merged)

@@ -23,7 +23,7 @@ ENTRY_POINTS = {
 # the package facades: every function a facade's __all__ names is an entry point. A subpackage that gets a
 # facade (an __init__ with __all__) is added here.
 FACADES = ("dockfactory.solver", "dockfactory.eval.report", "dockfactory.generator.exports", "dockfactory.detector",
-            "dockfactory.eval", "dockfactory.generator")
+            "dockfactory.eval", "dockfactory.generator", "dockfactory.generator.datasets")
 # entry points that raise nothing of their own (they set environment variables or look a value up): no Raises section
 RAISE_NOTHING = {"dockfactory.pin_label_arithmetic", "dockfactory.set_app_environment",
                  "dockfactory.eval.report.pdf_engine", "dockfactory.eval.verdict_exit_status"}

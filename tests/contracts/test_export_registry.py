@@ -1,10 +1,10 @@
 """The export formats have one list of names the config knows (core.names.EXPORT_FORMATS, what
-[export] formats and render write), one registry of writers (generator.dataset_tools.EXPORT_WRITERS:
+[export] formats and render write), one registry of writers (generator.datasets.tools.EXPORT_WRITERS:
 those plus the on-demand videos) and the command line's help: a format added to one and not the
 others fails here."""
 from dockfactory.cli import build_parser
 from dockfactory.core.names import EXPORT_FORMATS
-from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.datasets import tools as dt
 
 ON_DEMAND = ("video", "video_lossless")   # written by `dataset export` only (datasets with [runs])
 

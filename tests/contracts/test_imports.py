@@ -69,14 +69,33 @@ def test_the_generator_facade_imports_nothing_and_its_names_resolve(tmp_path):
             "import dockfactory.generator as g\n"
             "assert set(sys.modules) - before == {'dockfactory.generator'}, sorted(set(sys.modules) - before)\n"
             "assert 'torch' not in sys.modules and 'bpy' not in sys.modules\n"
-            "from dockfactory.generator import render_job, dataset_open, dataset_check, dataset_tools\n"
-            "from dockfactory.generator import dataset_diff, dataset_card\n"
+            "from dockfactory.generator import render_job\n"
+            "from dockfactory.generator.datasets import reader, check, tools, diff, card\n"
             "assert g.run_render is render_job.run_render and g.JobOptions is render_job.JobOptions\n"
-            "assert g.Dataset is dataset_open.Dataset and g.verify_dataset is dataset_check.verify\n"
-            "assert g.export_dataset is dataset_tools.export and g.dataset_info is dataset_tools.info\n"
-            "assert g.diff_datasets is dataset_diff.diff and g.write_card is dataset_card.write_card\n"
+            "assert g.Dataset is reader.Dataset and g.verify_dataset is check.verify\n"
+            "assert g.export_dataset is tools.export and g.dataset_info is tools.info\n"
+            "assert g.diff_datasets is diff.diff and g.write_card is card.write_card\n"
             "assert all(getattr(g, n) is not None for n in g.__all__) and set(g.__all__) <= set(dir(g))\n"
             "try:\n    g.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
+    _runs_ok(code, tmp_path)
+
+
+def test_the_datasets_facade_imports_nothing_and_its_names_resolve(tmp_path):
+    """``import dockfactory.generator.datasets`` loads none of the room's modules (a module of the
+    room importing a helper of another must not load them all); each name of its ``__all__``
+    resolves, on first use, to its owner's object, and an unknown name is an AttributeError."""
+    code = ("import sys, dockfactory.generator\n"
+            "before = set(sys.modules)\n"
+            "import dockfactory.generator.datasets as ds\n"
+            "assert set(sys.modules) - before == {'dockfactory.generator.datasets'}, sorted(set(sys.modules) - before)\n"
+            "from dockfactory.generator.datasets import reader, folder, check, tools, diff, card, hf_view, published\n"
+            "assert ds.Dataset is reader.Dataset and ds.DatasetError is folder.DatasetError\n"
+            "assert ds.verify_dataset is check.verify and ds.dataset_info is tools.info\n"
+            "assert ds.export_dataset is tools.export and ds.diff_datasets is diff.diff\n"
+            "assert ds.write_card is card.write_card and ds.write_hf_view is hf_view.write_hf_view\n"
+            "assert ds.publish_dataset is published.publish and ds.verify_against_manifest is published.verify_against\n"
+            "assert set(ds.__all__) <= set(dir(ds))\n"
+            "try:\n    ds.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
     _runs_ok(code, tmp_path)
 
 
@@ -88,7 +107,8 @@ def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
     code = ("import importlib, pkgutil, types\n"
             "known = {('dockfactory.solver', 'upnp'), ('dockfactory.generator.exports', 'coco_results')}\n"
             "for pkg in ('dockfactory.eval', 'dockfactory.detector', 'dockfactory.solver',\n"
-            "            'dockfactory.generator', 'dockfactory.generator.exports', 'dockfactory.eval.report',\n"
+            "            'dockfactory.generator', 'dockfactory.generator.exports', 'dockfactory.generator.datasets',\n"
+            "            'dockfactory.eval.report',\n"
             "            'dockfactory.measure'):\n"
             "    p = importlib.import_module(pkg)\n"
             "    for m in pkgutil.iter_modules(p.__path__):\n"

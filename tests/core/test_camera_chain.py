@@ -225,7 +225,7 @@ def test_a_colour_dataset_keeps_its_labels_and_raw_frames(colour_pair):
     whose class-colour sites are the bright ones inside a marker of that colour."""
     import cv2
 
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     colour, plain = colour_pair
     ds, ref = Dataset.open(colour), Dataset.open(plain)
     assert any(r["path"].startswith("raw/") for r in ds.manifest["files"])
@@ -249,7 +249,7 @@ def test_a_colour_dataset_keeps_its_labels_and_raw_frames(colour_pair):
 @pytest.mark.slow   # a painted 1280 x 960 dataset through the colour chain
 def test_the_report_names_the_simulated_cameras(colour_pair):
     from dockfactory.eval.simulated_cameras import html_simulated_cameras, simulated_cameras_block
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ds = Dataset.open(colour_pair[0])
     rows = [{"frame_id": f, "ok": True, "err_x": 0.1, "err_y": -0.2, "err_alpha": 0.01} for f in ds.frames("test")]
     block = simulated_cameras_block(ds, rows)
@@ -266,7 +266,7 @@ def test_the_detector_is_told_each_frames_camera(colour_pair):
     """detect / run tell the centre refinement each frame's Bayer pattern and JPEG encoding (the
     camera's maker knows both); a three-chip PNG camera tells nothing."""
     from dockfactory.eval.simulated_cameras import dataset_camera
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ds, plain = Dataset.open(colour_pair[0]), Dataset.open(colour_pair[1])
     told, plain_told = dataset_camera(ds), dataset_camera(plain)
     for fid in ds.frames():

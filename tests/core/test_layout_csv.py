@@ -14,7 +14,7 @@ from dockfactory.core.config import load_config
 from dockfactory.core.layout_csv import layout_from_csv, write_layout
 from dockfactory.core.layout_file import LayoutFileError, read_layout_file, read_layout_sigmas
 from dockfactory.core.resources import shipped_config
-from dockfactory.generator.dataset import layout_record
+from dockfactory.generator.datasets.folder import layout_record
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from dockfactory.core.layout_file import LayoutFileError, read_layout_file, read_layout_sigmas
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def test_a_datasets_layout_reads_back_as_its_markers(painted_source):
@@ -32,7 +32,7 @@ def _swap_sections(markers) -> None:
 def _write(tmp_path, edit):
     from dockfactory.core.config import load_config
     from dockfactory.core.resources import shipped_config
-    from dockfactory.generator.dataset import layout_record
+    from dockfactory.generator.datasets.folder import layout_record
     rec = layout_record(load_config(shipped_config("smoke")))
     edit(rec)
     path = tmp_path / "layout.json"

@@ -41,7 +41,7 @@ from dockfactory.eval.evaluate import (
     write_outputs,
 )
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 POSES_ONLY = "[localization]\nx = 5.0\ny = 5.0\nalpha = 0.1\n[estimation]\nx = 1.0\ny = 1.0\nalpha = 0.05\n"
 

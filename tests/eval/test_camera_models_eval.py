@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dockfactory.eval.camera_models_eval import camera_models_block
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 CONFIG = """
 [dataset]

@@ -24,10 +24,10 @@ from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.report import build_report, read_rows
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.eval.solve_frames import pose_record, solve_dataset, write_poses
 from dockfactory.eval.uncertainty import EXPECTED, calibration_block, reported_std, standard_scores, z_stats
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver import FocalNotObservable, solve_docking
 from dockfactory.solver.synthetic import default_layout, docking_scene
 

@@ -8,7 +8,7 @@ import pytest
 
 from dockfactory.eval.acceptance import AcceptanceSpec, Gate
 from dockfactory.eval.envelope import EnvelopeGrid, camera_envelope
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 
 @pytest.fixture(scope="module")

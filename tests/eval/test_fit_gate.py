@@ -14,7 +14,7 @@ from dockfactory.eval import fit_gate
 from dockfactory.eval.confidence import chi2_cdf
 from dockfactory.eval.fit_gate import MISFIT, fit_test
 from dockfactory.eval.solve_frames import KNOWN_LENS, UNCALIBRATED_LENS, docking_options, solve_frame
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 SIGMA = 0.05

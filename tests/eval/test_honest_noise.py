@@ -26,7 +26,7 @@ from dockfactory.eval.centre_noise import (
 )
 from dockfactory.eval.evaluate import evaluate, frame_bound, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 SIGMA_USED, OFF_PX = 0.05, 0.8
 SUSPECTS = ("A1", "A4", "B2", "B5")

@@ -19,7 +19,7 @@ from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.cli import main
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 FUZZ = hsettings(max_examples=25, deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

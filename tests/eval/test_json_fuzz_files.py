@@ -20,8 +20,8 @@ from dockfactory.core.layout_file import LayoutFileError, read_layout_file
 from dockfactory.core.resources import shipped_weights
 from dockfactory.detector.checkpoint import CheckpointError, load_model
 from dockfactory.detector.noise_card import centre_noise_px, noise_card_path
-from dockfactory.generator import published
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets import published
+from dockfactory.generator.datasets.folder import DatasetError
 
 FUZZ = hsettings(max_examples=25, deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

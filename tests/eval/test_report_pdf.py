@@ -13,7 +13,7 @@ from dockfactory.eval.report import pdf as report_pdf
 from dockfactory.eval.evaluate import evaluate, write_outputs
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.eval.acceptance import AcceptanceSpec
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 
 HEADINGS = ("h1", "h2", "h3")
 

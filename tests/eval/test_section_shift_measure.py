@@ -57,7 +57,7 @@ def test_a_split_of_the_dataset_measures_its_own_offset_or_says_it_cannot(painte
     exact centroids plus a 0.1 px offset per frame and section: over its 20-odd sections the
     estimate's spread is about 1 / sqrt(2 n), 16 %: tested within 35 %), and gives None when the detections do not cover the split or it has too few sections."""
     from dockfactory.eval.section_shift import split_section_shift
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ds = Dataset.open(painted)
     val = ds.frames(("val",))
     assert len(val) >= 8

@@ -3,7 +3,7 @@ import shutil
 
 import pytest
 
-from dockfactory.generator import published
+from dockfactory.generator.datasets import published
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ from pipeline_data import write_painted_dataset
 from dockfactory.core.calibration_files import Calibration, CalibrationError, read_calibration, write_calibration
 from dockfactory.core.config import ConfigError, config_from_dict, load_config
 from dockfactory.core.config_text import load_config_text
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.generator.version import dataset_version_id
 

@@ -21,7 +21,7 @@ from dockfactory.core.distortion import distort_pixels, undistort_pixels
 from dockfactory.core.geometry import blender_camera_intrinsics, pose_components, render_canvas
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import CameraModel, to_dict
-from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.camera_units import ImageFit, largest_fitting_focal, unit_lens, unit_sensor
 from dockfactory.generator.random_draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines

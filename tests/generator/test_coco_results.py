@@ -14,8 +14,8 @@ from test_exports import THRESHOLD, write_dataset
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import SPLITS
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.coco import KPT_OKS_SIGMAS
 from dockfactory.generator.exports.coco_results import coco_results
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 from test_exports import write_dataset
 
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets.folder import DatasetError
 
 
 @pytest.fixture(scope="module")
@@ -149,7 +149,7 @@ def test_verify_reports_a_listed_file_replaced_by_a_symlink_with_the_same_bytes(
 
 def test_frame_done_ignores_meta_records_outside_the_frame(painted):
     """A tampered meta record cannot make render stat (or the manifest list) a file elsewhere."""
-    from dockfactory.generator.dataset import frame_done
+    from dockfactory.generator.datasets.folder import frame_done
     meta = painted / "meta" / "000001.json"
     rec = json.loads(meta.read_text())
     assert frame_done(painted, "000001", keep_exr=True)

@@ -12,9 +12,9 @@ from cli_run import one_line_error, run_cli
 from dockfactory.core.config import ConfigError, load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.generator import render_job
-from dockfactory.generator.dataset_card import card_text, size_category
-from dockfactory.generator.dataset_check import verify
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.card import card_text, size_category
+from dockfactory.generator.datasets.check import verify
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.render_job import JobOptions, run_render
 
 SMOKE_SPLITS = {"train": 4, "test": 4, "repeat": 2}   # the smoke config: val_fraction leaves no val frame

@@ -8,7 +8,7 @@ import shutil
 import pytest
 from cli_run import one_line_error, run_cli
 
-from dockfactory.generator.dataset_diff import MAX_FIELDS, diff, field_differences
+from dockfactory.generator.datasets.diff import MAX_FIELDS, diff, field_differences
 
 
 @pytest.fixture

@@ -4,9 +4,9 @@ import json
 
 import pytest
 
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_check import verify
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.check import verify
+from dockfactory.generator.datasets.reader import Dataset
 
 
 def test_frames_are_the_plans_in_plan_order(painted_source):

@@ -16,7 +16,7 @@ from cli_run import run_cli
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.generator import render_job
-from dockfactory.generator.dataset_check import verify
+from dockfactory.generator.datasets.check import verify
 from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = [pytest.mark.skipif(importlib.util.find_spec("dvc") is None,

@@ -1,4 +1,4 @@
-"""Symlinks a DVC cache puts in place (``generator.dvc_links``), without DVC: the painted smoke
+"""Symlinks a DVC cache puts in place (``generator.datasets.dvc_links``), without DVC: the painted smoke
 dataset's files are moved into a cache laid out like DVC's (``.dvc/cache/files/md5/xx/...``)
 and replaced by symlinks, as ``dvc add`` with ``cache.type symlink`` does. tests/generator/test_dvc.py
 does the same with the real DVC."""
@@ -12,11 +12,11 @@ import pytest
 from cli_run import one_line_error, run_cli
 
 from dockfactory.core.io import FolderBusy
-from dockfactory.generator.dataset import DatasetError, dataset_lock, frame_done
-from dockfactory.generator.dataset_check import verify
-from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.dataset_tools import export
-from dockfactory.generator.dvc_links import CACHE_ENV, dvc_caches, outside_exports, outside_note, tracking_file
+from dockfactory.generator.datasets.folder import DatasetError, dataset_lock, frame_done
+from dockfactory.generator.datasets.check import verify
+from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.datasets.tools import export
+from dockfactory.generator.datasets.dvc_links import CACHE_ENV, dvc_caches, outside_exports, outside_note, tracking_file
 
 
 def link_into_cache(root: Path, cache: Path) -> int:

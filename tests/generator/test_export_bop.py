@@ -19,12 +19,12 @@ import pytest
 from bop_toolkit_check import RENDERER_MISSING
 from test_exports import write_dataset
 
-from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.exports import bop as export_bop
 from dockfactory.generator.bop_images import NO_HIT_MM, bop_box, depth_png, label_box, section_outlines
 from dockfactory.generator.bop_models import SEGMENTS, read_ply, section_mesh, write_ply
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import RenderPasses, read_compact
 from dockfactory.generator.random_draws import static_scene
 

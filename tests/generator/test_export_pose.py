@@ -17,8 +17,8 @@ import yaml
 from test_exports import THRESHOLD, ultralytics_dataset, write_dataset
 
 from dockfactory.core.layout import CLASS_NAMES
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.coco import KEYPOINTS_TO_CONTINUOUS
 from dockfactory.generator.exports.yolo import parse_yolo_line
 from dockfactory.generator.exports.yolo_pose import parse_pose_keypoint

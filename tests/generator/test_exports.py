@@ -26,9 +26,9 @@ from dockfactory.core.geometry import (
 )
 from dockfactory.core.io import write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES, marker_outline
-from dockfactory.generator import dataset_tools as dt
-from dockfactory.generator.dataset import prepare
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets import tools as dt
+from dockfactory.generator.datasets.folder import prepare
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.exports.coco import (
     KPT_OKS_SIGMAS,

@@ -1,4 +1,4 @@
-"""Fingerprint v3 (generator.fingerprints_libm): a published dataset whose labels' trigonometry
+"""Fingerprint v3 (generator.datasets.fingerprints_libm): a published dataset whose labels' trigonometry
 another CPU path rounded otherwise verifies on the cores a libm re-render gives, and nothing else.
 
 The published dataset is the painted smoke dataset (tests/pipeline_data.py); a re-render whose
@@ -10,10 +10,10 @@ import math
 
 import pytest
 
-from dockfactory.generator import published
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.fingerprints import FINGERPRINTS_V3_NAME, read_fingerprints_v2
-from dockfactory.generator.fingerprints_libm import derive
+from dockfactory.generator.datasets import published
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.fingerprints import FINGERPRINTS_V3_NAME, read_fingerprints_v2
+from dockfactory.generator.datasets.fingerprints_libm import derive
 
 
 def _edit(sub, fid, edit):

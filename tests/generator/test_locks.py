@@ -26,7 +26,7 @@ from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import HOST, remove_stale_temps
 from dockfactory.core.resources import default_acceptance, shipped_config
-from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.render_job import JobOptions, run_render
 
 DOCKFACTORY = str(Path(sys.executable).parent / "dockfactory")
@@ -67,7 +67,7 @@ def _dead_pid() -> int:
 HOLDER = """
 import sys
 from dockfactory.core.io import folder_lock
-from dockfactory.generator.dataset import dataset_lock
+from dockfactory.generator.datasets.folder import dataset_lock
 kind, folder = sys.argv[1], sys.argv[2]
 with (dataset_lock(folder, "render") if kind == "dataset" else folder_lock(folder, "run")):
     print("held", flush=True)
@@ -309,7 +309,7 @@ def test_render_removes_a_dead_workers_temporary_before_it_declares_complete(pai
 def test_a_foreign_folder_gets_no_lock_file_and_a_leftover_lock_blocks_nothing(tmp_path, no_render):
     """The lock file is made only in a folder render may write: a foreign folder is refused
     before it; a folder that holds nothing but a lock file left by an earlier render is empty."""
-    from dockfactory.generator.dataset import DatasetError, dataset_lock, prepare
+    from dockfactory.generator.datasets.folder import DatasetError, dataset_lock, prepare
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")

@@ -11,7 +11,7 @@ from dockfactory.core.config import ConfigError, config_from_dict, config_from_i
 from dockfactory.core.config_text import load_config_text
 from dockfactory.core.geometry import project_points
 from dockfactory.core.scene import RenderSettings, from_dict, to_dict
-from dockfactory.generator.dataset import identity
+from dockfactory.generator.datasets.folder import identity
 from dockfactory.generator.marker_regions import (
     FEATHER_PX,
     HALO_PX,

@@ -74,7 +74,7 @@ def _silhouette(frame, static, sec):
 
 def test_the_bop_models_are_the_parts(part_dataset):
     from dockfactory.core.mesh_files import read_mesh
-    from dockfactory.generator import dataset_tools as dt
+    from dockfactory.generator.datasets import tools as dt
     cfg, root = part_dataset
     out = dt.export(root, "bop")
     for obj, sec in ((1, "a"), (2, "b")):

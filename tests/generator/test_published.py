@@ -1,4 +1,4 @@
-"""A re-render checked against a published manifest (generator.published; issue 13).
+"""A re-render checked against a published manifest (generator.datasets.published; issue 13).
 
 The published dataset is the painted smoke dataset (tests/pipeline_data.py, no Blender); a
 "re-render" is a copy of some of its frames without the manifest, as ``dockfactory render
@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from dockfactory.cli import main
-from dockfactory.generator import published
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.fingerprints import read_fingerprints_v2
-from dockfactory.generator.label_prints import index_difference, index_measurements, label_core_sha256
+from dockfactory.generator.datasets import published
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.fingerprints import read_fingerprints_v2
+from dockfactory.generator.datasets.label_prints import index_difference, index_measurements, label_core_sha256
 
 
 def test_publish_copies_the_manifest_and_fingerprints_every_image(painted_source, tmp_path):
@@ -134,7 +134,7 @@ def test_a_manifest_that_is_not_one_is_a_one_line_error(release, capsys):
         published.verify_against(sub, pub / "manifest.json")
 
 
-# fingerprint v2 (generator/label_prints.py): a label whose object-edge pixels went to a neighbour
+# fingerprint v2 (generator/datasets/label_prints.py): a label whose object-edge pixels went to a neighbour
 # on another CPU (measured: one section pixel, 49 of 3,200 paper frames) against a real difference
 
 def _edit_label(sub, fid, edit) -> None:
@@ -212,11 +212,11 @@ def test_index_difference_is_none_for_another_structure():
     assert index_difference(a, a[:2]) is None
 
 
-# the markers themselves (generator/marker_check.py): a tile mean barely moves when a marker is
+# the markers themselves (generator/datasets/marker_check.py): a tile mean barely moves when a marker is
 # erased, moved or recoloured; the check compares each marker's colour with its verified label
 
 def _checked_markers(sub, fid):
-    from dockfactory.generator.marker_check import MIN_PIXELS
+    from dockfactory.generator.datasets.marker_check import MIN_PIXELS
     label = json.loads((sub / "labels" / f"{fid}.json").read_text())
     return [m for m in label["markers"] if m.get("legible") and (m.get("visible_pixels") or 0) >= MIN_PIXELS
             and m.get("visible_fraction", 0) >= 0.99]

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from dockfactory.core.config import load_config
-from dockfactory.generator import dataset_tools as dt
+from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.render_job import JobOptions, run_render
 
 pytestmark = [pytest.mark.render, pytest.mark.slow]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dockfactory.core.config import load_config
-from dockfactory.generator.dataset import DatasetError
+from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.generator.exr import read_compact
 from dockfactory.generator.render_job import JobOptions, run_render
 

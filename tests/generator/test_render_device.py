@@ -51,7 +51,7 @@ def test_an_unknown_device_is_refused():
 
 
 def test_a_stored_dataset_without_the_key_still_opens(painted):
-    from dockfactory.generator.dataset_open import Dataset
+    from dockfactory.generator.datasets.reader import Dataset
     ident = json.loads((painted / "dataset.json").read_text())
     assert "device" not in ident["config"]["render"]
     assert Dataset.open(painted).config.render.device == "cpu"

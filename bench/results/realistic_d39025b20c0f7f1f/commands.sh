@@ -11,6 +11,6 @@ D=out/realistic; E=out/realistic_eval
 .venv/bin/dockfactory evaluate $D --poses $E/poses_oracle.json --camera-models --out $E/eval_oracle
 ls $D/images > /dev/null
 .venv/bin/dockfactory measure $(.venv/bin/python -c "
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.reader import Dataset
 ds=Dataset.open('$D', full=False); print(' '.join(str(ds.image_path(f)) for f in ds.frames('test')))") --layout $D/layout.json --out $E/measure --threads 2 --quiet
 echo DONE

@@ -5,7 +5,7 @@ differs in the last bits from what every other CPU computes, and since ``dockfac
 pins numpy to libm's paths on every CPU, no re-render reproduces those bits. ``derive`` turns a
 re-render of some of such a dataset's frames (made by the pinned generator) into fingerprint v3 for
 those frames: per frame the label core digest of the re-render, with the sections' silhouettes
-drawn as the manifest's generator drew them (``generator.label_legacy``), beside v2's published
+drawn as the manifest's generator drew them (``generator.datasets.label_legacy``), beside v2's published
 index-pass numbers. It refuses a frame whose index-pass numbers are not within v2's tolerance of
 the published ones, and a frame already in the v3 file with another digest; frames whose core
 already equals v2's are counted (for them the derivation reproduces the published digest exactly,
@@ -17,15 +17,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core.io import write_bytes_atomic
-from dockfactory.generator.dataset import DatasetError, load_identity
-from dockfactory.generator.fingerprints import FINGERPRINTS_V3_NAME, fingerprints_of, read_fingerprints_v2
-from dockfactory.generator.label_prints import (
+from dockfactory.generator.datasets.folder import DatasetError, load_identity
+from dockfactory.generator.datasets.fingerprints import FINGERPRINTS_V3_NAME, fingerprints_of, read_fingerprints_v2
+from dockfactory.generator.datasets.label_prints import (
     INDEX_TOLERANCE_PX,
     index_difference,
     index_measurements,
     label_core_sha256,
 )
-from dockfactory.generator.published import LegacyLabels, _load_published, _rerendered_frames, _version_difference
+from dockfactory.generator.datasets.published import LegacyLabels, _load_published, _rerendered_frames, _version_difference
 
 
 @dataclass

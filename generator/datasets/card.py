@@ -1,6 +1,6 @@
 """The dataset card: ``README.md`` at the dataset's root, Hugging Face style (YAML front matter,
 then a body generated from the dataset's identity), and the ``hf/`` view it points at
-(``generator.hf_view``).
+(``generator.datasets.hf_view``).
 
 The card and the view are derived, like ``exports/``: they are not in the manifest (``dataset
 verify`` neither needs nor checks them; a dataset rendered before cards existed stays valid),
@@ -18,9 +18,9 @@ from pathlib import Path
 from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
-from dockfactory.generator.dataset import CONVENTIONS
-from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.hf_view import HF_DIR, HF_FEATURES, HF_SPLIT_NAMES, write_hf_view
+from dockfactory.generator.datasets.folder import CONVENTIONS
+from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.datasets.hf_view import HF_DIR, HF_FEATURES, HF_SPLIT_NAMES, write_hf_view
 
 CARD_NAME = "README.md"
 SIZE_BUCKETS = ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M"))

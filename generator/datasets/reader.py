@@ -1,7 +1,7 @@
 """The dataset contract: every consumer (detect, train, solve, evaluate, export, run) reads a dataset
 through ``Dataset.open``.
 
-``Dataset.open`` runs the checks of ``generator.dataset_check`` (``full=False``: images and EXR by size only) and
+``Dataset.open`` runs the checks of ``generator.datasets.check`` (``full=False``: images and EXR by size only) and
 refuses a damaged, incomplete or foreign dataset with a one-line DatasetError; a label's bytes are checked against
 the manifest again when it is read.
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 from dockfactory.core.config import Config
 from dockfactory.core.io import sha256_bytes
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_check import inspect
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.check import inspect
 
 
 class Labels(Mapping):
@@ -73,7 +73,7 @@ class Dataset:
 
     @classmethod
     def of_checked(cls, root, checked, full: bool) -> Dataset:
-        """The dataset a caller has just checked itself (``dataset_check.inspect`` with an OK
+        """The dataset a caller has just checked itself (``check.inspect`` with an OK
         report): what it read, without checking again."""
         return cls(Path(root), checked.identity, checked.config, checked.plan, checked.manifest, full)
 

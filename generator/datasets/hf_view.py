@@ -18,8 +18,8 @@ from pathlib import Path
 
 from dockfactory.core.io import TMP_MARK, stale_temp, write_text_atomic
 from dockfactory.core.names import CLASS_NAMES, POSE_NAMES, SPLITS
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.dataset_open import Dataset
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.coco import COCO_SHIFT   # OpenCV pixel centres -> continuous coordinates
 from dockfactory.generator.exports.files import folder_built_aside, place_file, source_image
 
@@ -118,7 +118,23 @@ def _same_bytes(a: Path, b: Path) -> bool:
 def write_hf_view(ds: Dataset) -> dict[str, int]:
     """Write ``hf/`` of the complete dataset ``ds`` (module docstring): built aside, then swapped
     in by rename, and left untouched when it already holds the same files (so a DVC-tracked
-    dataset stays clean). Returns the frames per split (non-empty splits only)."""
+    dataset stays clean).
+
+    Parameters
+    ----------
+    ds : Dataset
+        The opened, complete dataset.
+
+    Returns
+    -------
+    dict
+        Frames per split (non-empty splits only).
+
+    Raises
+    ------
+    DatasetError
+        ``hf`` is a symlink (the view is a folder inside the dataset).
+    """
     root = ds.root
     final = root / HF_DIR
     if final.is_symlink():

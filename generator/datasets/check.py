@@ -1,10 +1,10 @@
 """Checking a dataset directory: its identity, its manifest against its plan, its files against its
-manifest. ``verify`` reports every problem; ``Dataset.open`` (generator.dataset_open) runs the same
+manifest. ``verify`` reports every problem; ``Dataset.open`` (generator.datasets.reader) runs the same
 checks and refuses the dataset naming its first problems. With ``hash_bulk=False`` images and EXR
 are compared by size only (the small files, labels included, are always hashed).
 
 Derived files (not content, never in the manifest, regenerable): ``logs/``, ``exports/``, the
-dataset card ``README.md`` and its Hugging Face view ``hf/`` (``generator.dataset_card``).
+dataset card ``README.md`` and its Hugging Face view ``hf/`` (``generator.datasets.card``).
 
 Why and how: docs/datasets.md, "The chain of trust".
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 from dockfactory.core.config import Config, config_from_identity
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import dead_writer, is_temp_name, sha256_file
-from dockfactory.generator.dataset import (
+from dockfactory.generator.datasets.folder import (
     DATASET_FORMAT,
     ROOT_FILES,
     SPLITS,
@@ -26,7 +26,7 @@ from dockfactory.generator.dataset import (
     frame_files,
     load_identity,
 )
-from dockfactory.generator.dvc_links import CACHE_ENV, cache_link, dvc_caches
+from dockfactory.generator.datasets.dvc_links import CACHE_ENV, cache_link, dvc_caches
 from dockfactory.generator.sampler import frame_plan
 from dockfactory.generator.version import dataset_version_id, generator_version
 

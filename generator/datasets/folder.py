@@ -23,7 +23,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import LOCK_NAME, folder_lock, output_lock, sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import SPLITS
-from dockfactory.generator.dvc_links import cache_link, dvc_caches
+from dockfactory.generator.datasets.dvc_links import cache_link, dvc_caches
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.frame_output import frame_paths
 from dockfactory.generator.sampler import frame_plan
@@ -234,7 +234,7 @@ def frame_files(frame_id: str, keep_exr: bool, keep_raw: bool = False) -> dict[s
 def frame_done(root, frame_id: str, keep_exr: bool, keep_raw: bool = False) -> bool:
     """True when the frame's label (the commit point) and the files it vouches for exist. The meta
     record must name exactly the frame's own files (a record pointing elsewhere is not done); a
-    symlink is a file only when it is a DVC cache link (``generator.dvc_links``)."""
+    symlink is a file only when it is a DVC cache link (``generator.datasets.dvc_links``)."""
     p = frame_paths(root, frame_id)
     if not (p["label"].is_file() and p["image"].is_file() and p["meta"].is_file()):
         return False

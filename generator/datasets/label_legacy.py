@@ -8,7 +8,7 @@ generator/silhouette.py; the measurement: bench/results/tool_checks/README.md). 
 published paper dataset was labelled that way. A re-render by today's generator labels its
 sections correctly, so its label cannot equal the published one byte for byte; verify replaces the
 two fields by what this module computes for the same frame and compares again, and says so
-(generator.published). Everything else of the label must still match.
+(generator.datasets.published). Everything else of the label must still match.
 """
 from __future__ import annotations
 

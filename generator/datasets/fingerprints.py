@@ -1,4 +1,4 @@
-"""The fingerprint files published beside a dataset's manifest (``generator.published``).
+"""The fingerprint files published beside a dataset's manifest (``generator.datasets.published``).
 
 - ``fingerprints.npz`` (v1): per frame, the mean of every 80 x 80 px image tile per channel and
   the label's geometry digest (``label_prints.label_geometry_sha256``);
@@ -17,14 +17,14 @@ from dockfactory.core.cv import cv2
 import numpy as np
 
 from dockfactory.core.io import write_bytes_atomic
-from dockfactory.generator.dataset import DatasetError
-from dockfactory.generator.label_prints import index_measurements, label_core_sha256, label_geometry_sha256
+from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.datasets.label_prints import index_measurements, label_core_sha256, label_geometry_sha256
 
 TILE_PX = 80
 FINGERPRINTS_NAME = "fingerprints.npz"
 FINGERPRINTS_V2_NAME = "fingerprints_v2.npz"
 # v2's format; each frame's label core as a generator with numpy's trigonometry pinned to libm
-# computes it, for a dataset published with another (generator.published)
+# computes it, for a dataset published with another (generator.datasets.published)
 FINGERPRINTS_V3_NAME = "fingerprints_v3.npz"
 
 
@@ -88,7 +88,7 @@ def fingerprints_v2(frame_ids, label_texts, manifest_sha256: str | None = None) 
 
 def fingerprints_of(frame_ids, cores, rows, manifest_sha256: str | None = None) -> bytes:
     """The npz bytes of v2-format fingerprints from their parts: per frame id a label core digest
-    and a row of index-pass numbers (``generator.label_prints``)."""
+    and a row of index-pass numbers (``generator.datasets.label_prints``)."""
     index = np.full((len(rows), max((len(r) for r in rows), default=0)), np.nan)
     for i, r in enumerate(rows):
         index[i, :len(r)] = r

@@ -1,5 +1,5 @@
 """``dockfactory dataset verify | info | diff | export``: check, describe, compare and export dataset
-directories (the content diff lives in ``generator.dataset_diff``)."""
+directories (the content diff lives in ``generator.datasets.diff``)."""
 from __future__ import annotations
 
 import json
@@ -7,21 +7,21 @@ from pathlib import Path
 
 from dockfactory.core.config import config_from_identity
 from dockfactory.core.io import output_lock, remove_stale_temps, write_json_atomic
-from dockfactory.generator.dataset import (
+from dockfactory.generator.datasets.folder import (
     DatasetError,
     dataset_lock,
     load_identity,
     read_identity,
 )
-from dockfactory.generator.dataset_check import (  # noqa: F401  (verify: the CLI's and tests' entry)
+from dockfactory.generator.datasets.check import (  # noqa: F401  (verify: the CLI's and tests' entry)
     VerifyReport,
     content_files,
     load_manifest,
     verify,
 )
-from dockfactory.generator.dataset_diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
-from dockfactory.generator.dataset_open import Dataset
-from dockfactory.generator.dvc_links import outside_exports
+from dockfactory.generator.datasets.diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
+from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.datasets.dvc_links import outside_exports
 from dockfactory.generator.exports import (
     export_bop,
     export_cameras,

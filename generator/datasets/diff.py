@@ -6,7 +6,7 @@ every file of the content as it is on disk (``manifest.json`` included; not ``lo
 manifests say, so a corrupted copy shows its changed files even when its manifest is intact.
 Labels that differ are compared field by field (``markers[3].center_px[0]: 101.2 -> 101.7``).
 A symlink is compared by where it points, never followed, except a DVC cache link
-(``generator.dvc_links``), whose file is compared.
+(``generator.datasets.dvc_links``), whose file is compared.
 
 Bad input (a folder that is not a dataset, an unreadable identity or manifest) raises
 DatasetError; the command line exits like ``git diff --exit-code``: 0 identical, 1 different,
@@ -19,9 +19,9 @@ import os
 from pathlib import Path
 
 from dockfactory.core.io import sha256_file
-from dockfactory.generator.dataset import config_differences, load_identity
-from dockfactory.generator.dataset_check import NOT_CONTENT, content_files, load_manifest
-from dockfactory.generator.dvc_links import cache_link, dvc_caches
+from dockfactory.generator.datasets.folder import config_differences, load_identity
+from dockfactory.generator.datasets.check import NOT_CONTENT, content_files, load_manifest
+from dockfactory.generator.datasets.dvc_links import cache_link, dvc_caches
 
 MAX_FIELDS = 20   # field differences kept per label
 

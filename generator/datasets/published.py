@@ -23,9 +23,9 @@ from dockfactory.core.config import config_from_identity
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_bytes, sha256_file, write_bytes_atomic
 from dockfactory.core.user_files import check_regular_file
-from dockfactory.generator.dataset import FRAME_ID_RE, DatasetError, load_identity
-from dockfactory.generator.dataset_check import verify
-from dockfactory.generator.fingerprints import (
+from dockfactory.generator.datasets.folder import FRAME_ID_RE, DatasetError, load_identity
+from dockfactory.generator.datasets.check import verify
+from dockfactory.generator.datasets.fingerprints import (
     FINGERPRINTS_NAME,
     FINGERPRINTS_V2_NAME,
     FINGERPRINTS_V3_NAME,
@@ -36,11 +36,11 @@ from dockfactory.generator.fingerprints import (
     write_fingerprints,
     write_fingerprints_v2,
 )
-from dockfactory.generator.label_legacy import legacy_section_fields, with_legacy_sections
-from dockfactory.generator.marker_check import marker_problems
+from dockfactory.generator.datasets.label_legacy import legacy_section_fields, with_legacy_sections
+from dockfactory.generator.datasets.marker_check import marker_problems
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
-from dockfactory.generator.label_prints import (
+from dockfactory.generator.datasets.label_prints import (
     INDEX_TOLERANCE_PX,
     index_difference,
     index_measurements,
@@ -90,7 +90,7 @@ class PublishedReport:
         if self.labels_legacy_sections:
             notes.append(f"{self.labels_legacy_sections} labels match once their sections' pixels_all and bbox_obj_px "
                          "are drawn as the manifest's generator drew them (the convex hull of each section, 2 % "
-                         "too large; fixed since, generator/label_legacy.py): everything else matches")
+                         "too large; fixed since, generator/datasets/label_legacy.py): everything else matches")
         if self.labels_libm:
             notes.append(f"{self.labels_libm} labels match the published geometry as libm's sin and cos give it "
                          f"({FINGERPRINTS_V3_NAME}; the manifest's generator took numpy's AVX-512 paths, which "
@@ -210,7 +210,7 @@ def _index_problem(fid: str, text: bytes, published: tuple, rep: PublishedReport
 
 class LegacyLabels:
     """A re-render's labels with their sections' silhouettes as generators before the silhouette
-    fix drew them (generator.label_legacy), for a manifest such a generator made: the frames'
+    fix drew them (generator.datasets.label_legacy), for a manifest such a generator made: the frames'
     scenes come from the re-render's own config (the same as the manifest's), drawn once."""
 
     def __init__(self, root: Path):
@@ -321,25 +321,9 @@ def _difference_note(ident: dict, manifest: dict, devices: tuple[str, str]) -> s
             f"frames are compared as they are (a newer generator must reproduce them)")
 
 
-def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) -> PublishedReport:
-    """Check the (partial) dataset at ``root`` against a published manifest (module docstring)."""
-    root, manifest_path = Path(root), Path(manifest_path)
-    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not (math.isfinite(tolerance)
-                                                                                      and tolerance > 0):
-        raise DatasetError(f"--tolerance: expected a finite number of levels > 0, got {tolerance!r}")
-    pub = _load_published(manifest_path)
-    rep = PublishedReport(str(root), str(manifest_path), tolerance=tolerance)
-    legacy = None
-    ident = load_identity(root)
-    devices = _devices(ident, pub.manifest)
-    if ident["version_id"] != pub.manifest["version_id"]:
-        why = _version_difference(ident, pub.manifest)
-        if why is not None:
-            rep.problems.append(f"dataset.json: version {ident['version_id']}, the manifest's is "
-                                f"{pub.manifest['version_id']} ({why})")
-            return rep
-        rep.notes.append(_difference_note(ident, pub.manifest, devices))
-        legacy = LegacyLabels(root)
+def _check_root_files(root: Path, pub: _Published, devices: tuple[str, str], rep: PublishedReport) -> None:
+    """The dataset's root files against the manifest's records (config.toml by its config when its
+    text differs, and not at all across render devices)."""
     for name in EXACT_ROOT_FILES:
         if name == "config.toml" and devices[0] != devices[1]:
             continue
@@ -350,6 +334,46 @@ def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) ->
                              "value the published config left to its default then), its config is the same")
             continue
         rep.problems.append(f"{name}: differs from the manifest")
+
+
+def verify_against(root, manifest_path, tolerance: float = DEFAULT_TOLERANCE) -> PublishedReport:
+    """Check the (partial) dataset at ``root`` against a published manifest (module docstring).
+
+    Parameters
+    ----------
+    root : path
+        A dataset folder holding some or all of the manifest's frames (a re-render).
+    manifest_path : path
+        The published ``manifest.json``, its fingerprint files beside it (:func:`publish`).
+    tolerance : float
+        8-bit levels an image may differ by (renders are not bit-exact across CPUs).
+
+    Returns
+    -------
+    PublishedReport
+        Its frames checked, notes and problems (empty: the re-render reproduces the manifest).
+
+    Raises
+    ------
+    DatasetError
+        A bad tolerance, a missing or unbound manifest, or a folder that is no dataset.
+    """
+    root, manifest_path = Path(root), Path(manifest_path)
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not math.isfinite(tolerance) \
+            or tolerance <= 0:
+        raise DatasetError(f"--tolerance: expected a finite number of levels > 0, got {tolerance!r}")
+    pub, ident, legacy = _load_published(manifest_path), load_identity(root), None
+    rep = PublishedReport(str(root), str(manifest_path), tolerance=tolerance)
+    devices = _devices(ident, pub.manifest)
+    if ident["version_id"] != pub.manifest["version_id"]:
+        why = _version_difference(ident, pub.manifest)
+        if why is not None:
+            rep.problems.append(f"dataset.json: version {ident['version_id']}, the manifest's is "
+                                f"{pub.manifest['version_id']} ({why})")
+            return rep
+        rep.notes.append(_difference_note(ident, pub.manifest, devices))
+        legacy = LegacyLabels(root)
+    _check_root_files(root, pub, devices, rep)
     published = {f["frame_id"] for f in pub.manifest["frames"]}
     for fid in _rerendered_frames(root):
         if fid not in published:
@@ -369,7 +393,25 @@ def publish(root, out) -> str:
     the folder ``out``; a damaged or incomplete dataset is refused and nothing is written. Each
     file is written atomically, the fingerprints first and bound to the manifest (the sha256 of
     its content in them, :func:`manifest_binding`): a publish over an earlier one that stops half-way leaves the earlier manifest beside
-    fingerprints that name another, which verify refuses in one line (publish again)."""
+    fingerprints that name another, which verify refuses in one line (publish again).
+
+    Parameters
+    ----------
+    root : path
+        A complete dataset folder.
+    out : path
+        The folder the manifest and fingerprints go to (made if missing).
+
+    Returns
+    -------
+    str
+        One line naming the frames published and the files written.
+
+    Raises
+    ------
+    DatasetError
+        No ``out``, or a damaged or incomplete dataset (its problems in one line).
+    """
     if not out:
         raise DatasetError("dataset publish needs --out FOLDER")
     report = verify(root)
