@@ -16,24 +16,18 @@ __all__ = [
 ]
 
 
+ROOM_NAMES = ("Dataset", "verify_dataset", "dataset_info", "diff_datasets", "export_dataset", "write_card")
+
+
 def __getattr__(name: str):
     """The facade's names, imported from their module on first use (PEP 562)."""
     if name == "run_render":
         from dockfactory.generator.render_job import run_render as value
     elif name == "JobOptions":
         from dockfactory.generator.render_job import JobOptions as value
-    elif name == "Dataset":
-        from dockfactory.generator.datasets.reader import Dataset as value
-    elif name == "verify_dataset":
-        from dockfactory.generator.datasets.check import verify as value
-    elif name == "export_dataset":
-        from dockfactory.generator.datasets.tools import export as value
-    elif name == "dataset_info":
-        from dockfactory.generator.datasets.tools import info as value
-    elif name == "diff_datasets":
-        from dockfactory.generator.datasets.diff import diff as value
-    elif name == "write_card":
-        from dockfactory.generator.datasets.card import write_card as value
+    elif name in ROOM_NAMES:
+        from dockfactory.generator import datasets
+        value = getattr(datasets, name)
     else:
         raise AttributeError(f"module 'dockfactory.generator' has no attribute {name!r}")
     globals()[name] = value
