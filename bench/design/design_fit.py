@@ -17,7 +17,7 @@ thin-disc term of solver.disc_noise: a disc a few edge widths thick errs more ac
 EDGES_PX, the one whose prediction fits best (three-chip: with the least squares; Bayer: the
 shape a single factor fits best); each factor as the geometric mean of measured over predicted.
 
-Run: python -m bench.design.design_fit [--write] [--sources sampling.json white.json jpeg_a.json]
+Run: python -m bench.design.design_fit [--write] [--scenes a,b,c,d] [--sources sampling.json white.json jpeg_a.json]
 (--write: models/design_predictor.json; --sources: the three inputs above by their names under
 bench/results/sensor_effects/, for renders at another render default).
 """
@@ -125,43 +125,44 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES) -> dict:
     return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
 
 
-def _three_chip(results: dict, by_edge: dict):
+def _three_chip(results: dict, by_edge: dict, scenes=SCENES):
     """(edge, (s0, su, sv)) of the three-chip fit with the smallest relative error."""
-    tc = {s: measured(results, s, "three-chip") for s in SCENES}
+    tc = {s: measured(results, s, "three-chip") for s in scenes}
     best = None
     for e, bases in by_edge.items():
         p = nnls_relative(bases, tc)
-        err = float(np.sqrt(np.mean([np.log(predicted(bases[s], p) / tc[s]) ** 2 for s in SCENES])))
+        err = float(np.sqrt(np.mean([np.log(predicted(bases[s], p) / tc[s]) ** 2 for s in scenes])))
         if best is None or err < best[0]:
             best = (err, e, p)
     return best[1], best[2]
 
 
-def _bayer_edge(results: dict, by_edge: dict, p) -> float:
+def _bayer_edge(results: dict, by_edge: dict, p, scenes=SCENES) -> float:
     """The Bayer camera's edge width: the one whose shape a single factor fits best."""
     return min(by_edge, key=lambda e: _rms_log([(measured(results, s, x), predicted(by_edge[e][s], p))
-                                                for s in SCENES for x in BAYER]))
+                                                for s in scenes for x in BAYER]))
 
 
-def fit(sources=SOURCES) -> dict:
-    """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)."""
+def fit(sources=SOURCES, scenes=SCENES) -> dict:
+    """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)
+    over the sensor scenes ``scenes`` (each in ``sources[0]``)."""
     results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
-    by_edge = {e: {s: basis(s, e) for s in SCENES} for e in EDGES_PX}
-    e0, p = _three_chip(results, by_edge)
-    e1 = _bayer_edge(results, by_edge, p)
+    by_edge = {e: {s: basis(s, e) for s in scenes} for e in EDGES_PX}
+    e0, p = _three_chip(results, by_edge, scenes)
+    e1 = _bayer_edge(results, by_edge, p, scenes)
     bases, bayer_bases = by_edge[e0], by_edge[e1]
-    tc = {s: measured(results, s, "three-chip") for s in SCENES}
-    rows = ratio_rows("three-chip (fit)", {s: (tc[s], predicted(bases[s], p)) for s in SCENES})
-    for out in SCENES:
-        q = nnls_relative(bases, {s: tc[s] for s in SCENES if s != out})
+    tc = {s: measured(results, s, "three-chip") for s in scenes}
+    rows = ratio_rows("three-chip (fit)", {s: (tc[s], predicted(bases[s], p)) for s in scenes})
+    for out in scenes:
+        q = nnls_relative(bases, {s: tc[s] for s in scenes if s != out})
         rows += ratio_rows(f"three-chip, scene {out.upper()} left out", {out: (tc[out], predicted(bases[out], q))})
-    bayer = [(measured(results, s, e), predicted(bayer_bases[s], p)) for s in SCENES for e in BAYER]
+    bayer = [(measured(results, s, e), predicted(bayer_bases[s], p)) for s in scenes for e in BAYER]
     g = geo_factor(bayer)
     for e in BAYER:
-        rows += ratio_rows(e, {s: (measured(results, s, e), g * predicted(bayer_bases[s], p)) for s in SCENES})
-    jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in SCENES])
+        rows += ratio_rows(e, {s: (measured(results, s, e), g * predicted(bayer_bases[s], p)) for s in scenes})
+    jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in scenes])
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
-                                            g * jpeg * predicted(bayer_bases[s], p)) for s in SCENES})
+                                            g * jpeg * predicted(bayer_bases[s], p)) for s in scenes})
     other = ring_and_jpeg_factors(results, sources)
     versions = sorted(results)
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
@@ -185,10 +186,12 @@ def fit(sources=SOURCES) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--write", action="store_true", help="write models/design_predictor.json")
+    ap.add_argument("--scenes", default=",".join(SCENES),
+                    help="the sensor scenes fitted on, comma-separated (bench/configs/sensor_scene_<s>.toml; default: %(default)s)")
     ap.add_argument("--sources", nargs=3, default=SOURCES, metavar=("SAMPLING", "WHITE", "JPEG_A"),
                     help="the inputs under bench/results/sensor_effects/ (default: %(default)s)")
     args = ap.parse_args()
-    card = fit(tuple(args.sources))
+    card = fit(tuple(args.sources), tuple(args.scenes.split(",")))
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, edge {card['edge_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
           f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
