@@ -22,22 +22,11 @@ from dockfactory.generator.datasets.check import (  # noqa: F401  (verify: the C
 from dockfactory.generator.datasets.diff import diff, diff_text  # noqa: F401  (the CLI's and tests' entry)
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.datasets.dvc_links import outside_exports
-from dockfactory.generator.exports import (
-    export_bop,
-    export_cameras,
-    export_coco,
-    export_video,
-    export_video_lossless,
-    export_yolo,
-    export_yolo_pose,
-)
+from dockfactory.generator.exports import WRITERS
 from dockfactory.generator.exports.files import folder_built_aside
 from dockfactory.generator.sampler import frame_plan
 
-# coco, yolo, yolo-pose, bop, cameras: also written by render ([export] formats); the videos only on demand (dataset export)
-EXPORT_WRITERS = {"coco": export_coco, "yolo": export_yolo, "yolo-pose": export_yolo_pose, "bop": export_bop,
-                  "cameras": export_cameras,
-                  "video": export_video, "video_lossless": export_video_lossless}
+EXPORT_WRITERS = WRITERS   # the exports facade's registry: core.names.EXPORT_FORMATS, then the on-demand videos
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this

@@ -5,8 +5,14 @@ Modules: :mod:`~dockfactory.generator.exports.coco` (COCO keypoints), ``coco_res
 document as COCO results rows), ``yolo``, ``yolo_pose``, ``bop`` (the BOP layout with masks, depth
 and models), ``cameras`` (OpenCV, ROS and COLMAP calibrations per frame), ``video`` (each run as a
 video with its labels), ``files`` (placing a dataset's files in an export: hard links, DVC cache
-links or copies). The registry of names and writers is generator.datasets.tools.EXPORT_WRITERS.
+links or copies).
+
+``WRITERS`` is the registry: each name of ``core.names.EXPORT_FORMATS`` (what ``[export] formats``
+and render write; the config checks its names there) and of ``ON_DEMAND`` (written by ``dataset
+export`` only) to the facade's ``export_<name>`` (``-`` read as ``_``): a name without a writer
+fails at import.
 """
+from dockfactory.core.names import EXPORT_FORMATS
 from dockfactory.generator.exports.bop import export_bop
 from dockfactory.generator.exports.cameras import export_cameras
 from dockfactory.generator.exports.coco import coco_from_labels, export_coco
@@ -14,6 +20,9 @@ from dockfactory.generator.exports.coco_results import coco_results
 from dockfactory.generator.exports.video import export_video, export_video_lossless
 from dockfactory.generator.exports.yolo import export_yolo
 from dockfactory.generator.exports.yolo_pose import export_yolo_pose
+
+ON_DEMAND = ("video", "video_lossless")   # datasets with [runs]: one video per docking run
+WRITERS = {name: globals()["export_" + name.replace("-", "_")] for name in EXPORT_FORMATS + ON_DEMAND}
 
 __all__ = [
     # the writers of exports/<format>/
