@@ -5,9 +5,14 @@ import bpy
 import numpy as np
 
 
-def mesh_object(name: str, verts, faces, smooth: bool = False, collection=None):
+def mesh_object(name: str, verts, faces, smooth: bool = False, collection=None, material_indices=None):
+    """An object of ``verts`` (metres) and ``faces``; ``material_indices``: each face's slot in
+    the object's materials (set before Blender validates the mesh, so a face it drops takes its
+    index with it)."""
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata([tuple(map(float, v)) for v in verts], [], [tuple(map(int, f)) for f in faces])
+    if material_indices is not None:
+        mesh.polygons.foreach_set("material_index", [int(i) for i in material_indices])
     mesh.validate()
     mesh.update()
     if smooth:

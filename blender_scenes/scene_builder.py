@@ -119,12 +119,27 @@ def _section_cradles(static: StaticScene, sec: str, sign: int, support) -> list:
     return cradles
 
 
+def _file_materials(part, sec: str) -> list:
+    """The part's own materials (``[sections] materials = "file"``): the paint's shader at each
+    material's base colour, metallic and roughness, without grime or texture; set once, never per
+    frame."""
+    out = []
+    for k, (r, g, b, metallic, roughness) in enumerate(part.materials):
+        mat = mats.paint_material(f"part_{sec}_{k}")
+        mats.set_paint(mat, (r, g, b), metallic, roughness, 0.0, 0.0, 1.0, (0.0, 0.0, 0.0))
+        out.append(mat)
+    return out
+
+
 def _build_part(static: StaticScene, sec: str, paint, parent) -> None:
-    """A section's part mesh (core.scene.PartMesh, its section frame), flat-shaded in the paint:
-    exactly the triangles the labels use; no flange, band or cradles of the parametric section."""
+    """A section's part mesh (core.scene.PartMesh, its section frame), flat-shaded in the paint or
+    in its own materials: exactly the triangles the labels use; no flange, band or cradles of the
+    parametric section."""
     part = static.part(sec)
-    obj = meshes.mesh_object(f"section_{sec}", np.asarray(part.vertices) * MM, part.triangles)
-    obj.data.materials.append(paint)
+    own = part.triangle_materials if part.materials else None
+    obj = meshes.mesh_object(f"section_{sec}", np.asarray(part.vertices) * MM, part.triangles, material_indices=own)
+    for mat in _file_materials(part, sec) if part.materials else [paint]:
+        obj.data.materials.append(mat)
     obj.pass_index = SECTION_PASS_INDEX[sec]
     if parent is not None:
         obj.parent = parent

@@ -171,6 +171,11 @@ class SectionsConfig:
     mesh_a_triangles: tuple[tuple[int, int, int], ...] = ()       # its triangles (vertex indices)
     mesh_b_vertices: tuple[tuple[float, float, float], ...] = ()  # B's part as loaded (mm, B's frame)
     mesh_b_triangles: tuple[tuple[int, int, int], ...] = ()       # its triangles
+    materials: str = "paint"        # paint (the factory's randomised paint on every part) | file (each part's glTF materials: base colour, metallic, roughness)
+    mesh_a_materials: tuple[tuple[float, float, float, float, float], ...] = ()  # A's materials as loaded (red, green, blue linear, metallic, roughness; materials = "file")
+    mesh_a_triangle_materials: tuple[int, ...] = ()              # each of A's triangles' material
+    mesh_b_materials: tuple[tuple[float, float, float, float, float], ...] = ()  # B's materials as loaded
+    mesh_b_triangle_materials: tuple[int, ...] = ()              # each of B's triangles' material
 
 
 @dataclass(frozen=True)
@@ -307,8 +312,12 @@ IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
                     ("sections", "mesh_a_vertices"): [], ("sections", "mesh_a_triangles"): [],
-                    ("sections", "mesh_b_vertices"): [], ("sections", "mesh_b_triangles"): []}
+                    ("sections", "mesh_b_vertices"): [], ("sections", "mesh_b_triangles"): [],
+                    ("sections", "materials"): "paint",
+                    ("sections", "mesh_a_materials"): [], ("sections", "mesh_a_triangle_materials"): [],
+                    ("sections", "mesh_b_materials"): [], ("sections", "mesh_b_triangle_materials"): []}
 RENDER_DEVICES = ("cpu", "gpu")
+PART_MATERIALS = ("paint", "file")
 LIGHT_TREE_CHOICES = ("off", "markers", "on")
 
 
@@ -693,6 +702,24 @@ def _validate_parts(s: SectionsConfig, source: str) -> None:
                        f"{len(verts)} of mesh_{sec}_vertices")
         if bool(verts) != bool(tris):
             raise _err(source, "sections", f"mesh_{sec}_vertices", "vertices and triangles come together")
+        _validate_part_materials(s, sec, source)
+
+
+def _validate_part_materials(s: SectionsConfig, sec: str, source: str) -> None:
+    """[sections] materials: "file" needs every part's materials (read at load), "paint" none; the
+    loaded materials are rows of five numbers in [0, 1], one material index per triangle."""
+    if s.materials not in PART_MATERIALS:
+        raise _err(source, "sections", "materials", f"{s.materials!r} is not one of {', '.join(PART_MATERIALS)}")
+    tris, mats, idx = (getattr(s, f"mesh_{sec}{k}") for k in ("_triangles", "_materials", "_triangle_materials"))
+    if s.materials == "paint" and (mats or idx):
+        raise _err(source, "sections", f"mesh_{sec}_materials", 'stated with materials = "paint"; give one')
+    if s.materials == "file" and tris and not mats:
+        raise _err(source, "sections", "materials", f'"file", but part {sec.upper()} has no materials '
+                   "(only glTF files carry them): use \"paint\"")
+    if mats and (any(len(m) != 5 or not all(0.0 <= v <= 1.0 for v in m) for m in mats)
+                 or len(idx) != len(tris) or min(idx) < 0 or max(idx) >= len(mats)):
+        raise _err(source, "sections", f"mesh_{sec}_materials", "each material is five numbers in [0, 1] "
+                   "and each triangle names one of them")
 
 
 def _validate_markers(cfg: Config, source: str) -> None:

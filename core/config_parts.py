@@ -6,7 +6,9 @@ its docking face, +X from A toward B, +Z toward the camera; B's the same at its 
 ``mesh_units`` (glTF: metres). Loading the config reads it into ``mesh_a_vertices`` and
 ``mesh_a_triangles`` (mm), so the config holds the part itself: the version id is its content, a
 dataset's stored config re-renders it without the file, and everything downstream (markers cast
-onto it, silhouettes, the worker's scene, BOP models) reads the same triangles.
+onto it, silhouettes, the worker's scene, BOP models) reads the same triangles. With
+``[sections] materials = "file"`` the part's glTF materials are read the same way
+(``mesh_a_materials``, ``mesh_a_triangle_materials``) and rendered in place of the paint.
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ def resolve_parts(data: dict, config_path) -> tuple[dict, str | None]:
             continue
         if not isinstance(name, str):
             raise MeshError(f"{source}: [sections] mesh_{sec}: expected a file name, got {name!r}")
-        if f"mesh_{sec}_vertices" in sections or f"mesh_{sec}_triangles" in sections:
+        if any(f"mesh_{sec}_{k}" in sections for k in ("vertices", "triangles", "materials", "triangle_materials")):
             raise MeshError(f"{source}: [sections] mesh_{sec}: the config states its triangles too; give one")
         path = beside_config(name, config_path)
         try:
@@ -42,6 +44,12 @@ def resolve_parts(data: dict, config_path) -> tuple[dict, str | None]:
         out.pop(f"mesh_{sec}")
         out[f"mesh_{sec}_vertices"] = mesh.vertices.tolist()
         out[f"mesh_{sec}_triangles"] = mesh.triangles.tolist()
+        if sections.get("materials") == "file":
+            if mesh.materials is None:
+                raise MeshError(f'{source}: [sections] materials = "file": {name!r} has no materials (only glTF '
+                                'files carry them); use materials = "paint"')
+            out[f"mesh_{sec}_materials"] = mesh.materials.tolist()
+            out[f"mesh_{sec}_triangle_materials"] = mesh.triangle_materials.tolist()
         digest = short_digest(path)
         notes.append(f"[sections] mesh_{sec} = {name!r} (sha256 {digest}..., {len(mesh.triangles)} triangles)")
     return {**data, "sections": out}, " and ".join(notes) + " resolved"

@@ -2,8 +2,9 @@
 ASCII) and PLY (ASCII or binary little-endian); a user's parts come in through these.
 
 One in-memory form, :class:`TriMesh`: vertices (N, 3) float64 in mm and triangles (M, 3) int64
-indices. Only geometry is read (materials, normals and texture coordinates are left out: the
-factory paints its parts, and the face normals follow from the triangles). Units: glTF is in
+indices, and a glTF's materials (base colour, metallic, roughness per primitive: what
+``[sections] materials = "file"`` renders); normals and texture coordinates are left out (the
+face normals follow from the triangles), and so are OBJ's, STL's and PLY's colours. Units: glTF is in
 metres by its specification; OBJ, STL and PLY carry none, so the caller states them
 (``UNITS_MM``). A glTF's node transforms (matrix, or translation / rotation / scale) are applied
 through the scene's hierarchy. Polygons of OBJ and PLY are split into triangles as fans.
@@ -125,18 +126,19 @@ def read_mesh(path, units: str = "mm") -> TriMesh:
         raise MeshError(f"{path}: mesh file not found") from None
     except OSError as exc:
         raise MeshError(f"{path}: cannot read the mesh file ({exc.strerror})") from None
+    materials = triangle_materials = None
     if suffix in (".glb", ".gltf"):
-        verts, tris = read_gltf(data, path)
+        verts, tris, materials, triangle_materials = read_gltf(data, path)
         scale = 1000.0
     else:
         verts, tris = {".obj": _read_obj, ".stl": _read_stl, ".ply": read_ply}[suffix](data, str(path))
         scale = UNITS_MM[units]
-    return checked_mesh(verts * scale, tris, str(path))
+    return checked_mesh(verts * scale, tris, str(path), materials, triangle_materials)
 
 
 def mesh_bytes(mesh: TriMesh, suffix: str) -> bytes:
-    """``mesh`` (mm) in the format of file suffix ``suffix``: .glb (metres), .stl (binary), .obj
-    and .ply (ASCII), the last three in mm."""
+    """``mesh`` (mm) in the format of file suffix ``suffix``: .glb (metres, with the mesh's
+    materials), .stl (binary), .obj and .ply (ASCII), the last three in mm (geometry only)."""
     if suffix == ".glb":
         return glb_bytes(mesh)
     if suffix == ".stl":

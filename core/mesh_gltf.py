@@ -5,7 +5,10 @@ Read: every triangle primitive (mode 4) of every mesh the default scene's nodes 
 POSITION accessor and its indices (or none: consecutive triangles), each node's transform
 (``matrix``, or ``translation`` / ``rotation`` / ``scale``) applied through the hierarchy. Other
 primitive modes, sparse accessors and buffer files outside the glTF's folder are refused. glTF's
-unit is the metre (its specification); the caller scales.
+unit is the metre (its specification); the caller scales. Materials: each primitive's
+``pbrMetallicRoughness`` base colour factor (linear RGB; alpha and textures left out), metallic
+and roughness factors, at glTF's defaults where unstated (a primitive without a material takes
+glTF's default material); a file with no ``materials`` has none.
 """
 from __future__ import annotations
 
@@ -101,46 +104,85 @@ def _primitives(doc: dict, where: str):
             yield world, prim
 
 
-def read_gltf(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices (N, 3) metres, triangles (M, 3)) of a .glb or .gltf file's bytes ``data``."""
+def _material_row(doc: dict, index) -> tuple[float, ...]:
+    """(red, green, blue, metallic, roughness) of material ``index`` (None: glTF's default)."""
+    pbr = doc["materials"][index].get("pbrMetallicRoughness", {}) if index is not None else {}
+    r, g, b = [float(v) for v in pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))[:3]]
+    return r, g, b, float(pbr.get("metallicFactor", 1.0)), float(pbr.get("roughnessFactor", 1.0))
+
+
+def _read_doc(doc: dict, path: Path, glb_bin: bytes | None, where: str):
+    cache: dict[int, bytes] = {}
+
+    def buffers(i: int) -> bytes:
+        return cache.setdefault(i, _buffer(doc, i, path, glb_bin))
+    verts, tris, mats, rows, base = [], [], [], {}, 0
+    for world, prim in _primitives(doc, where):
+        pos = _accessor(doc, prim["attributes"]["POSITION"], buffers, where)
+        idx = (_accessor(doc, prim["indices"], buffers, where).ravel() if "indices" in prim
+               else np.arange(len(pos)))
+        verts.append(pos @ world[:3, :3].T + world[:3, 3])
+        tris.append(idx.reshape(-1, 3) + base)
+        row = rows.setdefault(prim.get("material"), len(rows))
+        mats.append(np.full(len(tris[-1]), row, dtype=np.int64))
+        base += len(pos)
+    materials = [_material_row(doc, i) for i in rows] if doc.get("materials") else None
+    return verts, tris, materials, mats
+
+
+def read_gltf(data: bytes, path: Path):
+    """(vertices (N, 3) metres, triangles (M, 3), materials (K, 5) rows of
+    ``mesh_base.MATERIAL_KEYS`` or None, triangle_materials (M,) or None) of a .glb or .gltf
+    file's bytes ``data``."""
     where = str(path)
     try:
         doc, glb_bin = _glb_chunks(data, where) if data[:4] == b"glTF" else (json.loads(data.decode("utf-8")), None)
-        cache: dict[int, bytes] = {}
-
-        def buffers(i: int) -> bytes:
-            return cache.setdefault(i, _buffer(doc, i, path, glb_bin))
-        verts, tris, base = [], [], 0
-        for world, prim in _primitives(doc, where):
-            pos = _accessor(doc, prim["attributes"]["POSITION"], buffers, where)
-            idx = (_accessor(doc, prim["indices"], buffers, where).ravel() if "indices" in prim
-                   else np.arange(len(pos)))
-            verts.append(pos @ world[:3, :3].T + world[:3, 3])
-            tris.append(idx.reshape(-1, 3) + base)
-            base += len(pos)
+        verts, tris, materials, mats = _read_doc(doc, path, glb_bin, where)
     except MeshError:
         raise
     except (KeyError, IndexError, TypeError, ValueError, struct.error, UnicodeDecodeError) as exc:
         raise MeshError(f"{where}: not a usable glTF 2.0 file ({type(exc).__name__}: {exc})") from None
     if not verts:
         raise MeshError(f"{where}: the glTF's scene holds no mesh")
-    return np.concatenate(verts), np.concatenate(tris)
+    if materials is None:
+        return np.concatenate(verts), np.concatenate(tris), None, None
+    return np.concatenate(verts), np.concatenate(tris), np.array(materials), np.concatenate(mats)
+
+
+def _primitive_groups(mesh: TriMesh) -> list[np.ndarray]:
+    """The triangles of each material in turn (all of them when the mesh has none)."""
+    if mesh.materials is None:
+        return [mesh.triangles]
+    return [mesh.triangles[mesh.triangle_materials == k] for k in range(len(mesh.materials))]
+
+
+def _material_doc(row) -> dict:
+    r, g, b, metallic, roughness = (float(v) for v in row)
+    return {"pbrMetallicRoughness": {"baseColorFactor": [r, g, b, 1.0], "metallicFactor": metallic,
+                                     "roughnessFactor": roughness}}
 
 
 def glb_bytes(mesh: TriMesh, metres_per_unit: float = 1e-3) -> bytes:
     """``mesh`` (its units times ``metres_per_unit`` are metres) as a .glb: one node, one mesh,
-    float32 positions and uint32 indices."""
+    float32 positions and uint32 indices, a primitive per material (with its material) when the
+    mesh has materials."""
     pos = (mesh.vertices * metres_per_unit).astype("<f4")
-    idx = mesh.triangles.astype("<u4")
-    binary = pos.tobytes() + idx.tobytes()
+    groups = [g.astype("<u4") for g in _primitive_groups(mesh)]
+    binary = pos.tobytes() + b"".join(g.tobytes() for g in groups)
+    views, accessors, prims, offset = [{"buffer": 0, "byteOffset": 0, "byteLength": pos.nbytes}], [
+        {"bufferView": 0, "componentType": 5126, "count": len(pos), "type": "VEC3",
+         "min": pos.min(axis=0).tolist(), "max": pos.max(axis=0).tolist()}], [], pos.nbytes
+    for k, g in enumerate(groups):
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": g.nbytes})
+        accessors.append({"bufferView": k + 1, "componentType": 5125, "count": g.size, "type": "SCALAR"})
+        prims.append({"attributes": {"POSITION": 0}, "indices": k + 1,
+                      **({"material": k} if mesh.materials is not None else {})})
+        offset += g.nbytes
     doc = {"asset": {"version": "2.0", "generator": "dockfactory"}, "scene": 0, "scenes": [{"nodes": [0]}],
-           "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-           "buffers": [{"byteLength": len(binary)}],
-           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": pos.nbytes},
-                           {"buffer": 0, "byteOffset": pos.nbytes, "byteLength": idx.nbytes}],
-           "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(pos), "type": "VEC3",
-                          "min": pos.min(axis=0).tolist(), "max": pos.max(axis=0).tolist()},
-                         {"bufferView": 1, "componentType": 5125, "count": idx.size, "type": "SCALAR"}]}
+           "nodes": [{"mesh": 0}], "meshes": [{"primitives": prims}], "buffers": [{"byteLength": len(binary)}],
+           "bufferViews": views, "accessors": accessors}
+    if mesh.materials is not None:
+        doc["materials"] = [_material_doc(row) for row in mesh.materials]
     text = json.dumps(doc, separators=(",", ":")).encode()
     text += b" " * (-len(text) % 4)
     binary += b"\0" * (-len(binary) % 4)

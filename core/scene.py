@@ -235,9 +235,12 @@ class MotionParams:
 @dataclass(frozen=True)
 class PartMesh:
     """A section's part from a mesh file (core.config_parts): vertices (mm, the section's frame)
-    and triangles (vertex indices)."""
+    and triangles (vertex indices); with ``[sections] materials = "file"`` its materials (rows of
+    ``mesh_base.MATERIAL_KEYS``) and each triangle's (empty: the factory's paint)."""
     vertices: tuple[tuple[float, float, float], ...]
     triangles: tuple[tuple[int, int, int], ...]
+    materials: tuple[tuple[float, ...], ...] = dataclasses.field(default=(), metadata={OMIT_IF_DEFAULT: True})
+    triangle_materials: tuple[int, ...] = dataclasses.field(default=(), metadata={OMIT_IF_DEFAULT: True})
 
     def corners(self) -> np.ndarray:
         """(M, 3, 3) mm: each triangle's three vertices."""

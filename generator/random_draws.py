@@ -56,7 +56,8 @@ def static_scene(cfg: Config) -> StaticScene:
     for drop in drops.values():
         reach = m.raise_mm + drop + BASE_EMBED_MM
         depth = max(depth, max(RING_BASE_DEPTH_MM, reach) if m.form == "puck" else reach)
-    parts = {f"part_{k}": PartMesh(getattr(s, f"mesh_{k}_vertices"), getattr(s, f"mesh_{k}_triangles"))
+    parts = {f"part_{k}": PartMesh(*(getattr(s, f"mesh_{k}_{f}") for f in
+                                     ("vertices", "triangles", "materials", "triangle_materials")))
              for k in ("a", "b") if getattr(s, f"mesh_{k}_triangles")}
     return StaticScene(radius_mm=s.radius_mm, length_mm=s.length_mm, flange_width_mm=s.flange_width_mm,
                        flange_height_mm=s.flange_height_mm, markers=markers,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from dockfactory.core.layout import place_marker
-from dockfactory.core.mesh_base import MeshError, TriMesh
+from dockfactory.core.mesh_base import MeshError, TriMesh, checked_mesh
 from dockfactory.core.mesh_files import mesh_bytes, read_mesh, write_mesh
 from dockfactory.core.mesh_markers import place_on_mesh, ray_hits
 
@@ -172,3 +172,85 @@ def test_a_config_holding_a_bad_part_is_one_line():
                               ({"mesh_units": "furlong"}, "'furlong' is not one of mm, cm, m, in")):
         with pytest.raises(ConfigError, match=message):
             config_from_dict({"sections": sections})
+
+
+TWO_COLOURS = np.array([[0.8, 0.05, 0.05, 0.0, 0.6], [0.05, 0.6, 0.05, 1.0, 0.2]])
+
+
+def test_a_gltfs_materials_round_trip_per_triangle(tmp_path):
+    """Each triangle keeps its material through a .glb (a primitive per material); a glTF without
+    materials has none; a primitive without a material takes glTF's default (white, metallic 1,
+    roughness 1)."""
+    coloured = TriMesh(BOX.vertices, BOX.triangles, TWO_COLOURS, np.arange(12) % 2)
+    write_mesh(coloured, tmp_path / "c.glb")
+    back = read_mesh(tmp_path / "c.glb")
+    assert back.materials is not None and back.triangle_materials is not None
+    got = {tuple(np.round(tri, 3).ravel()): tuple(back.materials[k]) for tri, k in
+           zip(back.corners(), back.triangle_materials)}
+    for tri, k in zip(coloured.corners(), coloured.triangle_materials):
+        assert got[tuple(np.round(tri, 3).ravel())] == pytest.approx(tuple(TWO_COLOURS[k]), abs=1e-6)
+    write_mesh(BOX, tmp_path / "plain.glb")
+    assert read_mesh(tmp_path / "plain.glb").materials is None
+    doc = json.loads((tmp_path / "c.glb").read_bytes()[20:20 + struct.unpack_from("<I", (tmp_path / "c.glb").read_bytes(), 12)[0]])
+    assert [p["material"] for p in doc["meshes"][0]["primitives"]] == [0, 1]
+    with pytest.raises(MeshError, match="materials do not index"):
+        checked_mesh(BOX.vertices, BOX.triangles, "x.glb", TWO_COLOURS, np.full(12, 2))
+    with pytest.raises(MeshError, match=r"x.glb: a material's colour"):
+        checked_mesh(BOX.vertices, BOX.triangles, "x.glb", TWO_COLOURS * 2, np.zeros(12))
+
+
+def test_a_primitive_without_a_material_takes_gltfs_default(tmp_path):
+    coloured = TriMesh(BOX.vertices, BOX.triangles, TWO_COLOURS[:1], np.zeros(12, dtype=np.int64))
+    data = bytearray(mesh_bytes(coloured, ".glb"))
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(bytes(data[20:20 + n]))
+    del doc["meshes"][0]["primitives"][0]["material"]
+    text = json.dumps(doc, separators=(",", ":")).encode()
+    text += b" " * (n - len(text))
+    data[20:20 + n] = text
+    (tmp_path / "d.glb").write_bytes(bytes(data))
+    m = read_mesh(tmp_path / "d.glb")
+    assert m.materials.tolist() == [[1.0, 1.0, 1.0, 1.0, 1.0]] and set(m.triangle_materials.tolist()) == {0}
+
+
+def test_a_config_takes_a_parts_materials_from_its_file(repo_root, tmp_path):
+    """``[sections] materials = "file"`` holds each part's materials in the config (a dataset's
+    stored config renders them without the file); "paint" holds none; a part whose file has no
+    materials (STL), an unknown choice or materials stated with "paint" are one line."""
+    import tomllib
+
+    from dockfactory.core.config import ConfigError, config_from_dict, load_config
+    from dockfactory.core.config_text import load_config_text
+    octagon = {k: read_mesh(repo_root / "configs" / "parts" / f"octagon_{k}.glb" if k == "a" else
+                            repo_root / "configs" / "parts" / "octagon_b.stl") for k in "ab"}
+    (tmp_path / "parts").mkdir()
+    for k, m in octagon.items():
+        n = len(m.triangles)
+        write_mesh(TriMesh(m.vertices, m.triangles, TWO_COLOURS, np.arange(n) % 2), tmp_path / "parts" / f"c_{k}.glb")
+    shipped = (repo_root / "configs" / "octagon_part.toml").read_text()
+    coloured = shipped.replace("octagon_a.glb", "c_a.glb").replace("octagon_b.stl", "c_b.glb")
+    (tmp_path / "f.toml").write_text(coloured.replace("[sections]\n", '[sections]\nmaterials = "file"\n'))
+    (tmp_path / "p.toml").write_text(coloured)
+    cfg, text = load_config_text(tmp_path / "f.toml")
+    s = cfg.sections
+    assert np.allclose(np.array(s.mesh_a_materials), TWO_COLOURS, atol=1e-6)
+    assert len(s.mesh_a_triangle_materials) == len(s.mesh_a_triangles) and set(s.mesh_a_triangle_materials) == {0, 1}
+    assert len(s.mesh_b_triangle_materials) == len(s.mesh_b_triangles)
+    assert config_from_dict(tomllib.loads(text)) == cfg
+    painted = load_config(tmp_path / "p.toml").sections
+    assert painted.materials == "paint" and painted.mesh_a_materials == () and painted.mesh_a_triangle_materials == ()
+    (tmp_path / "s.toml").write_text(shipped.replace("[sections]\n", '[sections]\nmaterials = "file"\n'))
+    (tmp_path / "parts" / "octagon_a.glb").write_bytes((repo_root / "configs" / "parts" / "octagon_a.glb").read_bytes())
+    with pytest.raises(MeshError, match=r"s.toml: \[sections\] materials = \"file\": 'parts/octagon_a.glb' has no materials"):
+        load_config(tmp_path / "s.toml")
+    with pytest.raises(ConfigError, match=r"\[sections\] materials: 'cad' is not one of paint, file"):
+        config_from_dict({"sections": {"materials": "cad"}})
+    v, t = BOX.vertices.tolist(), BOX.triangles.tolist()
+    with pytest.raises(ConfigError, match=r"mesh_a_materials: stated with materials = \"paint\""):
+        config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t,
+                                       "mesh_a_materials": TWO_COLOURS.tolist(), "mesh_a_triangle_materials": [0] * 12}})
+    with pytest.raises(ConfigError, match=r"\[sections\] materials: \"file\", but part A has no materials"):
+        config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file"}})
+    with pytest.raises(ConfigError, match="each triangle names one of them"):
+        config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file",
+                                       "mesh_a_materials": TWO_COLOURS.tolist(), "mesh_a_triangle_materials": [0] * 11}})

@@ -82,3 +82,37 @@ def test_the_bop_models_are_the_parts(part_dataset):
         s = cfg.sections
         want = np.asarray(getattr(s, f"mesh_{sec}_vertices"))[np.asarray(getattr(s, f"mesh_{sec}_triangles"))]
         assert np.abs(model.corners() - want).max() < 1e-4   # written with 4 decimals (mm)
+
+
+def test_a_part_renders_in_its_files_materials(repo_root, tmp_path):
+    """``[sections] materials = "file"``: A's part in a saturated green and B's in a saturated red
+    (their glTF materials) come out of Cycles and the camera model in those colours on every pixel
+    the index pass gives each section's body (the factory's paint would be a random colour)."""
+    import cv2
+
+    from dockfactory.core.mesh_base import TriMesh
+    from dockfactory.core.mesh_files import read_mesh, write_mesh
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    colours = {"a": (0.03, 0.5, 0.03, 0.0, 0.6), "b": (0.5, 0.03, 0.03, 0.0, 0.6)}
+    for sec, name in (("a", "octagon_a.glb"), ("b", "octagon_b.stl")):
+        m = read_mesh(repo_root / "configs" / "parts" / name)
+        write_mesh(TriMesh(m.vertices, m.triangles, np.array([colours[sec]]), np.zeros(len(m.triangles), int)),
+                   parts / f"c_{sec}.glb")
+    text = (repo_root / "configs" / "octagon_part.toml").read_text().replace("octagon_a.glb", "c_a.glb")
+    (tmp_path / "c.toml").write_text(text.replace("octagon_b.stl", "c_b.glb").replace(
+        "[sections]\n", '[sections]\nmaterials = "file"\n'))
+    sets = ("dataset.frames=1", "image.width=320", "image.height=240", "camera.focal_px=[300, 750]",
+            "camera.margin_px=12", *SETS[5:])
+    cfg, text = load_config_text(tmp_path / "c.toml", sets)
+    summary = run_render(cfg, tmp_path / "ds", text, JobOptions(progress=False))
+    assert summary.ok and summary.complete, summary.text()
+    fid = frame_plan(cfg)[0].frame_id
+    index = read_compact(tmp_path / "ds" / "exr" / f"{fid}.exr").index
+    rgb = cv2.cvtColor(cv2.imread(str(tmp_path / "ds" / "images" / f"{fid}.png")), cv2.COLOR_BGR2RGB).astype(float)
+    for sec, channel in (("A", 1), ("B", 0)):
+        body = index == SECTION_PASS_INDEX[sec]
+        assert body.sum() > 500, f"{sec}: {body.sum()} pixels"
+        mean = rgb[body].mean(axis=0)
+        others = [mean[c] for c in range(3) if c != channel]
+        assert mean[channel] > 1.4 * max(others), f"section {sec}: mean RGB {mean.round(1)}"
