@@ -18,6 +18,7 @@ EDGES_PX, the one whose prediction fits best (three-chip: with the least squares
 shape a single factor fits best); each factor as the geometric mean of measured over predicted.
 
 Run: python -m bench.design.design_fit [--write] [--scenes a,b,c,d] [--sources sampling.json white.json jpeg_a.json]
+[--ring-dark dark.json]
 (--write: models/design_predictor.json; --sources: the three inputs above by their names under
 bench/results/sensor_effects/, for renders at another render default).
 """
@@ -109,17 +110,20 @@ def ratio_rows(name, pairs_by_scene) -> list[dict]:
             for s, (m, p) in pairs_by_scene.items()]
 
 
-def ring_and_jpeg_factors(results: dict, sources=SOURCES) -> dict:
+def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None = None) -> dict:
     """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
     geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
     sampling: white-ring renders of scenes A and B (``sources[1]``) over the dark-ring ones
     (``results``, read from ``sources[0]``), three-chip for "none", Bayer bilinear and VNG for
-    "rggb"; JPEG over PNG on the dark scene A (``sources[2]``) and the two white-ring scenes."""
+    "rggb"; JPEG over PNG on the dark scene A (``sources[2]``) and the two white-ring scenes.
+    ``ring_dark``: the dark-ring results the white ones were measured beside, when they are not
+    ``results`` (white renders of an earlier render default: a ratio of one default)."""
+    dark = results if ring_dark is None else ring_dark
     white = json.loads((RESULTS / sources[1]).read_text())["datasets"]
     jpeg_a = json.loads((RESULTS / sources[2]).read_text())["datasets"]
     as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
-    ring = {"none": [(measured(as_scene, s, "three-chip"), measured(results, s, "three-chip")) for s in ("a", "b")],
-            "rggb": [(measured(as_scene, s, e), measured(results, s, e)) for s in ("a", "b") for e in BAYER]}
+    ring = {"none": [(measured(as_scene, s, "three-chip"), measured(dark, s, "three-chip")) for s in ("a", "b")],
+            "rggb": [(measured(as_scene, s, e), measured(dark, s, e)) for s in ("a", "b") for e in BAYER]}
     jpeg = [(measured(as_scene, s, "three-chip-jpeg90"), measured(as_scene, s, "three-chip")) for s in ("a", "b")]
     jpeg.append((measured(jpeg_a, "a", "three-chip-jpeg90"), measured(jpeg_a, "a", "three-chip")))
     return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
@@ -143,9 +147,10 @@ def _bayer_edge(results: dict, by_edge: dict, p, scenes=SCENES) -> float:
                                                 for s in scenes for x in BAYER]))
 
 
-def fit(sources=SOURCES, scenes=SCENES) -> dict:
+def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
     """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)
-    over the sensor scenes ``scenes`` (each in ``sources[0]``)."""
+    over the sensor scenes ``scenes`` (each in ``sources[0]``); ``ring_dark``: the dark-ring
+    results beside the white ones (:func:`ring_and_jpeg_factors`; None: ``sources[0]``)."""
     results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
     by_edge = {e: {s: basis(s, e) for s in scenes} for e in EDGES_PX}
     e0, p = _three_chip(results, by_edge, scenes)
@@ -163,7 +168,8 @@ def fit(sources=SOURCES, scenes=SCENES) -> dict:
     jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in scenes])
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
                                             g * jpeg * predicted(bayer_bases[s], p)) for s in scenes})
-    other = ring_and_jpeg_factors(results, sources)
+    dark = None if ring_dark is None else json.loads((RESULTS / ring_dark).read_text())["datasets"]
+    other = ring_and_jpeg_factors(results, sources, dark)
     versions = sorted(results)
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
             "shift_px": [round(float(p[1]), 5), round(float(p[2]), 5)],
@@ -178,7 +184,8 @@ def fit(sources=SOURCES, scenes=SCENES) -> dict:
             "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
                           "weights": "yolov5n_se_rings_markers.pt",
                           "source": f"bench/results/sensor_effects/{sources[0]}",
-                          "ring_and_jpeg_source": [f"bench/results/sensor_effects/{n}" for n in sources[1:]],
+                          "ring_and_jpeg_source": [f"bench/results/sensor_effects/{n}" for n in sources[1:]]
+                          + ([f"bench/results/sensor_effects/{ring_dark}"] if ring_dark else []),
                           "components_checked": list(FIT)},
             "error": {"predicted_over_measured": rows}}
 
@@ -190,8 +197,10 @@ def main() -> None:
                     help="the sensor scenes fitted on, comma-separated (bench/configs/sensor_scene_<s>.toml; default: %(default)s)")
     ap.add_argument("--sources", nargs=3, default=SOURCES, metavar=("SAMPLING", "WHITE", "JPEG_A"),
                     help="the inputs under bench/results/sensor_effects/ (default: %(default)s)")
+    ap.add_argument("--ring-dark", default=None, metavar="DARK",
+                    help="the dark-ring results the white ones were measured beside, if not SAMPLING")
     args = ap.parse_args()
-    card = fit(tuple(args.sources), tuple(args.scenes.split(",")))
+    card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark)
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, edge {card['edge_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
           f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
