@@ -716,10 +716,10 @@ def _validate_part_materials(s: SectionsConfig, sec: str, source: str) -> None:
     if s.materials == "file" and tris and not mats:
         raise _err(source, "sections", "materials", f'"file", but part {sec.upper()} has no materials '
                    "(only glTF files carry them): use \"paint\"")
-    if mats and (any(len(m) != 5 or not all(0.0 <= v <= 1.0 for v in m) for m in mats)
+    if mats and (not tris or any(len(m) != 5 or not all(0.0 <= v <= 1.0 for v in m) for m in mats)
                  or len(idx) != len(tris) or min(idx) < 0 or max(idx) >= len(mats)):
         raise _err(source, "sections", f"mesh_{sec}_materials", "each material is five numbers in [0, 1] "
-                   "and each triangle names one of them")
+                   "and each triangle of the part names one of them")
 
 
 def _validate_markers(cfg: Config, source: str) -> None:

@@ -251,6 +251,8 @@ def test_a_config_takes_a_parts_materials_from_its_file(repo_root, tmp_path):
                                        "mesh_a_materials": TWO_COLOURS.tolist(), "mesh_a_triangle_materials": [0] * 12}})
     with pytest.raises(ConfigError, match=r"\[sections\] materials: \"file\", but part A has no materials"):
         config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file"}})
-    with pytest.raises(ConfigError, match="each triangle names one of them"):
+    with pytest.raises(ConfigError, match="each triangle of the part names one of them"):
+        config_from_dict({"sections": {"materials": "file", "mesh_a_materials": TWO_COLOURS.tolist()}})
+    with pytest.raises(ConfigError, match="each triangle of the part names one of them"):
         config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file",
                                        "mesh_a_materials": TWO_COLOURS.tolist(), "mesh_a_triangle_materials": [0] * 11}})
