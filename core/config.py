@@ -19,7 +19,7 @@ from pathlib import Path
 from dockfactory.core import layout as layout_mod
 from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
 from dockfactory.core.config_files import resolve_config_files
-from dockfactory.core.mesh_base import MAX_TRIANGLES, MeshError
+from dockfactory.core.mesh_base import MAX_TRIANGLES, MeshError, checked_materials
 from dockfactory.core.mesh_files import UNITS_MM
 from dockfactory.core.mesh_markers import layout_on_parts
 from dockfactory.core.demosaic import DEMOSAICS
@@ -716,10 +716,14 @@ def _validate_part_materials(s: SectionsConfig, sec: str, source: str) -> None:
     if s.materials == "file" and tris and not mats:
         raise _err(source, "sections", "materials", f'"file", but part {sec.upper()} has no materials '
                    "(only glTF files carry them): use \"paint\"")
-    if mats and (not tris or any(len(m) != 5 or not all(0.0 <= v <= 1.0 for v in m) for m in mats)
-                 or len(idx) != len(tris) or min(idx) < 0 or max(idx) >= len(mats)):
-        raise _err(source, "sections", f"mesh_{sec}_materials", "each material is five numbers in [0, 1] "
-                   "and each triangle of the part names one of them")
+    if mats:
+        try:
+            if not tris:
+                raise MeshError("materials without a part")
+            checked_materials(mats, idx, len(tris), f"mesh_{sec}_materials")
+        except (MeshError, ValueError) as e:
+            raise _err(source, "sections", f"mesh_{sec}_materials", "each material is five numbers in [0, 1] "
+                       "and each triangle of the part names one of them") from e
 
 
 def _validate_markers(cfg: Config, source: str) -> None:

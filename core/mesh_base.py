@@ -40,8 +40,10 @@ def checked_materials(materials, triangle_materials, n_triangles: int, where: st
     names a material the mesh does not have."""
     if materials is None:
         return None, None
-    mats = np.asarray(materials, dtype=np.float64).reshape(-1, len(MATERIAL_KEYS))
+    mats = np.asarray(materials, dtype=np.float64)
     idx = np.asarray(triangle_materials, dtype=np.int64).reshape(-1)
+    if mats.ndim != 2 or mats.shape[1] != len(MATERIAL_KEYS):
+        raise MeshError(f"{where}: a material is not {len(MATERIAL_KEYS)} numbers ({', '.join(MATERIAL_KEYS)})")
     if len(mats) == 0 or not np.all(np.isfinite(mats)) or mats.min() < 0.0 or mats.max() > 1.0:
         raise MeshError(f"{where}: a material's colour, metallic or roughness is not a number in [0, 1]")
     if len(idx) != n_triangles or idx.min() < 0 or idx.max() >= len(mats):

@@ -115,7 +115,9 @@ def _read_doc(doc: dict, path: Path, glb_bin: bytes | None, where: str):
     cache: dict[int, bytes] = {}
 
     def buffers(i: int) -> bytes:
-        return cache.setdefault(i, _buffer(doc, i, path, glb_bin))
+        if i not in cache:
+            cache[i] = _buffer(doc, i, path, glb_bin)
+        return cache[i]
     verts, tris, mats, rows, base = [], [], [], {}, 0
     for world, prim in _primitives(doc, where):
         pos = _accessor(doc, prim["attributes"]["POSITION"], buffers, where)

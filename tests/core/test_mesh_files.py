@@ -256,3 +256,7 @@ def test_a_config_takes_a_parts_materials_from_its_file(repo_root, tmp_path):
     with pytest.raises(ConfigError, match="each triangle of the part names one of them"):
         config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file",
                                        "mesh_a_materials": TWO_COLOURS.tolist(), "mesh_a_triangle_materials": [0] * 11}})
+    with pytest.raises(ConfigError, match=r"mesh_a_materials\[0\]: expected 5 values, got 10"):
+        config_from_dict({"sections": {"mesh_a_vertices": v, "mesh_a_triangles": t, "materials": "file",
+                                       "mesh_a_materials": [TWO_COLOURS.ravel().tolist()],
+                                       "mesh_a_triangle_materials": [0] * 12}})
