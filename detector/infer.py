@@ -21,7 +21,7 @@ from dockfactory.core.progress import Progress
 from dockfactory.core.names import CLASS_NAMES, MIN_SCORE, NMS_IOU
 from dockfactory.detector.centre_camera import refine_centre_camera
 from dockfactory.detector.data import resize_exact
-from dockfactory.detector.noise_card import camera_class, card_figures
+from dockfactory.detector.noise_card import card_figures
 
 
 @dataclass(frozen=True)
@@ -275,9 +275,9 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
     dict
         ``{"format", "dataset", "dataset_version", "split", "weights", "weights_sha256",
         "conf_threshold", "iou_threshold", "pixel_convention", "timing", "frames": {frame_id:
-        [det]}}`` (told a ``camera``, ``camera_classes``: frame id -> class), each det ``{class_id,
-        class_name, score, bbox_px, center_px, refine_quality, refined, edge_px, bbox_detector_px}``
-        (pixels in the OpenCV convention; ``edge_px``: the edge fit's edge width, null without one).
+        [det]}}``, each det ``{class_id, class_name, score, bbox_px, center_px, refine_quality,
+        refined, edge_px, bbox_detector_px}`` (pixels in the OpenCV convention; ``edge_px``: the
+        edge fit's edge width, null without one).
 
     Raises
     ------
@@ -293,7 +293,7 @@ def detect_dataset(dataset, weights, out, split: str | None = "test", conf_thres
         print(f"note: weights trained on dataset version {det.meta['dataset_version']}, "
               f"detecting on {dataset.version_id}", file=sys.stderr)
     results, times = _detect_frames(det, frames, camera, progress)
-    doc = _detections_doc(dataset, split, weights, det, _classes(frames, camera), results, times)
+    doc = _detections_doc(dataset, split, weights, det, camera is not None, results, times)
     if out is not None:
         write_json_atomic(out, doc)
     return doc
@@ -316,19 +316,10 @@ def _detect_frames(det: "MarkerDetector", frames, camera, progress: bool) -> tup
     return results, times
 
 
-def _classes(frames, camera) -> dict | None:
-    """Frame id -> camera class (detector.noise_card.camera_class) told by ``camera``; None without."""
-    return None if camera is None else {f.frame_id: camera_class(*camera(f.frame_id)) for f in frames}
-
-
-def _detections_doc(dataset, split, weights, det: "MarkerDetector", classes: dict | None, results: dict,
+def _detections_doc(dataset, split, weights, det: "MarkerDetector", camera_told: bool, results: dict,
                     times: list[float]) -> dict:
-    """The detections JSON of :func:`detect_dataset` (its Returns); ``classes`` frame id -> camera
-    class when the camera was told (each frame's centre noise: the card's times its class's
-    factor, eval.solve_frames.class_options), else None."""
-    camera_told = classes is not None
-    return {**({"camera_classes": classes} if camera_told else {}), "format": "dockfactory.detections/1",
-            "dataset": str(dataset.root), "dataset_version": dataset.version_id,
+    """The detections JSON of :func:`detect_dataset` (its Returns)."""
+    return {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": dataset.version_id,
             "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
             "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
             "section_shift_px": det.section_shift_px and list(det.section_shift_px),

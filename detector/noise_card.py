@@ -30,29 +30,6 @@ def refinement_sha256() -> str:
     return hashlib.sha256(Path(centre.__file__).read_bytes()).hexdigest()
 
 
-# A camera class's centre noise over the card's (the card is measured on three-chip renders): the
-# pooled per-axis RMS of the fit's residuals through the class's camera over the three-chip camera's,
-# on the same frames, the larger of two scenes (bench/results/fit_gate/README.md, "A noise per camera
-# class"). "bayer": told the pattern (``cfa``); "jpeg": JPEG input (subsampled chroma).
-CAMERA_CLASS_FACTORS = {"three-chip": 1.0, "bayer": 3.7, "jpeg": 4.5, "bayer-jpeg": 7.9}
-
-
-def camera_class(cfa: str | None, jpeg: bool) -> str:
-    """The camera class of a frame: "bayer" when its Bayer pattern is told (``cfa``), "jpeg" when
-    it is a JPEG (or its chroma is subsampled), both, or "three-chip" (neither known)."""
-    if cfa is not None:
-        return "bayer-jpeg" if jpeg else "bayer"
-    return "jpeg" if jpeg else "three-chip"
-
-
-def class_noise_px(card_px: float | None, cfa: str | None, jpeg: bool) -> float | None:
-    """The centre noise (px per axis) of a frame of the camera class :func:`camera_class` names:
-    the card's three-chip figure ``card_px`` times the class's factor (CAMERA_CLASS_FACTORS); None
-    without a card. What the goodness-of-fit gate tests the frame's residuals against and the
-    covariance's floor (eval.fit_gate; solver.options.RefineOptions.sigma_floor_px)."""
-    return None if card_px is None else card_px * CAMERA_CLASS_FACTORS[camera_class(cfa, jpeg)]
-
-
 def noise_card_path(weights) -> Path:
     w = Path(weights)
     return w.with_name(w.stem + ".noise.json")
@@ -94,9 +71,7 @@ def card_figures(weights) -> CardFigures:
     Returns
     -------
     CardFigures
-        ``centre_noise_px`` (px per axis, of a three-chip camera: a card measured on other camera
-        classes is divided by their factor, :func:`class_noise_px` takes it to a frame's class),
-        ``section_shift_px`` and ``bias_px`` ((x, y) px), each
+        ``centre_noise_px`` (px per axis), ``section_shift_px`` and ``bias_px`` ((x, y) px), each
         None without a valid card: none beside the weights, one for other weights or another
         centre refinement, or not a card.
 
@@ -108,22 +83,7 @@ def card_figures(weights) -> CardFigures:
     doc = _card(weights)
     if doc is None:
         return CardFigures(None, None, None)
-    return CardFigures(float(doc["centre_noise_px"]) / _classes_factor(doc), _shift_of(doc), _bias_of(doc))
-
-
-def _classes_factor(doc: dict) -> float:
-    """The factor of the camera classes a card was measured on over the three-chip camera (the RMS
-    of CAMERA_CLASS_FACTORS over its frames, ``camera_classes``: class -> frames); 1 for a card
-    that does not name them (measured on three-chip renders) or names a class unknown here."""
-    counts = doc.get("camera_classes")
-    if not isinstance(counts, dict) or not counts:
-        return 1.0
-    try:
-        n = {c: int(k) for c, k in counts.items() if c in CAMERA_CLASS_FACTORS and int(k) > 0}
-    except (TypeError, ValueError):
-        return 1.0
-    total = sum(n.values())
-    return math.sqrt(sum(k * CAMERA_CLASS_FACTORS[c] ** 2 for c, k in n.items()) / total) if total else 1.0
+    return CardFigures(float(doc["centre_noise_px"]), _shift_of(doc), _bias_of(doc))
 
 
 def centre_noise_px(weights) -> float | None:

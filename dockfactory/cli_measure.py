@@ -215,8 +215,7 @@ def add_subcommand(sub) -> None:
                         "1: full resolution; 0: no overlays)")
     m.add_argument("--cfa", choices=PATTERNS,
                    help="the camera's Bayer pattern: the centre refinement fits the sensor's own samples of a "
-                        "demosaiced image, each fit is tested against a Bayer camera's centre noise, and "
-                        "one-channel 16-bit PNGs are read as raw frames")
+                        "demosaiced image, and one-channel 16-bit PNGs are read as raw frames")
     m.add_argument("--raw-black", type=float, default=0.0, help="raw frames: black level, DN (default 0)")
     m.add_argument("--raw-white", type=float, default=None,
                    help="raw frames: the sensor's white level, DN (needed: e.g. 4095 for 12 bit)")

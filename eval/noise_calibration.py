@@ -9,12 +9,11 @@ information about the test frames.
 from __future__ import annotations
 
 import tempfile
-from collections import Counter
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
-from dockfactory.detector.noise_card import camera_class, write_noise_card
+from dockfactory.detector.noise_card import write_noise_card
 from dockfactory.eval.centre_noise import centre_noise_block
 from dockfactory.eval.section_shift import section_shift_block
 from dockfactory.eval.simulated_cameras import dataset_camera
@@ -37,9 +36,7 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
     Returns
     -------
     dict
-        What the card holds: ``card`` (its path), ``centre_noise_px`` (px per axis, of the split's
-        cameras: ``camera_classes`` counts its frames per class, detector.noise_card.camera_class)
-        and details.
+        What the card holds: ``card`` (its path), ``centre_noise_px`` (px per axis) and details.
 
     Raises
     ------
@@ -50,9 +47,8 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
     if not ds.frames((split,)):
         raise DockfactoryError(f"{ds.root}: no frames in the {split} split to measure the centre noise on")
     with tempfile.TemporaryDirectory() as tmp:
-        camera = dataset_camera(ds)
         dets = detect_dataset(ds, weights, Path(tmp) / "dets.json", split=split, conf_threshold=min_score,
-                              progress=progress, camera=camera)
+                              progress=progress, camera=dataset_camera(ds))
     poses = solve_dataset(ds, (split,), detections=dets, min_score=min_score)
     block = centre_noise_block(ds, poses, dets, min_score, splits=(split,))
     shift = section_shift_block(ds, poses, dets, min_score, splits=(split,))
@@ -64,8 +60,6 @@ def calibrate_noise_card(ds, weights, split: str = "val", min_score: float = MIN
                "measured_on": {"dataset": str(ds.root), "dataset_version": ds.version_id, "split": split,
                                "frames": block["frames"]},
                "method": block["method"], "by_condition": block["by_condition"],
-               "section_shift_px": shift["shift_axis_px"], "section_shift": shift,
-               "camera_classes": dict(Counter(camera_class(*camera(f)) if camera else "three-chip"
-                                              for f in ds.frames((split,))))}
+               "section_shift_px": shift["shift_axis_px"], "section_shift": shift}
     card = write_noise_card(weights, overall["rms_px"], details)
     return {"card": str(card), "centre_noise_px": overall["rms_px"], **details}

@@ -22,7 +22,6 @@ from dockfactory.core.distortion import undistort_pixels
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
-from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import rng_for
 from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
@@ -225,25 +224,12 @@ def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, p
             frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
             continue
         frame_pp, centres = true_camera_centres(ds.labels[fid], centres) if true_camera else (pp, centres)
-        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame,
-                                                         class_options(options, detections, fid))
+        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, options)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
-            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model,
-                                    class_options(options, detections, group[0]), edges))
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options, edges))
     return frames
-
-
-def class_options(options: DockingOptions, detections: dict | None, fid: str) -> DockingOptions:
-    """``options`` with the floor (the noise card's three-chip figure) taken to frame ``fid``'s
-    camera class when the detections name it (``camera_classes``, detector.infer.detect_dataset;
-    detector.noise_card.CAMERA_CLASS_FACTORS); else ``options``."""
-    cls = ((detections or {}).get("camera_classes") or {}).get(fid)
-    floor = options.refine.sigma_floor_px
-    if cls not in CAMERA_CLASS_FACTORS or floor is None:
-        return options
-    return replace(options, refine=replace(options.refine, sigma_floor_px=floor * CAMERA_CLASS_FACTORS[cls]))
 
 
 def _check_modes(ds: Dataset, detections, oracle_sigma_px, self_calibrate, true_camera: bool, camera_model) -> None:

@@ -193,6 +193,8 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--write", action="store_true", help="write models/design_predictor.json")
+    ap.add_argument("--card-out", type=Path, default=None,
+                    help="write the card here instead (a card tried with `dockfactory design --card`, not shipped)")
     ap.add_argument("--scenes", default=",".join(SCENES),
                     help="the sensor scenes fitted on, comma-separated (bench/configs/sensor_scene_<s>.toml; default: %(default)s)")
     ap.add_argument("--sources", nargs=3, default=SOURCES, metavar=("SAMPLING", "WHITE", "JPEG_A"),
@@ -207,8 +209,8 @@ def main() -> None:
     print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")
     for r in card["error"]["predicted_over_measured"]:
         print(f"| {r['what']} | {r['scene'].upper()} | {r['x']:.2f} | {r['y']:.2f} | {r['alpha']:.2f} |")
-    if args.write:
-        write_json_atomic(ROOT / "models" / "design_predictor.json", card)
+    if args.write or args.card_out:
+        write_json_atomic(args.card_out or ROOT / "models" / "design_predictor.json", card)
 
 
 if __name__ == "__main__":

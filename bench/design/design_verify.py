@@ -12,6 +12,7 @@ The rendered RMSE over n frames has its own sampling error, about 1 / sqrt(2 n) 
 at 24 frames): the table prints the chi-square 95 % interval of each rendered RMSE beside it.
 
 Run: python -m bench.design.design_verify out/design_verify/quick out/design_verify/wide [--json OUT]
+     [--predicted-by out/card/quick out/card/wide]   # the same renders, another card's predictions
 """
 from __future__ import annotations
 
@@ -37,9 +38,11 @@ def _predicted(row: dict, min_p: float) -> str:
     return "undecided"
 
 
-def records(folder: Path) -> list[dict]:
-    """One record per design of ``folder``/design.json whose run finished."""
-    result = json.loads((folder / "design.json").read_text())
+def records(folder: Path, predicted_by: Path | None = None) -> list[dict]:
+    """One record per design of ``folder``/design.json whose run finished; ``predicted_by`` another
+    ``design`` folder of the same space (run without --verify, e.g. with another predictor card)
+    whose design.json gives the predictions instead (the designs matched by id)."""
+    result = json.loads(((predicted_by or folder) / "design.json").read_text())
     out = []
     for row in result["designs"]:
         metrics = folder / "verify" / row["id"] / "run" / "eval" / "metrics.json"
@@ -80,8 +83,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folders", nargs="+", type=Path)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--predicted-by", nargs="+", type=Path, default=None,
+                    help="one design folder per folder: its predictions (the same space, another card)")
     args = ap.parse_args()
-    recs = [r for f in args.folders for r in records(f)]
+    if args.predicted_by is not None and len(args.predicted_by) != len(args.folders):
+        ap.error("--predicted-by takes one folder per verified folder")
+    recs = [r for k, f in enumerate(args.folders)
+            for r in records(f, None if args.predicted_by is None else args.predicted_by[k])]
     print("| scene | design | X pred / rendered [95 %] | Y | alpha | P loc | rendered |\n| --- | --- | --- | --- | --- | --- | --- |")
     for r in recs:
         cells = [f"{r[c]['predicted']:.3g} / {r[c]['rendered']:.3g} [{r[c]['rendered_95'][0]:.3g}-"

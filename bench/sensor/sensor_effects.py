@@ -38,7 +38,6 @@ from dockfactory.core.camera_chain import ColourChain, configured_sensor
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.scene import SensorParams, from_dict
-from dockfactory.detector.noise_card import class_noise_px
 from dockfactory.eval.confidence import bootstrap_bounds
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
@@ -129,21 +128,15 @@ def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float
 DET_KEYS = ("class_id", "center_px", "bbox_px", "score", "refined", "edge_px")   # what a re-solve needs
 
 
-CLASS_NOISE = True   # the known noise of the class told (detector.noise_card.class_noise_px), else the card's
-
-
 def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str | None, jpeg: bool) -> dict:
     """Detect, refine (told the camera's Bayer pattern ``cfa`` and whether it wrote a JPEG), solve
     one delivered image; errors against its label, the detections (``dets``) and the markers the
-    fit used (``used``), so that the frame can be solved again (bench/sensor/sensor_shift.py). The
-    solve's known noise is the card's taken to the camera class told (as measure does), or the
-    card's alone when CLASS_NOISE is off (``--card-noise``)."""
+    fit used (``used``), so that the frame can be solved again (bench/sensor/sensor_shift.py)."""
     label = ds.labels[fid]
     h, w = image.shape[:2]
     dets = [{k: d[k] for k in DET_KEYS if k in d} for d in detector.detect(image, cfa=cfa, jpeg=jpeg)]
-    noise = class_noise_px(detector.centre_noise_px, cfa, jpeg) if CLASS_NOISE else detector.centre_noise_px
     rec = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
-                      "pinhole", docking_options(noise, lens_prior_for(ds.config)))[0]
+                      "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))[0]
     row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label), "dets": dets,
            "used": rec.get("marker_ids")}
     if rec["ok"]:
@@ -347,11 +340,7 @@ def main(argv=None) -> int:
     p.add_argument("--weights", default=None)
     p.add_argument("--tell-cfa", action="store_true", help="give the refinement the camera's Bayer pattern")
     p.add_argument("--tell-jpeg", action="store_true", help="tell the refinement which images were JPEG-encoded")
-    p.add_argument("--card-noise", action="store_true",
-                   help="solve against the card's noise for every camera (not the class told's)")
     args = p.parse_args(argv)
-    global CLASS_NOISE
-    CLASS_NOISE = not args.card_noise
     if args.compare:
         print(compare(args.datasets))
         return 0
@@ -364,7 +353,7 @@ def main(argv=None) -> int:
         p.error("--out is required")
     out = Path(args.out)
     results = json.loads(out.read_text()) if out.is_file() else {"datasets": {}}
-    for flag in ("tell_cfa", "tell_jpeg", "card_noise"):   # rows already in the file were measured with its flags
+    for flag in ("tell_cfa", "tell_jpeg"):   # rows already in the file were measured with its flags
         if results.get(flag, getattr(args, flag)) != getattr(args, flag):
             p.error(f"{out}: its rows were measured with {flag} = {results[flag]}; resume with the same "
                     f"flags or write another --out")
@@ -373,7 +362,7 @@ def main(argv=None) -> int:
     from dockfactory.detector.infer import MarkerDetector
     detector = MarkerDetector(args.weights or shipped_weights())
     results.update(weights=str(args.weights or shipped_weights()), preset=PRESET, tell_cfa=args.tell_cfa,
-                   tell_jpeg=args.tell_jpeg, card_noise=args.card_noise)
+                   tell_jpeg=args.tell_jpeg)
     for root in args.datasets:
         ds = Dataset.open(root, full=False)
         frames = ds.frames("test")[: args.frames or None]

@@ -39,13 +39,12 @@ def effect_ratios(detector, ds: Dataset, effect: str, frames: list[str]) -> list
         if ratio is not None:
             ratios.append(ratio)
         return out
-    effects.solve_frame, level, told = capture, fit_gate.GATE_P, effects.CLASS_NOISE
+    effects.solve_frame, level = capture, fit_gate.GATE_P
     fit_gate.GATE_P = 1e-300                        # nothing refused: every frame's ratio counts
-    effects.CLASS_NOISE = False                     # the ratio over the card's (three-chip) noise
     try:
         effects.run_effect(detector, ds, effect, frames, True, True)
     finally:
-        effects.solve_frame, fit_gate.GATE_P, effects.CLASS_NOISE = solve, level, told
+        effects.solve_frame, fit_gate.GATE_P = solve, level
     return ratios
 
 

@@ -25,7 +25,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_file, write_bytes_atomic, write_json_atomic
 from dockfactory.core.layout_file import read_layout_file, read_layout_sigmas
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
-from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS, camera_class, card_figures, class_noise_px
+from dockfactory.detector.noise_card import card_figures
 from dockfactory.measure.overlay import draw_measurement
 from dockfactory.measure.pool import MeasurePool
 from dockfactory.measure.read import (
@@ -166,11 +166,9 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     region only (:func:`detect_in`); ``lens`` the lens prior marginalised into the covariance (None:
     an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS); ``calibration`` the camera's
     (:func:`calibrated_solve`). The record carries ``image_size`` and ``timing_ms`` (detect,
-    solve) and ``camera_class`` (detector.noise_card.camera_class: ``cfa`` and ``jpeg`` also set the
-    centre noise its fit is tested against, detector.noise_card.class_noise_px)."""
+    solve)."""
     h, w = image.shape[:2]
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
-    noise = class_noise_px(detector.centre_noise_px, cfa, jpeg)
     t0 = time.perf_counter()
     frame.detections = detect_in(detector, image, roi, cfa, jpeg)
     t1 = time.perf_counter()
@@ -180,27 +178,25 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     elif calibration is not None:
         frame.record, frame.used_points, frame.used_edges = calibrated_solve(detector, markers, path, (w, h), centres,
-                                                                             calibration, noise)
+                                                                             calibration)
     else:
         frame.record, frame.used_points, frame.used_edges = solve_frame(
-            markers, frame.principal_point, centres, None, camera_model,
-            docking_options(noise, lens, detector.section_shift_px))
+            markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens,
+                                                                                 detector.section_shift_px))
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
-    frame.record["camera_class"] = camera_class(cfa, jpeg)
     t2 = time.perf_counter()
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
     return frame
 
 
-def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration, noise_px=None):
+def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration):
     """(record, used points, used edges) of one image of a calibrated camera: its centres (and
     boxes) taken to the ideal square-pixel pinhole camera (core.calibration_files.ideal_pixels),
     solved with the calibration's principal point, the lens known (nothing marginalised) and the
     pinhole model (the file's stated uncertainty marginalised: :func:`calibration_lens`); the focal
-    is solved and the record's ``calibration`` gives the calibrated one; ``noise_px`` the frame's
-    known centre noise (its camera class's, detector.noise_card.class_noise_px; None: the card's).
+    is solved and the record's ``calibration`` gives the calibrated one.
     An image of another size than the calibration's is not ok (category "calibration size")."""
     if tuple(size) != (cal.width, cal.height):
         why = f"{path}: the image is {size[0]}x{size[1]}, the calibration is for {cal.width}x{cal.height}"
@@ -210,8 +206,7 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     if boxes is not None:
         lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
         boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
-    noise_px = detector.centre_noise_px if noise_px is None else noise_px
-    options = docking_options(noise_px, calibration_lens(cal), detector.section_shift_px)
+    options = docking_options(detector.centre_noise_px, calibration_lens(cal), detector.section_shift_px)
     record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
                                       "pinhole", options)
     record["calibration"] = {"focal_px": focal, "fx": cal.fx, "fy": cal.fy, "principal_point": [cal.cx, cal.cy],
@@ -223,9 +218,8 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
                             lens: LensPrior | None = None, section_shift_px=None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
-    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card, its centre noise
-    taken to the noisiest ``camera_class`` of the frames, detector.noise_card.CAMERA_CLASS_FACTORS).
-    Returns the run's record (shared intrinsics or the reason it failed)."""
+    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card). Returns the
+    run's record (shared intrinsics or the reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
     if not solved:
         return {"ok": False, "reason": "no frame was identified", "frames": 0}
@@ -235,8 +229,6 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
                                f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))})")
     t0 = time.perf_counter()
     keys = [str(f.index) for f in solved]
-    if sigma_floor_px is not None:
-        sigma_floor_px *= max(CAMERA_CLASS_FACTORS[f.record.get("camera_class", "three-chip")] for f in solved)
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
                         docking_options(sigma_floor_px, lens, section_shift_px),
@@ -244,8 +236,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
-        f.record = {**records[str(f.index)], "image_size": f.record["image_size"], "timing_ms": timing,
-                    **({"camera_class": f.record["camera_class"]} if "camera_class" in f.record else {})}
+        f.record = {**records[str(f.index)], "image_size": f.record["image_size"], "timing_ms": timing}
     first = records[keys[0]]
     if not first["ok"]:
         return {"ok": False, "reason": first["reason"], "category": first["category"], "frames": len(solved)}

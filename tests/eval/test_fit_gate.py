@@ -5,7 +5,6 @@ centroids plus seeded noise of SIGMA px, the noise the "card" states. Each fault
 ok before the gate, with a pose far off; the gate refuses it, or leaves out the one bad centre.
 """
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -167,38 +166,3 @@ def test_camera_misfit_reads_the_known_noise_p_value():
     assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": 0.2}}) is None
     assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": None}}) is None
     assert fit_gate.camera_misfit({}) is None
-
-
-class _FakeDetector:
-    """A detector whose centres are a synthetic frame's exact ones + N(0, (factor CARD)^2): a
-    camera class ``factor`` times noisier than the three-chip card (solve_image's contract)."""
-
-    def __init__(self, sc, factor: float, seed: int):
-        self.centre_noise_px, self.section_shift_px = CARD, None
-        rng = np.random.default_rng(seed)
-        uv = np.vstack([sc.uv_a, sc.uv_b]) + factor * CARD * rng.standard_normal((len(sc.uv_a) + len(sc.uv_b), 2))
-        cls = [0] * len(sc.uv_a) + [1] * len(sc.uv_b)
-        self.dets = [{"class_id": c, "center_px": [float(u), float(v)], "score": 0.9} for c, (u, v) in zip(cls, uv)]
-
-    def detect(self, image, cfa=None, jpeg=False):
-        return self.dets
-
-
-@pytest.mark.parametrize("seed", [1, 2, 5])
-def test_a_bayer_jpeg_frame_is_tested_against_its_camera_class_noise(seed):
-    """Centres 9x the card (a Bayer + JPEG camera's 90th-percentile residuals, bench/results/fit_gate/
-    README.md): tested against the three-chip card (nothing told) the gate cannot explain them as
-    they are (it refuses the frame, or leaves out good centres); told the Bayer pattern and given a
-    JPEG, measure's per-image path tests it against the class's noise and takes it whole, the
-    record naming the class."""
-    from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS
-    from dockfactory.measure.images import solve_image
-    layout = default_layout()
-    sc = docking_scene(np.random.default_rng(seed), markers=layout)
-    det = _FakeDetector(sc, 9.0, seed + 50)
-    image = np.zeros((int(2 * sc.image_centre[1] + 1), int(2 * sc.image_centre[0] + 1), 3), np.uint8)
-    plain = solve_image(det, layout, 0, Path("f.png"), image, "pinhole", 0.25).record
-    told = solve_image(det, layout, 0, Path("f.jpg"), image, "pinhole", 0.25, cfa="RGGB", jpeg=True).record
-    assert plain["camera_class"] == "three-chip" and (plain.get("category") == MISFIT or plain.get("left_out"))
-    assert told["ok"] and told["camera_class"] == "bayer-jpeg" and "left_out" not in told, told.get("reason")
-    assert told["fit_test"]["ratio"] == pytest.approx(9.0 / CAMERA_CLASS_FACTORS["bayer-jpeg"], rel=0.4)

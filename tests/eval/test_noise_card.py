@@ -28,7 +28,6 @@ def test_noise_card_is_measured_written_and_used(painted, tmp_path, capsys):
     assert card["measured_on"]["split"] == "val" and card["measured_on"]["frames"] >= 2
     assert card["n"] >= 10 and 0.0 < card["centre_noise_px"] < 1.0
     assert centre_noise_px(w) == card["centre_noise_px"]
-    assert list(card["camera_classes"]) == ["three-chip"] and card["camera_classes"]["three-chip"] >= 2
     assert len(card["section_shift_px"]) == 2 and all(0.0 <= v < 1.0 for v in card["section_shift_px"])
     assert section_shift_px(w) == tuple(card["section_shift_px"])
     other = dict(card, refinement_sha256="0" * 64)      # measured with another centre refinement
@@ -76,43 +75,3 @@ def test_section_shift_is_read_from_a_valid_card_only(tmp_path, value, want):
     write_noise_card(w, 0.08, {} if value is None else {"section_shift_px": value})
     assert section_shift_px(w) == want
     assert centre_noise_px(w) == 0.08
-
-
-def test_a_frames_camera_class_sets_its_centre_noise():
-    """The class of a frame (its Bayer pattern told, a JPEG) scales the card's three-chip figure by
-    the class's measured factor; no card, no noise."""
-    from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS, camera_class, class_noise_px
-    assert [camera_class(c, j) for c, j in ((None, False), ("RGGB", False), (None, True), ("BGGR", True))] == \
-        ["three-chip", "bayer", "jpeg", "bayer-jpeg"]
-    assert CAMERA_CLASS_FACTORS["three-chip"] == 1.0
-    assert all(CAMERA_CLASS_FACTORS["three-chip"] < f for c, f in CAMERA_CLASS_FACTORS.items() if c != "three-chip")
-    assert CAMERA_CLASS_FACTORS["bayer-jpeg"] > max(CAMERA_CLASS_FACTORS["bayer"], CAMERA_CLASS_FACTORS["jpeg"])
-    assert class_noise_px(0.02, "RGGB", True) == pytest.approx(0.02 * CAMERA_CLASS_FACTORS["bayer-jpeg"])
-    assert class_noise_px(0.02, None, False) == 0.02 and class_noise_px(None, "RGGB", True) is None
-
-
-@pytest.mark.parametrize("classes,factor", [(None, 1.0), ({"three-chip": 40}, 1.0), ({"bayer": 40}, "bayer"),
-                                            ({"three-chip": 20, "bayer-jpeg": 20}, "mix"), ({"webcam": 3}, 1.0),
-                                            ({"bayer": "x"}, 1.0)])
-def test_a_card_measured_on_other_cameras_is_taken_to_the_three_chip_figure(tmp_path, classes, factor):
-    """A card names the camera classes of the frames it was measured on; its centre noise is read
-    back as the three-chip camera's (divided by the RMS of their factors), so that a frame's class
-    is not counted twice. A card that names none (or nothing known) is a three-chip card."""
-    from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS as F
-    w = tmp_path / "w.pt"
-    w.write_bytes(b"weights")
-    write_noise_card(w, 0.08, {} if classes is None else {"camera_classes": classes})
-    want = {"bayer": F["bayer"], "mix": ((F["three-chip"] ** 2 + F["bayer-jpeg"] ** 2) / 2) ** 0.5}.get(factor, factor)
-    assert centre_noise_px(w) == pytest.approx(0.08 / want)
-
-
-def test_solve_takes_each_frames_floor_to_its_camera_class():
-    """Detections that name each frame's camera class (detect told the camera) solve each frame with
-    the card's floor times its class's factor; a frame without a class, or no floor, as given."""
-    from dockfactory.detector.noise_card import CAMERA_CLASS_FACTORS
-    from dockfactory.eval.solve_frames import class_options, docking_options
-    opts = docking_options(0.02)
-    dets = {"camera_classes": {"f1": "bayer", "f2": "three-chip"}}
-    assert class_options(opts, dets, "f1").refine.sigma_floor_px == pytest.approx(0.02 * CAMERA_CLASS_FACTORS["bayer"])
-    assert class_options(opts, dets, "f2") == opts and class_options(opts, dets, "f3") is opts
-    assert class_options(opts, None, "f1") is opts and class_options(docking_options(None), dets, "f1").refine.sigma_floor_px is None

@@ -1,0 +1,105 @@
+"""The goodness-of-fit gate of a camera class at several noise levels: honest frames refused against
+faults let through, on the detections the sensor bench kept.
+
+    python -m bench.verdict.gate_classes RESULTS.json DATASET [DATASET ...] --factors 1,2,3.95,7.9
+        [--effects bayer-jpeg90,...] [--faults "as is,cropped 160/120 px"] [--frames N] [--out FILE.json]
+
+RESULTS.json is a sensor bench results file with its rows (bench/sensor/sensor_effects.py ``--out``:
+each frame's detections through each camera effect, the refinement told the camera); each DATASET
+the rendered dataset of one of its keys (its markers, image size and labels). Every frame's
+detections are solved again, after each fault of bench/render/fit_gate.py (a user's real faults on
+this camera's own centres), with the known centre noise the card's times each factor (a gate per
+camera class, tried: bench/results/fit_gate/README.md), through the gate as measure solves it. Per
+effect, factor and fault: frames ok, ok after leaving centres out, ok and beyond 3 reported
+standard deviations in X, Y or Z ("confidently wrong"), refused by category.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from bench.render.fit_gate import _moved_boxes, _row, faults
+from dockfactory.core.io import write_json_atomic
+from dockfactory.core.layout import build_layout
+from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
+from dockfactory.generator.datasets.reader import Dataset
+
+MIN_SCORE = 0.25
+
+
+def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: int) -> list[dict]:
+    """fit_gate's row of every sensor-bench row of ``ds`` after ``fault`` (markers, move, size),
+    solved with the known noise ``noise_px``."""
+    markers, move, size = fault
+    out = []
+    for row in rows[:frames]:
+        cls, uv, boxes, refined, edge = detection_arrays(row["dets"], MIN_SCORE)
+        if len(cls) == 0:
+            continue
+        rec, _, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
+                                (cls, move(uv), _moved_boxes(boxes, move), refined, edge), None, "pinhole",
+                                docking_options(noise_px, lens_prior_for(ds.config)))
+        out.append(_row(rec, ds.labels[row["frame"]]["pose_b_in_d"]))
+    return out
+
+
+def tally(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["ok"]]
+    return {"frames": len(rows), "ok": len(ok), "left_out": sum(r["left_out"] > 0 for r in ok),
+            "ok_beyond_3_sigma": sum(r["max_z"] > 3 for r in ok),
+            "refused": {c: sum(1 for r in rows if not r["ok"] and r["category"] == c)
+                        for c in sorted({r["category"] for r in rows if not r["ok"]})}}
+
+
+def _other_layout(ds: Dataset):
+    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
+    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)
+    return build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("results", type=Path)
+    ap.add_argument("datasets", nargs="+", type=Path)
+    ap.add_argument("--factors", default="1,2,4,7.9")
+    ap.add_argument("--effects", default=None, help="comma-separated (default: every effect with rows)")
+    ap.add_argument("--faults", default="as is,cropped 160/120 px,another layout")
+    ap.add_argument("--frames", type=int, default=48)
+    ap.add_argument("--card", type=float, default=None, help="the card's centre noise, px (default: the shipped weights')")
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args(argv)
+    if args.card is None:
+        from dockfactory.core.resources import shipped_weights
+        from dockfactory.detector.noise_card import card_figures
+        args.card = card_figures(shipped_weights()).centre_noise_px
+    results = json.loads(args.results.read_text())["datasets"]
+    opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in map(Dataset.open, args.datasets)}
+    out = {"card_px": args.card, "tables": []}
+    print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | refused |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
+    for key, effects in results.items():
+        ds = opened.get(key)
+        if ds is None:
+            print(f"{key}: no dataset given, skipped", file=sys.stderr)
+            continue
+        w, h = ds.config.image.width, ds.config.image.height
+        table = faults(w, h, _other_layout(ds))
+        for effect, res in effects.items():
+            if (args.effects and effect not in args.effects.split(",")) or "rows" not in res:
+                continue
+            for f in (float(v) for v in args.factors.split(",")):
+                for name in args.faults.split(","):
+                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames))
+                    out["tables"].append({"dataset": key, "effect": effect, "factor": f, "fault": name, **t})
+                    refused = ", ".join(f"{c} {n}" for c, n in t["refused"].items()) or "-"
+                    print(f"| {key.split('@')[0]} | {effect} | {f:g} | {name} | {t['frames']} | {t['ok']} | "
+                          f"{t['left_out']} | {t['ok_beyond_3_sigma']} | {refused} |", flush=True)
+                    if args.out:
+                        write_json_atomic(args.out, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
