@@ -2,7 +2,7 @@
 (none infeasible): the whole process, import and outputs included, each run timed by the wall
 clock. Target (issue 48): 200 designs in under 60 s on 2 cores.
 
-Run: python -m bench.design.design_speed [--runs 3]
+Run: python -m bench.design.design_speed [--runs 3] [--card CARD.json]   # another predictor card
 """
 from __future__ import annotations
 
@@ -54,14 +54,16 @@ def space_text() -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--card", default=None, help="a predictor card (default: the shipped one)")
     args = ap.parse_args()
+    card = ["--card", str(Path(args.card).resolve())] if args.card else []
     with tempfile.TemporaryDirectory() as tmp:
         space = Path(tmp) / "space.toml"
         space.write_text(space_text())
         times = []
         for k in range(args.runs):
             t0 = time.monotonic()
-            subprocess.run([sys.executable, "-m", "dockfactory", "design", str(space), "--out", f"{tmp}/o{k}"],
+            subprocess.run([sys.executable, "-m", "dockfactory", "design", str(space), "--out", f"{tmp}/o{k}", *card],
                            check=True, stdout=subprocess.DEVNULL)
             times.append(time.monotonic() - t0)
         rows = json.loads((Path(tmp) / "o0" / "design.json").read_text())["designs"]
