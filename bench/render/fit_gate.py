@@ -66,6 +66,14 @@ def faults(w: int, h: int, layout_other):
             "rotated 270": (None, lambda uv: np.column_stack([h - 1 - uv[:, 1], uv[:, 0]]), (h, w))}
 
 
+def other_layout(ds: Dataset):
+    """The "another layout" fault's markers: ``ds``'s layout on another scene's sections (radius
+    450 mm and 30 mm discs, or 300 mm and 20 mm for a dataset of the former)."""
+    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
+    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)
+    return build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
+
+
 def run(root: Path, lens=None, factor: float = 1.0, only=None) -> dict:
     """The fault table of one dataset (see the module's docstring); ``lens`` a LensPrior or None
     (the uncalibrated camera's default); ``factor`` on the card's noise the gate tests against;
@@ -75,9 +83,7 @@ def run(root: Path, lens=None, factor: float = 1.0, only=None) -> dict:
     card = dets.get("centre_noise_px")
     noise = None if card is None else card * factor
     w, h = ds.config.image.width, ds.config.image.height
-    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
-    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)   # another scene's
-    other = build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
+    other = other_layout(ds)
     out = {"dataset": str(root), "version": ds.version_id, "card_px": card, "noise_factor": factor,
            "noise_px": noise, "faults": {}}
     for name, (markers, move, size) in faults(w, h, other).items():

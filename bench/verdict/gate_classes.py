@@ -20,9 +20,8 @@ import json
 import sys
 from pathlib import Path
 
-from bench.render.fit_gate import _moved_boxes, _row, faults
+from bench.render.fit_gate import _moved_boxes, _row, faults, other_layout
 from dockfactory.core.io import write_json_atomic
-from dockfactory.core.layout import build_layout
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.generator.datasets.reader import Dataset
 
@@ -53,12 +52,6 @@ def tally(rows: list[dict]) -> dict:
                         for c in sorted({r["category"] for r in rows if not r["ok"]})}}
 
 
-def _other_layout(ds: Dataset):
-    mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
-    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)
-    return build_layout(ds.config.markers.layout_a, ds.config.markers.layout_b, radius, diameter)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", type=Path)
@@ -85,7 +78,7 @@ def main(argv=None) -> int:
             print(f"{key}: no dataset given, skipped", file=sys.stderr)
             continue
         w, h = ds.config.image.width, ds.config.image.height
-        table = faults(w, h, _other_layout(ds))
+        table = faults(w, h, other_layout(ds))
         for effect, res in effects.items():
             if (args.effects and effect not in args.effects.split(",")) or "rows" not in res:
                 continue
