@@ -42,6 +42,7 @@ MAX_REPEAT_POSES = 1_000        # repeatability ids are repPPP_CC: three digits 
 MAX_REPEAT_CAPTURES = 100       # ... and two of capture
 MIN_IMAGE_PX, MAX_IMAGE_PX = 16, 16384  # per side; at 16384 one float32 RGB pass is 3.2 GB
 MAX_SAMPLES = 1 << 24           # Cycles' hard limit on samples per pixel
+MAX_LIGHT_SMOOTHING_PX = 4.0   # [render] marker_light_smoothing_px: beyond it the smoothing reaches across a small marker
 MAX_BOUNCES = 1024              # Blender's limit on light path bounces
 # Every float (mm, deg, s, electrons, weights) is finite and at most this in size: 1e9 mm is
 # 1000 km, far beyond any docking scene, and sums, spans and products of config values stay finite
@@ -205,6 +206,7 @@ class RenderConfig:
     marker_adaptive_min_samples: int = 4  # with that adaptive sampling, every pixel at least this many samples; 0 = Cycles' automatic minimum (most of marker_samples at small thresholds)
     marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
     marker_coverage_threshold: float = 0.005  # > 0: that coverage render with adaptive sampling up to marker_coverage_samples (the markers' edges get them, their insides stop early); 0 = every pixel all of them
+    marker_light_smoothing_px: float = 0.7  # > 0: with the coverage correction, the light noise its samples leave on the marker smoothed over a Gaussian of this sigma (px), its exact-coverage edges kept (docs/rendering.md); 0 = off
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker
@@ -224,6 +226,11 @@ class RenderConfig:
         """The coverage render's adaptive threshold the frames are rendered with: 0 without a
         coverage render."""
         return self.marker_coverage_threshold if self.rendered_coverage_samples() else 0.0
+
+    def rendered_light_smoothing(self) -> float:
+        """The marker's light smoothing the frames are rendered with: 0 without the coverage
+        correction (it smooths what that correction leaves)."""
+        return self.marker_light_smoothing_px if self.rendered_coverage_samples() else 0.0
 
     def rendered_adaptive_threshold(self) -> float:
         """The marker regions' adaptive threshold the frames are rendered with: 0 without
@@ -308,6 +315,7 @@ IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0
                     ("render", "marker_adaptive_threshold"): 0.0, ("render", "marker_adaptive_min_samples"): 0,
                     ("render", "light_tree"): "off",
                     ("render", "marker_coverage_samples"): 0, ("render", "marker_coverage_threshold"): 0.0,
+                    ("render", "marker_light_smoothing_px"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
@@ -351,6 +359,7 @@ class Config:
             d["render"]["light_tree"] = self.render.rendered_light_tree()
             d["render"]["marker_coverage_samples"] = self.render.rendered_coverage_samples()
             d["render"]["marker_coverage_threshold"] = self.render.rendered_coverage_threshold()
+            d["render"]["marker_light_smoothing_px"] = self.render.rendered_light_smoothing()
             d["render"]["marker_adaptive_threshold"] = self.render.rendered_adaptive_threshold()
             d["render"]["marker_adaptive_min_samples"] = self.render.rendered_adaptive_min_samples()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
@@ -444,16 +453,17 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` and
-    ``marker_coverage_samples`` / ``marker_coverage_threshold`` / ``marker_adaptive_threshold`` /
-    ``marker_adaptive_min_samples`` are the ones the frames render with (without label-aware
-    sampling ``markers`` is ``off``, the coverage samples and the adaptive threshold 0, without
-    those samples the coverage threshold 0, without an adaptive threshold its minimum 0, and the
+    ``marker_coverage_samples`` / ``marker_coverage_threshold`` / ``marker_light_smoothing_px`` /
+    ``marker_adaptive_threshold`` / ``marker_adaptive_min_samples`` are the ones the frames render
+    with (without label-aware sampling ``markers`` is ``off``, the coverage samples and the
+    adaptive threshold 0, without those samples the coverage threshold and the smoothing 0, without an adaptive threshold its minimum 0, and the
     minimum at most ``marker_samples``), so a config and its stored identity read back equal."""
     cfg = build_dataclass(Config, data, source)
     validate(cfg, source)
     render = dataclasses.replace(cfg.render, light_tree=cfg.render.rendered_light_tree(),
                                  marker_coverage_samples=cfg.render.rendered_coverage_samples(),
                                  marker_coverage_threshold=cfg.render.rendered_coverage_threshold(),
+                                 marker_light_smoothing_px=cfg.render.rendered_light_smoothing(),
                                  marker_adaptive_threshold=cfg.render.rendered_adaptive_threshold(),
                                  marker_adaptive_min_samples=cfg.render.rendered_adaptive_min_samples())
     return dataclasses.replace(cfg, render=render)
@@ -542,7 +552,8 @@ def _check_at_most(source, table, key, value, limit, why: str) -> None:
 
 def _check_marker_coverage(source, rc: "RenderConfig") -> None:
     """[render] marker_coverage_samples: 0 or a sample count (inert without label-aware sampling);
-    marker_coverage_threshold: 0 or an adaptive threshold below 1."""
+    marker_coverage_threshold: 0 or an adaptive threshold below 1; marker_light_smoothing_px: 0 or
+    a sigma up to :data:`MAX_LIGHT_SMOOTHING_PX`."""
     _check_positive(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, MAX_SAMPLES,
                    "Cycles' limit")
@@ -550,6 +561,9 @@ def _check_marker_coverage(source, rc: "RenderConfig") -> None:
     if rc.marker_coverage_threshold >= 1.0:
         raise _err(source, "render", "marker_coverage_threshold",
                    f"{rc.marker_coverage_threshold} is not below 1 (a noise threshold: 0.005 is the default, 0 = off)")
+    _check_positive(source, "render", "marker_light_smoothing_px", rc.marker_light_smoothing_px, allow_zero=True)
+    _check_at_most(source, "render", "marker_light_smoothing_px", rc.marker_light_smoothing_px, MAX_LIGHT_SMOOTHING_PX,
+                   "it would reach across a small marker")
 
 
 def validate(cfg: Config, source: str = "<config>") -> None:

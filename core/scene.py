@@ -197,6 +197,9 @@ class RenderSettings:
     marker_coverage_samples: int = dataclasses.field(default=0, metadata={OMIT_IF_DEFAULT: True})
     # > 0: that coverage render with adaptive sampling up to marker_coverage_samples at this threshold
     marker_coverage_threshold: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
+    # > 0: the light noise the coverage correction leaves on the marker smoothed over a Gaussian of
+    # this sigma in px (generator.marker_coverage)
+    marker_light_smoothing_px: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

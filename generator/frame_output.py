@@ -76,13 +76,15 @@ def _file_record(rel: str, data: bytes) -> dict:
     return {"path": rel, "bytes": len(data), "sha256": sha256_bytes(data)}
 
 
-def region_colour(crop_exr, coverage_exr=None) -> np.ndarray:
+def region_colour(crop_exr, coverage_exr=None, smoothing_px: float = 0.0) -> np.ndarray:
     """(h, w, 3) float32 linear colour of a marker region's render; with its coverage render,
-    corrected by the exact coverage (generator.marker_coverage)."""
+    corrected by the exact coverage, the light noise left smoothed over ``smoothing_px``
+    (generator.marker_coverage)."""
     if coverage_exr is None:
         return read_rgb(crop_exr)
     region = read_region(crop_exr)
-    return corrected_region(region.rgb, region.noisy, region.coverage, read_class_coverage(coverage_exr))
+    return corrected_region(region.rgb, region.noisy, region.coverage, read_class_coverage(coverage_exr),
+                            smoothing_px)
 
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
@@ -95,7 +97,8 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     paths = frame_paths(root, frame.spec.frame_id)
     passes = read_passes(exr_path)
     if crops:
-        rgb = composite(passes.rgb, [region_colour(p, cov) for _, p, cov in crops], tuple(c[0] for c in crops),
+        smoothing = frame.render.marker_light_smoothing_px
+        rgb = composite(passes.rgb, [region_colour(p, cov, smoothing) for _, p, cov in crops], tuple(c[0] for c in crops),
                         marker_halos(frame, static))
         passes = replace(passes, rgb=rgb)
     passes = replace(passes, rgb=median_filtered(passes.rgb, frame.render.post_filter))

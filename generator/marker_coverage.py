@@ -10,7 +10,8 @@ share they converge to (``exact``). With the colour of each class near the pixel
 the corrected pixel is ``rgb + sum_k (exact_k - sampled_k) radiance_k``: the colour the pixel
 would have had had its samples landed in the exact proportions. ``sampled`` is unbiased for
 ``exact``, so the correction has mean zero whatever the class colours: a poor colour estimate
-leaves noise in, it adds no bias.
+leaves noise in, it adds no bias. What it leaves, the light's noise of each pixel's own samples,
+can be shared between the marker's pixels (``smoothing_px``; docs/rendering.md, "The light smoothing").
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ LOCAL_SIGMA_PX = 2.0     # the class colours are fitted over a Gaussian neighbou
 RIDGE = 0.02             # toward the region-wide colours where a class is under ~2 % of the neighbourhood
 COVERED = 1e-3           # a pixel a disc or ring covers more of than this is the marker's
 MARKER_REACH_PX = 2.0    # with a denoiser, its colour gives way to the denoised one over this many pixels
+MISFIT_SIGMAS = 12.0     # a residual beyond this many robust sigmas is a miss of the class colours, not noise
 
 
 def _classes(coverage: np.ndarray) -> np.ndarray:
@@ -63,17 +65,50 @@ def class_radiance(rgb: np.ndarray, exact: np.ndarray, sigma_px: float = LOCAL_S
     return np.linalg.solve(a, b)
 
 
-def coverage_corrected(rgb: np.ndarray, sampled: np.ndarray, exact: np.ndarray) -> np.ndarray:
+def _misfit(residual: np.ndarray, on: np.ndarray) -> np.ndarray:
+    """(h, w) bool: pixels whose residual no light noise explains (beyond :data:`MISFIT_SIGMAS`
+    robust sigmas of the marker's residuals in any channel: where the classes' local colours miss,
+    next to an occluder for one) and their 8 neighbours."""
+    vals = residual[on]
+    med = np.median(vals, axis=0)
+    sigma = 1.4826 * np.median(np.abs(vals - med), axis=0) + 1e-12
+    bad = (np.abs(residual - med) > MISFIT_SIGMAS * sigma).any(axis=-1)
+    return cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+
+
+def smoothed_on_marker(residual: np.ndarray, exact: np.ndarray, sigma_px: float) -> np.ndarray:
+    """``residual`` (h, w, 3) with every marker pixel (:func:`marker_weight` 1) replaced by the
+    Gaussian (``sigma_px``) mean of the marker pixels around it; the rest as it is. Only marker
+    pixels are averaged, so the paint's noise beyond the marker never enters its edge; a pixel the
+    light's noise cannot explain (:func:`_misfit`) is neither averaged nor spread: the classes'
+    colours miss there, and sharing that miss would move the edges around it."""
+    on = marker_weight(exact) >= 1.0
+    if not on.any():
+        return residual
+    on = (on & ~_misfit(residual, on)).astype(np.float64)
+    weight = _blur(on, sigma_px)
+    mean = _blur(residual * on[..., None], sigma_px) / np.maximum(weight, 1e-12)[..., None]
+    return np.where(on[..., None] > 0, mean, residual)
+
+
+def coverage_corrected(rgb: np.ndarray, sampled: np.ndarray, exact: np.ndarray,
+                       smoothing_px: float = 0.0) -> np.ndarray:
     """The region's colour ``rgb`` (h, w, 3, float linear) with its antialiasing noise taken out:
     ``sampled`` and ``exact`` are the (h, w, 2) disc and ring coverage of its samples and of the
-    converged coverage render; a new float32 array, never below 0. ValueError when the shapes
-    differ (a coverage render of another region must not pass silently)."""
+    converged coverage render; with ``smoothing_px`` > 0 the light noise left on the marker
+    smoothed over that sigma (px; :func:`smoothed_on_marker`); a new float32 array, never below 0.
+    ValueError when the shapes differ (a coverage render of another region must not pass
+    silently)."""
     if rgb.shape[:2] != sampled.shape[:2] or rgb.shape[:2] != exact.shape[:2]:
         raise ValueError(f"coverage of shape {sampled.shape[:2]} / {exact.shape[:2]} for a region of {rgb.shape[:2]}")
     c, s = _classes(exact), _classes(sampled)
     radiance = class_radiance(rgb[..., :3], c)
-    delta = np.einsum("hwk,hwkc->hwc", c - s, radiance)
-    return np.maximum(rgb[..., :3] + delta, 0.0).astype(np.float32)
+    if smoothing_px <= 0:
+        delta = np.einsum("hwk,hwkc->hwc", c - s, radiance)
+        return np.maximum(rgb[..., :3] + delta, 0.0).astype(np.float32)
+    residual = rgb[..., :3].astype(np.float64) - np.einsum("hwk,hwkc->hwc", s, radiance)
+    out = np.einsum("hwk,hwkc->hwc", c, radiance) + smoothed_on_marker(residual, exact, smoothing_px)
+    return np.maximum(out, 0.0).astype(np.float32)
 
 
 def marker_weight(exact: np.ndarray, reach_px: float = MARKER_REACH_PX) -> np.ndarray:
@@ -88,13 +123,15 @@ def marker_weight(exact: np.ndarray, reach_px: float = MARKER_REACH_PX) -> np.nd
 
 
 def corrected_region(rgb: np.ndarray, noisy: np.ndarray | None, sampled: np.ndarray,
-                     exact: np.ndarray) -> np.ndarray:
+                     exact: np.ndarray, smoothing_px: float = 0.0) -> np.ndarray:
     """A marker region's colour with the coverage correction: without a denoiser (``noisy`` None)
     :func:`coverage_corrected` of ``rgb``; with one, the correction of the colour before the
     denoiser (``noisy``) on the markers (:func:`marker_weight`), the denoised ``rgb`` on the paint
     beyond them (the denoiser follows each sample's albedo, so it keeps the coverage draw at the
-    edges; the paint's light noise is what it takes). (h, w, 3) float32."""
+    edges; the paint's light noise is what it takes); ``smoothing_px``: :func:`coverage_corrected`'s.
+    (h, w, 3) float32."""
     if noisy is None:
-        return coverage_corrected(rgb, sampled, exact)
+        return coverage_corrected(rgb, sampled, exact, smoothing_px)
     w = marker_weight(exact)[..., None]
-    return (w * coverage_corrected(noisy, sampled, exact) + (1.0 - w) * rgb[..., :3]).astype(np.float32)
+    corrected = coverage_corrected(noisy, sampled, exact, smoothing_px)
+    return (w * corrected + (1.0 - w) * rgb[..., :3]).astype(np.float32)

@@ -459,7 +459,8 @@ def render_settings(render: RenderConfig) -> RenderSettings:
                           marker_adaptive_min_samples=render.rendered_adaptive_min_samples(),
                           light_tree=render.rendered_light_tree(),
                           marker_coverage_samples=render.rendered_coverage_samples(),
-                          marker_coverage_threshold=render.rendered_coverage_threshold())
+                          marker_coverage_threshold=render.rendered_coverage_threshold(),
+                          marker_light_smoothing_px=render.rendered_light_smoothing())
 
 
 def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):

@@ -25,7 +25,7 @@ CONFIG = {
                "marker_adaptive_threshold": 0.0,
                "frame_timeout_s": TIMEOUT_S},
 }
-NAMES = ("crops", "coverage", "coverage_denoised", "coverage_adaptive", "converged")
+NAMES = ("crops", "coverage", "coverage_denoised", "coverage_adaptive", "coverage_smoothed", "converged")
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +35,7 @@ def rendered(tmp_path_factory):
     settings = {"crops": {}, "coverage": {"marker_coverage_samples": 128},
                 "coverage_denoised": {"marker_coverage_samples": 128, "marker_denoise": "fast"},
                 "coverage_adaptive": {"marker_coverage_samples": 128, "marker_coverage_threshold": 0.005},
+                "coverage_smoothed": {"marker_coverage_samples": 128, "marker_light_smoothing_px": 0.7},
                 "converged": {"marker_samples": 0, "samples": 128, "denoise": "off", "light_tree": "on"}}
     root = tmp_path_factory.mktemp("cov") / "ds"
     proc = start_worker(cfg, root, TIMEOUT_S)
@@ -75,3 +76,12 @@ def test_the_correction_takes_most_of_the_edge_noise_out(rendered, name):
     rows = _marker_errors(rendered, name)
     assert len(rows) >= 5
     assert rows[:, 1].sum() < 0.6 * rows[:, 0].sum(), rows
+
+
+def test_the_light_smoothing_takes_the_edge_noise_further_down(rendered):
+    """The same crops and coverage with the light noise left smoothed over 0.7 px: summed over the
+    whole markers, the edge pixels' squared error under 0.7x the correction's alone (measured
+    0.43x)."""
+    plain, smooth = _marker_errors(rendered, "coverage"), _marker_errors(rendered, "coverage_smoothed")
+    assert len(plain) >= 5 and len(smooth) == len(plain)
+    assert smooth[:, 1].sum() < 0.7 * plain[:, 1].sum(), (smooth[:, 1].sum(), plain[:, 1].sum())

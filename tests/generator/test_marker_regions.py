@@ -335,3 +335,27 @@ def test_a_coverage_threshold_out_of_range_is_refused_in_one_line(value):
     with pytest.raises(ConfigError, match=r"\[render\] marker_coverage_threshold") as err:
         _cfg(marker_coverage_threshold=value)
     assert "\n" not in str(err.value)
+
+
+def test_the_light_smoothing_is_stored_only_where_the_coverage_correction_uses_it():
+    """``marker_light_smoothing_px`` (default 0.7) is in the identity and the frames' render
+    settings beside a coverage correction; without one (no coverage samples, or no crops) it reads
+    back 0 and leaves the key out: the identity and label bytes of the configs before it."""
+    assert _cfg().render.marker_light_smoothing_px == 0.7
+    assert _cfg().to_dict()["render"]["marker_light_smoothing_px"] == 0.7
+    assert identity(_cfg(marker_light_smoothing_px=0.0)) != identity(_cfg())
+    for off in (_cfg(marker_coverage_samples=0), _cfg(marker_samples=0)):
+        assert off.render.marker_light_smoothing_px == 0.0
+        assert "marker_light_smoothing_px" not in off.to_dict()["render"]
+        assert "marker_light_smoothing_px" not in to_dict(render_settings(off.render))
+    for cfg in (_cfg(), _cfg(marker_light_smoothing_px=0.5), _cfg(marker_samples=0)):
+        assert config_from_identity(json.loads(cfg.canonical_json())) == cfg
+        assert config_from_dict(cfg.resolved_dict()) == cfg
+    assert render_settings(_cfg(marker_light_smoothing_px=1.2).render).marker_light_smoothing_px == 1.2
+
+
+@pytest.mark.parametrize("value, message", [(-0.5, "marker_light_smoothing_px"), (4.5, "across a small marker")])
+def test_a_light_smoothing_out_of_range_is_refused_in_one_line(value, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        _cfg(marker_light_smoothing_px=value)
+    assert "\n" not in str(err.value)

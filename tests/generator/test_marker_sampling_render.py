@@ -125,7 +125,7 @@ def test_labels_and_geometry_passes_are_those_of_the_plain_render(rendered, name
     assert np.mean([c[0] for c in chroma]) > np.mean([c[1] for c in chroma])
     for lab in (a, b):
         for key in ("marker_samples", "marker_denoise", "marker_adaptive_threshold", "marker_adaptive_min_samples",
-                    "marker_coverage_samples", "marker_coverage_threshold"):
+                    "marker_coverage_samples", "marker_coverage_threshold", "marker_light_smoothing_px"):
             lab["sampled"]["render"].pop(key, None)
         lab.pop("frame_id")
         lab["spec"].pop("frame_id")
