@@ -13,6 +13,8 @@ regular pattern repeats.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
@@ -43,10 +45,22 @@ def pattern_pair(n: int, radius_mm: float, diameter_mm: float, seed: int = 0):
     """(pattern_a, pattern_b) of ``n`` markers each for sections of ``radius_mm`` carrying discs
     of ``diameter_mm``: the shipped default for n = 7, else the first clean draw from ``seed``
     (module docstring). DockfactoryError (one line) for n outside [MIN_MARKERS, MAX_MARKERS] or
-    when no clean pattern is found (discs too large for n on this band)."""
+    when no clean pattern is found (discs too large for n on this band). Cached (a pure function
+    of its arguments: the designs of a space share their patterns; the tuples are immutable)."""
     if not (isinstance(n, int) and MIN_MARKERS <= n <= MAX_MARKERS):
         raise DockfactoryError(f"markers per section must be an integer in [{MIN_MARKERS}, {MAX_MARKERS}], "
                                f"got {n!r}")
+    pair = _pattern_pair(n, float(radius_mm), float(diameter_mm), int(seed))
+    if pair is None:
+        raise DockfactoryError(f"no irregular pattern of {n} markers of {diameter_mm:g} mm fits the band "
+                               f"{AXIAL_MM[0]:g}-{AXIAL_MM[1]:g} mm x +-{SPAN_DEG:g} deg on radius {radius_mm:g} mm")
+    return pair
+
+
+@lru_cache(maxsize=256)
+def _pattern_pair(n: int, radius_mm: float, diameter_mm: float, seed: int):
+    """:func:`pattern_pair` of checked arguments; None when no clean pattern is found (cached too:
+    an infeasible design of a space is asked again by its neighbours)."""
     if n == len(DEFAULT_LAYOUT_A) and not layout_problems(
             build_layout(DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, radius_mm, diameter_mm)):
         return DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B
@@ -55,5 +69,4 @@ def pattern_pair(n: int, radius_mm: float, diameter_mm: float, seed: int = 0):
         a, b = _draw(n, rng), _draw(n, rng)
         if not layout_problems(build_layout(a, b, radius_mm, diameter_mm)):
             return a, b
-    raise DockfactoryError(f"no irregular pattern of {n} markers of {diameter_mm:g} mm fits the band "
-                           f"{AXIAL_MM[0]:g}-{AXIAL_MM[1]:g} mm x +-{SPAN_DEG:g} deg on radius {radius_mm:g} mm")
+    return None

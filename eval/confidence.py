@@ -10,6 +10,7 @@ Why and how: docs/acceptance.md, "Confidence bounds".
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -51,8 +52,10 @@ def chi2_cdf(x: float, dof: float) -> float:
     return _gamma_p(dof / 2.0, x / 2.0)
 
 
+@lru_cache(maxsize=4096)
 def chi2_quantile(p: float, dof: float) -> float:
-    """x with P(chi2(dof) <= x) = p, for 0 < p < 1 and dof > 0 (bisection to 1e-12 relative)."""
+    """x with P(chi2(dof) <= x) = p, for 0 < p < 1 and dof > 0 (bisection to 1e-12 relative).
+    Cached: a verdict, a frame plan or a design space asks the same few quantiles many times."""
     if not (0 < p < 1) or not dof > 0:
         raise ValueError(f"chi2_quantile: need 0 < p < 1 and dof > 0, got p={p}, dof={dof}")
     lo, hi = 0.0, max(1.0, dof)

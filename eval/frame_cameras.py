@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.generator.sampler import frame_plan, sample_frame
+from dockfactory.generator.sampler import frame_plan, frame_geometry
 
 __all__ = ["FrameCameras", "cameras_of_test_frames"]
 
@@ -23,16 +23,16 @@ class FrameCameras:
 
 
 def cameras_of_test_frames(cfg, max_frames: int, what: str) -> list[FrameCameras]:
-    """The first ``max_frames`` test frames of ``cfg`` (generator.sampler: the frames a render of
-    it would draw). DockfactoryError "``what``: the config plans no test frame" when there is
+    """The first ``max_frames`` test frames of ``cfg`` (generator.sampler.frame_geometry: where B
+    and the camera are in the frames a render of it would draw). DockfactoryError "``what``: the config plans no test frame" when there is
     none; ConfigError when a frame cannot fit its markers."""
     specs = [s for s in frame_plan(cfg) if s.split == "test"][:max_frames]
     if not specs:
         raise DockfactoryError(f"{what}: the config plans no test frame")
     out = []
     for spec in specs:
-        f = sample_frame(cfg, spec)
-        cam = f.camera.cam_from_d_array()
-        out.append(FrameCameras(cam, cam @ f.d_from_b_array(), float(f.camera.focal_px),
-                                np.asarray(f.camera.principal_point, dtype=float)))
+        d_from_b, camera = frame_geometry(cfg, spec)
+        cam = camera.cam_from_d_array()
+        out.append(FrameCameras(cam, cam @ np.asarray(d_from_b, dtype=float), float(camera.focal_px),
+                                np.asarray(camera.principal_point, dtype=float)))
     return out

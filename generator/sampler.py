@@ -463,10 +463,10 @@ def render_settings(render: RenderConfig) -> RenderSettings:
                           marker_light_smoothing_px=render.rendered_light_smoothing())
 
 
-def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
+def _single_geometry(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
     """Without runs: the frame's own pose and camera (geometry stream; the zoom within [camera]
-    focal_px, capped so the markers fit through the unit's ``lens``), its stage (appearance,
-    clutter: geometry stream; lights: look stream) and the look stream for the rest."""
+    focal_px, capped so the markers fit through the unit's ``lens``); (d_from_b, camera, eye,
+    target, geometry stream, look stream), the streams where the geometry left them."""
     geo_rng, look_rng = _streams(cfg.dataset.seed, spec)
     d_from_b, cam_from_d, f_cap, u_focal, eye, target = sample_geometry(cfg.pose, cfg.camera, static,
                                                                         ImageFit.of(cfg), geo_rng, lens)
@@ -475,16 +475,23 @@ def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLe
         raise ConfigError(f"[camera] focal_px: frame {spec.frame_id} cannot fit its markers at "
                           f"{f_lo:g} px (largest that fits: {f_cap:.0f} px)")
     camera = camera_model(cfg.image, cfg.camera_units, lens, f_lo + u_focal * (f_hi - f_lo), cam_from_d, eye, target)
+    return d_from_b, camera, eye, target, geo_rng, look_rng
+
+
+def _single_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
+    """Without runs: the frame's geometry (:func:`_single_geometry`), its stage (appearance,
+    clutter: geometry stream; lights: look stream) and the look stream for the rest."""
+    d_from_b, camera, eye, target, geo_rng, look_rng = _single_geometry(cfg, spec, static, lens)
     appearance = sample_appearance(geo_rng, spec.condition, cfg.markers.ring)
     clutter = sample_clutter(geo_rng, static.radius_mm)
     lights = sample_lights(look_rng, target, spec.condition)
     return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
 
 
-def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
-    """With runs: the unit's fixed camera; a main frame's pose from its run's trajectory and its
-    stage (appearance, clutter, lights) from the run's stream, so they hold for the whole run; a
-    repeatability pose's from the repeat streams as without runs."""
+def _run_geometry(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
+    """With runs: the unit's fixed camera and the frame's pose (a main frame's from its run's
+    trajectory, a repeatability pose's from the repeat streams); (d_from_b, camera, eye, target,
+    stage stream, light stream, look stream)."""
     seed = cfg.dataset.seed
     cam_from_d, focal, eye, target = unit_camera(cfg.camera, cfg.pose, cfg.runs, seed, lens, static, ImageFit.of(cfg))
     camera = camera_model(cfg.image, cfg.camera_units, lens, focal, cam_from_d, eye, target)
@@ -498,10 +505,28 @@ def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens)
         look_rng = rng_for(seed, STREAM_LOOK, spec.index)
         t = run_time(cfg.runs, cfg.dataset.frames, spec.run, spec.run_frame)
         d_from_b = run_pose(cfg.pose, cfg.runs, seed, spec.run, t)
+    return d_from_b, camera, eye, target, stage_rng, light_rng, look_rng
+
+
+def _run_shot(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):
+    """With runs: the frame's geometry (:func:`_run_geometry`); its stage (appearance, clutter,
+    lights) from the run's stream, so they hold for the whole run (a repeatability pose's from
+    the repeat streams)."""
+    d_from_b, camera, eye, target, stage_rng, light_rng, look_rng = _run_geometry(cfg, spec, static, lens)
     appearance = sample_appearance(stage_rng, spec.condition, cfg.markers.ring)
     clutter = sample_clutter(stage_rng, static.radius_mm)
     lights = sample_lights(light_rng, target, spec.condition)
     return d_from_b, camera, eye, (appearance, clutter, lights), look_rng
+
+
+def frame_geometry(cfg: Config, spec: FrameSpec) -> tuple[np.ndarray, CameraModel]:
+    """(d_from_b (4, 4), camera) of one planned frame: :func:`sample_frame`'s, without drawing its
+    stage, lights, sensor or motion (the design predictor's frames need only where B and the
+    camera are; mid-exposure with [motion]). ConfigError as :func:`sample_frame`'s."""
+    static = static_scene(cfg)
+    lens = unit_lens(cfg.camera_units, cfg.dataset.seed, spec.unit)
+    geometry = (_run_geometry if cfg.runs.frames_per_run > 0 else _single_geometry)(cfg, spec, static, lens)
+    return geometry[0], geometry[1]
 
 
 def sample_frame(cfg: Config, spec: FrameSpec) -> FrameScene:

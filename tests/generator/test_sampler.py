@@ -15,7 +15,7 @@ from dockfactory.core.layout import (
 )
 from dockfactory.core.scene import FrameScene, from_dict, to_dict
 from dockfactory.generator.random_draws import markers_in_d, static_scene
-from dockfactory.generator.sampler import condition_counts, frame_plan, sample_frame
+from dockfactory.generator.sampler import condition_counts, frame_geometry, frame_plan, sample_frame
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +37,22 @@ def test_frame_is_a_function_of_seed_and_index_alone(cfg):
     assert f_small.d_from_b == f_big.d_from_b and f_small.camera == f_big.camera
     other_seed = config_from_dict({"dataset": {"frames": 300, "seed": 43}})
     assert sample_frame(other_seed, plan[5]).d_from_b != f_small.d_from_b
+
+
+@pytest.mark.parametrize("runs", [0, 5])
+def test_frame_geometry_is_sample_frames_pose_and_camera(cfg, runs):
+    """The design predictor's frames (frame_geometry: no stage drawn) are the rendered ones: the
+    same d_from_b and camera as sample_frame, main and repeatability frames, with and without
+    docking runs."""
+    c = cfg if runs == 0 else config_from_dict({"dataset": {"frames": 40, "seed": 9}, "runs": {"frames_per_run": runs},
+                                                "repeatability": {"poses": 2, "captures": 3}})
+    plan = frame_plan(c)
+    specs = list(plan[:12]) + [s for s in plan if s.kind == "repeat"][:4]
+    assert {s.kind for s in specs} == {"main", "repeat"}
+    for spec in specs:
+        f = sample_frame(c, spec)
+        d_from_b, camera = frame_geometry(c, spec)
+        assert np.array_equal(np.asarray(d_from_b, dtype=float), f.d_from_b_array()) and camera == f.camera
 
 
 def test_scene_serialisation_round_trip(cfg):
