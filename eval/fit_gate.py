@@ -5,11 +5,10 @@ dof = 2 n - p (n points used, p = 13 pose and focal parameters plus the free int
 camera model; k = GATE_NOISE_FACTOR), and its p-value; the frame ``explains`` the residuals when
 p >= GATE_P. Without a known noise, or without degrees of freedom, nothing is tested (``explains``
 None). ``camera_misfit``: the camera-model check (solver.model_error) against the same noise.
-
-``run_misfits``: the same test on each frame of a docking run solved with shared intrinsics
-(eval.solve_frames.solve_run), whose frames each passed ``gate`` alone: a frame the run's
-intrinsics cannot explain is left out of the run (its camera is not the run's), the run solved
-again without it.
+``class_test``: a noisier camera class's second test (its noise, and no pattern of the image's
+geometry in the residuals). ``run_misfits``: the test on each frame of a docking run solved with
+shared intrinsics (eval.solve_frames.solve_run): a frame the run's intrinsics cannot explain is
+left out of the run, the run solved again without it.
 
 Why and how: docs/acceptance.md, "The goodness-of-fit gate".
 """
@@ -26,6 +25,8 @@ from dockfactory.solver.stats import chi2_logsf
 
 GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms: bench/results/fit_gate/README.md)
 
+PATTERN_P = 0.1        # the class's test needs the residuals' geometry pattern at least this likely
+PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
@@ -80,6 +81,21 @@ def camera_misfit(record: dict) -> float | None:
     return p if p is not None and p < GATE_P else None
 
 
+def class_test(record: dict, sigma_px: float | None, factor: float) -> dict | None:
+    """The fit test of ``record`` at its camera class's noise (``factor`` times ``sigma_px``, the
+    card's), with ``camera_class_factor`` and ``pattern_p``, when the residuals pass it and show no
+    pattern of the image's geometry (the camera-model check's own p-value at least PATTERN_P over
+    at least PATTERN_MIN_DOF directions); else None (no class, no known noise, too few directions
+    to tell a pattern, or a misfit)."""
+    check = record.get("model_check") or {}
+    if not (factor > 1.0 and sigma_px is not None and check.get("dof", 0) >= PATTERN_MIN_DOF):
+        return None
+    test = fit_test(record, factor * sigma_px)
+    if not (test["explains"] and check["p_value"] >= PATTERN_P):
+        return None
+    return {**test, "camera_class_factor": factor, "pattern_p": float(check["p_value"])}
+
+
 def camera_misfit_reason(record: dict, p_value: float) -> str:
     """One line: why the gate refused a frame its camera model does not explain."""
     model = record.get("camera_model", "pinhole")
@@ -88,23 +104,29 @@ def camera_misfit_reason(record: dict, p_value: float) -> str:
             "or --camera-model pp_k1")
 
 
-def gate(solve, refit, n_rows: int, sigma_px: float | None):
+def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float = 1.0):
     """Run ``solve(keep)`` through the gate. ``keep`` (n_rows,) bool: the detection rows to use;
     ``solve`` returns (record, used, widths, ids) with ids (n_rows,) the marker id of each row the
     fit used, else None; ``refit(keep, ids)`` the record of a quick fit of the rows ``keep`` as
     the markers ``ids`` (no identification; raises or returns a not-ok record when it fails),
     which picks the centre to leave out. Returns (record, used, widths) of the first fit that
     passes (its ``fit_test`` and :func:`camera_misfit`; with ``left_out``, the ids of the centres it
-    left out), else a not-ok record; a first fit :func:`camera_misfit` flags is refused at once."""
+    left out), else a not-ok record. A first fit the card's noise does not explain passes whole when
+    its camera class (``class_factor``, eval.camera_classes) explains it (:func:`class_test`);
+    otherwise one :func:`camera_misfit` flags is refused at once."""
     keep = np.ones(n_rows, dtype=bool)
     first = solve(keep)
     if not first[0].get("ok"):
         return first[:3]
     test = first[0]["fit_test"] = fit_test(first[0], sigma_px)
-    if (lens_p := camera_misfit(first[0])) is not None:
-        return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}, {}
-    if test["explains"] is not False:
+    lens_p = camera_misfit(first[0])
+    if lens_p is None and test["explains"] is not False:
         return first[:3]
+    if (by_class := class_test(first[0], sigma_px, class_factor)) is not None:
+        first[0]["fit_test"] = {**by_class, "card": {k: test.get(k) for k in ("ratio", "p_value")}}
+        return first[:3]
+    if lens_p is not None:
+        return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}, {}
     ids, left = first[3], []
     for _ in range(MAX_LEFT_OUT):
         k = _worst_row(refit, keep, ids, sigma_px)

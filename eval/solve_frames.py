@@ -309,11 +309,13 @@ def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None,
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
-                options: DockingOptions = DEFAULT_DOCKING) -> tuple[dict, dict, dict]:
+                options: DockingOptions = DEFAULT_DOCKING, class_factor: float = 1.0) -> tuple[dict, dict, dict]:
     """(poses record, marker id -> centre (u, v) px the fit used, marker id -> the edge width
     (px) of each of those centres the detector measured one for) of one frame, through the
     goodness-of-fit gate (eval.fit_gate) against the known centre noise: the noise card's
-    (``options.refine.sigma_floor_px``), else ``sigma`` when given."""
+    (``options.refine.sigma_floor_px``), else ``sigma`` when given; ``class_factor`` the frame's
+    camera class's (eval.camera_classes.CAMERA_CLASS_FACTORS: 1 for the three-chip camera the card was
+    measured on)."""
     known = options.refine.sigma_floor_px if options.refine.sigma_floor_px is not None else sigma
 
     def refit(keep, ids):
@@ -322,7 +324,7 @@ def solve_frame(markers, pp, centres, sigma, camera_model: str,
                             camera_model=camera_model, options=options)
         return pose_record(res, len(rows))
     return gate(lambda keep: _solve_rows(markers, pp, centres, keep, sigma, camera_model, options), refit,
-                len(centres[0]), known)
+                len(centres[0]), known, class_factor)
 
 
 def _solve_rows(markers, pp, centres, keep: np.ndarray, sigma, camera_model: str, options: DockingOptions):

@@ -118,7 +118,7 @@ def _row(rec: dict, truth: dict) -> dict:
     z = [abs(rec["pose"][k] - truth[k]) / np.sqrt(cov[i, i]) for i, k in enumerate(AXES)]
     test = rec.get("fit_test", {})
     return {"ok": True, "left_out": len(rec.get("left_out", [])), "ratio": test.get("ratio"),
-            "max_z": float(max(z)), "x_err": rec["pose"]["x_mm"] - truth["x_mm"],
+            "max_z": float(max(z)), "z": [float(v) for v in z], "x_err": rec["pose"]["x_mm"] - truth["x_mm"],
             "std_xyz": np.sqrt(np.diag(cov)[:3]).tolist()}
 
 

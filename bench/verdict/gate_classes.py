@@ -3,6 +3,7 @@ faults let through, on the detections the sensor bench kept.
 
     python -m bench.verdict.gate_classes RESULTS.json DATASET [DATASET ...] --factors 1,2,3.95,7.9
         [--effects bayer-jpeg90,...] [--faults "as is,cropped 160/120 px"] [--frames N] [--out FILE.json]
+        [--class-gate]
 
 RESULTS.json is a sensor bench results file with its rows (bench/sensor/sensor_effects.py ``--out``:
 each frame's detections through each camera effect, the refinement told the camera); each DATASET
@@ -11,7 +12,10 @@ detections are solved again, after each fault of bench/render/fit_gate.py (a use
 this camera's own centres), with the known centre noise the card's times each factor (a gate per
 camera class, tried: bench/results/fit_gate/README.md), through the gate as measure solves it. Per
 effect, factor and fault: frames ok, ok after leaving centres out, ok and beyond 3 reported
-standard deviations in X, Y or Z ("confidently wrong"), refused by category.
+standard deviations in X, Y or Z ("confidently wrong"), the RMS of z = error / reported std of X,
+Y, Z, refused by category; every solve carries the card's section shift. With ``--class-gate`` the
+solve is measure's for the effect's camera class (eval.camera_classes, the class of the effect's
+name): the class's factor for the gate's second test and the class's section shift.
 """
 from __future__ import annotations
 
@@ -20,17 +24,27 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from bench.render.fit_gate import _moved_boxes, _row, faults, other_layout
 from dockfactory.core.io import write_json_atomic
+from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class, class_section_shift
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.generator.datasets.reader import Dataset
 
 MIN_SCORE = 0.25
 
 
-def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: int) -> list[dict]:
+def effect_class(effect: str) -> str:
+    """The camera class of a sensor-bench effect by its name (Bayer, JPEG, both or neither)."""
+    return camera_class("RGGB" if effect.startswith("bayer") else None, "jpeg" in effect)
+
+
+def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: int,
+               class_factor: float = 1.0, shift=None) -> list[dict]:
     """fit_gate's row of every sensor-bench row of ``ds`` after ``fault`` (markers, move, size),
-    solved with the known noise ``noise_px``."""
+    solved with the known noise ``noise_px`` (and the camera class's ``class_factor`` and section
+    ``shift``)."""
     markers, move, size = fault
     out = []
     for row in rows[:frames]:
@@ -39,15 +53,18 @@ def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: in
             continue
         rec, _, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
                                 (cls, move(uv), _moved_boxes(boxes, move), refined, edge), None, "pinhole",
-                                docking_options(noise_px, lens_prior_for(ds.config)))
+                                docking_options(noise_px, lens_prior_for(ds.config), shift), class_factor)
         out.append(_row(rec, ds.labels[row["frame"]]["pose_b_in_d"]))
     return out
 
 
 def tally(rows: list[dict]) -> dict:
+    """Frames, ok, ok with centres left out, ok beyond 3 sigma, the RMS of z (error / reported std)
+    of X, Y, Z over the ok frames, refused by category."""
     ok = [r for r in rows if r["ok"]]
+    rms_z = np.sqrt(np.mean(np.square([r["z"] for r in ok]), axis=0)).round(2).tolist() if ok else None
     return {"frames": len(rows), "ok": len(ok), "left_out": sum(r["left_out"] > 0 for r in ok),
-            "ok_beyond_3_sigma": sum(r["max_z"] > 3 for r in ok),
+            "ok_beyond_3_sigma": sum(r["max_z"] > 3 for r in ok), "rms_z_xyz": rms_z,
             "refused": {c: sum(1 for r in rows if not r["ok"] and r["category"] == c)
                         for c in sorted({r["category"] for r in rows if not r["ok"]})}}
 
@@ -62,16 +79,20 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=48)
     ap.add_argument("--card", type=float, default=None, help="the card's centre noise, px (default: the shipped weights')")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--class-gate", action="store_true", help="measure's gate: the card and the class's second test")
     args = ap.parse_args(argv)
+    if args.class_gate:
+        args.factors = "1"
+    from dockfactory.core.resources import shipped_weights
+    from dockfactory.detector.noise_card import card_figures
+    figures = card_figures(shipped_weights())
     if args.card is None:
-        from dockfactory.core.resources import shipped_weights
-        from dockfactory.detector.noise_card import card_figures
-        args.card = card_figures(shipped_weights()).centre_noise_px
+        args.card = figures.centre_noise_px
     results = json.loads(args.results.read_text())["datasets"]
     opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in map(Dataset.open, args.datasets)}
     out = {"card_px": args.card, "tables": []}
-    print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | refused |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
+    print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | RMS z X / Y / Z | refused |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
     for key, effects in results.items():
         ds = opened.get(key)
         if ds is None:
@@ -84,11 +105,15 @@ def main(argv=None) -> int:
                 continue
             for f in (float(v) for v in args.factors.split(",")):
                 for name in args.faults.split(","):
-                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames))
-                    out["tables"].append({"dataset": key, "effect": effect, "factor": f, "fault": name, **t})
+                    cls = effect_class(effect) if args.class_gate else "three-chip"
+                    cf, shift = CAMERA_CLASS_FACTORS[cls], class_section_shift(cls, figures.section_shift_px)
+                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames, cf, shift))
+                    out["tables"].append({"dataset": key, "effect": effect, "factor": f, "class_factor": cf,
+                                          "fault": name, **t})
                     refused = ", ".join(f"{c} {n}" for c, n in t["refused"].items()) or "-"
                     print(f"| {key.split('@')[0]} | {effect} | {f:g} | {name} | {t['frames']} | {t['ok']} | "
-                          f"{t['left_out']} | {t['ok_beyond_3_sigma']} | {refused} |", flush=True)
+                          f"{t['left_out']} | {t['ok_beyond_3_sigma']} | {' / '.join(map(str, t['rms_z_xyz'] or ['-']))} | "
+                          f"{refused} |", flush=True)
                     if args.out:
                         write_json_atomic(args.out, out)
     return 0

@@ -41,6 +41,7 @@ from dockfactory.measure.verdict import add_conformity, add_uncertainty
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
 from dockfactory.eval.uncertainty_budget import TERMS
+from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class, class_section_shift
 from dockfactory.solver.options import LensPrior
 from dockfactory.eval.solve_frames import (
     detection_arrays,
@@ -165,9 +166,12 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     ``jpeg`` steer the centre refinement (detector.MarkerDetector.detect); ``roi``: detect in this
     region only (:func:`detect_in`); ``lens`` the lens prior marginalised into the covariance (None:
     an uncalibrated camera's, eval.solve_frames.UNCALIBRATED_LENS); ``calibration`` the camera's
-    (:func:`calibrated_solve`). The record carries ``image_size`` and ``timing_ms`` (detect,
-    solve)."""
+    (:func:`calibrated_solve`). The record carries ``image_size``, ``timing_ms`` (detect, solve)
+    and ``camera_class`` (eval.camera_classes.camera_class of ``cfa`` and ``jpeg``: its section
+    shift is the pose's, and a fit the card's noise does not explain may pass at the class's,
+    eval.fit_gate.class_test)."""
     h, w = image.shape[:2]
+    cls = camera_class(cfa, jpeg)
     frame = Frame(index, path, {}, image, principal_point=((w - 1) / 2.0, (h - 1) / 2.0))
     t0 = time.perf_counter()
     frame.detections = detect_in(detector, image, roi, cfa, jpeg)
@@ -178,25 +182,29 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     elif calibration is not None:
         frame.record, frame.used_points, frame.used_edges = calibrated_solve(detector, markers, path, (w, h), centres,
-                                                                             calibration)
+                                                                             calibration, cls)
     else:
         frame.record, frame.used_points, frame.used_edges = solve_frame(
-            markers, frame.principal_point, centres, None, camera_model, docking_options(detector.centre_noise_px, lens,
-                                                                                 detector.section_shift_px))
+            markers, frame.principal_point, centres, None, camera_model,
+            docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px)),
+            CAMERA_CLASS_FACTORS[cls])
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
+    frame.record["camera_class"] = cls
     t2 = time.perf_counter()
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
     return frame
 
 
-def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration):
+def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration,
+                     camera: str = "three-chip"):
     """(record, used points, used edges) of one image of a calibrated camera: its centres (and
     boxes) taken to the ideal square-pixel pinhole camera (core.calibration_files.ideal_pixels),
     solved with the calibration's principal point, the lens known (nothing marginalised) and the
     pinhole model (the file's stated uncertainty marginalised: :func:`calibration_lens`); the focal
-    is solved and the record's ``calibration`` gives the calibrated one.
+    is solved and the record's ``calibration`` gives the calibrated one; ``camera`` the frame's
+    camera class (eval.camera_classes: its section shift and its factor for the gate).
     An image of another size than the calibration's is not ok (category "calibration size")."""
     if tuple(size) != (cal.width, cal.height):
         why = f"{path}: the image is {size[0]}x{size[1]}, the calibration is for {cal.width}x{cal.height}"
@@ -206,9 +214,10 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     if boxes is not None:
         lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
         boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
-    options = docking_options(detector.centre_noise_px, calibration_lens(cal), detector.section_shift_px)
+    options = docking_options(detector.centre_noise_px, calibration_lens(cal),
+                              class_section_shift(camera, detector.section_shift_px))
     record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
-                                      "pinhole", options)
+                                      "pinhole", options, CAMERA_CLASS_FACTORS[camera])
     record["calibration"] = {"focal_px": focal, "fx": cal.fx, "fy": cal.fy, "principal_point": [cal.cx, cal.cy],
                              "distortion": list(cal.dist),
                              **({"std": list(cal.std)} if cal.std is not None else {})}
@@ -550,6 +559,14 @@ def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dic
     return extra
 
 
+def _frames_section_shift(frames: list[Frame], card_shift_px) -> tuple[float, float] | None:
+    """The section shift of a run of ``frames``: per axis the largest of their camera classes'
+    (eval.camera_classes.class_section_shift); None when none has one."""
+    shifts = [class_section_shift(f.record.get("camera_class", "three-chip"), card_shift_px) for f in frames]
+    shifts = [v for v in shifts if v is not None]
+    return tuple(max(v[i] for v in shifts) for i in (0, 1)) if shifts else None
+
+
 def _run_of(frames: list[Frame], markers, model, card, out, options) -> tuple[dict, float]:
     """--self-calibrate sequence: the joint solve of the identified frames and their overlays
     (the run's record with its warnings; the seconds it took); ``card`` the weights' noise card
@@ -558,7 +575,7 @@ def _run_of(frames: list[Frame], markers, model, card, out, options) -> tuple[di
     with warnings.catch_warnings(record=True) as caught:   # kept with the run, not printed
         warnings.simplefilter("always")
         run = self_calibrate_sequence(frames, markers, model, card.centre_noise_px, options.camera.lens,
-                                      card.section_shift_px)
+                                      _frames_section_shift(frames, card.section_shift_px))
     if caught:
         run["notes"] = sorted({f"{w.category.__name__}: {w.message}" for w in caught})[:20]
     if options.overlay_size is not None:

@@ -34,6 +34,7 @@ from dockfactory.core.histogram import LogHistogram
 from dockfactory.core.layout_file import read_layout_file
 from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.eval.acceptance import load_acceptance
+from dockfactory.eval.camera_classes import camera_class, class_section_shift
 from dockfactory.eval.conformity import UNDECIDED, coverage_k, pose_conformity, pose_tolerances
 from dockfactory.eval.solve_frames import docking_options, resolve_camera_model
 from dockfactory.solver.options import LensPrior
@@ -512,7 +513,9 @@ def _measurer(detector, markers, options: StreamOptions, decide, size) -> Stream
                if options.roi_refresh and min(size) > 1 else None)
     calibration = (WindowCalibration(markers, options.window, resolve_camera_model(options.camera_model, "sequence"),
                                      options.freeze_after,
-                                     docking_options(detector.centre_noise_px, options.lens, detector.section_shift_px))
+                                     docking_options(detector.centre_noise_px, options.lens,
+                                                     class_section_shift(camera_class(options.cfa, options.jpeg),
+                                                                         detector.section_shift_px)))
                    if options.window else None)
     return StreamMeasurer(detector, markers, options, PoseKalman() if options.filter == "kalman" else None,
                           decide, tracker, calibration)

@@ -178,6 +178,7 @@ def test_raw_frames_are_developed_and_measured(big, tmp_path, capsys):
         # (the painted frames' centre noise is near the shipped card's limit)
         ids = [set(r["marker_ids"]) | set(r.get("left_out") or ()) for r in (got, rec)]
         assert got["ok"] and ids[0] == ids[1]
+        assert got["camera_class"] == "bayer" and rec["camera_class"] == "three-chip"   # the gate's second test
         for k in ("x_mm", "y_mm", "alpha_deg"):
             i = POSE_NAMES.index(k)
             std = np.hypot(*(np.sqrt(np.asarray(r["covariance"])[i, i]) for r in (got, rec)))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, build_layout
-from dockfactory.eval import fit_gate
+from dockfactory.eval import camera_classes, fit_gate
 from dockfactory.eval.confidence import chi2_cdf
 from dockfactory.eval.fit_gate import MISFIT, fit_test
 from dockfactory.eval.solve_frames import KNOWN_LENS, UNCALIBRATED_LENS, docking_options, solve_frame
@@ -166,3 +166,76 @@ def test_camera_misfit_reads_the_known_noise_p_value():
     assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": 0.2}}) is None
     assert fit_gate.camera_misfit({"model_check": {"known_noise_p_value": None}}) is None
     assert fit_gate.camera_misfit({}) is None
+
+
+SHIPPED_CARD = 0.0174   # a card like the shipped ones (0.013-0.020 px)
+
+
+def _noisy_class(seed: int, pp_offset_px, noise_px: float, class_factor: float) -> dict:
+    """A far frame (scene B's geometry, an uncalibrated camera) whose centres carry ``noise_px`` of
+    independent noise per disc (a noisier camera class than the card's), solved at SHIPPED_CARD
+    with the camera class's ``class_factor``."""
+    layout = build_layout(DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, 450.0, 30.0)
+    sc = docking_scene(np.random.default_rng(seed), markers=layout, pp_offset_px=pp_offset_px, **FAR)
+    n_a, n_b = len(sc.uv_a), len(sc.uv_b)
+    uv = np.vstack([sc.uv_a, sc.uv_b]) + noise_px * np.random.default_rng(seed + 1000).standard_normal((n_a + n_b, 2))
+    cls = np.r_[np.zeros(n_a, dtype=int), np.ones(n_b, dtype=int)]
+    return solve_frame(layout, sc.image_centre, (cls, uv, None, None, None), None, "pinhole",
+                       docking_options(SHIPPED_CARD, UNCALIBRATED_LENS), class_factor)[0]
+
+
+BAYER_JPEG = camera_classes.CAMERA_CLASS_FACTORS["bayer-jpeg"]
+
+
+@pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
+def test_a_noisier_camera_class_keeps_its_frames_whole_and_a_crop_is_still_refused():
+    """Centres as noisy as a Bayer + JPEG camera's (its class factor times the card), 12 frames:
+    the card's gate alone refuses some and strips centres from most (measured: 3 of 12 whole);
+    told the class, the frames the card refuses pass whole when their residuals show no pattern
+    (at least 6 of 12 whole, each with its class noted); the same frames with the principal point
+    160 / 120 px off (a crop) are never ok, told the class or not."""
+    seeds = range(12)
+    noise = BAYER_JPEG * SHIPPED_CARD
+    card = [_noisy_class(s, (0.0, 0.0), noise, 1.0) for s in seeds]
+    told = [_noisy_class(s, (0.0, 0.0), noise, BAYER_JPEG) for s in seeds]
+    whole = lambda recs: [r for r in recs if r["ok"] and not r.get("left_out")]   # noqa: E731
+    assert len(whole(card)) <= 4 and len(whole(told)) >= 6
+    by_class = [r for r in told if r["ok"] and "camera_class_factor" in r["fit_test"]]
+    assert len(by_class) >= 4
+    assert all(r["fit_test"]["camera_class_factor"] == BAYER_JPEG and r["fit_test"]["pattern_p"] >= fit_gate.PATTERN_P
+               and r["fit_test"]["card"]["ratio"] > 3 for r in by_class)
+    for factor in (1.0, BAYER_JPEG):
+        assert not any(_noisy_class(s, (160.0, 120.0), noise, factor)["ok"] for s in seeds)
+
+
+def test_class_test_needs_a_class_a_noise_and_no_geometry_pattern():
+    rec = {"n_markers": {"A": 7, "B": 7}, "rmse_px": {"A": 0.1, "B": 0.1}, "camera_model": "pinhole",
+           "model_check": {"dof": 3, "p_value": 0.5}}
+    sigma = 0.1 / 8.0                                                  # residuals about 8x the card
+    assert fit_test(rec, sigma)["explains"] is False
+    got = fit_gate.class_test(rec, sigma, 7.9)
+    assert got["explains"] and got["camera_class_factor"] == 7.9 and got["pattern_p"] == 0.5
+    assert got["ratio"] == pytest.approx(fit_test(rec, sigma)["ratio"] / 7.9)
+    assert fit_gate.class_test(rec, sigma, 1.0) is None                 # the card's class: no second test
+    assert fit_gate.class_test(rec, None, 7.9) is None                  # no known noise
+    assert fit_gate.class_test(rec, sigma, 1.2) is None                 # 5.5x the class's noise: still a misfit
+    pattern = {**rec, "model_check": {"dof": 3, "p_value": 0.09}}
+    assert fit_gate.class_test(pattern, sigma, 7.9) is None             # the residuals look like a crop
+    few = {**rec, "model_check": {"dof": 2, "p_value": 0.9}}
+    assert fit_gate.class_test(few, sigma, 7.9) is None                 # too few directions to tell a pattern
+    assert fit_gate.class_test({k: v for k, v in rec.items() if k != "model_check"}, sigma, 7.9) is None
+
+
+@pytest.mark.parametrize("cfa, jpeg, cls", [(None, False, "three-chip"), ("RGGB", False, "bayer"),
+                                            (None, True, "jpeg"), ("BGGR", True, "bayer-jpeg")])
+def test_camera_class_of_a_frame(cfa, jpeg, cls):
+    assert camera_classes.camera_class(cfa, jpeg) == cls and cls in camera_classes.CAMERA_CLASS_FACTORS
+
+
+def test_a_class_section_shift_is_the_larger_of_the_cards_and_the_classs_per_axis():
+    own = camera_classes.CLASS_SECTION_SHIFT_PX["bayer-jpeg"]
+    assert camera_classes.class_section_shift("bayer-jpeg", (0.0, 0.0)) == own
+    assert camera_classes.class_section_shift("bayer-jpeg", (1.0, 0.0)) == (1.0, own[1])
+    assert camera_classes.class_section_shift("bayer-jpeg", None) == own
+    assert camera_classes.class_section_shift("three-chip", (0.0017, 0.0019)) == (0.0017, 0.0019)
+    assert camera_classes.class_section_shift("three-chip", None) is None      # nothing measured: none
