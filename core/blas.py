@@ -15,9 +15,9 @@ import os
 import numpy  # noqa: F401  (loads its BLAS: openblas_core reads the loaded library)
 
 try:
-    from numpy._core._multiarray_umath import __cpu_features__
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 except ImportError:   # numpy < 2
-    from numpy.core._multiarray_umath import __cpu_features__
+    from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
 from dockfactory import LABEL_BLAS_CORE, LABEL_SIMD_ENV, LABEL_SIMD_OFF, pin_label_arithmetic
 from dockfactory import LABEL_BLAS_ENV as ENV
@@ -33,8 +33,10 @@ def pin_label_blas(environ=os.environ) -> None:
 
 
 def numpy_simd_on() -> list[str]:
-    """The AVX-512 paths numpy runs in this process (empty when pinned or on a CPU without them)."""
-    return [name for name in LABEL_SIMD_OFF if __cpu_features__.get(name)]
+    """The AVX-512 paths numpy runs in this process (empty when pinned or on a CPU without them): a
+    feature the CPU has counts only when this numpy build dispatches to it (numpy 1.26 has no
+    AVX512_SPR paths, and a CPU that has the feature still runs the others' paths, switched off)."""
+    return [name for name in LABEL_SIMD_OFF if __cpu_features__.get(name) and name in __cpu_dispatch__]
 
 
 def openblas_core() -> str | None:

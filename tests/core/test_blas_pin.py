@@ -53,6 +53,16 @@ def test_the_pin_switches_numpys_avx512_paths_off_and_keeps_the_callers():
     assert state == "[] False"     # the caller's AVX2 off as asked, no AVX-512 path on any CPU
 
 
+def test_a_feature_numpy_has_no_paths_for_is_not_counted_as_on(monkeypatch):
+    """A CPU with AVX512_SPR under a numpy that dispatches no AVX512_SPR path (1.26) runs nothing of
+    it: only the dispatched features the CPU has and the pin left on count."""
+    monkeypatch.setattr(blas, "__cpu_features__", {"AVX512_SPR": True, "AVX512_SKX": False, "AVX2": True})
+    monkeypatch.setattr(blas, "__cpu_dispatch__", ["AVX2", "AVX512_SKX"])
+    assert blas.numpy_simd_on() == []
+    monkeypatch.setattr(blas, "__cpu_dispatch__", ["AVX2", "AVX512_SKX", "AVX512_SPR"])
+    assert blas.numpy_simd_on() == ["AVX512_SPR"]
+
+
 def test_a_render_with_numpy_on_its_avx512_paths_is_refused_in_one_line(monkeypatch, repo_root, tmp_path):
     from dockfactory.core.config import load_config
     monkeypatch.setattr(blas, "numpy_simd_on", lambda: ["AVX512_SKX"])
