@@ -42,11 +42,18 @@ def _render_regions(scene, regions, exr_path: str, kind: str) -> list[str]:
     wc, hc = r.resolution_x, r.resolution_y
     r.use_border = r.use_crop_to_border = True
     paths = []
-    for i, region in enumerate(regions):
-        _set_border(r, region, wc, hc)
-        r.filepath = crop_path(exr_path, i, kind)
-        bpy.ops.render.render(write_still=True)
-        paths.append(r.filepath)
+    # One frame's regions are one scene: Cycles keeps its copy between them (persistent data)
+    # instead of syncing the scene afresh for each, and drops it after the last, so no frame
+    # inherits another's (scene_builder: why persistent data is off between frames).
+    r.use_persistent_data = True
+    try:
+        for i, region in enumerate(regions):
+            _set_border(r, region, wc, hc)
+            r.filepath = crop_path(exr_path, i, kind)
+            bpy.ops.render.render(write_still=True)
+            paths.append(r.filepath)
+    finally:
+        r.use_persistent_data = False
     return paths
 
 
