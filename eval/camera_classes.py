@@ -10,7 +10,8 @@ camera class" and "The class's test"); each is the larger of the two scenes.
 """
 from __future__ import annotations
 
-__all__ = ["CAMERA_CLASS_FACTORS", "CLASS_SECTION_SHIFT_PX", "camera_class", "class_section_shift"]
+__all__ = ["CAMERA_CLASS_FACTORS", "CLASS_SECTION_SHIFT_PX", "camera_class", "class_section_shift",
+           "classes_section_shift"]
 
 # The pooled per-axis RMS of the residuals through the class's camera over the three-chip camera's.
 CAMERA_CLASS_FACTORS = {"three-chip": 1.0, "bayer": 3.7, "jpeg": 4.5, "bayer-jpeg": 7.9}
@@ -35,3 +36,12 @@ def class_section_shift(cls: str, card_shift_px) -> tuple[float, float] | None:
     if card_shift_px is None:
         return None if not any(own) else own
     return tuple(max(float(c), o) for c, o in zip(card_shift_px, own))
+
+
+def classes_section_shift(classes, card_shift_px) -> tuple[float, float] | None:
+    """The section shift (x, y) px of frames of the camera classes ``classes`` solved together (a
+    run sharing its intrinsics): per axis the largest of their :func:`class_section_shift`; None
+    when none has one."""
+    shifts = [class_section_shift(c, card_shift_px) for c in classes]
+    shifts = [v for v in shifts if v is not None]
+    return tuple(max(v[i] for v in shifts) for i in (0, 1)) if shifts else None

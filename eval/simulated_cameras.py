@@ -3,7 +3,9 @@ filter array and EMVA 1288 sensor, ISP, encoding) and the localization errors of
 frames, so a report names the camera its figures hold for, with one row per unit (and preset).
 
 The block is built from the dataset's config (the same draws the factory made: ``unit_lens``,
-``unit_sensor``) and the evaluation's per-frame rows; it is reported, not gated.
+``unit_sensor``) and the evaluation's per-frame rows; it is reported, not gated. The camera of each
+frame (its Bayer pattern and encoding: ``dataset_camera`` per unit for the detector,
+``frame_camera`` from the frame's label for its camera class) is read here too.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import numpy as np
 
 from dockfactory.core.camera_chain import white_dn
 from dockfactory.eval.acceptance import UNITS
+from dockfactory.eval.camera_classes import camera_class
 from dockfactory.generator.camera_units import unit_lens, unit_sensor
 from dockfactory.generator.datasets.reader import Dataset
 
@@ -121,16 +124,47 @@ def html_simulated_cameras(block: dict) -> list[str]:
             f"<table>{head}{''.join(rows)}</table>"]
 
 
+def unit_camera(cfg, unit: int) -> tuple[str | None, bool]:
+    """(Bayer pattern or None, JPEG-encoded?) of camera unit ``unit`` of a dataset config ``cfg``
+    (core.config.Config): the draws the factory made for it (``unit_sensor``'s CFA, None for
+    "none" or without [sensor] presets; ``unit_lens``'s JPEG quality, 0: lossless)."""
+    us = unit_sensor(cfg.sensor, cfg.dataset.seed, unit)
+    cfa = us.cfa if us is not None and us.cfa != "none" else None
+    return cfa, bool(unit_lens(cfg.camera_units, cfg.dataset.seed, unit).jpeg_quality)
+
+
 def dataset_camera(ds: Dataset):
     """frame id -> (Bayer pattern or None, JPEG-encoded?) of the unit that took the frame: what the
     maker of a camera knows (its pixel format, its encoding), told to the detector's centre
     refinement; None when every unit is a three-chip camera writing lossless images."""
     cfg = ds.config
-    units = {}
-    for u in range(cfg.camera_units.count):
-        us = unit_sensor(cfg.sensor, cfg.dataset.seed, u)
-        cfa = us.cfa if us is not None and us.cfa != "none" else None
-        units[u] = (cfa, bool(unit_lens(cfg.camera_units, cfg.dataset.seed, u).jpeg_quality))
+    units = {u: unit_camera(cfg, u) for u in range(cfg.camera_units.count)}
     if all(v == (None, False) for v in units.values()):
         return None
     return lambda fid: units[int(ds.labels[fid]["spec"].get("unit", 0))]
+
+
+def frame_camera(label: dict, cfg) -> tuple[str | None, bool]:
+    """(Bayer pattern or None, JPEG-encoded?) of the frame a dataset ``label`` describes, as its image
+    was delivered. Each from the label's own record when it has one: ``sampled.sensor`` (the
+    pattern of its colour ``chain``'s CFA; no chain, or "none": the frame went through no CFA, as
+    with the three-chip noise model or an ideal frame, which skips the sensor) and
+    ``camera.jpeg_quality`` (None or 0: lossless); else its camera unit's in the dataset's config
+    ``cfg`` (:func:`unit_camera`; the unit from ``spec.unit``, 0 when absent). The stored image
+    says nothing: a JPEG unit's frames are kept as PNGs of the decoded JPEG."""
+    unit_cfa, unit_jpeg = unit_camera(cfg, int(label.get("spec", {}).get("unit", 0)))
+    sensor = label.get("sampled", {}).get("sensor")
+    if isinstance(sensor, dict):
+        chain = sensor.get("chain") or {}
+        cfa = chain.get("cfa") if chain.get("cfa") not in (None, "none") else None
+    else:
+        cfa = unit_cfa
+    camera = label.get("camera", {})
+    jpeg = bool(camera["jpeg_quality"]) if "jpeg_quality" in camera else unit_jpeg
+    return cfa, jpeg
+
+
+def frame_camera_class(label: dict, cfg) -> str:
+    """The camera class (eval.camera_classes.camera_class) of the dataset frame ``label`` of a
+    dataset of config ``cfg``: its :func:`frame_camera`."""
+    return camera_class(*frame_camera(label, cfg))

@@ -7,8 +7,10 @@ each disc's image, label ``outline_centroid_px``) plus Gaussian noise. Output PO
    "sigma_px": ..., "frames": {frame_id: {"ok": true, "d_from_b": 4x4, "pose": {...},
    "focal_px": ..., "covariance": 6x6, "rmse_px": {"A", "B"},
    "marker_ids": [...] (used in the fit), "rejected_ids": [...] (identified, left out as
-   suspect), "n_markers": {"A", "B"}} | {"ok": false, "reason": ..., "category": ...}}}
-Frames without a pose are kept with their reason: never dropped.
+   suspect), "n_markers": {"A", "B"}, "camera_class": ...} | {"ok": false, "reason": ...,
+   "category": ..., "camera_class": ...}}}
+Frames without a pose are kept with their reason: never dropped. Each frame's camera class is its
+label's (eval.simulated_cameras.frame_camera_class); detected centres are judged by it as measure's.
 """
 from __future__ import annotations
 
@@ -24,7 +26,9 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import rng_for
+from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, classes_section_shift
 from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
+from dockfactory.eval.simulated_cameras import frame_camera_class
 from dockfactory.solver import (
     AmbiguousIdentification,
     DockingOptions,
@@ -180,14 +184,14 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
         docking run with shared intrinsics, ``frame`` (or None) each frame alone.
     true_camera, lens, section_shift_px : bool, LensPrior or None, (float, float) or None
         Each frame with its label's principal point and distortion (a calibrated camera's
-        reference); the lens prior (:func:`lens_prior_for`, None: its choice); the common offset
-        of a section's centres (eval.section_shift; default: the card's).
+        reference); the lens prior (:func:`lens_prior_for`, None: its choice); every frame's section
+        shift (eval.section_shift; None: the card's, raised to its camera class's: :func:`class_options`).
 
     Returns
     -------
     dict
-        The poses document: its settings and ``frames`` (frame id -> solved record or
-        ``{"ok": False, "reason", "category"}``), mm and degrees, pixels in the OpenCV convention.
+        The poses document: its settings and ``frames`` (frame id -> solved record or ``{"ok": False,
+        "reason", "category"}``, each with its ``camera_class``), mm, degrees, OpenCV pixels.
 
     Raises
     ------
@@ -201,8 +205,8 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
     pp = ((w - 1) / 2.0, (h - 1) / 2.0)   # uncalibrated: only the image size is known
     sigma = sigma_px if sigma_px is not None or detections is not None else (oracle_sigma_px or None)
     options = _dataset_options(ds, detections, sigma_floor_px, lens, true_camera, section_shift_px)
-    frames = _solve_frames(ds, splits, detections, oracle_sigma_px, min_score, pp, sigma, camera_model,
-                           self_calibrate, true_camera, options)
+    frames = _solve_frames(ds, splits, detections, oracle_sigma_px, min_score, pp, sigma, camera_model, self_calibrate,
+                           true_camera, options, None if detections is None else section_shift_px is None)
     return {"format": POSES_FORMAT, "dataset_version": ds.version_id,
             "source": "detections" if detections is not None else "oracle", "oracle_sigma_px": oracle_sigma_px,
             "min_score": min_score, "principal_point": list(pp), "camera_model": camera_model,
@@ -212,11 +216,14 @@ def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | Non
 
 
 def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, pp, sigma, camera_model,
-                  self_calibrate, true_camera: bool, options) -> dict:
+                  self_calibrate, true_camera: bool, options, by_class: bool | None = None) -> dict:
     """Frame id -> record of every frame of ``splits`` (:func:`solve_dataset`'s ``frames``): each
-    frame alone, then, with ``self_calibrate`` "sequence", each docking run with shared intrinsics."""
+    frame alone, then, with ``self_calibrate`` "sequence", each docking run with shared intrinsics;
+    every record names the frame's ``camera_class``, and :func:`class_options` of ``by_class`` says
+    what the class changes in its solve."""
     markers = ds.markers()
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
+    classes = {fid: frame_camera_class(ds.labels[fid], ds.config) for fid in ds.frames(splits)}
     frames, used, edges = {}, {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
@@ -224,12 +231,32 @@ def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, p
             frames[fid] = {"ok": False, "reason": "no detections for this frame", "category": "no detections"}
             continue
         frame_pp, centres = true_camera_centres(ds.labels[fid], centres) if true_camera else (pp, centres)
-        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, options)
+        frame_options, factor = class_options(options, [classes[fid]], by_class)
+        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame,
+                                                         frame_options, factor)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
-            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, options, edges))
+            run_options = class_options(options, [classes[f] for f in group], by_class)[0]
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, run_options, edges))
+    for fid, rec in frames.items():
+        rec["camera_class"] = classes[fid]
     return frames
+
+
+def class_options(options: DockingOptions, classes, by_class: bool | None) -> tuple[DockingOptions, float]:
+    """(options, gate class factor) of frames of the camera classes ``classes`` (one frame's, or a
+    run's) solved together, as measure solves an image of its class. ``by_class`` None (the oracle:
+    label centroids with the stated noise, which no camera class changes): ``options`` and 1.
+    Else the factor is the class's (eval.camera_classes.CAMERA_CLASS_FACTORS; of several: the
+    largest) and, when ``by_class`` is True, the section shift per axis the largest of
+    ``options``' (the card's) and the classes' (eval.camera_classes.classes_section_shift); False:
+    the shift of ``options`` as given."""
+    if by_class is None:
+        return options, 1.0
+    factor = max(CAMERA_CLASS_FACTORS[c] for c in classes)
+    shift = classes_section_shift(classes, options.section_shift_px) if by_class else options.section_shift_px
+    return (options if shift == options.section_shift_px else replace(options, section_shift_px=shift)), factor
 
 
 def _check_modes(ds: Dataset, detections, oracle_sigma_px, self_calibrate, true_camera: bool, camera_model) -> None:

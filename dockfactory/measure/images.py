@@ -41,7 +41,12 @@ from dockfactory.measure.verdict import add_conformity, add_uncertainty
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.conformity import COVERAGE_K, pose_tolerances
 from dockfactory.eval.uncertainty_budget import TERMS
-from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class, class_section_shift
+from dockfactory.eval.camera_classes import (
+    CAMERA_CLASS_FACTORS,
+    camera_class,
+    class_section_shift,
+    classes_section_shift,
+)
 from dockfactory.solver.options import LensPrior
 from dockfactory.eval.solve_frames import (
     detection_arrays,
@@ -561,10 +566,8 @@ def _assess(frames: list[Frame], markers, sigmas, bias, spec, acceptance) -> dic
 
 def _frames_section_shift(frames: list[Frame], card_shift_px) -> tuple[float, float] | None:
     """The section shift of a run of ``frames``: per axis the largest of their camera classes'
-    (eval.camera_classes.class_section_shift); None when none has one."""
-    shifts = [class_section_shift(f.record.get("camera_class", "three-chip"), card_shift_px) for f in frames]
-    shifts = [v for v in shifts if v is not None]
-    return tuple(max(v[i] for v in shifts) for i in (0, 1)) if shifts else None
+    (eval.camera_classes.classes_section_shift); None when none has one."""
+    return classes_section_shift([f.record.get("camera_class", "three-chip") for f in frames], card_shift_px)
 
 
 def _run_of(frames: list[Frame], markers, model, card, out, options) -> tuple[dict, float]:

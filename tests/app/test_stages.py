@@ -102,7 +102,7 @@ def test_solve_stage_from_detections_matches_the_oracle(ds, exact_poses):
     poses = solve_dataset(ds, detections={"frames": frames})
     assert poses["source"] == "detections"
     assert poses["frames"][missing] == {"ok": False, "reason": "no detections for this frame",
-                                        "category": "no detections"}
+                                        "category": "no detections", "camera_class": "three-chip"}
     for fid, rec in poses["frames"].items():
         if fid != missing:
             assert rec["n_detections"] == 14
