@@ -7,9 +7,11 @@ models beyond the pinhole). On normalised image coordinates (x, y) = (X / Z, Y /
     x_d = x radial + 2 p1 x y + p2 (r2 + 2 x^2)
     y_d = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
 
-then pixels u = f x_d + cx, v = f y_d + cy (square pixels, no skew: the convention of
-``core.geometry.intrinsics``). ``cv2.projectPoints`` with ``distCoeffs = (k1, k2, p1, p2, k3)``
-gives the same numbers (tests/core/test_distortion.py).
+then pixels u = fx x_d + cx, v = fy y_d + cy (no skew; fy = pixel_aspect fx, 1 for square
+pixels: the convention of ``core.geometry.intrinsics``). ``cv2.projectPoints`` with that K and
+``distCoeffs = (k1, k2, p1, p2, k3)`` gives the same numbers (tests/core/test_distortion.py).
+The pinhole side of :func:`distort_pixels` / :func:`undistort_pixels` has square pixels at fx (the
+factory's render): u = fx x + cx, v = fx y + cy.
 """
 from __future__ import annotations
 
@@ -90,15 +92,36 @@ def undistort_normalized(xy_d, coeffs, iterations: int = 20, tol: float = 1e-14)
     return xy
 
 
-def distort_pixels(uv, focal_px: float, principal_point, coeffs) -> np.ndarray:
-    """Distorted pixel positions of ideal pinhole pixels ``uv`` (N, 2) of the same camera."""
+def _check_aspect(pixel_aspect) -> float:
+    a = float(pixel_aspect)
+    if not (np.isfinite(a) and a > 0):
+        raise ValueError(f"pixel_aspect (fy / fx) must be positive and finite, got {pixel_aspect}")
+    return a
+
+
+def distort_pixels(uv, focal_px: float, principal_point, coeffs, pixel_aspect: float = 1.0) -> np.ndarray:
+    """Delivered (distorted) pixels (N, 2) of pinhole pixels ``uv`` (N, 2) of one camera.
+
+    ``uv``: the ideal pinhole image with square pixels at ``focal_px`` (= fx) and
+    ``principal_point`` (cx, cy), px. Returns u = fx x_d + cx, v = fy y_d + cy with
+    fy = ``pixel_aspect`` fx (module docstring; ``pixel_aspect`` 1: the same arithmetic as square
+    pixels). ValueError for a non-positive ``pixel_aspect``.
+    """
+    a = _check_aspect(pixel_aspect)
     c = np.asarray(principal_point, dtype=np.float64)
     xy = (np.asarray(uv, dtype=np.float64) - c) / focal_px
-    return distort_normalized(xy, coeffs) * focal_px + c
+    if a == 1.0:
+        return distort_normalized(xy, coeffs) * focal_px + c
+    return distort_normalized(xy, coeffs) * np.array([focal_px, focal_px * a]) + c
 
 
-def undistort_pixels(uv_d, focal_px: float, principal_point, coeffs) -> np.ndarray:
-    """Ideal pinhole pixels of distorted pixel positions ``uv_d`` (N, 2)."""
+def undistort_pixels(uv_d, focal_px: float, principal_point, coeffs, pixel_aspect: float = 1.0) -> np.ndarray:
+    """Pinhole pixels (N, 2) (square, at ``focal_px``) of delivered pixels ``uv_d`` (N, 2): the
+    inverse of :func:`distort_pixels` with the same arguments (x_d = (u - cx) / fx,
+    y_d = (v - cy) / fy, fy = ``pixel_aspect`` fx). ValueError as there, or where the lens folds."""
+    a = _check_aspect(pixel_aspect)
     c = np.asarray(principal_point, dtype=np.float64)
-    xy_d = (np.asarray(uv_d, dtype=np.float64).reshape(-1, 2) - c) / focal_px
-    return undistort_normalized(xy_d, coeffs) * focal_px + c
+    uv_d = np.asarray(uv_d, dtype=np.float64).reshape(-1, 2)
+    if a == 1.0:
+        return undistort_normalized((uv_d - c) / focal_px, coeffs) * focal_px + c
+    return undistort_normalized((uv_d - c) / np.array([focal_px, focal_px * a]), coeffs) * focal_px + c

@@ -114,12 +114,27 @@ def transform_from_pose_components(x_mm, y_mm, z_mm, alpha_deg, beta_deg, gamma_
                           [x_mm, y_mm, z_mm])
 
 
-def intrinsics(focal_px: float, principal_point) -> np.ndarray:
-    """Pinhole K (3, 3) with square pixels, no skew. ``principal_point``: (2,) px."""
+def intrinsics(focal_px: float, principal_point, pixel_aspect: float = 1.0) -> np.ndarray:
+    """Pinhole K (3, 3), no skew: fx = ``focal_px``, fy = ``pixel_aspect`` fx (1: square pixels),
+    ``principal_point``: (2,) px. ValueError for a non-positive or non-finite focal or aspect."""
     if not np.isfinite(focal_px) or focal_px <= 0:
         raise ValueError(f"focal_px must be positive and finite, got {focal_px}")
+    if not np.isfinite(pixel_aspect) or pixel_aspect <= 0:
+        raise ValueError(f"pixel_aspect must be positive and finite, got {pixel_aspect}")
     c = check_array("principal_point", principal_point, (2,))
-    return np.array([[focal_px, 0.0, c[0]], [0.0, focal_px, c[1]], [0.0, 0.0, 1.0]])
+    return np.array([[focal_px, 0.0, c[0]], [0.0, focal_px * pixel_aspect, c[1]], [0.0, 0.0, 1.0]])
+
+
+def pinhole_intrinsics(k) -> np.ndarray:
+    """The square-pixel K (3, 3) of the camera with K ``k`` (3, 3): its fx on both axes, its
+    principal point (the factory's render of that camera: core.scene.CameraModel); ``k`` itself
+    (as float64) when fx = fy."""
+    k = check_array("K", k, (3, 3))
+    if k[1, 1] == k[0, 0]:
+        return k
+    out = k.copy()
+    out[1, 1] = k[0, 0]
+    return out
 
 
 def project_points(k, cam_from_x, points) -> tuple[np.ndarray, np.ndarray]:
@@ -213,6 +228,9 @@ def polygon_area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
 CANVAS_MARGIN_PX = 2        # beyond the farthest source position: the bilinear taps, rounding
 CANVAS_MAX_SCALE = 2.0      # a canvas side is at most this many image sides
 CANVAS_BORDER_STEP_PX = 4.0  # spacing of the border points whose sources bound the canvas
+# |fy / fx - 1| of a camera the square-pixel render is resampled to (docs/configuration.md,
+# "A calibration file in a config": why this bound)
+MAX_PIXEL_ASPECT_DIFF = 0.05
 
 
 def _border_pixels(width: int, height: int, step: float) -> np.ndarray:
@@ -237,9 +255,9 @@ def _check_folds(lo, hi, focal_px: float, c: np.ndarray, coeffs) -> None:
 
 @lru_cache(maxsize=64)
 def _canvas(width: int, height: int, focal_px: float, principal_point: tuple, coeffs: tuple,
-            scales: tuple) -> tuple[int, int, int, int]:
+            scales: tuple, pixel_aspect: float) -> tuple[int, int, int, int]:
     c = np.asarray(principal_point, dtype=np.float64)
-    src = undistort_pixels(_border_pixels(width, height, CANVAS_BORDER_STEP_PX), focal_px, c, coeffs)
+    src = undistort_pixels(_border_pixels(width, height, CANVAS_BORDER_STEP_PX), focal_px, c, coeffs, pixel_aspect)
     pts = np.concatenate([c + (src - c) / s for s in scales])
     lo = np.floor(pts.min(0)).astype(int) - CANVAS_MARGIN_PX
     hi = np.ceil(pts.max(0)).astype(int) + CANVAS_MARGIN_PX
@@ -252,19 +270,23 @@ def _canvas(width: int, height: int, focal_px: float, principal_point: tuple, co
 
 
 def render_canvas(width: int, height: int, focal_px: float, principal_point, coeffs,
-                  scales=(1.0, 1.0, 1.0)) -> tuple[int, int, int, int]:
+                  scales=(1.0, 1.0, 1.0), pixel_aspect: float = 1.0) -> tuple[int, int, int, int]:
     """The pinhole render (overscan) a distorted ``width`` x ``height`` image is resampled from.
 
-    Delivered pixel p shows the pinhole image (focal ``focal_px``, ``principal_point``) at
+    Delivered pixel p (fx = ``focal_px``, fy = ``pixel_aspect`` fx) shows the pinhole image (square
+    pixels at ``focal_px``, ``principal_point``; ``core.distortion.undistort_pixels``) at
     ``pp + (undistort(p) - pp) / s`` for each channel scale ``s`` of ``scales``; the canvas is the
     smallest pixel-aligned rectangle that holds every such position of the image's border (the
     distortion maps the border to the border: a diffeomorphism, checked to have no fold) plus
     CANVAS_MARGIN_PX. Returns (offset_x, offset_y, canvas_width, canvas_height): canvas pixel
     (i, j) is pinhole pixel (i + offset_x, j + offset_y); its principal point is
     ``principal_point - offset``. Raises ValueError for a lens that folds or needs over
-    CANVAS_MAX_SCALE times the image.
+    CANVAS_MAX_SCALE times the image, or a ``pixel_aspect`` beyond MAX_PIXEL_ASPECT_DIFF of 1.
     """
+    if not abs(float(pixel_aspect) - 1.0) <= MAX_PIXEL_ASPECT_DIFF:
+        raise ValueError(f"render canvas: pixel aspect (fy / fx) {pixel_aspect} is more than "
+                         f"{MAX_PIXEL_ASPECT_DIFF:g} from 1 (MAX_PIXEL_ASPECT_DIFF)")
     c = check_array("principal_point", principal_point, (2,))
     k = tuple(float(v) for v in coeffs_array(coeffs))
     return _canvas(int(width), int(height), float(focal_px), (float(c[0]), float(c[1])), k,
-                   tuple(float(s) for s in scales))
+                   tuple(float(s) for s in scales), float(pixel_aspect))

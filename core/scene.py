@@ -56,12 +56,14 @@ NO_DISTORTION = (0.0,) * N_COEFFS
 
 @dataclass(frozen=True)
 class CameraModel:
-    """A frame's camera: pinhole K and pose, plus its unit's lens (defaults: an ideal camera).
+    """A frame's camera: K and pose, plus its unit's lens (defaults: an ideal camera).
 
-    Delivered pixel p (OpenCV pixels) shows what the pinhole K sees at the undistorted position of
-    p (``core.distortion``, OpenCV's Brown-Conrady model, coefficients in OpenCV's order); channel
-    c of it at ``pp + (that - pp) / channel_scales()[c]`` (lateral chromatic aberration: the red
-    and blue images are magnified about the principal point against the green one).
+    K (:meth:`k`) has fx = ``focal_px`` and fy = ``pixel_aspect`` fx. The render is the pinhole
+    image with square pixels at ``focal_px`` (:meth:`pinhole_k`); delivered pixel p (OpenCV
+    pixels) shows it at the undistorted position of p (``core.distortion``, OpenCV's Brown-Conrady
+    model, coefficients in OpenCV's order, the aspect taken out); channel c of it at
+    ``pp + (that - pp) / channel_scales()[c]`` (lateral chromatic aberration: the red and blue
+    images are magnified about the principal point against the green one).
     """
     width: int
     height: int
@@ -78,8 +80,16 @@ class CameraModel:
     sensor_width_mm: float = 36.0                    # physical sensor: focal mm = focal_px * this / width
     jpeg_quality: int = 0                            # 0: delivered without JPEG encoding
     jpeg_subsampling: str = "420"                    # chroma: 420 | 444
+    # fy / fx of the delivered image's pixels (1: square); left out of to_dict while 1
+    pixel_aspect: float = dataclasses.field(default=1.0, metadata={OMIT_IF_DEFAULT: True})
 
     def k(self) -> np.ndarray:
+        """The delivered image's K (3, 3): fx = focal_px, fy = pixel_aspect fx, the principal point."""
+        return intrinsics(self.focal_px, self.principal_point, self.pixel_aspect)
+
+    def pinhole_k(self) -> np.ndarray:
+        """The render's K (3, 3): square pixels at focal_px, the principal point (pinhole pixels,
+        before the canvas offset); :meth:`k` itself for square pixels."""
         return intrinsics(self.focal_px, self.principal_point)
 
     def corner_radius_px(self) -> float:
@@ -94,8 +104,9 @@ class CameraModel:
         return (1.0 + self.aberration_px[0] / r, 1.0, 1.0 + self.aberration_px[1] / r)
 
     def is_pinhole(self) -> bool:
-        """No distortion and no aberration: the render is the delivered image (no resampling)."""
-        return not any(self.distortion) and not any(self.aberration_px)
+        """No distortion, no aberration and square pixels: the render is the delivered image (no
+        resampling)."""
+        return not any(self.distortion) and not any(self.aberration_px) and self.pixel_aspect == 1.0
 
     def canvas(self) -> tuple[int, int, int, int]:
         """(offset_x, offset_y, width, height) of the pinhole render that covers every delivered
@@ -104,7 +115,7 @@ class CameraModel:
         if self.is_pinhole():
             return 0, 0, self.width, self.height
         return render_canvas(self.width, self.height, self.focal_px, self.principal_point,
-                             self.distortion, self.channel_scales())
+                             self.distortion, self.channel_scales(), self.pixel_aspect)
 
     def focal_mm(self) -> float:
         return self.focal_px * self.sensor_width_mm / self.width

@@ -11,8 +11,11 @@ from dockfactory.core.geometry import (
     intrinsics,
     invert_transform,
     look_at_cam_from_world,
+    MAX_PIXEL_ASPECT_DIFF,
+    pinhole_intrinsics,
     pose_components,
     project_points,
+    render_canvas,
     rot_x,
     rot_y,
     rot_z,
@@ -99,3 +102,24 @@ def test_bad_points_raise(bad):
 def test_bad_focal_raises():
     with pytest.raises(ValueError, match="focal_px"):
         intrinsics(-1.0, (0, 0))
+
+
+def test_a_pixel_aspect_scales_fy_and_the_render_has_square_pixels_at_fx():
+    k = intrinsics(1000.0, (320.0, 240.0), 1.004)
+    assert k[0, 0] == 1000.0 and k[1, 1] == pytest.approx(1004.0, rel=1e-15) and k[1, 2] == 240.0
+    assert intrinsics(1000.0, (320.0, 240.0), 1.0).tobytes() == intrinsics(1000.0, (320.0, 240.0)).tobytes()
+    assert pinhole_intrinsics(k).tolist() == intrinsics(1000.0, (320.0, 240.0)).tolist()
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="pixel_aspect"):
+            intrinsics(1000.0, (0, 0), bad)
+
+
+def test_the_render_canvas_of_non_square_pixels_holds_the_rows_at_fx():
+    """No distortion: fy > fx shows fewer pinhole (square, fx) rows than the image has: the canvas
+    holds the image's H / aspect rows about cy (plus the 2 px margin), its columns are the square
+    camera's; beyond MAX_PIXEL_ASPECT_DIFF it is refused."""
+    ox, oy, wc, hc = render_canvas(640, 480, 1000.0, (319.5, 239.5), (0,) * 5, pixel_aspect=1.04)
+    assert (ox, wc) == (-3, 646)   # columns: [-0.5, 639.5] floored / ceiled, 2 px margin each side
+    assert oy == np.floor(239.5 - 240 / 1.04) - 2 and oy + hc - 1 == np.ceil(239.5 + 240 / 1.04) + 2
+    with pytest.raises(ValueError, match="MAX_PIXEL_ASPECT_DIFF"):
+        render_canvas(640, 480, 1000.0, (319.5, 239.5), (0,) * 5, pixel_aspect=1.0 + 1.01 * MAX_PIXEL_ASPECT_DIFF)
