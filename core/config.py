@@ -24,6 +24,7 @@ from dockfactory.core.mesh_files import UNITS_MM
 from dockfactory.core.mesh_markers import layout_on_parts
 from dockfactory.core.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.geometry import MAX_PIXEL_ASPECT_DIFF
 from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
 from dockfactory.core.sensor_presets import PRESETS
 from dockfactory.core.names import EXPORT_FORMATS, MIN_CHROMA
@@ -129,6 +130,7 @@ class CameraUnitsConfig:
     k3: Range = (0.0, 0.0)                           # radial, 6th order
     p1: Range = (0.0, 0.0)                           # tangential (OpenCV's p1, p2)
     p2: Range = (0.0, 0.0)                           # tangential, second coefficient
+    pixel_aspect: Range = (1.0, 1.0)                 # fy / fx of a unit's pixels (1: square; a calibration file's fy / fx)
     aberration_red_px: Range = (0.0, 0.0)            # red vs green, radial shift at the image corner
     aberration_blue_px: Range = (0.0, 0.0)           # blue vs green
     sensor_width_mm: float = 36.0                    # sets the aperture (focal mm / f-number)
@@ -318,6 +320,7 @@ IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0
                     ("render", "marker_light_smoothing_px"): 0.0,
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
+                    ("camera_units", "pixel_aspect"): [1.0, 1.0],
                     ("sections", "mesh_a"): "", ("sections", "mesh_b"): "", ("sections", "mesh_units"): "mm",
                     ("sections", "mesh_a_vertices"): [], ("sections", "mesh_a_triangles"): [],
                     ("sections", "mesh_b_vertices"): [], ("sections", "mesh_b_triangles"): [],
@@ -636,7 +639,7 @@ def _check_symmetric(source, table, key, rng, limit, name: str) -> None:
 
 
 def _validate_camera_units(cfg: Config, source: str) -> None:
-    """[camera_units]: count, principal point, distortion and aberration ranges."""
+    """[camera_units]: count, principal point, distortion, pixel aspect and aberration ranges."""
     u, t = cfg.camera_units, "camera_units"
     if u.calibration:
         raise _err(source, t, "calibration", f"{u.calibration!r} is read when a config file is loaded (load_config), "
@@ -652,6 +655,7 @@ def _validate_camera_units(cfg: Config, source: str) -> None:
         _check_symmetric(source, t, key, getattr(u, key), MAX_TANGENTIAL, "MAX_TANGENTIAL")
     for key in ("aberration_red_px", "aberration_blue_px"):
         _check_symmetric(source, t, key, getattr(u, key), MAX_ABERRATION_PX, "MAX_ABERRATION_PX")
+    _check_range(source, t, "pixel_aspect", u.pixel_aspect, 1.0 - MAX_PIXEL_ASPECT_DIFF, 1.0 + MAX_PIXEL_ASPECT_DIFF)
 
 
 def _validate_lens_extras(cfg: Config, source: str) -> None:

@@ -283,7 +283,7 @@ def render_canvas(width: int, height: int, focal_px: float, principal_point, coe
     ``principal_point - offset``. Raises ValueError for a lens that folds or needs over
     CANVAS_MAX_SCALE times the image, or a ``pixel_aspect`` beyond MAX_PIXEL_ASPECT_DIFF of 1.
     """
-    if not abs(float(pixel_aspect) - 1.0) <= MAX_PIXEL_ASPECT_DIFF:
+    if not 1.0 - MAX_PIXEL_ASPECT_DIFF <= float(pixel_aspect) <= 1.0 + MAX_PIXEL_ASPECT_DIFF:
         raise ValueError(f"render canvas: pixel aspect (fy / fx) {pixel_aspect} is more than "
                          f"{MAX_PIXEL_ASPECT_DIFF:g} from 1 (MAX_PIXEL_ASPECT_DIFF)")
     c = check_array("principal_point", principal_point, (2,))

@@ -147,13 +147,15 @@ def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_p
 
 def true_camera_centres(label: dict, centres):
     """(principal point (2,), centres) of a frame seen through its label's true camera: the
-    centres and boxes undistorted with the true K and coefficients (the reference of a calibrated
-    camera: the same frames solved with the true intrinsics; the focal length is still estimated)."""
+    centres and boxes undistorted with the true K and coefficients, its pixel aspect taken out
+    (square pixels at its fx: the reference of a calibrated camera, the same frames solved with the
+    true intrinsics; the focal length is still estimated)."""
     cam = label["camera"]
     pp, dist = tuple(cam["principal_point"]), cam.get("distortion") or [0.0] * 5
+    aspect = cam["K"][1][1] / cam["K"][0][0]
 
     def ideal(uv):
-        return undistort_pixels(uv, cam["focal_px"], pp, dist)
+        return undistort_pixels(uv, cam["focal_px"], pp, dist, aspect)
 
     cls, uv, boxes, refined, edge = centres
     if boxes is not None:

@@ -1,5 +1,5 @@
-"""Camera units: the lens of each unit (principal point, distortion, chromatic aberration, depth of
-field, JPEG), drawn once per unit from [camera_units] with the dataset seed; the units dealt to
+"""Camera units: the lens of each unit (principal point, distortion, pixel aspect, chromatic
+aberration, depth of field, JPEG), drawn once per unit from [camera_units] with the dataset seed; the units dealt to
 frames or runs; the frame's camera through a unit's lens and the largest focal that keeps the
 markers inside its image.
 
@@ -32,9 +32,10 @@ class UnitLens:
     f_number: float                         # 0: no depth of field
     focus_error_mm: float
     jpeg_quality: int                       # 0: no JPEG encoding
+    pixel_aspect: float = 1.0               # fy / fx of the unit's pixels
 
     def is_ideal(self) -> bool:
-        return not any(self.distortion) and not any(self.principal_offset)
+        return not any(self.distortion) and not any(self.principal_offset) and self.pixel_aspect == 1.0
 
 
 @lru_cache(maxsize=256)
@@ -42,16 +43,17 @@ def unit_lens(units: CameraUnitsConfig, seed: int, unit: int) -> UnitLens:
     """Lens of camera unit ``unit``: a function of ([camera_units], dataset seed, unit) alone, drawn
     from the unit's STREAM_UNIT_LENS stream; every value is drawn, in a fixed order, whether its
     feature is on or not (principal offset x, y; k1, k2, k3, p1, p2; aberration red, blue;
-    f-number, focus error; JPEG quality)."""
+    f-number, focus error; JPEG quality; pixel aspect)."""
     rng = rng_for(seed, STREAM_UNIT_LENS, unit)
     offset = (uniform(rng, units.principal_offset_x_px), uniform(rng, units.principal_offset_y_px))
     k1, k2, k3, p1, p2 = (uniform(rng, getattr(units, key)) for key in ("k1", "k2", "k3", "p1", "p2"))
     aberration = (uniform(rng, units.aberration_red_px), uniform(rng, units.aberration_blue_px))
     f_number, focus_error = uniform(rng, units.f_number), uniform(rng, units.focus_error_mm)
     quality = int(rng.integers(units.jpeg_quality[0], units.jpeg_quality[1] + 1))
+    aspect = uniform(rng, units.pixel_aspect)
     dof = units.depth_of_field
     return UnitLens(unit, offset, (k1, k2, p1, p2, k3), aberration, f_number if dof else 0.0,
-                    focus_error if dof else 0.0, quality if units.jpeg else 0)
+                    focus_error if dof else 0.0, quality if units.jpeg else 0, aspect)
 
 
 @dataclass(frozen=True)
@@ -125,8 +127,8 @@ def largest_fitting_focal(fit: ImageFit, cam_from_d: np.ndarray, points_d: np.nd
                           lens: UnitLens | None = None) -> float:
     """Largest focal (px) that keeps every marker disc (centres ``points_d`` (N, 3) mm in D, seen
     by a camera at ``cam_from_d`` (4, 4)) ``fit.margin_px`` inside the image, through the unit's
-    lens (principal point and distortion; pixel offsets from the principal point scale with the
-    focal, so the bound is closed-form). 0 when a marker is behind the camera or the principal
+    lens (principal point, distortion and pixel aspect; pixel offsets from the principal point
+    scale with the focal, so the bound is closed-form). 0 when a marker is behind the camera or the principal
     point leaves no room; an ideal lens (or None) uses the centred pinhole's bound."""
     pc = transform_points(cam_from_d, points_d)
     z = pc[:, 2]
@@ -144,25 +146,26 @@ def largest_fitting_focal(fit: ImageFit, cam_from_d: np.ndarray, points_d: np.nd
     xd = distort_normalized(corners, lens.distortion)
     pp, size = principal_point(image, lens), (image.width, image.height)
     caps = [np.inf]
-    for axis in (0, 1):
+    for axis, aspect in ((0, 1.0), (1, lens.pixel_aspect)):
         room_hi, room_lo = size[axis] - 0.5 - margin - pp[axis], pp[axis] + 0.5 - margin
         if min(room_hi, room_lo) <= 0:
             return 0.0
-        d = xd[:, axis]
+        d = xd[:, axis] * aspect
         caps += list(room_hi / d[d > 0]) + list(room_lo / -d[d < 0])
     return float(min(caps))
 
 
 def camera_model(image: ImageConfig, units: CameraUnitsConfig, lens: UnitLens, focal_px: float,
                  cam_from_d, eye, target) -> CameraModel:
-    """The frame's camera: pinhole K (``focal_px``, the unit's principal point) at ``cam_from_d``
-    (4, 4), aimed from ``eye`` at ``target`` ((3,) mm in D), plus the unit's lens and the shared
-    body of [camera_units] (sensor width, JPEG chroma subsampling)."""
+    """The frame's camera: K (fx = ``focal_px``, fy = the unit's pixel aspect fx, the unit's
+    principal point) at ``cam_from_d`` (4, 4), aimed from ``eye`` at ``target`` ((3,) mm in D),
+    plus the unit's lens and the shared body of [camera_units] (sensor width, JPEG chroma
+    subsampling)."""
     distance = float(np.linalg.norm(np.asarray(eye) - np.asarray(target)))
     return CameraModel(image.width, image.height, float(focal_px), principal_point(image, lens),
                        mat4(cam_from_d), vec(target), distance, lens.unit, lens.distortion, lens.aberration_px,
                        lens.f_number, distance + lens.focus_error_mm if lens.f_number > 0 else 0.0,
-                       units.sensor_width_mm, lens.jpeg_quality, units.jpeg_subsampling)
+                       units.sensor_width_mm, lens.jpeg_quality, units.jpeg_subsampling, lens.pixel_aspect)
 
 
 def check_lenses(units: CameraUnitsConfig, image: ImageConfig, seed: int, focal_px: float, source: str) -> None:

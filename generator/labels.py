@@ -3,9 +3,9 @@
 Pixel convention (OpenCV): the centre of the top-left pixel is (0, 0); the image spans
 [-0.5, W - 0.5] x [-0.5, H - 0.5]. Boxes are [x0, y0, x1, y1] in that continuous frame.
 
-Every position is in the delivered image: the pinhole projection (K) moved by the camera unit's
-lens distortion (``core.distortion``, OpenCV's model), analytically: centres, the dense marker
-outlines (and so boxes, areas and ``outline_centroid_px``), section silhouettes.
+Every position is in the delivered image of K (fy = pixel aspect fx): the render's pinhole projection
+(square pixels at fx) through the unit's lens and pixel aspect (``core.distortion``), analytically:
+centres, the dense marker outlines (and so boxes, areas, ``outline_centroid_px``), section silhouettes.
 
 With [motion] (``generator.motion``, docs/motion.md) ``d_from_b`` is B at mid-exposure. A global
 shutter's labels are B's at mid-exposure; a rolling shutter's place every point of B (centres,
@@ -20,6 +20,7 @@ import numpy as np
 
 from dockfactory.core.distortion import COEFF_NAMES, coeffs_array, distort_pixels
 from dockfactory.core.geometry import (
+    pinhole_intrinsics,
     polygon_area_centroid,
     pose_components,
     project_points,
@@ -38,18 +39,31 @@ DENSIFY_PX = 1.0   # a region's outline is resampled to this spacing before it i
 
 
 def image_px(uv: np.ndarray, k: np.ndarray, coeffs) -> np.ndarray:
-    """Delivered-image pixels (N, 2) of pinhole pixels ``uv`` (N, 2) of K (3, 3) with lens
-    distortion ``coeffs`` (OpenCV order); ``uv`` itself when there is no distortion."""
+    """Delivered-image pixels (N, 2) of pinhole pixels ``uv`` (N, 2) (the render's: square at
+    fx, ``core.geometry.pinhole_intrinsics``) of the camera with K ``k`` (3, 3) and lens distortion ``coeffs``
+    (OpenCV order); ``uv`` itself for square pixels without distortion."""
     c = coeffs_array(coeffs)
-    if not np.any(c):
+    aspect = float(k[1, 1] / k[0, 0])
+    if not np.any(c) and aspect == 1.0:
         return uv
-    return distort_pixels(uv, float(k[0, 0]), k[:2, 2], c)
+    return distort_pixels(uv, float(k[0, 0]), k[:2, 2], c, aspect)
+
+
+def ideal_px(uv: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of K ``k`` (3, 3) alone (no distortion: fy on the rows) of the render's
+    pinhole pixels ``uv`` (N, 2) (``core.geometry.pinhole_intrinsics``); ``uv`` itself for square pixels."""
+    if k[1, 1] == k[0, 0]:
+        return uv
+    out = np.array(uv, dtype=np.float64)
+    out[:, 1] = k[1, 2] + (out[:, 1] - k[1, 2]) * (k[1, 1] / k[0, 0])
+    return out
 
 
 def marker_outline_px(marker: Marker, k: np.ndarray, coeffs, cam_from_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The marker disc's edge in the delivered image: (uv (n, 2) px, depth (n,) mm), the dense
-    outline (``layout.OUTLINE_POINTS``) distorted point by point. NaN where behind the camera."""
-    uv, z = project_points(k, cam_from_s, marker_outline(marker))
+    """The marker disc's edge in the delivered image of the camera with K ``k`` (3, 3) and lens
+    ``coeffs``: (uv (n, 2) px, depth (n,) mm), the dense outline (``layout.OUTLINE_POINTS``)
+    projected by the render's pinhole and distorted point by point. NaN where behind the camera."""
+    uv, z = project_points(pinhole_intrinsics(k), cam_from_s, marker_outline(marker))
     return image_px(uv, k, coeffs), z
 
 
@@ -59,7 +73,7 @@ def marker_pinhole_outlines(frame: FrameScene, static: StaticScene) -> list[tupl
     moves, B's markers under a rolling shutter with no exposure time have their row-time outline,
     and blurred ones (exposure time > 0) none: their index-pass edges are the ones Cycles sampled."""
     cam = frame.camera
-    k, cam_from_d, d_from_b = cam.k(), cam.cam_from_d_array(), frame.d_from_b_array()
+    k, cam_from_d, d_from_b = cam.pinhole_k(), cam.cam_from_d_array(), frame.d_from_b_array()
     rolling = rolling_view(frame)
     blurred = frame.motion is not None and frame.motion.moves() and frame.motion.exposure_ms > 0
     out = []
@@ -119,8 +133,9 @@ def clip_polygon(poly: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
 def part_outlines(parts_uv: list[np.ndarray], cam) -> list[np.ndarray]:
     """The delivered-image outlines (M, 2) of convex solids from their pinhole points ``parts_uv``
     (each (N, 2)): each one's convex hull, through ``cam``'s lens (:func:`distorted_region`) when it
-    has distortion (the image of a convex solid is then no longer convex)."""
-    if any(cam.distortion):
+    has distortion (the image of a convex solid is then no longer convex) or non-square pixels."""
+    k = cam.k()
+    if any(cam.distortion) or k[1, 1] != k[0, 0]:
         return [distorted_region(uv, cam) for uv in parts_uv]
     return [uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()] for uv in parts_uv]
 
@@ -187,8 +202,8 @@ def _projected_outline(outline_uv: np.ndarray, outline_z: np.ndarray, bounds) ->
 def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b: np.ndarray, bounds,
                      rolling: MovingB | None = None) -> dict:
     """The geometric part of a marker's label (projection, boxes, areas; no visibility), in the
-    delivered image (through the lens distortion ``coeffs``); a marker of B under the rolling
-    shutter ``rolling`` with every point at its own row's time."""
+    delivered image of K ``k`` (through the lens distortion ``coeffs``); a marker of B under the
+    rolling shutter ``rolling`` with every point at its own row's time."""
     d_from_s = d_from_b if m.section == "B" else np.eye(4)
     centre_d = transform_points(d_from_s, np.array([m.center_mm]))[0]
     normal_d = d_from_s[:3, :3] @ np.asarray(m.normal)
@@ -197,7 +212,7 @@ def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b:
         outline_pinhole, outline_z, _ = rolling.project(marker_outline(m))
         outline_uv = image_px(outline_pinhole, k, coeffs)
     else:
-        pinhole, depth = project_points(k, cam_from_d, centre_d[None])
+        pinhole, depth = project_points(pinhole_intrinsics(k), cam_from_d, centre_d[None])
         outline_uv, outline_z = marker_outline_px(m, k, coeffs, cam_from_d @ d_from_s)
     centre = image_px(pinhole, k, coeffs)[0]
     in_frame = bool(depth[0] > 0 and bounds[0] <= centre[0] <= bounds[2] and bounds[1] <= centre[1] <= bounds[3])
@@ -207,7 +222,8 @@ def _marker_geometry(m, k: np.ndarray, coeffs, cam_from_d: np.ndarray, d_from_b:
         "id": m.id, "section": m.section, "class_id": m.class_id, "pass_index": m.pass_index,
         "center_section_mm": list(m.center_mm), "center_d_mm": centre_d.tolist(),
         "normal_d": normal_d.tolist(), "diameter_mm": m.diameter_mm,
-        "center_px": centre.tolist(), "center_pinhole_px": pinhole[0].tolist(), "depth_mm": float(depth[0]),
+        "center_px": centre.tolist(), "center_pinhole_px": ideal_px(pinhole, k)[0].tolist(),
+        "depth_mm": float(depth[0]),
         "outline_centroid_px": outline_centroid.tolist(),
         "bbox_px": _bbox(clipped) if len(clipped) else None,
         "bbox_unclipped_px": _bbox(outline_uv) if np.all(outline_z > 0) else None,
@@ -224,15 +240,15 @@ def _clamped_box(points: np.ndarray, bounds) -> list[float] | None:
     return box if box[0] <= box[2] and box[1] <= box[3] else None
 
 
-def _add_marker_motion(rec: dict, m, mb: MovingB, coeffs, bounds) -> None:
-    """Add a moving B marker's ``time_ms`` (its centre's exposure centre, from mid-exposure),
+def _add_marker_motion(rec: dict, m, mb: MovingB, k: np.ndarray, coeffs, bounds) -> None:
+    """Add (K ``k``, lens ``coeffs``) a moving B marker's ``time_ms`` (its centre's exposure centre, from mid-exposure),
     ``blur_px`` (its centre's image path from the start to the end of that exposure) and
     ``bbox_swept_px`` (the box its outline sweeps over the exposure, within the image) to ``rec``."""
     offsets = exposure_offsets(mb)
     centre, outline = np.array([m.center_mm]), marker_outline(m)
     _, _, t = mb.project(centre)
-    ends = [image_px(mb.project(centre, off)[0], mb.k, coeffs)[0] for off in (offsets[0], offsets[-1])]
-    swept = np.concatenate([image_px(mb.project(outline, off)[0], mb.k, coeffs) for off in offsets])
+    ends = [image_px(mb.project(centre, off)[0], k, coeffs)[0] for off in (offsets[0], offsets[-1])]
+    swept = np.concatenate([image_px(mb.project(outline, off)[0], k, coeffs) for off in offsets])
     rec["time_ms"] = float(t[0]) * 1000.0
     rec["blur_px"] = (ends[1] - ends[0]).tolist()
     rec["bbox_swept_px"] = _clamped_box(swept, bounds)
@@ -384,7 +400,7 @@ def frame_labels(frame: FrameScene, static: StaticScene, index: np.ndarray | Non
     for m in static.markers:
         rec = _marker_geometry(m, k, cam.distortion, cam_from_d, d_from_b, bounds, rolling)
         if mb is not None and m.section == "B":
-            _add_marker_motion(rec, m, mb, cam.distortion, bounds)
+            _add_marker_motion(rec, m, mb, k, cam.distortion, bounds)
         if stats is not None:
             _add_marker_visibility(rec, m, stats, image, visible_threshold, min_chroma)
         markers.append(rec)

@@ -83,7 +83,7 @@ def marker_halos(frame: FrameScene, static: StaticScene) -> list[np.ndarray]:
     in layout order; markers with a point at or behind the camera are left out."""
     cam = frame.camera
     ox, oy, _, _ = cam.canvas()
-    k, cam_from_d = cam.k(), cam.cam_from_d_array()
+    k, cam_from_d = cam.pinhole_k(), cam.cam_from_d_array()
     out = []
     for m in static.markers:
         poses = _b_poses(frame) if m.section == "B" else [np.eye(4)]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dockfactory.core.config import ConfigError, MotionConfig
-from dockfactory.core.geometry import check_array, transform_points
+from dockfactory.core.geometry import check_array, pinhole_intrinsics, transform_points
 from dockfactory.core.scene import FrameScene, MotionParams, vec
 from dockfactory.generator.random_draws import STREAM_FRAME_ISP, STREAM_FRAME_MOTION, rng_for, uniform
 
@@ -56,8 +56,8 @@ def row_time_s(rows, canvas_height: int, readout_s: float) -> np.ndarray:
 class MovingB:
     """Section B as a frame's camera sees it in motion.
 
-    ``k``: (3, 3) pinhole K; ``cam_from_d``, ``d_from_b``: (4, 4), B at mid-exposure;
-    ``velocity_mm_s``: (3,) in D; ``exposure_s``, ``readout_s`` (>= 0): as ``MotionParams``;
+    ``k``: (3, 3) the render's pinhole K (square pixels: ``CameraModel.pinhole_k``);
+    ``cam_from_d``, ``d_from_b``: (4, 4), B at mid-exposure; ``velocity_mm_s``: (3,) in D; ``exposure_s``, ``readout_s`` (>= 0): as ``MotionParams``;
     ``row_offset``: pinhole row of canvas row 0 (canvas row = pinhole row - row_offset);
     ``canvas_height`` (>= 1): rows the rolling shutter reads. Arrays are checked (shape, finite)
     and stored as float64; bad values raise ValueError.
@@ -144,7 +144,7 @@ def moving_b(frame: FrameScene) -> MovingB | None:
         return None
     cam = frame.camera
     _, oy, _, hc = cam.canvas()
-    return MovingB(cam.k(), cam.cam_from_d_array(), frame.d_from_b_array(), np.array(m.velocity_mm_s),
+    return MovingB(cam.pinhole_k(), cam.cam_from_d_array(), frame.d_from_b_array(), np.array(m.velocity_mm_s),
                    m.exposure_ms / 1000.0, m.readout_ms / 1000.0, float(oy), int(hc))
 
 
@@ -161,7 +161,7 @@ def label_rolling_view(label: dict) -> MovingB | None:
     m, cam = label.get("motion"), label["camera"]
     if not m or not m["rolling_shutter_ms"] > 0 or not m["shutter_ms"] > 0 or not any(m["velocity_d_mm_s"]):
         return None
-    return MovingB(np.asarray(cam["K"], dtype=np.float64), np.asarray(cam["cam_from_d"], dtype=np.float64),
+    return MovingB(pinhole_intrinsics(cam["K"]), np.asarray(cam["cam_from_d"], dtype=np.float64),
                    np.asarray(label["d_from_b"], dtype=np.float64), np.asarray(m["velocity_d_mm_s"], dtype=np.float64),
                    m["exposure_ms"] / 1000.0, m["rolling_shutter_ms"] / 1000.0,
                    float(cam["render_canvas"]["offset_px"][1]), int(m["canvas_rows"]))

@@ -1,7 +1,7 @@
 """Camera model applied to the linear render (pure numpy + OpenCV).
 
-lens: the pinhole render (an overscan canvas, ``CameraModel.canvas``) is resampled into the
-delivered image through the exact inverse of the unit's distortion (``distortion_maps``), each
+lens: the pinhole render (an overscan canvas, ``CameraModel.canvas``, square pixels) is resampled into
+the delivered image through the exact inverse of the unit's distortion and pixel aspect (``distortion_maps``), each
 colour channel through its own magnification (lateral chromatic aberration); bilinear for
 colour, nearest for the depth and index passes (``resample_passes``) ->
 linear radiance -> auto exposure (mean luminance of the central region to 0.18) -> lens:
@@ -161,11 +161,16 @@ def _upsample_rows(a: np.ndarray, n: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=2)
-def _maps(width: int, height: int, focal_px: float, pp: tuple, coeffs: tuple, offset: tuple):
+def _maps(width: int, height: int, focal_px: float, pp: tuple, coeffs: tuple, offset: tuple, aspect: float = 1.0):
+    """(map_x, map_y) of :func:`distortion_maps` from its camera's numbers (:func:`_key`)."""
     gx = np.arange(-MAP_GRID_PX, width + 2 * MAP_GRID_PX, MAP_GRID_PX, dtype=np.float64)
     gy = np.arange(-MAP_GRID_PX, height + 2 * MAP_GRID_PX, MAP_GRID_PX, dtype=np.float64)
-    xd = np.stack(np.meshgrid((gx - pp[0]) / focal_px, (gy - pp[1]) / focal_px), axis=-1).reshape(-1, 2)
-    disp = ((undistort_normalized(xd, coeffs) - xd) * focal_px).reshape(len(gy), len(gx), 2).astype(np.float32)
+    xd = np.stack(np.meshgrid((gx - pp[0]) / focal_px, (gy - pp[1]) / (focal_px * aspect)), axis=-1).reshape(-1, 2)
+    if aspect == 1.0:
+        disp = (undistort_normalized(xd, coeffs) - xd) * focal_px
+    else:   # the render's rows are at focal_px, the delivered image's at focal_px * aspect
+        disp = undistort_normalized(xd, coeffs) * focal_px - xd * np.array([focal_px, focal_px * aspect])
+    disp = disp.reshape(len(gy), len(gx), 2).astype(np.float32)
     full = [_upsample_rows(np.ascontiguousarray(_upsample_rows(disp[..., c].T, width).T), height) for c in (0, 1)]
     map_x = full[0] + (np.arange(width, dtype=np.float32) - np.float32(offset[0]))
     map_y = full[1] + (np.arange(height, dtype=np.float32)[:, None] - np.float32(offset[1]))
@@ -176,12 +181,13 @@ def _maps(width: int, height: int, focal_px: float, pp: tuple, coeffs: tuple, of
 def _key(cam: CameraModel) -> tuple:
     ox, oy, _, _ = cam.canvas()
     return (cam.width, cam.height, float(cam.focal_px), tuple(map(float, cam.principal_point)),
-            tuple(map(float, cam.distortion)), (ox, oy))
+            tuple(map(float, cam.distortion)), (ox, oy), float(cam.pixel_aspect))
 
 
 def distortion_maps(cam: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     """(map_x, map_y), each (H, W) float32: for every delivered pixel, the position in the render
-    canvas (its pixel convention) of the undistorted point it shows (the green channel). Cached
+    canvas (its pixel convention; square pixels at the camera's focal_px) of the undistorted point
+    it shows (the green channel), the pixel aspect taken out. Cached
     (read-only arrays): the frames of a docking run share one."""
     return _maps(*_key(cam))
 
@@ -226,7 +232,7 @@ def _inside_convex(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 def _window(cam: CameraModel, poly: np.ndarray):
     """Delivered pixels around the distorted image of outline ``poly`` (N, 2, pinhole px): slices."""
-    uv = distort_pixels(poly, cam.focal_px, cam.principal_point, cam.distortion)
+    uv = distort_pixels(poly, cam.focal_px, cam.principal_point, cam.distortion, cam.pixel_aspect)
     x0, y0 = np.floor(uv.min(0)).astype(int) - 2
     x1, y1 = np.ceil(uv.max(0)).astype(int) + 3
     x0, y0, x1, y1 = max(0, x0), max(0, y0), min(cam.width, x1), min(cam.height, y1)

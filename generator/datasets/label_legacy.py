@@ -32,9 +32,9 @@ def _filled(mask: np.ndarray) -> tuple[int, list[float] | None]:
 
 def _legacy_pixels(uv: np.ndarray, cam) -> tuple[int, list[float] | None]:
     """(count, box) of the legacy fill of the hull points ``uv`` (pinhole px): the convex hull,
-    or with distortion the distorted outline as a polygon."""
+    or with distortion (or non-square pixels) the distorted outline as a polygon."""
     mask = np.zeros((cam.height, cam.width), np.uint8)
-    if any(cam.distortion):
+    if any(cam.distortion) or cam.pixel_aspect != 1.0:
         poly = distorted_region(uv, cam)
         if len(poly) >= 3:
             cv2.fillPoly(mask, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, 4)

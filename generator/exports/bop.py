@@ -32,6 +32,16 @@ def lens_record(cam: dict) -> dict:
             "aberration_px": cam.get("aberration_px"), "depth_of_field": cam.get("depth_of_field")}
 
 
+def _write_nominal_camera(cfg: dict, out: Path) -> None:
+    """camera.json from the dataset's config ``cfg`` (its identity's dict): the image centre (BOP's
+    pixel corners), the mean focal as fx and fx times the mean pixel aspect as fy."""
+    w, h = cfg["image"]["width"], cfg["image"]["height"]
+    fx = float(np.mean(cfg["camera"]["focal_px"]))
+    aspect = float(np.mean(cfg["camera_units"].get("pixel_aspect", [1.0, 1.0])))
+    write_json_atomic(out / "camera.json", {"width": w, "height": h, "cx": (w - 1) / 2 + 0.5, "cy": (h - 1) / 2 + 0.5,
+                                            "fx": fx, "fy": fx * aspect, "depth_scale": 1.0})
+
+
 def export_bop(root, out) -> Path:
     """The BOP layout of the dataset ``root`` under ``out``: the two sections' models, a camera.json,
     and per split one scene with its images, masks (and with the kept EXR depth and visible masks),
@@ -61,10 +71,7 @@ def export_bop(root, out) -> Path:
     cfg = ds.identity["config"]
     static = static_scene(ds.config)
     _write_models(cfg["sections"], out)
-    w, h = cfg["image"]["width"], cfg["image"]["height"]
-    write_json_atomic(out / "camera.json", {"width": w, "height": h, "cx": (w - 1) / 2 + 0.5, "cy": (h - 1) / 2 + 0.5,
-                                            "fx": float(np.mean(cfg["camera"]["focal_px"])),
-                                            "fy": float(np.mean(cfg["camera"]["focal_px"])), "depth_scale": 1.0})
+    _write_nominal_camera(cfg, out)
     scenes: dict[str, dict] = {}
     for label in ds.labels_of():
         split = label["spec"]["split"]

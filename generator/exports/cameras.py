@@ -3,7 +3,7 @@
 
 The intrinsics are the pinhole K and Brown-Conrady lens the frame was rendered through: the
 labels' marker centres are these cameras' projections of the markers (tests hold it to
-cv2.projectPoints). The renderer's pixels are square (fx = fy).
+cv2.projectPoints), fx and fy as the unit's pixel aspect makes them.
 
 Why and how: docs/datasets.md, "The cameras export's files".
 """

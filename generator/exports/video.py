@@ -47,7 +47,13 @@ def frame_label(k: int, label: dict) -> dict:
             "run_frame": spec["run_frame"], "pose": label["pose_b_in_d"], "d_from_b": label["d_from_b"],
             "focal_px": cam["focal_px"], "principal_point": cam["principal_point"],
             "distortion": cam.get("distortion") or [0.0] * 5,
-            "image_size": [label["image"]["width"], label["image"]["height"]]}
+            **_pixel_aspect(cam), "image_size": [label["image"]["width"], label["image"]["height"]]}
+
+
+def _pixel_aspect(cam: dict) -> dict:
+    """{"pixel_aspect": fy / fx} of a label's camera with non-square pixels, else {}."""
+    (fx, _, _), (_, fy, _) = cam["K"][0], cam["K"][1]
+    return {} if fy == fx else {"pixel_aspect": fy / fx}
 
 
 def write_run_video(ds: Dataset, frame_ids: list[str], path: Path, fourcc: str) -> None:
