@@ -1,9 +1,9 @@
 """A calibration file in the factory (core.config_calibration) and every frame's true camera out
 (generator.exports.cameras), without Blender: a config naming a calibration file renders that
-camera (the file's image size, focal, principal point and lens on every frame), the dataset's
-stored config reproduces it without the file, a key set twice or non-square pixels are one line;
-the cameras export is read by OpenCV's own FileStorage and COLMAP's format back to the labels'
-camera, and cv2.projectPoints through it lands on the labels' marker centres (1e-6 px)."""
+camera (the file's image size, fx and fy, principal point and lens on every frame), the dataset's
+stored config reproduces it without the file, a key set twice or fy / fx beyond the bound is one
+line; the cameras export is read by OpenCV's own FileStorage and COLMAP's format back to the
+labels' camera (fx != fy), and cv2.projectPoints through it lands on the labels' centres (1e-6 px)."""
 from __future__ import annotations
 
 import json
@@ -19,10 +19,12 @@ from dockfactory.core.config import ConfigError, config_from_dict, load_config
 from dockfactory.core.config_text import load_config_text
 from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.exports.cameras import label_calibration
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.generator.version import dataset_version_id
 
-CAL = Calibration(640, 480, 700.3, 700.3, 326.3, 236.9, (-0.08, 0.05, 0.0004, -0.0003, 0.01))
+# fy / fx = 1.0037: a real calibration's focal lengths differ by 0.1-1 %
+CAL = Calibration(640, 480, 700.3, 702.9, 326.3, 236.9, (-0.08, 0.05, 0.0004, -0.0003, 0.01))
 SMALL = """[dataset]
 name = "calibrated"
 seed = 4
@@ -54,11 +56,12 @@ def test_every_frame_is_the_calibrated_camera(tmp_path, name):
     path = _config(tmp_path, name=name)
     cfg, text = load_config_text(path)
     check_focal_fits(cfg, str(path))
-    f = np.sqrt(CAL.fx * CAL.fy)
+    assert cfg.camera.focal_px == (CAL.fx, CAL.fx) and cfg.camera_units.pixel_aspect == (CAL.fy / CAL.fx,) * 2
     for spec in frame_plan(cfg):
         cam = sample_frame(cfg, spec).camera
         assert (cam.width, cam.height) == (640, 480)
-        assert cam.focal_px == pytest.approx(f, abs=1e-9)
+        k = cam.k()   # the unit's K is the file's: fx and fy
+        assert k[0, 0] == CAL.fx and k[1, 1] == pytest.approx(CAL.fy, rel=1e-15)
         assert cam.principal_point == pytest.approx((CAL.cx, CAL.cy), abs=1e-9)
         assert cam.distortion == pytest.approx(CAL.dist, abs=1e-15)
     assert load_config(path) == cfg   # every loader resolves it
@@ -72,6 +75,7 @@ def test_every_frame_is_the_calibrated_camera(tmp_path, name):
 
 @pytest.mark.parametrize("extra, message", [
     ("k1 = [-0.1, 0.0]\n", "[camera_units] k1: set by [camera_units] calibration = 'cam.yaml' too"),
+    ("pixel_aspect = [1.0, 1.0]\n", "[camera_units] pixel_aspect: set by [camera_units] calibration = 'cam.yaml' too"),
     ("[camera]\nfocal_px = [600, 800]\n", None),
     ("[image]\nwidth = 1280\n", "[image] width: 1280, but the calibration file 'cam.yaml' is 640 x 480 px"),
 ])
@@ -87,18 +91,24 @@ def test_a_key_set_twice_is_one_line(tmp_path, extra, message):
     assert message in str(err.value) and str(path) in str(err.value) and "\n" not in str(err.value)
 
 
-def test_an_equal_image_size_a_missing_file_and_non_square_pixels(tmp_path):
+def test_an_equal_image_size_a_missing_file_and_the_aspect_bound(tmp_path):
     path = _config(tmp_path, "[image]\nwidth = 640\nheight = 480\n")
     assert load_config_text(path)[0].image.width == 640
     (tmp_path / "cam.yaml").unlink()
     missing = r"c.toml: \[camera_units\] calibration: .*cam.yaml: calibration file not found"
     with pytest.raises(CalibrationError, match=missing):
         load_config(path)
-    path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 702.0, 320.0, 240.0))
-    with pytest.raises(CalibrationError, match=r"fx 700 and fy 702 px differ by 0.285 %: the factory renders square"):
+    for fy in (702.0, 668.0):   # 0.29 % and -4.6 %: within MAX_PIXEL_ASPECT_DIFF (5 %), rendered as they are
+        path = _config(tmp_path, cal=Calibration(640, 480, 700.0, fy, 320.0, 240.0))
+        cfg = load_config(path)
+        assert cfg.camera.focal_px == (700.0, 700.0) and cfg.camera_units.pixel_aspect == (fy / 700.0,) * 2
+    path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 740.0, 320.0, 240.0))
+    with pytest.raises(CalibrationError) as err:
         load_config(path)
-    path = _config(tmp_path, cal=Calibration(640, 480, 700.0, 700.0 * (1 + 5e-6), 320.0, 240.0))
-    assert load_config(path).camera.focal_px[0] == pytest.approx(700.0 * (1 + 2.5e-6))   # within 1e-5: sqrt(fx fy)
+    msg = str(err.value)
+    head = f"{tmp_path / 'c.toml'}: [camera_units] calibration: {tmp_path / 'cam.yaml'}: camera_matrix: "
+    assert msg.startswith(head)
+    assert "fx 700 and fy 740 px: fy / fx = 1.05714 is 5.71 % from 1, beyond the 5 %" in msg and "\n" not in msg
 
 
 def test_a_config_built_from_data_cannot_name_a_file():
@@ -137,6 +147,7 @@ def test_the_cameras_export_projects_onto_the_labels(calibrated):
         pc, uv = _markers_in_camera(label)
         proj, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), k, dist)
         assert np.max(np.abs(proj.reshape(-1, 2) - uv)) < 1e-6, fid
+        assert read_calibration(out / "opencv" / f"{fid}.yaml") == label_calibration(label)
         assert read_calibration(out / "ros" / f"{fid}.yaml") == read_calibration(out / "opencv" / f"{fid}.yaml")
         (out / "one.txt").write_text(line + "\n")
         assert read_calibration(out / "one.txt") == read_calibration(out / "opencv" / f"{fid}.yaml")
@@ -146,16 +157,16 @@ def test_the_cameras_export_projects_onto_the_labels(calibrated):
 def test_a_fixed_unit_is_written_once_and_is_the_calibration_file(calibrated):
     root, out = calibrated
     unit = read_calibration(out / "units" / "unit_00.yaml")
-    f = float(np.sqrt(CAL.fx * CAL.fy))
     assert (unit.width, unit.height) == (CAL.width, CAL.height)
-    assert (unit.fx, unit.fy) == pytest.approx((f, f), abs=1e-9)
+    assert unit.fx == CAL.fx and unit.fy == pytest.approx(CAL.fy, rel=1e-15) and unit.fy != unit.fx
     assert (unit.cx, unit.cy) == pytest.approx((CAL.cx, CAL.cy), abs=1e-9) and unit.dist == pytest.approx(CAL.dist)
     assert read_calibration(out / "units" / "unit_00.ros.yaml") == unit
     assert read_calibration(out / "units" / "unit_00.cameras.txt") == unit
 
 
 @pytest.mark.render
-def test_cycles_renders_the_calibrated_camera(tmp_path):
+@pytest.mark.parametrize("fy", [338.0, 341.1])   # square, and fy / fx = 1.0092 (rows resampled)
+def test_cycles_renders_the_calibrated_camera(tmp_path, fy):
     """The lens check of tests/generator/test_render.py (LENS_CHECK's scene at 320 x 240) with its
     lens from a calibration file instead of ranges, rendered by Cycles: the index pass's marker
     pixels are the exact rasterisation of the calibrated camera's outlines (at most 0.5 % differ)
@@ -163,7 +174,7 @@ def test_cycles_renders_the_calibrated_camera(tmp_path):
     from pipeline_data import LENS_CHECK, label_vs_index
 
     from dockfactory.generator.render_job import JobOptions, run_render
-    cal = Calibration(320, 240, 338.0, 338.0, 166.4, 115.2, (-0.12, 0.03, 8e-4, -6e-4, 0.0))
+    cal = Calibration(320, 240, 338.0, fy, 166.4, 115.2, (-0.12, 0.03, 8e-4, -6e-4, 0.0))
     write_calibration(cal, tmp_path / "cam.json", "opencv-json")
     lens_keys = ("principal_offset", "k1 ", "k2 ", "p1 ", "p2 ", "aberration", "count", "focal_px", "jpeg")
     text = "".join(ln + "\n" for ln in LENS_CHECK.splitlines() if not ln.startswith(lens_keys))
@@ -180,3 +191,4 @@ def test_cycles_renders_the_calibrated_camera(tmp_path):
     out = dt.export(tmp_path / "ds", "cameras")
     unit = read_calibration(out / "units" / "unit_00.yaml")
     assert (unit.cx, unit.cy, unit.dist) == (pytest.approx(cal.cx), pytest.approx(cal.cy), pytest.approx(cal.dist))
+    assert (unit.fx, unit.fy) == (cal.fx, pytest.approx(cal.fy, rel=1e-15))
