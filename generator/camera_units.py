@@ -1,7 +1,7 @@
 """Camera units: the lens of each unit (principal point, distortion, pixel aspect, chromatic
-aberration, depth of field, JPEG), drawn once per unit from [camera_units] with the dataset seed; the units dealt to
-frames or runs; the frame's camera through a unit's lens and the largest focal that keeps the
-markers inside its image.
+aberration, depth of field, JPEG), drawn once per unit from [camera_units] with the dataset seed;
+the units dealt to frames or runs; the frame's camera through a unit's lens and the largest focal
+that keeps the markers inside its image.
 
 Every function takes the config sections it reads ([camera_units], [sensor], [image]) and the
 dataset seed, never the whole config (``ImageFit.of`` picks what the focal fit reads).
@@ -128,8 +128,8 @@ def largest_fitting_focal(fit: ImageFit, cam_from_d: np.ndarray, points_d: np.nd
     """Largest focal (px) that keeps every marker disc (centres ``points_d`` (N, 3) mm in D, seen
     by a camera at ``cam_from_d`` (4, 4)) ``fit.margin_px`` inside the image, through the unit's
     lens (principal point, distortion and pixel aspect; pixel offsets from the principal point
-    scale with the focal, so the bound is closed-form). 0 when a marker is behind the camera or the principal
-    point leaves no room; an ideal lens (or None) uses the centred pinhole's bound."""
+    scale with the focal, so the bound is closed-form). 0 when a marker is behind the camera or
+    the principal point leaves no room; an ideal lens (or None) uses the centred pinhole's bound."""
     pc = transform_points(cam_from_d, points_d)
     z = pc[:, 2]
     if np.any(z <= 0):

@@ -40,8 +40,8 @@ DENSIFY_PX = 1.0   # a region's outline is resampled to this spacing before it i
 
 def image_px(uv: np.ndarray, k: np.ndarray, coeffs) -> np.ndarray:
     """Delivered-image pixels (N, 2) of pinhole pixels ``uv`` (N, 2) (the render's: square at
-    fx, ``core.geometry.pinhole_intrinsics``) of the camera with K ``k`` (3, 3) and lens distortion ``coeffs``
-    (OpenCV order); ``uv`` itself for square pixels without distortion."""
+    fx, ``core.geometry.pinhole_intrinsics``) of the camera with K ``k`` (3, 3) and lens
+    distortion ``coeffs`` (OpenCV order); ``uv`` itself for square pixels without distortion."""
     c = coeffs_array(coeffs)
     aspect = float(k[1, 1] / k[0, 0])
     if not np.any(c) and aspect == 1.0:
@@ -51,7 +51,8 @@ def image_px(uv: np.ndarray, k: np.ndarray, coeffs) -> np.ndarray:
 
 def ideal_px(uv: np.ndarray, k: np.ndarray) -> np.ndarray:
     """Pixels (N, 2) of K ``k`` (3, 3) alone (no distortion: fy on the rows) of the render's
-    pinhole pixels ``uv`` (N, 2) (``core.geometry.pinhole_intrinsics``); ``uv`` itself for square pixels."""
+    pinhole pixels ``uv`` (N, 2) (``core.geometry.pinhole_intrinsics``); ``uv`` itself for square
+    pixels."""
     if k[1, 1] == k[0, 0]:
         return uv
     out = np.array(uv, dtype=np.float64)
@@ -241,9 +242,10 @@ def _clamped_box(points: np.ndarray, bounds) -> list[float] | None:
 
 
 def _add_marker_motion(rec: dict, m, mb: MovingB, k: np.ndarray, coeffs, bounds) -> None:
-    """Add (K ``k``, lens ``coeffs``) a moving B marker's ``time_ms`` (its centre's exposure centre, from mid-exposure),
+    """Add a moving B marker's ``time_ms`` (its centre's exposure centre, from mid-exposure),
     ``blur_px`` (its centre's image path from the start to the end of that exposure) and
-    ``bbox_swept_px`` (the box its outline sweeps over the exposure, within the image) to ``rec``."""
+    ``bbox_swept_px`` (the box its outline sweeps over the exposure, within the image) to ``rec``,
+    in the delivered image of K ``k`` with lens ``coeffs``."""
     offsets = exposure_offsets(mb)
     centre, outline = np.array([m.center_mm]), marker_outline(m)
     _, _, t = mb.project(centre)

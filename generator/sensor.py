@@ -1,9 +1,9 @@
 """Camera model applied to the linear render (pure numpy + OpenCV).
 
-lens: the pinhole render (an overscan canvas, ``CameraModel.canvas``, square pixels) is resampled into
-the delivered image through the exact inverse of the unit's distortion and pixel aspect (``distortion_maps``), each
-colour channel through its own magnification (lateral chromatic aberration); bilinear for
-colour, nearest for the depth and index passes (``resample_passes``) ->
+lens: the pinhole render (an overscan canvas, ``CameraModel.canvas``, square pixels) is resampled
+into the delivered image through the exact inverse of the unit's distortion and pixel aspect
+(``distortion_maps``), each colour channel through its own magnification (lateral chromatic
+aberration); bilinear for colour, nearest for the depth and index passes (``resample_passes``) ->
 linear radiance -> auto exposure (mean luminance of the central region to 0.18) -> lens:
 vignetting and veiling glare (an energy-conserving wide blur of part of the light) -> exposure
 offset (2^ev; several stops down in low light) -> sensor: electrons (full well at 1.0, clipped),
@@ -161,7 +161,7 @@ def _upsample_rows(a: np.ndarray, n: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=2)
-def _maps(width: int, height: int, focal_px: float, pp: tuple, coeffs: tuple, offset: tuple, aspect: float = 1.0):
+def _maps(width: int, height: int, focal_px: float, pp: tuple, coeffs: tuple, offset: tuple, aspect: float):
     """(map_x, map_y) of :func:`distortion_maps` from its camera's numbers (:func:`_key`)."""
     gx = np.arange(-MAP_GRID_PX, width + 2 * MAP_GRID_PX, MAP_GRID_PX, dtype=np.float64)
     gy = np.arange(-MAP_GRID_PX, height + 2 * MAP_GRID_PX, MAP_GRID_PX, dtype=np.float64)
@@ -187,8 +187,8 @@ def _key(cam: CameraModel) -> tuple:
 def distortion_maps(cam: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     """(map_x, map_y), each (H, W) float32: for every delivered pixel, the position in the render
     canvas (its pixel convention; square pixels at the camera's focal_px) of the undistorted point
-    it shows (the green channel), the pixel aspect taken out. Cached
-    (read-only arrays): the frames of a docking run share one."""
+    it shows (the green channel), the pixel aspect taken out. Cached (read-only arrays): the
+    frames of a docking run share one."""
     return _maps(*_key(cam))
 
 
