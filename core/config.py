@@ -17,15 +17,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dockfactory.core import layout as layout_mod
-from dockfactory.core.camera_chain import CFA_CHOICES, configured_sensor
+from dockfactory.core.camera_chain.colour_sensor import CFA_CHOICES, configured_sensor
 from dockfactory.core.config_files import resolve_config_files
 from dockfactory.core.mesh_base import MAX_TRIANGLES, MeshError, checked_materials
 from dockfactory.core.mesh_files import UNITS_MM
 from dockfactory.core.mesh_markers import layout_on_parts
-from dockfactory.core.demosaic import DEMOSAICS
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.geometry import MAX_PIXEL_ASPECT_DIFF
-from dockfactory.core.isp import DENOISERS, JPEG_SUBSAMPLING, TONE_CURVES
+from dockfactory.core.camera_chain.encoding import JPEG_SUBSAMPLING
+from dockfactory.core.camera_chain.isp import DENOISERS, TONE_CURVES
 from dockfactory.core.sensor_presets import PRESETS
 from dockfactory.core.names import EXPORT_FORMATS, MIN_CHROMA
 
@@ -247,7 +248,7 @@ class RenderConfig:
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """Camera model applied to the linear render (see generator/sensor.py)."""
+    """The camera after the lens: exposure, sensor, ISP (the camera chain, core/camera_chain/)."""
     full_well_e: Range = (8000.0, 20000.0)  # electrons at linear 1.0 after auto exposure
     read_noise_e: Range = (2.0, 6.0)         # electrons, per frame
     adc_bits: int = 12                       # 8-16: the raw frame's depth
@@ -255,7 +256,7 @@ class SensorConfig:
     low_light_ev: Range = (-5.0, -3.0)       # several stops down
     low_light_gain_ev: Range = (0.5, 2.0)    # digital gain that partly makes up for it (net 1-4.5 EV darker)
     vignetting: Range = (0.0, 0.25)          # relative fall-off at the image corners
-    # A colour camera (core.camera_chain): with presets, EMVA 1288 sensors replace the model above
+    # A colour camera (camera_chain.colour_sensor): with presets, EMVA 1288 sensors replace the model above
     # (full_well_e, read_noise_e); each per-unit list gives unit u its item u % len(list).
     presets: tuple[str, ...] = ()            # core.sensor_presets names; () keeps the model above
     overrides: Overrides = ()                # [sensor.overrides]: preset figures replaced, key by key

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dockfactory.core.camera_chain import ColourChain
+from dockfactory.core.camera_chain.colour_sensor import ColourChain
 from dockfactory.core.distortion import N_COEFFS
 from dockfactory.core.geometry import intrinsics, render_canvas
 from dockfactory.core.layout import RING_BASE_DEPTH_MM, Marker
@@ -167,8 +167,9 @@ class Appearance:
 
 @dataclass(frozen=True)
 class SensorParams:
-    """Inputs of generator.sensor.apply_sensor (see there); ``chain``: a colour camera
-    (core.camera_chain) in place of the three-chip noise model (full_well_e, read_noise_e)."""
+    """Inputs of the camera chain's light, sensor and ISP stages (core.camera_chain.expose_frame);
+    ``chain``: a colour camera (core.camera_chain.colour_sensor) in place of the plain sensor
+    (full_well_e, read_noise_e)."""
     ideal: bool
     exposure_ev: float
     gain_ev: float

@@ -1,5 +1,5 @@
 """Sensor presets: Sony Pregius global-shutter colour sensors in EMVA 1288 terms, from published
-figures (cited beside each preset), for :mod:`dockfactory.core.emva`.
+figures (cited beside each preset), for :mod:`dockfactory.core.camera_chain.emva`.
 
 Every preset is at 12 ADC bits (``emva.with_adc_bits`` moves it) and at the camera's base gain.
 Where the sources found give a figure only indirectly, the comment shows the derivation; where
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from dockfactory.core.emva import FIELD_NAMES, EmvaSensor
+from dockfactory.core.camera_chain.emva import FIELD_NAMES, EmvaSensor
 from dockfactory.core.errors import DockfactoryError
 
 IR_CUT_TRANSMITTANCE = 0.93   # Basler's example value at 545 nm (source in the module docstring)

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from dockfactory.core.cfa import channel_map
+from dockfactory.core.camera_chain.cfa import channel_map
 import dockfactory.detector.centre as centre
 from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
 from dockfactory.detector.centre_joint import joint_fit, reference_channel

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 from dockfactory.core.cv import cv2
 import numpy as np
 
-from dockfactory.core.cfa import channel_map
+from dockfactory.core.camera_chain.cfa import channel_map
 import dockfactory.detector.centre as centre
 from dockfactory.detector.centre import CLASS_CHANNEL
 

@@ -10,8 +10,8 @@ from dockfactory.core.progress import Progress
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.core.resources import shipped_weights
-from dockfactory.core.cfa import PATTERNS
-from dockfactory.core.demosaic import DEMOSAICS
+from dockfactory.core.camera_chain.cfa import PATTERNS
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS
 from dockfactory.cli_args import (
     MAX_THREADS,
     float_in,

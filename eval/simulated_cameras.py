@@ -13,7 +13,7 @@ import html
 
 import numpy as np
 
-from dockfactory.core.camera_chain import white_dn
+from dockfactory.core.camera_chain.colour_sensor import white_dn
 from dockfactory.eval.acceptance import UNITS
 from dockfactory.eval.camera_classes import camera_class
 from dockfactory.generator.camera_units import unit_lens, unit_sensor

@@ -1,4 +1,4 @@
-"""The dataset factory (sampler, sensor model, labels, render jobs, dataset checks, tools and card),
+"""The dataset factory (sampler, labels, render jobs, dataset checks, tools and card),
 behind a small facade.
 
 Importing the package imports no other module: render workers import it, where the dataset tools

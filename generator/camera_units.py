@@ -17,8 +17,8 @@ from dockfactory.core.config import CameraUnitsConfig, Config, ConfigError, Imag
 from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.scene import CameraModel, mat4, vec
-from dockfactory.core.camera_chain import configured_sensor
-from dockfactory.core.emva import EmvaSensor
+from dockfactory.core.camera_chain.colour_sensor import configured_sensor
+from dockfactory.core.camera_chain.emva import EmvaSensor
 from dockfactory.generator.random_draws import STREAM_UNIT_LENS, STREAM_UNIT_SENSOR, STREAM_UNITS, rng_for, uniform
 
 

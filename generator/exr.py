@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import OpenEXR
 
+from dockfactory.core.camera_chain import RenderPasses
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import atomic_path
 from dockfactory.core.names import MARKER_CLASS_AOV
@@ -19,13 +20,6 @@ from dockfactory.core.names import MARKER_CLASS_AOV
 
 class ExrError(DockfactoryError):
     pass
-
-
-@dataclass
-class RenderPasses:
-    rgb: np.ndarray    # (H, W, 3) float32 linear
-    depth_mm: np.ndarray  # (H, W) float32, planar depth in mm (inf where nothing was hit)
-    index: np.ndarray  # (H, W) int32 object index (0 = not a marker)
 
 
 def _find(channels: dict, *suffixes) -> np.ndarray | None:

@@ -1,8 +1,8 @@
 """Turn a finished render into a dataset frame (no bpy): PNG, optional EXR, label, meta.
 
 Files of frame ``<id>`` in a dataset directory:
-  images/<id>.png   8-bit sRGB after the camera model (lens, sensor, and for a JPEG unit the
-                    decoded JPEG, losslessly)
+  images/<id>.png   8-bit sRGB after the camera chain (core.camera_chain: lens, sensor, ISP, and
+                    for a JPEG unit the decoded JPEG), losslessly
   exr/<id>.exr      optional: linear RGB (half), depth (mm), marker index pass, in the delivered
                     (distorted) geometry
   raw/<id>.png      optional ([sensor] raw_output): a colour camera's raw frame in DN, 16-bit PNG:
@@ -22,6 +22,7 @@ from pathlib import Path
 from dockfactory.core.cv import cv2
 import numpy as np
 
+from dockfactory.core.camera_chain import capture
 from dockfactory.core.io import (
     sha256_bytes,
     sha256_file,
@@ -34,7 +35,6 @@ from dockfactory.generator.exr import read_class_coverage, read_passes, read_reg
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
 from dockfactory.generator.marker_coverage import corrected_region
 from dockfactory.generator.marker_regions import composite, marker_halos
-from dockfactory.generator.sensor import expose_frame, jpeg_round_trip, resample_passes
 
 # Huffman-only deflate: on these (noisy) images it is both the fastest and the smallest of the
 # zlib strategies (1280x960: 49 ms, 1.36 MB vs 64 ms, 1.70 MB for the default strategy at level 1)
@@ -104,12 +104,10 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     passes = replace(passes, rgb=median_filtered(passes.rgb, frame.render.post_filter))
     t1 = time.perf_counter()
     outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)
-    passes = resample_passes(passes, frame.camera, outlines)   # the lens: distortion, chromatic aberration
-    t_lens = time.perf_counter()
-    image, raw, derived = expose_frame(passes.rgb, frame.sensor)
-    if frame.camera.jpeg_quality:
-        image = jpeg_round_trip(image, frame.camera.jpeg_quality, frame.camera.jpeg_subsampling)
-    label = frame_labels(frame, static, passes.index, visible_threshold, derived, image, min_chroma)
+    shot = capture(passes, frame.camera, frame.sensor, outlines)   # the camera chain: lens .. encoding
+    passes, image, raw = shot.passes, shot.image, shot.raw
+    t_camera = time.perf_counter()
+    label = frame_labels(frame, static, passes.index, visible_threshold, shot.derived, image, min_chroma)
     t2 = time.perf_counter()
     png = encode_png(image, f"frame {frame.spec.frame_id}")
     write_bytes_atomic(paths["image"], png)
@@ -129,6 +127,6 @@ def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_ex
     meta = {"frame_id": frame.spec.frame_id, "files": files}
     write_json_atomic(paths["meta"], meta)
     write_bytes_atomic(paths["label"], text)   # last: the commit point of the frame
-    timings = {**(timings or {}), "read_exr": t1 - t0, "lens": t_lens - t1, "sensor_labels": t2 - t_lens,
+    timings = {**(timings or {}), "read_exr": t1 - t0, "camera": t_camera - t1, "labels": t2 - t_camera,
                "encode_write": time.perf_counter() - t2}
     return {"meta": meta, "timings_s": timings}

@@ -70,9 +70,10 @@ def marker_outline_px(marker: Marker, k: np.ndarray, coeffs, cam_from_s: np.ndar
 
 def marker_pinhole_outlines(frame: FrameScene, static: StaticScene) -> list[tuple[int, np.ndarray]]:
     """(pass index, outline (n, 2) in the camera's pinhole pixels) of every marker in front of the
-    camera: what the render canvas shows before the lens (``sensor.refine_marker_edges``). While B
-    moves, B's markers under a rolling shutter with no exposure time have their row-time outline,
-    and blurred ones (exposure time > 0) none: their index-pass edges are the ones Cycles sampled."""
+    camera: what the render canvas shows before the lens (``camera_chain.lens.refine_marker_edges``).
+    While B moves, B's markers under a rolling shutter with no exposure time have their row-time
+    outline, and blurred ones (exposure time > 0) none: their index-pass edges are the ones Cycles
+    sampled."""
     cam = frame.camera
     k, cam_from_d, d_from_b = cam.pinhole_k(), cam.cam_from_d_array(), frame.d_from_b_array()
     rolling = rolling_view(frame)

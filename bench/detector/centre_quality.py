@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dockfactory.core.cfa import mosaic
+from dockfactory.core.camera_chain.cfa import mosaic
 from dockfactory.core.cv import cv2
-from dockfactory.core.demosaic import demosaic
+from dockfactory.core.camera_chain.demosaic import demosaic
 from dockfactory.core.io import write_json_atomic
-from dockfactory.core.isp import jpeg_round_trip
+from dockfactory.core.camera_chain import jpeg_round_trip
 from dockfactory.generator.datasets.reader import Dataset
 
 

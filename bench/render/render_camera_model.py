@@ -28,10 +28,10 @@ import numpy as np
 
 from tests.pipeline_data import painted_passes
 
+from dockfactory.core.camera_chain import capture, lens
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.core.scene import NO_DISTORTION
-from dockfactory.generator import sensor
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
 from dockfactory.generator.sampler import frame_plan, sample_frame
@@ -40,14 +40,11 @@ from dockfactory.generator.sampler import frame_plan, sample_frame
 def post(frame, static, passes, cold: bool):
     """The worker's post-processing of one frame (frame_output.finish_frame without the writes)."""
     if cold:
-        sensor._maps.cache_clear()
-        sensor._channel_tables.cache_clear()
+        lens._maps.cache_clear()
+        lens._channel_tables.cache_clear()
     outlines = () if frame.camera.is_pinhole() else marker_pinhole_outlines(frame, static)
-    out = sensor.resample_passes(passes, frame.camera, outlines)
-    image, derived = sensor.apply_sensor(out.rgb, frame.sensor)
-    if frame.camera.jpeg_quality:
-        image = sensor.jpeg_round_trip(image, frame.camera.jpeg_quality)
-    return frame_labels(frame, static, out.index, 0.5, derived, image)
+    shot = capture(passes, frame.camera, frame.sensor, outlines)
+    return frame_labels(frame, static, shot.passes.index, 0.5, shot.derived, shot.image)
 
 
 def timed(fn, repeat: int) -> tuple[float, float]:

@@ -75,7 +75,7 @@ def main() -> int:
           f"frames={n} (first frame per worker excluded)")
     print("The worker finishes frame k (sensor model, labels, writes) while Cycles renders frame k+1, so a")
     print("frame's post-processing is hidden when Cycles leaves CPU idle; s/image is the throughput.")
-    print(f"{'condition':10s} {'n':>3s} {'cycles s':>9s} {'update':>7s} {'read':>6s} {'lens':>6s} {'sensor+lab':>10s} "
+    print(f"{'condition':10s} {'n':>3s} {'cycles s':>9s} {'update':>7s} {'read':>6s} {'camera':>6s} {'labels':>10s} "
           f"{'write':>6s} {'post cpu':>9s} {'cycles cpu':>10s}")
     all_t = []
     for cond in CONDITIONS + ("ALL",):
@@ -85,8 +85,8 @@ def main() -> int:
         if not ts:
             continue
         med = lambda k: statistics.median(t[k] for t in ts)  # noqa: E731
-        print(f"{cond:10s} {len(ts):3d} {med('cycles'):9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} {med('lens'):6.3f} "
-              f"{med('sensor_labels'):10.3f} {med('encode_write'):6.3f} {med('post_cpu'):9.3f} {med('cycles_cpu'):10.2f}")
+        print(f"{cond:10s} {len(ts):3d} {med('cycles'):9.2f} {med('scene_update'):7.3f} {med('read_exr'):6.3f} {med('camera'):6.3f} "
+              f"{med('labels'):10.3f} {med('encode_write'):6.3f} {med('post_cpu'):9.3f} {med('cycles_cpu'):10.2f}")
     steady = [t for i, t in enumerate(timings) if i >= args.workers]
     ends = sorted(t["finished_at"] for t in steady)
     per_image = (ends[-1] - ends[0]) / (len(ends) - 1) if len(ends) > 1 else float("nan")

@@ -44,7 +44,7 @@ import numpy as np
 
 from bench.sensor.sensor_effects import delivered
 
-from dockfactory.core.cfa import channel_map
+from dockfactory.core.camera_chain.cfa import channel_map
 from dockfactory.detector.centre import CLASS_CHANNEL, _SRGB_TO_LINEAR
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_passes

@@ -27,9 +27,9 @@ import numpy as np
 
 from bench.sensor.centre_bound import centre_information
 
-from dockfactory.core.cfa import channel_map, mosaic
-from dockfactory.core.demosaic import demosaic
-from dockfactory.core.isp import tone_map
+from dockfactory.core.camera_chain.cfa import channel_map, mosaic
+from dockfactory.core.camera_chain.demosaic import demosaic
+from dockfactory.core.camera_chain.isp import tone_map
 from dockfactory.detector.centre import refine_centre
 from dockfactory.detector.centre_camera import refine_centre_camera
 DISC, RING, PAINT = (0.30, 0.02, 0.02), 0.02, 0.25

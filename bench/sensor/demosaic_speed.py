@@ -1,4 +1,4 @@
-"""Speed of ``dockfactory.core.demosaic.demosaic``: median wall time per method on a 1280x960 raw
+"""Speed of ``dockfactory.core.camera_chain.demosaic.demosaic``: median wall time per method on a 1280x960 raw
 frame, uint16 (12-bit values) and uint8 (float32 with --float). Target: the slowest method under
 about 60 ms per uint16 frame on the 2-core machine.
 
@@ -15,8 +15,8 @@ import time
 import cv2
 import numpy as np
 
-from dockfactory.core.cfa import PATTERNS
-from dockfactory.core.demosaic import DEMOSAICS, demosaic
+from dockfactory.core.camera_chain.cfa import PATTERNS
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS, demosaic
 
 HEIGHT, WIDTH = 960, 1280
 TARGET_MS = 60.0

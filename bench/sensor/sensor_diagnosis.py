@@ -34,9 +34,9 @@ import numpy as np
 
 from bench.sensor.sensor_effects import COMPONENTS, EFFECTS, delivered
 
-from dockfactory.core.cfa import mosaic
-from dockfactory.core.demosaic import demosaic
-from dockfactory.core.isp import tone_map
+from dockfactory.core.camera_chain.cfa import mosaic
+from dockfactory.core.camera_chain.demosaic import demosaic
+from dockfactory.core.camera_chain.isp import tone_map
 SUPERSAMPLE = 8
 PAINT, RING = np.array([0.35, 0.35, 0.33]), np.array([0.03, 0.03, 0.03])
 DISC = {0: np.array([0.55, 0.02, 0.02]), 1: np.array([0.02, 0.06, 0.45])}
@@ -126,7 +126,7 @@ def centre_row(name: str, dets: dict, ds) -> str:
 
 
 def run_noise(detector, ds, frames) -> None:
-    import dockfactory.core.emva as emva
+    import dockfactory.core.camera_chain.emva as emva
     print("| camera, temporal noise | refined centres | RMS x / y px | median px | over 0.3 px |")
     print("| --- | --- | --- | --- | --- |")
     keep = emva._add_temporal_noise

@@ -9,7 +9,7 @@ shipped detector, the centre refinement and the pinhole solver; pose and centre 
 Each DATASET must keep its linear renders (``[render] keep_exr = true``; the kept EXR is the
 delivered geometry before the sensor): bench/configs/sensor_scene_a.toml and sensor_scene_b.toml
 (two geometries, ideal pinhole lens, normal light, 48 test frames each). Every effect sends the
-frame's linear image through ``generator.sensor.expose_frame`` with the frame's own exposure,
+frame's linear image through ``core.camera_chain.expose_frame`` with the frame's own exposure,
 vignetting and noise seed (its label's sensor record) and the effect's colour chain, so the
 effects differ only in the camera. Geometry never changes: the errors are measured against the
 labels. The reference ("three-chip") is a three-chip sensor with the same EMVA 1288 preset, PNG
@@ -34,7 +34,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dockfactory.core.camera_chain import ColourChain, configured_sensor
+from dockfactory.core.camera_chain import ColourChain, expose_frame, jpeg_round_trip
+from dockfactory.core.camera_chain.colour_sensor import configured_sensor
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.scene import SensorParams, from_dict
@@ -44,7 +45,6 @@ from dockfactory.eval.solve_frames import detection_arrays, docking_options, len
 from dockfactory.eval.uncertainty import reported_std
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_passes
-from dockfactory.generator.sensor import expose_frame, jpeg_round_trip
 
 PRESET = "imx273"
 UNIT_SEED = 26

@@ -36,7 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from dockfactory.core.cfa import channel_map
+from dockfactory.core.camera_chain.cfa import channel_map
 from dockfactory.detector import centre, centre_camera
 from dockfactory.detector.centre import EDGE_BIAS_PX, Refined
 from dockfactory.detector.centre_joint import fit_disc_joint

@@ -21,8 +21,8 @@ import numpy as np
 
 from dockfactory.core.calibration_files import Calibration
 from dockfactory.core.camera_chain import develop_raw
-from dockfactory.core.cfa import PATTERNS
-from dockfactory.core.demosaic import DEMOSAICS
+from dockfactory.core.camera_chain.cfa import PATTERNS
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.measure.image_header import ImageHeaderError, ImageTooLarge, check_size, path_kind
 from dockfactory.solver.options import LensPrior

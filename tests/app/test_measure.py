@@ -145,7 +145,7 @@ def test_bad_images_are_reported_not_dropped_and_self_calibration_runs(one_camer
 
 def _raw_mosaic(png, black: int = 64, white: int = 4095):
     """A camera's raw frame of an 8-bit sRGB image: linear, RGGB mosaic, 12-bit DN above ``black``."""
-    from dockfactory.core.cfa import mosaic
+    from dockfactory.core.camera_chain.cfa import mosaic
     x = cv2.cvtColor(cv2.imread(str(png)), cv2.COLOR_BGR2RGB) / 255.0
     lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
     return np.rint(black + mosaic(lin, "RGGB") * (white - black)).astype(np.uint16)

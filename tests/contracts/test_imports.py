@@ -99,6 +99,24 @@ def test_the_datasets_facade_imports_nothing_and_its_names_resolve(tmp_path):
     _runs_ok(code, tmp_path)
 
 
+def test_the_camera_chain_facade_imports_nothing_and_its_names_resolve(tmp_path):
+    """``import dockfactory.core.camera_chain`` loads none of the chain's modules (``core.scene``
+    imports a stage module, which imports ``core.scene``: an eager facade would be a cycle); each
+    name of its ``__all__`` resolves, on first use, to its owner's object."""
+    code = ("import sys, dockfactory.core\n"
+            "before = set(sys.modules)\n"
+            "import dockfactory.core.camera_chain as cc\n"
+            "assert set(sys.modules) - before == {'dockfactory.core.camera_chain'}, sorted(set(sys.modules) - before)\n"
+            "from dockfactory.core.camera_chain import order, lens, colour_sensor, isp, encoding\n"
+            "assert cc.capture is order.capture and cc.expose_frame is order.expose_frame\n"
+            "assert cc.develop is order.develop and cc.Capture is order.Capture\n"
+            "assert cc.resample_passes is lens.resample_passes and cc.RenderPasses is lens.RenderPasses\n"
+            "assert cc.ColourChain is colour_sensor.ColourChain and cc.develop_raw is isp.develop_raw\n"
+            "assert cc.jpeg_round_trip is encoding.jpeg_round_trip and set(cc.__all__) <= set(dir(cc))\n"
+            "try:\n    cc.no_such_name\nexcept AttributeError as e:\n    print('ok', e)\n")
+    _runs_ok(code, tmp_path)
+
+
 def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
     """``import dockfactory.eval.evaluate as m`` must give the module: a facade that bound a
     function of the same name as one of its package's modules would hand out the function. Two
@@ -108,7 +126,7 @@ def test_no_facade_name_shadows_a_module_of_its_package(tmp_path):
             "known = {('dockfactory.solver', 'upnp'), ('dockfactory.generator.exports', 'coco_results')}\n"
             "for pkg in ('dockfactory.eval', 'dockfactory.detector', 'dockfactory.solver',\n"
             "            'dockfactory.generator', 'dockfactory.generator.exports', 'dockfactory.generator.datasets',\n"
-            "            'dockfactory.eval.report',\n"
+            "            'dockfactory.eval.report', 'dockfactory.core.camera_chain',\n"
             "            'dockfactory.measure'):\n"
             "    p = importlib.import_module(pkg)\n"
             "    for m in pkgutil.iter_modules(p.__path__):\n"

@@ -1,4 +1,4 @@
-"""The colour camera after the lens (core.camera_chain, core.isp) and its place in the factory:
+"""The colour camera after the lens (core.camera_chain: colour_sensor, isp, order) and its place in the factory:
 colours survive the chain, the photon transfer curve of a flat field through the whole chain
 gives back the preset's gain and dark noise (EMVA 1288's own method), fixed patterns belong to a
 camera unit, the sensor never moves a label, bad sensor configs are refused in one line."""
@@ -11,21 +11,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dockfactory.core import isp
-from dockfactory.core.camera_chain import (
-    ColourChain,
-    camera_response,
-    colour_correction_matrix,
-    configured_sensor,
-    develop,
-    sense,
-    white_balance_gains,
-    white_dn,
-)
-from dockfactory.core.cfa import PATTERNS, channel_map
+from dockfactory.core.camera_chain import ColourChain, develop
+from dockfactory.core.camera_chain.cfa import PATTERNS, channel_map
+from dockfactory.core.camera_chain.colour_sensor import camera_response, configured_sensor, sense, white_dn
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS
+from dockfactory.core.camera_chain.emva import photon_transfer
+from dockfactory.core.camera_chain.encoding import jpeg_round_trip
+from dockfactory.core.camera_chain.isp import colour_correction_matrix, white_balance_gains
 from dockfactory.core.config import ConfigError, config_from_dict
-from dockfactory.core.demosaic import DEMOSAICS
-from dockfactory.core.emva import photon_transfer
 from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.random_draws import static_scene
@@ -177,7 +170,7 @@ def test_jpeg_subsampling_keeps_or_halves_chroma(sub):
     """A one-pixel-wide red line on grey: 4:4:4 keeps its chroma, 4:2:0 smears it."""
     img = np.full((32, 32, 3), 128, np.uint8)
     img[:, 15] = (255, 0, 0)
-    out = isp.jpeg_round_trip(img, 95, sub).astype(int)
+    out = jpeg_round_trip(img, 95, sub).astype(int)
     red_minus_green = out[8:24, 15, 0] - out[8:24, 15, 1]
     assert (red_minus_green.mean() > 180) == (sub == "444")
 

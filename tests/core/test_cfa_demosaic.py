@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dockfactory.core.cfa import (
+from dockfactory.core.camera_chain.cfa import (
     PATTERNS,
     apply_crosstalk,
     channel_map,
@@ -17,7 +17,7 @@ from dockfactory.core.cfa import (
     pattern_channels,
     pattern_sites,
 )
-from dockfactory.core.demosaic import _CV_BAYER, DEMOSAICS, demosaic, vng_displacement
+from dockfactory.core.camera_chain.demosaic import _CV_BAYER, DEMOSAICS, demosaic, vng_displacement
 
 DTYPES = (np.uint8, np.uint16, np.float32)
 EXPECTED_CHANNELS = {"RGGB": [[0, 1], [1, 2]], "BGGR": [[2, 1], [1, 0]],

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dockfactory.core import emva
-from dockfactory.core.emva import EmvaSensor, expose, fixed_patterns, photon_transfer, with_adc_bits
+from dockfactory.core.camera_chain import emva
+from dockfactory.core.camera_chain.emva import EmvaSensor, expose, fixed_patterns, photon_transfer, with_adc_bits
 from dockfactory.core.sensor_presets import PRESETS, preset, with_overrides
 
 SIZE = 256

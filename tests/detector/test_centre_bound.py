@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dockfactory.core.cfa import channel_map
+from dockfactory.core.camera_chain.cfa import channel_map
 
 from bench.sensor import centre_bound as cb
 

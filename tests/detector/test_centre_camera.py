@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from dockfactory.core.cfa import PATTERNS, mosaic
-from dockfactory.core.demosaic import DEMOSAICS, demosaic
+from dockfactory.core.camera_chain.cfa import PATTERNS, mosaic
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS, demosaic
 from dockfactory.detector import centre
 from dockfactory.detector.centre import EDGE_BIAS_PX, refine_centre
 from dockfactory.detector.centre_camera import refine_centre_camera
@@ -100,7 +100,7 @@ def test_a_jpeg_is_fitted_on_its_luma(class_id):
     """A three-chip image through JPEG q90 4:2:0 (chroma at half resolution): the fit on the luma
     halves the plain refinement's error on a noisy synthetic disc (measured RMS 0.025-0.034 px
     against 0.052; asserted: luma <= 0.75 x plain and <= 0.045 px)."""
-    from dockfactory.core.isp import jpeg_round_trip
+    from dockfactory.core.camera_chain import jpeg_round_trip
     rng = np.random.default_rng(3)
     plain, luma = [], []
     for _ in range(24):

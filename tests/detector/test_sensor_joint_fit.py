@@ -7,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from dockfactory.core.cfa import mosaic
-from dockfactory.core.demosaic import DEMOSAICS, demosaic
+from dockfactory.core.camera_chain.cfa import mosaic
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS, demosaic
 from dockfactory.detector.centre_camera import refine_centre_camera
 
 from bench.sensor import sensor_joint_fit as sj

@@ -26,7 +26,8 @@ from dockfactory.generator.camera_units import ImageFit, largest_fitting_focal, 
 from dockfactory.generator.random_draws import markers_in_d, static_scene
 from dockfactory.generator.labels import frame_labels, marker_outline_px, marker_pinhole_outlines
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
-from dockfactory.generator.sensor import channel_maps, distortion_maps, jpeg_round_trip, resample_passes
+from dockfactory.core.camera_chain import jpeg_round_trip, resample_passes
+from dockfactory.core.camera_chain.lens import channel_maps, distortion_maps
 
 STRONG = (-0.15, -0.05, 1e-3, -1e-3, 0.0)
 

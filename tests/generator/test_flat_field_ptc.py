@@ -1,5 +1,5 @@
 """EMVA 1288's photon transfer method on flat fields rendered by Cycles and sent through the
-factory's own sensor stage (``generator.sensor.expose_frame``: auto exposure, exposure_ev, the
+factory's own sensor stage (``core.camera_chain.expose_frame``: auto exposure, exposure_ev, the
 colour camera's crosstalk, QE, Bayer CFA, DSNU / PRNU of the unit, temporal noise, ADC): the raw
 frames' green sites give back the preset's system gain K and temporal dark noise within 5 %.
 
@@ -13,12 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dockfactory.core.camera_chain import ColourChain, configured_sensor
-from dockfactory.core.cfa import channel_map
-from dockfactory.core.emva import photon_transfer
+from dockfactory.core.camera_chain import ColourChain, expose_frame
+from dockfactory.core.camera_chain.colour_sensor import configured_sensor
+from dockfactory.core.camera_chain.cfa import channel_map
+from dockfactory.core.camera_chain.emva import photon_transfer
 from dockfactory.core.scene import SensorParams
 from dockfactory.generator.exr import read_passes
-from dockfactory.generator.sensor import TARGET_GREY, expose_frame
+from dockfactory.core.camera_chain.light import TARGET_GREY
 
 SIZE = 256
 SCRIPT = Path(__file__).with_name("flat_field_scene.py")

@@ -25,7 +25,8 @@ from dockfactory.generator.labels import frame_labels, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view, moving_b
 from dockfactory.generator.random_draws import markers_in_d, static_scene
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
-from dockfactory.generator.sensor import distortion_maps, resample_passes
+from dockfactory.core.camera_chain import resample_passes
+from dockfactory.core.camera_chain.lens import distortion_maps
 
 NONSQUARE = LENS_CHECK.replace("frames = 4", "frames = 6").replace(
     "[camera_units]\ncount = 2\n", "[camera_units]\ncount = 3\npixel_aspect = [0.96, 1.04]\n")

@@ -1,11 +1,11 @@
-"""A colour camera after the lens: colour filters -> EMVA 1288 sensor -> ISP (pure numpy/OpenCV).
+"""The colour sensor of the camera chain: colour filters -> EMVA 1288 sensor (pure numpy/OpenCV).
 
-``develop`` takes the exposure-normalised linear image (linear sRGB primaries, 1.0 = the level
-that fills the green pixels' full well) and returns what the camera delivers (8-bit RGB) and the
-raw frame it read out (DN). The stages, in the order light travels: colour filters (a 3x3 camera
-response, ``camera_response``, sampled through the CFA ``pattern`` of ``core.cfa``), the sensor
-(``core.emva.expose``) and the ISP (``core.isp``; demosaic ``core.demosaic``; colour correction with the
-inverse of the true camera response). JPEG encoding is the lens unit's (``isp.jpeg_round_trip``).
+``sense`` takes the exposure-normalised linear light (linear sRGB primaries, 1.0 = the level that
+fills the green pixels' full well) and returns the raw frame the sensor reads out (DN): colour
+filters (a 3x3 camera response, ``camera_response``: crosstalk and each channel's quantum
+efficiency), sampled through the CFA ``pattern`` of ``cfa`` (or three sensors, ``cfa`` "none"),
+then the sensor (``emva.expose``). ``ColourChain`` is one frame's colour camera after the lens
+(its sensor's and its ISP's settings); ``configured_sensor`` reads a [sensor] preset.
 
 Why and how: docs/colour_cameras.md, "The camera chain".
 """
@@ -17,10 +17,9 @@ from functools import lru_cache
 from dockfactory.core.cv import cv2
 import numpy as np
 
-from dockfactory.core import isp
-from dockfactory.core.cfa import PATTERNS, apply_crosstalk, mosaic, pattern_sites
-from dockfactory.core.demosaic import DEMOSAICS, demosaic
-from dockfactory.core.emva import EmvaSensor, expose, fixed_patterns, with_adc_bits
+from dockfactory.core.camera_chain.cfa import PATTERNS, apply_crosstalk, mosaic
+from dockfactory.core.camera_chain.demosaic import DEMOSAICS
+from dockfactory.core.camera_chain.emva import EmvaSensor, expose, fixed_patterns, with_adc_bits
 from dockfactory.core.sensor_presets import preset, with_overrides
 
 CFA_CHOICES = ("none",) + PATTERNS
@@ -75,21 +74,8 @@ def camera_response(sensor: EmvaSensor, crosstalk: float) -> np.ndarray:
     return _response(tuple(float(q) for q in sensor.quantum_efficiency), float(crosstalk))
 
 
-def white_balance_gains(response: np.ndarray, wb_error=(0.0, 0.0)) -> np.ndarray:
-    """(3,) the gains the ISP applies: the exact ones (1 / the response to a neutral, so a grey
-    comes out grey) with the red and blue gains off by ``wb_error`` (relative)."""
-    exact = 1.0 / response.sum(axis=1)
-    return exact * np.array([1.0 + wb_error[0], 1.0, 1.0 + wb_error[1]])
-
-
-def colour_correction_matrix(response: np.ndarray) -> np.ndarray:
-    """(3, 3) the ISP's colour correction: the inverse of the white-balanced response (rows sum
-    to 1)."""
-    return np.linalg.inv(response / response.sum(axis=1, keepdims=True))
-
-
 def sense(linear: np.ndarray, chain: ColourChain, rng: np.random.Generator) -> np.ndarray:
-    """``linear: (H, W, 3) float32`` exposure-normalised linear sRGB -> raw frame in DN, uint16:
+    """The stage: ``linear: (H, W, 3) float32`` exposure-normalised linear sRGB -> raw frame, DN, uint16:
     ``(H, W)`` through a CFA, ``(H, W, 3)`` for a three-chip sensor (``cfa`` "none": three sensors,
     each with its own fixed patterns, exposed as one (3H, W) frame)."""
     cam = apply_crosstalk(linear, camera_response(chain.sensor, chain.crosstalk))
@@ -109,36 +95,6 @@ def white_dn(sensor: EmvaSensor) -> float:
     """The DN of a green pixel at its saturation capacity (the ISP's white level)."""
     top = float(2 ** sensor.adc_bits - 1)
     return min(top, sensor.black_level_dn + sensor.gain_dn_per_e * sensor.saturation_e)
-
-
-def process(raw_dn: np.ndarray, chain: ColourChain, gain_ev: float = 0.0) -> np.ndarray:
-    """The ISP: raw DN (``sense``'s output) -> ``(H, W, 3) uint8`` display RGB. ``gain_ev``: the
-    digital gain (stops) applied in linear before the tone curve."""
-    response = camera_response(chain.sensor, chain.crosstalk)
-    gains = white_balance_gains(response, chain.wb_error)
-    x = isp.normalise_raw(raw_dn, chain.sensor.black_level_dn, white_dn(chain.sensor))
-    if chain.cfa != "none":
-        rgb = demosaic(isp.white_balance_mosaic(x, chain.cfa, gains), chain.cfa, chain.demosaic)
-    else:
-        rgb = isp.white_balance_rgb(x, gains)
-    if chain.colour_correction:
-        rgb = isp.colour_correct(rgb, colour_correction_matrix(response))
-    if gain_ev:
-        rgb *= np.float32(2.0 ** gain_ev)
-    out = isp.tone_map(rgb, chain.tone)
-    out = isp.denoise(out, chain.denoise)
-    return isp.unsharp_mask(out, chain.sharpen_amount, chain.sharpen_sigma_px)
-
-
-def develop(linear: np.ndarray, chain: ColourChain, rng: np.random.Generator,
-            gain_ev: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """(delivered ``(H, W, 3) uint8`` RGB, raw frame in DN) of one exposure: ``sense`` then
-    ``process``. ``rng``: the frame's noise stream."""
-    chain.check()
-    if linear.ndim != 3 or linear.shape[2] != 3:
-        raise ValueError(f"linear image must be (H, W, 3), got {linear.shape}")
-    raw = sense(linear, chain, rng)
-    return process(raw, chain, gain_ev), raw
 
 
 QE_KEYS = ("qe_red", "qe_green", "qe_blue")
@@ -162,25 +118,3 @@ def configured_sensor(name: str, overrides, adc_bits: int) -> EmvaSensor:
     return with_overrides(sensor, {**values, "quantum_efficiency": tuple(qe)}, f"sensor preset {name!r}")
 
 
-def grey_world_gains(raw: np.ndarray, pattern: str) -> np.ndarray:
-    """(3,) white-balance gains of a normalised mosaic ``raw`` (H, W) float32 by the grey-world
-    assumption: each channel's mean brought to green's (a scene of mostly neutral surfaces)."""
-    means = np.array([raw[dy::2, dx::2].mean() for dy in (0, 1) for dx in (0, 1)])
-    chans = [c for _, _, c in pattern_sites(pattern)]
-    per = np.array([means[[i for i, c in enumerate(chans) if c == k]].mean() for k in range(3)])
-    if not np.all(per > 0):
-        raise ValueError(f"raw frame: a colour channel has no signal (means {per.round(6).tolist()})")
-    return per[1] / per
-
-
-def develop_raw(raw_dn: np.ndarray, pattern: str, black_dn: float, white_dn: float, method: str,
-                gains=None) -> np.ndarray:
-    """A raw mosaic read from a camera, (H, W) integer DN, as 8-bit sRGB (H, W, 3) uint8: black
-    level and white level (DN), white balance (``gains`` (R, G, B), else grey world), demosaic
-    ``method``, sRGB tone curve. No colour correction: a camera's own matrix is not known here."""
-    if raw_dn.ndim != 2:
-        raise ValueError(f"a raw frame is one channel (H, W), got shape {raw_dn.shape}")
-    x = isp.normalise_raw(raw_dn, black_dn, white_dn)
-    g = grey_world_gains(x, pattern) if gains is None else np.asarray(gains, dtype=float)
-    rgb = demosaic(isp.white_balance_mosaic(x, pattern, g), pattern, method)
-    return isp.tone_map(rgb, "srgb")

@@ -1,13 +1,13 @@
+"""The camera chain between the lens and the encoding (core.camera_chain.expose_frame) of a camera
+without [sensor] presets: auto exposure, exposure offset, vignetting and veiling glare (light), the
+plain sensor's noise and ADC, its ISP (digital gain, sRGB); an ideal camera."""
 import numpy as np
 import pytest
 
+from dockfactory.core.camera_chain import expose_frame
+from dockfactory.core.camera_chain.isp import _srgb_lut
+from dockfactory.core.camera_chain.light import TARGET_GREY, auto_exposure_scale
 from dockfactory.core.scene import SensorParams
-from dockfactory.generator.sensor import (
-    TARGET_GREY,
-    _srgb_lut,
-    apply_sensor,
-    auto_exposure_scale,
-)
 
 
 def params(**kw):
@@ -15,6 +15,12 @@ def params(**kw):
                 adc_bits=12, vignetting=0.0, bloom=0.0, noise_seed=1)
     base.update(kw)
     return SensorParams(**base)
+
+
+def apply_sensor(linear, p):
+    """(8-bit image, derived values) of ``expose_frame``."""
+    image, _, derived = expose_frame(linear, p)
+    return image, derived
 
 
 def flat(value, h=200, w=300):

@@ -1,6 +1,6 @@
 """Demosaicing: the ISP side of a Bayer camera (a full RGB image from the one-channel raw frame).
 
-``demosaic(raw, pattern, method)`` with ``pattern`` one of ``dockfactory.core.cfa.PATTERNS``
+``demosaic(raw, pattern, method)`` with ``pattern`` one of ``cfa.PATTERNS``
 (colours of the top-left 2x2 block) and ``method`` one of :data:`DEMOSAICS`: OpenCV's ``"bilinear"``,
 ``"edge_aware"`` and ``"vng"`` (8-bit only: other inputs are companded to 8 bits), and ``"mhc"`` (Malvar,
 He, Cutler, ICASSP 2004, as four 5x5 linear filters). Every method returns the raw samples unchanged at
@@ -17,7 +17,7 @@ from functools import lru_cache
 from dockfactory.core.cv import cv2
 import numpy as np
 
-from dockfactory.core.cfa import channel_map, pattern_channels, pattern_sites
+from dockfactory.core.camera_chain.cfa import channel_map, pattern_channels, pattern_sites
 
 DEMOSAICS = ("bilinear", "edge_aware", "vng", "mhc")
 RAW_DTYPES = (np.uint8, np.uint16, np.float32)

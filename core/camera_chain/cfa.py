@@ -6,7 +6,7 @@ indices are RGB order: R = 0, G = 1, B = 2, the order of every ``(H, W, 3)`` arr
 
 ``mosaic`` turns a full-colour image into the raw frame the sensor records (one channel per
 pixel); ``apply_crosstalk`` mixes the channels first, as overlapping filter spectra do.
-``dockfactory.core.demosaic`` is the inverse side (the ISP).
+``demosaic`` is the inverse side (the ISP).
 """
 from __future__ import annotations
 

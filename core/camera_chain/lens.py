@@ -1,138 +1,31 @@
-"""Camera model applied to the linear render (pure numpy + OpenCV).
+"""The lens stage of the camera chain: the render canvas -> the delivered image's geometry.
 
-lens: the pinhole render (an overscan canvas, ``CameraModel.canvas``, square pixels) is resampled
-into the delivered image through the exact inverse of the unit's distortion and pixel aspect
-(``distortion_maps``), each colour channel through its own magnification (lateral chromatic
-aberration); bilinear for colour, nearest for the depth and index passes (``resample_passes``) ->
-linear radiance -> auto exposure (mean luminance of the central region to 0.18) -> lens:
-vignetting and veiling glare (an energy-conserving wide blur of part of the light) -> exposure
-offset (2^ev; several stops down in low light) -> sensor: electrons (full well at 1.0, clipped),
-shot noise, read noise -> ADC (``adc_bits``) -> digital gain (2^gain_ev) -> sRGB, 8 bit.
-Shot noise uses the Gaussian approximation N(e, e), accurate above a few electrons. A colour camera
-([sensor] presets: ``SensorParams.chain``) replaces the sensor part after the veiling glare with
-``core.camera_chain`` (CFA, EMVA 1288 sensor, ISP). Last, a unit with JPEG encoding delivers the
-JPEG-decoded image (``jpeg_round_trip``).
+The pinhole render (an overscan canvas, ``CameraModel.canvas``, square pixels at ``focal_px``) is
+resampled into the delivered image through the exact inverse of the unit's distortion and pixel
+aspect (``distortion_maps``), each colour channel through its own magnification (lateral
+chromatic aberration, ``channel_maps``): colour bilinear, depth and object index nearest, the
+markers' edges in the index pass by their exact outlines (``resample_passes``). Radiance stays
+scene-linear; the labels are resampled with the image.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 from dockfactory.core.cv import cv2
 import numpy as np
 
-from dockfactory.core import isp
-from dockfactory.core.camera_chain import develop
 from dockfactory.core.distortion import distort_pixels, undistort_normalized
-from dockfactory.core.scene import CameraModel, SensorParams
-from dockfactory.generator.exr import RenderPasses
-
-TARGET_GREY = 0.18
-LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+from dockfactory.core.scene import CameraModel
 
 
-def auto_exposure_scale(linear: np.ndarray) -> float:
-    """Scale that brings the mean luminance of the central 60 % of the image to 0.18.
+@dataclass
+class RenderPasses:
+    """The passes of a render, or of the delivered image after the lens."""
+    rgb: np.ndarray    # (H, W, 3) float32 linear
+    depth_mm: np.ndarray  # (H, W) float32, planar depth in mm (inf where nothing was hit)
+    index: np.ndarray  # (H, W) int32 object index (0 = not a marker)
 
-    ``linear``: (H, W, 3) float32. Luminance is clipped at 4 so a lamp in view does not darken
-    the frame.
-    """
-    h, w = linear.shape[:2]
-    crop = linear[int(0.2 * h):int(0.8 * h), int(0.2 * w):int(0.8 * w)]
-    lum = np.minimum(crop @ LUMA, 4.0)
-    mean = float(lum.mean())
-    return TARGET_GREY / max(mean, 1e-6)
-
-
-@lru_cache(maxsize=4)
-def _radius2(h: int, w: int) -> np.ndarray:
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    r2 = ((x - (w - 1) / 2) ** 2 + (y - (h - 1) / 2) ** 2) / (((w - 1) / 2) ** 2 + ((h - 1) / 2) ** 2)
-    return r2[..., None]
-
-
-@lru_cache(maxsize=4)
-def _srgb_lut(levels: int) -> np.ndarray:
-    x = np.arange(levels, dtype=np.float64) / (levels - 1)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.clip(np.rint(s * 255.0), 0, 255).astype(np.uint8)
-
-
-VEIL_SOURCE_CAP = 64.0  # radiance (x mid-grey 0.18 -> 11.5) above which a source adds no more veil
-
-
-def veiling_glare(linear: np.ndarray, amount: float) -> np.ndarray:
-    """L + amount * (wide_blur(min(L, cap)) - min(L, cap)): light scattered in the lens.
-
-    A halo around bright sources and a veil that lowers contrast. The scattered radiance is
-    capped (``VEIL_SOURCE_CAP`` x mid-grey) so that a lamp in view washes out its neighbourhood,
-    not the whole frame. ``linear``: (H, W, 3) float32, exposure-normalised.
-    """
-    h, w = linear.shape[:2]
-    src = np.minimum(linear, np.float32(VEIL_SOURCE_CAP * TARGET_GREY))
-    small = cv2.resize(src, (max(1, w // 8), max(1, h // 8)), interpolation=cv2.INTER_AREA)
-    sigma = 0.03 * max(small.shape[:2])
-    blurred = cv2.GaussianBlur(small, (0, 0), sigmaX=sigma) * 0.6 + \
-        cv2.GaussianBlur(small, (0, 0), sigmaX=4 * sigma) * 0.4
-    big = cv2.resize(blurred, (w, h), interpolation=cv2.INTER_LINEAR)
-    return linear + np.float32(amount) * (big - src)
-
-
-def apply_sensor(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, dict]:
-    """8-bit sRGB image (H, W, 3) uint8 (RGB order) and the values it derived (exposure scale).
-
-    ``linear``: (H, W, 3) float32 scene-linear render.
-    """
-    image, _, derived = expose_frame(linear, p)
-    return image, derived
-
-
-def _exposed(img: np.ndarray, p: SensorParams, scale: float) -> np.ndarray:
-    """The lens and exposure part (in place): auto exposure x 2^ev, vignetting, veiling glare."""
-    img *= np.float32(scale * 2.0 ** p.exposure_ev)
-    if p.vignetting > 0:
-        img *= 1.0 - np.float32(p.vignetting) * _radius2(*img.shape[:2])
-    if p.bloom > 0:
-        img = veiling_glare(img, p.bloom)
-    return img
-
-
-def expose_frame(linear: np.ndarray, p: SensorParams) -> tuple[np.ndarray, np.ndarray | None, dict]:
-    """(delivered 8-bit RGB (H, W, 3) uint8, raw frame in DN or None, derived values) of one frame.
-
-    ``linear``: (H, W, 3) float32 scene-linear render. A colour camera (``p.chain``) goes through
-    ``core.camera_chain.develop`` and returns its raw frame ((H, W) uint16 behind a CFA, (H, W, 3)
-    for a three-chip one); the three-chip noise model returns None. An ideal frame is noise-free
-    whatever the camera.
-    """
-    if linear.ndim != 3 or linear.shape[2] != 3:
-        raise ValueError(f"linear image must be (H, W, 3), got {linear.shape}")
-    img = np.nan_to_num(np.array(linear, dtype=np.float32), copy=False, nan=0.0, posinf=0.0, neginf=0.0)
-    scale = auto_exposure_scale(img)
-    levels = 2 ** p.adc_bits
-    lut = _srgb_lut(levels)
-    if p.ideal:
-        img *= np.float32(scale)
-        idx = np.rint(np.clip(img, 0.0, 1.0) * (levels - 1)).astype(np.int32)
-        return lut[idx], None, {"auto_exposure_scale": scale}
-    img = _exposed(img, p, scale)
-    rng = np.random.default_rng(p.noise_seed)
-    if p.chain is not None:
-        image, raw = develop(img, p.chain, rng, p.gain_ev)
-        return image, raw, {"auto_exposure_scale": scale}
-    electrons = np.clip(img, 0.0, 1.0, out=img)
-    electrons *= np.float32(p.full_well_e)
-    sigma = np.sqrt(electrons + np.float32(p.read_noise_e ** 2))
-    sigma *= rng.standard_normal(electrons.shape, dtype=np.float32)
-    electrons += sigma
-    electrons *= np.float32((levels - 1) / p.full_well_e)
-    dn = np.clip(np.rint(electrons, out=electrons), 0, levels - 1, out=electrons)
-    if p.gain_ev != 0:
-        dn = np.minimum(np.rint(dn * np.float32(2.0 ** p.gain_ev)), levels - 1)
-    idx = dn.astype(np.int32)
-    return lut[idx], None, {"auto_exposure_scale": scale}
-
-
-# ----------------------------------------------------------------------------- lens
 
 # The exact inverse of the distortion is computed (Newton, core.distortion) on a grid of this
 # spacing and upsampled with separable Catmull-Rom: within 5e-4 px of the exact inverse at every
@@ -273,10 +166,30 @@ def refine_marker_edges(index: np.ndarray, canvas: RenderPasses, cam: CameraMode
 
 
 def resample_passes(passes: RenderPasses, cam: CameraModel, outlines=()) -> RenderPasses:
-    """The delivered (distorted, aberrated) passes of a canvas render: colour bilinear per channel,
-    depth and object index nearest (the green channel's map), the markers' edges in the index pass
-    by their exact outlines (``refine_marker_edges``; ``outlines``: (pass index, outline (N, 2) in
-    pinhole px of the camera)). A pinhole camera's passes are returned as they are."""
+    """The stage: the delivered (distorted, aberrated) passes of a canvas render.
+
+    Colour bilinear per channel, depth and object index nearest (the green channel's map), the
+    markers' edges in the index pass by their exact outlines (:func:`refine_marker_edges`).
+
+    Parameters
+    ----------
+    passes : RenderPasses
+        The render of ``cam.canvas()``: colour (Hc, Wc, 3) scene-linear, depth (mm), index.
+    cam : CameraModel
+        The frame's camera.
+    outlines : sequence of (int, (N, 2) float64)
+        (index-pass value, convex outline in the camera's pinhole px) of the markers.
+
+    Returns
+    -------
+    RenderPasses
+        The passes of the delivered image, (H, W); a pinhole camera's ``passes`` as they are.
+
+    Raises
+    ------
+    ValueError
+        ``passes`` not of the camera's canvas size.
+    """
     if cam.is_pinhole():
         return passes
     _, _, wc, hc = cam.canvas()
@@ -297,8 +210,3 @@ def resample_passes(passes: RenderPasses, cam: CameraModel, outlines=()) -> Rend
     index = np.rint(index).astype(np.int32)
     refine_marker_edges(index, passes, cam, outlines)
     return RenderPasses(rgb=rgb, depth_mm=depth, index=index)
-
-
-def jpeg_round_trip(image: np.ndarray, quality: int, subsampling: str = "420") -> np.ndarray:
-    """``image`` (H, W, 3) uint8 RGB as a JPEG of ``quality`` decodes (``core.isp.jpeg_round_trip``)."""
-    return isp.jpeg_round_trip(image, quality, subsampling)
