@@ -15,6 +15,7 @@ from collections import defaultdict
 import numpy as np
 
 from dockfactory.eval.centre_noise import MIN_CONDITION_DETECTIONS, used_centre_matches
+from dockfactory.eval.pixel_aspect import delivered_ellipses, label_pixel_aspect
 from dockfactory.solver.disc_noise import (
     REFERENCE_RADIUS_PX,
     SHAPE_EXPONENT,
@@ -32,8 +33,9 @@ EM_ITERATIONS = 300
 
 def label_noise_shapes(label: dict, markers) -> np.ndarray | None:
     """(n, 2, 2): relative centre covariance of ``markers`` (label markers) under the label's
-    exact camera; None when the label lacks the disc geometry (centre_d_mm, normal_d,
-    diameter_mm) or a disc is not in front of the camera."""
+    exact camera, in its delivered pixels (each disc's image with K's fy on the rows:
+    eval.pixel_aspect.delivered_ellipses); None when the label lacks the disc geometry
+    (centre_d_mm, normal_d, diameter_mm) or a disc is not in front of the camera."""
     try:
         cam = np.asarray(label["camera"]["cam_from_d"], dtype=float)
         centres = np.array([m["center_d_mm"] for m in markers], dtype=float).reshape(-1, 3)
@@ -45,7 +47,8 @@ def label_noise_shapes(label: dict, markers) -> np.ndarray | None:
     centres = centres @ cam[:3, :3].T + cam[:3, 3]
     if np.any(centres[:, 2] <= 0):
         return None
-    return noise_shapes(disc_ellipses(centres, normals @ cam[:3, :3].T, diameters, focal))
+    ellipses = disc_ellipses(centres, normals @ cam[:3, :3].T, diameters, focal)
+    return noise_shapes(delivered_ellipses(ellipses, label_pixel_aspect(label)))
 
 
 def _t_loglik(q: np.ndarray, nu: float, s2: float) -> float:

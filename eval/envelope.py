@@ -1,10 +1,10 @@
 """The tolerance envelope: which uncalibrated cameras pass.
 
-For the dataset's own test geometry (each test frame's true camera pose, focal length and visible
-markers), the marker centres are projected through hypothetical real cameras: a principal point
-``m`` px off the image centre (in each of ``directions`` directions; the worst direction counts)
-and radial distortion ``k1``, plus Gaussian centre noise (the measured detector noise, or a
-given one). Each frame is then solved the way the paper's method does (pinhole, principal point
+For the dataset's own test geometry (each test frame's true camera pose, focal lengths fx and fy
+and visible markers), the marker centres are projected through hypothetical real cameras: a
+principal point ``m`` px off the image centre (in each of ``directions`` directions; the worst
+direction counts) and radial distortion ``k1``, plus Gaussian centre noise (the measured detector
+noise, or a given one). Each frame is then solved the way the paper's method does (pinhole, principal point
 at the image centre, identities known) and the localization statistics the acceptance spec gates
 are computed per (m, k1). The envelope is where every gated statistic passes: the cameras that
 need no calibration for these tolerances; outside it a camera needs self-calibration.
@@ -22,6 +22,7 @@ from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.distortion import distort_normalized
 from dockfactory.core.geometry import transform_points
 from dockfactory.eval.acceptance import AcceptanceSpec
+from dockfactory.eval.pixel_aspect import label_pixel_aspect
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.generator.random_draws import rng_for
 from dockfactory.solver import SolverError, solve_docking
@@ -39,14 +40,17 @@ class EnvelopeGrid:
 
 def _frame_geometry(label: dict) -> dict | None:
     """What the sweep needs of a test frame: ids and camera-frame centres of its fully visible,
-    legible markers (None when a section has fewer than 4), focal length, image centre, truth."""
+    legible markers (None when a section has fewer than 4), focal lengths (fx, fy: K's; a camera
+    with non-square pixels keeps them, which the single-focal solve then carries as a camera
+    without calibration would), pixel aspect, image centre, truth."""
     vis = [m for m in label["markers"] if m.get("visibility") == 2 and m.get("legible", True)]
     if min(sum(m["section"] == s for m in vis) for s in ("A", "B")) < 4:
         return None
     pts = transform_points(np.array(label["camera"]["cam_from_d"]), np.array([m["center_d_mm"] for m in vis]))
     w, h = label["image"]["width"], label["image"]["height"]
-    return {"ids": [m["id"] for m in vis], "xy": pts[:, :2] / pts[:, 2:3], "focal": label["camera"]["focal_px"],
-            "centre": np.array([(w - 1) / 2.0, (h - 1) / 2.0]), "truth": label["pose_b_in_d"],
+    fx, aspect = label["camera"]["focal_px"], label_pixel_aspect(label)
+    return {"ids": [m["id"] for m in vis], "xy": pts[:, :2] / pts[:, 2:3], "focal": np.array([fx, fx * aspect]),
+            "aspect": aspect, "centre": np.array([(w - 1) / 2.0, (h - 1) / 2.0]), "truth": label["pose_b_in_d"],
             "index": label["spec"]["index"]}
 
 
@@ -104,10 +108,21 @@ def _envelope_record(grid: EnvelopeGrid, frames, sigma_px: float, spec: Acceptan
     passes = np.ones((len(grid.pp_offsets_px), len(grid.k1)), dtype=bool)
     for c, thr in gated.items():
         passes &= value[c] <= thr
+    aspect, note = _aspect_note(frames)
     return {"pp_offsets_px": list(grid.pp_offsets_px), "k1": list(grid.k1), "directions": grid.directions,
             "frames": len(frames), "sigma_px": sigma_px, "statistic": statistic,
             "thresholds": dict(gated), "values": {c: np.where(np.isfinite(v), v, None).tolist() for c, v in value.items()},
-            "passes": passes.tolist(), "verdict": envelope_verdict(grid, passes)}
+            "passes": passes.tolist(), **aspect, "verdict": envelope_verdict(grid, passes) + note}
+
+
+def _aspect_note(frames) -> tuple[dict, str]:
+    """({"pixel_aspect": [lowest, highest]}, a clause for the verdict) of frames whose cameras have
+    non-square pixels; ({}, "") when every one is square."""
+    lo, hi = min((f["aspect"] for f in frames), default=1.0), max((f["aspect"] for f in frames), default=1.0)
+    if lo == hi == 1.0:
+        return {}, ""
+    told = f"{lo:.4g}" if lo == hi else f"{lo:.4g}-{hi:.4g}"
+    return {"pixel_aspect": [lo, hi]}, f" (every camera with the dataset's pixel aspect fy / fx, {told})"
 
 
 def envelope_verdict(grid: EnvelopeGrid, passes: np.ndarray) -> str:

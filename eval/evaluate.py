@@ -37,7 +37,8 @@ from dockfactory.eval.simulated_cameras import simulated_cameras_block
 from dockfactory.eval.uncertainty import calibration_block, reported_std, standard_scores
 from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.generator.datasets.reader import Dataset
-from dockfactory.solver import SolverError, crb_d_from_b
+from dockfactory.eval.pixel_aspect import crb_delivered, label_pixel_aspect
+from dockfactory.solver import SolverError
 
 METRICS_FORMAT = "dockfactory.metrics/1"
 
@@ -46,9 +47,11 @@ def frame_bound(label: dict, marker_ids, sigma_px: float, disc_scale_px: float |
     """Cramer-Rao std of (X, Y, Z, alpha, beta, gamma) for this frame's exact geometry, and
     ``sigma_px`` the per-axis centre noise it assumed (px, averaged over the points).
 
-    Isotropic noise of std ``sigma_px``; with ``disc_scale_px`` each marker's noise is shaped by
-    its disc's image (solver.disc_noise) at that scale (eval.centre_noise_disc), unless the label
-    lacks the disc geometry."""
+    Isotropic noise of std ``sigma_px`` in the delivered image; with ``disc_scale_px`` each
+    marker's noise is shaped by its disc's image (solver.disc_noise) at that scale
+    (eval.centre_noise_disc), unless the label lacks the disc geometry. A camera with non-square
+    pixels (K's fy != fx) is bounded with that noise taken to the square pinhole at fx
+    (eval.pixel_aspect.crb_delivered)."""
     by_id = {m["id"]: m for m in label["markers"]}
     ids = [i for i in (marker_ids or []) if i in by_id] or [m["id"] for m in label["markers"] if m.get("visibility") == 2]
     marks = {s: [by_id[i] for i in ids if i.startswith(s)] for s in "AB"}
@@ -63,8 +66,8 @@ def frame_bound(label: dict, marker_ids, sigma_px: float, disc_scale_px: float |
         if sa is not None and sb is not None:
             shapes, sigma_px = (sa, sb), frame_noise_px(np.concatenate([sa, sb]), disc_scale_px)
     try:
-        b = crb_d_from_b(pa, cam_from_d, pb, cam_from_b, label["camera"]["focal_px"],
-                         label["camera"]["principal_point"], sigma_px, noise_shapes=shapes)
+        b = crb_delivered(pa, cam_from_d, pb, cam_from_b, label["camera"]["focal_px"],
+                          label["camera"]["principal_point"], sigma_px, label_pixel_aspect(label), shapes)
     except SolverError:
         return None
     return {**{c: b.std[POSE_KEYS[c]] for c in COMPONENTS}, "sigma_px": sigma_px}

@@ -14,12 +14,13 @@ __all__ = ["FrameCameras", "cameras_of_test_frames"]
 
 @dataclass(frozen=True)
 class FrameCameras:
-    """One test frame: ``cam_from_a`` and ``cam_from_b`` (4, 4; A's frame is D), ``focal_px``,
-    ``principal_point`` (2,) px."""
+    """One test frame: ``cam_from_a`` and ``cam_from_b`` (4, 4; A's frame is D), ``focal_px`` (fx),
+    ``principal_point`` (2,) px and ``pixel_aspect`` (fy / fx of its delivered image)."""
     cam_from_a: np.ndarray
     cam_from_b: np.ndarray
     focal_px: float
     principal_point: np.ndarray
+    pixel_aspect: float = 1.0
 
 
 def cameras_of_test_frames(cfg, max_frames: int, what: str) -> list[FrameCameras]:
@@ -34,5 +35,5 @@ def cameras_of_test_frames(cfg, max_frames: int, what: str) -> list[FrameCameras
         d_from_b, camera = frame_geometry(cfg, spec)
         cam = camera.cam_from_d_array()
         out.append(FrameCameras(cam, cam @ np.asarray(d_from_b, dtype=float), float(camera.focal_px),
-                                np.asarray(camera.principal_point, dtype=float)))
+                                np.asarray(camera.principal_point, dtype=float), float(camera.pixel_aspect)))
     return out

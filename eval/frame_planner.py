@@ -18,7 +18,7 @@ from dockfactory.eval.acceptance import AcceptanceSpec
 from dockfactory.eval.confidence import frames_to_decide
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.eval.frame_cameras import cameras_of_test_frames
-from dockfactory.solver.crb import crb_d_from_b
+from dockfactory.eval.pixel_aspect import crb_delivered
 
 BLOCKS = {"localization": "test frames", "estimation": "repeatability degrees of freedom (captures - poses)"}
 
@@ -82,13 +82,15 @@ def plan_lines(rows: list[dict]) -> list[str]:
 
 def expected_from_config(cfg, sigma_px: float, bound_factor: float = 1.0, max_frames: int = 200) -> dict:
     """{component: bound_factor x RMS over the config's test frames (the first ``max_frames``)
-    of the Cramer-Rao std} at ``sigma_px`` of isotropic centre noise. DockfactoryError when the
+    of the Cramer-Rao std} at ``sigma_px`` of isotropic centre noise in the delivered image (a
+    frame with non-square pixels: eval.pixel_aspect.crb_delivered). DockfactoryError when the
     config plans no test frame."""
     st = static_scene(cfg)
     pa, pb = marker_points(st.markers, "A"), marker_points(st.markers, "B")
     stds = []
     for f in cameras_of_test_frames(cfg, max_frames, "plan-frames"):
-        b = crb_d_from_b(pa, f.cam_from_a, pb, f.cam_from_b, f.focal_px, f.principal_point, sigma_px)
+        b = crb_delivered(pa, f.cam_from_a, pb, f.cam_from_b, f.focal_px, f.principal_point, sigma_px,
+                          f.pixel_aspect)
         stds.append([b.std[POSE_KEYS[c]] for c in COMPONENTS])
     rms = np.sqrt(np.mean(np.square(stds), axis=0)) * bound_factor
     return {c: float(v) for c, v in zip(COMPONENTS, rms)}

@@ -28,6 +28,7 @@ from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import rng_for
 from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, classes_section_shift
 from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
+from dockfactory.eval.pixel_aspect import label_pixel_aspect
 from dockfactory.eval.simulated_cameras import frame_camera_class
 from dockfactory.solver import (
     AmbiguousIdentification,
@@ -152,7 +153,7 @@ def true_camera_centres(label: dict, centres):
     true intrinsics; the focal length is still estimated)."""
     cam = label["camera"]
     pp, dist = tuple(cam["principal_point"]), cam.get("distortion") or [0.0] * 5
-    aspect = cam["K"][1][1] / cam["K"][0][0]
+    aspect = label_pixel_aspect(label)
 
     def ideal(uv):
         return undistort_pixels(uv, cam["focal_px"], pp, dist, aspect)

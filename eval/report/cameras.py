@@ -11,7 +11,7 @@ import numpy as np
 ENVELOPE_SCHEMA = {"pp_offsets_px": ("list", "num"), "k1": ("list", "num"), "directions": "int", "frames": "int",
                    "sigma_px": "num", "statistic": "str", "thresholds": ("map", "num"),
                    "values": ("map", ("list", ("list", "num?"))), "passes": ("list", ("list", "bool")),
-                   "verdict": "str"}
+                   "pixel_aspect?": ("list", "num"), "verdict": "str"}
 
 
 def plot_envelope(plt, env: dict, fig_png) -> str:

@@ -44,6 +44,7 @@ from dockfactory.eval.model_check import html_model_check, model_check_sentence
 from dockfactory.eval.simulated_cameras import BLOCK_SCHEMA as SIMULATED_CAMERAS_SCHEMA
 from dockfactory.eval.simulated_cameras import html_simulated_cameras, sensor_schema
 from dockfactory.generator.datasets.folder import DatasetError
+from dockfactory.generator.labels import image_px
 from dockfactory.generator.version import generator_version, package_version
 
 GATED = ("x", "y", "alpha")
@@ -301,13 +302,9 @@ def _gallery_item(img, r: dict, lab: dict, poses: dict | None, detections: dict 
     rec = (poses or {}).get("frames", {}).get(fid)
     # the layout reprojected with the estimated poses and focal: yellow dots
     if rec and rec.get("ok") is True and rec.get("cam_from_a") is not None and rec.get("d_from_b") is not None:
-        k = intrinsics(rec["focal_px"], poses.get("principal_point", lab["camera"]["principal_point"]))
-        cam_from_a = np.array(rec["cam_from_a"])
-        for m in lab["markers"]:
-            cam_from_s = cam_from_a @ (np.array(rec["d_from_b"]) if m["section"] == "B" else np.eye(4))
-            uv, _ = project_points(k, cam_from_s, np.array(m["center_section_mm"])[None])
-            if np.all(np.isfinite(uv)):
-                cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), 3, (0, 255, 255), -1, cv2.LINE_AA)
+        for u, v in reprojected_layout(rec, lab, poses):
+            if np.isfinite(u) and np.isfinite(v):
+                cv2.circle(img, (int(round(u)), int(round(v))), 3, (0, 255, 255), -1, cv2.LINE_AA)
     h, w = img.shape[:2]
     scale = 640 / w
     img = cv2.resize(img, (640, int(h * scale)), interpolation=cv2.INTER_AREA)
@@ -315,6 +312,26 @@ def _gallery_item(img, r: dict, lab: dict, poses: dict | None, detections: dict 
     cap = (f"{fid} ({r['condition']}): " + (f"failed: {r['reason']}" if not r["ok"] else
            ", ".join(f"{c} err {r[f'err_{c}']:+.3f} {UNITS[c]}" for c in GATED)))
     return cap, base64.b64encode(png.tobytes()).decode()
+
+
+def reprojected_layout(rec: dict, lab: dict, poses: dict) -> np.ndarray:
+    """(N, 2) delivered-image pixels (NaN behind the camera) of the label ``lab``'s N markers under
+    a solved record ``rec``'s poses and focal, through the camera its solve assumed: the poses'
+    principal point, pinhole (the single-focal model the solver fitted to the delivered pixels);
+    for a true-camera solve (``poses["true_camera"]``: the square-pixel pinhole at fx of the label's
+    camera, eval.solve_frames.true_camera_centres) back through the label's principal point, pixel
+    aspect (K's fy) and distortion (generator.labels.image_px)."""
+    cam = lab["camera"]
+    true_camera = bool(poses.get("true_camera"))
+    pp = cam["principal_point"] if true_camera else poses.get("principal_point", cam["principal_point"])
+    k = intrinsics(rec["focal_px"], pp)
+    cam_from_a, d_from_b = np.array(rec["cam_from_a"]), np.array(rec["d_from_b"])
+    uv = np.array([project_points(k, cam_from_a @ (d_from_b if m["section"] == "B" else np.eye(4)),
+                                  np.array(m["center_section_mm"])[None])[0][0] for m in lab["markers"]])
+    uv = uv.reshape(-1, 2)
+    if not true_camera:
+        return uv
+    return image_px(uv, np.array(cam["K"], dtype=float), cam.get("distortion") or [0.0] * 5)
 
 
 def git_describe() -> str:
