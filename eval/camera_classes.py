@@ -11,7 +11,7 @@ camera class" and "The class's test"); each is the larger of the two scenes.
 from __future__ import annotations
 
 __all__ = ["CAMERA_CLASS_FACTORS", "CLASS_SECTION_SHIFT_PX", "camera_class", "class_section_shift",
-           "classes_section_shift"]
+           "classes_section_shift", "classes_factor"]
 
 # The pooled per-axis RMS of the residuals through the class's camera over the three-chip camera's.
 CAMERA_CLASS_FACTORS = {"three-chip": 1.0, "bayer": 3.7, "jpeg": 4.5, "bayer-jpeg": 7.9}
@@ -45,3 +45,10 @@ def classes_section_shift(classes, card_shift_px) -> tuple[float, float] | None:
     shifts = [class_section_shift(c, card_shift_px) for c in classes]
     shifts = [v for v in shifts if v is not None]
     return tuple(max(v[i] for v in shifts) for i in (0, 1)) if shifts else None
+
+
+def classes_factor(classes) -> float:
+    """The gate's class factor of frames of the camera classes ``classes`` solved together (a run
+    sharing its intrinsics): the largest of their CAMERA_CLASS_FACTORS (its residuals are as noisy
+    as its noisiest camera's); 1.0 for none."""
+    return max((CAMERA_CLASS_FACTORS[c] for c in classes), default=1.0)

@@ -7,8 +7,8 @@ p >= GATE_P. Without a known noise, or without degrees of freedom, nothing is te
 None). ``camera_misfit``: the camera-model check (solver.model_error) against the same noise.
 ``class_test``: a noisier camera class's second test (its noise, and no pattern of the image's
 geometry in the residuals). ``run_misfits``: the test on each frame of a docking run solved with
-shared intrinsics (eval.solve_frames.solve_run): a frame the run's intrinsics cannot explain is
-left out of the run, the run solved again without it.
+shared intrinsics (eval.solve_frames.solve_run), the class's too: a frame the run's intrinsics
+cannot explain is left out of the run, the run solved again without it.
 
 Why and how: docs/acceptance.md, "The goodness-of-fit gate".
 """
@@ -123,7 +123,7 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
     if lens_p is None and test["explains"] is not False:
         return first[:3]
     if (by_class := class_test(first[0], sigma_px, class_factor)) is not None:
-        first[0]["fit_test"] = {**by_class, "card": {k: test.get(k) for k in ("ratio", "p_value")}}
+        first[0]["fit_test"] = _class_passed(by_class, test)
         return first[:3]
     if lens_p is not None:
         return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}, {}
@@ -146,17 +146,33 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
     return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}, {}
 
 
-def run_misfits(records: dict, sigma_px: float | None) -> dict:
+def _class_passed(by_class: dict, card: dict) -> dict:
+    """The ``fit_test`` of a fit its camera class explains (:func:`class_test`'s ``by_class``) after
+    the card's test ``card`` refused it: the class's, with the card's ratio and p-value under ``card``."""
+    return {**by_class, "card": {k: card.get(k) for k in ("ratio", "p_value")}}
+
+
+def run_misfits(records: dict, sigma_px: float | None, class_factor: float = 1.0) -> dict:
     """{frame id: fit_test} of the solved frames of a docking run solved with shared intrinsics
     (records with ``run_frames``) whose residuals the known noise cannot explain: a frame whose
     camera is not the run's (zoom, focus or image geometry changed) fits alone but not with the
-    run's intrinsics."""
+    run's intrinsics. Each record gets its ``fit_test``. As in :func:`gate`, a frame the card's
+    test refuses passes when the run's camera class explains it (:func:`class_test` at
+    ``class_factor``: the largest of the run's frames' factors, eval.camera_classes.classes_factor);
+    the pattern that test asks about is the run's camera-model check (one for the run's shared
+    intrinsics, in every frame's record): a run whose residuals show the image's geometry gets the
+    card's test alone."""
     out = {}
     for fid, rec in records.items():
-        if rec.get("ok"):
-            test = rec["fit_test"] = fit_test(rec, sigma_px)
-            if test["explains"] is False:
-                out[fid] = test
+        if not rec.get("ok"):
+            continue
+        test = rec["fit_test"] = fit_test(rec, sigma_px)
+        if test["explains"] is not False:
+            continue
+        if (by_class := class_test(rec, sigma_px, class_factor)) is not None:
+            rec["fit_test"] = _class_passed(by_class, test)
+        else:
+            out[fid] = test
     return out
 
 

@@ -26,7 +26,7 @@ from dockfactory.core.io import sha256_file, write_json_atomic
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.random_draws import rng_for
-from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, classes_section_shift
+from dockfactory.eval.camera_classes import classes_factor, classes_section_shift
 from dockfactory.eval.fit_gate import MISFIT, gate, run_misfit_reason, run_misfits
 from dockfactory.eval.pixel_aspect import label_pixel_aspect
 from dockfactory.eval.simulated_cameras import frame_camera_class
@@ -240,24 +240,32 @@ def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, p
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
-            run_options = class_options(options, [classes[f] for f in group], by_class)[0]
-            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, run_options, edges))
-    for fid, rec in frames.items():
-        rec["camera_class"] = classes[fid]
-    return frames
+            run_options, run_factor = class_options(options, [classes[f] for f in group], by_class)
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, run_options, edges,
+                                    run_factor))
+    return name_camera_classes(frames, classes)
+
+
+def name_camera_classes(records: dict, classes: dict) -> dict:
+    """``records`` (id -> record) with each record naming its frame's ``camera_class`` (``classes``:
+    id -> class, eval.camera_classes), in place (a run's joint records replace the frames' own,
+    which named it); returns ``records``."""
+    for key, rec in records.items():
+        rec["camera_class"] = classes[key]
+    return records
 
 
 def class_options(options: DockingOptions, classes, by_class: bool | None) -> tuple[DockingOptions, float]:
     """(options, gate class factor) of frames of the camera classes ``classes`` (one frame's, or a
     run's) solved together, as measure solves an image of its class. ``by_class`` None (the oracle:
     label centroids with the stated noise, which no camera class changes): ``options`` and 1.
-    Else the factor is the class's (eval.camera_classes.CAMERA_CLASS_FACTORS; of several: the
-    largest) and, when ``by_class`` is True, the section shift per axis the largest of
+    Else the factor is the class's (eval.camera_classes.classes_factor; of several: the largest,
+    which a run's gate takes) and, when ``by_class`` is True, the section shift per axis the largest of
     ``options``' (the card's) and the classes' (eval.camera_classes.classes_section_shift); False:
     the shift of ``options`` as given."""
     if by_class is None:
         return options, 1.0
-    factor = max(CAMERA_CLASS_FACTORS[c] for c in classes)
+    factor = classes_factor(classes)
     shift = classes_section_shift(classes, options.section_shift_px) if by_class else options.section_shift_px
     return (options if shift == options.section_shift_px else replace(options, section_shift_px=shift)), factor
 
@@ -403,20 +411,22 @@ def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
 
 
 def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str,
-              options: DockingOptions = DEFAULT_DOCKING, edges: dict | None = None) -> dict:
+              options: DockingOptions = DEFAULT_DOCKING, edges: dict | None = None, class_factor: float = 1.0) -> dict:
     """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
     the joint solve fails, every frame of the run says why. ``used`` / ``edges``: per frame id the
     centres and edge widths :func:`solve_frame` returned (``edges`` None: no widths told).
     Through the run gate (eval.fit_gate.run_misfits, against the noise card's centre noise, else
-    ``sigma``): the worst frame the run's intrinsics cannot explain is left out (not ok, the reason
+    ``sigma``, and the run's camera class's ``class_factor``: eval.camera_classes.classes_factor of
+    its frames'): the worst frame the run's intrinsics cannot explain is left out (not ok, the reason
     in one line) and the rest solved again, at most a quarter of the run (at least one frame)
-    while three remain; frames still unexplained after that are not ok either."""
+    while three remain; frames still unexplained after that are not ok either. The records name no
+    ``camera_class``: the caller's (:func:`name_camera_classes`)."""
     known = options.refine.sigma_floor_px if options.refine.sigma_floor_px is not None else sigma
     left: dict = {}
     while True:
         members = [f for f in group if f not in left]
         out = _joint_records(markers, pp, members, frames, used, sigma, camera_model, options, edges)
-        bad = run_misfits(out, known)
+        bad = run_misfits(out, known, class_factor)
         if not bad or len(members) <= 2 or len(left) >= max(1, len(group) // 4):
             left.update({f: _left_out(test, known) for f, test in bad.items()})
             return {f: left.get(f) or out[f] for f in group}

@@ -45,12 +45,14 @@ from dockfactory.eval.camera_classes import (
     CAMERA_CLASS_FACTORS,
     camera_class,
     class_section_shift,
+    classes_factor,
     classes_section_shift,
 )
 from dockfactory.solver.options import LensPrior
 from dockfactory.eval.solve_frames import (
     detection_arrays,
     docking_options,
+    name_camera_classes,
     resolve_camera_model,
     solve_frame,
     solve_run,
@@ -232,8 +234,10 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
                             lens: LensPrior | None = None, section_shift_px=None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
-    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card). Returns the
-    run's record (shared intrinsics or the reason it failed)."""
+    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card), each keeping its
+    ``camera_class``, whose factor the run gate takes (the largest of the frames':
+    eval.camera_classes.classes_factor). Returns the run's record (shared intrinsics or the
+    reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
     if not solved:
         return {"ok": False, "reason": "no frame was identified", "frames": 0}
@@ -243,10 +247,12 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
                                f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))})")
     t0 = time.perf_counter()
     keys = [str(f.index) for f in solved]
+    classes = {str(f.index): f.record.get("camera_class", "three-chip") for f in solved}
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
                         docking_options(sigma_floor_px, lens, section_shift_px),
-                        {str(f.index): f.used_edges for f in solved})
+                        {str(f.index): f.used_edges for f in solved}, classes_factor(classes.values()))
+    name_camera_classes(records, classes)
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}

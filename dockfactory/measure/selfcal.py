@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dockfactory.core.distortion import undistort_pixels
+from dockfactory.eval.camera_classes import classes_factor
 from dockfactory.eval.solve_frames import solve_run
 from dockfactory.solver import DockingOptions
 from dockfactory.solver.options import DEFAULT_DOCKING
@@ -38,7 +39,9 @@ def parse_window(text: str) -> int:
 class WindowCalibration:
     """``apply(index, frame)`` -> the frame's record after the window's joint solve (the module
     docstring); ``frame`` a measure.Frame solved alone (pinhole), with its ``used_points`` (and
-    ``used_edges``: the edge widths the run's covariance takes, :func:`solver.solve_sequence`)."""
+    ``used_edges``: the edge widths the run's covariance takes, :func:`solver.solve_sequence`) and
+    its record's ``camera_class``, which the joint record keeps and whose factor the run gate takes
+    (of the window's frames: the largest, eval.camera_classes.classes_factor)."""
     markers: tuple
     window: int
     camera_model: str = "auto"
@@ -54,22 +57,23 @@ class WindowCalibration:
             return record
         if self.frozen is not None:
             return self._frozen(index, frame)
-        self.frames.append((str(index), frame.used_points, record["n_detections"], frame.used_edges))
+        self.frames.append((str(index), frame.used_points, record["n_detections"], frame.used_edges,
+                            record.get("camera_class", "three-chip")))
         while len(self.frames) > self.window:
             self.frames.popleft()
         if len(self.frames) < MIN_FRAMES:
             return {**record, "self_calibration": f"window of {len(self.frames)} frames: solved alone"}
-        keys = [k for k, _, _, _ in self.frames]
-        out = solve_run(self.markers, frame.principal_point, keys, {k: {"n_detections": n} for k, _, n, _ in self.frames},
-                        {k: used for k, used, _, _ in self.frames}, None, self.camera_model, self.options,
-                        {k: edges for k, _, _, edges in self.frames})[str(index)]
+        keys = [k for k, *_ in self.frames]
+        out = solve_run(self.markers, frame.principal_point, keys, {k: {"n_detections": n} for k, _, n, *_ in self.frames},
+                        {k: used for k, used, *_ in self.frames}, None, self.camera_model, self.options,
+                        {k: edges for k, _, _, edges, _ in self.frames},
+                        classes_factor(c for *_, c in self.frames))[str(index)]
         if not out["ok"]:
             return {**record, "self_calibration": f"window solve failed, solved alone: {out['reason']}"}
         self.joint += 1
         if self.freeze_after is not None and self.joint >= self.freeze_after:
             self.frozen = {"camera_model": out["camera_model"], "focal_px": out["focal_px"], **out["intrinsics"]}
-        extra = {k: record[k] for k in ("image_size", "timing_ms", "roi") if k in record}
-        return {**out, **extra, "self_calibrated": "window"}
+        return {**out, **_kept(record), "self_calibrated": "window"}
 
     def _frozen(self, index: int, frame) -> dict:
         """The frame's centres undistorted with the frozen intrinsics, solved alone (pinhole)."""
@@ -81,9 +85,14 @@ class WindowCalibration:
         key = str(index)
         out = solve_run(self.markers, pp, [key], {key: {"n_detections": frame.record["n_detections"]}},
                         {key: dict(zip(ids, map(tuple, uv)))}, None, "pinhole", self.options,
-                        {key: frame.used_edges})[key]
+                        {key: frame.used_edges}, classes_factor([frame.record.get("camera_class", "three-chip")]))[key]
         if not out["ok"]:
             return {**frame.record, "self_calibration": f"frozen-intrinsics solve failed: {out['reason']}"}
-        extra = {k: frame.record[k] for k in ("image_size", "timing_ms", "roi") if k in frame.record}
-        return {**out, **extra, "camera_model": fz["camera_model"], "frozen_intrinsics": dict(fz),
+        return {**out, **_kept(frame.record), "camera_model": fz["camera_model"], "frozen_intrinsics": dict(fz),
                 "self_calibrated": "frozen"}
+
+
+def _kept(record: dict) -> dict:
+    """What a frame's own record keeps when a joint (window or frozen) record replaces it: its image
+    size, timings, region of interest and ``camera_class`` (eval.camera_classes)."""
+    return {k: record[k] for k in ("image_size", "timing_ms", "roi", "camera_class") if k in record}

@@ -25,7 +25,7 @@ from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.labels import frame_labels
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
-from dockfactory.solver.synthetic import IMAGE_SIZE, docking_scene
+from dockfactory.solver.synthetic import IMAGE_SIZE, docking_run, docking_scene
 
 SMOKE = shipped_config("smoke").read_text()
 BAYER = '\n[sensor]\npresets = ["imx273"]\ncfa = ["RGGB"]\n'
@@ -117,17 +117,17 @@ def test_a_three_chip_datasets_frames_keep_the_card(painted_source, monkeypatch)
     assert all(r["camera_class"] == "three-chip" for r in poses["frames"].values())
 
 
-def test_a_docking_run_carries_its_classes_section_shift(tmp_path_factory, monkeypatch):
+def test_a_docking_run_carries_its_classes_section_shift_and_factor(tmp_path_factory, monkeypatch):
     text = BAYER_JPEG_TEXT + "\n[runs]\nframes_per_run = 4\n"
     ds = Dataset.open(painted_from_text(tmp_path_factory, "bayer-jpeg-runs", text))
-    shifts, real = [], solve_frames.solve_run
+    runs, real = [], solve_frames.solve_run
 
-    def spy(markers, pp, group, frames, used, sigma, model, options, edges=None):
-        shifts.append(options.section_shift_px)
-        return real(markers, pp, group, frames, used, sigma, model, options, edges)
+    def spy(markers, pp, group, frames, used, sigma, model, options, edges=None, class_factor=1.0):
+        runs.append((options.section_shift_px, class_factor))
+        return real(markers, pp, group, frames, used, sigma, model, options, edges, class_factor)
     monkeypatch.setattr(solve_frames, "solve_run", spy)
     poses = solve_dataset(ds, detections=_detections(ds), self_calibrate="sequence")
-    assert shifts and all(s == class_section_shift("bayer-jpeg", None) for s in shifts)
+    assert runs and all(r == (class_section_shift("bayer-jpeg", None), CAMERA_CLASS_FACTORS["bayer-jpeg"]) for r in runs)
     assert all(r["camera_class"] == "bayer-jpeg" for r in poses["frames"].values())
 
 
@@ -170,3 +170,50 @@ def test_told_the_class_frames_the_card_refuses_pass_whole():
         assert r["ok"] and not r.get("left_out") and r["camera_class"] == "bayer-jpeg", r.get("reason")
         assert r["fit_test"]["camera_class_factor"] == CAMERA_CLASS_FACTORS["bayer-jpeg"]
         assert r["fit_test"]["card"]["ratio"] > 3 and "section_shift_variance" in r
+
+
+def _far_run(seed: int, zoomed: float = 1.0):
+    """(an opened-dataset stand-in with one docking run of 6 frames, its detections): synthetic far
+    frames of one fixed camera whose centres carry a Bayer + JPEG camera's noise, their labels
+    telling the class; frame 000004's centres scaled by ``zoomed`` about the principal point (its
+    zoom changed: not the run's camera)."""
+    noise = CAMERA_CLASS_FACTORS["bayer-jpeg"] * CARD
+    cfg = config_from_dict(tomllib.loads(f"[image]\nwidth = {IMAGE_SIZE[0]}\nheight = {IMAGE_SIZE[1]}\n"
+                                         "[runs]\nframes_per_run = 6\n"))
+    run = docking_run(np.random.default_rng(seed), 6, markers=FAR_LAYOUT, **FAR)
+    labels, frames = {}, {}
+    for k, sc in enumerate(run.frames):
+        uv = np.vstack([sc.uv_a, sc.uv_b]) + noise * np.random.default_rng(100 * seed + k).standard_normal(
+            (len(sc.uv_a) + len(sc.uv_b), 2))
+        if k == 4:
+            uv = sc.principal_point + zoomed * (uv - sc.principal_point)
+        fid = f"{k:06d}"
+        labels[fid] = {"spec": {"unit": 0, "run": 0}, "camera": {"jpeg_quality": 90},
+                       "sampled": {"sensor": {"chain": {"cfa": "RGGB"}}}}
+        frames[fid] = [{"class_id": int(i >= len(sc.uv_a)), "score": 1.0, "center_px": p.tolist()}
+                       for i, p in enumerate(uv)]
+    ds = SimpleNamespace(config=cfg, labels=labels, markers=lambda: FAR_LAYOUT, frames=lambda splits: list(labels),
+                         version_id="synthetic", root="synthetic")
+    return ds, {"centre_noise_px": CARD, "frames": frames}
+
+
+def test_a_runs_frames_at_their_classs_noise_pass_the_run_gate_and_another_camera_still_fails():
+    """A docking run whose centres carry a Bayer + JPEG camera's noise (7.9x the card): the frames
+    the frame gate passed (told their class) also pass the run gate, at the class's noise where the
+    card alone refuses them (residuals over 3x it); a frame whose zoom changed by 1 % is still left
+    out of its run."""
+    for seed in (0, 1):
+        ds, dets = _far_run(seed)
+        frames = solve_dataset(ds, ("test",), detections=dets, lens=UNCALIBRATED_LENS, camera_model="auto",
+                               self_calibrate="sequence")["frames"]
+        joint = [r for r in frames.values() if r.get("self_calibrated") == "sequence"]
+        assert len(joint) >= 5 and all(r["camera_class"] == "bayer-jpeg" for r in frames.values())
+        for r in joint:
+            assert r["ok"], r.get("reason")
+            assert r["fit_test"]["camera_class_factor"] == CAMERA_CLASS_FACTORS["bayer-jpeg"]
+            assert r["fit_test"]["card"]["ratio"] > 3 and r["run_frames"] == len(joint)
+        ds, dets = _far_run(seed, zoomed=1.01)
+        frames = solve_dataset(ds, ("test",), detections=dets, lens=UNCALIBRATED_LENS, camera_model="auto",
+                               self_calibrate="sequence")["frames"]
+        assert not frames["000004"]["ok"] and frames["000004"]["reason"].startswith("docking run solve: residuals")
+        assert sum(r["ok"] for r in frames.values()) == len(joint) - 1

@@ -226,6 +226,21 @@ def test_class_test_needs_a_class_a_noise_and_no_geometry_pattern():
     assert fit_gate.class_test({k: v for k, v in rec.items() if k != "model_check"}, sigma, 7.9) is None
 
 
+def test_the_run_gate_takes_the_runs_class_factor():
+    """A run's frame 8x the card: refused at the card, passed at the run's class (its fit_test the
+    class's, the card's ratio under ``card``) unless the run's residuals show a geometry pattern."""
+    rec = {"ok": True, "n_markers": {"A": 7, "B": 7}, "rmse_px": {"A": 0.1, "B": 0.1}, "camera_model": "pinhole",
+           "self_calibrated": "sequence", "run_frames": 5, "model_check": {"dof": 3, "p_value": 0.5}}
+    sigma = 0.1 / 8.0
+    bad = fit_gate.run_misfits({"f": dict(rec)}, sigma)
+    assert list(bad) == ["f"] and bad["f"]["explains"] is False
+    records = {"f": dict(rec), "g": {"ok": False}}
+    assert fit_gate.run_misfits(records, sigma, camera_classes.classes_factor(["three-chip", "bayer-jpeg"])) == {}
+    assert records["f"]["fit_test"]["camera_class_factor"] == BAYER_JPEG and records["f"]["fit_test"]["card"]["ratio"] > 7
+    pattern = {**rec, "model_check": {"dof": 3, "p_value": 0.01}}
+    assert list(fit_gate.run_misfits({"f": pattern}, sigma, BAYER_JPEG)) == ["f"]
+
+
 @pytest.mark.parametrize("cfa, jpeg, cls", [(None, False, "three-chip"), ("RGGB", False, "bayer"),
                                             (None, True, "jpeg"), ("BGGR", True, "bayer-jpeg")])
 def test_camera_class_of_a_frame(cfa, jpeg, cls):
