@@ -251,8 +251,12 @@ class FrameReader:
 
 
 def frame_line(index: int, timestamp_ms: float, record: dict) -> dict:
-    """The JSON line of one measured frame (the module docstring) from its measure record."""
+    """The JSON line of one measured frame (the module docstring) from its measure record; its
+    ``camera_class`` (eval.camera_classes) when the record names one, as every record of
+    :meth:`StreamMeasurer.line` does."""
     line = {"type": "frame", "frame": index, "timestamp_ms": timestamp_ms, "ok": bool(record["ok"])}
+    if "camera_class" in record:
+        line["camera_class"] = record["camera_class"]
     if record["ok"]:
         std = np.sqrt(np.clip(np.diag(np.asarray(record["covariance"], float)), 0.0, None))
         line.update(pose=record["pose"], std=dict(zip(POSE_NAMES, std.tolist())), focal_px=record["focal_px"],
@@ -409,9 +413,12 @@ class StreamMeasurer:
     def line(self, item, record: dict | None = None) -> dict:
         """The JSON line of one frame ``(index, t_start, read_ms, timestamp_ms, rgb)`` of a
         :class:`FrameReader`, its timings and (with them) the filtered pose and the hook's answer;
-        ``record``: the frame's measure record when a worker process made it (None: solved here)."""
+        ``record``: the frame's measure record when a worker process made it (None: solved here).
+        Every line names the frame's ``camera_class``: the record's, else (a frame refused or failed
+        before its solve) the class of the options' ``cfa`` and ``jpeg`` (eval.camera_classes)."""
         index, t_start, read_ms, timestamp_ms, rgb = item
         record = self.solve(index, rgb) if record is None else record
+        record.setdefault("camera_class", camera_class(self.options.cfa, self.options.jpeg))
         line = frame_line(index, timestamp_ms, record)
         if self.kalman is not None:
             line["filtered"] = self.kalman.step(timestamp_ms / 1000.0, line.get("pose"), line.get("std"))

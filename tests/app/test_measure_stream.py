@@ -413,3 +413,42 @@ def test_a_calibrated_camera_streamed_is_measured_as_its_images(tmp_path_factory
         pose = lines[k]["pose"]
         assert abs(pose["x_mm"] - labels[k]["x_mm"]) < 3 and abs(pose["y_mm"] - labels[k]["y_mm"]) < 3
         assert abs(lines[k]["pose"]["alpha_deg"] - labels[k]["alpha_deg"]) < 0.1
+
+
+class _NoMarkers:
+    """A detector that finds nothing (or raises ``error``): the stream's records without a solve."""
+    centre_noise_px, section_shift_px = 0.0174, None
+
+    def __init__(self, error: Exception | None = None):
+        self.error = error
+
+    def detect(self, image, cfa=None, jpeg=False):
+        if self.error is not None:
+            raise self.error
+        return []
+
+
+@pytest.mark.parametrize("cfa, jpeg, cls", [(None, False, "three-chip"), ("rggb", False, "bayer"),
+                                            (None, True, "jpeg"), ("rggb", True, "bayer-jpeg")])
+def test_every_stream_line_names_the_frames_camera_class(cfa, jpeg, cls):
+    """Each frame line names its ``camera_class`` as measure's records do: the class of the
+    stream's ``--cfa`` and chroma (eval.camera_classes.camera_class), for a frame without
+    markers, one refused by the reader, one whose measurement raised, a worker's record that names
+    none (a dead worker's) and a solved record's own (before: no line carried it)."""
+    options = measure_stream.StreamOptions(cfa=cfa, jpeg=jpeg)
+    image = np.zeros((48, 64, 3), np.uint8)
+
+    def line(detector, rgb, record=None):
+        measurer = measure_stream.StreamMeasurer(detector, (), options)
+        return measurer.line((3, 0.0, 1.0, 100.0, rgb), record)
+
+    assert line(_NoMarkers(), image)["category"] == "no markers detected"
+    assert line(_NoMarkers(), image)["camera_class"] == cls
+    assert line(None, "refused")["camera_class"] == cls
+    failed = line(_NoMarkers(RuntimeError("boom")), image)
+    assert failed["category"] == "measure error" and failed["camera_class"] == cls
+    dead = {"ok": False, "category": "measure error", "reason": "frame 3: the worker died"}
+    assert line(None, None, dead)["camera_class"] == cls
+    solved = {"ok": True, "covariance": np.eye(6).tolist(), "pose": {}, "focal_px": 1500.0, "rmse_px": {},
+              "n_detections": 0, "marker_ids": [], "camera_class": "bayer"}
+    assert measure_stream.frame_line(3, 100.0, solved)["camera_class"] == "bayer"
