@@ -21,7 +21,8 @@ from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_space import Design, DesignSpace, jpeg_quality
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.eval.frame_cameras import cameras_of_test_frames
-from dockfactory.solver.disc_noise import section_noise_shapes
+from dockfactory.eval.pixel_aspect import delivered_ellipses, square_pixel_covariances, square_pixel_shift
+from dockfactory.solver.disc_noise import disc_ellipses, noise_shapes, section_noise_shapes
 from dockfactory.solver.refine import (
     d_from_b_jacobian,
     inverse_spd,
@@ -30,7 +31,8 @@ from dockfactory.solver.refine import (
 )
 from dockfactory.solver.section_shift import section_shift_covariance
 
-__all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "mean_variances", "Prediction"]
+__all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "mean_variances", "Prediction",
+           "square_pixel_noise_shapes"]
 
 
 @dataclass(frozen=True)
@@ -83,33 +85,52 @@ def _section_jac(markers, cam, focal, pp):
     return jac
 
 
-def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass):
+def square_pixel_noise_shapes(markers, cam_from_s, focal: float, edge_px=None, pixel_aspect: float = 1.0):
+    """(m, 2, 2): the disc model's noise shapes (solver.disc_noise.noise_shapes) of ``markers`` (one
+    section's, seen by ``cam_from_s`` (4, 4)) in the square-pixel pinhole at fx = ``focal``: the
+    shapes of their discs' delivered images (fy = ``pixel_aspect`` fx:
+    eval.pixel_aspect.delivered_ellipses) taken there (S^-1 T S^-1), as the judge's bound takes
+    delivered noise (eval.pixel_aspect.crb_delivered); ``edge_px`` (m,) delivered px or None.
+    solver.disc_noise.section_noise_shapes itself for ``pixel_aspect`` 1."""
+    if pixel_aspect == 1.0 or len(markers) == 0:
+        return section_noise_shapes(markers, cam_from_s, focal, edge_px)
+    cam = np.asarray(cam_from_s, dtype=np.float64)
+    centres = np.array([m.center_mm for m in markers]) @ cam[:3, :3].T + cam[:3, 3]
+    normals = np.array([m.normal for m in markers]) @ cam[:3, :3].T
+    ellipses = disc_ellipses(centres, normals, [m.diameter_mm for m in markers], focal)
+    return square_pixel_covariances(noise_shapes(delivered_ellipses(ellipses, pixel_aspect), edge_px), pixel_aspect)
+
+
+def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, pixel_aspect: float = 1.0):
     """(noise (6,), offset (6,)) variances of d_from_b (POSE_NAMES order, mm^2 / deg^2) of one
-    frame: the fit's sandwich covariance under the disc noise and the section offset."""
+    frame: the fit's sandwich covariance under the disc noise and the section offset. A camera
+    with non-square pixels (``pixel_aspect`` = fy / fx, ``focal`` = fx): the fit in the square-pixel
+    pinhole at fx about ``pp``, the noise the delivered discs show taken there
+    (:func:`square_pixel_noise_shapes`) and the offset likewise (eval.pixel_aspect); 1: square."""
     ma = [m for m in markers if m.section == "A"]
     mb = [m for m in markers if m.section == "B"]
     jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
     edges = (None, None) if not noise.edge_px > 0 else (np.full(len(ma), noise.edge_px), np.full(len(mb), noise.edge_px))
-    shapes = np.concatenate([section_noise_shapes(ma, cam_a, focal, edges[0]),
-                             section_noise_shapes(mb, cam_b, focal, edges[1])])
+    shapes = np.concatenate([square_pixel_noise_shapes(ma, cam_a, focal, edges[0], pixel_aspect),
+                             square_pixel_noise_shapes(mb, cam_b, focal, edges[1], pixel_aspect)])
     a = inverse_spd(jac.T @ jac)
     jr = jac.reshape(-1, 2, jac.shape[1])
     middle = noise.scale_px ** 2 * np.einsum("nap,nab,nbq->pq", jr, shapes, jr)
     cov_noise = a @ middle @ a
     groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
-    cov_shift = section_shift_covariance(jac, groups, noise.shift_px)
+    cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect))
     prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])
     return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))
 
 
 def mean_variances(cfg, noise: NoiseClass, max_frames: int):
     """(noise (6,), offset (6,), frames): :func:`frame_variances` averaged over the first
-    ``max_frames`` test frames of ``cfg``. ConfigError / DockfactoryError when a frame cannot be
+    ``max_frames`` test frames of ``cfg`` (each at its camera's pixel aspect). ConfigError / DockfactoryError when a frame cannot be
     drawn (the markers do not fit the image) or its geometry is degenerate."""
     markers = static_scene(cfg).markers
     frames = cameras_of_test_frames(cfg, max_frames, "design")
-    parts = [frame_variances(markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise)
-             for f in frames]
+    parts = [frame_variances(markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise,
+                             f.pixel_aspect) for f in frames]
     vn, vs = np.mean(parts, axis=0)
     if not (np.all(np.isfinite(vn)) and np.all(np.isfinite(vs))):
         raise DockfactoryError("the pose is not observable from these markers (degenerate geometry)")

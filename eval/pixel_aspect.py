@@ -15,7 +15,8 @@ import numpy as np
 
 from dockfactory.solver.crb import DockingBound, crb_d_from_b
 
-__all__ = ["label_pixel_aspect", "delivered_ellipses", "square_pixel_covariances", "crb_delivered"]
+__all__ = ["label_pixel_aspect", "delivered_ellipses", "square_pixel_covariances", "square_pixel_shift",
+           "crb_delivered"]
 
 
 def label_pixel_aspect(label: dict) -> float:
@@ -44,6 +45,14 @@ def square_pixel_covariances(covariances, aspect: float):
     if aspect == 1.0:
         return covariances
     return np.asarray(covariances, dtype=np.float64) * _aspect_grid(aspect, -1.0)
+
+
+def square_pixel_shift(shift_px, aspect: float):
+    """(x, y) px: S^-1 s, a per-axis std ``shift_px`` (x, y) of delivered pixels (a section's
+    common offset) in the square-pixel pinhole at fx; ``shift_px`` itself for ``aspect`` 1."""
+    if aspect == 1.0:
+        return shift_px
+    return (float(shift_px[0]), float(shift_px[1]) / float(aspect))
 
 
 def _mean_axis_variance(shapes: np.ndarray) -> float:

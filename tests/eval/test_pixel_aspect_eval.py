@@ -1,7 +1,7 @@
 """The judge on cameras with non-square pixels (K's fy = 1.03 fx, the label's focal_px = fx): the
-disc model's noise shapes, the Cramer-Rao bound of evaluate and of plan-frames, the tolerance
-envelope's cameras and the report's reprojection, each against OpenCV's projectPoints with the
-label's own K; a square camera's figures are unchanged.
+disc model's noise shapes, the Cramer-Rao bound of evaluate and of plan-frames, the design
+predictor, the tolerance envelope's cameras and the report's reprojection, each against OpenCV's
+projectPoints with the label's own K; a square camera's figures are unchanged.
 
 Labels are the factory's own (``sample_frame`` and ``frame_labels``, no render). The reference
 bound is the Fisher information of the delivered centres, differentiated numerically through
@@ -67,9 +67,8 @@ def _delivered(theta, pa, pb, pp, aspect) -> np.ndarray:
     return np.vstack([_project(pa, cam_a, k), _project(pb, cam_a @ transform_from_pose_components(*theta[6:12]), k)])
 
 
-def reference_std(pa, cam_from_a, pb, d_from_b, focal, pp, aspect, point_cov) -> np.ndarray:
-    """(6,) Cramer-Rao std of d_from_b's components (mm, deg) from the delivered centres' Fisher
-    information, point covariances ``point_cov`` (N, 2, 2) px^2 of the delivered pixels."""
+def _delivered_jacobian(pa, cam_from_a, pb, d_from_b, focal, pp, aspect) -> np.ndarray:
+    """(N, 2, 13): d(delivered centres) / d(rvec_a, t_a, d_from_b's pose, fx), numerically."""
     pose = pose_components(d_from_b)
     theta = np.r_[cv2.Rodrigues(np.asarray(cam_from_a)[:3, :3])[0].ravel(), np.asarray(cam_from_a)[:3, 3],
                   [pose[c] for c in COMPONENTS], focal]
@@ -80,6 +79,13 @@ def reference_std(pa, cam_from_a, pb, d_from_b, focal, pp, aspect, point_cov) ->
         up[i] += h
         down[i] -= h
         jac[:, :, i] = (_delivered(up, pa, pb, pp, aspect) - _delivered(down, pa, pb, pp, aspect)) / (2 * h)
+    return jac
+
+
+def reference_std(pa, cam_from_a, pb, d_from_b, focal, pp, aspect, point_cov) -> np.ndarray:
+    """(6,) Cramer-Rao std of d_from_b's components (mm, deg) from the delivered centres' Fisher
+    information, point covariances ``point_cov`` (N, 2, 2) px^2 of the delivered pixels."""
+    jac = _delivered_jacobian(pa, cam_from_a, pb, d_from_b, focal, pp, aspect)
     info = np.einsum("nap,nab,nbq->pq", jac, np.linalg.inv(point_cov), jac)
     return np.sqrt(np.diag(np.linalg.inv(info))[6:12])
 
@@ -172,6 +178,63 @@ def test_plan_frames_bounds_the_delivered_centres():
     want = np.sqrt(np.mean(np.square(stds), axis=0))
     got = expected_from_config(cfg, 0.1, max_frames=3)
     assert np.allclose([got[c.split("_")[0]] for c in COMPONENTS], want, rtol=2e-4)
+
+
+# ----------------------------------------------------------------------------- the design predictor
+
+def _sandwich_std(jac, aspect, point_cov, groups, shift_px) -> np.ndarray:
+    """(6,) std of d_from_b's components of the unweighted least-squares fit in the square-pixel
+    pinhole at fx (residuals S^-1 (delivered centres), S = diag(1, aspect)) whose delivered centres
+    have covariances ``point_cov`` (N, 2, 2) px^2 and a common shift per section (``groups``) of
+    std ``shift_px`` per delivered axis."""
+    s_inv = np.diag([1.0, 1.0 / aspect])
+    jsq = np.einsum("ab,nbp->nap", s_inv, jac)
+    a = np.linalg.inv(np.einsum("nap,naq->pq", jsq, jsq))
+    middle = np.einsum("nap,nab,nbq->pq", jsq, s_inv @ point_cov @ s_inv, jsq)
+    shift = s_inv @ np.diag(np.square(shift_px)) @ s_inv
+    for g in np.unique(groups):
+        summed = jsq[groups == g].sum(axis=0)
+        middle += summed.T @ shift @ summed
+    return np.sqrt(np.diag(a @ middle @ a)[6:12])
+
+
+def _marker_in_d(m, d_from_s) -> dict:
+    """A layout marker as a label's (``center_d_mm``, ``normal_d``, ``diameter_mm``)."""
+    return {"center_d_mm": d_from_s[:3, :3] @ np.asarray(m.center_mm) + d_from_s[:3, 3],
+            "normal_d": d_from_s[:3, :3] @ np.asarray(m.normal), "diameter_mm": m.diameter_mm}
+
+
+def test_the_design_predictor_fits_the_square_pinhole_under_the_delivered_discs_noise():
+    """The prediction (eval.design_predict.frame_variances, mean_variances) of a camera with fy =
+    1.03 fx: the sandwich of the fit in the square pinhole at fx of centres whose delivered noise
+    is the disc model of the discs OpenCV projects through K (with the thin-disc term) plus a common
+    shift per section, numerically; the square camera's figures are off by more than 1 %."""
+    from dockfactory.eval.design_predict import NoiseClass, frame_variances, mean_variances
+    cfg = _config(ASPECT, frames=12)
+    markers = static_scene(cfg).markers
+    ma, mb = [m for m in markers if m.section == "A"], [m for m in markers if m.section == "B"]
+    noise = NoiseClass(0.02, (0.03, 0.02), 2.0)
+    frames = cameras_of_test_frames(cfg, 2, "test")
+    for f in frames:
+        assert f.pixel_aspect == pytest.approx(ASPECT)
+        d_from_b = np.linalg.inv(f.cam_from_a) @ f.cam_from_b
+        label = {"camera": {"cam_from_d": f.cam_from_a, "K": _k(f.focal_px, f.principal_point, ASPECT)}}
+        discs = np.array([_disc_image(label, _marker_in_d(m, np.eye(4))) for m in ma]
+                         + [_disc_image(label, _marker_in_d(m, d_from_b)) for m in mb])
+        point_cov = noise.scale_px ** 2 * noise_shapes(discs, np.full(len(discs), noise.edge_px))
+        jac = _delivered_jacobian(marker_points(ma, "A"), f.cam_from_a, marker_points(mb, "B"), d_from_b,
+                                  f.focal_px, f.principal_point, ASPECT)
+        groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
+        want = _sandwich_std(jac, ASPECT, point_cov, groups, noise.shift_px)
+        args = (markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise)
+        got = np.sqrt(np.sum(frame_variances(*args, f.pixel_aspect), axis=0))
+        assert np.allclose(got, want, rtol=1e-6), got / want - 1
+        square = np.sqrt(np.sum(frame_variances(*args), axis=0))
+        assert np.max(np.abs(square / want - 1)) > 0.01                         # the aspect matters
+    vn, vs, n = mean_variances(cfg, noise, 2)
+    parts = [frame_variances(markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise,
+                             f.pixel_aspect) for f in frames]
+    assert n == 2 and np.allclose(vn + vs, np.sum(np.mean(parts, axis=0), axis=0), rtol=1e-12)
 
 
 # ----------------------------------------------------------------------------- the envelope
