@@ -100,18 +100,43 @@ class Sensitivity:
 def record_geometry(record: dict, markers) -> tuple:
     """(points_a (Na, 3), points_b (Nb, 3), used ids in that order, cam_from_a, cam_from_b,
     Intrinsics, IntrinsicsModel) of a solved pose record (eval.solve_frames.pose_record with
-    ``image_size``; a pinhole record's principal point is the image centre)."""
+    ``image_size``; a pinhole record's principal point is the one it was solved about: its
+    ``calibration``'s (measure --calibration), else the image centre)."""
     by_id = {m.id: m for m in markers}
     ids = [i for s in ("A", "B") for i in record["marker_ids"] if by_id[i].section == s]
     pts = {s: np.array([by_id[i].center_mm for i in ids if by_id[i].section == s], dtype=float).reshape(-1, 3)
            for s in ("A", "B")}
     cam_from_a = np.array(record["cam_from_a"], dtype=float)
     cam_from_b = cam_from_a @ np.array(record["d_from_b"], dtype=float)
-    w, h = record["image_size"]
-    intr_rec = record.get("intrinsics") or {"cx": (w - 1) / 2.0, "cy": (h - 1) / 2.0}
+    solved_pp = _solved_principal_point(record)
+    intr_rec = record.get("intrinsics") or solved_pp
     coeffs = [intr_rec.get(k, 0.0) for k in ("k1", "k2", "p1", "p2")] + [0.0]
     intr = Intrinsics(float(record["focal_px"]), np.array([intr_rec["cx"], intr_rec["cy"]]), np.array(coeffs))
     return pts["A"], pts["B"], ids, cam_from_a, cam_from_b, intr, MODELS[record.get("camera_model", "pinhole")]
+
+
+def _solved_principal_point(record: dict) -> dict:
+    """{"cx", "cy"} px: the principal point a pinhole record was solved about: its calibration's,
+    else the centre of its ``image_size``."""
+    w, h = record["image_size"]
+    cal = record.get("calibration")
+    if cal is not None:
+        cx, cy = cal["principal_point"]
+        return {"cx": float(cx), "cy": float(cy)}
+    return {"cx": (w - 1) / 2.0, "cy": (h - 1) / 2.0}
+
+
+def solved_bias_px(record: dict, bias_px):
+    """(x, y) px: the detector's centre offset ``bias_px`` (x, y; delivered pixels) in the pixels
+    the record was solved in. A calibrated record's centres (its ``calibration``: measure
+    --calibration) were taken to the ideal square camera at f = sqrt(fx fy)
+    (core.calibration_files.ideal_pixels), which scales each axis by f / fx and f / fy (the lens's
+    distortion, which varies over the image, left out); ``bias_px`` itself otherwise (None: None)."""
+    cal = record.get("calibration")
+    if bias_px is None or cal is None:
+        return bias_px
+    f = math.sqrt(float(cal["fx"]) * float(cal["fy"]))
+    return (float(bias_px[0]) * f / float(cal["fx"]), float(bias_px[1]) * f / float(cal["fy"]))
 
 
 def section_shift_variance(record: dict) -> np.ndarray | None:
@@ -144,7 +169,8 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
                 k: float = COVERAGE_K, noise_from_residuals: bool = True) -> dict:
     """{component: {term: u or None, "combined": u_c, "expanded": U, "k": k}} of a solved record
     (module docstring); a term not given (no ``sigma_mm``, no ``bias_px``) is None and adds
-    nothing. Units: mm for x_mm, y_mm, z_mm, deg for the angles. ``noise_from_residuals``: the
+    nothing; ``bias_px`` is in delivered pixels (:func:`solved_bias_px` takes it to the record's).
+    Units: mm for x_mm, y_mm, z_mm, deg for the angles. ``noise_from_residuals``: the
     record's covariance scales with a noise estimated from its residuals (measure, solve without
     a known sigma), which then already holds the share of the layout term that shows as misfit:
     that share (the layout's residual variance over the noise used, ``sigma_px``) is moved from
@@ -168,7 +194,7 @@ def pose_budget(record: dict, markers: tuple[Marker, ...], sigma_mm: dict | None
             centre2 = centre2 * (1.0 - min(1.0, sens.layout_residual_px2(s) / float(record["sigma_px"]) ** 2))
     terms = {"centre_noise": centre2, "intrinsics": u_intr2, "model_error": model2, "section_shift": shift2,
              "layout": layout2,
-             "detector_bias": None if bias_px is None else sens.bias_var(bias_px)}
+             "detector_bias": None if bias_px is None else sens.bias_var(solved_bias_px(record, bias_px))}
     out = {}
     for c, name in enumerate(POSE_NAMES):
         row = {t: (None if v is None else math.sqrt(float(v[c]))) for t, v in terms.items()}
