@@ -28,6 +28,7 @@ from dockfactory.core.names import MIN_SCORE, POSE_NAMES
 from dockfactory.detector.noise_card import card_figures
 from dockfactory.measure.overlay import draw_measurement
 from dockfactory.measure.pool import MeasurePool
+from dockfactory.measure.selfcal import kept_from_frame
 from dockfactory.measure.read import (
     DEFAULT_MAX_MEGAPIXELS,
     MAX_MEGAPIXELS,
@@ -234,10 +235,11 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
                             lens: LensPrior | None = None, section_shift_px=None) -> dict:
     """Solve the identified frames jointly (one camera unit); their records are replaced by the
-    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card), each keeping its
-    ``camera_class``, whose factor the run gate takes (the largest of the frames':
-    eval.camera_classes.classes_factor). Returns the run's record (shared intrinsics or the
-    reason it failed)."""
+    joint ones (``sigma_floor_px``, ``section_shift_px``: the weights' noise card), each keeping
+    what dockfactory.measure.selfcal.kept_from_frame keeps (its size, timings with the joint
+    solve's share added, ``notes`` and ``camera_class``, whose factor the run gate takes: the
+    largest of the frames', eval.camera_classes.classes_factor). Returns the run's record
+    (shared intrinsics or the reason it failed)."""
     solved = [f for f in frames if f.record["ok"]]
     if not solved:
         return {"ok": False, "reason": "no frame was identified", "frames": 0}
@@ -256,7 +258,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
         timing = {**f.record["timing_ms"], "solve": round(f.record["timing_ms"]["solve"] + ms, 2)}
-        f.record = {**records[str(f.index)], "image_size": f.record["image_size"], "timing_ms": timing}
+        f.record = {**records[str(f.index)], **kept_from_frame(f.record), "timing_ms": timing}
     first = records[keys[0]]
     if not first["ok"]:
         return {"ok": False, "reason": first["reason"], "category": first["category"], "frames": len(solved)}

@@ -73,7 +73,7 @@ class WindowCalibration:
         self.joint += 1
         if self.freeze_after is not None and self.joint >= self.freeze_after:
             self.frozen = {"camera_model": out["camera_model"], "focal_px": out["focal_px"], **out["intrinsics"]}
-        return {**out, **_kept(record), "self_calibrated": "window"}
+        return {**out, **kept_from_frame(record), "self_calibrated": "window"}
 
     def _frozen(self, index: int, frame) -> dict:
         """The frame's centres undistorted with the frozen intrinsics, solved alone (pinhole)."""
@@ -88,11 +88,13 @@ class WindowCalibration:
                         {key: frame.used_edges}, classes_factor([frame.record.get("camera_class", "three-chip")]))[key]
         if not out["ok"]:
             return {**frame.record, "self_calibration": f"frozen-intrinsics solve failed: {out['reason']}"}
-        return {**out, **_kept(frame.record), "camera_model": fz["camera_model"], "frozen_intrinsics": dict(fz),
+        return {**out, **kept_from_frame(frame.record), "camera_model": fz["camera_model"], "frozen_intrinsics": dict(fz),
                 "self_calibrated": "frozen"}
 
 
-def _kept(record: dict) -> dict:
-    """What a frame's own record keeps when a joint (window or frozen) record replaces it: its image
-    size, timings, region of interest and ``camera_class`` (eval.camera_classes)."""
-    return {k: record[k] for k in ("image_size", "timing_ms", "roi", "camera_class") if k in record}
+def kept_from_frame(record: dict) -> dict:
+    """What a frame's own record keeps when a joint record (a window's, a frozen solve's, or
+    ``measure --self-calibrate sequence``'s) replaces it: its image size, timings, region of
+    interest, ``camera_class`` (eval.camera_classes) and ``notes`` (the decoder's messages and
+    the warnings raised measuring it), those it has."""
+    return {k: record[k] for k in ("image_size", "timing_ms", "roi", "camera_class", "notes") if k in record}

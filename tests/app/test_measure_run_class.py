@@ -1,7 +1,8 @@
 """measure's joint solves keep each frame's camera class: ``--self-calibrate sequence``
 (dockfactory.measure.images.self_calibrate_sequence) and a stream's window
 (dockfactory.measure.selfcal.WindowCalibration) replace a frame's record by the run's, which keeps
-its ``camera_class``, and the run gate judges the run at that class's noise (eval.fit_gate.run_misfits).
+its ``camera_class`` (and the frame's ``notes``), and the run gate judges the run at that class's
+noise (eval.fit_gate.run_misfits).
 
 The frames are synthetic far frames of one docking run (solver.synthetic.docking_run, scene B's
 geometry) whose centres carry a Bayer + JPEG camera's noise (7.9x the card), each solved alone as
@@ -71,3 +72,31 @@ def test_a_streams_window_keeps_the_frames_class_and_judges_it_at_its_noise(cls)
     assert all(r["camera_class"] == cls for r in joint)
     if cls == BAYER_JPEG:
         assert all(r["fit_test"]["camera_class_factor"] == CAMERA_CLASS_FACTORS[cls] for r in joint)
+
+
+NOTES = ["UserWarning: a decoder's message"]
+
+
+def test_a_sequence_runs_records_keep_each_frames_notes():
+    """``--self-calibrate sequence`` replaces a frame's record by the run's: the frame's ``notes``
+    (the decoder's messages and the warnings raised measuring it) stay in it, as its size, timings
+    and class do (before: dropped)."""
+    frames = _frames("three-chip")
+    for f in frames[::2]:
+        f.record["notes"] = list(NOTES)
+    run = self_calibrate_sequence(frames, LAYOUT, "auto", CARD, None, None)
+    assert run["ok"] and all(f.record["self_calibrated"] == "sequence" for f in frames)
+    assert [f.record.get("notes") for f in frames] == [NOTES if k % 2 == 0 else None for k in range(len(frames))]
+    assert all(f.record["image_size"] == list(IMAGE_SIZE) for f in frames)
+
+
+def test_a_streams_joint_records_keep_each_frames_notes():
+    """A stream's window and frozen-intrinsics records keep the frame's own ``notes`` too."""
+    window = WindowCalibration(tuple(LAYOUT), 6, "auto", freeze_after=2, options=_options("three-chip"))
+    records = []
+    for f in _frames("three-chip"):
+        f.record["notes"] = list(NOTES)
+        records.append(window.apply(f.index, f))
+    kinds = [r.get("self_calibrated") for r in records]
+    assert "window" in kinds and "frozen" in kinds, kinds
+    assert all(r["notes"] == NOTES for r in records)
