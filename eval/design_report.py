@@ -13,7 +13,7 @@ import html
 import io
 from pathlib import Path
 
-from dockfactory.core.io import write_json_atomic, write_text_atomic
+from dockfactory.core.io import make_output_folder, write_json_atomic, write_text_atomic
 
 __all__ = ["table_lines", "markdown", "write_design_outputs"]
 
@@ -136,9 +136,9 @@ def _html(result: dict, png: str | None) -> str:
 
 
 def write_design_outputs(out_dir, result: dict) -> list[Path]:
-    """design.json, design.md, design.html (+ design.png) in ``out_dir``; the paths written."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """design.json, design.md, design.html (+ design.png) in ``out_dir``; the paths written.
+    DockfactoryError (one line naming ``--out``) when ``out_dir`` is a file or cannot be made."""
+    out = make_output_folder(out_dir)
     png = _plot_png(result["designs"])
     write_json_atomic(out / "design.json", result)
     write_text_atomic(out / "design.md", markdown(result))

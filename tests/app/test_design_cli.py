@@ -115,6 +115,16 @@ def test_a_bad_space_is_one_line_and_exit_2(tmp_path, capsys, edit, needle):
     assert not (tmp_path / "o").exists()
 
 
+def test_an_out_that_is_a_file_is_one_line_and_exit_2_before_any_work(tmp_path, capsys):
+    """--out naming an existing file (a typo, a script's variable) was a traceback after the table."""
+    space, out = _space(tmp_path, SPACE), tmp_path / "taken"
+    out.write_text("mine")
+    code, stdout, err = run_cli(["design", space, "--out", out], capsys)
+    assert code == 2 and "is a file, not a folder" in err and str(out) in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and "designs predicted" not in stdout
+    assert out.read_text() == "mine"
+
+
 def test_a_design_that_cannot_see_its_markers_is_infeasible_with_the_reason(tmp_path, capsys):
     space = _space(tmp_path, SPACE.replace("focal_mm = 6.0", "focal_mm = 25.0"))
     assert run_cli(["design", space, "--out", tmp_path / "o"], capsys)[0] == 0
