@@ -242,15 +242,23 @@ def _directory_lock(directory: Path, folder: Path):
         os.close(fd)   # releases the lock
 
 
-def make_output_folder(folder, option: str = "--out") -> Path:
-    """Create the output folder ``folder`` (and its parents) and return it, or raise one
-    :class:`DockfactoryError` line naming ``option`` and the folder: an existing file, a folder
-    under a file, a place where no folder can be made (read-only, /proc), a folder not writable."""
+def check_output_folder(folder, option: str = "--out") -> Path:
+    """``folder`` as a Path when it can be an output folder as far as can be told without making it
+    (not an empty path, not an existing file), else one :class:`DockfactoryError` line naming
+    ``option``: a command checks its ``--out`` so before work whose results it would lose."""
     if not str(folder).strip():   # Path("") is the current folder: never written by accident
         raise DockfactoryError(f"{option}: an empty path; give the output folder")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise DockfactoryError(f"{option} {folder}: is a file, not a folder")
+    return folder
+
+
+def make_output_folder(folder, option: str = "--out") -> Path:
+    """Create the output folder ``folder`` (and its parents) and return it, or raise one
+    :class:`DockfactoryError` line naming ``option`` and the folder: an existing file, a folder
+    under a file, a place where no folder can be made (read-only, /proc), a folder not writable."""
+    folder = check_output_folder(folder, option)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from dockfactory.cli_args import float_in, output_path, positive_int
-from dockfactory.core.errors import DockfactoryError
+from dockfactory.core.io import check_output_folder
 from dockfactory.core.config import load_config
 from dockfactory.design_verify import comparison_lines, verify_designs
 from dockfactory.core.resources import (
@@ -63,8 +63,7 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
 
 
 def cmd_design(args) -> int:
-    if Path(args.out).exists() and not Path(args.out).is_dir():   # before any work: nothing predicted is lost
-        raise DockfactoryError(f"--out {args.out}: is a file, not a folder")
+    check_output_folder(args.out)   # before any work: a bad --out loses no prediction
     result, by_id, space, scene, spec_path = design_answer(args)
     print("\n".join(table_lines(result["designs"], args.top)))
     print(f"{len(result['designs'])} designs predicted in {result['seconds']:.1f} s")
