@@ -75,6 +75,7 @@ def _far_refined(monkeypatch=None) -> tuple[int, int]:
     return far, off
 
 
+@pytest.mark.slow   # seconds of work: the full suite runs it (make test), the fast lane does not
 def test_a_hidden_chord_is_rarely_a_refined_centre_far_off(monkeypatch):
     """Discs with a chord hidden, most of their centres 1-5 px off (85 of 90): without the symmetry
     term 75 of them are returned refined (as the refinement did before it, like the renders' 7.5 px

@@ -92,6 +92,7 @@ def test_pdf_without_an_engine_is_one_line_and_exit_2(eval_dir, tmp_path, monkey
     assert not out.exists() and not out.with_suffix(".pdf").exists()
 
 
+@pytest.mark.slow   # seconds of work: the full suite runs it (make test), the fast lane does not
 def test_the_print_stylesheet_keeps_each_heading_with_its_plot():
     """A plot after 20-69 lines of text: wherever the page break falls, the plot's heading goes to
     the next page with it. (WeasyPrint's own user-agent stylesheet already avoids a break after a

@@ -64,6 +64,7 @@ def _has_bpy() -> bool:
     return importlib.util.find_spec("bpy") is not None
 
 
+@pytest.mark.slow   # seconds of work: the full suite runs it (make test), the fast lane does not
 @pytest.mark.skipif(not _has_bpy(), reason="needs bpy (Blender as a Python module)")
 def test_gpu_without_a_gpu_is_one_line_exit_2_and_nothing_written(tmp_path, capsys):
     from dockfactory.generator.render_device import probe_gpus

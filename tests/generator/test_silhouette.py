@@ -62,7 +62,7 @@ def ray_silhouette(frame, static, sec: str, d_cam: np.ndarray | None = None) -> 
 CASES = {"pinhole": {}, "lens": {"camera_units": {"k1": [-0.2, -0.2], "k2": [0.05, 0.05], "principal_offset_x_px": [12.0, 12.0]}}}
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", [c if c != "lens" else pytest.param(c, marks=pytest.mark.slow) for c in sorted(CASES)])
 def test_label_silhouette_is_what_rays_hit(case):
     cfg = config_from_dict({"dataset": {"frames": 4}, **CASES[case]})
     static = static_scene(cfg)

@@ -5,6 +5,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from dockfactory.generator import render_worker
 
 
@@ -17,6 +19,7 @@ def _alive(pid: int) -> bool:
         return fh.read().split(")")[-1].split()[0] != "Z"
 
 
+@pytest.mark.slow   # seconds of work: the full suite runs it (make test), the fast lane does not
 def test_a_worker_whose_starter_is_killed_exits():
     """A starter process starts a worker the way the pool does and is killed (SIGKILL); the
     worker, idle on its stdin (which the starter's death does not close: the test holds it),

@@ -93,6 +93,7 @@ def test_joint_parameters_and_covariance_at_crb():
     assert 0.8 < np.median(cov_ratio) < 1.25
 
 
+@pytest.mark.slow   # seconds of work: the full suite runs it (make test), the fast lane does not
 def test_single_section_unbiased_at_crb():
     rng = np.random.default_rng(8)
     sigma, n = 0.1, 300
