@@ -22,7 +22,7 @@ import torch
 from torch import nn
 
 from dockfactory.core.progress import Progress
-from dockfactory.core.io import remove_stale_temps, sha256_file, write_json_atomic
+from dockfactory.core.io import check_output_folder, remove_stale_temps, sha256_file, write_json_atomic
 from dockfactory.detector.anchors import (
     anchor_fitness,
     anchors_per_level,
@@ -352,11 +352,12 @@ def train(dataset: FrameSource, out, cfg: TrainConfig = TrainConfig(), resume: b
         Nothing to resume, a checkpoint of another dataset version or other initial weights, or
         unusable ``init`` weights.
     DockfactoryError, ValueError
-        A dataset without train frames, a frame that cannot be read, a bad data or train config.
+        ``out`` an existing file (before any work), a dataset without train frames, a frame that
+        cannot be read, a bad data or train config.
     FloatingPointError
         The loss became NaN or infinite.
     """
-    out = Path(out)
+    out = check_output_folder(out)   # an existing file is refused before any work, not after an epoch
     if out.is_dir():   # temporary checkpoints a killed run left (their writer is gone)
         remove_stale_temps(out, max_age_s=STALE_CHECKPOINT_S)
     init_w = load_init_weights(init) if init is not None else None

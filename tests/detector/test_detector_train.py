@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from dockfactory.core.errors import DockfactoryError
 from dockfactory.detector.anchors import (
     anchor_fitness,
     anchors_per_level,
@@ -91,6 +92,17 @@ def test_resume_equals_not_stopping(tmp_path):
     for sa, sb in zip(a["optimizer"]["state"].values(), b["optimizer"]["state"].values()):
         assert torch.equal(sa["momentum_buffer"], sb["momentum_buffer"])
     assert a["history"][-1]["box"] == b["history"][-1]["box"] and b["epoch"] == 2
+
+
+def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path):
+    """An --out naming an existing file (a typo, a script's variable) was a FileExistsError traceback
+    when the first checkpoint was written, an epoch of work later."""
+    out = tmp_path / "taken"
+    out.write_text("mine")
+    with pytest.raises(DockfactoryError, match="is a file, not a folder") as err:
+        train(None, out, TrainConfig(epochs=1))   # refused before the dataset is read
+    assert str(out) in str(err.value) and "\n" not in str(err.value)
+    assert out.read_text() == "mine"
 
 
 def test_corrupted_and_foreign_checkpoints_fail_cleanly(tmp_path):
