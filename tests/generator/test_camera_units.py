@@ -170,11 +170,13 @@ def test_realistic_config_has_the_issue_ranges():
     assert frame_labels(frame, static_scene(cfg), None, 0.5)["sampled"]["sensor"]["chain"]["cfa"] == frame.sensor.chain.cfa
 
 
-def test_focal_cap_through_the_lens_is_exact():
+@pytest.mark.parametrize("extra", [{"principal_offset_x_px": [-40, 40]}, {"pixel_aspect": [0.95, 1.05]}],
+                         ids=["square", "pixel-aspect"])
+def test_focal_cap_through_the_lens_is_exact(extra):
     """At the largest fitting focal the outermost distorted marker corner is exactly margin_px
-    inside the image; ideal lenses keep the closed form of the pinhole."""
-    cfg = config_from_dict({"camera_units": {"k1": [-0.15, 0.05], "principal_offset_x_px": [-40, 40],
-                                             "principal_offset_y_px": [-40, 40], "count": 4}})
+    inside the image (its rows at fy = aspect fx); ideal lenses keep the closed form of the pinhole."""
+    cfg = config_from_dict({"camera_units": {"k1": [-0.15, 0.05], "principal_offset_y_px": [-40, 40], "count": 4,
+                                             **extra}})
     static = static_scene(cfg)
     for spec in frame_plan(cfg)[:8]:
         frame = sample_frame(cfg, spec)
@@ -185,7 +187,7 @@ def test_focal_cap_through_the_lens_is_exact():
         r = cfg.markers.diameter_mm / 2
         corners = np.concatenate([(pc[:, :2] + r * np.array(s)) / pc[:, 2:] for s in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
         pp = np.array(frame.camera.principal_point)
-        uv = distort_pixels(corners * cap + pp, cap, pp, lens.distortion)
+        uv = distort_pixels(corners * cap + pp, cap, pp, lens.distortion, lens.pixel_aspect)
         room = np.concatenate([uv.min(0) + 0.5, np.array([1280, 960]) - 0.5 - uv.max(0)]) - cfg.camera.margin_px
         assert room.min() == pytest.approx(0.0, abs=1e-6)
 

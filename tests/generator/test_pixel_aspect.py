@@ -14,16 +14,16 @@ import pytest
 from pipeline_data import LENS_CHECK, label_vs_index, write_painted_dataset
 
 from dockfactory.core.config import ConfigError, config_from_dict, load_config
-from dockfactory.core.distortion import distort_pixels, undistort_pixels
+from dockfactory.core.distortion import undistort_pixels
 from dockfactory.core.geometry import transform_points
 from dockfactory.core.layout import marker_outline
 from dockfactory.core.scene import CameraModel, to_dict
-from dockfactory.generator.camera_units import ImageFit, largest_fitting_focal, unit_lens
+from dockfactory.generator.camera_units import unit_lens
 from dockfactory.generator.datasets import tools as dt
 from dockfactory.generator.exr import RenderPasses
 from dockfactory.generator.labels import frame_labels, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view, moving_b
-from dockfactory.generator.random_draws import markers_in_d, static_scene
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import check_focal_fits, frame_plan, sample_frame
 from dockfactory.core.camera_chain import resample_passes
 from dockfactory.core.camera_chain.lens import distortion_maps
@@ -78,28 +78,6 @@ def test_each_unit_draws_its_aspect_and_every_frame_has_its_k(cfg):
     # the default is square: the key stays out of every scene record
     square = sample_frame(config_from_dict({}), frame_plan(config_from_dict({}))[0]).camera
     assert square.pixel_aspect == 1.0 and "pixel_aspect" not in to_dict(square)
-
-
-def test_the_focal_cap_holds_the_rows_at_fy():
-    """At the largest fitting focal the outermost delivered marker corner is exactly margin_px
-    inside the image, its rows at fy = aspect fx."""
-    data = {"camera_units": {"k1": [-0.15, 0.05], "principal_offset_y_px": [-40, 40], "count": 4,
-                             "pixel_aspect": [0.95, 1.05]}}
-    c = config_from_dict(data)
-    static = static_scene(c)
-    for spec in frame_plan(c)[:8]:
-        frame = sample_frame(c, spec)
-        lens = unit_lens(c.camera_units, c.dataset.seed, spec.unit)
-        pts = markers_in_d(static, frame.d_from_b_array())
-        cap = largest_fitting_focal(ImageFit.of(c), frame.camera.cam_from_d_array(), pts, lens)
-        pc = (frame.camera.cam_from_d_array()[:3, :3] @ pts.T).T + frame.camera.cam_from_d_array()[:3, 3]
-        r = c.markers.diameter_mm / 2
-        corners = np.concatenate([(pc[:, :2] + r * np.array(s)) / pc[:, 2:]
-                                  for s in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
-        pp = np.array(frame.camera.principal_point)
-        uv = distort_pixels(corners * cap + pp, cap, pp, lens.distortion, lens.pixel_aspect)
-        room = np.concatenate([uv.min(0) + 0.5, np.array([1280, 960]) - 0.5 - uv.max(0)]) - c.camera.margin_px
-        assert room.min() == pytest.approx(0.0, abs=1e-6)
 
 
 # ----------------------------------------------------------------------------- the lens maps
