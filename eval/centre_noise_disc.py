@@ -3,7 +3,7 @@
 Each centre the solver used is matched as in :mod:`eval.centre_noise` (error = detected minus the
 label's ``outline_centroid_px``) and whitened by the relative covariance T_i of its disc's image
 (:func:`solver.disc_noise.noise_shapes` of the label's exact geometry): q_i = e_i^T T_i^-1 e_i,
-in px^2 of a round disc of ``REFERENCE_RADIUS_PX``.
+in px^2 of a disc whose minor semi-axis is ``REFERENCE_RADIUS_PX``.
 
 Why and how: docs/acceptance.md, "Centre noise under the disc model".
 """
@@ -17,9 +17,9 @@ import numpy as np
 from dockfactory.eval.centre_noise import MIN_CONDITION_DETECTIONS, used_centre_matches
 from dockfactory.eval.pixel_aspect import delivered_ellipses, label_pixel_aspect
 from dockfactory.solver.disc_noise import (
+    MINOR_EXPONENT,
+    NOISE_FLOOR,
     REFERENCE_RADIUS_PX,
-    SHAPE_EXPONENT,
-    SIZE_EXPONENT,
     disc_ellipses,
     noise_shapes,
 )
@@ -117,7 +117,7 @@ def disc_noise_block(ds, poses: dict, detections: dict, min_score: float,
         by_cond[label["spec"]["condition"]].append(q)
     per = {c: np.concatenate(v) for c, v in sorted(by_cond.items())}
     every = np.concatenate(list(per.values())) if per else np.zeros(0)
-    return {"model": {"shape_exponent": SHAPE_EXPONENT, "size_exponent": SIZE_EXPONENT,
+    return {"model": {"minor_exponent": MINOR_EXPONENT, "noise_floor": NOISE_FLOOR,
                       "reference_radius_px": REFERENCE_RADIUS_PX},
             "method": "used centres whitened by their disc's relative covariance "
                       "(solver.disc_noise); bound scale: Fisher-equivalent sigma of a fitted "

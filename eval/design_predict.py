@@ -85,20 +85,20 @@ def _section_jac(markers, cam, focal, pp):
     return jac
 
 
-def square_pixel_noise_shapes(markers, cam_from_s, focal: float, edge_px=None, pixel_aspect: float = 1.0):
+def square_pixel_noise_shapes(markers, cam_from_s, focal: float, pixel_aspect: float = 1.0):
     """(m, 2, 2): the disc model's noise shapes (solver.disc_noise.noise_shapes) of ``markers`` (one
     section's, seen by ``cam_from_s`` (4, 4)) in the square-pixel pinhole at fx = ``focal``: the
     shapes of their discs' delivered images (fy = ``pixel_aspect`` fx:
     eval.pixel_aspect.delivered_ellipses) taken there (S^-1 T S^-1), as the judge's bound takes
-    delivered noise (eval.pixel_aspect.crb_delivered); ``edge_px`` (m,) delivered px or None.
+    delivered noise (eval.pixel_aspect.crb_delivered).
     solver.disc_noise.section_noise_shapes itself for ``pixel_aspect`` 1."""
     if pixel_aspect == 1.0 or len(markers) == 0:
-        return section_noise_shapes(markers, cam_from_s, focal, edge_px)
+        return section_noise_shapes(markers, cam_from_s, focal)
     cam = np.asarray(cam_from_s, dtype=np.float64)
     centres = np.array([m.center_mm for m in markers]) @ cam[:3, :3].T + cam[:3, 3]
     normals = np.array([m.normal for m in markers]) @ cam[:3, :3].T
     ellipses = disc_ellipses(centres, normals, [m.diameter_mm for m in markers], focal)
-    return square_pixel_covariances(noise_shapes(delivered_ellipses(ellipses, pixel_aspect), edge_px), pixel_aspect)
+    return square_pixel_covariances(noise_shapes(delivered_ellipses(ellipses, pixel_aspect)), pixel_aspect)
 
 
 def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, pixel_aspect: float = 1.0):
@@ -110,9 +110,8 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
     ma = [m for m in markers if m.section == "A"]
     mb = [m for m in markers if m.section == "B"]
     jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
-    edges = (None, None) if not noise.edge_px > 0 else (np.full(len(ma), noise.edge_px), np.full(len(mb), noise.edge_px))
-    shapes = np.concatenate([square_pixel_noise_shapes(ma, cam_a, focal, edges[0], pixel_aspect),
-                             square_pixel_noise_shapes(mb, cam_b, focal, edges[1], pixel_aspect)])
+    shapes = np.concatenate([square_pixel_noise_shapes(ma, cam_a, focal, pixel_aspect),
+                             square_pixel_noise_shapes(mb, cam_b, focal, pixel_aspect)])
     a = inverse_spd(jac.T @ jac)
     jr = jac.reshape(-1, 2, jac.shape[1])
     middle = noise.scale_px ** 2 * np.einsum("nap,nab,nbq->pq", jr, shapes, jr)

@@ -27,15 +27,13 @@ from dockfactory.solver.refine import (
 )
 from dockfactory.solver.section_shift import section_shift_covariance
 
-__all__ = ["SHAPE_EXPONENT", "SIZE_EXPONENT", "REFERENCE_RADIUS_PX", "THIN_DISC_RATIO", "THIN_DISC_POWER",
-           "disc_ellipses", "noise_shapes", "thin_disc_factor", "section_noise_shapes", "with_disc_noise",
-           "robust_refit", "t_weights", "with_model_error", "ROBUST_NU", "ROBUST_ITERATIONS"]
+__all__ = ["MINOR_EXPONENT", "NOISE_FLOOR", "REFERENCE_RADIUS_PX", "disc_ellipses", "noise_shapes",
+           "section_noise_shapes", "with_disc_noise", "robust_refit", "t_weights", "with_model_error",
+           "ROBUST_NU", "ROBUST_ITERATIONS"]
 
-SHAPE_EXPONENT = 1.5
-SIZE_EXPONENT = 1.0
-REFERENCE_RADIUS_PX = 10.0
-THIN_DISC_RATIO = 4.75   # minor semi-axis / edge width where the minor-axis variance doubles ...
-THIN_DISC_POWER = 1.5    # ... and how fast it grows below (:func:`thin_disc_factor`)
+REFERENCE_RADIUS_PX = 10.0   # minor semi-axis (px) of the disc whose noise shape is I
+MINOR_EXPONENT = 2.5         # the variance grows as (REFERENCE_RADIUS_PX / b)^MINOR_EXPONENT ...
+NOISE_FLOOR = 0.5            # ... over a floor, in the same units (:func:`noise_shapes`)
 ROBUST_NU = 4.0          # Student-t degrees of freedom of the robust refit's weights
 ROBUST_ITERATIONS = 4    # reweighting rounds of the robust refit
 MEDIAN_CHI2_2 = 2.0 * np.log(2.0)   # median of a chi-square with 2 degrees of freedom
@@ -64,49 +62,32 @@ def disc_ellipses(centres_cam, normals_cam, diameters_mm, focal_px: float) -> np
     return a @ np.transpose(a, (0, 2, 1))
 
 
-def noise_shapes(ellipses, edge_px=None) -> np.ndarray:
-    """(N, 2, 2): the relative centre covariance T of each disc image ``ellipses`` (N, 2, 2) px^2
-    (:func:`disc_ellipses`), see the module docstring; with ``edge_px`` (N,) px (the edge fit's
-    edge width of each centre, NaN: none) its minor-axis term times :func:`thin_disc_factor`."""
-    lam, vec = np.linalg.eigh(np.asarray(ellipses, dtype=np.float64).reshape(-1, 2, 2))
-    minor, major = np.sqrt(np.maximum(lam[:, 0], 0.0)), np.sqrt(lam[:, 1])
-    rho = np.clip(minor / major, 1e-3, 1.0)
-    size = (REFERENCE_RADIUS_PX / major) ** SIZE_EXPONENT
-    across = size if edge_px is None else size * thin_disc_factor(minor, edge_px)
-    d = np.stack([across, size * rho ** -SHAPE_EXPONENT], 1)        # eigh: minor first
-    return np.einsum("nij,nj,nkj->nik", vec, d, vec)
+def noise_shapes(ellipses) -> np.ndarray:
+    """(N, 2, 2): the relative centre covariance T = v(b) I of each disc image ``ellipses`` (N, 2,
+    2) px^2 (:func:`disc_ellipses`), b its minor semi-axis (px):
+
+        v(b) = ((REFERENCE_RADIUS_PX / b)^MINOR_EXPONENT + NOISE_FLOOR) / (1 + NOISE_FLOOR),
+
+    so T = I for a disc whose minor semi-axis is REFERENCE_RADIUS_PX. The scale (px) is measured,
+    never assumed here. Why isotropic and in b alone: the refined centres of converged renders err
+    as much along a disc's major axis as across it, and both grow steeply as the disc thins
+    (slant or distance), whatever its major axis; the law and its check on three scenes of
+    different geometry and seven cameras: docs/solver.md, "Disc noise"."""
+    lam = np.linalg.eigvalsh(np.asarray(ellipses, dtype=np.float64).reshape(-1, 2, 2))
+    minor = np.sqrt(np.maximum(lam[:, 0], 1e-12))
+    v = ((REFERENCE_RADIUS_PX / minor) ** MINOR_EXPONENT + NOISE_FLOOR) / (1.0 + NOISE_FLOOR)
+    return v[:, None, None] * np.eye(2)
 
 
-def thin_disc_factor(minor_px, edge_px) -> np.ndarray:
-    """(N,) >= 1: the variance of a centre along its disc's minor axis over what the edge
-    integral gives (module docstring), 1 + (THIN_DISC_RATIO / r)^THIN_DISC_POWER with r the minor
-    semi-axis ``minor_px`` over the edge width ``edge_px`` (Gaussian std, px; NaN or 0: factor 1).
-
-    Why: where the disc is only a few edge widths thick, the two edges across it blur into one
-    bump, and the edge fit's centre across the disc trades against its disc level and ring level
-    far more than the edge integral says (a blurred or demosaiced thin disc errs 2-3.5x more
-    across its minor axis than along its major one relative to the model; white-noise Fisher
-    information of a blurred ellipse does not show it: the error is the estimator's, under the
-    renders' noise). Measured on two scenes of different geometry: results/README.md,
-    "Measurements behind the code's constants"."""
-    minor = np.asarray(minor_px, dtype=np.float64)
-    edge = np.asarray(edge_px, dtype=np.float64)
-    ok = np.isfinite(edge) & (edge > 0)
-    r = np.where(ok, minor / np.where(ok, edge, 1.0), np.inf)
-    return 1.0 + (THIN_DISC_RATIO / np.maximum(r, 1e-6)) ** THIN_DISC_POWER
-
-
-def section_noise_shapes(markers, cam_from_s, focal_px: float, edge_px=None) -> np.ndarray:
+def section_noise_shapes(markers, cam_from_s, focal_px: float) -> np.ndarray:
     """(m, 2, 2): :func:`noise_shapes` of ``markers`` (core.layout.Marker, all of one section)
-    seen by ``cam_from_s`` (4, 4), the camera from their section's frame; ``edge_px`` (m,) px or
-    None as there."""
+    seen by ``cam_from_s`` (4, 4), the camera from their section's frame."""
     if len(markers) == 0:
         return np.zeros((0, 2, 2))
     cam = np.asarray(cam_from_s, dtype=np.float64)
     centres = np.array([m.center_mm for m in markers]) @ cam[:3, :3].T + cam[:3, 3]
     normals = np.array([m.normal for m in markers]) @ cam[:3, :3].T
-    return noise_shapes(disc_ellipses(centres, normals, [m.diameter_mm for m in markers],
-                                      focal_px), edge_px)
+    return noise_shapes(disc_ellipses(centres, normals, [m.diameter_mm for m in markers], focal_px))
 
 
 def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: dict,
@@ -191,9 +172,7 @@ def _stacked(fit: JointFit, points: SectionPoints, fitter: JointFitter, keep: di
     for k, s in enumerate(SECTIONS):
         rows = [r for r, ok in zip(points.rows[s], keep[s]) if ok]
         blocks.append(Block(points.points_3d[s][keep[s]], p2[s][keep[s]], k))
-        edge = None if points.edge_px is None else points.edge_px[rows]
-        shapes.append(section_noise_shapes([points.markers[r] for r in rows], fit.cams[s],
-                                           fit.focal_px, edge))
+        shapes.append(section_noise_shapes([points.markers[r] for r in rows], fit.cams[s], fit.focal_px))
     intr = fit.intrinsics or Intrinsics.pinhole(fit.focal_px, fitter.principal_point)
     poses = tuple((c[:3, :3], c[:3, 3]) for c in (fit.cam_from_a, fit.cam_from_b))
     return tuple(blocks), poses, intr, camera_model(fit.model), np.concatenate(shapes)

@@ -169,7 +169,7 @@ def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: boo
     spatial_bias_factor` over the image, correlation length BIAS_LENGTH image diagonals, the
     diagonal taken from the assumed principal point ``pp``; :func:`solver.model_error.
     persistent_bias_covariance`); with the noise estimated, each centre's noise shaped by its
-    disc's image (:func:`solver.disc_noise.section_noise_shapes`, told the frame's edge widths),
+    disc's image (:func:`solver.disc_noise.section_noise_shapes`),
     never below ``floor_px``; ``sigma_px`` its noise part, the field's std px per axis). ``mf``
     unchanged (and 0.0) when that covariance is not finite."""
     points, groups, shapes = [], [], []
@@ -181,7 +181,7 @@ def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: boo
             points.append(fr.p2[s])
             groups += [s] * len(fr.rows[s])
             shapes.append(section_noise_shapes([layout.by_id[fr.ids[r]] for r in fr.rows[s]], cam,
-                                               mf.intrinsics.focal_px, fr.edge[fr.rows[s]]))
+                                               mf.intrinsics.focal_px))
     extent = (2.0 * float(pp[0]) + 1.0, 2.0 * float(pp[1]) + 1.0)       # the image, from its centre
     factor = spatial_bias_factor(np.concatenate(points), np.array(groups), BIAS_LENGTH * float(np.hypot(*extent)),
                                  extent)

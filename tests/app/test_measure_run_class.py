@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from disc_noise_draws import disc_noise
 
 from dockfactory.core.layout import DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, build_layout
 from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, class_section_shift
@@ -38,7 +39,7 @@ def _frames(cls: str, seed: int = 0, n: int = 6) -> list[Frame]:
     out = []
     for k, sc in enumerate(run.frames):
         uv = np.vstack([sc.uv_a, sc.uv_b])
-        uv = uv + CAMERA_CLASS_FACTORS[cls] * CARD * np.random.default_rng(100 * seed + k).standard_normal(uv.shape)
+        uv = uv + disc_noise(sc, LAYOUT, CAMERA_CLASS_FACTORS[cls] * CARD, np.random.default_rng(100 * seed + k))
         ids = np.r_[np.zeros(len(sc.uv_a), int), np.ones(len(sc.uv_b), int)]
         record, used, edges = solve_frame(LAYOUT, pp, (ids, uv, None, None, None), None, "pinhole", _options(cls),
                                           CAMERA_CLASS_FACTORS[cls])

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from disc_noise_draws import disc_noise
 from pipeline_data import painted_from_text
 
 from dockfactory.core.config import config_from_dict
@@ -183,8 +184,7 @@ def _far_run(seed: int, zoomed: float = 1.0):
     run = docking_run(np.random.default_rng(seed), 6, markers=FAR_LAYOUT, **FAR)
     labels, frames = {}, {}
     for k, sc in enumerate(run.frames):
-        uv = np.vstack([sc.uv_a, sc.uv_b]) + noise * np.random.default_rng(100 * seed + k).standard_normal(
-            (len(sc.uv_a) + len(sc.uv_b), 2))
+        uv = np.vstack([sc.uv_a, sc.uv_b]) + disc_noise(sc, FAR_LAYOUT, noise, np.random.default_rng(100 * seed + k))
         if k == 4:
             uv = sc.principal_point + zoomed * (uv - sc.principal_point)
         fid = f"{k:06d}"

@@ -120,17 +120,6 @@ def test_seven_markers_is_the_shipped_layout_and_bad_counts_are_one_line():
         pattern_pair(16, 300.0, 90.0)
 
 
-def test_a_wider_edge_widens_the_prediction_across_the_thin_discs():
-    """The thin-disc term (a camera class's edge width): every component's predicted variance grows
-    with the edge width, and Y (the discs' minor axes run vertically) more than X."""
-    rng = np.random.default_rng(9)
-    sc = docking_scene(rng)
-    v = [frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point,
-                         NoiseClass(0.02, (0.0, 0.0), e))[0] for e in (0.0, 1.5, 3.0)]
-    assert np.all(v[0] <= v[1]) and np.all(v[1] < v[2])
-    assert v[2][1] / v[0][1] > v[2][0] / v[0][0]
-
-
 def test_a_bad_predictor_card_is_one_line(tmp_path):
     import json
     from dockfactory.core.resources import shipped_design_card

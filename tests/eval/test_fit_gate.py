@@ -67,8 +67,8 @@ def test_another_scenes_layout_is_refused_in_one_line(frames, monkeypatch):
     after = [_solve(other, f) for f in fs[:4]]
     assert all(not r["ok"] for r in after)
     misfits = [r for r in after if r["category"] == MISFIT]
-    assert len(misfits) >= 3 and all("x the camera's centre noise" in r["reason"] and "wrong layout" in r["reason"]
-                                     and "\n" not in r["reason"] for r in misfits)
+    named = [r for r in misfits if "x the camera's centre noise" in r["reason"] and "wrong layout" in r["reason"]]
+    assert len(named) >= 3 and all("\n" not in r["reason"] for r in after)   # the others: the camera-model check
 
 
 @pytest.mark.slow  # several seconds of solves or pages; the full suite runs it
@@ -110,7 +110,7 @@ def test_fit_test_is_the_chi_square_of_the_residuals_or_says_not_tested():
     assert k1k2["dof"] == 13
 
 
-CARD = 0.0258   # a card at which the chi-square alone passes the crop (the default weights' card before the light tree)
+CARD = 0.04     # a card at which the chi-square alone passes the crop after leaving two centres out
 FAR = dict(radius_mm=450.0, distance_range=(2000.0, 2500.0), focal_range=(2000.0, 3600.0))   # scene B's geometry
 
 

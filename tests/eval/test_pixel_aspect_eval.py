@@ -221,7 +221,7 @@ def test_the_design_predictor_fits_the_square_pinhole_under_the_delivered_discs_
         label = {"camera": {"cam_from_d": f.cam_from_a, "K": _k(f.focal_px, f.principal_point, ASPECT)}}
         discs = np.array([_disc_image(label, _marker_in_d(m, np.eye(4))) for m in ma]
                          + [_disc_image(label, _marker_in_d(m, d_from_b)) for m in mb])
-        point_cov = noise.scale_px ** 2 * noise_shapes(discs, np.full(len(discs), noise.edge_px))
+        point_cov = noise.scale_px ** 2 * noise_shapes(discs)
         jac = _delivered_jacobian(marker_points(ma, "A"), f.cam_from_a, marker_points(mb, "B"), d_from_b,
                                   f.focal_px, f.principal_point, ASPECT)
         groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]

@@ -1,13 +1,13 @@
 """Centre noise shaped by the disc's image: the bound, the solver's covariance and the scale (issue 12).
 
-The detector's centres scatter more along the major axis of a disc's (squeezed) image than along
-its minor axis (solver.disc_noise). With such noise:
+The detector's centres scatter more the thinner a disc's image is (solver.disc_noise). With such
+noise:
 - the Cramer-Rao bound with per-point noise shapes (solver.crb ``noise_shapes``) is the RMSE of the
-  efficient (weighted maximum-likelihood) estimator, Monte-Carlo within 10 %, while the isotropic
-  bound at the same per-axis noise is 20 % too large for Y (the issue's symptom);
+  efficient (weighted maximum-likelihood) estimator, Monte-Carlo within 10 %, and the unweighted
+  fit errs more than it;
 - the covariance of the solver's unweighted fit is the sandwich (covariance_from_jacobian with
   ``point_cov``), and solve_docking's reported std gives RMS z within 0.88-1.12 over 240 frames
-  (isotropic: X and alpha above 1.1, Y below 0.92);
+  (isotropic: X above 1.1);
 - the bound's scale comes from the Fisher information of the whitened centre errors (a Student t
   fit), which gross errors do not inflate the way they inflate the RMS.
 Tolerances: 400 Monte-Carlo draws give an RMS to 1 / sqrt(800) = 3.5 % (10 % is 2.8 standard
@@ -25,6 +25,8 @@ from dockfactory.core.layout import marker_outline
 from dockfactory.eval.centre_noise_disc import frame_noise_px, label_noise_shapes, scale_stats
 from dockfactory.solver import DockingOptions, InvalidSolverInput, crb_d_from_b, solve_docking
 from dockfactory.solver.disc_noise import (
+    MINOR_EXPONENT,
+    NOISE_FLOOR,
     REFERENCE_RADIUS_PX,
     disc_ellipses,
     noise_shapes,
@@ -100,14 +102,15 @@ def monte_carlo():
 
 
 def test_the_bound_with_disc_shaped_noise_is_the_rmse_of_the_efficient_estimator(monte_carlo):
-    sc, shapes, rmse_weighted, _ = monte_carlo
+    sc, shapes, rmse_weighted, rmse_plain = monte_carlo
     args = (sc.points_a, sc.cam_from_d, sc.points_b, sc.cam_from_b, sc.focal_px, sc.principal_point, SIGMA)
     shaped = np.array([crb_d_from_b(*args, noise_shapes=shapes).std[k] for k in KEYS])
     iso = np.array([crb_d_from_b(*args).std[k] for k in KEYS])
     assert rmse_weighted / shaped == pytest.approx(np.ones(3), abs=0.10)
-    # the isotropic bound at the same per-axis noise overstates Y (measured 1.23x): the issue's
-    # measured / bound of 0.6 for Y; X and alpha it understates (0.92x)
-    assert iso[1] / shaped[1] > 1.15 and iso[0] < shaped[0] and iso[2] < shaped[2]
+    # the unweighted fit, which ignores the shapes, errs more than the bound (measured 1.19 / 1.21 /
+    # 1.27x): a thin disc's centre is worth less than a round one's
+    assert np.all(rmse_plain / shaped > 1.1)
+    assert not np.allclose(iso, shaped, rtol=0.05)      # the isotropic bound is another number
     # the shapes' scale does not matter, only their form
     scaled = crb_d_from_b(*args, noise_shapes=(5.0 * shapes[0], 5.0 * shapes[1])).std
     assert [scaled[k] for k in KEYS] == pytest.approx(shaped.tolist(), rel=1e-9)
@@ -125,7 +128,9 @@ def test_the_covariance_of_the_unweighted_fit_is_the_sandwich(monte_carlo):
     assert rmse_plain / std == pytest.approx(np.ones(3), abs=0.10)
     iso, _ = covariance_from_jacobian(jac, zero, SIGMA)
     iso_std = np.sqrt(np.diag(prop @ iso[:12, :12] @ prop.T))[[0, 1, 3]]
-    assert rmse_plain[1] / iso_std[1] < 0.9 and rmse_plain[0] / iso_std[0] > 1.1
+    # the isotropic covariance at the same per-axis noise understates the errors (measured X / Y /
+    # alpha 1.16 / 1.23 / 1.08x): its noise is spread evenly over thin and round discs
+    assert rmse_plain[1] / iso_std[1] > 1.12 and rmse_plain[0] / iso_std[0] > 1.08
 
 
 def test_identity_shapes_give_the_isotropic_covariance_and_bound():
@@ -161,15 +166,21 @@ def test_bad_noise_shapes_are_refused():
         crb_d_from_b(*args, noise_shapes=good)
 
 
-def test_noise_shapes_follow_the_edge_fit_law():
-    # a round disc of the reference radius: T = I
-    assert noise_shapes(np.diag([REFERENCE_RADIUS_PX ** 2] * 2)[None])[0] == pytest.approx(np.eye(2), abs=1e-12)
-    # semi-axes 12 and 6 px, major axis at 30 deg: variance (10 / 12) x (0.5^-1.5, 1)
+def test_noise_shapes_follow_the_minor_axis_law():
+    # a disc whose minor semi-axis is the reference radius: T = I, whatever its major axis
+    for major in (REFERENCE_RADIUS_PX, 25.0):
+        s = np.diag([major ** 2, REFERENCE_RADIUS_PX ** 2])
+        assert noise_shapes(s[None])[0] == pytest.approx(np.eye(2), abs=1e-12)
+    # semi-axes 12 and 4 px, major axis at 30 deg: isotropic, ((10 / 4)^p + floor) / (1 + floor)
     u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
     v = np.array([-u[1], u[0]])
-    t = noise_shapes((144.0 * np.outer(u, u) + 36.0 * np.outer(v, v))[None])[0]
-    assert u @ t @ u == pytest.approx(10 / 12 * 0.5 ** -1.5, rel=1e-9)
-    assert v @ t @ v == pytest.approx(10 / 12, rel=1e-9) and u @ t @ v == pytest.approx(0.0, abs=1e-12)
+    t = noise_shapes((144.0 * np.outer(u, u) + 16.0 * np.outer(v, v))[None])[0]
+    want = (2.5 ** MINOR_EXPONENT + NOISE_FLOOR) / (1.0 + NOISE_FLOOR)
+    assert t == pytest.approx(want * np.eye(2), rel=1e-9)
+    # thinner discs are noisier, larger ones quieter, never below the floor's share
+    minors = np.array([2.0, 5.0, 10.0, 40.0, 1e4])
+    var = noise_shapes(np.stack([np.diag([1e8, b * b]) for b in minors]))[:, 0, 0]
+    assert np.all(np.diff(var) < 0) and var[-1] == pytest.approx(NOISE_FLOOR / (1.0 + NOISE_FLOOR), rel=1e-6)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -249,8 +260,8 @@ def test_solve_docking_reports_an_honest_std_under_disc_shaped_noise():
             z[d].append([(getattr(r, k) - truth[k]) / r.std[k] for k in KEYS])
     rms = {d: np.sqrt(np.mean(np.square(v), axis=0)) for d, v in z.items()}
     assert rms[True] == pytest.approx(np.ones(3), abs=0.12), rms[True]
-    # isotropic (measured 1.19 / 0.83 / 1.20): X and alpha too confident, Y too cautious
-    assert rms[False][0] > 1.1 and rms[False][2] > 1.1 and rms[False][1] < 0.92, rms[False]
+    # isotropic (measured 1.21 / 1.13 / 1.10): too confident, most in X
+    assert rms[False][0] > 1.1 and np.all(rms[False] > 1.03), rms[False]
 
 
 def _disc_noise_frame(rng, sigma=SIGMA):
@@ -264,9 +275,10 @@ def _disc_noise_frame(rng, sigma=SIGMA):
 
 
 @pytest.mark.slow   # 2 x 160 synthetic frames through the whole docking pipeline
-def test_the_robust_refit_costs_nothing_on_clean_frames_and_keeps_an_honest_std():
-    """Disc-shaped Gaussian noise, no gross error: the reweighted fit's errors are those of the
-    unweighted fit (RMSE within 10 %) and its RMS z stays within 0.85-1.15."""
+def test_the_robust_refit_weighs_by_the_disc_noise_on_clean_frames_and_keeps_an_honest_std():
+    """Disc-shaped Gaussian noise, no gross error: the reweighted fit, weighted by each disc's
+    noise, errs less than the unweighted fit (RMSE below 0.92x on each component; measured 0.77 /
+    0.83 / about 0.8) and its RMS z stays within 0.85-1.15."""
     rng = np.random.default_rng(22)
     err, z = {True: [], False: []}, []
     for _ in range(160):
@@ -278,7 +290,7 @@ def test_the_robust_refit_costs_nothing_on_clean_frames_and_keeps_an_honest_std(
             if robust:
                 z.append([(getattr(r, k) - truth[k]) / r.std[k] for k in KEYS])
     rmse = {d: np.sqrt(np.mean(np.square(v), axis=0)) for d, v in err.items()}
-    assert rmse[True] == pytest.approx(rmse[False], rel=0.10)
+    assert np.all(rmse[True] < 0.92 * rmse[False]), rmse
     rms_z = np.sqrt(np.mean(np.square(z), axis=0))
     assert np.all((rms_z > 0.85) & (rms_z < 1.15)), rms_z
 
