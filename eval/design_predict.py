@@ -103,7 +103,9 @@ def square_pixel_noise_shapes(markers, cam_from_s, focal: float, pixel_aspect: f
 
 def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, pixel_aspect: float = 1.0):
     """(noise (6,), offset (6,)) variances of d_from_b (POSE_NAMES order, mm^2 / deg^2) of one
-    frame: the fit's sandwich covariance under the disc noise and the section offset. A camera
+    frame: the covariance of the fit weighted by the disc noise (as the solver's robust refit
+    weighs the centres, solver.disc_noise.robust_refit: scale^2 (J^T T^-1 J)^-1) and what the
+    section offset adds to that weighted fit. A camera
     with non-square pixels (``pixel_aspect`` = fy / fx, ``focal`` = fx): the fit in the square-pixel
     pinhole at fx about ``pp``, the noise the delivered discs show taken there
     (:func:`square_pixel_noise_shapes`) and the offset likewise (eval.pixel_aspect); 1: square."""
@@ -112,12 +114,11 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
     jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
     shapes = np.concatenate([square_pixel_noise_shapes(ma, cam_a, focal, pixel_aspect),
                              square_pixel_noise_shapes(mb, cam_b, focal, pixel_aspect)])
-    a = inverse_spd(jac.T @ jac)
     jr = jac.reshape(-1, 2, jac.shape[1])
-    middle = noise.scale_px ** 2 * np.einsum("nap,nab,nbq->pq", jr, shapes, jr)
-    cov_noise = a @ middle @ a
+    cov_noise = noise.scale_px ** 2 * inverse_spd(np.einsum("nap,nab,nbq->pq", jr, np.linalg.inv(shapes), jr))
     groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
-    cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect))
+    sqrt_w = np.linalg.inv(np.linalg.cholesky(shapes))
+    cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect), sqrt_w)
     prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])
     return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))
 

@@ -5,6 +5,7 @@ shipped detector, the centre refinement and the pinhole solver; pose and centre 
                                    [--effects NAME,NAME] [--frames N] [--weights W.pt]
                                    [--tell-cfa] [--tell-jpeg]
     python -m bench.sensor.sensor_effects --compare RESULTS.json [RESULTS.json ...]
+    python -m bench.sensor.sensor_effects DATASET [DATASET ...] --resolve ROWS.json --out RESULTS.json
 
 Each DATASET must keep its linear renders (``[render] keep_exr = true``; the kept EXR is the
 delivered geometry before the sensor): bench/configs/sensor_scene_a.toml and sensor_scene_b.toml
@@ -20,7 +21,9 @@ outline centroids (median length, mean dx / dy per class). ``sampling-rggb`` is 
 image refined (with ``--tell-cfa``) as if it came from an RGGB sensor: what the sampling alone costs.
 
 Results land in RESULTS.json after each (dataset, effect) pair (resumable: finished pairs are
-skipped), and a markdown table is printed at the end.
+skipped), and a markdown table is printed at the end. ``--resolve ROWS.json`` solves the rows of a
+results file written with them again by the solver as it is now, from their kept detections (no
+detector, no EXR read): the bench's figures after a change of the solver.
 """
 from __future__ import annotations
 
@@ -132,16 +135,46 @@ def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str |
     """Detect, refine (told the camera's Bayer pattern ``cfa`` and whether it wrote a JPEG), solve
     one delivered image; errors against its label, the detections (``dets``) and the markers the
     fit used (``used``), so that the frame can be solved again (bench/sensor/sensor_shift.py)."""
-    label = ds.labels[fid]
     h, w = image.shape[:2]
     dets = [{k: d[k] for k in DET_KEYS if k in d} for d in detector.detect(image, cfa=cfa, jpeg=jpeg)]
+    return solved_row(ds, fid, dets, (w, h), detector.centre_noise_px)
+
+
+def solved_row(ds: Dataset, fid: str, dets: list[dict], size, noise_px: float | None) -> dict:
+    """The bench's row of frame ``fid`` of ``ds`` from its detections ``dets`` in an image of
+    ``size`` (w, h) px: solved as the bench solves (pinhole, principal point at the centre, the
+    card's noise ``noise_px``), errors against the label."""
+    label = ds.labels[fid]
+    w, h = size
     rec = solve_frame(ds.markers(), ((w - 1) / 2.0, (h - 1) / 2.0), detection_arrays(dets, 0.25), None,
-                      "pinhole", docking_options(detector.centre_noise_px, lens_prior_for(ds.config)))[0]
+                      "pinhole", docking_options(noise_px, lens_prior_for(ds.config)))[0]
     row = {"frame": fid, "ok": rec["ok"], "centres": centre_errors(dets, label), "dets": dets,
            "used": rec.get("marker_ids")}
     if rec["ok"]:
         row.update(pose_errors(rec, label))
     return row
+
+
+def resolved(rows_path: str, roots: list[str], noise_px: float | None) -> dict:
+    """A results file of this bench whose every row (``rows_path``: written with its rows) is
+    solved again from its kept detections by the solver as it is now (no detector: after a change
+    of the solver, its figures without a render); each dataset of the file must be among ``roots``
+    (DockfactoryError naming it)."""
+    from dockfactory.core.errors import DockfactoryError
+    results = json.loads(Path(rows_path).read_text())
+    opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in (Dataset.open(r, full=False) for r in roots)}
+    for key, effects in results["datasets"].items():
+        if key not in opened:
+            raise DockfactoryError(f"{rows_path}: dataset {key} is not among the DATASET arguments")
+        ds = opened[key]
+        size = (ds.config.image.width, ds.config.image.height)
+        for effect, res in effects.items():
+            if "rows" not in res:
+                raise DockfactoryError(f"{rows_path}: {key} {effect} was written without its rows")
+            rows = [solved_row(ds, r["frame"], r["dets"], size, noise_px) for r in res["rows"]]
+            effects[effect] = {**summary(rows), "seconds": res.get("seconds"), "rows": rows}
+        add_intervals(effects)
+    return results
 
 
 def pose_errors(rec: dict, label: dict) -> dict:
@@ -340,7 +373,17 @@ def main(argv=None) -> int:
     p.add_argument("--weights", default=None)
     p.add_argument("--tell-cfa", action="store_true", help="give the refinement the camera's Bayer pattern")
     p.add_argument("--tell-jpeg", action="store_true", help="tell the refinement which images were JPEG-encoded")
+    p.add_argument("--resolve", metavar="ROWS.json",
+                   help="solve the rows of this results file again (no detector) into --out; DATASETS: its datasets")
     args = p.parse_args(argv)
+    if args.resolve:
+        if not args.out:
+            p.error("--out is required")
+        from dockfactory.detector.noise_card import card_figures
+        results = resolved(args.resolve, args.datasets, card_figures(args.weights or shipped_weights()).centre_noise_px)
+        write_json_atomic(Path(args.out), results)
+        print(table(results))
+        return 0
     if args.compare:
         print(compare(args.datasets))
         return 0

@@ -182,20 +182,21 @@ def test_plan_frames_bounds_the_delivered_centres():
 
 # ----------------------------------------------------------------------------- the design predictor
 
-def _sandwich_std(jac, aspect, point_cov, groups, shift_px) -> np.ndarray:
-    """(6,) std of d_from_b's components of the unweighted least-squares fit in the square-pixel
-    pinhole at fx (residuals S^-1 (delivered centres), S = diag(1, aspect)) whose delivered centres
-    have covariances ``point_cov`` (N, 2, 2) px^2 and a common shift per section (``groups``) of
-    std ``shift_px`` per delivered axis."""
+def _weighted_std(jac, aspect, point_cov, groups, shift_px) -> np.ndarray:
+    """(6,) std of d_from_b's components of the least-squares fit in the square-pixel pinhole at fx
+    (residuals S^-1 (delivered centres), S = diag(1, aspect)) weighted by the inverse of its
+    centres' covariances, whose delivered centres have covariances ``point_cov`` (N, 2, 2) px^2 and
+    a common shift per section (``groups``) of std ``shift_px`` per delivered axis."""
     s_inv = np.diag([1.0, 1.0 / aspect])
     jsq = np.einsum("ab,nbp->nap", s_inv, jac)
-    a = np.linalg.inv(np.einsum("nap,naq->pq", jsq, jsq))
-    middle = np.einsum("nap,nab,nbq->pq", jsq, s_inv @ point_cov @ s_inv, jsq)
+    w = np.linalg.inv(s_inv @ point_cov @ s_inv)
+    a = np.linalg.inv(np.einsum("nap,nab,nbq->pq", jsq, w, jsq))
     shift = s_inv @ np.diag(np.square(shift_px)) @ s_inv
+    cov = a.copy()
     for g in np.unique(groups):
-        summed = jsq[groups == g].sum(axis=0)
-        middle += summed.T @ shift @ summed
-    return np.sqrt(np.diag(a @ middle @ a)[6:12])
+        m = np.einsum("nap,nab->pb", jsq[groups == g], w[groups == g])
+        cov += a @ m @ shift @ m.T @ a
+    return np.sqrt(np.diag(cov)[6:12])
 
 
 def _marker_in_d(m, d_from_s) -> dict:
@@ -225,7 +226,7 @@ def test_the_design_predictor_fits_the_square_pinhole_under_the_delivered_discs_
         jac = _delivered_jacobian(marker_points(ma, "A"), f.cam_from_a, marker_points(mb, "B"), d_from_b,
                                   f.focal_px, f.principal_point, ASPECT)
         groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
-        want = _sandwich_std(jac, ASPECT, point_cov, groups, noise.shift_px)
+        want = _weighted_std(jac, ASPECT, point_cov, groups, noise.shift_px)
         args = (markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise)
         got = np.sqrt(np.sum(frame_variances(*args, f.pixel_aspect), axis=0))
         assert np.allclose(got, want, rtol=1e-6), got / want - 1
