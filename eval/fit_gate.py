@@ -106,10 +106,10 @@ def camera_misfit_reason(record: dict, p_value: float) -> str:
 
 def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float = 1.0):
     """Run ``solve(keep)`` through the gate. ``keep`` (n_rows,) bool: the detection rows to use;
-    ``solve`` returns (record, used, widths, ids) with ids (n_rows,) the marker id of each row the
+    ``solve`` returns (record, used, ids) with ids (n_rows,) the marker id of each row the
     fit used, else None; ``refit(keep, ids)`` the record of a quick fit of the rows ``keep`` as
     the markers ``ids`` (no identification; raises or returns a not-ok record when it fails),
-    which picks the centre to leave out. Returns (record, used, widths) of the first fit that
+    which picks the centre to leave out. Returns (record, used) of the first fit that
     passes (its ``fit_test`` and :func:`camera_misfit`; with ``left_out``, the ids of the centres it
     left out), else a not-ok record. A first fit the card's noise does not explain passes whole when
     its camera class (``class_factor``, eval.camera_classes) explains it (:func:`class_test`);
@@ -117,17 +117,17 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
     keep = np.ones(n_rows, dtype=bool)
     first = solve(keep)
     if not first[0].get("ok"):
-        return first[:3]
+        return first[:2]
     test = first[0]["fit_test"] = fit_test(first[0], sigma_px)
     lens_p = camera_misfit(first[0])
     if lens_p is None and test["explains"] is not False:
-        return first[:3]
+        return first[:2]
     if (by_class := class_test(first[0], sigma_px, class_factor)) is not None:
         first[0]["fit_test"] = _class_passed(by_class, test)
-        return first[:3]
+        return first[:2]
     if lens_p is not None:
-        return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}, {}
-    ids, left = first[3], []
+        return {"ok": False, "category": MISFIT, "reason": camera_misfit_reason(first[0], lens_p)}, {}
+    ids, left = first[2], []
     for _ in range(MAX_LEFT_OUT):
         k = _worst_row(refit, keep, ids, sigma_px)
         if k is None:
@@ -137,13 +137,13 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
         best = solve(keep)
         if not best[0].get("ok"):
             break
-        ids = best[3]
+        ids = best[2]
         best[0]["fit_test"] = fit_test(best[0], sigma_px)
         if best[0]["fit_test"]["explains"] and camera_misfit(best[0]) is None:
             best[0]["left_out"] = left
             best[0]["fit_test"]["before"] = {"ratio": test["ratio"], "p_value": test["p_value"]}
-            return best[:3]
-    return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}, {}
+            return best[:2]
+    return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}
 
 
 def _class_passed(by_class: dict, card: dict) -> dict:

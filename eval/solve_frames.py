@@ -66,10 +66,9 @@ def oracle_detections(label: dict, sigma_px: float, rng: np.random.Generator):
 
 
 def detection_arrays(dets: list[dict], min_score: float):
-    """(class_ids (N,), centres (N, 2), boxes (N, 4) or None, refined (N,) bool or None, edge
-    widths (N,) px or None) of the detections scoring at least ``min_score``; boxes / refined
-    are None unless every detection has them, edge widths None when none has one (NaN where a
-    detection has none: its centre was not edge-fitted)."""
+    """(class_ids (N,), centres (N, 2), boxes (N, 4) or None, refined (N,) bool or None) of the
+    detections scoring at least ``min_score``: the centres :func:`solve_frame` takes; boxes /
+    refined are None unless every detection has them."""
     keep = [d for d in dets if d.get("score", 1.0) >= min_score]
     cls = np.array([d["class_id"] for d in keep], dtype=int)
     uv = np.array([d["center_px"] for d in keep], dtype=float).reshape(-1, 2)
@@ -77,9 +76,7 @@ def detection_arrays(dets: list[dict], min_score: float):
              if all("bbox_px" in d for d in keep) else None)
     refined = (np.array([bool(d["refined"]) for d in keep], dtype=bool)
                if all("refined" in d for d in keep) else None)
-    edge = (np.array([np.nan if d.get("edge_px") is None else d["edge_px"] for d in keep], dtype=float)
-            if any(d.get("edge_px") is not None for d in keep) else None)
-    return cls, uv, boxes, refined, edge
+    return cls, uv, boxes, refined
 
 
 def pose_record(res, n_detections: int) -> dict:
@@ -135,15 +132,15 @@ def resolve_camera_model(camera_model: str | None, self_calibrate: str | None) -
 
 
 def frame_centres(ds: Dataset, fid: str, detections: dict | None, oracle_sigma_px, min_score: float):
-    """(class_ids, centres, boxes, refined, edge widths) of a frame: its detections, or the oracle's noisy exact
-    centroids (seeded per frame); None when the detections file has no entry for it."""
+    """(class_ids, centres, boxes, refined) of a frame (:func:`detection_arrays`): its detections, or the
+    oracle's noisy exact centroids (seeded per frame); None when the detections file has no entry for it."""
     if detections is not None:
         dets = detections["frames"].get(fid)
         return None if dets is None else detection_arrays(dets, min_score)
     label = ds.labels[fid]   # the oracle reads the exact centroids
     rng = rng_for(ds.config.dataset.seed, ORACLE_STREAM, label["spec"]["index"])
     cls, uv = oracle_detections(label, oracle_sigma_px, rng)
-    return cls, uv, None, None, None
+    return cls, uv, None, None
 
 
 def true_camera_centres(label: dict, centres):
@@ -158,12 +155,12 @@ def true_camera_centres(label: dict, centres):
     def ideal(uv):
         return undistort_pixels(uv, cam["focal_px"], pp, dist, aspect)
 
-    cls, uv, boxes, refined, edge = centres
+    cls, uv, boxes, refined = centres
     if boxes is not None:
         corners = ideal(boxes.reshape(-1, 2)).reshape(-1, 4)
         boxes = np.concatenate([np.minimum(corners[:, :2], corners[:, 2:]),
                                 np.maximum(corners[:, :2], corners[:, 2:])], axis=1)
-    return pp, (cls, ideal(uv), boxes, refined, edge)
+    return pp, (cls, ideal(uv), boxes, refined)
 
 
 def solve_dataset(ds: Dataset, splits=("test", "repeat"), detections: dict | None = None,
@@ -227,7 +224,7 @@ def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, p
     markers = ds.markers()
     per_frame = "pinhole" if self_calibrate == "sequence" else camera_model
     classes = {fid: frame_camera_class(ds.labels[fid], ds.config) for fid in ds.frames(splits)}
-    frames, used, edges = {}, {}, {}
+    frames, used = {}, {}
     for fid in ds.frames(splits):
         centres = frame_centres(ds, fid, detections, oracle_sigma_px, min_score)
         if centres is None:
@@ -235,13 +232,12 @@ def _solve_frames(ds: Dataset, splits, detections, oracle_sigma_px, min_score, p
             continue
         frame_pp, centres = true_camera_centres(ds.labels[fid], centres) if true_camera else (pp, centres)
         frame_options, factor = class_options(options, [classes[fid]], by_class)
-        frames[fid], used[fid], edges[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame,
-                                                         frame_options, factor)
+        frames[fid], used[fid] = solve_frame(markers, frame_pp, centres, sigma, per_frame, frame_options, factor)
     if self_calibrate == "sequence":
         for group in docking_runs(ds, [f for f in frames if frames[f]["ok"]]):
             run_pp = tuple(ds.labels[group[0]]["camera"]["principal_point"]) if true_camera else pp
             run_options, run_factor = class_options(options, [classes[f] for f in group], by_class)
-            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, run_options, edges,
+            frames.update(solve_run(markers, run_pp, group, frames, used, sigma, camera_model, run_options,
                                     run_factor))
     return name_camera_classes(frames, classes)
 
@@ -347,9 +343,9 @@ def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None,
 
 
 def solve_frame(markers, pp, centres, sigma, camera_model: str,
-                options: DockingOptions = DEFAULT_DOCKING, class_factor: float = 1.0) -> tuple[dict, dict, dict]:
-    """(poses record, marker id -> centre (u, v) px the fit used, marker id -> the edge width
-    (px) of each of those centres the detector measured one for) of one frame, through the
+                options: DockingOptions = DEFAULT_DOCKING, class_factor: float = 1.0) -> tuple[dict, dict]:
+    """(poses record, marker id -> centre (u, v) px the fit used) of one frame whose ``centres`` are
+    (class_ids, centres, boxes, refined) as :func:`detection_arrays` gives them, through the
     goodness-of-fit gate (eval.fit_gate) against the known centre noise: the noise card's
     (``options.refine.sigma_floor_px``), else ``sigma`` when given; ``class_factor`` the frame's
     camera class's (eval.camera_classes.CAMERA_CLASS_FACTORS: 1 for the three-chip camera the card was
@@ -366,22 +362,21 @@ def solve_frame(markers, pp, centres, sigma, camera_model: str,
 
 
 def _solve_rows(markers, pp, centres, keep: np.ndarray, sigma, camera_model: str, options: DockingOptions):
-    """:func:`solve_frame`'s solve of the detection rows ``keep`` (bool); (record, used, widths,
-    ids: per row of ``centres`` the marker id the fit used it as, else None)."""
-    cls, uv, boxes, refined, edge = (None if a is None else a[keep] for a in centres)
+    """:func:`solve_frame`'s solve of the detection rows ``keep`` (bool); (record, used, ids: per
+    row of ``centres`` the marker id the fit used it as, else None)."""
+    cls, uv, boxes, refined = (None if a is None else a[keep] for a in centres)
     ids = [None] * len(keep)
     try:
         res = solve_docking(markers, pp, detections=(cls, uv), sigma_px=sigma, boxes=boxes, refined=refined,
-                            edge_px=edge, camera_model=camera_model, options=options)
+                            camera_model=camera_model, options=options)
     except SolverError as exc:
-        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}, {}, ids
+        return {"ok": False, "reason": str(exc), "category": failure_category(exc)}, {}, ids
     rows = np.flatnonzero(keep)
     kept = [(k, mid) for k, (mid, ok) in enumerate(zip(res.marker_ids, res.inliers)) if ok and mid]
     for k, mid in kept:
         ids[rows[k]] = mid
     used = {mid: (float(uv[k, 0]), float(uv[k, 1])) for k, mid in kept}
-    widths = {} if edge is None else {mid: float(edge[k]) for k, mid in kept if np.isfinite(edge[k])}
-    return pose_record(res, int(len(centres[0]))), used, widths, ids
+    return pose_record(res, int(len(centres[0]))), used, ids
 
 
 def has_docking_runs(ds: Dataset) -> bool:
@@ -411,10 +406,10 @@ def docking_runs(ds: Dataset, frame_ids) -> list[list[str]]:
 
 
 def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, camera_model: str,
-              options: DockingOptions = DEFAULT_DOCKING, edges: dict | None = None, class_factor: float = 1.0) -> dict:
+              options: DockingOptions = DEFAULT_DOCKING, class_factor: float = 1.0) -> dict:
     """The records of one docking run solved with shared intrinsics (solver.solve_sequence); when
-    the joint solve fails, every frame of the run says why. ``used`` / ``edges``: per frame id the
-    centres and edge widths :func:`solve_frame` returned (``edges`` None: no widths told).
+    the joint solve fails, every frame of the run says why. ``used``: per frame id the centres
+    :func:`solve_frame` returned.
     Through the run gate (eval.fit_gate.run_misfits, against the noise card's centre noise, else
     ``sigma``, and the run's camera class's ``class_factor``: eval.camera_classes.classes_factor of
     its frames'): the worst frame the run's intrinsics cannot explain is left out (not ok, the reason
@@ -425,7 +420,7 @@ def solve_run(markers, pp, group: list[str], frames: dict, used: dict, sigma, ca
     left: dict = {}
     while True:
         members = [f for f in group if f not in left]
-        out = _joint_records(markers, pp, members, frames, used, sigma, camera_model, options, edges)
+        out = _joint_records(markers, pp, members, frames, used, sigma, camera_model, options)
         bad = run_misfits(out, known, class_factor)
         if not bad or len(members) <= 2 or len(left) >= max(1, len(group) // 4):
             left.update({f: _left_out(test, known) for f, test in bad.items()})
@@ -440,12 +435,11 @@ def _left_out(test: dict, known: float) -> dict:
             "fit_test": test}
 
 
-def _joint_records(markers, pp, group, frames, used, sigma, camera_model, options, edges) -> dict:
+def _joint_records(markers, pp, group, frames, used, sigma, camera_model, options) -> dict:
     """:func:`solve_run`'s joint solve of the frames ``group`` (no gate)."""
-    widths = None if edges is None else [edges.get(f) or None for f in group]
     try:
         run = solve_sequence(markers, pp, [used[f] for f in group], camera_model=camera_model, sigma_px=sigma,
-                             edge_px=widths, options=options)
+                             options=options)
     except SolverError as exc:
         return {f: {"ok": False, "reason": f"docking run solve: {exc}", "category": failure_category(exc)}
                 for f in group}

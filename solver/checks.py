@@ -17,7 +17,7 @@ from dockfactory.solver.errors import (
 )
 
 __all__ = ["as_points", "as_principal_point", "as_point_covariances", "check_correspondences",
-           "check_edge_widths", "check_shift_px", "check_sigma", "row_array", "layout_arrays", "collinear_2d",
+           "check_shift_px", "check_sigma", "row_array", "layout_arrays", "collinear_2d",
            "collinear_3d", "MIN_POINTS", "COLLINEAR_TOL", "MAX_SIGMA_PX"]
 
 MIN_POINTS = 4
@@ -98,9 +98,9 @@ def check_shift_px(shift_px) -> tuple[float, float]:
     return (x, y)
 
 
-def row_array(value, n, shape, name, dtype, allow_nan: bool = False):
-    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection); NaN
-    refused unless ``allow_nan``, inf always (InvalidSolverInput naming ``name``)."""
+def row_array(value, n, shape, name, dtype):
+    """None, or ``value`` as an (n, *shape) array of ``dtype`` (one row per detection); NaN and
+    inf refused (InvalidSolverInput naming ``name``)."""
     if value is None:
         return None
     try:
@@ -110,18 +110,9 @@ def row_array(value, n, shape, name, dtype, allow_nan: bool = False):
     if arr.shape != (n, *shape):
         raise InvalidSolverInput(f"{name}: expected shape {(n, *shape)} (one row per "
                                  f"detection), got {arr.shape}")
-    if not np.all(np.isfinite(arr) | (allow_nan & np.isnan(arr))):
+    if not np.all(np.isfinite(arr)):
         raise InvalidSolverInput(f"{name}: contains NaN or inf")
     return arr
-
-
-def check_edge_widths(value, n: int) -> np.ndarray | None:
-    """None, or ``value`` as an (n,) float array of edge widths (px, one per detection; NaN:
-    no edge fit); InvalidSolverInput for another shape, a negative or an infinite width."""
-    edge = row_array(value, n, (), "edge_px", float, allow_nan=True)
-    if edge is not None and not np.all(np.isnan(edge) | (edge >= 0)):
-        raise InvalidSolverInput(f"edge_px: widths must be finite and >= 0 (NaN: none), got {edge.tolist()}")
-    return edge
 
 
 def collinear_3d(points: np.ndarray) -> bool:

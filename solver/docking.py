@@ -24,7 +24,6 @@ from dockfactory.solver.camera_models import (
 from dockfactory.solver.checks import (
     MIN_POINTS,
     as_principal_point,
-    check_edge_widths,
     check_sigma,
     row_array,
 )
@@ -157,7 +156,7 @@ def _intrinsics_report(fit: JointFit):
 
 
 def solve_docking(markers, principal_point, *, detections=None, correspondences=None, boxes=None, refined=None,
-                  edge_px=None, sigma_px: float | None = None, robust: bool = False,
+                  sigma_px: float | None = None, robust: bool = False,
                   rng: np.random.Generator | None = None, camera_model: str = PINHOLE.name,
                   options: DockingOptions = DEFAULT_DOCKING) -> DockingResult:
     """Pose of B relative to A from one image of both sections (shared unknown focal length).
@@ -166,12 +165,11 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
     ----------
     markers, principal_point : layout, (2,) px
         :class:`core.layout.Marker` of both sections, ``center_mm`` in each marker's own section frame.
-    detections, boxes, refined, edge_px : (class_ids (N,), points_2d (N, 2) px), (N, 4) px, (N,) bool, (N,) px
+    detections, boxes, refined : (class_ids (N,), points_2d (N, 2) px), (N, 4) px, (N,) bool
         Exactly one of ``detections`` / ``correspondences``. Classes 0 / "A" red, 1 / "B" blue; ids from
         :func:`solver.identify.identify_markers` (missing markers, strays, swapped classes tolerated); suspect centres
         left out while each section keeps ``MIN_POINTS`` (:mod:`solver.suspects`): ``boxes`` the outlines [x0, y0, x1,
-        y1]; ``refined`` False where the detector could not refine the centre; ``edge_px`` each centre's edge-fit
-        width (NaN: none; None: unknown), widening the noise of a disc thin for its blur (disc_noise.noise_shapes).
+        y1]; ``refined`` False where the detector could not refine the centre.
         With ``options.eccentricity`` centres are corrected by their perspective offset and refitted.
     correspondences, robust, rng : dict marker id -> (u, v) or (marker_ids (N,), points_2d (N, 2)); bool; Generator
         ``robust=True`` (with ``rng``, a numpy Generator) rejects outliers by LO-RANSAC.
@@ -200,9 +198,9 @@ def solve_docking(markers, principal_point, *, detections=None, correspondences=
                          check_model_name(camera_model), options.model_choice, options.lens,
                          options.section_shift_px)
     if detections is not None:
-        return _solve_detections(markers, layout, detections, (boxes, refined, edge_px), fitter, options)
-    if boxes is not None or refined is not None or edge_px is not None:
-        raise InvalidSolverInput("boxes=, refined= and edge_px= describe detections: give them with detections=")
+        return _solve_detections(markers, layout, detections, (boxes, refined), fitter, options)
+    if boxes is not None or refined is not None:
+        raise InvalidSolverInput("boxes= and refined= describe detections: give them with detections=")
     if robust and not isinstance(rng, np.random.Generator):
         raise InvalidSolverInput("robust=True needs rng, a numpy.random.Generator (explicit seed)")
     return _solve_correspondences(layout, correspondences, rng if robust else None, fitter, options)
@@ -212,11 +210,10 @@ def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,
                       fitter: JointFitter, options: DockingOptions) -> DockingResult:
     """Identify, fit, leave out suspects, correct the eccentricity, refit; the robust refit and
     the covariance of the disc noise model (``options.disc_noise``, ``options.robust``).
-    ``per_detection``: (boxes, refined, edge_px) as :func:`solve_docking` takes them."""
+    ``per_detection``: (boxes, refined) as :func:`solve_docking` takes them."""
     n_det = len(parse_detections(detections)[0])
     boxes = row_array(per_detection[0], n_det, (4,), "boxes", float)
     refined = row_array(per_detection[1], n_det, (), "refined", bool)
-    edge_px = check_edge_widths(per_detection[2], n_det)
     ident = identify_markers(markers, fitter.principal_point, detections, options.identify,
                              options.refine, trusted=refined)
     ids = list(ident.marker_ids)
@@ -228,7 +225,7 @@ def _solve_detections(markers, layout: LayoutArrays, detections, per_detection,
     # 150-180 deg, no error raised) and refused 2 more (focal not observable); the poses of
     # all the others moved by at most 6e-8 mm and 1.3e-8 deg (the LM's stopping tolerance)
     fit = fitter.fit(p3["A"], p2["A"], p3["B"], p2["B"], start=ident.start)
-    points = SectionPoints(rows, p3, p2, tuple(layout.by_id.get(i) for i in ids), edge_px)
+    points = SectionPoints(rows, p3, p2, tuple(layout.by_id.get(i) for i in ids))
     fit, inliers = leave_out_suspects(fit, points, fitter, used.copy(), boxes, refined,
                                       options.min_extent)
     keep, points_2d = section_keep(points, inliers), points.points_2d

@@ -121,14 +121,12 @@ class SectionPoints:
     """The points a docking fit uses, per section s in ("A", "B"): ``rows[s]`` the input rows
     (list of n_s ints), ``points_3d[s]`` (n_s, 3) mm in the section's frame, ``points_2d[s]``
     (n_s, 2) px; ``markers`` (N,): the layout marker of every input row (None if not
-    identified); ``edge_px`` (N,) px or None: the edge width of every input row's centre fit
-    (NaN: none), for :func:`solver.disc_noise.noise_shapes`."""
+    identified)."""
 
     rows: dict
     points_3d: dict
     points_2d: dict
     markers: tuple
-    edge_px: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

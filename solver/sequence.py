@@ -9,14 +9,13 @@ Why and how: docs/solver.md, "Docking runs (self-calibration)".
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from dockfactory.core.names import SECTIONS
 from dockfactory.solver.camera_models import PINHOLE, Intrinsics, check_model_name
-from dockfactory.solver.checks import as_principal_point, check_edge_widths, check_sigma
+from dockfactory.solver.checks import as_principal_point, check_sigma
 from dockfactory.solver.disc_noise import section_noise_shapes
 from dockfactory.solver.docking import DockingResult
 from dockfactory.solver.errors import InvalidSolverInput, NoValidCamera, SolverError
@@ -89,19 +88,17 @@ class SequenceResult:
 @dataclass(frozen=True)
 class _Frame:
     """One frame's validated points: ``rows`` / ``p3`` / ``p2`` per section (as
-    :func:`solver.layout_points.section_arrays`), its marker ``ids`` (N,), the edge width of
-    each centre ``edge`` (N,) px (NaN: not told)."""
+    :func:`solver.layout_points.section_arrays`) and its marker ``ids`` (N,)."""
 
     ids: tuple
     rows: dict
     p3: dict
     p2: dict
-    edge: np.ndarray
 
 
 def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINHOLE.name,
                    sigma_px: float | None = None, share_cam_from_a: bool = True,
-                   edge_px=None, options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
+                   options: DockingOptions = DEFAULT_DOCKING) -> SequenceResult:
     """Poses of B in A for every frame of one docking run, the camera's intrinsics estimated once for the run.
 
     Parameters
@@ -117,9 +114,6 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
         The pixel noise std, or None (estimated from the residuals).
     share_cam_from_a : bool
         One camera pose relative to A for the whole run (the camera and A are fixed) or one per frame.
-    edge_px : None, or per frame None or a mapping marker id -> edge width (px, NaN: none)
-        The detector's edge width of that centre (:func:`solver.solve_docking`'s ``edge_px``), which widens the noise
-        of centres on discs thin for their blur in the run's covariance (:func:`solver.disc_noise.thin_disc_factor`).
     options : DockingOptions
 
     Returns
@@ -135,7 +129,7 @@ def solve_sequence(markers, principal_point, frames, *, camera_model: str = PINH
     pp = as_principal_point(principal_point)
     sigma = check_sigma(sigma_px)
     model_name = check_model_name(camera_model)
-    parsed = _parse_frames(layout, frames, edge_px)
+    parsed = _parse_frames(layout, frames)
     pin = _pinhole_run(parsed, pp, sigma, bool(share_cam_from_a), options)
     blocks = _blocks(parsed, bool(share_cam_from_a))
     mf = fit_camera_model(blocks, pin, model_name, sigma, options.refine, options.model_choice)
@@ -193,41 +187,24 @@ def _with_run_bias(mf: ModelFit, parsed, sigma, layout: LayoutArrays, share: boo
     return replace(mf, covariance=cov, sigma_px=float(np.sqrt(sigma2))), float(np.sqrt(tau2))
 
 
-def _parse_frames(layout: LayoutArrays, frames, edge_px=None) -> list:
-    """Validated :class:`_Frame` per input frame (InvalidSolverInput for an empty run, for
-    ``edge_px`` not one entry per frame or naming a marker the frame does not have)."""
+def _parse_frames(layout: LayoutArrays, frames) -> list:
+    """Validated :class:`_Frame` per input frame (InvalidSolverInput for an empty run; a
+    frame's own error prefixed with its index)."""
     try:
         frames = list(frames)
     except TypeError:
         raise InvalidSolverInput("frames: expected a sequence of correspondences") from None
     if not frames:
         raise InvalidSolverInput("frames: a docking run needs at least one frame")
-    edges = [None] * len(frames) if edge_px is None else list(edge_px)
-    if len(edges) != len(frames):
-        raise InvalidSolverInput(f"edge_px: {len(edges)} entries for {len(frames)} frames (one per frame)")
     out = []
-    for k, (corr, edge) in enumerate(zip(frames, edges)):
+    for k, corr in enumerate(frames):
         try:
             ids, uv = checked_correspondences(layout, corr)
             rows, p3, p2 = section_arrays(layout, ids, np.ones(len(ids), dtype=bool), uv)
-            widths = _frame_edges(ids, edge)
         except SolverError as exc:
             raise type(exc)(f"frame {k}: {exc}") from None
-        out.append(_Frame(tuple(ids), rows, p3, p2, widths))
+        out.append(_Frame(tuple(ids), rows, p3, p2))
     return out
-
-
-def _frame_edges(ids, edge) -> np.ndarray:
-    """(N,) edge widths of a frame's centres in the order of ``ids`` from ``edge`` (None or a
-    mapping marker id -> width px); NaN where not told."""
-    if edge is None:
-        return np.full(len(ids), np.nan)
-    if not isinstance(edge, Mapping):
-        raise InvalidSolverInput(f"edge_px: expected a mapping marker id -> width, got {type(edge).__name__}")
-    unknown = sorted(set(edge) - set(ids), key=str)
-    if unknown:
-        raise InvalidSolverInput(f"edge_px: marker ids not among the frame's correspondences: {unknown[:10]}")
-    return check_edge_widths([np.nan if edge.get(i) is None else edge[i] for i in ids], len(ids))
 
 
 def _blocks(parsed, share: bool) -> tuple:

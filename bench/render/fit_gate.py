@@ -91,12 +91,12 @@ def run(root: Path, lens=None, factor: float = 1.0, only=None) -> dict:
             continue
         rows = []
         for fid in ds.frames(("test",)):
-            cls, uv, boxes, refined, edge = detection_arrays(dets["frames"].get(fid, []), MIN_SCORE)
+            cls, uv, boxes, refined = detection_arrays(dets["frames"].get(fid, []), MIN_SCORE)
             if len(cls) == 0:
                 continue
-            rec, _, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
-                                    (cls, move(uv), _moved_boxes(boxes, move), refined, edge), None,
-                                    "pinhole", docking_options(noise, lens))
+            rec, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
+                                 (cls, move(uv), _moved_boxes(boxes, move), refined), None,
+                                 "pinhole", docking_options(noise, lens))
             rows.append(_row(rec, ds.labels[fid]["pose_b_in_d"]))
         out["faults"][name] = _summary(rows)
     return out

@@ -77,10 +77,10 @@ def solve_all(root: Path, ids, dets: dict) -> dict:
     for fid in ids:
         label = json.loads((root / "labels" / f"{fid}.json").read_text())
         cond, w, h = label["spec"]["condition"], label["image"]["width"], label["image"]["height"]
-        cls, uv, boxes, refined, edge = detection_arrays(dets[fid], MIN_SCORE)
+        cls, uv, boxes, refined = detection_arrays(dets[fid], MIN_SCORE)
         try:
             res = solve_docking(markers, ((w - 1) / 2, (h - 1) / 2), detections=(cls, uv), boxes=boxes,
-                                refined=refined, edge_px=edge, options=options)
+                                refined=refined, options=options)
         except SolverError as exc:
             out[fid] = (cond, None, type(exc).__name__)
             continue

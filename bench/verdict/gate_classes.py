@@ -48,12 +48,12 @@ def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: in
     markers, move, size = fault
     out = []
     for row in rows[:frames]:
-        cls, uv, boxes, refined, edge = detection_arrays(row["dets"], MIN_SCORE)
+        cls, uv, boxes, refined = detection_arrays(row["dets"], MIN_SCORE)
         if len(cls) == 0:
             continue
-        rec, _, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
-                                (cls, move(uv), _moved_boxes(boxes, move), refined, edge), None, "pinhole",
-                                docking_options(noise_px, lens_prior_for(ds.config), shift), class_factor)
+        rec, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
+                             (cls, move(uv), _moved_boxes(boxes, move), refined), None, "pinhole",
+                             docking_options(noise_px, lens_prior_for(ds.config), shift), class_factor)
         out.append(_row(rec, ds.labels[row["frame"]]["pose_b_in_d"]))
     return out
 

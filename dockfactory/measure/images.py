@@ -94,7 +94,6 @@ class Frame:
     detections: list = field(default_factory=list)
     principal_point: tuple = (0.0, 0.0)
     used_points: dict = field(default_factory=dict)   # marker id -> (u, v) the frame's fit used
-    used_edges: dict = field(default_factory=dict)    # marker id -> edge width (px) of those centres, if measured
 
 
 def collect_images(items) -> list[Path]:
@@ -189,10 +188,9 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
         why = f"{NO_MARKERS} (none scoring {min_score:g} or more of {len(frame.detections)})"
         frame.record = {"ok": False, "category": NO_MARKERS, "reason": f"{path}: {why}"}
     elif calibration is not None:
-        frame.record, frame.used_points, frame.used_edges = calibrated_solve(detector, markers, path, (w, h), centres,
-                                                                             calibration, cls)
+        frame.record, frame.used_points = calibrated_solve(detector, markers, path, (w, h), centres, calibration, cls)
     else:
-        frame.record, frame.used_points, frame.used_edges = solve_frame(
+        frame.record, frame.used_points = solve_frame(
             markers, frame.principal_point, centres, None, camera_model,
             docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px)),
             CAMERA_CLASS_FACTORS[cls])
@@ -207,7 +205,7 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
 
 def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration,
                      camera: str = "three-chip"):
-    """(record, used points, used edges) of one image of a calibrated camera: its centres (and
+    """(record, used points) of one image of a calibrated camera: its centres (and
     boxes) taken to the ideal square-pixel pinhole camera (core.calibration_files.ideal_pixels),
     solved with the calibration's principal point, the lens known (nothing marginalised) and the
     pinhole model (the file's stated uncertainty marginalised: :func:`calibration_lens`); the focal
@@ -216,20 +214,20 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     An image of another size than the calibration's is not ok (category "calibration size")."""
     if tuple(size) != (cal.width, cal.height):
         why = f"{path}: the image is {size[0]}x{size[1]}, the calibration is for {cal.width}x{cal.height}"
-        return {"ok": False, "category": "calibration size", "reason": why}, {}, {}
-    cls, uv, boxes, refined, edge = centres
+        return {"ok": False, "category": "calibration size", "reason": why}, {}
+    cls, uv, boxes, refined = centres
     ideal, focal = ideal_pixels(cal, uv)
     if boxes is not None:
         lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
         boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
     options = docking_options(detector.centre_noise_px, calibration_lens(cal),
                               class_section_shift(camera, detector.section_shift_px))
-    record, used, edges = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined, edge), None,
-                                      "pinhole", options, CAMERA_CLASS_FACTORS[camera])
+    record, used = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined), None,
+                               "pinhole", options, CAMERA_CLASS_FACTORS[camera])
     record["calibration"] = {"focal_px": focal, "fx": cal.fx, "fy": cal.fy, "principal_point": [cal.cx, cal.cy],
                              "distortion": list(cal.dist),
                              **({"std": list(cal.std)} if cal.std is not None else {})}
-    return record, used, edges
+    return record, used
 
 
 def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sigma_floor_px=None,
@@ -252,8 +250,7 @@ def self_calibrate_sequence(frames: list[Frame], markers, camera_model: str, sig
     classes = {str(f.index): f.record.get("camera_class", "three-chip") for f in solved}
     records = solve_run(markers, solved[0].principal_point, keys, {str(f.index): f.record for f in solved},
                         {str(f.index): f.used_points for f in solved}, None, camera_model,
-                        docking_options(sigma_floor_px, lens, section_shift_px),
-                        {str(f.index): f.used_edges for f in solved}, classes_factor(classes.values()))
+                        docking_options(sigma_floor_px, lens, section_shift_px), classes_factor(classes.values()))
     name_camera_classes(records, classes)
     ms = 1000 * (time.perf_counter() - t0) / len(solved)
     for f in solved:
@@ -439,15 +436,13 @@ def check_one_size(paths, probes) -> None:
 
 def _entry(frame: Frame) -> dict:
     return {"record": frame.record, "detections": frame.detections, "principal_point": list(frame.principal_point),
-            "used_points": [[mid, *uv] for mid, uv in frame.used_points.items()],
-            "used_edge_px": [[mid, w] for mid, w in frame.used_edges.items()]}
+            "used_points": [[mid, *uv] for mid, uv in frame.used_points.items()]}
 
 
 def _frame(index: int, path: Path, entry: dict) -> Frame:
     return Frame(index, path, entry["record"], detections=entry["detections"],
                  principal_point=tuple(entry["principal_point"]),
-                 used_points={mid: (u, v) for mid, u, v in entry["used_points"]},
-                 used_edges={mid: w for mid, w in entry.get("used_edge_px", [])})
+                 used_points={mid: (u, v) for mid, u, v in entry["used_points"]})
 
 
 def _died(path: Path, error: BaseException) -> dict:

@@ -38,8 +38,7 @@ def parse_window(text: str) -> int:
 @dataclass
 class WindowCalibration:
     """``apply(index, frame)`` -> the frame's record after the window's joint solve (the module
-    docstring); ``frame`` a measure.Frame solved alone (pinhole), with its ``used_points`` (and
-    ``used_edges``: the edge widths the run's covariance takes, :func:`solver.solve_sequence`) and
+    docstring); ``frame`` a measure.Frame solved alone (pinhole), with its ``used_points`` and
     its record's ``camera_class``, which the joint record keeps and whose factor the run gate takes
     (of the window's frames: the largest, eval.camera_classes.classes_factor)."""
     markers: tuple
@@ -57,7 +56,7 @@ class WindowCalibration:
             return record
         if self.frozen is not None:
             return self._frozen(index, frame)
-        self.frames.append((str(index), frame.used_points, record["n_detections"], frame.used_edges,
+        self.frames.append((str(index), frame.used_points, record["n_detections"],
                             record.get("camera_class", "three-chip")))
         while len(self.frames) > self.window:
             self.frames.popleft()
@@ -66,7 +65,6 @@ class WindowCalibration:
         keys = [k for k, *_ in self.frames]
         out = solve_run(self.markers, frame.principal_point, keys, {k: {"n_detections": n} for k, _, n, *_ in self.frames},
                         {k: used for k, used, *_ in self.frames}, None, self.camera_model, self.options,
-                        {k: edges for k, _, _, edges, _ in self.frames},
                         classes_factor(c for *_, c in self.frames))[str(index)]
         if not out["ok"]:
             return {**record, "self_calibration": f"window solve failed, solved alone: {out['reason']}"}
@@ -85,7 +83,7 @@ class WindowCalibration:
         key = str(index)
         out = solve_run(self.markers, pp, [key], {key: {"n_detections": frame.record["n_detections"]}},
                         {key: dict(zip(ids, map(tuple, uv)))}, None, "pinhole", self.options,
-                        {key: frame.used_edges}, classes_factor([frame.record.get("camera_class", "three-chip")]))[key]
+                        classes_factor([frame.record.get("camera_class", "three-chip")]))[key]
         if not out["ok"]:
             return {**frame.record, "self_calibration": f"frozen-intrinsics solve failed: {out['reason']}"}
         return {**out, **kept_from_frame(frame.record), "camera_model": fz["camera_model"], "frozen_intrinsics": dict(fz),

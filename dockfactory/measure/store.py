@@ -8,9 +8,10 @@ and measures the rest; with another key (other images, bytes or options), or aft
 older measure, everything an earlier run wrote (entries, overlays, measurements.json/.csv) is
 removed first, so stale results never mix into new ones.
 
-An entry is ``{"key", "index", "image", "record", "detections", "used_points", "used_edge_px",
-"principal_point"}`` (``used_edge_px`` [[marker id, px]]: the edge widths of the used centres; absent
-in entries of older runs, read as none): the per-image stage of measure (before a docking run's joint solve).
+An entry is ``{"key", "index", "image", "record", "detections", "used_points", "principal_point"}``:
+the per-image stage of measure (before a docking run's joint solve). Entries written by earlier
+versions may also carry ``used_edge_px`` (the edge widths of the used centres, which no solve takes
+any more): it is ignored.
 """
 from __future__ import annotations
 

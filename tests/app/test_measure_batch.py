@@ -254,11 +254,30 @@ def test_results_are_written_as_they_finish_and_a_rerun_measures_only_the_rest(s
         assert got["ok"] and max(abs(got["pose"][k] - v) for k, v in rec["pose"].items()) < 1e-9
 
 
+def test_an_entry_of_the_previous_version_with_edge_widths_still_loads(tmp_path):
+    """Entries written before the edge widths left the solve carry ``used_edge_px``: the store
+    still takes such an entry and measure reads it as before (the widths ignored); new entries
+    no longer carry the key."""
+    from dockfactory.measure.store import MeasureStore
+    image = tmp_path / "a.png"
+    made_with = {"images": [str(image)]}
+    store = MeasureStore(tmp_path / "out", made_with)
+    assert store.open([image]) == {}
+    used = {"A1": (100.5, 200.25), "B3": (300.0, 400.75)}
+    store.save(0, image, {"record": {"ok": True, "n_detections": 2}, "detections": [], "principal_point": [319.5, 239.5],
+                          "used_points": [[mid, *uv] for mid, uv in used.items()],
+                          "used_edge_px": [["A1", 0.8], ["B3", 2.5]]})
+    [(index, entry)] = MeasureStore(tmp_path / "out", made_with).open([image]).items()
+    frame = measure_mod._frame(index, image, entry)
+    assert frame.used_points == used and frame.principal_point == (319.5, 239.5) and frame.record["ok"]
+    assert "used_edge_px" not in measure_mod._entry(frame)
+
+
 @pytest.mark.slow   # measure three times in this process
-def test_a_resumed_docking_run_keeps_the_edge_widths(run_source, tmp_path, monkeypatch):
-    """--self-calibrate sequence: each entry keeps the edge widths of the centres its frame used
-    (the run's covariance takes them), so a resumed run reports the covariance of a fresh one
-    (to 1e-9 relative), not the one of centres without widths."""
+def test_a_resumed_docking_run_takes_the_entries_of_the_previous_version(run_source, tmp_path, monkeypatch):
+    """--self-calibrate sequence resumed from entries as the previous version wrote them (with the
+    edge widths of the used centres, ``used_edge_px``): the resumed run reports the poses and
+    covariances of a fresh one (to 1e-9 relative)."""
     folder, layout = run_source
     real, calls = measure_mod.measure_and_draw, []
 
@@ -270,9 +289,12 @@ def test_a_resumed_docking_run_keeps_the_edge_widths(run_source, tmp_path, monke
     monkeypatch.setattr(measure_mod, "measure_and_draw", stops_at_third)
     out, fresh = tmp_path / "out", tmp_path / "fresh"
     assert _measure([folder], layout, out, "--workers", "1", "--self-calibrate", "sequence") == 130
-    entries = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
-    assert len(entries) == 2 and all(len(e["used_edge_px"]) >= 8 for e in entries)
-    assert all(set(mid for mid, _ in e["used_edge_px"]) <= set(mid for mid, *_ in e["used_points"]) for e in entries)
+    paths = sorted((out / "records").glob("*.json"))
+    assert len(paths) == 2
+    for p in paths:
+        entry = json.loads(p.read_text())
+        assert "used_edge_px" not in entry and len(entry["used_points"]) >= 8
+        p.write_text(json.dumps({**entry, "used_edge_px": [[mid, 1.5] for mid, *_ in entry["used_points"]]}))
     monkeypatch.setattr(measure_mod, "measure_and_draw", real)
     assert _measure([folder], layout, out, "--workers", "1", "--self-calibrate", "sequence") == 0
     assert _measure([folder], layout, fresh, "--workers", "1", "--self-calibrate", "sequence") == 0
@@ -280,6 +302,7 @@ def test_a_resumed_docking_run_keeps_the_edge_widths(run_source, tmp_path, monke
     for name, rec in _by_name(_doc(fresh)).items():
         got = _by_name(_doc(out))[name]
         assert got["ok"] and got["self_calibrated"] == "sequence"
+        assert max(abs(got["pose"][k] - v) for k, v in rec["pose"].items()) < 1e-9
         assert np.allclose(got["covariance"], rec["covariance"], rtol=1e-9, atol=0.0)
 
 

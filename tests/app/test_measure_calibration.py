@@ -26,7 +26,7 @@ def _frame(rng):
     sc = docking_scene(rng, pp_offset_px=(25.0, -18.0), coeffs=(-0.12, 0.03))
     uv = np.vstack([sc.uv_a, sc.uv_b]) + 0.05 * rng.standard_normal((14, 2))
     cal = Calibration(1280, 960, sc.focal_px, sc.focal_px, *sc.principal_point, (-0.12, 0.03, 0.0, 0.0, 0.0))
-    return sc, (np.array([0] * 7 + [1] * 7), uv, None, np.ones(14, bool), None), cal
+    return sc, (np.array([0] * 7 + [1] * 7), uv, None, np.ones(14, bool)), cal
 
 
 def test_ideal_pixels_undo_the_lens():
@@ -44,13 +44,13 @@ def test_a_calibrated_camera_solves_within_its_uncertainty():
     for _ in range(20):
         sc, centres, cal = _frame(rng)
         truth = pose_components(sc.d_from_b)
-        rec, _, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
+        rec, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
         assert rec["ok"] and rec["calibration"]["focal_px"] == pytest.approx(sc.focal_px)
         assert rec["focal_px"] == pytest.approx(sc.focal_px, rel=0.03)
         std = np.sqrt(np.diag(rec["covariance"]))
         z_cal.append([(rec["pose"][k] - truth[k]) / s for k, s in zip(("x_mm", "y_mm"), std[:2])])
         e_cal.append([rec["pose"][k] - truth[k] for k in ("x_mm", "y_mm", "alpha_deg")])
-        plain, _, _ = solve_frame(LAYOUT, (639.5, 479.5), centres, None, "pinhole", docking_options(0.05))
+        plain, _ = solve_frame(LAYOUT, (639.5, 479.5), centres, None, "pinhole", docking_options(0.05))
         if plain["ok"]:
             e_plain.append([plain["pose"][k] - truth[k] for k in ("x_mm", "y_mm", "alpha_deg")])
     assert np.sqrt(np.mean(np.square(z_cal))) < 1.5 and np.max(np.abs(z_cal)) < 4.5
@@ -61,7 +61,7 @@ def test_a_calibrated_camera_solves_within_its_uncertainty():
 
 def test_an_image_of_another_size_is_refused():
     sc, centres, cal = _frame(np.random.default_rng(9))
-    rec, used, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1920, 1080), centres, cal)
+    rec, used = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1920, 1080), centres, cal)
     assert not rec["ok"] and rec["category"] == "calibration size" and "1920x1080" in rec["reason"] and not used
 
 
@@ -124,7 +124,7 @@ def test_the_overlay_reprojects_through_the_calibrated_lens():
 
     from dockfactory.measure.overlay import project_layout
     sc, centres, cal = _frame(np.random.default_rng(12))
-    rec, _, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
+    rec, _ = calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)
     got = project_layout(rec, LAYOUT)
     cam_from_a, a_from_b = np.array(rec["cam_from_a"]), np.array(rec["d_from_b"])
     want = []
@@ -155,7 +155,7 @@ def test_a_calibrated_records_bias_term_is_the_pose_shift_of_shifted_delivered_c
     cal = Calibration(1280, 960, fx, fy, *sc.principal_point)
     uv = np.vstack([cv2.projectPoints(pts, cv2.Rodrigues(cam[:3, :3])[0], cam[:3, 3], cal.K, np.zeros(5))[0]
                     .reshape(-1, 2) for pts, cam in ((sc.points_a, sc.cam_from_d), (sc.points_b, sc.cam_from_b))])
-    centres = (np.array([0] * 7 + [1] * 7), uv, None, np.ones(14, bool), None)
+    centres = (np.array([0] * 7 + [1] * 7), uv, None, np.ones(14, bool))
     rec = {**calibrated_solve(DETECTOR, LAYOUT, Path("f.png"), (1280, 960), centres, cal)[0], "image_size": [1280, 960]}
     assert rec["ok"] and np.array_equal(record_geometry(rec, LAYOUT)[5].principal_point, sc.principal_point)
     ids = [m.id for m in LAYOUT if m.section == "A"] + [m.id for m in LAYOUT if m.section == "B"]

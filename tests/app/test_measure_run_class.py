@@ -41,10 +41,10 @@ def _frames(cls: str, seed: int = 0, n: int = 6) -> list[Frame]:
         uv = np.vstack([sc.uv_a, sc.uv_b])
         uv = uv + disc_noise(sc, LAYOUT, CAMERA_CLASS_FACTORS[cls] * CARD, np.random.default_rng(100 * seed + k))
         ids = np.r_[np.zeros(len(sc.uv_a), int), np.ones(len(sc.uv_b), int)]
-        record, used, edges = solve_frame(LAYOUT, pp, (ids, uv, None, None, None), None, "pinhole", _options(cls),
-                                          CAMERA_CLASS_FACTORS[cls])
+        record, used = solve_frame(LAYOUT, pp, (ids, uv, None, None), None, "pinhole", _options(cls),
+                                   CAMERA_CLASS_FACTORS[cls])
         record.update(camera_class=cls, image_size=list(IMAGE_SIZE), timing_ms={"detect": 1.0, "solve": 1.0})
-        out.append(Frame(k, Path(f"{k:03d}.png"), record, principal_point=pp, used_points=used, used_edges=edges))
+        out.append(Frame(k, Path(f"{k:03d}.png"), record, principal_point=pp, used_points=used))
     return out
 
 

@@ -123,9 +123,9 @@ def test_a_docking_run_carries_its_classes_section_shift_and_factor(tmp_path_fac
     ds = Dataset.open(painted_from_text(tmp_path_factory, "bayer-jpeg-runs", text))
     runs, real = [], solve_frames.solve_run
 
-    def spy(markers, pp, group, frames, used, sigma, model, options, edges=None, class_factor=1.0):
+    def spy(markers, pp, group, frames, used, sigma, model, options, class_factor=1.0):
         runs.append((options.section_shift_px, class_factor))
-        return real(markers, pp, group, frames, used, sigma, model, options, edges, class_factor)
+        return real(markers, pp, group, frames, used, sigma, model, options, class_factor)
     monkeypatch.setattr(solve_frames, "solve_run", spy)
     poses = solve_dataset(ds, detections=_detections(ds), self_calibrate="sequence")
     assert runs and all(r == (class_section_shift("bayer-jpeg", None), CAMERA_CLASS_FACTORS["bayer-jpeg"]) for r in runs)

@@ -36,8 +36,8 @@ def frames(painted_source):
 
 def _solve(markers, f, uv=None):
     fid, cls, uv0, pp, _ = f
-    rec, _, _ = solve_frame(markers, pp, (cls, uv0 if uv is None else uv, None, None, None), None, "pinhole",
-                            docking_options(SIGMA))
+    rec, _ = solve_frame(markers, pp, (cls, uv0 if uv is None else uv, None, None), None, "pinhole",
+                         docking_options(SIGMA))
     return rec
 
 
@@ -125,7 +125,7 @@ def _synthetic(seed: int, pp_offset_px, lens=KNOWN_LENS, coeffs=None, far: bool 
     n_a, n_b = len(sc.uv_a), len(sc.uv_b)
     uv = np.vstack([sc.uv_a, sc.uv_b]) + CARD * np.random.default_rng(seed + 1000).standard_normal((n_a + n_b, 2))
     cls = np.r_[np.zeros(n_a, dtype=int), np.ones(n_b, dtype=int)]
-    return solve_frame(layout, sc.image_centre, (cls, uv, None, None, None), None, "pinhole",
+    return solve_frame(layout, sc.image_centre, (cls, uv, None, None), None, "pinhole",
                        docking_options(CARD, lens))[0]
 
 
@@ -180,7 +180,7 @@ def _noisy_class(seed: int, pp_offset_px, noise_px: float, class_factor: float) 
     n_a, n_b = len(sc.uv_a), len(sc.uv_b)
     uv = np.vstack([sc.uv_a, sc.uv_b]) + noise_px * np.random.default_rng(seed + 1000).standard_normal((n_a + n_b, 2))
     cls = np.r_[np.zeros(n_a, dtype=int), np.ones(n_b, dtype=int)]
-    return solve_frame(layout, sc.image_centre, (cls, uv, None, None, None), None, "pinhole",
+    return solve_frame(layout, sc.image_centre, (cls, uv, None, None), None, "pinhole",
                        docking_options(SHIPPED_CARD, UNCALIBRATED_LENS), class_factor)[0]
 
 

@@ -207,7 +207,7 @@ def test_the_true_camera_reference_and_the_video_lines_take_the_aspect(cfg):
         k = np.array(label["camera"]["K"])
         uv = np.array([m["center_px"] for m in label["markers"] if m["in_frame"]])
         centres_d = np.array([m["center_d_mm"] for m in label["markers"] if m["in_frame"]])
-        _, (_, ideal, _, _, _) = true_camera_centres(label, (None, uv, None, None, None))
+        _, (_, ideal, _, _) = true_camera_centres(label, (None, uv, None, None))
         want, _ = cv2.projectPoints(transform_points(frame.camera.cam_from_d_array(), centres_d), np.zeros(3),
                                     np.zeros(3), frame.camera.pinhole_k(), np.zeros(5))
         assert np.abs(ideal - want.reshape(-1, 2)).max() < 1e-6

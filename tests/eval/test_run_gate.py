@@ -1,6 +1,6 @@
-"""The judge's docking-run solve is told the detector's edge widths: ``solve_frame`` returns the
-widths of the centres its fit used (none for a centre without one), and ``solve_run`` hands them
-to ``solver.solve_sequence`` (a thin disc widens the run's Y std). Synthetic run, seeded."""
+"""The judge's docking-run solve through the run gate (eval.solve_frames.solve_run,
+eval.fit_gate.run_misfits): each frame solved alone (``solve_frame``), then the run with shared
+intrinsics; a frame the run's intrinsics cannot explain is left out. Synthetic run, seeded."""
 import numpy as np
 
 from dockfactory.eval.solve_frames import solve_frame, solve_run
@@ -10,33 +10,16 @@ LAYOUT = default_layout()
 CLASSES = np.array([0 if m.section == "A" else 1 for m in LAYOUT])
 
 
-def _centres(scene, rng, edge):
-    uv = np.vstack([scene.uv_a, scene.uv_b]) + 0.05 * rng.standard_normal((len(LAYOUT), 2))
-    return CLASSES, uv, None, None, edge
-
-
-def test_frame_widths_are_the_used_centres_with_a_width():
-    rng = np.random.default_rng(7)
-    run = docking_run(rng, 2)
-    edge = np.full(len(LAYOUT), 0.8)
-    edge[[0, 5]] = np.nan
-    record, used, widths = solve_frame(LAYOUT, run.frames[0].image_centre, _centres(run.frames[0], rng, edge),
-                                       None, "pinhole")
-    assert record["ok"] and set(widths) <= set(used)
-    assert set(used) - set(widths) == {LAYOUT[0].id, LAYOUT[5].id} and all(w == 0.8 for w in widths.values())
-    assert solve_frame(LAYOUT, run.frames[0].image_centre, _centres(run.frames[0], rng, None), None, "pinhole")[2] == {}
-
-
 def _run_records(run, rng, zoomed: int | None = None, zoom: float = 1.0):
     """Each frame solved alone (gated); frame ``zoomed``'s centres scaled about the image centre
     by ``zoom`` (the camera zoomed between frames: the frame fits alone with another focal)."""
     frames, used = {}, {}
     for k, sc in enumerate(run.frames):
-        classes, uv, *_ = _centres(sc, rng, None)
+        uv = np.vstack([sc.uv_a, sc.uv_b]) + 0.05 * rng.standard_normal((len(LAYOUT), 2))
         if k == zoomed:
             uv = sc.image_centre + zoom * (uv - sc.image_centre)
-        frames[str(k)], used[str(k)], _ = solve_frame(LAYOUT, sc.image_centre, (classes, uv, None, None, None),
-                                                      0.05, "pinhole")
+        frames[str(k)], used[str(k)] = solve_frame(LAYOUT, sc.image_centre, (CLASSES, uv, None, None), 0.05,
+                                                   "pinhole")
         assert frames[str(k)]["ok"]
     return frames, used
 
