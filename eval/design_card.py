@@ -17,7 +17,8 @@ from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_predict import NoiseClass
 from dockfactory.eval.design_space import Design, jpeg_quality
 
-CARD_FORMAT = "dockfactory.design_predictor/1"
+CARD_FORMAT = "dockfactory.design_predictor/2"
+OLD_FORMATS = ("dockfactory.design_predictor/1",)   # fitted under an earlier centre-noise model: refit
 
 __all__ = ["DesignCard", "load_design_card", "CARD_FORMAT"]
 
@@ -30,7 +31,6 @@ class DesignCard:
     cfa_factor: dict
     ring_factor: dict
     jpeg_factor: dict
-    edge_px: dict
     jpeg_min_quality: int
     bound_factor: dict
     provisional: tuple[str, ...]
@@ -47,8 +47,7 @@ class DesignCard:
         if q is not None:
             g *= self.jpeg_factor[design.camera.cfa]
             used.append(f"jpeg_factor.{design.camera.cfa}")
-        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g),
-                           self.edge_px[design.camera.cfa])
+        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g))
         return noise, [u for u in used if u in self.provisional], ""
 
 
@@ -72,17 +71,6 @@ def _rings(path, table) -> dict:
     return {ring: _factors(path, table, ring, ("none", "rggb"), "ring_factor.") for ring in ("dark", "white")}
 
 
-def _edges(path, table) -> dict:
-    if not isinstance(table, dict) or set(table) != {"none", "rggb"}:
-        raise DockfactoryError(f"{path}: edge_px: expected a table of none, rggb, got {table!r}")
-    out = {}
-    for k, v in table.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 <= v <= 20:
-            raise DockfactoryError(f"{path}: edge_px.{k}: expected a number in [0, 20] px, got {v!r}")
-        out[k] = float(v)
-    return out
-
-
 def load_design_card(path) -> DesignCard:
     """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
     path = Path(path)
@@ -92,7 +80,11 @@ def load_design_card(path) -> DesignCard:
         raise DockfactoryError(f"{path}: cannot read the predictor card: {exc.strerror}") from None
     except ValueError as exc:
         raise DockfactoryError(f"{path}: not valid JSON: {exc}") from None
-    if not isinstance(data, dict) or data.get("format") != CARD_FORMAT:
+    fmt = data.get("format") if isinstance(data, dict) else None
+    if fmt in OLD_FORMATS:
+        raise DockfactoryError(f"{path}: format {fmt!r}: fitted under the previous centre-noise model; refit it "
+                               "(python -m bench.design.design_fit --card-out CARD.json)")
+    if fmt != CARD_FORMAT:
         raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r}")
     shift = data.get("shift_px")
     if not (isinstance(shift, list) and len(shift) == 2):
@@ -107,6 +99,5 @@ def load_design_card(path) -> DesignCard:
                       (_positive(path, "shift_px[0]", shift[0]), _positive(path, "shift_px[1]", shift[1])),
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _rings(path, data.get("ring_factor")),
-                      _factors(path, data, "jpeg_factor", ("none", "rggb")),
-                      _edges(path, data.get("edge_px")), q,
+                      _factors(path, data, "jpeg_factor", ("none", "rggb")), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data)

@@ -38,12 +38,9 @@ __all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "
 @dataclass(frozen=True)
 class NoiseClass:
     """The centre noise of one design's camera class: disc-model scale (px per axis at
-    REFERENCE_RADIUS_PX), section offset (px per axis) and the edge width (px, Gaussian std) its
-    discs' edges have in the refinement's fit (0: no thin-disc term; solver.disc_noise.
-    thin_disc_factor widens the noise across a disc only a few edge widths thick)."""
+    REFERENCE_RADIUS_PX) and section offset (px per axis)."""
     scale_px: float
     shift_px: tuple[float, float]
-    edge_px: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -12,10 +12,8 @@ jpeg32_a_48.json by default; ring/white24_48.json, jpeg24_a_48.json for the ship
 The model (eval.design_predict): RMSE^2 = s0^2 Vn + su^2 Vu + sv^2 Vv per component, Vn the
 disc-noise variance at unit scale and Vu, Vv the section offset's at unit shift per axis, mean
 over the frames. (s0, su, sv) by non-negative least squares on the relative squared error of the
-three-chip camera's X, Y and alpha on the three scenes; each camera class's edge width (the
-thin-disc term of solver.disc_noise: a disc a few edge widths thick errs more across it) from
-EDGES_PX, the one whose prediction fits best (three-chip: with the least squares; Bayer: the
-shape a single factor fits best); each factor as the geometric mean of measured over predicted.
+three-chip camera's X, Y and alpha on the three scenes; each factor as the geometric mean of
+measured over predicted.
 
 Run: python -m bench.design.design_fit [--write] [--scenes a,b,c,d] [--sources sampling.json white.json jpeg_a.json]
 [--ring-dark dark.json]
@@ -50,24 +48,14 @@ IDX = {"x": 0, "y": 1, "alpha": 3}
 BAYER = ("bayer-bilinear", "bayer-vng")
 
 
-EDGES_PX = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)   # the edge widths tried per camera class
-
-
-def basis(scene: str, edge_px: float = 0.0) -> np.ndarray:
-    """(3, 3): rows Vn, Vu, Vv; columns X, Y, alpha (mean over the scene's 48 test frames), the
-    discs' edges ``edge_px`` wide (0: no thin-disc term)."""
+def basis(scene: str) -> np.ndarray:
+    """(3, 3): rows Vn, Vu, Vv; columns X, Y, alpha (mean over the scene's 48 test frames)."""
     cfg = load_config(ROOT / "bench" / "configs" / f"sensor_scene_{scene}.toml")
     rows = []
     for shift in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)):
-        vn, vs, _ = mean_variances(cfg, NoiseClass(1.0, shift, edge_px), 48)
+        vn, vs, _ = mean_variances(cfg, NoiseClass(1.0, shift), 48)
         rows.append(vn if shift == (0.0, 0.0) else vs)
     return np.array(rows)[:, [IDX[c] for c in FIT]]
-
-
-def _rms_log(pairs) -> float:
-    """RMS of log(measured / predicted) about its mean (what a factor cannot absorb)."""
-    logs = np.array([np.log(m / p) for m, p in pairs])
-    return float(np.sqrt(np.mean((logs - logs.mean()) ** 2)))
 
 
 def measured(results: dict, scene: str, effect: str) -> np.ndarray:
@@ -129,45 +117,25 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None
     return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
 
 
-def _three_chip(results: dict, by_edge: dict, scenes=SCENES):
-    """(edge, (s0, su, sv)) of the three-chip fit with the smallest relative error."""
-    tc = {s: measured(results, s, "three-chip") for s in scenes}
-    best = None
-    for e, bases in by_edge.items():
-        p = nnls_relative(bases, tc)
-        err = float(np.sqrt(np.mean([np.log(predicted(bases[s], p) / tc[s]) ** 2 for s in scenes])))
-        if best is None or err < best[0]:
-            best = (err, e, p)
-    return best[1], best[2]
-
-
-def _bayer_edge(results: dict, by_edge: dict, p, scenes=SCENES) -> float:
-    """The Bayer camera's edge width: the one whose shape a single factor fits best."""
-    return min(by_edge, key=lambda e: _rms_log([(measured(results, s, x), predicted(by_edge[e][s], p))
-                                                for s in scenes for x in BAYER]))
-
-
 def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
     """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)
     over the sensor scenes ``scenes`` (each in ``sources[0]``); ``ring_dark``: the dark-ring
     results beside the white ones (:func:`ring_and_jpeg_factors`; None: ``sources[0]``)."""
     results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
-    by_edge = {e: {s: basis(s, e) for s in scenes} for e in EDGES_PX}
-    e0, p = _three_chip(results, by_edge, scenes)
-    e1 = _bayer_edge(results, by_edge, p, scenes)
-    bases, bayer_bases = by_edge[e0], by_edge[e1]
+    bases = {s: basis(s) for s in scenes}
     tc = {s: measured(results, s, "three-chip") for s in scenes}
+    p = nnls_relative(bases, tc)
     rows = ratio_rows("three-chip (fit)", {s: (tc[s], predicted(bases[s], p)) for s in scenes})
     for out in scenes:
         q = nnls_relative(bases, {s: tc[s] for s in scenes if s != out})
         rows += ratio_rows(f"three-chip, scene {out.upper()} left out", {out: (tc[out], predicted(bases[out], q))})
-    bayer = [(measured(results, s, e), predicted(bayer_bases[s], p)) for s in scenes for e in BAYER]
+    bayer = [(measured(results, s, e), predicted(bases[s], p)) for s in scenes for e in BAYER]
     g = geo_factor(bayer)
     for e in BAYER:
-        rows += ratio_rows(e, {s: (measured(results, s, e), g * predicted(bayer_bases[s], p)) for s in scenes})
-    jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bayer_bases[s], p)) for s in scenes])
+        rows += ratio_rows(e, {s: (measured(results, s, e), g * predicted(bases[s], p)) for s in scenes})
+    jpeg = geo_factor([(measured(results, s, "bayer-jpeg90"), g * predicted(bases[s], p)) for s in scenes])
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
-                                            g * jpeg * predicted(bayer_bases[s], p)) for s in scenes})
+                                            g * jpeg * predicted(bases[s], p)) for s in scenes})
     dark = None if ring_dark is None else json.loads((RESULTS / ring_dark).read_text())["datasets"]
     other = ring_and_jpeg_factors(results, sources, dark)
     versions = sorted(results)
@@ -177,7 +145,6 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
             "ring_factor": {"dark": {"none": 1.0, "rggb": 1.0},
                             "white": {c: round(v, 3) for c, v in other["ring_white"].items()}},
             "jpeg_factor": {"none": round(other["jpeg_none"], 3), "rggb": round(jpeg, 3)},
-            "edge_px": {"none": e0, "rggb": e1},
             "jpeg_min_quality": 90,
             "bound_factor": {c: 1.0 for c in ("x", "y", "z", "alpha", "beta", "gamma")},
             "provisional": [],
@@ -203,7 +170,7 @@ def main() -> None:
                     help="the dark-ring results the white ones were measured beside, if not SAMPLING")
     args = ap.parse_args()
     card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark)
-    print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, edge {card['edge_px']} px, "
+    print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
           f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
     print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")

@@ -126,12 +126,28 @@ def test_a_bad_predictor_card_is_one_line(tmp_path):
     from dockfactory.core.resources import shipped_design_card
     from dockfactory.eval.design_card import load_design_card
     card = json.loads(shipped_design_card().read_text())
-    assert load_design_card(shipped_design_card()).edge_px == card["edge_px"]
-    for key, value, needle in (("edge_px", {"none": 0.0}, "edge_px: expected a table of none, rggb"),
-                               ("scale_px", -1, "scale_px: expected a positive number"),
-                               ("format", "x", "format: expected 'dockfactory.design_predictor/1'")):
+    assert load_design_card(shipped_design_card()).scale_px == card["scale_px"] and "edge_px" not in card
+    for key, value, needle in (("scale_px", -1, "scale_px: expected a positive number"),
+                               ("format", "x", "format: expected 'dockfactory.design_predictor/2'")):
         path = tmp_path / f"{key}.json"
         path.write_text(json.dumps({**card, key: value}))
         with pytest.raises(DockfactoryError) as exc:
             load_design_card(path)
         assert needle in str(exc.value) and str(path) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_card_of_the_previous_noise_model_is_refused_with_how_to_refit(tmp_path):
+    """A card of format /1 (fitted before the centre noise followed the disc's minor semi-axis, with
+    an edge width per camera class) is refused in one line naming the file and the refit command."""
+    import json
+    from dockfactory.core.resources import shipped_design_card
+    from dockfactory.eval.design_card import load_design_card
+    card = json.loads(shipped_design_card().read_text())
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({**card, "format": "dockfactory.design_predictor/1",
+                                "edge_px": {"none": 0.0, "rggb": 4.0}}))
+    with pytest.raises(DockfactoryError) as exc:
+        load_design_card(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: format 'dockfactory.design_predictor/1': fitted under the previous")
+    assert "python -m bench.design.design_fit" in msg and "\n" not in msg

@@ -208,13 +208,13 @@ def _marker_in_d(m, d_from_s) -> dict:
 def test_the_design_predictor_fits_the_square_pinhole_under_the_delivered_discs_noise():
     """The prediction (eval.design_predict.frame_variances, mean_variances) of a camera with fy =
     1.03 fx: the sandwich of the fit in the square pinhole at fx of centres whose delivered noise
-    is the disc model of the discs OpenCV projects through K (with the thin-disc term) plus a common
-    shift per section, numerically; the square camera's figures are off by more than 1 %."""
+    is the disc model of the discs OpenCV projects through K plus a common shift per section,
+    numerically; the square camera's figures are off by more than 1 %."""
     from dockfactory.eval.design_predict import NoiseClass, frame_variances, mean_variances
     cfg = _config(ASPECT, frames=12)
     markers = static_scene(cfg).markers
     ma, mb = [m for m in markers if m.section == "A"], [m for m in markers if m.section == "B"]
-    noise = NoiseClass(0.02, (0.03, 0.02), 2.0)
+    noise = NoiseClass(0.02, (0.03, 0.02))
     frames = cameras_of_test_frames(cfg, 2, "test")
     for f in frames:
         assert f.pixel_aspect == pytest.approx(ASPECT)
