@@ -128,7 +128,7 @@ def centre_errors(dets: list[dict], label: dict) -> list[tuple[int, float, float
     return [(m["class_id"], float(c[0] - t[0]), float(c[1] - t[1])) for m, t, c in matched_centres(dets, label)]
 
 
-DET_KEYS = ("class_id", "center_px", "bbox_px", "score", "refined", "edge_px")   # what a re-solve needs
+DET_KEYS = ("class_id", "center_px", "bbox_px", "score", "refined")   # what a re-solve needs
 
 
 def measure_frame(detector, ds: Dataset, fid: str, image: np.ndarray, cfa: str | None, jpeg: bool) -> dict:
