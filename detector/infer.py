@@ -188,6 +188,7 @@ class MarkerDetector:
         self.backend = resolve_backend(backend)
         card = card_figures(self.weights)   # the weights' noise card (None where there is none)
         self.centre_noise_px, self.section_shift_px = card.centre_noise_px, card.section_shift_px
+        self.noise_core_px = card.core_px
         if self.backend == "onnx":
             self.network = OnnxNetwork(self.model)
         else:
@@ -322,7 +323,7 @@ def _detections_doc(dataset, split, weights, det: "MarkerDetector", camera_told:
     return {"format": "dockfactory.detections/1", "dataset": str(dataset.root), "dataset_version": dataset.version_id,
             "split": split, "weights": str(weights), "weights_sha256": sha256_of(weights),
             "weights_dataset_version": det.meta["dataset_version"], "centre_noise_px": det.centre_noise_px,
-            "section_shift_px": det.section_shift_px and list(det.section_shift_px),
+            "centre_noise_core_px": det.noise_core_px, "section_shift_px": det.section_shift_px and list(det.section_shift_px),
             "conf_threshold": det.conf, "iou_threshold": det.iou, "camera_told": camera_told,
             "pixel_convention": "opencv: (0,0) is the centre of the top-left pixel",
             "timing": {"frames": len(times), "mean_ms": round(1000 * float(np.mean(times)), 2),

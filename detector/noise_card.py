@@ -53,11 +53,13 @@ def _card(weights) -> dict | None:
 
 class CardFigures(NamedTuple):
     """What a valid noise card says, read once (None where it says nothing): ``centre_noise_px``
-    (px per axis), ``section_shift_px`` (x, y) px, ``bias_px`` (x, y) px."""
+    (px per axis), ``section_shift_px`` (x, y) px, ``bias_px`` (x, y) px, ``core_px`` (its robust
+    core, px per axis: the noise the camera is known to have at least, solver.refine.scale_with_prior)."""
 
     centre_noise_px: float | None
     section_shift_px: tuple[float, float] | None
     bias_px: tuple[float, float] | None
+    core_px: float | None = None
 
 
 def card_figures(weights) -> CardFigures:
@@ -83,7 +85,16 @@ def card_figures(weights) -> CardFigures:
     doc = _card(weights)
     if doc is None:
         return CardFigures(None, None, None)
-    return CardFigures(float(doc["centre_noise_px"]), _shift_of(doc), _bias_of(doc))
+    return CardFigures(float(doc["centre_noise_px"]), _shift_of(doc), _bias_of(doc), _core_of(doc))
+
+
+def _core_of(doc: dict) -> float | None:
+    """The card's robust core (px per axis) when it states a positive finite one, else None."""
+    try:
+        value = float(doc["robust_px"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) and 0 < value <= MAX_CARD_NOISE_PX else None
 
 
 def centre_noise_px(weights) -> float | None:

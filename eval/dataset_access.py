@@ -221,6 +221,8 @@ def validate_detections(data, path, required: tuple[str, ...] = ()) -> dict:
         check_str(data["weights_sha256"], path, "weights_sha256")
     if data.get("centre_noise_px") is not None:   # the weights' noise card: the covariance floor
         check_number(data["centre_noise_px"], path, "centre_noise_px", hi=MAX_SIGMA_PX, positive=True)
+    if data.get("centre_noise_core_px") is not None:   # the card's robust core: the noise prior
+        check_number(data["centre_noise_core_px"], path, "centre_noise_core_px", hi=MAX_SIGMA_PX, positive=True)
     if data.get("section_shift_px") is not None:   # the card's common offset of a section's centres
         for a, v in enumerate(check_list(data["section_shift_px"], path, "section_shift_px", 2)):
             check_number(v, path, f"section_shift_px[{a}]", 0.0, MAX_SIGMA_PX)

@@ -258,12 +258,22 @@ def class_options(options: DockingOptions, classes, by_class: bool | None) -> tu
     Else the factor is the class's (eval.camera_classes.classes_factor; of several: the largest,
     which a run's gate takes) and, when ``by_class`` is True, the section shift per axis the largest of
     ``options``' (the card's) and the classes' (eval.camera_classes.classes_section_shift); False:
-    the shift of ``options`` as given."""
+    the shift of ``options`` as given; the noise prior the class's (:func:`with_class_prior`)."""
     if by_class is None:
         return options, 1.0
     factor = classes_factor(classes)
     shift = classes_section_shift(classes, options.section_shift_px) if by_class else options.section_shift_px
-    return (options if shift == options.section_shift_px else replace(options, section_shift_px=shift)), factor
+    out = options if shift == options.section_shift_px else replace(options, section_shift_px=shift)
+    return with_class_prior(out, factor), factor
+
+
+def with_class_prior(options: DockingOptions, factor: float) -> DockingOptions:
+    """``options`` whose noise prior (the card's robust core, ``refine.noise_prior_px``) is the
+    camera class's: times the class ``factor`` (eval.camera_classes); unchanged without one."""
+    prior = options.refine.noise_prior_px
+    if prior is None or factor == 1.0:
+        return options
+    return replace(options, refine=replace(options.refine, noise_prior_px=prior * factor))
 
 
 def _check_modes(ds: Dataset, detections, oracle_sigma_px, self_calibrate, true_camera: bool, camera_model) -> None:
@@ -288,7 +298,8 @@ def _dataset_options(ds: Dataset, detections, sigma_floor_px, lens, true_camera:
     if section_shift_px is None and detections is not None:
         section_shift_px = detections.get("section_shift_px")
     lens = lens or (KNOWN_LENS if true_camera else lens_prior_for(ds.config))
-    return docking_options(sigma_floor_px, lens, section_shift_px)
+    core = None if detections is None else detections.get("centre_noise_core_px")
+    return docking_options(sigma_floor_px, lens, section_shift_px, core)
 
 
 UNCALIBRATED_LENS = LensPrior(marginalise=True)   # the app's lens: nobody calibrated it
@@ -330,14 +341,14 @@ def config_lens_prior(config) -> LensPrior:
 
 
 def docking_options(sigma_floor_px: float | None, lens: LensPrior | None = None,
-                    section_shift_px=None) -> DockingOptions:
+                    section_shift_px=None, prior_px: float | None = None) -> DockingOptions:
     """The solver's options with the detector's measured centre noise as the covariance's floor,
     ``lens`` the plausible range of the intrinsics its camera model does not estimate (None: an
     uncalibrated camera's, :data:`UNCALIBRATED_LENS`, marginalised into the covariance) and
     ``section_shift_px`` (x, y) the measured common offset of a section's centres (None: none;
     eval.section_shift)."""
-    refine = DEFAULT_DOCKING.refine if sigma_floor_px is None else \
-        replace(DEFAULT_DOCKING.refine, sigma_floor_px=float(sigma_floor_px))
+    refine = replace(DEFAULT_DOCKING.refine, sigma_floor_px=None if sigma_floor_px is None else float(sigma_floor_px),
+                     noise_prior_px=None if prior_px is None else float(prior_px))
     return replace(DEFAULT_DOCKING, refine=refine, lens=UNCALIBRATED_LENS if lens is None else lens,
                    section_shift_px=None if section_shift_px is None else tuple(section_shift_px))
 

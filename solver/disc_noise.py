@@ -21,8 +21,8 @@ from dockfactory.solver.refine import (
     inverse_spd,
     refine_blocks,
     relative_pose,
+    scale_with_prior,
     stack_blocks,
-    student_t_factor,
     whitened,
 )
 from dockfactory.solver.section_shift import section_shift_covariance
@@ -113,7 +113,7 @@ def with_disc_noise(fit: JointFit, points: SectionPoints, fitter: JointFitter, k
     res, jac, valid = stack_blocks(blocks, poses, intr, model)
     if not valid:
         return fit
-    cov, sigma = covariance_from_jacobian(jac, res, fitter.sigma_px, None, shapes)
+    cov, sigma = covariance_from_jacobian(jac, res, fitter.sigma_px, None, shapes, fitter.options.noise_prior_px)
     prop = d_from_b_jacobian(*poses[0], *poses[1])
     out = replace(fit, covariance=prop @ cov[:12, :12] @ prop.T, covariance_params=cov, sigma_px=sigma)
     k2 = sigma ** 2 / (np.trace(shapes, axis1=1, axis2=2).mean() / 2.0)
@@ -292,10 +292,13 @@ def _robust_result(fit: JointFit, ref, blocks, shapes, winv, previous: np.ndarra
     a_inv = inverse_spd(np.einsum("n,nap,naq->pq", w, jw, jw))
     b = np.einsum("n,nap,naq->pq", w * w, jw, jw)
     dof = 2 * shapes.shape[0] - jw.shape[2]
-    k2 = float(w @ np.sum(rw * rw, axis=1)) / max(dof, 1) * student_t_factor(dof)
-    cov = k2 * (a_inv @ b @ a_inv)
     base = shapes if base is None else base      # sigma: the disc noise, without occlusion
-    sigma = float(np.sqrt(k2 * np.trace(base, axis1=1, axis2=2).mean() / 2.0))   # px, per axis
+    mean_var = float(np.trace(base, axis1=1, axis2=2).mean()) / 2.0
+    prior = None if fitter is None else fitter.options.noise_prior_px
+    _, k2 = scale_with_prior(float(w @ np.sum(rw * rw, axis=1)) / max(dof, 1), dof,
+                             None if prior is None else prior ** 2 / mean_var)
+    cov = k2 * (a_inv @ b @ a_inv)
+    sigma = float(np.sqrt(k2 * mean_var))   # px, per axis
     res, _, _ = stack_blocks(blocks, ref.poses, ref.intrinsics, ref.model, want_jacobian=False)
     na = 2 * blocks[0].points_3d.shape[0]
     rmse = [float(np.sqrt(2.0 * (r @ r) / max(r.size, 1))) for r in (res[:na], res[na:])]

@@ -87,6 +87,10 @@ class RefineOptions:
     Covariance (:func:`solver.refine.covariance_from_jacobian`):
     - ``sigma_floor_px``: when the noise sigma is estimated from a fit's residuals, it is never
       taken below this (the detector's centre noise measured on labelled frames); None: no floor.
+    - ``noise_prior_px``: the core of the centre noise the camera is known to have (px per axis:
+      the noise card's robust core times the camera class's factor); a disc-model covariance's
+      noise scale estimated from few residuals is pulled up toward it
+      (:func:`solver.refine.scale_with_prior`); None: no prior.
     """
 
     max_iterations: int = 60
@@ -109,6 +113,7 @@ class RefineOptions:
     subset_refines: int = 3
     few_points: int = 5
     sigma_floor_px: float | None = None
+    noise_prior_px: float | None = None
 
     def __post_init__(self):
         for name in ("max_iterations", "damping_tries", "max_focal_rel_std",
@@ -116,8 +121,9 @@ class RefineOptions:
                      "fallback_starts", "profile_focals", "profile_iterations", "plausible_rmse_px",
                      "subset_max_points", "subset_refines", "few_points"):
             _positive(name, getattr(self, name))
-        if self.sigma_floor_px is not None:
-            check_sigma(self.sigma_floor_px)
+        for name in ("sigma_floor_px", "noise_prior_px"):
+            if getattr(self, name) is not None:
+                check_sigma(getattr(self, name))
 
 
 @dataclass(frozen=True)

@@ -109,14 +109,16 @@ def bin_rows(name: str, d: np.ndarray) -> list[str]:
 
 
 def input_poses(ds, effect: str, rows: list[dict], card) -> dict:
-    """Frames solved / refused, RMS z and RMSE (AXES order) of the rows of one input, each frame
-    solved as measure solves an image of the effect's camera class, the shipped card's noise."""
+    """Frames solved / refused, RMS z, RMSE (AXES order) and frames beyond 3 reported std in X, Y or
+    Z of the rows of one input, each frame solved as measure solves an image of the effect's camera
+    class (the shipped card's floor, section shift and noise prior, each the class's)."""
     from bench.verdict.gate_classes import effect_class
     from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, class_section_shift
     from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
     cls = effect_class(effect)
+    prior = None if card.core_px is None else card.core_px * CAMERA_CLASS_FACTORS[cls]
     options = docking_options(card.centre_noise_px, lens_prior_for(ds.config),
-                              class_section_shift(cls, card.section_shift_px))
+                              class_section_shift(cls, card.section_shift_px), prior)
     pp = ((ds.config.image.width - 1) / 2.0, (ds.config.image.height - 1) / 2.0)
     errs, zs, refused = [], [], 0
     for row in rows:
@@ -133,16 +135,17 @@ def input_poses(ds, effect: str, rows: list[dict], card) -> dict:
         errs.append(e)
         zs.append(e / np.sqrt(np.diag(np.array(rec["covariance"]))[[0, 1, 2, 3]]))
     rms = (lambda a: np.sqrt(np.mean(np.square(a), axis=0)).tolist() if len(a) else None)
-    return {"solved": len(errs), "refused": refused, "rms_z": rms(zs), "rmse": rms(errs)}
+    beyond = int(np.sum(np.any(np.abs(np.array(zs).reshape(-1, 4)[:, :3]) > 3, axis=1)))
+    return {"solved": len(errs), "refused": refused, "rms_z": rms(zs), "rmse": rms(errs), "beyond_3": beyond}
 
 
 def pose_line(name: str, r: dict) -> str:
     """A markdown row of :func:`input_poses`' result."""
     if r["rms_z"] is None:
-        return f"| {name} | 0 / {r['refused']} | | |"
+        return f"| {name} | 0 / {r['refused']} | | | |"
     z = " / ".join(f"{v:.2f}" for v in r["rms_z"])
     e = " / ".join(f"{v:.4f}" for v in r["rmse"])
-    return f"| {name} | {r['solved']} / {r['refused']} | {z} | {e} |"
+    return f"| {name} | {r['solved']} / {r['refused']} | {z} | {e} | {r['beyond_3']} |"
 
 
 def inputs(rows_path: str, roots: list[str]):
@@ -196,8 +199,8 @@ def main(argv=None) -> int:
         from dockfactory.detector.noise_card import card_figures
         card = card_figures(shipped_weights())
         out["poses"] = {name: input_poses(ds, eff, rows, card) for name, ds, eff, rows in items}
-        print("\n| input | solved / refused | RMS z X / Y / Z / alpha | RMSE X / Y / Z mm, alpha deg |")
-        print("| --- | --- | --- | --- |")
+        print("\n| input | solved / refused | RMS z X / Y / Z / alpha | RMSE X / Y / Z mm, alpha deg | beyond 3 std |")
+        print("| --- | --- | --- | --- | --- |")
         print("\n".join(pose_line(n, r) for n, r in out["poses"].items()))
     if args.json:
         from dockfactory.core.io import write_json_atomic

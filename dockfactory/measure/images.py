@@ -192,8 +192,7 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     else:
         frame.record, frame.used_points = solve_frame(
             markers, frame.principal_point, centres, None, camera_model,
-            docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px)),
-            CAMERA_CLASS_FACTORS[cls])
+            class_docking_options(detector, lens, cls), CAMERA_CLASS_FACTORS[cls])
     if frame.record["ok"]:
         frame.record.setdefault("camera_model", "pinhole")
     frame.record["camera_class"] = cls
@@ -201,6 +200,15 @@ def solve_image(detector, markers, index: int, path: Path, image: np.ndarray, ca
     frame.record["image_size"] = [w, h]
     frame.record["timing_ms"] = {"detect": round(1000 * (t1 - t0), 2), "solve": round(1000 * (t2 - t1), 2)}
     return frame
+
+
+def class_docking_options(detector, lens, cls: str):
+    """The solver's options for an image of camera class ``cls`` (eval.camera_classes) seen
+    through ``detector`` (its noise card's figures: the floor, the section shift and the noise
+    prior, each the class's) and the lens prior ``lens``."""
+    core = detector.noise_core_px
+    return docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px),
+                           None if core is None else core * CAMERA_CLASS_FACTORS[cls])
 
 
 def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration,
@@ -220,8 +228,7 @@ def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: C
     if boxes is not None:
         lo, hi = ideal_pixels(cal, boxes[:, :2])[0], ideal_pixels(cal, boxes[:, 2:])[0]
         boxes = np.column_stack([np.minimum(lo, hi), np.maximum(lo, hi)])
-    options = docking_options(detector.centre_noise_px, calibration_lens(cal),
-                              class_section_shift(camera, detector.section_shift_px))
+    options = class_docking_options(detector, calibration_lens(cal), camera)
     record, used = solve_frame(markers, (cal.cx, cal.cy), (cls, ideal, boxes, refined), None,
                                "pinhole", options, CAMERA_CLASS_FACTORS[camera])
     record["calibration"] = {"focal_px": focal, "fx": cal.fx, "fy": cal.fy, "principal_point": [cal.cx, cal.cy],

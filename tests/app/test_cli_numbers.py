@@ -36,6 +36,8 @@ def test_sigma_floor_flag_out_of_range(painted_source, tmp_path, capsys, value):
     (lambda d: d.update(centre_noise_px="abc"), "centre_noise_px"),
     (lambda d: d.update(centre_noise_px=[1]), "centre_noise_px"),
     (lambda d: d.update(centre_noise_px=-0.1), "centre_noise_px"),
+    (lambda d: d.update(centre_noise_core_px=-0.1), "centre_noise_core_px"),
+    (lambda d: d.update(centre_noise_core_px="abc"), "centre_noise_core_px"),
     (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px="x"), "bbox_detector_px"),
     (lambda d: next(iter(d["frames"].values()))[0].update(bbox_detector_px=[1, 2, 3, float("nan")]),
      "bbox_detector_px"),

@@ -19,7 +19,7 @@ from dockfactory.measure.images import calibrated_solve
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
-DETECTOR = SimpleNamespace(centre_noise_px=0.05, section_shift_px=None)
+DETECTOR = SimpleNamespace(centre_noise_px=0.05, section_shift_px=None, noise_core_px=None)
 
 
 def _frame(rng):
