@@ -111,10 +111,10 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
     jac = joint_jacobian(_section_jac(ma, cam_a, focal, pp), _section_jac(mb, cam_b, focal, pp))
     shapes = np.concatenate([square_pixel_noise_shapes(ma, cam_a, focal, pixel_aspect),
                              square_pixel_noise_shapes(mb, cam_b, focal, pixel_aspect)])
-    jr = jac.reshape(-1, 2, jac.shape[1])
-    cov_noise = noise.scale_px ** 2 * inverse_spd(np.einsum("nap,nab,nbq->pq", jr, np.linalg.inv(shapes), jr))
-    groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
     sqrt_w = np.linalg.inv(np.linalg.cholesky(shapes))
+    jw = np.einsum("nab,nbp->nap", sqrt_w, jac.reshape(-1, 2, jac.shape[1])).reshape(jac.shape)
+    cov_noise = noise.scale_px ** 2 * inverse_spd(jw.T @ jw)
+    groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
     cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect), sqrt_w)
     prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])
     return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))

@@ -57,6 +57,7 @@ from dockfactory.eval.solve_frames import (
     resolve_camera_model,
     solve_frame,
     solve_run,
+    with_class_prior,
 )
 from dockfactory.generator.datasets.folder import writer_lock
 from dockfactory.generator.version import package_version
@@ -206,9 +207,9 @@ def class_docking_options(detector, lens, cls: str):
     """The solver's options for an image of camera class ``cls`` (eval.camera_classes) seen
     through ``detector`` (its noise card's figures: the floor, the section shift and the noise
     prior, each the class's) and the lens prior ``lens``."""
-    core = detector.noise_core_px
-    return docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px),
-                           None if core is None else core * CAMERA_CLASS_FACTORS[cls])
+    options = docking_options(detector.centre_noise_px, lens, class_section_shift(cls, detector.section_shift_px),
+                              detector.noise_core_px)
+    return with_class_prior(options, CAMERA_CLASS_FACTORS[cls])
 
 
 def calibrated_solve(detector, markers, path: Path, size: tuple, centres, cal: Calibration,
