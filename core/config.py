@@ -28,7 +28,7 @@ from dockfactory.core.geometry import MAX_PIXEL_ASPECT_DIFF
 from dockfactory.core.camera_chain.encoding import JPEG_SUBSAMPLING
 from dockfactory.core.camera_chain.isp import DENOISERS, TONE_CURVES
 from dockfactory.core.sensor_presets import PRESETS
-from dockfactory.core.names import EXPORT_FORMATS, MIN_CHROMA
+from dockfactory.core.names import MIN_CHROMA
 
 Range = tuple[float, float]
 Overrides = tuple[tuple[str, float], ...]   # a TOML table of name = number, sorted by name
@@ -306,7 +306,10 @@ class LabelsConfig:
 
 @dataclass(frozen=True)
 class ExportConfig:
-    formats: tuple[str, ...] = ("coco", "yolo")  # written when the dataset completes; also yolo-pose, bop
+    """Exports written when the dataset completes. A name is a format of the export registry
+    (``dockfactory dataset export --help`` lists them) not written on demand only; check-config,
+    render and run refuse any other in one line naming the file, table and key."""
+    formats: tuple[str, ...] = ("coco", "yolo")  # the formats written when the dataset completes
 
 
 
@@ -575,7 +578,7 @@ def validate(cfg: Config, source: str = "<config>") -> None:
     for check in (_validate_numbers, _validate_dataset, _validate_image_camera, _validate_camera_units,
                   _validate_lens_extras, _validate_runs, _validate_pose_sections, _validate_markers,
                   _validate_render, _validate_sensor, _validate_motion, _validate_occlusion_glare,
-                  _validate_labels_export):
+                  _validate_labels):
         check(cfg, source)
 
 
@@ -904,12 +907,9 @@ def _validate_occlusion_glare(cfg: Config, source: str) -> None:
     _check_range(source, "glare", "bloom", cfg.glare.bloom, lo=0, hi=1)
 
 
-def _validate_labels_export(cfg: Config, source: str) -> None:
+def _validate_labels(cfg: Config, source: str) -> None:
     if not 0 <= cfg.labels.min_chroma < 1:
         raise _err(source, "labels", "min_chroma", f"must be in [0, 1), got {cfg.labels.min_chroma}")
     if not 0 < cfg.labels.visible_threshold <= 1:
         raise _err(source, "labels", "visible_threshold",
                    f"must be in (0, 1], got {cfg.labels.visible_threshold}")
-    for f in cfg.export.formats:
-        if f not in EXPORT_FORMATS:
-            raise _err(source, "export", "formats", f"unknown format {f!r} (known: {', '.join(EXPORT_FORMATS)})")

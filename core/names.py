@@ -1,6 +1,6 @@
 """Names and defaults that every layer shares, each defined once and imported where used.
 
-- Splits of a dataset and the export formats.
+- Splits of a dataset.
 - Sections and detector classes: class id k is section ``SECTIONS[k]``, named ``CLASS_NAMES[k]``,
   whose marker colour is strongest in RGB channel ``CLASS_CHANNELS[k]`` (red on A, blue on B).
 - Pose components of ``d_from_b``: ``POSE_NAMES`` (the keys of every pose dict a tool writes),
@@ -15,7 +15,6 @@ CLASS_NAMES = ("RedA", "BlueB")       # detector class ids 0 and 1
 CLASS_CHANNELS = (0, 2)               # RGB channel of each class's colour: RedA -> R, BlueB -> B
 
 SPLITS = ("train", "val", "test", "repeat")   # a dataset's splits; repeat = the repeatability captures
-EXPORT_FORMATS = ("coco", "yolo", "yolo-pose", "bop", "cameras")   # what `dataset export` and [export] formats write
 
 COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 UNITS = {"x": "mm", "y": "mm", "z": "mm", "alpha": "deg", "beta": "deg", "gamma": "deg"}

@@ -17,6 +17,7 @@ from dockfactory.generator.datasets import published
 from dockfactory.generator.datasets.folder import dataset_lock, identity, writer_lock
 from dockfactory.generator.datasets.card import write_card
 from dockfactory.generator.datasets.dvc_links import outside_note
+from dockfactory.generator.exports import FORMATS, check_export_formats
 from dockfactory.generator.label_overlay import draw_overlay
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
@@ -25,10 +26,12 @@ EXIT_OK, EXIT_FAILED = 0, 1
 
 
 def load_checked(path, sets=()):
-    """(config, its text) of ``path`` with ``--set`` overrides ``sets``, checked feasible (every
-    planned frame fits its markers): the check samples every frame's geometry, so it runs here
-    (render, run, check-config), not on every load."""
+    """(config, its text) of ``path`` with ``--set`` overrides ``sets``, its ``[export] formats``
+    checked against the export registry (the generator's: core knows no format names) and the config
+    checked feasible (every planned frame fits its markers: the check samples every frame's geometry),
+    so both run here (render, run, check-config), not on every load."""
     cfg, text = load_config_text(resolve_config(path), sets)
+    check_export_formats(cfg, str(path))
     check_focal_fits(cfg, str(path))
     return cfg, text
 
@@ -92,12 +95,19 @@ def cmd_card(args) -> int:
     return EXIT_OK
 
 
-def cmd_export(args) -> int:
-    formats = [f.strip() for f in args.format.split(",")]
+def format_names(text: str) -> list[str]:
+    """The names of ``--format`` (comma-separated, spaces around a name ignored), each a format of the
+    export registry; else a DockfactoryError naming the first unknown one."""
+    formats = [f.strip() for f in text.split(",")]
     unknown = [f for f in formats if f not in dt.EXPORT_WRITERS]
     if unknown:
         raise DockfactoryError(f"--format: unknown export format {unknown[0]!r} "
                                f"(known: {', '.join(dt.EXPORT_WRITERS)})")
+    return formats
+
+
+def cmd_export(args) -> int:
+    formats = format_names(args.format)
     if args.out is not None and len(args.dirs) > 1:
         raise DockfactoryError("--out: one dataset at a time (each export folder holds one dataset's formats)")
     for root in args.dirs:
@@ -132,6 +142,13 @@ def cmd_show(args) -> int:
     return EXIT_OK
 
 
+def _format_help() -> str:
+    """Each format of the export registry with its summary (the ones ``[export] formats`` cannot name marked)."""
+    marks = {True: " (on demand: not in [export] formats)", False: ""}
+    return "; ".join(f"{name}: {fmt.summary}".replace("%", "%%") + marks[fmt.on_demand]
+                     for name, fmt in FORMATS.items())
+
+
 def _add_dataset_actions(d) -> None:
     """``dataset verify | info | diff | export | card | publish``, each its own parser: a flag of one
     action given to another is an error, not silently ignored."""
@@ -154,13 +171,11 @@ def _add_dataset_actions(d) -> None:
     f.add_argument("dir_b", metavar="DIR_B")
     f.add_argument("--json", action="store_true", help="print JSON")
     f.set_defaults(func=cmd_diff)
-    e = acts.add_parser("export", help="write COCO, YOLO, YOLO-pose or BOP files, or docking-run videos, of each "
-                                       "dataset (under its exports/)")
+    e = acts.add_parser("export", help="write exports of each dataset (under its exports/): COCO, YOLO, BOP, "
+                                       "cameras, docking-run videos, ... (--format)")
     e.add_argument("dirs", nargs="+", metavar="DIR")
     e.add_argument("--format", default="coco,yolo,bop",
-                   help="coco, yolo, yolo-pose, bop, cameras (every frame's camera as OpenCV / ROS / COLMAP "
-                        "calibration files), video (each docking run as an MP4 with its labels), video_lossless "
-                        "(FFV1 .mkv) (comma-separated; default coco,yolo,bop)")
+                   help=_format_help() + " (comma-separated; default coco,yolo,bop)")
     e.add_argument("--out", type=output_path, default=None, metavar="FOLDER",
                    help="write FOLDER/<format>/ outside the dataset (default: DIR/exports/; for a dataset "
                         "tracked by DVC whose project does not ignore exports/, T.exports/ beside its tracked folder T)")

@@ -27,6 +27,7 @@ from dockfactory.eval.simulated_cameras import dataset_camera
 from dockfactory.eval.solve_frames import solve_dataset, write_poses
 from dockfactory.generator.datasets.folder import identity
 from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.exports import check_export_formats
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits
 
@@ -129,6 +130,7 @@ def _render_stage(cfg, config_path, config_text: str, data_dir: Path, workers: i
         return version
     say(f"render: dataset {version} -> {data_dir}")
     t = time.monotonic()
+    check_export_formats(cfg, str(config_path))
     check_focal_fits(cfg, str(config_path))
     summary = run_render(cfg, data_dir, config_text, JobOptions(workers=workers))
     print_summary(summary)

@@ -25,6 +25,7 @@ from dockfactory.generator.datasets.card import write_card
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.datasets.tools import export_complete, write_export
 from dockfactory.generator.datasets.dvc_links import outside_note
+from dockfactory.generator.exports import check_export_formats
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.render_device import check_render_device
 from dockfactory.generator.executors import LocalExecutor, RayExecutor
@@ -116,8 +117,8 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
     """Render (the missing frames of) a dataset into ``root``.
 
     Resumable (finished frames are never touched), sharded, fault tolerant (a crashed or hung worker is restarted and
-    its frame retried up to ``opts.retries`` times) and memory bounded (module docstring). Every scene is sampled, the
-    render device and the target folder are checked before anything is written.
+    its frame retried up to ``opts.retries`` times) and memory bounded (module docstring). The export formats are
+    checked, every scene is sampled, the render device and the target folder are checked before anything is written.
 
     Parameters
     ----------
@@ -141,13 +142,15 @@ def run_render(cfg: Config, root, config_text: str, opts: JobOptions = JobOption
         arithmetic not the labels' (core.blas), a GPU device without a GPU, another writer holding the dataset's
         lock (core.io.FolderBusy).
     ConfigError
-        A frame the config cannot sample (its markers do not fit the image, a rolling shutter that does not fit).
+        A frame the config cannot sample (its markers do not fit the image, a rolling shutter that does not fit), a
+        name of ``[export] formats`` that is no format of the export registry or one written on demand only.
     DatasetError
         ``root`` is not a directory, or holds something else or another dataset version.
     """
     t_start = time.monotonic()
     if opts.workers < 1:
         raise DockfactoryError(f"--workers must be >= 1, got {opts.workers}")
+    check_export_formats(cfg)   # the exports written when it completes: refused before any work
     check_label_blas()   # the plan's geometry is computed here, in this process
     frames = select_frames(cfg, opts)
     # sample every scene up front: a bad frame fails before anything is written

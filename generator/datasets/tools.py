@@ -26,7 +26,7 @@ from dockfactory.generator.exports import WRITERS
 from dockfactory.generator.exports.files import folder_built_aside
 from dockfactory.generator.sampler import frame_plan
 
-EXPORT_WRITERS = WRITERS   # the exports facade's registry: core.names.EXPORT_FORMATS, then the on-demand videos
+EXPORT_WRITERS = WRITERS   # the export registry's writers by name (generator.exports.FORMATS: each format module's own)
 
 EXPORT_MARK = ".dockfactory-export.json"   # written last into an export: a folder without it is not one
 STALE_EXPORT_S = 6 * 3600.0                 # a temporary export of another host counts as stale after this
@@ -141,7 +141,7 @@ def export(root, fmt: str, ds: Dataset | None = None, dest=None) -> Path:
     root : path
         The complete dataset folder.
     fmt : str
-        A name of ``EXPORT_WRITERS``: coco, yolo, yolo-pose, bop, cameras, video, video_lossless.
+        A name of ``EXPORT_WRITERS``, the export registry (``dockfactory dataset export --help`` lists them).
     ds : Dataset, optional
         The dataset already opened (one check for several formats); None: opened (and checked) here.
     dest : path, optional

@@ -17,6 +17,7 @@ from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exr import read_compact
 from dockfactory.generator.exports.files import place_file, source_exr, source_image
+from dockfactory.generator.exports.registry import ExportFormat
 from dockfactory.generator.random_draws import static_scene
 
 OBJ_ID = {"A": 1, "B": 2}
@@ -161,3 +162,8 @@ def _frame_records(label: dict) -> tuple[dict, list]:
         gts.append({"obj_id": OBJ_ID[srec["section"]], "cam_R_m2c": m2c[:3, :3].ravel().tolist(),
                     "cam_t_m2c": m2c[:3, 3].tolist()})
     return camera, gts
+
+
+FORMATS = (
+    ExportFormat("bop", export_bop, "the BOP layout with masks, depth and the sections' models"),
+)

@@ -15,6 +15,7 @@ from pathlib import Path
 from dockfactory.core.calibration_files import Calibration, calibration_text, colmap_line
 from dockfactory.core.io import write_text_atomic
 from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.exports.registry import ExportFormat
 
 UNIT_FILES = (("opencv-yaml", "unit_{unit:02d}.yaml"), ("ros", "unit_{unit:02d}.ros.yaml"),
               ("colmap", "unit_{unit:02d}.cameras.txt"))
@@ -72,3 +73,8 @@ def export_cameras(root, out) -> Path:
     write_text_atomic(out / "colmap" / "frame_ids.json", json.dumps(ids, indent=1) + "\n")
     _write_units(out, cameras)
     return out
+
+
+FORMATS = (
+    ExportFormat("cameras", export_cameras, "every frame's camera as OpenCV / ROS / COLMAP calibration files"),
+)

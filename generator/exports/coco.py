@@ -18,6 +18,7 @@ from dockfactory.core.layout import CLASS_NAMES, Marker, marker_outline
 from dockfactory.core.names import SPLITS
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import place_file, source_image
+from dockfactory.generator.exports.registry import ExportFormat
 from dockfactory.generator.labels import clip_polygon, image_px, marker_outline_px
 from dockfactory.generator.motion import label_rolling_view
 
@@ -273,3 +274,8 @@ def export_coco(root, out) -> Path:
             place_file(source_image(root, lab["frame_id"]), out / "images" / split / f"{lab['frame_id']}.png")
         write_json_atomic(out / "annotations" / f"person_keypoints_{split}.json", coco, indent=None)
     return out
+
+
+FORMATS = (
+    ExportFormat("coco", export_coco, "COCO keypoints, boxes and outlines, one JSON per split"),
+)

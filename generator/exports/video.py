@@ -21,6 +21,7 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.generator.datasets.folder import DatasetError
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import source_image
+from dockfactory.generator.exports.registry import ExportFormat
 
 VIDEO_FPS = 10.0
 CODECS = {"video": ("mp4v", ".mp4", True), "video_lossless": ("FFV1", ".mkv", False)}   # fourcc, suffix, lossy
@@ -137,3 +138,10 @@ def export_video_lossless(ds: Dataset, out) -> Path:
         When an image of the dataset is not a colour image of the dataset's size.
     """
     return export_video_as(ds, out, "video_lossless")
+
+
+FORMATS = (   # written by `dataset export` only: a dataset with [runs] has one video per docking run
+    ExportFormat("video", export_video, "each docking run as an MP4 with its labels", on_demand=True),
+    ExportFormat("video_lossless", export_video_lossless, "each docking run as FFV1 .mkv, the PNGs' pixels exactly",
+                 on_demand=True),
+)

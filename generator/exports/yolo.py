@@ -16,6 +16,7 @@ from dockfactory.core.io import write_text_atomic
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.generator.exports.files import place_file, source_image
+from dockfactory.generator.exports.registry import ExportFormat
 
 YOLO_SPLITS = ("train", "val", "test")   # the splits data.yaml names; repeat is exported beside them
 
@@ -108,3 +109,8 @@ def export_yolo(root, out) -> Path:
         When the dataset is not intact and complete, or a file of it cannot be read.
     """
     return write_yolo_layout(root, out, yolo_lines)
+
+
+FORMATS = (
+    ExportFormat("yolo", export_yolo, "YOLO boxes in ultralytics' layout"),
+)

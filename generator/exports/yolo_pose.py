@@ -16,6 +16,7 @@ from pathlib import Path
 from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.generator.exports.coco import KEYPOINTS, centre_in_image
 from dockfactory.generator.exports.yolo import box_fields, exported_markers, write_yolo_layout
+from dockfactory.generator.exports.registry import ExportFormat
 
 KEYPOINT_DECIMALS = 10   # normalised: 1e-10 of a 10,000 px image is 1e-6 px
 
@@ -68,3 +69,8 @@ def export_yolo_pose(root, out) -> Path:
         When the dataset is not intact and complete, or a file of it cannot be read.
     """
     return write_yolo_layout(root, out, pose_lines, pose_yaml_keys())
+
+
+FORMATS = (
+    ExportFormat("yolo-pose", export_yolo_pose, "YOLO boxes plus each marker's centre as a keypoint"),
+)
