@@ -6,10 +6,11 @@ must be a finite number > 0 (NaN, inf, zero and negative values are refused, nev
 that is given must gate at least one component, or say ``gated = false`` (and then name no threshold): an empty
 ``[estimation]`` table, or one with only a statistic, would otherwise switch the gate off without a word. Detection
 minima are in (0, 1]; ``[failures] max_rate`` is in [0, 1] and its ``conditions`` are names from
-``core.config.CONDITIONS`` (case matters: "Normal" is refused), at least one, each once. With ``statistic =
-"rmse"`` (the default) a threshold is in mm or deg; with ``statistic = "mse"`` it is in mm^2 or deg^2.
-- estimation: repeatability, the pooled spread of repeated estimates of one static pose about that pose's mean (RMS
-  deviation; its square for mse);
+``core.config.CONDITIONS`` (case matters: "Normal" is refused), at least one, each once. A table's ``statistic``
+is a name of ``eval.gate_statistic.STATISTICS`` ("rmse", the default, in mm or deg; each states its unit, its value,
+its bounds and its conversion to the RMS there), and its thresholds are in that statistic's unit; a statistic that
+cannot gate the table is refused in one line.
+- estimation: repeatability, the spread of repeated estimates of one static pose about that pose's mean;
 - localization: accuracy, the error of the estimate against the exact ground truth on the test split.
 """
 from __future__ import annotations
@@ -23,7 +24,6 @@ from dockfactory.eval.gate_statistic import STATISTICS, gate_statistic
 from dockfactory.core.config import CONDITIONS, ConfigError, build_dataclass
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS  # noqa: F401  (re-exported)
 from dockfactory.core.user_files import check_regular_file
-from dockfactory.eval.confidence import frames_to_decide
 
 
 @dataclass(frozen=True)
@@ -152,7 +152,9 @@ def validate_acceptance(spec: AcceptanceSpec, data: dict, source: str) -> None:
     for name in ("estimation", "localization"):
         gate = getattr(spec, name)
         if gate.statistic not in STATISTICS:
-            raise _bad(source, name, "statistic", f"{gate.statistic!r} is not {' or '.join(STATISTICS)}")
+            raise _bad(source, name, "statistic", f"{gate.statistic!r} is not one of {', '.join(STATISTICS)}")
+        if why := gate_statistic(gate.statistic).refusal(name):
+            raise _bad(source, name, "statistic", f"{gate.statistic!r}: {why}")
         given = data.get(name, {})
         _check_gates_something(source, name, gate, data)
         for c in COMPONENTS:
@@ -229,11 +231,11 @@ def _pose_criteria(metrics: dict, spec: AcceptanceSpec) -> list[dict]:
 
 def _more_frames_note(blk: dict, c: str, value: float, thr: float, statistic: str, confidence: float,
                       block: str) -> str:
-    """What would decide an undecided criterion: how many more frames (captures) the chi-square
-    bound needs if the measured value holds (eval.confidence.frames_to_decide)."""
-    root = gate_statistic(statistic).to_rms
+    """What would decide an undecided criterion: how many more frames (captures) the statistic's
+    bound needs if the measured value holds (eval.gate_statistic ``frames_to_decide``)."""
+    stat = gate_statistic(statistic)
     dof = blk.get("dof") if block == "estimation" else blk["overall"][c].get("n")
-    needed = frames_to_decide(root(value), root(thr), int(dof or 0), confidence)
+    needed = stat.frames_to_decide(stat.to_rms(value), stat.to_rms(thr), int(dof or 0), confidence)
     what = "repeatability captures" if block == "estimation" else "test frames"
     if needed is None:
         return f"undecided: the value sits at the threshold; no number of {what} decides it"
@@ -242,15 +244,17 @@ def _more_frames_note(blk: dict, c: str, value: float, thr: float, statistic: st
 
 
 def _bounds_of(metrics: dict, block: str, c: str, statistic: str, value) -> dict:
-    """The statistic's lower and upper confidence bounds (squared for mse) and their methods."""
+    """The statistic's lower and upper confidence bounds in its own units (eval.gate_statistic
+    ``own_bounds``: squared for mse) and their methods; none without a value or an upper bound (a
+    guarded criterion then fails), with the record's note on why a bound is missing."""
     b = ((metrics.get("bounds") or {}).get(block) or {}).get(c) or {}
     if value is None or b.get("upper") is None:
-        return {"lower": None, "upper": None, "bounds_by": None}
-    power = gate_statistic(statistic).power
+        why = {"note": b["note"]} if value is not None and b.get("note") else {}
+        return {"lower": None, "upper": None, "bounds_by": None, **why}
+    lower, upper = gate_statistic(statistic).own_bounds(b)
     tails = (f"; heavy tails (kurtosis {b['kurtosis']:.1f}): the upper bound may undercover"
              if b.get("heavy_tailed") else "")
-    return {"lower": b["lower"] ** power, "upper": b["upper"] ** power,
-            "bounds_by": f"{b['lower_by']} / {b['upper_by']}{tails}"}
+    return {"lower": lower, "upper": upper, "bounds_by": f"{b['lower_by']} / {b['upper_by']}{tails}"}
 
 
 def decide_criterion(rule: str, value, threshold, lower, upper) -> str:

@@ -163,6 +163,23 @@ def decide(chi2, boot) -> dict:
     return {**out, "lower": low[1][0], "upper": high[1][1], "lower_by": low[0], "upper_by": high[0]}
 
 
+def chi2_pass_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
+    """P(the chi-square upper bound of an RMS measured over ``dof`` degrees of freedom is within
+    ``threshold``) when the true RMS is ``rmse`` (Gaussian errors): the bound sqrt(S / chi2_{1-c}(dof))
+    with S = rmse^2 chi2(dof); 1.0 for rmse 0."""
+    if rmse <= 0:
+        return 1.0
+    return chi2_cdf(threshold ** 2 * chi2_quantile(1 - confidence, dof) / rmse ** 2, dof)
+
+
+def chi2_reject_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
+    """P(the chi-square lower bound sqrt(S / chi2_c(dof)) is beyond ``threshold``) when the true RMS
+    is ``rmse``, S = rmse^2 chi2(dof); 0.0 for rmse 0."""
+    if rmse <= 0:
+        return 0.0
+    return 1.0 - chi2_cdf(threshold ** 2 * chi2_quantile(confidence, dof) / rmse ** 2, dof)
+
+
 def frames_to_decide(rmse: float, threshold: float, dof: int, confidence: float, limit: int = 100_000) -> int | None:
     """Degrees of freedom (frames) at which the chi-square bound of a statistic measured at
     ``rmse`` would decide against ``threshold`` (upper bound within it when rmse < threshold,

@@ -63,16 +63,17 @@ def exit_status(decision: str) -> int:
 
 
 def pose_tolerances(spec: AcceptanceSpec, source: str = "acceptance spec") -> dict[str, float]:
-    """{pose name ("x_mm", "alpha_deg", ...): tolerance T} of the components the spec's
-    ``[localization]`` table gates (module docstring); DockfactoryError naming ``source`` when it
-    gates none (a single pose would be judged on nothing)."""
+    """{pose name ("x_mm", "alpha_deg", ...): tolerance T (mm, deg)} of the components the spec's
+    ``[localization]`` table gates (module docstring): the RMS its statistic's threshold stands
+    for under the Gaussian model (eval.gate_statistic ``to_rms``); DockfactoryError naming
+    ``source`` when it gates none (a single pose would be judged on nothing)."""
     gate = spec.localization
     thresholds = gate.thresholds()
     if not thresholds:
         raise DockfactoryError(f"{source}: [localization] gates no component: a single pose has no tolerance "
                                "to be judged against (give x, y or alpha there)")
-    root = gate_statistic(gate.statistic).to_rms
-    return {POSE_KEYS[c]: root(t) for c, t in thresholds.items()}
+    stat = gate_statistic(gate.statistic)
+    return {POSE_KEYS[c]: stat.to_rms(t) for c, t in thresholds.items()}
 
 
 def coverage_k(spec: AcceptanceSpec) -> float:

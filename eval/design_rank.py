@@ -10,7 +10,6 @@ import math
 from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.core.config import ConfigError
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.eval.confidence import chi2_cdf, chi2_quantile, frames_to_decide
 from dockfactory.eval.design_card import DesignCard
 from dockfactory.eval.design_predict import design_config, predict_design
 from dockfactory.eval.design_space import Design, DesignSpace
@@ -18,20 +17,17 @@ from dockfactory.eval.design_space import Design, DesignSpace
 __all__ = ["pass_probability", "reject_probability", "design_row", "rank_rows", "design_id"]
 
 
-def pass_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
-    """P(the guarded rule proves rmse <= threshold) with ``dof`` degrees of freedom (module
-    docstring); 1.0 for rmse 0."""
-    if rmse <= 0:
-        return 1.0
-    return chi2_cdf(threshold ** 2 * chi2_quantile(1 - confidence, dof) / rmse ** 2, dof)
+def pass_probability(rmse: float, threshold: float, dof: int, confidence: float, statistic: str = "rmse") -> float:
+    """P(the guarded rule proves a criterion in ``statistic`` passes) with ``dof`` degrees of
+    freedom, errors of true RMS ``rmse`` against a threshold of RMS ``threshold`` (mm, deg; the
+    statistic's bounds under the Gaussian model: eval.gate_statistic); 1.0 for rmse 0."""
+    return gate_statistic(statistic).pass_probability(rmse, threshold, dof, confidence)
 
 
-def reject_probability(rmse: float, threshold: float, dof: int, confidence: float) -> float:
-    """P(the guarded rule proves rmse > threshold): its lower bound sqrt(S / chi2_c(n)) beyond
-    the threshold, S = rmse^2 chi2(n); 0.0 for rmse 0."""
-    if rmse <= 0:
-        return 0.0
-    return 1.0 - chi2_cdf(threshold ** 2 * chi2_quantile(confidence, dof) / rmse ** 2, dof)
+def reject_probability(rmse: float, threshold: float, dof: int, confidence: float, statistic: str = "rmse") -> float:
+    """P(the guarded rule proves a criterion in ``statistic`` fails) (as :func:`pass_probability`);
+    0.0 for rmse 0."""
+    return gate_statistic(statistic).reject_probability(rmse, threshold, dof, confidence)
 
 
 def design_id(design: Design) -> str:
@@ -49,16 +45,17 @@ def _base_row(design: Design, space: DesignSpace) -> dict:
 
 
 def _block(spec, block: str, figures: dict, dof: int) -> dict:
-    """Per gated component of ``block``: predicted, threshold, margin, probability, frames."""
+    """Per gated component of ``block``: predicted, threshold, margin, probability, frames (RMS
+    figures; the gate's statistic converts its thresholds and judges: eval.gate_statistic)."""
     gate = getattr(spec, block)
-    root = gate_statistic(gate.statistic).to_rms
+    stat = gate_statistic(gate.statistic)
     out = {}
     for comp, thr in gate.thresholds().items():
-        t, r = root(thr), figures[comp]
+        t, r = stat.to_rms(thr), figures[comp]
         out[comp] = {"predicted": r, "threshold": t, "margin": r / t,
-                     "probability": pass_probability(r, t, dof, spec.confidence),
-                     "reject_probability": reject_probability(r, t, dof, spec.confidence),
-                     "frames_to_prove": frames_to_decide(r, t, 1, spec.confidence) if r < t else None}
+                     "probability": pass_probability(r, t, dof, spec.confidence, gate.statistic),
+                     "reject_probability": reject_probability(r, t, dof, spec.confidence, gate.statistic),
+                     "frames_to_prove": stat.frames_to_decide(r, t, 1, spec.confidence) if r < t else None}
     return out
 
 

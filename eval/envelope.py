@@ -5,9 +5,10 @@ and visible markers), the marker centres are projected through hypothetical real
 principal point ``m`` px off the image centre (in each of ``directions`` directions; the worst
 direction counts) and radial distortion ``k1``, plus Gaussian centre noise (the measured detector
 noise, or a given one). Each frame is then solved the way the paper's method does (pinhole, principal point
-at the image centre, identities known) and the localization statistics the acceptance spec gates
-are computed per (m, k1). The envelope is where every gated statistic passes: the cameras that
-need no calibration for these tolerances; outside it a camera needs self-calibration.
+at the image centre, identities known) and each gated component's RMSE is computed per (m, k1),
+in the gate's statistic under the Gaussian model (eval.gate_statistic ``from_rms``). The envelope
+is where every gated statistic passes: the cameras that need no calibration for these
+tolerances; outside it a camera needs self-calibration.
 
 Correspondences are the projected marker centres (not disc centroids), so the solver's
 eccentricity correction plays no part: the sweep isolates the camera model.
@@ -102,6 +103,8 @@ def camera_envelope(ds, spec: AcceptanceSpec, sigma_px: float, grid: EnvelopeGri
 
 
 def _envelope_record(grid: EnvelopeGrid, frames, sigma_px: float, spec: AcceptanceSpec, rmse: dict) -> dict:
+    """The envelope's record: ``rmse`` {component: (offsets, k1) RMSE grid} in the gate's statistic
+    (its ``from_rms``) against the thresholds, the pass map and the verdict sentence."""
     gated = spec.localization.thresholds()
     statistic = spec.localization.statistic
     value = {c: gate_statistic(statistic).from_rms(r) for c, r in rmse.items()}

@@ -18,7 +18,8 @@ from dockfactory.core.layout import CLASS_NAMES
 from dockfactory.core.names import MIN_SCORE
 from dockfactory.eval.uncertainty_budget import budget_block
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS, AcceptanceSpec, verdict
-from dockfactory.eval.confidence import chi2_bounds, pooled_spread_bounds, rmse_bounds
+from dockfactory.eval.confidence import chi2_bounds
+from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.model_check import model_check_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
@@ -221,21 +222,23 @@ def estimation_block(rows: list[dict]) -> dict:
     return rep
 
 
-def statistic_bounds(test: list[dict], rep: list[dict], confidence: float) -> dict:
-    """One-sided ``confidence`` bounds (eval.confidence: chi-square and bootstrap, the cautious
-    pair deciding) of every component's localization RMSE over the solved test frames and pooled
-    repeatability spread over the static poses; bootstrap seeds fixed per component (the same
-    rows give the same bounds)."""
+def statistic_bounds(test: list[dict], rep: list[dict], spec: AcceptanceSpec) -> dict:
+    """One-sided ``spec.confidence`` bounds of every component's statistic, each block's by its
+    gate's statistic (eval.gate_statistic ``bounds`` / ``spread_bounds``; for rmse and mse the RMS
+    bounds of eval.confidence, chi-square and bootstrap, the cautious pair deciding): localization
+    over the solved test frames' errors, estimation over the static poses' repeated estimates.
+    Bootstrap seeds fixed per component (the same rows give the same bounds)."""
     ok = [r for r in test if r["ok"]]
     groups = defaultdict(list)
     for r in rep:
         if r["ok"]:
             groups[r["pose_index"]].append(r)
-    out = {"confidence": confidence, "localization": {}, "estimation": {}}
+    loc, est = gate_statistic(spec.localization.statistic), gate_statistic(spec.estimation.statistic)
+    out = {"confidence": spec.confidence, "localization": {}, "estimation": {}}
     for k, c in enumerate(COMPONENTS):
-        out["localization"][c] = rmse_bounds([r[f"err_{c}"] for r in ok], confidence, seed=k) if ok else {}
-        out["estimation"][c] = pooled_spread_bounds([[r[f"est_{c}"] for r in g] for _, g in sorted(groups.items())],
-                                                    confidence, seed=100 + k)
+        out["localization"][c] = loc.bounds([r[f"err_{c}"] for r in ok], spec.confidence, seed=k) if ok else {}
+        out["estimation"][c] = est.spread_bounds([[r[f"est_{c}"] for r in g] for _, g in sorted(groups.items())],
+                                                 spec.confidence, seed=100 + k)
     return out
 
 
@@ -322,7 +325,7 @@ def _evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path, mi
         metrics["camera_models"] = camera_models_block(ds, detections, float(sigma), min_score)
     metrics["simulated_cameras"] = simulated_cameras_block(ds, test)
     metrics["model_check"] = model_check_block(poses, test)
-    metrics["bounds"] = statistic_bounds(test, rep, spec.confidence)
+    metrics["bounds"] = statistic_bounds(test, rep, spec)
     metrics["uncertainty_budget"] = test_budget(ds, poses, test, noise)
     metrics["acceptance"] = verdict(metrics, spec)
     return metrics, rows

@@ -15,7 +15,6 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout import marker_points
 from dockfactory.core.names import COMPONENTS, POSE_KEYS, UNITS
 from dockfactory.eval.acceptance import AcceptanceSpec
-from dockfactory.eval.confidence import frames_to_decide
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.eval.frame_cameras import cameras_of_test_frames
 from dockfactory.eval.pixel_aspect import crb_delivered
@@ -36,9 +35,10 @@ def plan_frames(spec: AcceptanceSpec, expected: dict[str, dict[str, float]]) -> 
     Returns
     -------
     list of dict
-        One row per gated component: threshold (rmse units), margin, what the frames would prove
-        ("conformance" / "non-conformance" / None at the threshold) and how many (None: no count
-        up to 100,000 decides).
+        One row per gated component: threshold (the RMS of the gate's statistic's threshold under
+        the Gaussian model), margin, what the frames would prove ("conformance" / "non-conformance"
+        / None at the threshold) and how many by the statistic's bounds (eval.gate_statistic; None:
+        no count up to 100,000 decides).
 
     Raises
     ------
@@ -48,12 +48,12 @@ def plan_frames(spec: AcceptanceSpec, expected: dict[str, dict[str, float]]) -> 
     rows = []
     for block, figures in expected.items():
         gate = getattr(spec, block)
-        root = gate_statistic(gate.statistic).to_rms
+        stat = gate_statistic(gate.statistic)
         for c, thr in gate.thresholds().items():
             if c not in figures:
                 raise DockfactoryError(f"plan-frames: [{block}] gates {c} but no expected figure for it was given")
-            rmse, t = figures[c], root(thr)
-            n = frames_to_decide(rmse, t, 1, spec.confidence)
+            rmse, t = figures[c], stat.to_rms(thr)
+            n = stat.frames_to_decide(rmse, t, 1, spec.confidence)
             proves = None if rmse == t else ("conformance" if rmse < t else "non-conformance")
             rows.append({"block": block, "component": c, "unit": UNITS[c], "expected_rmse": rmse, "threshold": t,
                          "margin": rmse / t, "proves": proves, "frames": n, "counts": BLOCKS[block],

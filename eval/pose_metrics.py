@@ -1,9 +1,11 @@
-"""Pose error statistics (pure numpy): MSE, RMSE, bias, spread, percentiles, repeatability."""
+"""Pose error statistics (pure numpy): the gate statistics' values (eval.gate_statistic), bias, spread,
+percentiles, repeatability."""
 from __future__ import annotations
 
 import numpy as np
 
 from dockfactory.eval.acceptance import COMPONENTS, POSE_KEYS
+from dockfactory.eval.gate_statistic import error_values, spread_values, summary_fields
 
 
 def wrap_deg(a):
@@ -20,38 +22,40 @@ def pose_error(est: dict, true: dict) -> dict[str, float]:
 
 
 def error_stats(errors) -> dict:
-    """Statistics of signed errors (n,): n, mse, rmse, mean (bias), std, p95 and max of |e|."""
+    """Statistics of signed errors (n,): the fields of eval.gate_statistic ``summary_fields`` in
+    that order: n, every gate statistic's value (eval.gate_statistic ``error_values``: rmse, mse,
+    ...), and the errors' own moments: mean (bias), std (ddof 1; 0 for one error), p95 and max of
+    |e|. None each (n 0) for no errors."""
     e = np.asarray(errors, dtype=float)
     if e.size == 0:
-        return {"n": 0, "mse": None, "rmse": None, "mean": None, "std": None, "p95": None, "max": None}
-    a = np.abs(e)
-    return {"n": int(e.size), "mse": float(np.mean(e ** 2)), "rmse": float(np.sqrt(np.mean(e ** 2))),
-            "mean": float(e.mean()), "std": float(e.std(ddof=1)) if e.size > 1 else 0.0,
-            "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+        own = {"n": 0, "mean": None, "std": None, "p95": None, "max": None}
+    else:
+        a = np.abs(e)
+        own = {"n": int(e.size), "mean": float(e.mean()), "std": float(e.std(ddof=1)) if e.size > 1 else 0.0,
+               "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+    fields = {**own, **error_values(e)}   # a statistic's own value over a moment of its name
+    return {k: fields[k] for k in summary_fields() if k in fields}
 
 
 def repeatability(groups: dict) -> dict:
     """Spread of repeated estimates of static poses.
 
-    ``groups``: pose key -> list of estimate dicts (x, y, ... per capture). Per pose: the
-    standard deviation of each component over its captures; pooled: sqrt(sum of squared
-    deviations from each pose's mean / sum(n_i - 1)), the pooled RMS spread ("rmse") and its
-    square ("mse").
+    ``groups``: pose key -> list of estimate dicts (x, y, ... per capture). Per pose (two or more
+    captures): the standard deviation of each component over its captures; pooled: per component
+    the spread of every statistic that can gate estimation (eval.gate_statistic ``spread_values``:
+    "rmse" the pooled RMS spread sqrt(sum of squared deviations from each pose's mean / sum(n_i -
+    1)), "mse" its square, ...), None each without a degree of freedom; ``dof`` = sum(n_i - 1).
     """
-    per_pose = []
-    ss = {c: 0.0 for c in COMPONENTS}
-    dof = 0
+    per_pose, values, dof = [], {c: [] for c in COMPONENTS}, 0
     for key, ests in sorted(groups.items()):
         if len(ests) < 2:
             continue
         row = {"pose": key, "captures": len(ests)}
         for c in COMPONENTS:
             v = np.array([e[c] for e in ests], dtype=float)
-            dev = v - v.mean()
-            ss[c] += float((dev ** 2).sum())
-            row[c] = float(np.sqrt((dev ** 2).sum() / (len(v) - 1)))
+            values[c].append(v)
+            row[c] = float(np.sqrt(((v - v.mean()) ** 2).sum() / (len(v) - 1)))
         dof += len(ests) - 1
         per_pose.append(row)
-    pooled = {c: ({"rmse": float(np.sqrt(ss[c] / dof)), "mse": float(ss[c] / dof)} if dof else
-                  {"rmse": None, "mse": None}) for c in COMPONENTS}
+    pooled = {c: spread_values(values[c]) for c in COMPONENTS}
     return {"per_pose": per_pose, "pooled": pooled, "dof": dof}

@@ -13,7 +13,7 @@ import os
 import subprocess
 from pathlib import Path
 
-from dockfactory.eval.gate_statistic import gate_statistic
+from dockfactory.eval.gate_statistic import STATISTICS, gate_statistic, statistics_of, summary_fields
 from dockfactory.core.cv import cv2
 import numpy as np
 
@@ -21,7 +21,7 @@ from dockfactory.core.geometry import intrinsics, project_points
 from dockfactory.core.io import write_json_atomic, write_text_atomic
 from dockfactory.eval.acceptance import COMPONENTS, UNITS
 from dockfactory.eval.dataset_access import json_kind, read_json_file, validate_detections, validate_poses
-from dockfactory.eval.acceptance import DECISION_RULES, criterion_passes, decide_criterion, overall_verdict
+from dockfactory.eval.acceptance import DECISION_RULES, Gate, criterion_passes, decide_criterion, overall_verdict
 from dockfactory.eval.report.calibration import (
     CALIBRATION_SCHEMA,
     CENTRE_NOISE_SCHEMA,
@@ -352,7 +352,7 @@ def git_describe() -> str:
 # number, "num?" a finite number or null, "int", "str", "str?", "bool", "any"; a dict is an
 # object with those keys (a key ending in "?" may be absent); ("map", S) an object whose values
 # are S; ("list", S) a list of S.
-_STATS = {k: "num?" for k in ("mse", "rmse", "mean", "std", "p95", "max")} | {"n": "int"}
+_STATS = {k: "num?" for k in summary_fields() if k != "n"} | {"n": "int"}   # eval.pose_metrics.error_stats
 _COMPS = {c: _STATS for c in COMPONENTS}
 METRICS_SCHEMA = {
     "dataset": {"root": "str", "version_id": "str", "name": "str"},
@@ -366,7 +366,7 @@ METRICS_SCHEMA = {
                      "calibration?": CALIBRATION_SCHEMA},
     "estimation": {"n_frames": "int", "n_solved": "int",
                    "per_pose": ("list", {"pose": "str", "captures": "int"} | {c: "num?" for c in COMPONENTS}),
-                   "pooled": {c: {"rmse": "num?", "mse": "num?"} for c in COMPONENTS}},
+                   "pooled": {c: {k: "num?" for k in statistics_of("estimation")} for c in COMPONENTS}},
     "failures_test": {"count": "int", "frames": "int", "rate": "num?",
                       "by_condition": ("map", {"failed": "int", "frames": "int"}),
                       "list": ("list", {"frame_id": "str", "condition": "str", "reason": "str"})},
@@ -582,25 +582,41 @@ def _rule_text(acc: dict) -> str:
     if acc.get("decision_rule", "simple") == "guarded":
         return (f"Decision rule: guarded (ISO 14253-1 style). A pose statistic passes only when its one-sided "
                 f"{conf:.0%} upper confidence bound is within its threshold, fails when its {conf:.0%} lower bound "
-                "is beyond it, and is UNDECIDED between (more frames would decide); bounds by chi-square under a "
-                "Gaussian error model and by a studentized bootstrap, the more cautious one deciding (the method of each bound in "
-                "brackets). Detection minima and the failure rate compare the value itself.")
+                f"is beyond it, and is UNDECIDED between (more frames would decide); bounds by {_bounds_methods(acc)} "
+                "(the method of each bound in brackets). Detection minima and the failure rate compare the value itself.")
     return ("Decision rule: simple. Each statistic's value is compared with its threshold; its confidence "
             "bounds are shown but do not decide.")
+
+
+def _bounds_methods(acc: dict) -> str:
+    """How the bounds of the verdict's pose statistics are computed (each statistic's
+    ``bounds_text``; the default statistic's when no pose criterion is gated)."""
+    names = [c["statistic"] for c in acc["criteria"] if c.get("block") in ("estimation", "localization")]
+    texts = dict.fromkeys(gate_statistic(n).bounds_text for n in names or [Gate.statistic] if n in STATISTICS)
+    return "; ".join(texts)
 
 
 MIN_N_STATS = 3   # fewer frames print "n too small", not a std of 0 or a 100 % coverage
 
 
+_MOMENT_HEADERS = {"n": "n", "mean": "bias", "std": "std", "p95": "p95 |e|", "max": "max |e|"}
+
+
+def _summary_header(field: str) -> str:
+    """A statistics table's header of an error summary's field: a gate statistic's own, else the
+    moment's (eval.pose_metrics.error_stats)."""
+    return STATISTICS[field].header() if field in STATISTICS else _MOMENT_HEADERS[field]
+
+
 def _stats_table(block: dict, title: str, min_n: int = 1) -> str:
     """A statistics table (units in every header); rows with fewer than ``min_n`` frames say so."""
-    head = ("<tr><th>component</th><th>n</th><th>MSE (unit^2)</th><th>RMSE</th><th>bias</th><th>std</th>"
-            "<th>p95 |e|</th><th>max |e|</th></tr>")
+    fields = summary_fields()
+    head = "<tr><th>component</th>" + "".join(f"<th>{html.escape(_summary_header(k))}</th>" for k in fields) + "</tr>"
     rows = []
     for c in COMPONENTS:
         n = block[c].get("n") or 0
-        cells = (f"<td>{n}</td><td colspan='6' class='note'>n too small (fewer than {min_n} frames)</td>" if n < min_n
-                 else "".join(f"<td>{_num(block[c][k])}</td>" for k in ("n", "mse", "rmse", "mean", "std", "p95", "max")))
+        cells = (f"<td>{n}</td><td colspan='{len(fields) - 1}' class='note'>n too small (fewer than {min_n} frames)</td>"
+                 if n < min_n else "".join(f"<td>{_num(block[c][k])}</td>" for k in fields))
         rows.append(f"<tr><td>{c} ({UNITS[c]})</td>{cells}</tr>")
     return f"<h3>{html.escape(title)}</h3><table>{head}{''.join(rows)}</table>"
 

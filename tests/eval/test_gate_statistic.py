@@ -29,6 +29,16 @@ def test_no_module_branches_on_the_statistic_s_name(repo_root):
     assert offenders == []
 
 
+def test_no_module_lists_the_statistics_or_reads_their_powers(repo_root):
+    """Outside eval/gate_statistic.py no module names the statistics as a set (a pair of names) or
+    reads a statistic's power: they ask the owner."""
+    pattern = re.compile(r"""["']r?mse["']\s*,\s*["']r?mse["']|(statistic|\))\.power\b|\]\.power\b""")
+    offenders = [str(p.relative_to(repo_root)) for folder in ("eval", "dockfactory", "core", "solver", "generator")
+                 for p in (repo_root / folder).rglob("*.py")
+                 if p.name != "gate_statistic.py" and pattern.search(p.read_text())]
+    assert offenders == []
+
+
 def test_a_spec_in_mse_plans_and_judges_as_its_rmse_twin(tmp_path):
     from dockfactory.eval.acceptance import load_acceptance
     from dockfactory.eval.frame_planner import plan_frames
