@@ -326,7 +326,7 @@ STATISTICS: dict[str, GateStatistic] = {
 
 # The fields of an error summary (eval.pose_metrics.error_stats) in the order metrics.json and the
 # report's statistics tables give them: the statistics' values among the errors' own moments (n,
-# mean, std, p95 and max of |e|); a statistic not named here follows them.
+# mean, std and max of |e|); a statistic not named here follows them.
 SUMMARY = ("n", "mse", "rmse", "mean", "std", "p95", "max")
 
 

@@ -599,7 +599,7 @@ def _bounds_methods(acc: dict) -> str:
 MIN_N_STATS = 3   # fewer frames print "n too small", not a std of 0 or a 100 % coverage
 
 
-_MOMENT_HEADERS = {"n": "n", "mean": "bias", "std": "std", "p95": "p95 |e|", "max": "max |e|"}
+_MOMENT_HEADERS = {"n": "n", "mean": "bias", "std": "std", "max": "max |e|"}
 
 
 def _summary_header(field: str) -> str:
