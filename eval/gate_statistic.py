@@ -10,7 +10,7 @@ planner, the envelope, the design ranking, conformity and the report's tolerance
 planning (``frames_to_decide``, ``pass_probability``, ``reject_probability``). Consumers ask this
 module and branch on no statistic's name: adding a statistic is an entry here and its test.
 
-Why and how: docs/acceptance.md.
+Why and how: docs/acceptance.md, "Gate statistics".
 """
 from __future__ import annotations
 
