@@ -33,7 +33,11 @@ NOTES = (
 
 def _card_summary(card) -> str:
     fitted = card.data.get("fitted_on", {})
-    return (f"centre noise {card.scale_px} px at a 10 px disc, section offset {list(card.shift_px)} px, "
+    law = card.law
+    noise = ("centre noise as the solver weighs it" if law is None else
+             f"centre noise variance (10 / b)^{law.minor_exponent:g} + {law.floor:g} + "
+             f"{law.ring_coefficient:g} (1.5 / w)^{law.ring_exponent:g} (b minor semi-axis, w ring width, px)")
+    return (f"{noise}, scale {card.scale_px} px, section offset {list(card.shift_px)} px, "
             f"Bayer x{card.cfa_factor['rggb']}, JPEG x{card.jpeg_factor}, white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
             f"fitted on {len(fitted.get('renders', []))} renders of {fitted.get('frames_each', '?')} frames; "
             f"provisional: {', '.join(card.provisional) or 'none'}")

@@ -14,11 +14,14 @@ from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import COMPONENTS
+from dockfactory.eval.design_noise import CentreNoiseLaw
 from dockfactory.eval.design_predict import NoiseClass
 from dockfactory.eval.design_space import Design, jpeg_quality
 
-CARD_FORMAT = "dockfactory.design_predictor/2"
+CARD_FORMAT = "dockfactory.design_predictor/3"
+NO_LAW_FORMAT = "dockfactory.design_predictor/2"     # no centre_noise: the centres' noise is the solver's weights
 OLD_FORMATS = ("dockfactory.design_predictor/1",)   # fitted under an earlier centre-noise model: refit
+LAW_KEYS = ("minor_exponent", "floor", "ring_coefficient", "ring_exponent")
 
 __all__ = ["DesignCard", "load_design_card", "CARD_FORMAT"]
 
@@ -35,6 +38,7 @@ class DesignCard:
     bound_factor: dict
     provisional: tuple[str, ...]
     data: dict
+    law: CentreNoiseLaw | None = None
 
     def noise_of(self, design: Design) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design``: the class None with
@@ -47,7 +51,7 @@ class DesignCard:
         if q is not None:
             g *= self.jpeg_factor[design.camera.cfa]
             used.append(f"jpeg_factor.{design.camera.cfa}")
-        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g))
+        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law)
         return noise, [u for u in used if u in self.provisional], ""
 
 
@@ -63,6 +67,22 @@ def _factors(path, data, key, names, where: str = "") -> dict:
     if not isinstance(table, dict) or set(table) != set(names):
         raise DockfactoryError(f"{path}: {name}: expected a table of {', '.join(names)}, got {table!r}")
     return {n: _positive(path, f"{name}.{n}", table[n]) for n in names}
+
+
+def _law(path, data: dict) -> CentreNoiseLaw | None:
+    """The card's ``centre_noise`` (format /3: each of LAW_KEYS a number >= 0), None for a /2 card."""
+    if data.get("format") == NO_LAW_FORMAT:
+        return None
+    table = data.get("centre_noise")
+    if not isinstance(table, dict) or set(table) != set(LAW_KEYS):
+        raise DockfactoryError(f"{path}: centre_noise: expected a table of {', '.join(LAW_KEYS)}, got {table!r}")
+    values = {}
+    for k in LAW_KEYS:
+        v = table[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise DockfactoryError(f"{path}: centre_noise.{k}: expected a number >= 0, got {v!r}")
+        values[k] = float(v)
+    return CentreNoiseLaw(**values)
 
 
 def _rings(path, table) -> dict:
@@ -84,8 +104,8 @@ def load_design_card(path) -> DesignCard:
     if fmt in OLD_FORMATS:
         raise DockfactoryError(f"{path}: format {fmt!r}: fitted under the previous centre-noise model; refit it "
                                "(python -m bench.design.design_fit --card-out CARD.json)")
-    if fmt != CARD_FORMAT:
-        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r}")
+    if fmt not in (CARD_FORMAT, NO_LAW_FORMAT):
+        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r} (or {NO_LAW_FORMAT!r})")
     shift = data.get("shift_px")
     if not (isinstance(shift, list) and len(shift) == 2):
         raise DockfactoryError(f"{path}: shift_px: expected [u, v] px, got {shift!r}")
@@ -100,4 +120,4 @@ def load_design_card(path) -> DesignCard:
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _rings(path, data.get("ring_factor")),
                       _factors(path, data, "jpeg_factor", ("none", "rggb")), q,
-                      _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data)
+                      _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data))

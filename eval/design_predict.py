@@ -18,6 +18,7 @@ from dockfactory.core.config import config_from_dict
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout_patterns import pattern_pair
 from dockfactory.core.names import COMPONENTS
+from dockfactory.eval.design_noise import CentreNoiseLaw, over_weights
 from dockfactory.eval.design_space import Design, DesignSpace, jpeg_quality
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.eval.frame_cameras import cameras_of_test_frames
@@ -38,9 +39,11 @@ __all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "
 @dataclass(frozen=True)
 class NoiseClass:
     """The centre noise of one design's camera class: disc-model scale (px per axis at
-    REFERENCE_RADIUS_PX) and section offset (px per axis)."""
+    REFERENCE_RADIUS_PX), section offset (px per axis) and the law the centres' noise follows
+    (eval.design_noise; None: the solver's own weights, solver.disc_noise.noise_shapes)."""
     scale_px: float
     shift_px: tuple[float, float]
+    law: CentreNoiseLaw | None = None
 
 
 @dataclass(frozen=True)
@@ -98,11 +101,23 @@ def square_pixel_noise_shapes(markers, cam_from_s, focal: float, pixel_aspect: f
     return square_pixel_covariances(noise_shapes(delivered_ellipses(ellipses, pixel_aspect)), pixel_aspect)
 
 
+def _weighted_fit_covariance(jw: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """(p, p) covariance in units of scale^2 of the fit weighted by the solver's noise shapes
+    (``jw``: (2m, p) Jacobian whitened by them) when marker i's true variance is ``ratio[i]`` (m,)
+    times its weight: H J_w^T R J_w H, H = (J_w^T J_w)^-1, R the ratios per axis; H itself when all
+    ratios are 1."""
+    h = inverse_spd(jw.T @ jw)
+    if np.all(ratio == 1.0):
+        return h
+    return h @ (jw.T * np.repeat(ratio, 2)) @ jw @ h
+
+
 def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, pixel_aspect: float = 1.0):
     """(noise (6,), offset (6,)) variances of d_from_b (POSE_NAMES order, mm^2 / deg^2) of one
     frame: the covariance of the fit weighted by the disc noise (as the solver's robust refit
-    weighs the centres, solver.disc_noise.robust_refit: scale^2 (J^T T^-1 J)^-1) and what the
-    section offset adds to that weighted fit. A camera
+    weighs the centres, solver.disc_noise.robust_refit: scale^2 (J^T T^-1 J)^-1 when the centres'
+    noise is the solver's weights, the sandwich of :func:`_weighted_fit_covariance` under
+    ``noise.law``) and what the section offset adds to that weighted fit. A camera
     with non-square pixels (``pixel_aspect`` = fy / fx, ``focal`` = fx): the fit in the square-pixel
     pinhole at fx about ``pp``, the noise the delivered discs show taken there
     (:func:`square_pixel_noise_shapes`) and the offset likewise (eval.pixel_aspect); 1: square."""
@@ -113,7 +128,8 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
                              square_pixel_noise_shapes(mb, cam_b, focal, pixel_aspect)])
     sqrt_w = np.linalg.inv(np.linalg.cholesky(shapes))
     jw = np.einsum("nab,nbp->nap", sqrt_w, jac.reshape(-1, 2, jac.shape[1])).reshape(jac.shape)
-    cov_noise = noise.scale_px ** 2 * inverse_spd(jw.T @ jw)
+    cov_noise = noise.scale_px ** 2 * _weighted_fit_covariance(
+        jw, np.r_[over_weights(ma, cam_a, focal, noise.law), over_weights(mb, cam_b, focal, noise.law)])
     groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
     cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect), sqrt_w)
     prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])

@@ -37,6 +37,7 @@ import numpy as np  # noqa: E402
 from dockfactory.core.config import load_config  # noqa: E402
 from dockfactory.core.io import write_json_atomic  # noqa: E402
 from dockfactory.eval.design_card import CARD_FORMAT  # noqa: E402
+from dockfactory.eval.design_noise import CentreNoiseLaw  # noqa: E402
 from dockfactory.eval.design_predict import NoiseClass, mean_variances  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -46,14 +47,18 @@ SCENES = ("a", "b", "c")
 FIT = ("x", "y", "alpha")
 IDX = {"x": 0, "y": 1, "alpha": 3}
 BAYER = ("bayer-bilinear", "bayer-vng")
+# The centres' noise law (eval.design_noise), measured per marker on the sensor scenes A, B, D and on
+# A and B with the other disc size (python -m bench.sensor.ring_width_law; bench/results/design/README.md).
+LAW = CentreNoiseLaw(minor_exponent=1.0, floor=5.0, ring_coefficient=8.0, ring_exponent=3.0)
 
 
-def basis(scene: str) -> np.ndarray:
-    """(3, 3): rows Vn, Vu, Vv; columns X, Y, alpha (mean over the scene's 48 test frames)."""
+def basis(scene: str, law: CentreNoiseLaw | None = LAW) -> np.ndarray:
+    """(3, 3): rows Vn, Vu, Vv; columns X, Y, alpha (mean over the scene's 48 test frames), the
+    centres' noise following ``law`` (None: the solver's weights)."""
     cfg = load_config(ROOT / "bench" / "configs" / f"sensor_scene_{scene}.toml")
     rows = []
     for shift in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)):
-        vn, vs, _ = mean_variances(cfg, NoiseClass(1.0, shift), 48)
+        vn, vs, _ = mean_variances(cfg, NoiseClass(1.0, shift, law), 48)
         rows.append(vn if shift == (0.0, 0.0) else vs)
     return np.array(rows)[:, [IDX[c] for c in FIT]]
 
@@ -117,12 +122,13 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None
     return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
 
 
-def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
+def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: CentreNoiseLaw = LAW) -> dict:
     """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)
-    over the sensor scenes ``scenes`` (each in ``sources[0]``); ``ring_dark``: the dark-ring
-    results beside the white ones (:func:`ring_and_jpeg_factors`; None: ``sources[0]``)."""
+    over the sensor scenes ``scenes`` (each in ``sources[0]``) with the centres' noise ``law``;
+    ``ring_dark``: the dark-ring results beside the white ones (:func:`ring_and_jpeg_factors`;
+    None: ``sources[0]``)."""
     results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
-    bases = {s: basis(s) for s in scenes}
+    bases = {s: basis(s, law) for s in scenes}
     tc = {s: measured(results, s, "three-chip") for s in scenes}
     p = nnls_relative(bases, tc)
     rows = ratio_rows("three-chip (fit)", {s: (tc[s], predicted(bases[s], p)) for s in scenes})
@@ -145,7 +151,7 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None) -> dict:
             "ring_factor": {"dark": {"none": 1.0, "rggb": 1.0},
                             "white": {c: round(v, 3) for c, v in other["ring_white"].items()}},
             "jpeg_factor": {"none": round(other["jpeg_none"], 3), "rggb": round(jpeg, 3)},
-            "jpeg_min_quality": 90,
+            "jpeg_min_quality": 90, "centre_noise": dict(vars(law)),
             "bound_factor": {c: 1.0 for c in ("x", "y", "z", "alpha", "beta", "gamma")},
             "provisional": [],
             "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
@@ -168,8 +174,12 @@ def main() -> None:
                     help="the inputs under bench/results/sensor_effects/ (default: %(default)s)")
     ap.add_argument("--ring-dark", default=None, metavar="DARK",
                     help="the dark-ring results the white ones were measured beside, if not SAMPLING")
+    ap.add_argument("--law", default=None, metavar="P,FLOOR,C,K",
+                    help="the centres' noise law: minor exponent, floor, ring coefficient, ring exponent "
+                         "(default: LAW, the measured one)")
     args = ap.parse_args()
-    card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark)
+    law = LAW if args.law is None else CentreNoiseLaw(*(float(v) for v in args.law.split(",")))
+    card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark, law)
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
           f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")

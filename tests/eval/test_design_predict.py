@@ -12,10 +12,11 @@ from dockfactory.core.geometry import pose_components
 from dockfactory.core.layout import DEFAULT_LAYOUT_A, build_layout, layout_problems
 from dockfactory.core.layout_patterns import pattern_pair
 from dockfactory.eval.confidence import chi2_bounds
+from dockfactory.eval.design_noise import RING_REFERENCE_PX, CentreNoiseLaw, over_weights, ring_width_px
 from dockfactory.eval.design_predict import NoiseClass, frame_variances
 from dockfactory.eval.design_rank import pass_probability, reject_probability
 from dockfactory.solver import crb_d_from_b, solve_docking
-from dockfactory.solver.disc_noise import section_noise_shapes
+from dockfactory.solver.disc_noise import MINOR_EXPONENT, NOISE_FLOOR, section_noise_shapes
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
 LAYOUT = default_layout()
@@ -128,7 +129,9 @@ def test_a_bad_predictor_card_is_one_line(tmp_path):
     card = json.loads(shipped_design_card().read_text())
     assert load_design_card(shipped_design_card()).scale_px == card["scale_px"] and "edge_px" not in card
     for key, value, needle in (("scale_px", -1, "scale_px: expected a positive number"),
-                               ("format", "x", "format: expected 'dockfactory.design_predictor/2'")):
+                               ("format", "x", "format: expected 'dockfactory.design_predictor/3'"),
+                               ("centre_noise", {"floor": 1.0}, "centre_noise: expected a table of minor_exponent"),
+                               ("centre_noise", {**card["centre_noise"], "floor": -1}, "centre_noise.floor: expected a number >= 0")):
         path = tmp_path / f"{key}.json"
         path.write_text(json.dumps({**card, key: value}))
         with pytest.raises(DockfactoryError) as exc:
@@ -151,3 +154,79 @@ def test_a_card_of_the_previous_noise_model_is_refused_with_how_to_refit(tmp_pat
     msg = str(exc.value)
     assert msg.startswith(f"{path}: format 'dockfactory.design_predictor/1': fitted under the previous")
     assert "python -m bench.design.design_fit" in msg and "\n" not in msg
+
+
+def test_a_card_without_a_centre_noise_law_predicts_with_the_solver_s_weights(tmp_path):
+    """A card of format /2 (no centre_noise) loads with no law: its designs' centres are noisy as
+    the solver weighs them, and its predictions are those of the weighted fit (the sandwich with
+    every ratio 1 is the weighted covariance exactly)."""
+    import json
+    from dockfactory.core.resources import shipped_design_card
+    from dockfactory.eval.design_card import load_design_card
+    card = json.loads(shipped_design_card().read_text())
+    assert load_design_card(shipped_design_card()).law is not None
+    old = {k: v for k, v in card.items() if k != "centre_noise"} | {"format": "dockfactory.design_predictor/2"}
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps(old))
+    assert load_design_card(path).law is None
+    sc = docking_scene(np.random.default_rng(5))
+    plain = frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point, NoiseClass(0.05, (0.01, 0.01)))
+    same = CentreNoiseLaw(MINOR_EXPONENT, NOISE_FLOOR, 0.0, 1.0)   # the solver's law, up to its normalisation
+    lawful = frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point,
+                             NoiseClass(0.05, (0.01, 0.01), same))
+    np.testing.assert_allclose(lawful[0], plain[0] * (1 + NOISE_FLOOR), rtol=1e-9)
+    np.testing.assert_array_equal(lawful[1], plain[1])
+
+
+def test_the_ring_term_makes_a_larger_disc_noisier_at_the_same_image():
+    """The factory's ring is RING_EXTRA_MM wide whatever the disc: at the same minor semi-axis a
+    30 mm disc's ring is two thirds as wide in the image as a 20 mm disc's, and the law's variance
+    is larger by the ring term alone."""
+    law = CentreNoiseLaw(1.0, 5.0, 8.0, 3.0)
+    b = np.array([6.0, 6.0])
+    w = ring_width_px(b, np.array([20.0, 30.0]))
+    np.testing.assert_allclose(w, [6.0 * 2.5 / 10.0, 6.0 * 2.5 / 15.0])
+    v = law.variance(b, w)
+    ring = 8.0 * (RING_REFERENCE_PX / w) ** 3
+    np.testing.assert_allclose(v - ring, [10 / 6 + 5] * 2)
+    assert v[1] / v[0] > 1.5
+
+
+@pytest.mark.slow
+def test_predicted_rmse_follows_the_solver_when_the_noise_is_not_its_weights():
+    """300 synthetic frames whose centres' noise follows a law with a ring term (not the solver's
+    weights: the solver still weighs by its own law): the solver's RMSE of X, Y, alpha is within
+    0.8-1.25x of the sandwich's prediction (the RMS over the frames of the predicted std)."""
+    rng = np.random.default_rng(71)
+    law = CentreNoiseLaw(1.0, 5.0, 8.0, 3.0)
+    noise = NoiseClass(0.004, (0.0, 0.0), law)
+    err, var = [], []
+    for _ in range(300):
+        sc = docking_scene(rng)
+        vn, _ = frame_variances(LAYOUT, sc.cam_from_d, sc.cam_from_b, sc.focal_px, sc.principal_point, noise)
+        ratio = np.r_[over_weights([m for m in LAYOUT if m.section == "A"], sc.cam_from_d, sc.focal_px, law),
+                      over_weights([m for m in LAYOUT if m.section == "B"], sc.cam_from_b, sc.focal_px, law)]
+        shapes = _scene_noise(sc) * ratio[:, None, None]
+        uv = _draw_centres(rng, sc, shapes, NoiseClass(noise.scale_px, (0.0, 0.0)))
+        res = solve_docking(LAYOUT, sc.principal_point, detections=(CLASSES, uv))
+        truth = pose_components(sc.d_from_b)
+        err.append([getattr(res, k) - truth[k] for k, _ in COMPS])
+        var.append([vn[i] for _, i in COMPS])
+    rmse = np.sqrt(np.mean(np.square(err), axis=0))
+    ratio_law = rmse / np.sqrt(np.mean(var, axis=0))
+    assert np.all((ratio_law > 0.8) & (ratio_law < 1.25)), ratio_law
+
+
+def test_the_sandwich_is_the_covariance_of_the_weighted_fit_under_other_noise():
+    """A linear model fitted with the solver's whitening while each point's true variance is
+    ``ratio`` times its weight: the estimates' covariance over 20,000 draws is
+    _weighted_fit_covariance's to 3 %, and it differs from the weighted fit's own (J_w^T J_w)^-1."""
+    from dockfactory.eval.design_predict import _weighted_fit_covariance
+    rng = np.random.default_rng(9)
+    jw = rng.normal(size=(16, 3))
+    ratio = rng.uniform(0.3, 6.0, 8)
+    pred = _weighted_fit_covariance(jw, ratio)
+    noise = rng.standard_normal((20_000, 16)) * np.sqrt(np.repeat(ratio, 2))
+    est = noise @ jw @ np.linalg.inv(jw.T @ jw)
+    np.testing.assert_allclose(np.cov(est.T), pred, rtol=0.03, atol=0.03 * np.abs(pred).max())
+    assert not np.allclose(pred, np.linalg.inv(jw.T @ jw), rtol=0.2)
