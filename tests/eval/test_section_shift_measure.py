@@ -52,6 +52,7 @@ def painted(tmp_path_factory):
     return painted_from_text(tmp_path_factory, "shift", SHIFT_SPLIT_CONFIG)
 
 
+@pytest.mark.slow   # the painted dataset of its fixture: about 9 s, for this one test
 def test_a_split_of_the_dataset_measures_its_own_offset_or_says_it_cannot(painted):
     """``split_section_shift`` measures the offset on the val frames' detections (a painted dataset,
     exact centroids plus a 0.1 px offset per frame and section: over its 20-odd sections the
