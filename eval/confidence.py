@@ -191,7 +191,13 @@ def frames_to_decide(rmse: float, threshold: float, dof: int, confidence: float,
     def decided(n: int) -> bool:
         lower, upper = chi2_bounds(rmse * rmse * n, n, confidence)
         return upper <= threshold if rmse < threshold else lower > threshold
-    hi = max(dof, 1)
+    return first_decided(decided, dof, limit)
+
+
+def first_decided(decided, start: int, limit: int) -> int | None:
+    """The count n >= ``start`` where ``decided(n)`` first holds, by doubling then bisection (the
+    smallest one when decided is monotone); None when none up to ``limit`` does."""
+    hi = max(start, 1)
     while not decided(hi):
         hi *= 2
         if hi > limit:

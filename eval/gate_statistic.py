@@ -24,6 +24,7 @@ import numpy as np
 from dockfactory.eval.confidence import (
     chi2_pass_probability,
     chi2_reject_probability,
+    first_decided,
     frames_to_decide,
     pooled_spread_bounds,
     rmse_bounds,
@@ -190,24 +191,6 @@ def order_ranks(n: int, q: float, confidence: float) -> tuple[int | None, int | 
     return (m + 1 if m >= 0 else None), upper
 
 
-def _first_decided(decided, start: int, limit: int) -> int | None:
-    """The count n >= ``start`` where ``decided(n)`` first holds, by doubling then bisection (the
-    smallest one when decided is monotone); None when none up to ``limit`` does."""
-    hi = max(start, 1)
-    while not decided(hi):
-        hi *= 2
-        if hi > limit:
-            return None
-    lo = max(1, hi // 2)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if decided(mid):
-            hi = mid
-        else:
-            lo = mid + 1
-    return hi
-
-
 @dataclass(frozen=True)
 class AbsQuantile(GateStatistic):
     """The ``percent`` percentile of |e| (mm, deg): localization only.
@@ -301,7 +284,7 @@ class AbsQuantile(GateStatistic):
                 return False
             expected = rms * half_normal.inv_cdf(0.5 + rank / (n + 1) / 2)
             return expected <= threshold_rms * self._z if rms < threshold_rms else expected > threshold_rms * self._z
-        return _first_decided(decided, dof, limit)
+        return first_decided(decided, dof, limit)
 
     def pass_probability(self, rms, threshold_rms, dof, confidence):
         upper = order_ranks(dof, self._q, confidence)[1]
