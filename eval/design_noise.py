@@ -51,7 +51,8 @@ def over_weights(markers, cam_from_s, focal_px: float, law: CentreNoiseLaw | Non
     """(m,) for ``markers`` (core.layout.Marker, one section's, seen by ``cam_from_s`` (4, 4) at
     ``focal_px``): the ratio of ``law``'s variance to the solver's weight (the isotropic
     solver.disc_noise.noise_shapes of the same discs); all ones when ``law`` is None (the solver's
-    weights are the noise)."""
+    weights are the noise). Both are taken of the discs' images in the square-pixel pinhole at
+    ``focal_px``, for a camera of non-square pixels too (a ratio of two laws of the same discs)."""
     if law is None or len(markers) == 0:
         return np.ones(len(markers))
     cam = np.asarray(cam_from_s, dtype=np.float64)
