@@ -4,7 +4,8 @@
                                     [--weights W] [--out table.json] [--boot 2000]
 
 Each ``--scene`` names its datasets: the first (REF) is the converged reference (e.g.
-``marker_samples = 256``), the others the candidates; all of one scene must be renders of the same
+``marker_samples = 256`` on every crop pixel, no denoiser, no coverage correction: refused
+otherwise, unless ``--any-reference``), the others the candidates; all of one scene must be renders of the same
 config but for ``[render]`` (the same frames, poses and cameras; checked on the labels' poses).
 Every dataset's test frames go through the shipped detector with its refinement (``dockfactory
 detect``, cached beside the dataset as ``detections_bench.json``) and the paper's pinhole solver
@@ -182,7 +183,37 @@ def sample_fit(entries: list[dict]) -> dict | None:
             "samples_for_1p2x_ref": need}
 
 
-def run_scene(dirs: list[str], weights: str | None, boot: int) -> list[dict]:
+CONVERGED_MIN_SAMPLES = 128   # a reference's crops take at least this many samples on every pixel
+
+
+def reference_problems(render) -> list[str]:
+    """What keeps a dataset's ``[render]`` table (``render``) from being a converged reference at
+    the markers: fewer than CONVERGED_MIN_SAMPLES crop samples, adaptive sampling (its threshold stops
+    pixels early: a reference about 1.2x worse in median), a denoiser or the coverage correction at
+    the markers (docs/rendering.md, "The converged reference"). Empty when it is one."""
+    out = []
+    if render.marker_samples < CONVERGED_MIN_SAMPLES:
+        out.append(f"marker_samples = {render.marker_samples} (at least {CONVERGED_MIN_SAMPLES})")
+    if render.marker_adaptive_threshold > 0:
+        out.append(f"marker_adaptive_threshold = {render.marker_adaptive_threshold} (0: every pixel every sample)")
+    if render.marker_denoise != "off":
+        out.append(f"marker_denoise = {render.marker_denoise!r} (\"off\")")
+    if render.marker_coverage_samples > 0:
+        out.append(f"marker_coverage_samples = {render.marker_coverage_samples} (0)")
+    return out
+
+
+def check_reference(root: str, any_reference: bool = False) -> None:
+    """SystemExit (one line naming ``root`` and what is wrong) when the dataset at ``root`` is not
+    rendered as a converged reference (:func:`reference_problems`), unless ``any_reference``."""
+    problems = reference_problems(Dataset.open(root, full=False).config.render)
+    if problems and not any_reference:
+        raise SystemExit(f"{root}: not a converged reference: {'; '.join(problems)} "
+                         "(docs/rendering.md, \"The converged reference\"; --any-reference to compare anyway)")
+
+
+def run_scene(dirs: list[str], weights: str | None, boot: int, any_reference: bool = False) -> list[dict]:
+    check_reference(dirs[0], any_reference)
     measured = [measure(Path(d), weights) for d in dirs]
     ref = measured[0]
     for m, d in zip(measured[1:], dirs[1:]):
@@ -206,12 +237,14 @@ def main() -> int:
     ap.add_argument("--weights", default=None)
     ap.add_argument("--boot", type=int, default=2000)
     ap.add_argument("--out", default=None, help="write the figures (no per-frame rows) as JSON")
+    ap.add_argument("--any-reference", action="store_true",
+                    help="compare against a first dataset that is not rendered as a converged reference")
     args = ap.parse_args()
     results = {}
     for scene in args.scene:
         if len(scene) < 3:
             raise SystemExit(f"--scene {scene[0]}: give the reference and at least one candidate")
-        results[scene[0]] = run_scene(scene[1:], args.weights, args.boot)
+        results[scene[0]] = run_scene(scene[1:], args.weights, args.boot, args.any_reference)
     print("\n".join(table(results)))
     for scene, entries in results.items():
         fit = sample_fit(entries)
