@@ -185,11 +185,17 @@ class SectionsConfig:
 @dataclass(frozen=True)
 class MarkersConfig:
     diameter_mm: float = 20.0       # of each coloured disc
-    raise_mm: float = 1.0           # height of the disc's top face above the surface
-    form: str = "puck"              # puck (the disc on a raised dark cylinder, its side showing at a slant) | flat (printed on a dark plate raise_mm thick, at most 0.5 mm; docs/rendering.md)
+    raise_mm: float | None = None   # height of the disc's top face above the surface; unset: the form's (layout.FORM_RAISE_MM: puck 1 mm, flat 0.1 mm)
+    form: str = "flat"              # flat (printed on a dark plate raise_mm thick, at most 0.5 mm) | puck (the disc on a raised dark cylinder, its side showing at a slant); docs/rendering.md
     ring: str = "dark"              # the ring around each disc: dark (reflectance 0.01-0.05) | white (0.70-0.85) | mixed (each frame one of the two)
     layout_a: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_A  # A's markers: (s_mm from the docking face, phi_deg about the axis, 0 = toward +Z)
     layout_b: tuple[tuple[float, float], ...] = layout_mod.DEFAULT_LAYOUT_B  # B's, the same way
+
+    def __post_init__(self):
+        """An unset ``raise_mm`` becomes the form's (an unknown form keeps the puck's: validation
+        names the form), so every reader sees a number."""
+        if self.raise_mm is None:
+            object.__setattr__(self, "raise_mm", layout_mod.FORM_RAISE_MM.get(self.form, layout_mod.FORM_RAISE_MM["puck"]))
 
 
 @dataclass(frozen=True)

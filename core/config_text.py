@@ -146,6 +146,8 @@ def type_text(hint) -> str:
         return "table of name = number"
     if hint == config_mod.Range:
         return "[min, max]"
+    if hint == (float | None):   # TOML has no null: the key is a number or left out
+        return "number"
     if typing.get_origin(hint) is tuple:
         args = typing.get_args(hint)
         if len(args) == 2 and args[1] is Ellipsis:

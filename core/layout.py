@@ -36,6 +36,7 @@ BASE_EMBED_MM = 0.05      # how far a marker's base reaches into the section, wh
 # at most FLAT_MAX_RAISE_MM); both have a planar disc, so the labels are exact for either.
 MARKER_FORMS = ("puck", "flat")
 FLAT_MAX_RAISE_MM = 0.5
+FORM_RAISE_MM = {"puck": 1.0, "flat": 0.1}   # each form's raise_mm when a config leaves it unset
 # Grey reflectance range of the ring, per design: a dark ring leaves a Bayer sensor a red disc's
 # edge in its red samples alone; a white ring shows it in the green and blue samples too.
 RING_REFLECTANCE = {"dark": (0.01, 0.05), "white": (0.70, 0.85)}

@@ -19,7 +19,7 @@ from pathlib import Path
 from dockfactory.core.cv import cv2
 import numpy as np
 
-from dockfactory.core.config import config_from_identity
+from dockfactory.core.config import config_from_dict, config_from_identity
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.io import sha256_bytes, sha256_file, write_bytes_atomic
 from dockfactory.core.user_files import check_regular_file
@@ -168,14 +168,24 @@ def _rerendered_frames(root: Path) -> list[str]:
 
 
 def _same_config(path: Path, manifest: dict) -> bool:
-    """Whether the re-render's config text ``path`` resolves to the manifest's config (both read
-    as stored identities: a key they leave out at its identity-neutral value), so that a config
-    pinning a key whose default moved since publishing still verifies."""
+    """Whether the re-render's config text ``path`` resolves to the manifest's config (the
+    manifest's read as a stored identity: a key it leaves out at its identity-neutral value; the
+    text either so, or as a config file: a key it leaves out at today's default), so that a config
+    pinning a key whose default moved since publishing still verifies, and so does one that leaves
+    out a key whose default it renders."""
+    errors = (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, DockfactoryError, KeyError, TypeError)
     try:
-        mine = config_from_identity(tomllib.loads(path.read_text(encoding="utf-8")), str(path))
-        return mine.canonical_json() == config_from_identity(manifest["config"]).canonical_json()
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, DockfactoryError, KeyError, TypeError):
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        published = config_from_identity(manifest["config"]).canonical_json()
+    except errors:
         return False
+    for read in (config_from_identity, config_from_dict):
+        try:
+            if read(data, str(path)).canonical_json() == published:
+                return True
+        except errors:
+            pass
+    return False
 
 
 def _same_bytes(path: Path, record: dict | None) -> bool:

@@ -2,8 +2,8 @@
 
 The disc is planar in both, so labels are exact for either; the form sets how far the marker's
 dark base reaches below the disc (the puck's at least RING_BASE_DEPTH_MM, the plate's its
-thickness plus the sagitta of its rim over the cylinder): never floating over the section, and
-the shipped configs' scenes unchanged byte for byte.
+thickness plus the sagitta of its rim over the cylinder): never floating over the section. The
+default is the flat plate (0.1 mm); the configs pinned to the puck render their scenes unchanged.
 """
 import json
 import math
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from dockfactory.core.config import ConfigError, config_from_dict, load_config
-from dockfactory.core.layout import BASE_EMBED_MM, RING_BASE_DEPTH_MM, RING_EXTRA_MM, base_depth_mm
+from dockfactory.core.config import ConfigError, config_from_dict, config_from_identity, load_config
+from dockfactory.core.layout import BASE_EMBED_MM, FORM_RAISE_MM, RING_BASE_DEPTH_MM, RING_EXTRA_MM, base_depth_mm
 from dockfactory.core.scene import to_dict
 from dockfactory.generator.marker_regions import halo_points
 from dockfactory.generator.random_draws import static_scene
@@ -42,25 +42,59 @@ def test_a_puck_keeps_its_depth_unless_it_would_float():
         base_depth_mm("cube", 1.0, 20.0, 300.0)
 
 
-def test_the_shipped_configs_scenes_do_not_name_the_depth(repo_root):
+def test_the_shipped_configs_scenes_carry_their_forms_depth(repo_root):
+    """The configs pinned to the puck render their scenes as before (the depth not named, so the
+    same bytes); every other one renders the default flat plate with its own depth."""
     paths = sorted((repo_root / "configs").glob("*.toml")) + sorted((repo_root / "bench" / "configs").glob("*.toml"))
     datasets = [p for p in paths if "[dataset]" in p.read_text()]        # not the acceptance or training configs
     assert len(datasets) >= 10
+    forms = {}
     for path in datasets:
         cfg = load_config(path)
         static = static_scene(cfg)
-        assert static.marker_base_depth_mm == RING_BASE_DEPTH_MM
-        assert "marker_base_depth_mm" not in json.dumps(to_dict(static))
+        forms[path.name] = cfg.markers.form
+        if cfg.markers.form == "puck":
+            assert static.marker_base_depth_mm == RING_BASE_DEPTH_MM and cfg.markers.raise_mm == 1.0
+            assert "marker_base_depth_mm" not in json.dumps(to_dict(static))
+        else:
+            assert cfg.markers.raise_mm == FORM_RAISE_MM["flat"]
+            assert static.marker_base_depth_mm == pytest.approx(
+                _plate_reach(0.1, cfg.markers.diameter_mm, cfg.sections.radius_mm))
+    pinned = {"paper.toml", "detector.toml", "detector_colour.toml", "centre_scene_b.toml"}
+    assert {n for n, f in forms.items() if f == "puck"} == pinned & set(forms)
+    assert forms["quick.toml"] == "flat"
 
 
 def test_a_flat_config_carries_its_depth_and_another_version():
-    puck = config_from_dict({"markers": {"raise_mm": 0.2}})
+    puck = config_from_dict({"markers": {"form": "puck", "raise_mm": 0.2}})
     flat = config_from_dict({"markers": {"form": "flat", "raise_mm": 0.2}})
     assert flat.canonical_json() != puck.canonical_json()                # another dataset version
-    assert config_from_dict({"markers": {"form": "puck"}}).canonical_json() == config_from_dict({}).canonical_json()
+    assert config_from_dict({"markers": {"form": "flat", "raise_mm": 0.1}}).canonical_json() == \
+        config_from_dict({}).canonical_json()
     depth = static_scene(flat).marker_base_depth_mm
     assert to_dict(static_scene(flat))["marker_base_depth_mm"] == depth == pytest.approx(_plate_reach(0.2, 20, 300))
     assert static_scene(flat).markers == static_scene(puck).markers      # the same discs: the same labels
+
+
+@pytest.mark.parametrize("markers, form, raise_mm", [
+    ({}, "flat", 0.1), ({"form": "flat"}, "flat", 0.1), ({"form": "puck"}, "puck", 1.0),
+    ({"form": "puck", "raise_mm": 2.0}, "puck", 2.0), ({"raise_mm": 0.3}, "flat", 0.3)])
+def test_an_unset_raise_is_the_forms_own(markers, form, raise_mm):
+    m = config_from_dict({"markers": markers}).markers
+    assert (m.form, m.raise_mm) == (form, raise_mm)
+
+
+def test_a_puck_dataset_stored_before_the_flat_default_reads_back_as_a_puck():
+    """A stored identity without ``form`` was rendered as a puck (the form before the default
+    changed); a puck config written out states its form, so it reads back a puck."""
+    puck = config_from_dict({"markers": {"form": "puck"}})
+    stored = puck.to_dict()
+    assert "form" not in stored["markers"] and stored["markers"]["raise_mm"] == 1.0
+    back = config_from_identity(stored)
+    assert (back.markers.form, back.markers.raise_mm) == ("puck", 1.0) and back == puck
+    assert puck.resolved_dict()["markers"]["form"] == "puck"
+    assert config_from_dict(puck.resolved_dict()) == puck
+    assert "form" in config_from_dict({}).to_dict()["markers"]         # a flat dataset names its form
 
 
 def test_the_halo_reaches_the_bottom_of_the_base():
@@ -72,7 +106,7 @@ def test_the_halo_reaches_the_bottom_of_the_base():
 
 
 @pytest.mark.parametrize("markers, message", [
-    ({"form": "flat"}, r"\[markers\] raise_mm: a flat marker is a printed plate at most 0.5 mm thick, got 1 "
+    ({"form": "flat", "raise_mm": 1.0}, r"\[markers\] raise_mm: a flat marker is a printed plate at most 0.5 mm thick, got 1 "
                        r"\(set raise_mm, e.g. 0.2\)"),
     ({"form": "disc"}, r"\[markers\] form: 'disc' is not one of puck, flat"),
 ])

@@ -151,7 +151,7 @@ def test_a_config_names_a_part_and_holds_it(repo_root, tmp_path):
     assert text.startswith("# octagon_part.toml with [sections] mesh_a = 'parts/octagon_a.glb' (sha256 ")
     assert config_from_dict(tomllib.loads(text)) == cfg == load_config(repo_root / "configs" / "octagon_part.toml")
     a0 = cfg.markers_layout()[0]
-    assert a0.normal == pytest.approx((0.0, 0.0, 1.0)) and a0.center_mm[2] == pytest.approx(300 * np.cos(np.pi / 8) + 1)
+    assert a0.normal == pytest.approx((0.0, 0.0, 1.0)) and a0.center_mm[2] == pytest.approx(300 * np.cos(np.pi / 8) + 0.1)   # the flat plate's 0.1 mm
     (tmp_path / "c.toml").write_text('[sections]\nmesh_a = "nope.glb"\n')
     with pytest.raises(MeshError, match=r"c.toml: \[sections\] mesh_a: .*nope.glb: mesh file not found"):
         load_config(tmp_path / "c.toml")

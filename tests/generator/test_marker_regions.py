@@ -42,7 +42,7 @@ def _canvas_points(frame, static, m):
     cam = frame.camera
     ox, oy, _, _ = cam.canvas()
     pose = frame.d_from_b_array() if m.section == "B" else np.eye(4)
-    uv, _ = project_points(cam.k(), cam.cam_from_d_array() @ pose, halo_points(m))
+    uv, _ = project_points(cam.k(), cam.cam_from_d_array() @ pose, halo_points(m, base_depth_mm=static.marker_base_depth_mm))
     return uv - [ox, oy]
 
 

@@ -121,10 +121,12 @@ def test_runs_and_repeatability_frames_move_too():
 def test_configs_without_motion_sample_and_label_the_bytes_of_before(repo_root, name):
     """Every frame's scene (to_dict) and label text (no index pass) against their digests: the scenes' at
     0724401 (before motion), the labels' re-recorded when the section silhouette changed (the file's about);
-    with label-aware sampling off, the value those digests were recorded at (it became the default since)."""
+    with label-aware sampling off and the raised puck, the values those digests were recorded at (each
+    became another default since)."""
     golden = json.loads((repo_root / "tests" / "data" / "motion_off_golden.json").read_text())["configs"][name]
     cfg = load_config(repo_root / "configs" / f"{name}.toml")
-    cfg = dataclasses.replace(cfg, render=dataclasses.replace(cfg.render, marker_samples=0))
+    cfg = dataclasses.replace(cfg, render=dataclasses.replace(cfg.render, marker_samples=0),
+                              markers=dataclasses.replace(cfg.markers, form="puck", raise_mm=1.0))
     static = static_scene(cfg)
     got = {}
     for spec in frame_plan(cfg):

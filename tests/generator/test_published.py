@@ -363,11 +363,17 @@ def test_a_config_text_that_states_a_moved_default_still_verifies_and_another_co
     the same config, a note, not a problem. A text that resolves to another config is still one."""
     pub, sub, ids = release
     text = (sub / "config.toml").read_text()
-    assert "\nmarker_samples = 0\n" in text                      # the smoke config pins it
-    (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\n# left to the default\n", 1))
+    assert "\nmarker_samples = 0\n" in text and "[markers]" not in text   # the smoke config pins one, not the other
+    # a text of the time before either default moved: it leaves out what was the default then
+    # (sampling off) and states what was not (the flat marker)
+    (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\n# left to the default\n", 1)
+                                     + '\n[markers]\nform = "flat"\n')
     rep = published.verify_against(sub, pub / "manifest.json")
     assert rep.ok, rep.text()
     assert any("config.toml: its text is not the published one" in n for n in rep.notes)
+    # a text of today's that states the flat form the default renders anyway
+    (sub / "config.toml").write_text(text + '\n[markers]\nform = "flat"\nraise_mm = 0.1\n')
+    assert published.verify_against(sub, pub / "manifest.json").ok
     (sub / "config.toml").write_text(text.replace("\nmarker_samples = 0\n", "\nmarker_samples = 8\n", 1))
     rep = published.verify_against(sub, pub / "manifest.json")
     assert not rep.ok and "config.toml: differs from the manifest" in rep.problems

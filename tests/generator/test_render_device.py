@@ -17,10 +17,13 @@ from dockfactory.generator.version import dataset_version_id
 # device key existed (dataset_version_id(cfg.canonical_json(), blender="5.0.1",
 # generator="0.1.0+fixed")): the config part of every version id must not move. quick and
 # realistic render with label-aware sampling since it became the default: their ids are those of
-# the same config with it off (marker_samples = 0, the value that renders what they held before).
+# the same config with it off (marker_samples = 0, the value that renders what they held before);
+# likewise smoke, quick and realistic render the printed flat marker since it became the default:
+# their ids are those of the same config with the raised puck.
 BEFORE_DEVICE = {"smoke": "0f232de11a0961f8", "quick": "fb879ab49c3d1a7a", "realistic": "b4cacf658a488b5a",
                  "paper": "ed8dae519be049c0"}
 SAMPLING_BY_DEFAULT = ("quick", "realistic")
+FLAT_BY_DEFAULT = ("smoke", "quick", "realistic")   # the printed flat marker became the default; paper pins the puck
 
 
 def _vid(cfg) -> str:
@@ -28,12 +31,20 @@ def _vid(cfg) -> str:
 
 
 def _before_sampling(cfg):
-    return config_from_dict({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "marker_samples": 0}})
+    return config_from_identity({**cfg.to_dict(), "render": {**cfg.to_dict()["render"], "marker_samples": 0}})
+
+
+def _before_flat(cfg):
+    return config_from_identity({**cfg.to_dict(), "markers": {**cfg.to_dict()["markers"], "form": "puck", "raise_mm": 1.0}})
 
 
 def test_the_default_device_keeps_every_config_hash():
     for name, before in BEFORE_DEVICE.items():
         cfg = load_config(shipped_config(name))
+        assert cfg.markers.form == ("flat" if name in FLAT_BY_DEFAULT else "puck"), name
+        if name in FLAT_BY_DEFAULT:
+            assert _vid(cfg) != before, name
+            cfg = _before_flat(cfg)
         if name in SAMPLING_BY_DEFAULT:
             assert cfg.render.marker_samples == 32 and _vid(cfg) != before, name
             cfg = _before_sampling(cfg)
