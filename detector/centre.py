@@ -385,11 +385,12 @@ def edge_fit(win: _Window | None) -> EdgeFit | None:
     x, y, s = dx[band], dy[band], win.s[band].astype(np.float64)
     p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
     p = _levenberg_marquardt(p0, x, y, s)
-    if p is None or not _fit_accepted(p, m0):
+    anchors = coverage_anchors(win)
+    if p is None or not _fit_accepted(p, m0, anchors):
         return None
     if _minor_px(p) < THIN_DISC_EDGE_WIDTHS * _edge_px(p):
         q = _refit_shading_along_major(p, x, y, s)
-        p = q if q is not None and _fit_accepted(q, m0) else p
+        p = q if q is not None and _fit_accepted(q, m0, anchors) else p
     return EdgeFit(centre=win.centre + p[:2], edge_px=_edge_px(p), minor_px=_minor_px(p))
 
 
@@ -506,15 +507,62 @@ def _levenberg_marquardt(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndar
     return p if np.isfinite(p).all() else None
 
 
-def _fit_accepted(p: np.ndarray, m0: np.ndarray) -> bool:
-    """The fit is the disc: its centre within ``FIT_MAX_SHIFT_PX`` of the coverage centroid, its
-    axes within 0.8-1.25 times the coverage ellipse's, an edge width under 3 px (a sharper edge
-    than the model's floor of 0.05 px is fine: 2-spp renders have near-binary edge pixels) and a
-    disc above the ring."""
+def _fit_accepted(p: np.ndarray, m0: np.ndarray, anchors: np.ndarray | None = None) -> bool:
+    """The fit is the disc: its centre within ``FIT_MAX_SHIFT_PX`` of the coverage centroid or of
+    another of ``anchors`` ((k, 2) px from that centroid; :func:`coverage_anchors`), its axes
+    within 0.8-1.25 times the coverage ellipse's, an edge width under 3 px (a sharper edge than
+    the model's floor of 0.05 px is fine: 2-spp renders have near-binary edge pixels) and a disc
+    above the ring."""
     m = np.array([[p[2], p[3]], [p[3], p[4]]])
     eig, eig0 = _eigenvalues_2x2(m), _eigenvalues_2x2(m0)
     if eig[0] <= 0:
         return False
     axes_ok = bool(np.all((eig / eig0 > 0.64) & (eig / eig0 < 1.5625)))   # axis ratio 0.8-1.25
-    return (axes_ok and float(np.hypot(p[0], p[1])) < FIT_MAX_SHIFT_PX
+    near = np.zeros((1, 2)) if anchors is None else np.vstack([np.zeros((1, 2)), anchors])
+    return (axes_ok and float(np.min(np.hypot(near[:, 0] - p[0], near[:, 1] - p[1]))) < FIT_MAX_SHIFT_PX
             and float(np.exp(p[5])) < 3.0 and p[6] > p[9])
+
+
+def coverage_anchors(win: _Window) -> np.ndarray:
+    """(k, 2) px from the coverage centroid: the centroids of the coverage binarised at half the
+    disc level and of the coverage normalised by a disc level that is a plane fitted to the disc's
+    pixels (refitted twice on the pixels that normalisation puts in the disc). A shading across
+    the disc (a shadow's edge, a light's fall-off) pulls the soft coverage's centroid toward the
+    bright side by up to a pixel on a slanted disc; these hardly move: an edge fit within reach of
+    one of them is the disc's (its own model takes the shading)."""
+    if win.w is None or (win.w > 0.5).sum() < 6:
+        return np.zeros((1, 2))
+    x, y = win.xs - win.centre[0], win.ys - win.centre[1]
+    core, support = win.w > 0.5, win.w > 0
+    out = [(float(x[core].mean()), float(y[core].mean()))]
+    cov = None
+    for _ in range(3):
+        level = _plane_through(x, y, win.s, core)
+        if level is None:
+            break
+        cov = np.clip((win.s - win.bg) / np.maximum(level - win.bg, 1e-6), 0.0, 1.0) * support
+        if (cov > 0.5).sum() < 6:
+            cov = None
+            break
+        core = cov > 0.5
+    if cov is not None:
+        out.append((float((cov * x).sum() / cov.sum()), float((cov * y).sum() / cov.sum())))
+    return np.array(out)
+
+
+def _plane_through(x: np.ndarray, y: np.ndarray, s: np.ndarray, mask: np.ndarray) -> np.ndarray | None:
+    """(h, w) least-squares plane s ~ c0 + c1 x + c2 y over the pixels of ``mask``, evaluated
+    everywhere (the 3 x 3 normal equations by Cramer's rule: no LAPACK); None when degenerate."""
+    xm, ym, sm = (v[mask].astype(np.float64) for v in (x, y, s))
+    a = np.array([[xm.size, xm.sum(), ym.sum()], [xm.sum(), (xm * xm).sum(), (xm * ym).sum()],
+                  [ym.sum(), (xm * ym).sum(), (ym * ym).sum()]])
+    rhs = np.array([sm.sum(), (xm * sm).sum(), (ym * sm).sum()])
+    det = float(np.dot(a[0], np.cross(a[1], a[2])))
+    if not np.isfinite(det) or abs(det) < 1e-9 * float(np.abs(a).max()) ** 3:
+        return None
+    c = []
+    for k in range(3):
+        m = a.copy()
+        m[:, k] = rhs
+        c.append(float(np.dot(m[0], np.cross(m[1], m[2]))) / det)
+    return c[0] + c[1] * x + c[2] * y
