@@ -55,9 +55,12 @@ class DesignCard:
         return noise, [u for u in used if u in self.provisional], ""
 
 
-def _positive(path, key, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise DockfactoryError(f"{path}: {key}: expected a positive number, got {value!r}")
+def _positive(path, key, value, zero: bool = False) -> float:
+    """``value`` as a float when it is a finite number above 0 (at or above 0 with ``zero``: an
+    offset the fit found absent), else DockfactoryError naming the card and the key."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value < 0 or (value == 0 and not zero):
+        raise DockfactoryError(f"{path}: {key}: expected a {'non-negative' if zero else 'positive'} number, got {value!r}")
     return float(value)
 
 
@@ -116,7 +119,7 @@ def load_design_card(path) -> DesignCard:
     if not (isinstance(prov, list) and all(isinstance(p, str) for p in prov)):
         raise DockfactoryError(f"{path}: provisional: expected a list of factor names, got {prov!r}")
     return DesignCard(str(path), _positive(path, "scale_px", data.get("scale_px")),
-                      (_positive(path, "shift_px[0]", shift[0]), _positive(path, "shift_px[1]", shift[1])),
+                      (_positive(path, "shift_px[0]", shift[0], zero=True), _positive(path, "shift_px[1]", shift[1], zero=True)),
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _rings(path, data.get("ring_factor")),
                       _factors(path, data, "jpeg_factor", ("none", "rggb")), q,

@@ -131,12 +131,25 @@ def test_a_bad_predictor_card_is_one_line(tmp_path):
     for key, value, needle in (("scale_px", -1, "scale_px: expected a positive number"),
                                ("format", "x", "format: expected 'dockfactory.design_predictor/3'"),
                                ("centre_noise", {"floor": 1.0}, "centre_noise: expected a table of minor_exponent"),
-                               ("centre_noise", {**card["centre_noise"], "floor": -1}, "centre_noise.floor: expected a number >= 0")):
+                               ("centre_noise", {**card["centre_noise"], "floor": -1}, "centre_noise.floor: expected a number >= 0"),
+                               ("shift_px", [0.01, -0.001], "shift_px[1]: expected a non-negative number")):
         path = tmp_path / f"{key}.json"
         path.write_text(json.dumps({**card, key: value}))
         with pytest.raises(DockfactoryError) as exc:
             load_design_card(path)
         assert needle in str(exc.value) and str(path) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_card_whose_fit_found_no_offset_along_an_axis_loads(tmp_path):
+    """A section offset of 0 along an axis (the fit's non-negative least squares found none) is a
+    measurement, not a broken card: it loads, and the predicted noise carries no offset there."""
+    import json
+    from dockfactory.core.resources import shipped_design_card
+    from dockfactory.eval.design_card import load_design_card
+    card = json.loads(shipped_design_card().read_text())
+    path = tmp_path / "zero.json"
+    path.write_text(json.dumps({**card, "shift_px": [card["shift_px"][0], 0.0]}))
+    assert load_design_card(path).shift_px == (card["shift_px"][0], 0.0)
 
 
 def test_a_card_of_the_previous_noise_model_is_refused_with_how_to_refit(tmp_path):
