@@ -537,14 +537,17 @@ def _settle_rivals(hyps, ids, pts, sel, uv, pp, search: _Search) -> None:
 
 
 def _explained(judged: list, n_other: int, sigma_px: float | None) -> list:
-    """The (joint rmse, hypothesis) pairs of ``judged`` whose joint fit the known centre noise
-    ``sigma_px`` explains (chi-square of the residuals against ``GATE_NOISE_FACTOR`` times it over
-    2 n - 13 dof, p >= RIVAL_P: the gate's test, eval.fit_gate), when at
-    least one is; all of them without a known noise or when none is. Why: a rival whose fit is
-    many times the camera's noise is no explanation of the detections (the goodness-of-fit gate
-    would refuse its pose), so it cannot make the identification ambiguous."""
-    if sigma_px is None or not sigma_px > 0:
+    """The (joint rmse, hypothesis) pairs of ``judged`` whose joint fit the centre noise explains
+    (chi-square of the residuals against ``GATE_NOISE_FACTOR`` times it over 2 n - 13 dof, p >=
+    RIVAL_P: the gate's test, eval.fit_gate); all of them without a known noise ``sigma_px``. The
+    noise is the known one, or, where the best fit exceeds it, at least what the best fit shows
+    (its RMSE over ``GATE_NOISE_FACTOR``): a camera noisier than its card makes every fit exceed
+    the card, and a rival many times the best fit is still no explanation (the goodness-of-fit
+    gate then judges the chosen pose against the card). Why: a rival whose fit is many times the
+    camera's noise cannot make the identification ambiguous."""
+    if sigma_px is None or not sigma_px > 0 or not judged:
         return judged
+    sigma_px = max(sigma_px, min(r for r, _ in judged) / GATE_NOISE_FACTOR)
     keep = []
     for rmse, h in judged:
         n = len(h.pairs) + n_other
