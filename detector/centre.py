@@ -385,12 +385,11 @@ def edge_fit(win: _Window | None) -> EdgeFit | None:
     x, y, s = dx[band], dy[band], win.s[band].astype(np.float64)
     p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
     p = _levenberg_marquardt(p0, x, y, s)
-    anchors = coverage_anchors(win)
-    if p is None or not _fit_accepted(p, m0, anchors):
+    if p is None or not _fit_accepted(p, m0, win):
         return None
     if _minor_px(p) < THIN_DISC_EDGE_WIDTHS * _edge_px(p):
         q = _refit_shading_along_major(p, x, y, s)
-        p = q if q is not None and _fit_accepted(q, m0, anchors) else p
+        p = q if q is not None and _fit_accepted(q, m0, win) else p
     return EdgeFit(centre=win.centre + p[:2], edge_px=_edge_px(p), minor_px=_minor_px(p))
 
 
@@ -507,20 +506,25 @@ def _levenberg_marquardt(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndar
     return p if np.isfinite(p).all() else None
 
 
-def _fit_accepted(p: np.ndarray, m0: np.ndarray, anchors: np.ndarray | None = None) -> bool:
-    """The fit is the disc: its centre within ``FIT_MAX_SHIFT_PX`` of the coverage centroid or of
-    another of ``anchors`` ((k, 2) px from that centroid; :func:`coverage_anchors`), its axes
-    within 0.8-1.25 times the coverage ellipse's, an edge width under 3 px (a sharper edge than
-    the model's floor of 0.05 px is fine: 2-spp renders have near-binary edge pixels) and a disc
-    above the ring."""
+def _fit_accepted(p: np.ndarray, m0: np.ndarray, win: _Window | None = None) -> bool:
+    """The fit is the disc: its axes within 0.8-1.25 times the coverage ellipse's, an edge width
+    under 3 px (a sharper edge than the model's floor of 0.05 px is fine: 2-spp renders have
+    near-binary edge pixels), a disc above the ring, and its centre within ``FIT_MAX_SHIFT_PX`` of
+    the coverage centroid or, given the window ``win``, of one of its :func:`coverage_anchors`
+    (computed only for a fit beyond the centroid's reach)."""
     m = np.array([[p[2], p[3]], [p[3], p[4]]])
     eig, eig0 = _eigenvalues_2x2(m), _eigenvalues_2x2(m0)
     if eig[0] <= 0:
         return False
     axes_ok = bool(np.all((eig / eig0 > 0.64) & (eig / eig0 < 1.5625)))   # axis ratio 0.8-1.25
-    near = np.zeros((1, 2)) if anchors is None else np.vstack([np.zeros((1, 2)), anchors])
-    return (axes_ok and float(np.min(np.hypot(near[:, 0] - p[0], near[:, 1] - p[1]))) < FIT_MAX_SHIFT_PX
-            and float(np.exp(p[5])) < 3.0 and p[6] > p[9])
+    if not (axes_ok and float(np.exp(p[5])) < 3.0 and p[6] > p[9]):
+        return False
+    if float(np.hypot(p[0], p[1])) < FIT_MAX_SHIFT_PX:
+        return True
+    if win is None:
+        return False
+    anchors = coverage_anchors(win)
+    return float(np.min(np.hypot(anchors[:, 0] - p[0], anchors[:, 1] - p[1]))) < FIT_MAX_SHIFT_PX
 
 
 def coverage_anchors(win: _Window) -> np.ndarray:

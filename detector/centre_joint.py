@@ -124,7 +124,7 @@ def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = 
         rms = np.sqrt(np.bincount(data.k, r * r, minlength=len(data.levels)) / count)
         data = replace(data, wt=1.0 / (rms[data.k] + 1e-4))
         p = _levenberg_marquardt(p, data)
-    if p is None or not centre._fit_accepted(p[:_GEOMETRY + _LEVELS], m0, centre.coverage_anchors(win)):
+    if p is None or not centre._fit_accepted(p[:_GEOMETRY + _LEVELS], m0, win):
         return None
     return p, data
 
