@@ -31,6 +31,11 @@ NOTES = (
 )
 
 
+def _jpeg_summary(table: dict) -> str:
+    """The JPEG factors per ring, monochrome / Bayer: "3.9 / 4.1 dark, 2.7 / 1.6 white"."""
+    return ", ".join(f"{t['none']:g} / {t['rggb']:g} {ring}" for ring, t in table.items())
+
+
 def _card_summary(card) -> str:
     fitted = card.data.get("fitted_on", {})
     law = card.law
@@ -38,7 +43,7 @@ def _card_summary(card) -> str:
              f"centre noise variance (10 / b)^{law.minor_exponent:g} + {law.floor:g} + "
              f"{law.ring_coefficient:g} (1.5 / w)^{law.ring_exponent:g} (b minor semi-axis, w ring width, px)")
     return (f"{noise}, scale {card.scale_px} px, section offset {list(card.shift_px)} px, "
-            f"Bayer x{card.cfa_factor['rggb']}, JPEG x{card.jpeg_factor}, white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
+            f"Bayer x{card.cfa_factor['rggb']}, JPEG x{_jpeg_summary(card.jpeg_factor)}, white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
             f"fitted on {len(fitted.get('renders', []))} renders of {fitted.get('frames_each', '?')} frames; "
             f"provisional: {', '.join(card.provisional) or 'none'}")
 

@@ -18,7 +18,8 @@ from dockfactory.eval.design_noise import CentreNoiseLaw
 from dockfactory.eval.design_predict import NoiseClass
 from dockfactory.eval.design_space import Design, jpeg_quality
 
-CARD_FORMAT = "dockfactory.design_predictor/3"
+CARD_FORMAT = "dockfactory.design_predictor/4"
+CFA_JPEG_FORMAT = "dockfactory.design_predictor/3"   # one JPEG factor per camera class, whatever the ring
 NO_LAW_FORMAT = "dockfactory.design_predictor/2"     # no centre_noise: the centres' noise is the solver's weights
 OLD_FORMATS = ("dockfactory.design_predictor/1",)   # fitted under an earlier centre-noise model: refit
 LAW_KEYS = ("minor_exponent", "floor", "ring_coefficient", "ring_exponent")
@@ -49,8 +50,8 @@ class DesignCard:
         g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring][design.camera.cfa]
         used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}.{design.camera.cfa}"]
         if q is not None:
-            g *= self.jpeg_factor[design.camera.cfa]
-            used.append(f"jpeg_factor.{design.camera.cfa}")
+            g *= self.jpeg_factor[design.ring][design.camera.cfa]
+            used.append(f"jpeg_factor.{design.ring}.{design.camera.cfa}")
         noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law)
         return noise, [u for u in used if u in self.provisional], ""
 
@@ -88,10 +89,20 @@ def _law(path, data: dict) -> CentreNoiseLaw | None:
     return CentreNoiseLaw(**values)
 
 
-def _rings(path, table) -> dict:
+def _rings(path, table, key: str = "ring_factor") -> dict:
+    """{ring: {cfa: factor}} of the card's ``key`` table (dark, white; each none, rggb)."""
     if not isinstance(table, dict) or set(table) != {"dark", "white"}:
-        raise DockfactoryError(f"{path}: ring_factor: expected a table of dark, white, got {table!r}")
-    return {ring: _factors(path, table, ring, ("none", "rggb"), "ring_factor.") for ring in ("dark", "white")}
+        raise DockfactoryError(f"{path}: {key}: expected a table of dark, white, got {table!r}")
+    return {ring: _factors(path, table, ring, ("none", "rggb"), f"{key}.") for ring in ("dark", "white")}
+
+
+def _jpeg(path, data: dict) -> dict:
+    """{ring: {cfa: factor}} of the card's ``jpeg_factor``: per ring and camera class (format /4); a
+    card of an earlier format has one factor per camera class, which is taken for both rings."""
+    if data.get("format") == CARD_FORMAT:
+        return _rings(path, data.get("jpeg_factor"), "jpeg_factor")
+    per_cfa = _factors(path, data, "jpeg_factor", ("none", "rggb"))
+    return {ring: dict(per_cfa) for ring in ("dark", "white")}
 
 
 def load_design_card(path) -> DesignCard:
@@ -107,8 +118,8 @@ def load_design_card(path) -> DesignCard:
     if fmt in OLD_FORMATS:
         raise DockfactoryError(f"{path}: format {fmt!r}: fitted under the previous centre-noise model; refit it "
                                "(python -m bench.design.design_fit --card-out CARD.json)")
-    if fmt not in (CARD_FORMAT, NO_LAW_FORMAT):
-        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r} (or {NO_LAW_FORMAT!r})")
+    if fmt not in (CARD_FORMAT, CFA_JPEG_FORMAT, NO_LAW_FORMAT):
+        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r} (or {CFA_JPEG_FORMAT!r}, {NO_LAW_FORMAT!r})")
     shift = data.get("shift_px")
     if not (isinstance(shift, list) and len(shift) == 2):
         raise DockfactoryError(f"{path}: shift_px: expected [u, v] px, got {shift!r}")
@@ -122,5 +133,5 @@ def load_design_card(path) -> DesignCard:
                       (_positive(path, "shift_px[0]", shift[0], zero=True), _positive(path, "shift_px[1]", shift[1], zero=True)),
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _rings(path, data.get("ring_factor")),
-                      _factors(path, data, "jpeg_factor", ("none", "rggb")), q,
+                      _jpeg(path, data), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data))

@@ -103,23 +103,37 @@ def ratio_rows(name, pairs_by_scene) -> list[dict]:
             for s, (m, p) in pairs_by_scene.items()]
 
 
-def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None = None) -> dict:
-    """The white ring's factor per camera class and JPEG q90's on a three-chip camera, each the
-    geometric mean over X, Y, alpha of measured over measured on the same frames at label-aware
-    sampling: white-ring renders of scenes A and B (``sources[1]``) over the dark-ring ones
-    (``results``, read from ``sources[0]``), three-chip for "none", Bayer bilinear and VNG for
-    "rggb"; JPEG over PNG on the dark scene A (``sources[2]``) and the two white-ring scenes.
-    ``ring_dark``: the dark-ring results the white ones were measured beside, when they are not
-    ``results`` (white renders of an earlier render default: a ratio of one default)."""
+def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None = None,
+                          scenes=("a",)) -> dict:
+    """The white ring's factor per camera class, and JPEG q90's on a three-chip camera per ring,
+    each the geometric mean over X, Y, alpha of measured over measured on the same frames at
+    label-aware sampling: white-ring renders of scenes A and B (``sources[1]``) over the dark-ring
+    ones (``results``, read from ``sources[0]``), three-chip for "none", Bayer bilinear and VNG for
+    "rggb"; JPEG over PNG on the dark ``scenes`` of ``sources[2]`` ("jpeg_dark"; those of them it holds) and on the two
+    white-ring scenes ("jpeg_white"): JPEG costs a dark ring's edge several times what it costs a
+    white one's, so one factor pooled over both would be wrong for each. ``ring_dark``: the
+    dark-ring results the white ones were measured beside, when they are not ``results`` (white
+    renders of an earlier render default: a ratio of one default)."""
     dark = results if ring_dark is None else ring_dark
     white = json.loads((RESULTS / sources[1]).read_text())["datasets"]
-    jpeg_a = json.loads((RESULTS / sources[2]).read_text())["datasets"]
+    jpeg_src = json.loads((RESULTS / sources[2]).read_text())["datasets"]
     as_scene = {f"sensor-scene-{s}@": white[k] for s in ("a", "b") for k in white if k.startswith(f"sensor-scene-{s}-white@")}
     ring = {"none": [(measured(as_scene, s, "three-chip"), measured(dark, s, "three-chip")) for s in ("a", "b")],
             "rggb": [(measured(as_scene, s, e), measured(dark, s, e)) for s in ("a", "b") for e in BAYER]}
-    jpeg = [(measured(as_scene, s, "three-chip-jpeg90"), measured(as_scene, s, "three-chip")) for s in ("a", "b")]
-    jpeg.append((measured(jpeg_a, "a", "three-chip-jpeg90"), measured(jpeg_a, "a", "three-chip")))
-    return {"ring_white": {c: geo_factor(v) for c, v in ring.items()}, "jpeg_none": geo_factor(jpeg)}
+    jpeg_white = [(measured(as_scene, s, "three-chip-jpeg90"), measured(as_scene, s, "three-chip")) for s in ("a", "b")]
+    jpeg_dark = [(measured(jpeg_src, s, "three-chip-jpeg90"), measured(jpeg_src, s, "three-chip")) for s in scenes
+                 if any(k.startswith(f"sensor-scene-{s}@") for k in jpeg_src)]
+    return {"ring_white": {c: geo_factor(v) for c, v in ring.items()},
+            "jpeg_dark": geo_factor(jpeg_dark), "jpeg_white": geo_factor(jpeg_white)}
+
+
+def jpeg_table(other: dict, jpeg_rggb: float) -> dict:
+    """The card's ``jpeg_factor`` per ring and camera class: the Bayer camera's white-ring figure
+    (not measured: no Bayer + JPEG render of a white ring) is its dark-ring one times the white
+    ring's JPEG factor over the dark ring's on the three-chip camera (provisional)."""
+    white_rggb = max(1.0, jpeg_rggb * other["jpeg_white"] / other["jpeg_dark"])
+    return {"dark": {"none": round(other["jpeg_dark"], 3), "rggb": round(jpeg_rggb, 3)},
+            "white": {"none": round(other["jpeg_white"], 3), "rggb": round(white_rggb, 3)}}
 
 
 def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: CentreNoiseLaw = LAW) -> dict:
@@ -143,17 +157,17 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: Centr
     rows += ratio_rows("bayer-jpeg90", {s: (measured(results, s, "bayer-jpeg90"),
                                             g * jpeg * predicted(bases[s], p)) for s in scenes})
     dark = None if ring_dark is None else json.loads((RESULTS / ring_dark).read_text())["datasets"]
-    other = ring_and_jpeg_factors(results, sources, dark)
+    other = ring_and_jpeg_factors(results, sources, dark, scenes)
     versions = sorted(results)
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
             "shift_px": [round(float(p[1]), 5), round(float(p[2]), 5)],
             "cfa_factor": {"none": 1.0, "rggb": round(g, 3)},
             "ring_factor": {"dark": {"none": 1.0, "rggb": 1.0},
                             "white": {c: round(v, 3) for c, v in other["ring_white"].items()}},
-            "jpeg_factor": {"none": round(other["jpeg_none"], 3), "rggb": round(jpeg, 3)},
+            "jpeg_factor": jpeg_table(other, jpeg),
             "jpeg_min_quality": 90, "centre_noise": dict(vars(law)),
             "bound_factor": {c: 1.0 for c in ("x", "y", "z", "alpha", "beta", "gamma")},
-            "provisional": [],
+            "provisional": ["jpeg_factor.white.rggb"],
             "fitted_on": {"renders": versions, "frames_each": 48, "condition": "normal",
                           "weights": "yolov5n_se_rings_markers.pt",
                           "source": f"bench/results/sensor_effects/{sources[0]}",
@@ -182,7 +196,7 @@ def main() -> None:
     card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark, law)
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']}, "
-          f"jpeg x{card['jpeg_factor']}, white ring x{card['ring_factor']['white']}")
+          f"jpeg x{card['jpeg_factor']} (provisional: {card['provisional']}), white ring x{card['ring_factor']['white']}")
     print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")
     for r in card["error"]["predicted_over_measured"]:
         print(f"| {r['what']} | {r['scene'].upper()} | {r['x']:.2f} | {r['y']:.2f} | {r['alpha']:.2f} |")

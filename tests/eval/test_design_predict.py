@@ -129,7 +129,10 @@ def test_a_bad_predictor_card_is_one_line(tmp_path):
     card = json.loads(shipped_design_card().read_text())
     assert load_design_card(shipped_design_card()).scale_px == card["scale_px"] and "edge_px" not in card
     for key, value, needle in (("scale_px", -1, "scale_px: expected a positive number"),
-                               ("format", "x", "format: expected 'dockfactory.design_predictor/3'"),
+                               ("format", "x", "format: expected 'dockfactory.design_predictor/4'"),
+                               ("jpeg_factor", {"none": 3.9, "rggb": 4.1}, "jpeg_factor: expected a table of dark, white"),
+                               ("jpeg_factor", {**card["jpeg_factor"], "white": {"none": 0, "rggb": 1.6}},
+                                "jpeg_factor.white.none: expected a positive number"),
                                ("centre_noise", {"floor": 1.0}, "centre_noise: expected a table of minor_exponent"),
                                ("centre_noise", {**card["centre_noise"], "floor": -1}, "centre_noise.floor: expected a number >= 0"),
                                ("shift_px", [0.01, -0.001], "shift_px[1]: expected a non-negative number")):
@@ -150,6 +153,45 @@ def test_a_card_whose_fit_found_no_offset_along_an_axis_loads(tmp_path):
     path = tmp_path / "zero.json"
     path.write_text(json.dumps({**card, "shift_px": [card["shift_px"][0], 0.0]}))
     assert load_design_card(path).shift_px == (card["shift_px"][0], 0.0)
+
+
+def _design(cfa: str, ring: str, image_format: str):
+    from dockfactory.eval.design_space import Camera, Design, Lens
+    return Design(Camera("cam", 1440, 1080, 3.45, cfa), Lens(6.0), (1000.0, 1800.0), 24.0, ring, 7, image_format)
+
+
+def test_jpeg_costs_each_ring_its_own_factor_and_a_provisional_one_is_named(tmp_path):
+    """A card of format /4 has JPEG factors per ring and camera class: a dark-ring JPEG design's
+    noise is the dark ring's PNG noise times the dark factor, a white ring's times the white one;
+    the Bayer camera's white-ring factor, marked provisional, is named beside the design using it."""
+    import json
+    from dockfactory.eval.design_card import load_design_card
+    from dockfactory.core.resources import shipped_design_card
+    card = json.loads(shipped_design_card().read_text())
+    path = tmp_path / "four.json"
+    path.write_text(json.dumps({**card, "format": "dockfactory.design_predictor/4",
+                                "jpeg_factor": {"dark": {"none": 7.0, "rggb": 4.0}, "white": {"none": 2.5, "rggb": 1.5}},
+                                "provisional": ["jpeg_factor.white.rggb"]}))
+    c = load_design_card(path)
+    for cfa, ring, factor in (("none", "dark", 7.0), ("none", "white", 2.5), ("rggb", "dark", 4.0), ("rggb", "white", 1.5)):
+        png, _, _ = c.noise_of(_design(cfa, ring, "png"))
+        jpeg, prov, _ = c.noise_of(_design(cfa, ring, "jpeg95"))
+        assert jpeg.scale_px == pytest.approx(png.scale_px * factor, rel=1e-12)
+        assert jpeg.shift_px == pytest.approx(tuple(v * factor for v in png.shift_px), rel=1e-12)
+        assert prov == (["jpeg_factor.white.rggb"] if (cfa, ring) == ("rggb", "white") else [])
+
+
+def test_a_card_with_one_jpeg_factor_per_camera_class_loads_for_both_rings(tmp_path):
+    """A card of format /3 (one JPEG factor per camera class, pooled over the rings) still loads:
+    both rings take its factor."""
+    import json
+    from dockfactory.eval.design_card import load_design_card
+    from dockfactory.core.resources import shipped_design_card
+    card = json.loads(shipped_design_card().read_text())
+    path = tmp_path / "three.json"
+    path.write_text(json.dumps({**card, "format": "dockfactory.design_predictor/3", "jpeg_factor": {"none": 3.9, "rggb": 4.1}}))
+    c = load_design_card(path)
+    assert c.jpeg_factor == {"dark": {"none": 3.9, "rggb": 4.1}, "white": {"none": 3.9, "rggb": 4.1}}
 
 
 def test_a_card_of_the_previous_noise_model_is_refused_with_how_to_refit(tmp_path):
@@ -178,7 +220,8 @@ def test_a_card_without_a_centre_noise_law_predicts_with_the_solver_s_weights(tm
     from dockfactory.eval.design_card import load_design_card
     card = json.loads(shipped_design_card().read_text())
     assert load_design_card(shipped_design_card()).law is not None
-    old = {k: v for k, v in card.items() if k != "centre_noise"} | {"format": "dockfactory.design_predictor/2"}
+    old = {k: v for k, v in card.items() if k != "centre_noise"} | {"format": "dockfactory.design_predictor/2",
+                                                                     "jpeg_factor": {"none": 3.9, "rggb": 4.1}}
     path = tmp_path / "two.json"
     path.write_text(json.dumps(old))
     assert load_design_card(path).law is None
