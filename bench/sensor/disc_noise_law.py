@@ -2,7 +2,7 @@
 per camera, and whether the poses' reported std follows their errors under the shipped law
 (``solver.disc_noise.noise_shapes``: variance (R0 / b)^p + floor, b the minor semi-axis).
 
-    python -m bench.sensor.disc_noise_law ROWS.json DATASET [DATASET ...] [--poses] [--json OUT]
+    python -m bench.sensor.disc_noise_law ROWS.json DATASET [DATASET ...] [--poses] [--law P,FLOOR] [--json OUT]
 
 ROWS.json is a ``bench.sensor.sensor_effects`` output with its rows (the detections of every
 delivered frame per effect); each DATASET one of the sensor scenes it was run on (their labels).
@@ -176,13 +176,26 @@ def law_data(items) -> dict:
     return out
 
 
+def use_law(text: str | None) -> tuple[float, float]:
+    """(p, floor) the poses are solved under: the shipped law, or ``text`` "P,FLOOR" set in
+    solver.disc_noise for this process (the table's law column stays the shipped one)."""
+    if text is None:
+        return MINOR_EXPONENT, NOISE_FLOOR
+    import dockfactory.solver.disc_noise as disc_noise
+    disc_noise.MINOR_EXPONENT, disc_noise.NOISE_FLOOR = (float(v) for v in text.split(","))
+    return disc_noise.MINOR_EXPONENT, disc_noise.NOISE_FLOOR
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("rows")
     ap.add_argument("datasets", nargs="+")
     ap.add_argument("--poses", action="store_true", help="solve every row's frame under the shipped law")
     ap.add_argument("--json", default=None, help="write the figures to this file")
+    ap.add_argument("--law", default=None, metavar="P,FLOOR",
+                    help="solve the poses under this law instead of the shipped one (a law tried, not shipped)")
     args = ap.parse_args(argv)
+    law = use_law(args.law)
     items = inputs(args.rows, args.datasets)
     data = law_data(items)
     lines = ["| input | b px | markers | measured | law |", "| --- | --- | --- | --- | --- |"]
@@ -191,9 +204,10 @@ def main(argv=None) -> int:
         fits[name] = best_law([d])
         lines += bin_rows(name, d) + [f"| {name} | best p {fits[name][0]:.2f}, floor {fits[name][1]:.2f} | {len(d)} | | |"]
     pooled = best_law(list(data.values()))
-    print(f"shipped law: p {MINOR_EXPONENT}, floor {NOISE_FLOOR}; pooled best: p {pooled[0]:.2f}, floor {pooled[1]:.2f}\n")
+    print(f"shipped law: p {MINOR_EXPONENT}, floor {NOISE_FLOOR}; poses under p {law[0]}, floor {law[1]}; "
+          f"pooled best: p {pooled[0]:.2f}, floor {pooled[1]:.2f}\n")
     print("\n".join(lines))
-    out = {"shipped": [MINOR_EXPONENT, NOISE_FLOOR], "pooled": pooled, "per_input": fits}
+    out = {"shipped": [MINOR_EXPONENT, NOISE_FLOOR], "poses_law": list(law), "pooled": pooled, "per_input": fits}
     if args.poses:
         from dockfactory.core.resources import shipped_weights
         from dockfactory.detector.noise_card import card_figures

@@ -3,7 +3,7 @@ faults let through, on the detections the sensor bench kept.
 
     python -m bench.verdict.gate_classes RESULTS.json DATASET [DATASET ...] --factors 1,2,3.95,7.9
         [--effects bayer-jpeg90,...] [--faults "as is,cropped 160/120 px"] [--frames N] [--out FILE.json]
-        [--class-gate]
+        [--class-gate] [--pattern-min-dof N]
 
 RESULTS.json is a sensor bench results file with its rows (bench/sensor/sensor_effects.py ``--out``:
 each frame's detections through each camera effect, the refinement told the camera); each DATASET
@@ -80,7 +80,12 @@ def main(argv=None) -> int:
     ap.add_argument("--card", type=float, default=None, help="the card's centre noise, px (default: the shipped weights')")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--class-gate", action="store_true", help="measure's gate: the card and the class's second test")
+    ap.add_argument("--pattern-min-dof", type=int, default=None,
+                    help="try the class's test with this many tested directions at least (eval.fit_gate.PATTERN_MIN_DOF)")
     args = ap.parse_args(argv)
+    if args.pattern_min_dof is not None:
+        from dockfactory.eval import fit_gate
+        fit_gate.PATTERN_MIN_DOF = args.pattern_min_dof
     if args.class_gate:
         args.factors = "1"
     from dockfactory.core.resources import shipped_weights
@@ -90,7 +95,7 @@ def main(argv=None) -> int:
         args.card = figures.centre_noise_px
     results = json.loads(args.results.read_text())["datasets"]
     opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in map(Dataset.open, args.datasets)}
-    out = {"card_px": args.card, "tables": []}
+    out = {"card_px": args.card, "pattern_min_dof": args.pattern_min_dof, "tables": []}
     print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | RMS z X / Y / Z | refused |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
     for key, effects in results.items():
