@@ -24,6 +24,7 @@ RIDGE = 0.02             # toward the region-wide colours where a class is under
 COVERED = 1e-3           # a pixel a disc or ring covers more of than this is the marker's
 MARKER_REACH_PX = 2.0    # with a denoiser, its colour gives way to the denoised one over this many pixels
 MISFIT_SIGMAS = 12.0     # a residual beyond this many robust sigmas is a miss of the class colours, not noise
+MIN_CLASS_PIXELS = 16    # a class with fewer marker pixels is judged by the marker's pooled sigma
 
 
 def _classes(coverage: np.ndarray) -> np.ndarray:
@@ -65,14 +66,23 @@ def class_radiance(rgb: np.ndarray, exact: np.ndarray, sigma_px: float = LOCAL_S
     return np.linalg.solve(a, b)
 
 
-def _misfit(residual: np.ndarray, on: np.ndarray) -> np.ndarray:
+def _misfit(residual: np.ndarray, on: np.ndarray, exact: np.ndarray) -> np.ndarray:
     """(h, w) bool: pixels whose residual no light noise explains (beyond :data:`MISFIT_SIGMAS`
-    robust sigmas of the marker's residuals in any channel: where the classes' local colours miss,
-    next to an occluder for one) and their 8 neighbours."""
-    vals = residual[on]
-    med = np.median(vals, axis=0)
-    sigma = 1.4826 * np.median(np.abs(vals - med), axis=0) + 1e-12
-    bad = (np.abs(residual - med) > MISFIT_SIGMAS * sigma).any(axis=-1)
+    robust sigmas in any channel: where the classes' local colours miss, next to an occluder for
+    one) and their 8 neighbours. The sigma is each class's own (the pixels ``on`` whose largest
+    ``exact`` share is that class's; all of ``on`` for a class of under :data:`MIN_CLASS_PIXELS`):
+    a bright disc's light noise is several times a dark ring's, and one sigma pooled over both
+    flagged a third of an ordinary marker's pixels (its bright ones)."""
+    group = np.argmax(_classes(exact), axis=-1)
+    bad = np.zeros(on.shape, dtype=bool)
+    for k in range(3):
+        part = on & (group == k)
+        if not part.any():
+            continue
+        vals = residual[part] if part.sum() >= MIN_CLASS_PIXELS else residual[on]
+        med = np.median(vals, axis=0)
+        sigma = 1.4826 * np.median(np.abs(vals - med), axis=0) + 1e-12
+        bad |= part & (np.abs(residual - med) > MISFIT_SIGMAS * sigma).any(axis=-1)
     return cv2.dilate(bad.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
 
 
@@ -85,7 +95,7 @@ def smoothed_on_marker(residual: np.ndarray, exact: np.ndarray, sigma_px: float)
     on = marker_weight(exact) >= 1.0
     if not on.any():
         return residual
-    on = (on & ~_misfit(residual, on)).astype(np.float64)
+    on = (on & ~_misfit(residual, on, exact)).astype(np.float64)
     weight = _blur(on, sigma_px)
     mean = _blur(residual * on[..., None], sigma_px) / np.maximum(weight, 1e-12)[..., None]
     return np.where(on[..., None] > 0, mean, residual)

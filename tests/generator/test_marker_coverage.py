@@ -192,3 +192,25 @@ def test_a_miss_of_the_class_colours_is_not_spread(exact):
     assert np.abs(got[ring & on]).max() < 0.03
     plain = rng.normal(0.0, 0.01, (H, W, 3))
     assert np.std(smoothed_on_marker(plain, cov, 1.5)[on]) < 0.5 * np.std(plain[on])
+
+
+def test_a_bright_disc_s_own_noise_is_not_taken_for_a_miss(exact):
+    """Light noise scales with the light: a bright disc's residual 10x a dark ring's (sigma 0.05
+    against 0.005, the paint 0.02). The guard judges each class by its own sigma, so it leaves out
+    almost none of the marker's pixels (under 2 %; one sigma pooled over the classes flagged the
+    disc's tails and their neighbours, a third of an ordinary rendered marker's pixels) and the
+    smoothing takes the disc's noise down; a miss of 20 disc sigmas is still kept out."""
+    from dockfactory.generator.marker_coverage import _misfit
+    _, cov = exact
+    on = marker_weight(cov) >= 1.0
+    share = np.concatenate([cov, np.clip(1.0 - cov.sum(axis=-1, keepdims=True), 0.0, 1.0)], axis=-1)
+    sigma = share @ np.array([0.05, 0.005, 0.02])
+    rng = np.random.default_rng(11)
+    res = rng.standard_t(6, (H, W, 3)) * sigma[..., None]
+    assert _misfit(res, on, cov)[on].mean() < 0.02
+    disc = on & (cov[..., 0] > 0.99)
+    assert np.std(smoothed_on_marker(res, cov, 1.5)[disc]) < 0.5 * np.std(res[disc])
+    ys, xs = np.nonzero(disc)
+    y0, x0 = ys[len(ys) // 2], xs[len(xs) // 2]
+    res[y0, x0] += 1.0
+    assert _misfit(res, on, cov)[y0, x0]
