@@ -72,7 +72,7 @@ def _misfit(residual: np.ndarray, on: np.ndarray, exact: np.ndarray) -> np.ndarr
     one) and their 8 neighbours. The sigma is each class's own (the pixels ``on`` whose largest
     ``exact`` share is that class's; all of ``on`` for a class of under :data:`MIN_CLASS_PIXELS`):
     a bright disc's light noise is several times a dark ring's, and one sigma pooled over both
-    flagged a third of an ordinary marker's pixels (its bright ones)."""
+    takes the bright class's ordinary noise for misses (bench/results/marker_sampling/README.md)."""
     group = np.argmax(_classes(exact), axis=-1)
     bad = np.zeros(on.shape, dtype=bool)
     for k in range(3):

@@ -109,8 +109,8 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None
     each the geometric mean over X, Y, alpha of measured over measured on the same frames at
     label-aware sampling: white-ring renders of scenes A and B (``sources[1]``) over the dark-ring
     ones (``results``, read from ``sources[0]``), three-chip for "none", Bayer bilinear and VNG for
-    "rggb"; JPEG over PNG on the dark ``scenes`` of ``sources[2]`` ("jpeg_dark"; those of them it holds) and on the two
-    white-ring scenes ("jpeg_white"): JPEG costs a dark ring's edge several times what it costs a
+    "rggb"; JPEG over PNG on the dark ``scenes`` of ``sources[2]`` ("jpeg_dark"; those of them it
+    holds) and on the two white-ring scenes ("jpeg_white"): JPEG costs a dark ring's edge several times what it costs a
     white one's, so one factor pooled over both would be wrong for each. ``ring_dark``: the
     dark-ring results the white ones were measured beside, when they are not ``results`` (white
     renders of an earlier render default: a ratio of one default)."""
