@@ -130,7 +130,8 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None
 def jpeg_table(other: dict, jpeg_rggb: float) -> dict:
     """The card's ``jpeg_factor`` per ring and camera class: the Bayer camera's white-ring figure
     (not measured: no Bayer + JPEG render of a white ring) is its dark-ring one times the white
-    ring's JPEG factor over the dark ring's on the three-chip camera (provisional)."""
+    ring's JPEG factor over the dark ring's on the three-chip camera (provisional), and at least 1:
+    a JPEG adds noise, it takes none away."""
     white_rggb = max(1.0, jpeg_rggb * other["jpeg_white"] / other["jpeg_dark"])
     return {"dark": {"none": round(other["jpeg_dark"], 3), "rggb": round(jpeg_rggb, 3)},
             "white": {"none": round(other["jpeg_white"], 3), "rggb": round(white_rggb, 3)}}
