@@ -28,8 +28,9 @@ def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: b
     data: with a ``cfa``, the reference channel of ``centre_joint.reference_channel`` (the class's
     own channel on a dark ring) at its own sites, NaN elsewhere; with ``jpeg`` and no ``cfa`` the
     luma; linear, negated when its disc is darker than its ring (a disc on a white ring) so that
-    the disc lies above the ring. Also the disc and ring levels of that data; None when either
-    level has no pixel or the disc does not stand out. ValueError for an unknown pattern."""
+    the disc lies above the ring. Also the disc and ring levels of that data (with a ``cfa`` the ring
+    level the reference channel's); None when either level has no pixel or the disc does not stand
+    out. ValueError for an unknown pattern."""
     y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
     h, w = win.s.shape
     sub = image[y0:y0 + h, x0:x0 + w]
@@ -49,7 +50,7 @@ def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: b
     inner, ring = (win.rho <= 0.5) & sites, (win.rho >= 1.08) & (win.rho <= 1.22) & sites
     if not inner.any() or not ring.any():
         return None
-    fg, bg = float(np.percentile(level[inner], 25)), float(np.median(level[ring]))
+    fg, bg = float(np.percentile(level[inner], 25)), float(np.median(level[ring]) if cfa is None else ref[2][1])
     if not fg > bg:   # the disc does not stand out in this evidence
         return None
     return replace(win, s=np.where(sites, level, np.float32(np.nan)), fg=fg, bg=bg)

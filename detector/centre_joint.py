@@ -16,7 +16,14 @@ from dockfactory.core.camera_chain.cfa import channel_map
 import dockfactory.detector.centre as centre
 from dockfactory.detector.centre import CLASS_CHANNEL
 
+# The fit's band ends where the ring may: at this scale of the first ellipse (a 2.5 mm ring around
+# a disc up to 50 mm wide reaches at least 1.1 of its radius). Across a thin disc the ring is under
+# a pixel and the paint beyond it, bright in every raw channel (unlike the three-chip score, where
+# paint and ring read alike), would enter the band's outer pixel.
+RING_SCALE_LIMIT = 1.1
 MIN_CHANNEL_CNR = 2.0   # another channel joins the fit when |disc - ring| is at least this many noise sigmas
+RING_FLOOR_PERCENTILE = 10.0   # the ring's level within an annulus that may hold paint (ring_floor)
+RING_FLOOR_MIN_SAMPLES = 5
 _GEOMETRY, _LEVELS = 6, 4   # centre (2), ellipse (3), log edge width; per channel f0, f1, f2, ring
 
 
@@ -45,42 +52,73 @@ def channel_levels(level: np.ndarray, sites: np.ndarray, rho: np.ndarray) -> tup
     return fg, bg, float(1.4826 * 0.5 * mad) + 1e-4
 
 
-def site_samples(lin: np.ndarray, cmap: np.ndarray, win, own: int, band: np.ndarray) -> SiteSamples | None:
+def site_samples(lin: np.ndarray, cmap: np.ndarray, win, ref, band: np.ndarray) -> SiteSamples | None:
     """Samples of every channel with contrast at its own sites inside ``band`` (h, w) bool, the
-    reference channel ``own`` first. ``lin`` (h, w, 3) linear window of the image, ``cmap`` (h, w) its
-    channel map, ``win`` the pass's ``centre._Window``. A channel whose disc is darker than its ring
-    enters negated (values and levels), so that every slot's disc lies above its ring (the fit's
-    acceptance reads slot 0's). None when the reference channel has no contrast."""
+    reference channel first with the sign and levels of ``ref`` (:func:`reference_channel`).
+    ``lin`` (h, w, 3) linear window of the image, ``cmap`` (h, w) its channel map, ``win`` the
+    pass's ``centre._Window``. Another channel whose disc is darker than its ring enters negated
+    (values and levels), so that every slot's disc lies above its ring (the fit's acceptance reads
+    slot 0's). None when the reference channel has no contrast."""
+    own, own_sign, own_levels = ref
     dx, dy = win.xs - win.centre[0], win.ys - win.centre[1]
     parts, levels = [], []
     for ch in (own, *(c for c in range(3) if c != own)):
         lv = channel_levels(lin[..., ch], cmap == ch, win.rho)
-        if ch == own and (lv is None or lv[0] == lv[1]):
+        if ch == own and (lv is None or own_levels[0] == own_levels[1]):
             return None
         if lv is None or (ch != own and abs(lv[0] - lv[1]) < MIN_CHANNEL_CNR * lv[2]):
             continue
-        sign = 1.0 if lv[0] > lv[1] else -1.0
+        sign = own_sign if ch == own else (1.0 if lv[0] > lv[1] else -1.0)
         sel = band & (cmap == ch)
         n = int(sel.sum())
         parts.append((dx[sel], dy[sel], sign * lin[..., ch][sel], np.full(n, len(levels)), np.full(n, 1.0 / lv[2])))
-        levels.append((sign * lv[0], sign * lv[1]))
+        levels.append(tuple(own_levels) if ch == own else (sign * lv[0], sign * lv[1]))
     x, y, s, k, wt = (np.concatenate(v) for v in zip(*parts))
     return SiteSamples(x=x, y=y, s=s.astype(np.float64), k=k, wt=wt, levels=np.array(levels))
 
 
+def ring_floor(level: np.ndarray, sites: np.ndarray, rho: np.ndarray) -> float | None:
+    """The ``RING_FLOOR_PERCENTILE`` percentile of one channel's ``level`` at ``sites`` over the
+    ring annulus (``rho`` 1.08-1.22) when the annulus brightens outward (a dark ring, paint beyond
+    it); None when it does not (a white ring, or no paint in it) or under
+    ``RING_FLOOR_MIN_SAMPLES`` samples. Why: around a thin or small disc the annulus holds the dark
+    ring and the paint beyond it, and the paint can lift the annulus's median above a dim disc; the
+    ring is the annulus's dark, inner part."""
+    sel = (rho >= 1.08) & (rho <= 1.22) & sites
+    ring, r = level[sel], rho[sel]
+    if ring.size < RING_FLOOR_MIN_SAMPLES or not np.ptp(ring) > 0 or not np.ptp(r) > 0:
+        return None
+    if not np.corrcoef(r, ring)[0, 1] > 0:
+        return None
+    return float(np.percentile(ring, RING_FLOOR_PERCENTILE))
+
+
+def disc_noise(level: np.ndarray, sites: np.ndarray, rho: np.ndarray) -> float:
+    """Robust spread (1.4826 MAD) + 1e-4 of one channel's ``level`` at ``sites`` over the inner half
+    of the pass's box (``rho`` <= 0.5): the disc's own noise, free of what the annulus holds."""
+    inner = level[(rho <= 0.5) & sites]
+    return float(1.4826 * np.median(np.abs(inner - np.median(inner)))) + 1e-4
+
+
 def reference_channel(lin: np.ndarray, cmap: np.ndarray, rho: np.ndarray, class_channel: int):
     """(channel, sign, (disc level, ring level) of ``sign`` times the channel) whose samples steer
-    the fit's band: the class's own channel when its disc is above its ring (a disc on a dark ring),
-    else the channel of the largest contrast to noise ``|disc - ring| / noise`` at its own sites (on a
-    white ring, a red disc's edge is in the green and blue samples, dark against the ring), sign -1
-    when its disc is the darker. None when no channel has a disc and a ring level."""
+    the fit's band: the class's own channel when its disc is above its ring (a disc on a dark ring:
+    above the annulus's median, or ``MIN_CHANNEL_CNR`` of its own noise sigmas above the annulus's
+    dark part, :func:`ring_floor`, the ring level then that part), else the channel of the largest
+    contrast to noise ``|disc - ring| / noise`` at its own sites (on a white ring, a red disc's edge
+    is in the green and blue samples, dark against the ring), sign -1 when its disc is the darker.
+    None when no channel has a disc and a ring level."""
     best = None
     for ch in range(3):
         lv = channel_levels(lin[..., ch], cmap == ch, rho)
         if lv is None:
             continue
-        if ch == class_channel and lv[0] > lv[1]:
-            return ch, 1.0, lv[:2]
+        if ch == class_channel:
+            if lv[0] > lv[1]:
+                return ch, 1.0, lv[:2]
+            floor = ring_floor(lin[..., ch], cmap == ch, rho)
+            if floor is not None and lv[0] > floor + MIN_CHANNEL_CNR * disc_noise(lin[..., ch], cmap == ch, rho):
+                return ch, 1.0, (lv[0], floor)
         cnr = abs(lv[0] - lv[1]) / lv[2]
         if cnr > 0 and (best is None or cnr > best[0]):
             sign = 1.0 if lv[0] > lv[1] else -1.0
@@ -100,9 +138,14 @@ def fit_disc_joint(image: np.ndarray, win, class_id: int, cfa: str, reweight: bo
 
 def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = True):
     """(parameters, the fit's ``SiteSamples`` with the weights of its last fit) of
-    :func:`fit_disc_joint`, the centre at parameters[:2] px from ``win.centre``; None as there."""
+    :func:`fit_disc_joint`, the centre at parameters[:2] px from ``win.centre``; None as there.
+    The band ends at ``RING_SCALE_LIMIT`` of the first ellipse; where that leaves no accepted fit
+    (too few samples of a small disc, a first ellipse smaller than the disc) the band as it was
+    without that end is fitted instead."""
     m0 = centre._inverse_2x2(4 * win.cov)
-    d0, _ = centre._sampson(win.xs - win.centre[0], win.ys - win.centre[1], m0[0, 0], m0[0, 1], m0[1, 1])
+    ex, ey = win.xs - win.centre[0], win.ys - win.centre[1]
+    d0, _ = centre._sampson(ex, ey, m0[0, 0], m0[0, 1], m0[1, 1])
+    q0 = m0[0, 0] * ex * ex + 2 * m0[0, 1] * ex * ey + m0[1, 1] * ey * ey
     y0, x0 = int(win.ys[0, 0]), int(win.xs[0, 0])
     h, w = win.s.shape
     lin = centre._SRGB_TO_LINEAR[image[y0:y0 + h, x0:x0 + w]]
@@ -113,7 +156,14 @@ def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = 
     c, sign, lv = ref
     band = ((d0 > -centre.FIT_BAND_IN_PX) & (d0 < centre.FIT_BAND_OUT_PX)
             & centre._usable(sign * lin[..., c], win.pur, win.rho, lv[0], lv[1]))
-    data = site_samples(lin, cmap, win, c, band)
+    fitted = _fit_band(site_samples(lin, cmap, win, ref, band & (q0 < RING_SCALE_LIMIT ** 2)), m0, win, reweight)
+    return fitted if fitted is not None else _fit_band(site_samples(lin, cmap, win, ref, band), m0, win, reweight)
+
+
+def _fit_band(data: SiteSamples | None, m0: np.ndarray, win, reweight: bool):
+    """(parameters, ``data`` with the weights of the last fit) of the disc fitted to ``data`` from
+    the first ellipse ``m0`` (then, with ``reweight``, again with each channel weighted by its
+    residual RMS); None under 20 samples or when ``centre._fit_accepted`` refuses it."""
     if data is None or data.x.size < 20:
         return None
     p = _levenberg_marquardt(np.concatenate([[0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2)],

@@ -38,7 +38,8 @@ import cv2
 import numpy as np
 
 from dockfactory.core.camera_chain import ColourChain, expose_frame, jpeg_round_trip
-from dockfactory.core.camera_chain.colour_sensor import configured_sensor
+from dockfactory.core.camera_chain.colour_sensor import configured_sensor, white_dn
+from dockfactory.core.camera_chain.isp import develop_raw
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.resources import shipped_weights
 from dockfactory.core.scene import SensorParams, from_dict
@@ -86,7 +87,12 @@ EFFECTS = {
     "bayer-wb20": (lambda i: chain("RGGB", "bilinear", wb=wb_draw(i, 0.2)), 0.0, None),
     "bayer-sharpen": (lambda i: chain("RGGB", "bilinear", sharpen_amount=0.8), 0.0, None),
     "sampling-rggb": (lambda i: chain(), 0.0, None),
+    "bayer-raw": (lambda i: chain("RGGB", "vng"), 0.0, None),
 }
+# Effects whose camera writes its raw mosaic (a 16-bit one-channel frame in DN): the image is what
+# ``measure --cfa RGGB --raw-black --raw-white`` develops from it (dockfactory.measure.read), with
+# this demosaic; the camera's own ISP (colour correction, tone) never touches the samples.
+RAW_DEMOSAIC = {"bayer-raw": "vng"}
 # Effects whose image is a three-chip camera's but whose refinement (with --tell-cfa) is told a
 # Bayer pattern: it then fits only the values an RGGB sensor would have sampled, with no demosaic and
 # the same noise per sample, so the row measures what the 1-in-4 sampling alone costs.
@@ -101,7 +107,10 @@ def delivered(passes_rgb: np.ndarray, label: dict, effect: str) -> np.ndarray:
     linear = passes_rgb
     if blur > 0:
         linear = cv2.GaussianBlur(np.ascontiguousarray(linear, dtype=np.float32), (0, 0), blur)
-    image, _, _ = expose_frame(linear, params)
+    image, raw, _ = expose_frame(linear, params)
+    if effect in RAW_DEMOSAIC:
+        sensor = params.chain.sensor
+        return develop_raw(raw, params.chain.cfa, sensor.black_level_dn, white_dn(sensor), RAW_DEMOSAIC[effect])
     return jpeg_round_trip(image, *jpeg) if jpeg else image
 
 
