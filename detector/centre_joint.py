@@ -23,7 +23,7 @@ from dockfactory.detector.centre import CLASS_CHANNEL
 RING_SCALE_LIMIT = 1.1
 MIN_CHANNEL_CNR = 2.0   # another channel joins the fit when |disc - ring| is at least this many noise sigmas
 RING_FLOOR_PERCENTILE = 10.0   # the ring's level within an annulus that may hold paint (ring_floor)
-RING_FLOOR_MIN_SAMPLES = 5
+RING_FLOOR_MIN_SAMPLES = 5      # fewer annulus samples than this: no floor (a percentile of a handful is one sample)
 _GEOMETRY, _LEVELS = 6, 4   # centre (2), ellipse (3), log edge width; per channel f0, f1, f2, ring
 
 
