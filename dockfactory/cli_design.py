@@ -42,8 +42,12 @@ def _card_summary(card) -> str:
     noise = ("centre noise as the solver weighs it" if law is None else
              f"centre noise variance (10 / b)^{law.minor_exponent:g} + {law.floor:g} + "
              f"{law.ring_coefficient:g} (1.5 / w)^{law.ring_exponent:g} (b minor semi-axis, w ring width, px)")
+    size = (card.size_exponent or {}).get("rggb", 0.0)
+    bayer = f"Bayer x{card.cfa_factor['rggb']}" + (f" (10 / b)^{size:g}" if size else "")
+    above = "".join(f", JPEG q{q}+ x{_jpeg_summary(t)}" for q, t in sorted((card.jpeg_above or {}).items()))
     return (f"{noise}, scale {card.scale_px} px, section offset {list(card.shift_px)} px, "
-            f"Bayer x{card.cfa_factor['rggb']}, JPEG x{_jpeg_summary(card.jpeg_factor)}, white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
+            f"{bayer}, JPEG q{card.jpeg_min_quality}+ x{_jpeg_summary(card.jpeg_factor)}{above}, "
+            f"white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
             f"fitted on {len(fitted.get('renders', []))} renders of {fitted.get('frames_each', '?')} frames; "
             f"provisional: {', '.join(card.provisional) or 'none'}")
 

@@ -18,7 +18,8 @@ from dockfactory.eval.design_noise import CentreNoiseLaw
 from dockfactory.eval.design_predict import NoiseClass
 from dockfactory.eval.design_space import Design, jpeg_quality
 
-CARD_FORMAT = "dockfactory.design_predictor/4"
+CARD_FORMAT = "dockfactory.design_predictor/5"
+RING_JPEG_FORMAT = "dockfactory.design_predictor/4"  # no size exponent per camera class: 0 for every class
 CFA_JPEG_FORMAT = "dockfactory.design_predictor/3"   # one JPEG factor per camera class, whatever the ring
 NO_LAW_FORMAT = "dockfactory.design_predictor/2"     # no centre_noise: the centres' noise is the solver's weights
 OLD_FORMATS = ("dockfactory.design_predictor/1",)   # fitted under an earlier centre-noise model: refit
@@ -40,6 +41,19 @@ class DesignCard:
     provisional: tuple[str, ...]
     data: dict
     law: CentreNoiseLaw | None = None
+    size_exponent: dict | None = None
+    jpeg_above: dict | None = None
+
+    def jpeg_of(self, quality: int) -> tuple[dict, str]:
+        """({ring: {cfa: factor}}, its key's name) for a JPEG of ``quality``: the table measured at
+        the highest quality at or below it (``jpeg_factor`` at ``jpeg_min_quality``,
+        ``jpeg_factor_above`` above it): a JPEG's noise falls as its quality rises, so a quality
+        between two measured ones takes the noisier figure."""
+        table, name = self.jpeg_factor, "jpeg_factor"
+        for q in sorted(self.jpeg_above or {}):
+            if quality >= q:
+                table, name = self.jpeg_above[q], f"jpeg_factor_above.{q}"
+        return table, name
 
     def noise_of(self, design: Design) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design``: the class None with
@@ -50,9 +64,11 @@ class DesignCard:
         g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring][design.camera.cfa]
         used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}.{design.camera.cfa}"]
         if q is not None:
-            g *= self.jpeg_factor[design.ring][design.camera.cfa]
-            used.append(f"jpeg_factor.{design.ring}.{design.camera.cfa}")
-        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law)
+            table, name = self.jpeg_of(q)
+            g *= table[design.ring][design.camera.cfa]
+            used.append(f"{name}.{design.ring}.{design.camera.cfa}")
+        k = (self.size_exponent or {}).get(design.camera.cfa, 0.0)
+        noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law, k)
         return noise, [u for u in used if u in self.provisional], ""
 
 
@@ -65,12 +81,12 @@ def _positive(path, key, value, zero: bool = False) -> float:
     return float(value)
 
 
-def _factors(path, data, key, names, where: str = "") -> dict:
+def _factors(path, data, key, names, where: str = "", zero: bool = False) -> dict:
     table = data.get(key)
     name = f"{where}{key}"
     if not isinstance(table, dict) or set(table) != set(names):
         raise DockfactoryError(f"{path}: {name}: expected a table of {', '.join(names)}, got {table!r}")
-    return {n: _positive(path, f"{name}.{n}", table[n]) for n in names}
+    return {n: _positive(path, f"{name}.{n}", table[n], zero) for n in names}
 
 
 def _law(path, data: dict) -> CentreNoiseLaw | None:
@@ -99,10 +115,34 @@ def _rings(path, table, key: str = "ring_factor") -> dict:
 def _jpeg(path, data: dict) -> dict:
     """{ring: {cfa: factor}} of the card's ``jpeg_factor``: per ring and camera class (format /4); a
     card of an earlier format has one factor per camera class, which is taken for both rings."""
-    if data.get("format") == CARD_FORMAT:
+    if data.get("format") in (CARD_FORMAT, RING_JPEG_FORMAT):
         return _rings(path, data.get("jpeg_factor"), "jpeg_factor")
     per_cfa = _factors(path, data, "jpeg_factor", ("none", "rggb"))
     return {ring: dict(per_cfa) for ring in ("dark", "white")}
+
+
+def _size_exponents(path, data: dict) -> dict:
+    """{cfa: exponent >= 0} of the card's ``cfa_size_exponent`` (format /5); zeros for an earlier
+    format (one factor for every disc)."""
+    if data.get("format") != CARD_FORMAT:
+        return {"none": 0.0, "rggb": 0.0}
+    return _factors(path, data, "cfa_size_exponent", ("none", "rggb"), zero=True)
+
+
+def _jpeg_above(path, data: dict, min_quality: int) -> dict:
+    """{quality: {ring: {cfa: factor}}} of the card's optional ``jpeg_factor_above`` (format /5):
+    each key an integer quality above ``min_quality`` and at most 100, each value a table as
+    ``jpeg_factor``; empty when absent."""
+    table = data.get("jpeg_factor_above", {}) if data.get("format") == CARD_FORMAT else {}
+    if not isinstance(table, dict):
+        raise DockfactoryError(f"{path}: jpeg_factor_above: expected a table of qualities, got {table!r}")
+    out = {}
+    for key, rings in table.items():
+        if not (key.isdigit() and min_quality < int(key) <= 100):
+            raise DockfactoryError(f"{path}: jpeg_factor_above.{key}: expected an integer quality in "
+                                   f"{min_quality + 1}-100")
+        out[int(key)] = _rings(path, rings, f"jpeg_factor_above.{key}")
+    return out
 
 
 def load_design_card(path) -> DesignCard:
@@ -118,8 +158,9 @@ def load_design_card(path) -> DesignCard:
     if fmt in OLD_FORMATS:
         raise DockfactoryError(f"{path}: format {fmt!r}: fitted under the previous centre-noise model; refit it "
                                "(python -m bench.design.design_fit --card-out CARD.json)")
-    if fmt not in (CARD_FORMAT, CFA_JPEG_FORMAT, NO_LAW_FORMAT):
-        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r} (or {CFA_JPEG_FORMAT!r}, {NO_LAW_FORMAT!r})")
+    if fmt not in (CARD_FORMAT, RING_JPEG_FORMAT, CFA_JPEG_FORMAT, NO_LAW_FORMAT):
+        raise DockfactoryError(f"{path}: format: expected {CARD_FORMAT!r} (or {RING_JPEG_FORMAT!r}, "
+                               f"{CFA_JPEG_FORMAT!r}, {NO_LAW_FORMAT!r})")
     shift = data.get("shift_px")
     if not (isinstance(shift, list) and len(shift) == 2):
         raise DockfactoryError(f"{path}: shift_px: expected [u, v] px, got {shift!r}")
@@ -134,4 +175,5 @@ def load_design_card(path) -> DesignCard:
                       _factors(path, data, "cfa_factor", ("none", "rggb")),
                       _rings(path, data.get("ring_factor")),
                       _jpeg(path, data), q,
-                      _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data))
+                      _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data),
+                      _size_exponents(path, data), _jpeg_above(path, data, q))

@@ -18,7 +18,7 @@ from dockfactory.core.config import config_from_dict
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.layout_patterns import pattern_pair
 from dockfactory.core.names import COMPONENTS
-from dockfactory.eval.design_noise import CentreNoiseLaw, over_weights
+from dockfactory.eval.design_noise import CentreNoiseLaw, disc_minor_px, over_weights, size_factors
 from dockfactory.eval.design_space import Design, DesignSpace, jpeg_quality
 from dockfactory.generator.random_draws import static_scene
 from dockfactory.eval.frame_cameras import cameras_of_test_frames
@@ -39,11 +39,14 @@ __all__ = ["NoiseClass", "design_config", "frame_variances", "predict_design", "
 @dataclass(frozen=True)
 class NoiseClass:
     """The centre noise of one design's camera class: disc-model scale (px per axis at
-    REFERENCE_RADIUS_PX), section offset (px per axis) and the law the centres' noise follows
-    (eval.design_noise; None: the solver's own weights, solver.disc_noise.noise_shapes)."""
+    REFERENCE_RADIUS_PX), section offset (px per axis), the law the centres' noise follows
+    (eval.design_noise; None: the solver's own weights, solver.disc_noise.noise_shapes) and the
+    class's size exponent (eval.design_noise.size_factors: 0, the law's shape; above 0, the
+    class's noise and offset grow faster as the discs shrink)."""
     scale_px: float
     shift_px: tuple[float, float]
     law: CentreNoiseLaw | None = None
+    size_exponent: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -112,12 +115,23 @@ def _weighted_fit_covariance(jw: np.ndarray, ratio: np.ndarray) -> np.ndarray:
     return h @ (jw.T * np.repeat(ratio, 2)) @ jw @ h
 
 
+def _shift_size_factor(ma, mb, cam_a, cam_b, focal: float, exponent: float) -> float:
+    """The section offset's factor in a frame for a class of size ``exponent``: the RMS of the
+    markers' eval.design_noise.size_factors (the offset comes from the same sampling as the
+    noise); 1 at exponent 0."""
+    if exponent == 0.0:
+        return 1.0
+    minor = np.r_[disc_minor_px(ma, cam_a, focal)[0], disc_minor_px(mb, cam_b, focal)[0]]
+    return float(np.sqrt(np.mean(size_factors(minor, exponent) ** 2)))
+
+
 def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, pixel_aspect: float = 1.0):
     """(noise (6,), offset (6,)) variances of d_from_b (POSE_NAMES order, mm^2 / deg^2) of one
     frame: the covariance of the fit weighted by the disc noise (as the solver's robust refit
     weighs the centres, solver.disc_noise.robust_refit: scale^2 (J^T T^-1 J)^-1 when the centres'
     noise is the solver's weights, the sandwich of :func:`_weighted_fit_covariance` under
-    ``noise.law``) and what the section offset adds to that weighted fit. A camera
+    ``noise.law`` and the class's size factors) and what the section offset adds to that weighted
+    fit (the offset times :func:`_shift_size_factor`). A camera
     with non-square pixels (``pixel_aspect`` = fy / fx, ``focal`` = fx): the fit in the square-pixel
     pinhole at fx about ``pp``, the noise the delivered discs show taken there
     (:func:`square_pixel_noise_shapes`) and the offset likewise (eval.pixel_aspect); 1: square."""
@@ -128,10 +142,13 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
                              square_pixel_noise_shapes(mb, cam_b, focal, pixel_aspect)])
     sqrt_w = np.linalg.inv(np.linalg.cholesky(shapes))
     jw = np.einsum("nab,nbp->nap", sqrt_w, jac.reshape(-1, 2, jac.shape[1])).reshape(jac.shape)
+    k = noise.size_exponent
     cov_noise = noise.scale_px ** 2 * _weighted_fit_covariance(
-        jw, np.r_[over_weights(ma, cam_a, focal, noise.law), over_weights(mb, cam_b, focal, noise.law)])
+        jw, np.r_[over_weights(ma, cam_a, focal, noise.law, k), over_weights(mb, cam_b, focal, noise.law, k)])
     groups = np.r_[np.zeros(len(ma), int), np.ones(len(mb), int)]
-    cov_shift = section_shift_covariance(jac, groups, square_pixel_shift(noise.shift_px, pixel_aspect), sqrt_w)
+    shift = np.asarray(square_pixel_shift(noise.shift_px, pixel_aspect), dtype=np.float64) * _shift_size_factor(
+        ma, mb, cam_a, cam_b, focal, k)
+    cov_shift = section_shift_covariance(jac, groups, shift, sqrt_w)
     prop = d_from_b_jacobian(cam_a[:3, :3], cam_a[:3, 3], cam_b[:3, :3], cam_b[:3, 3])
     return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))
 

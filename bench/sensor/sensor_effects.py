@@ -81,6 +81,8 @@ EFFECTS = {
     "bayer-mhc": (lambda i: chain("RGGB", "mhc"), 0.0, None),
     "bayer-jpeg90": (lambda i: chain("RGGB", "bilinear"), 0.0, (90, "420")),
     "three-chip-jpeg90": (lambda i: chain(), 0.0, (90, "420")),
+    "bayer-jpeg95": (lambda i: chain("RGGB", "bilinear"), 0.0, (95, "420")),
+    "three-chip-jpeg95": (lambda i: chain(), 0.0, (95, "420")),
     "three-chip-jpeg70": (lambda i: chain(), 0.0, (70, "420")),
     "blur1.2": (lambda i: chain(), 1.2, None),
     "wb20": (lambda i: chain(wb=wb_draw(i, 0.2)), 0.0, None),

@@ -129,7 +129,7 @@ def test_a_bad_predictor_card_is_one_line(tmp_path):
     card = json.loads(shipped_design_card().read_text())
     assert load_design_card(shipped_design_card()).scale_px == card["scale_px"] and "edge_px" not in card
     for key, value, needle in (("scale_px", -1, "scale_px: expected a positive number"),
-                               ("format", "x", "format: expected 'dockfactory.design_predictor/4'"),
+                               ("format", "x", "format: expected 'dockfactory.design_predictor/5'"),
                                ("jpeg_factor", {"none": 3.9, "rggb": 4.1}, "jpeg_factor: expected a table of dark, white"),
                                ("jpeg_factor", {**card["jpeg_factor"], "white": {"none": 0, "rggb": 1.6}},
                                 "jpeg_factor.white.none: expected a positive number"),
