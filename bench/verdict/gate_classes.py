@@ -15,7 +15,8 @@ effect, factor and fault: frames ok, ok after leaving centres out, ok and beyond
 standard deviations in X, Y or Z ("confidently wrong"), the RMS of z = error / reported std of X,
 Y, Z, refused by category; every solve carries the card's section shift. With ``--class-gate`` the
 solve is measure's for the effect's camera class (eval.camera_classes, the class of the effect's
-name): the class's factor for the gate's second test and the class's section shift.
+name): the class's factor for the gate's second test, the class's section shift, and the noise prior
+(the card's robust core times the class's factor; dockfactory.measure.images.class_docking_options).
 """
 from __future__ import annotations
 
@@ -29,7 +30,13 @@ import numpy as np
 from bench.render.fit_gate import _moved_boxes, _row, faults, other_layout
 from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class, class_section_shift
-from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
+from dockfactory.eval.solve_frames import (
+    detection_arrays,
+    docking_options,
+    lens_prior_for,
+    solve_frame,
+    with_class_prior,
+)
 from dockfactory.generator.datasets.reader import Dataset
 
 MIN_SCORE = 0.25
@@ -41,10 +48,11 @@ def effect_class(effect: str) -> str:
 
 
 def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: int,
-               class_factor: float = 1.0, shift=None) -> list[dict]:
+               class_factor: float = 1.0, shift=None, prior_px: float | None = None) -> list[dict]:
     """fit_gate's row of every sensor-bench row of ``ds`` after ``fault`` (markers, move, size),
     solved with the known noise ``noise_px`` (and the camera class's ``class_factor`` and section
-    ``shift``)."""
+    ``shift``); ``prior_px``: the card's robust core, the noise prior measure gives the solver
+    (times the class factor, as measure does: eval.solve_frames.with_class_prior); None: none."""
     markers, move, size = fault
     out = []
     for row in rows[:frames]:
@@ -53,7 +61,8 @@ def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: in
             continue
         rec, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
                              (cls, move(uv), _moved_boxes(boxes, move), refined), None, "pinhole",
-                             docking_options(noise_px, lens_prior_for(ds.config), shift), class_factor)
+                             with_class_prior(docking_options(noise_px, lens_prior_for(ds.config), shift, prior_px),
+                                              class_factor), class_factor)
         out.append(_row(rec, ds.labels[row["frame"]]["pose_b_in_d"]))
     return out
 
@@ -79,7 +88,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=48)
     ap.add_argument("--card", type=float, default=None, help="the card's centre noise, px (default: the shipped weights')")
     ap.add_argument("--out", type=Path)
-    ap.add_argument("--class-gate", action="store_true", help="measure's gate: the card and the class's second test")
+    ap.add_argument("--class-gate", action="store_true",
+                    help="measure's solve: the card, the class's second test, section shift and noise prior")
     ap.add_argument("--pattern-min-dof", type=int, default=None,
                     help="try the class's test with this many tested directions at least (eval.fit_gate.PATTERN_MIN_DOF)")
     args = ap.parse_args(argv)
@@ -112,7 +122,8 @@ def main(argv=None) -> int:
                 for name in args.faults.split(","):
                     cls = effect_class(effect) if args.class_gate else "three-chip"
                     cf, shift = CAMERA_CLASS_FACTORS[cls], class_section_shift(cls, figures.section_shift_px)
-                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames, cf, shift))
+                    prior = figures.core_px if args.class_gate else None
+                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames, cf, shift, prior))
                     out["tables"].append({"dataset": key, "effect": effect, "factor": f, "class_factor": cf,
                                           "fault": name, **t})
                     refused = ", ".join(f"{c} {n}" for c, n in t["refused"].items()) or "-"
