@@ -28,6 +28,8 @@ GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms
 PATTERN_P = 0.1        # the class's test needs the residuals' geometry pattern at least this likely
 PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
+LEFT_OUT_NEEDS_PATTERN = True   # a camera class noisier than the card keeps a fit with centres left out only
+                                # where the camera-model check can still test PATTERN_MIN_DOF directions
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
 
@@ -140,10 +142,30 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
         ids = best[2]
         best[0]["fit_test"] = fit_test(best[0], sigma_px)
         if best[0]["fit_test"]["explains"] and camera_misfit(best[0]) is None:
+            if _untestable(best[0], class_factor):
+                return {"ok": False, "category": MISFIT, "reason": untestable_reason(best[0], len(left))}, {}
             best[0]["left_out"] = left
             best[0]["fit_test"]["before"] = {"ratio": test["ratio"], "p_value": test["p_value"]}
             return best[:2]
     return {"ok": False, "category": MISFIT, "reason": misfit_reason(test, sigma_px, len(left))}, {}
+
+
+def _untestable(record: dict, class_factor: float) -> bool:
+    """Whether a fit the gate reached by leaving centres out cannot be told from a crop: its camera
+    class is noisier than the card (``class_factor`` above 1) and its camera-model check has fewer
+    than PATTERN_MIN_DOF directions left to test. Such a camera's honest residuals exceed the card's
+    everywhere, so leaving out the centres that stand out most also absorbs an image geometry's
+    pattern (a principal point off centre), and too few directions remain to see it
+    (bench/results/fit_gate/README.md, "white rings through JPEG cameras")."""
+    dof = (record.get("model_check") or {}).get("dof", 0)
+    return LEFT_OUT_NEEDS_PATTERN and class_factor > 1.0 and dof < PATTERN_MIN_DOF
+
+
+def untestable_reason(record: dict, left_out: int) -> str:
+    """One line: why the gate refused a fit of a noisy camera class with centres left out."""
+    dof = (record.get("model_check") or {}).get("dof", 0)
+    return (f"the residuals fit only with {left_out} centre(s) left out, and the {dof} image-geometry direction(s) "
+            f"left cannot tell this camera's noise from a crop or a lens: give --calibration (the principal point)")
 
 
 def _class_passed(by_class: dict, card: dict) -> dict:

@@ -3,7 +3,7 @@ faults let through, on the detections the sensor bench kept.
 
     python -m bench.verdict.gate_classes RESULTS.json DATASET [DATASET ...] --factors 1,2,3.95,7.9
         [--effects bayer-jpeg90,...] [--faults "as is,cropped 160/120 px"] [--frames N] [--out FILE.json]
-        [--class-gate] [--pattern-min-dof N]
+        [--class-gate] [--pattern-min-dof N] [--left-out-any]
 
 RESULTS.json is a sensor bench results file with its rows (bench/sensor/sensor_effects.py ``--out``:
 each frame's detections through each camera effect, the refinement told the camera); each DATASET
@@ -92,7 +92,13 @@ def main(argv=None) -> int:
                     help="measure's solve: the card, the class's second test, section shift and noise prior")
     ap.add_argument("--pattern-min-dof", type=int, default=None,
                     help="try the class's test with this many tested directions at least (eval.fit_gate.PATTERN_MIN_DOF)")
+    ap.add_argument("--left-out-any", action="store_true",
+                    help="the gate before: a noisy class's fit with centres left out kept however few directions its "
+                         "camera-model check has left (eval.fit_gate.LEFT_OUT_NEEDS_PATTERN off)")
     args = ap.parse_args(argv)
+    if args.left_out_any:
+        from dockfactory.eval import fit_gate
+        fit_gate.LEFT_OUT_NEEDS_PATTERN = False
     if args.pattern_min_dof is not None:
         from dockfactory.eval import fit_gate
         fit_gate.PATTERN_MIN_DOF = args.pattern_min_dof
