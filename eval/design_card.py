@@ -113,8 +113,8 @@ def _rings(path, table, key: str = "ring_factor") -> dict:
 
 
 def _jpeg(path, data: dict) -> dict:
-    """{ring: {cfa: factor}} of the card's ``jpeg_factor``: per ring and camera class (format /4); a
-    card of an earlier format has one factor per camera class, which is taken for both rings."""
+    """{ring: {cfa: factor}} of the card's ``jpeg_factor``: per ring and camera class (formats /4 and
+    /5); a card of an earlier format has one factor per camera class, which is taken for both rings."""
     if data.get("format") in (CARD_FORMAT, RING_JPEG_FORMAT):
         return _rings(path, data.get("jpeg_factor"), "jpeg_factor")
     per_cfa = _factors(path, data, "jpeg_factor", ("none", "rggb"))

@@ -8,8 +8,8 @@ has a thinner ring in the image, and the paint beyond it reaches into the band t
 units; the predictor takes its ratio to the solver's weights per marker (:func:`over_weights`).
 
 A camera class may add noise that grows faster than a three-chip camera's as the disc shrinks
-(a Bayer camera samples each colour at half the pixel pitch: the smaller the disc's image, the
-larger its share of that loss): :func:`size_factors`, its std over the law's, per marker
+(a Bayer camera samples red and blue at every second pixel along each axis: the smaller the disc's
+image, the larger the share of its edge that sampling loses): :func:`size_factors`, its std over the law's, per marker
 (docs/design.md, "A Bayer camera's cost grows as the disc shrinks").
 """
 from __future__ import annotations
