@@ -13,6 +13,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.eval.design_card import DesignCard
 from dockfactory.eval.design_predict import design_config, predict_design
 from dockfactory.eval.design_space import Design, DesignSpace
+from dockfactory.generator.sampler import check_focal_fits
 
 __all__ = ["pass_probability", "reject_probability", "design_row", "rank_rows", "design_id"]
 
@@ -68,12 +69,14 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     noise, provisional, why = card.noise_of(design)
     if noise is None:
         return {**row, "status": "not predicted", "reason": why}
+    prefix = f"{space.source}: design {design.label()}"
     try:
         cfg = design_config(scene_cfg, design, space, space.geometry_frames)
         pred = predict_design(cfg, noise, card.bound_factor, space.geometry_frames)
+        # every test frame the user will take must fit its markers, not only the predicted ones
+        check_focal_fits(design_config(scene_cfg, design, space, space.test_frames), prefix)
     except (ConfigError, DockfactoryError) as exc:
-        prefix = f"{space.source}: design {design.label()}: "
-        return {**row, "status": "infeasible", "reason": str(exc).replace(prefix, "")}
+        return {**row, "status": "infeasible", "reason": str(exc).replace(f"{prefix}: ", "")}
     loc = _block(spec, "localization", pred.rmse, space.test_frames)
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}

@@ -3,6 +3,7 @@ the answer deterministic, and a design's config what its renders would use."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -195,3 +196,17 @@ def test_a_verified_run_that_left_no_metrics_is_one_line(tmp_path):
     from dockfactory.design_verify import _rendered
     with pytest.raises(DockfactoryError, match="has no eval/metrics.json: the run of this design did not finish"):
         _rendered(tmp_path / "run")
+
+
+def test_a_design_whose_later_test_frames_cannot_fit_their_markers_is_infeasible(tmp_path, capsys):
+    """The wide scene at 1.7-2.4 m with a 6 mm lens: the 24 frames the prediction draws fit their
+    markers, frame 2 of the 48 test frames does not (a verify render refused it after the design
+    was answered "passes"): the design is infeasible with the whole plan's reason."""
+    wide = Path(__file__).resolve().parents[2] / "bench" / "configs" / "design_scene_wide.toml"
+    text = (SPACE.replace('scene = "quick"', f'scene = "{wide}"')
+            .replace("test_frames = 30", "test_frames = 48\ngeometry_frames = 24"))
+    text = text[:text.index("[space]")] + "[space]\ndistance_mm = [[1700, 2400]]\nmarker_diameter_mm = [30]\nmarkers_per_section = [7]\n"
+    assert run_cli(["design", _space(tmp_path, text), "--out", tmp_path / "o"], capsys)[0] == 0
+    rows = json.loads((tmp_path / "o" / "design.json").read_text())["designs"]
+    assert rows and all(r["status"] == "infeasible" and "cannot fit all markers" in r["reason"] for r in rows)
+    assert all(not r["reason"].startswith(str(tmp_path)) for r in rows)
