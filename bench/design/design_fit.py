@@ -13,7 +13,9 @@ The model (eval.design_predict): RMSE^2 = s0^2 Vn + su^2 Vu + sv^2 Vv per compon
 disc-noise variance at unit scale and Vu, Vv the section offset's at unit shift per axis, mean
 over the frames. (s0, su, sv) by non-negative least squares on the relative squared error of the
 three-chip camera's X, Y and alpha on the three scenes; each factor as the geometric mean of
-measured over predicted.
+measured over predicted; the Bayer camera's (bilinear, the factory's demosaic) with a size exponent k
+fitted beside it (noise g (10 / b)^k per marker: :func:`size_fit`), and JPEG figures above q90 from
+q95 beside q90 on the same frames (``--jpeg95``).
 
 Run: python -m bench.design.design_fit [--write] [--scenes a,b,c,d] [--sources sampling.json white.json jpeg_a.json]
 [--ring-dark dark.json]
