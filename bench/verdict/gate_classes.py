@@ -24,19 +24,15 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from bench.render.fit_gate import _moved_boxes, _row, faults, other_layout
 from dockfactory.core.io import write_json_atomic
-from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class, class_section_shift
-from dockfactory.eval.solve_frames import (
-    detection_arrays,
-    docking_options,
-    lens_prior_for,
-    solve_frame,
-    with_class_prior,
-)
+from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class
+from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
+from dockfactory.measure.images import class_docking_options
 from dockfactory.generator.datasets.reader import Dataset
 
 MIN_SCORE = 0.25
@@ -47,12 +43,23 @@ def effect_class(effect: str) -> str:
     return camera_class("RGGB" if effect.startswith("bayer") else None, "jpeg" in effect)
 
 
-def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: int,
-               class_factor: float = 1.0, shift=None, prior_px: float | None = None) -> list[dict]:
+def solve_options(ds: Dataset, figures, noise_px: float, cls: str | None):
+    """The solver's options for a frame of ``ds`` through the camera class ``cls``: measure's own
+    (dockfactory.measure.images.class_docking_options: the card's floor ``noise_px``, the class's
+    section shift and noise prior) with the card's ``figures``; None for ``cls``: the gate at
+    ``noise_px`` with the card's section shift and no prior (the bench before the class's test)."""
+    lens = lens_prior_for(ds.config)
+    if cls is None:
+        return docking_options(noise_px, lens, figures.section_shift_px)
+    card = SimpleNamespace(centre_noise_px=noise_px, section_shift_px=figures.section_shift_px,
+                           noise_core_px=figures.core_px)
+    return class_docking_options(card, lens, cls)
+
+
+def fault_rows(ds: Dataset, rows: list[dict], options, fault, frames: int, class_factor: float = 1.0) -> list[dict]:
     """fit_gate's row of every sensor-bench row of ``ds`` after ``fault`` (markers, move, size),
-    solved with the known noise ``noise_px`` (and the camera class's ``class_factor`` and section
-    ``shift``); ``prior_px``: the card's robust core, the noise prior measure gives the solver
-    (times the class factor, as measure does: eval.solve_frames.with_class_prior); None: none."""
+    solved with ``options`` (:func:`solve_options`) and the camera class's ``class_factor`` for the
+    gate's second test."""
     markers, move, size = fault
     out = []
     for row in rows[:frames]:
@@ -61,8 +68,7 @@ def fault_rows(ds: Dataset, rows: list[dict], noise_px: float, fault, frames: in
             continue
         rec, _ = solve_frame(markers or ds.markers(), ((size[0] - 1) / 2.0, (size[1] - 1) / 2.0),
                              (cls, move(uv), _moved_boxes(boxes, move), refined), None, "pinhole",
-                             with_class_prior(docking_options(noise_px, lens_prior_for(ds.config), shift, prior_px),
-                                              class_factor), class_factor)
+                             options, class_factor)
         out.append(_row(rec, ds.labels[row["frame"]]["pose_b_in_d"]))
     return out
 
@@ -126,10 +132,10 @@ def main(argv=None) -> int:
                 continue
             for f in (float(v) for v in args.factors.split(",")):
                 for name in args.faults.split(","):
-                    cls = effect_class(effect) if args.class_gate else "three-chip"
-                    cf, shift = CAMERA_CLASS_FACTORS[cls], class_section_shift(cls, figures.section_shift_px)
-                    prior = figures.core_px if args.class_gate else None
-                    t = tally(fault_rows(ds, res["rows"], args.card * f, table[name], args.frames, cf, shift, prior))
+                    cls = effect_class(effect) if args.class_gate else None
+                    cf = CAMERA_CLASS_FACTORS[cls or "three-chip"]
+                    options = solve_options(ds, figures, args.card * f, cls)
+                    t = tally(fault_rows(ds, res["rows"], options, table[name], args.frames, cf))
                     out["tables"].append({"dataset": key, "effect": effect, "factor": f, "class_factor": cf,
                                           "fault": name, **t})
                     refused = ", ".join(f"{c} {n}" for c, n in t["refused"].items()) or "-"
