@@ -71,10 +71,10 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
         return {**row, "status": "not predicted", "reason": why}
     prefix = f"{space.source}: design {design.label()}"
     try:
-        cfg = design_config(scene_cfg, design, space, space.geometry_frames)
+        cfg = design_config(scene_cfg, design, space, max(space.test_frames, space.geometry_frames))
         pred = predict_design(cfg, noise, card.bound_factor, space.geometry_frames)
         # every test frame the user will take must fit its markers, not only the predicted ones
-        check_focal_fits(design_config(scene_cfg, design, space, space.test_frames), prefix)
+        check_focal_fits(cfg, prefix)
     except (ConfigError, DockfactoryError) as exc:
         return {**row, "status": "infeasible", "reason": str(exc).replace(f"{prefix}: ", "")}
     loc = _block(spec, "localization", pred.rmse, space.test_frames)
