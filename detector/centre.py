@@ -2,16 +2,14 @@
 
 A marker is a red or blue disc inside a dark ring. Two coverage passes in a window around the
 detector's box (linear light, a colour score normalised between ring and disc into a soft
-coverage of the disc's connected component, its moments) give a first ellipse, the window, the
+coverage of the disc's connected component, its moments; on the luma where the colour score
+cannot tell the disc from its ring: :func:`coverage_passes`) give a first ellipse, the window, the
 quality and the fallback; :func:`edge_fit` then fits the projected disc to the score in a band
 around that ellipse's edge (an ellipse, a blurred edge, a shaded disc level, a ring level) and
-gives the centre and the edge width; :func:`finish_refined` judges it. The quality in [0, 1]
-combines contrast, shape, agreement with the detector's box and the disc's point symmetry about
-its centre; below ``min_quality`` the centre is not refined, and a refused edge fit is never kept
-at full quality.
-
-The module's sha256 names the refinement of the weights' noise cards (``detector.noise_card``).
-Why and how: docs/detector.md, "The centre refinement".
+gives the centre and the edge width; :func:`finish_refined` judges it (quality in [0, 1]: contrast,
+shape, agreement with the box, point symmetry; below ``min_quality`` not refined; a refused edge
+fit never kept at full quality). The module's sha256 names the refinement of the weights' noise
+cards (``detector.noise_card``). Why and how: docs/detector.md, "The centre refinement".
 """
 from __future__ import annotations
 
@@ -26,6 +24,7 @@ from dockfactory.core.names import CLASS_CHANNELS
 _SRGB_TO_LINEAR = np.where(np.arange(256) / 255.0 <= 0.04045, np.arange(256) / 255.0 / 12.92,
                            ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4).astype(np.float32)
 CLASS_CHANNEL = dict(enumerate(CLASS_CHANNELS))  # class id -> RGB channel of its colour
+LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
 
 
 @dataclass(frozen=True)
@@ -82,7 +81,8 @@ class _Window:
     """What one coverage pass measured in its window: the score ``s``, its purity ``pur``, the
     pixel coordinates ``xs``, ``ys`` and the normalised radius ``rho`` of the pass's box (all
     (h, w)), the first ellipse (centre (2,) px and covariance (2, 2) px^2 of the coverage), the
-    disc and ring levels of the score, the soft coverage ``w`` (h, w) of the disc's component."""
+    disc and ring levels of the score, the soft coverage ``w`` (h, w) of the disc's component;
+    ``luma``: the pass scored the luma (:func:`luma_score`), not the colour."""
     s: np.ndarray
     pur: np.ndarray
     xs: np.ndarray
@@ -93,6 +93,7 @@ class _Window:
     fg: float
     bg: float
     w: np.ndarray | None = None
+    luma: bool = False
 
 
 def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.3,
@@ -115,9 +116,9 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
     Returns
     -------
     Refined
-        Two coverage passes (the second in the window of the first refined ellipse, kept when
-        refined too), then :func:`edge_fit` in the kept pass's window gives the centre and
-        :func:`finish_refined` judges it; the box is the moment box around the centre.
+        The kept coverage pass (:func:`coverage_passes`), then :func:`edge_fit` in its window
+        gives the centre and :func:`finish_refined` judges it; the box is the moment box around
+        the centre.
 
     Raises
     ------
@@ -125,15 +126,48 @@ def refine_centre(image: np.ndarray, box, class_id: int, min_quality: float = 0.
         An image that is not (H, W, 3) uint8, a box that is not finite with x1 > x0 and y1 > y0,
         or a class_id other than 0 or 1.
     """
-    first, win = _refine_once(image, box, class_id, min_quality, edge_bias_px)
-    if not first.refined:
+    first, win = coverage_passes(image, box, class_id, min_quality, edge_bias_px)
+    if win is None:
         return first
-    second, win2 = _refine_once(image, first.box, class_id, min_quality, edge_bias_px)
-    if second.refined:
-        first, win = second, win2
     fit = edge_fit(win)
     return finish_refined(image, first, win, None if fit is None else (fit.centre, fit.edge_px),
                           min_quality, edge_bias_px)
+
+
+def coverage_passes(image: np.ndarray, box, class_id: int, min_quality: float,
+                    edge_bias_px: float) -> tuple[Refined, "_Window | None"]:
+    """(the kept coverage pass, its window; None when none was refined) of the detection ``box``:
+    two passes on the colour score (the second in the window of the first refined ellipse, kept
+    when refined too); when the colour score's first pass is refused, the same two passes on the
+    linear luma (:func:`luma_score`). Why the luma: a disc in shadow inside a warm-lit white ring
+    scores in colour about what the ring does (R - mean(G, B) of a bright warm white equals a dim
+    red's), and a JPEG's half-resolution chroma smears a thin disc's colour into its ring, while the
+    disc's edge against its ring stays sharp in luma. Only where the colour pass is refused: a
+    luma pass replacing colour passes of low quality made the centres of thin discs worse (docs/detector.md,
+    "The luma pass")."""
+    first, win = _refine_once(image, box, class_id, min_quality, edge_bias_px)
+    luma = not first.refined
+    if luma:
+        by_luma = _refine_once(image, box, class_id, min_quality, edge_bias_px, True)
+        if not by_luma[0].refined:
+            return first, None
+        first, win = by_luma
+    second, win2 = _refine_once(image, first.box, class_id, min_quality, edge_bias_px, luma)
+    return (second, win2) if second.refined else (first, win)
+
+
+def luma_score(rgb: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(score, purity) of the window ``rgb`` (h, w, 3) uint8 sRGB for the luma pass: the linear
+    luma (BT.601 weights on sRGB, then linearised), negated when the disc (``rho`` <= 0.5, the
+    normalised radius of the detector's box) is darker than the annulus beyond it (rho 1.08-1.22:
+    a white ring), so that the disc stands above its ring as in the colour score; purity all ones
+    (luma has no colour to be pure in)."""
+    luma = np.rint(rgb.astype(np.float32) @ LUMA_WEIGHTS).astype(np.uint8)
+    level = _SRGB_TO_LINEAR[luma].astype(np.float32)
+    inner, ring = rho <= 0.5, (rho >= 1.08) & (rho <= 1.22)
+    if inner.any() and ring.any() and np.median(level[inner]) < np.median(level[ring]):
+        level = -level
+    return level, np.ones(level.shape, np.float32)
 
 
 # A refused edge fit leaves the coverage centroid at this share of the coverage pass's quality; the
@@ -151,12 +185,13 @@ def finish_refined(image: np.ndarray, first: Refined, win: _Window, fitted, min_
                    edge_bias_px: float) -> Refined:
     """The detection from the kept coverage pass (``first``, ``win``) and the edge fit's
     ``fitted`` (centre (2,) px, edge width px; None when the fit was refused: the coverage
-    centroid, at ``REFUSED_FIT_QUALITY`` of the quality). The quality takes the disc's point
+    centroid, at ``REFUSED_FIT_QUALITY`` of the quality, not refined after a luma pass). The quality takes the disc's point
     symmetry about the centre (:func:`symmetry_quality`): a part hidden by an occluder or eaten
     by glare moves the centre toward what is left. Below ``min_quality`` the centre is returned
     not refined."""
-    if fitted is None:
-        centre, edge_px, quality = first.center, float("nan"), first.quality * REFUSED_FIT_QUALITY
+    if fitted is None:   # a luma pass's coverage is no centre of its own (its colour pass was refused)
+        share = 0.0 if win.luma else REFUSED_FIT_QUALITY
+        centre, edge_px, quality = first.center, float("nan"), first.quality * share
     else:
         (centre, edge_px), quality = fitted, first.quality
     quality *= symmetry_quality(asymmetry_px(win, centre))
@@ -277,9 +312,11 @@ def _quality(area: float, det: float, hw: float, hh: float, contrast: float) -> 
 
 
 def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
-                 edge_bias_px: float) -> tuple[Refined, _Window | None]:
-    """One coverage pass in the window of ``box``: (result, the window's measurements for the
-    edge fit; None unless refined)."""
+                 edge_bias_px: float, luma: bool = False) -> tuple[Refined, _Window | None]:
+    """One coverage pass in the window of ``box`` on the colour score (``luma``: on
+    :func:`luma_score`, refused unless the class's colour is the purest at the disc's centre: the
+    detector's class is kept as the colour pass keeps it): (result, the window's measurements for
+    the edge fit; None unless refined)."""
     box = _checked_box(image, box)
     h_img, w_img = image.shape[:2]
     fallback = Refined(center=np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2]), box=box.copy(),
@@ -290,9 +327,13 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     if win is None:
         return fallback, None
     x0, y0, x1, y1 = win
-    s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
     ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     rho = np.sqrt(((xs - cx) / hw) ** 2 + ((ys - cy) / hh) ** 2)  # 1 on the box's inscribed ellipse
+    s, pur = score_and_purity(image[y0:y1, x0:x1], class_id)
+    if luma:
+        if not np.median(pur[rho <= 0.5]) > 0:   # the disc is not the class's colour: no luma pass
+            return fallback, None
+        s, pur = luma_score(image[y0:y1, x0:x1], rho)
     coverage = _soft_coverage(s, pur, rho)
     if coverage is None:
         return fallback, None
@@ -312,7 +353,7 @@ def _refine_once(image: np.ndarray, box, class_id: int, min_quality: float,
     rbox = np.array([mx - ex, my - ey, mx + ex, my + ey])
     rbox = np.clip(rbox, -0.5, np.array([w_img, h_img, w_img, h_img]) - 0.5)
     window = _Window(s=s, pur=pur, xs=xs, ys=ys, rho=rho, centre=np.array([mx, my]),
-                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg, w=w)
+                     cov=np.array([[vxx, vxy], [vxy, vyy]]), fg=fg, bg=bg, w=w, luma=luma)
     return Refined(center=np.array([mx, my]), box=rbox, quality=quality, refined=True), window
 
 

@@ -20,7 +20,7 @@ from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
 from dockfactory.detector.centre_joint import joint_fit, reference_channel
 
 
-LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)   # JPEG's Y' (BT.601, on sRGB values)
+LUMA_WEIGHTS = centre.LUMA_WEIGHTS
 
 
 def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: bool):
@@ -69,12 +69,9 @@ def refine_centre_camera(image: np.ndarray, box, class_id: int, cfa: str | None 
         return centre.refine_centre(image, box, class_id, min_quality, edge_bias_px)
     if cfa is not None:
         channel_map(cfa, 2, 2)   # an unknown pattern is refused before any work
-    first, win = centre._refine_once(image, box, class_id, min_quality, edge_bias_px)
-    if not first.refined:
+    first, win = centre.coverage_passes(image, box, class_id, min_quality, edge_bias_px)
+    if win is None:
         return first
-    second, win2 = centre._refine_once(image, first.box, class_id, min_quality, edge_bias_px)
-    if second.refined:
-        first, win = second, win2
     if cfa is not None and not jpeg:
         joint = joint_fit(image, win, class_id, cfa)
         fitted = None if joint is None else (win.centre + joint[0][:2], centre._edge_px(joint[0]))
