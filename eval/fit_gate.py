@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from dockfactory.core.errors import DockfactoryError
+from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS
 from dockfactory.solver.camera_models import camera_model as model_named
 from dockfactory.solver.options import GATE_NOISE_FACTOR
 from dockfactory.solver.stats import chi2_logsf
@@ -28,8 +29,9 @@ GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms
 PATTERN_P = 0.1        # the class's test needs the residuals' geometry pattern at least this likely
 PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
-LEFT_OUT_NEEDS_PATTERN = True   # a camera class noisier than the card keeps a fit with centres left out only
+LEFT_OUT_NEEDS_PATTERN = True   # a camera class with a JPEG keeps a fit with centres left out only
                                 # where the camera-model check can still test PATTERN_MIN_DOF directions
+LEFT_OUT_MIN_FACTOR = CAMERA_CLASS_FACTORS["bayer"]   # ... the classes noisier than a Bayer camera alone
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
 
@@ -152,13 +154,15 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
 
 def _untestable(record: dict, class_factor: float) -> bool:
     """Whether a fit the gate reached by leaving centres out cannot be told from a crop: its camera
-    class is noisier than the card (``class_factor`` above 1) and its camera-model check has fewer
-    than PATTERN_MIN_DOF directions left to test. Such a camera's honest residuals exceed the card's
-    everywhere, so leaving out the centres that stand out most also absorbs an image geometry's
-    pattern (a principal point off centre), and too few directions remain to see it
-    (bench/results/fit_gate/README.md, "white rings through JPEG cameras")."""
+    class is noisier than a Bayer camera's (``class_factor`` above LEFT_OUT_MIN_FACTOR: the classes
+    with a JPEG) and its camera-model check has fewer than PATTERN_MIN_DOF directions left to test.
+    Such a camera's honest residuals exceed the card's everywhere, so leaving out the centres that
+    stand out most also absorbs an image geometry's pattern (a principal point off centre), and too
+    few directions remain to see it. Why not a Bayer camera's: on six sensor scenes none of its
+    cropped frames passed this way, while the rule refused its honest ones
+    (bench/results/fit_gate/README.md, "white rings through JPEG cameras", "The rule's classes")."""
     dof = (record.get("model_check") or {}).get("dof", 0)
-    return LEFT_OUT_NEEDS_PATTERN and class_factor > 1.0 and dof < PATTERN_MIN_DOF
+    return LEFT_OUT_NEEDS_PATTERN and class_factor > LEFT_OUT_MIN_FACTOR and dof < PATTERN_MIN_DOF
 
 
 def untestable_reason(record: dict, left_out: int) -> str:

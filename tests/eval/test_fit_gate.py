@@ -287,3 +287,14 @@ def test_a_noisy_class_s_fit_with_centres_left_out_and_too_few_directions_is_ref
     assert kept["ok"] and kept["left_out"] == [3]
     tested, _ = _gate_leaving_one_out(4.5, fit_gate.PATTERN_MIN_DOF)
     assert tested["ok"] and tested["left_out"] == [3]
+
+
+def test_a_bayer_camera_without_jpeg_keeps_its_fit_with_centres_left_out():
+    """The rule is the JPEG classes': a Bayer camera alone (factor 3.7), whose cropped frames never
+    passed by leaving centres out on six sensor scenes, keeps the frame with the centre left out
+    (before: refused, one honest frame of 48 turning a design's localization to fail); Bayer + JPEG
+    is refused."""
+    kept, _ = _gate_leaving_one_out(camera_classes.CAMERA_CLASS_FACTORS["bayer"], 1)
+    assert kept["ok"] and kept["left_out"] == [3]
+    refused, _ = _gate_leaving_one_out(camera_classes.CAMERA_CLASS_FACTORS["bayer-jpeg"], 1)
+    assert refused["ok"] is False and "--calibration" in refused["reason"]
