@@ -20,9 +20,6 @@ from dockfactory.detector.centre import CLASS_CHANNEL, EDGE_BIAS_PX, Refined
 from dockfactory.detector.centre_joint import joint_fit, reference_channel
 
 
-LUMA_WEIGHTS = centre.LUMA_WEIGHTS
-
-
 def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: bool):
     """The coverage window ``win`` (a ``centre._Window``) with its score replaced by the fit's
     data: with a ``cfa``, the reference channel of ``centre_joint.reference_channel`` (the class's
@@ -35,10 +32,7 @@ def fit_evidence(image: np.ndarray, win, class_id: int, cfa: str | None, jpeg: b
     h, w = win.s.shape
     sub = image[y0:y0 + h, x0:x0 + w]
     if cfa is None:
-        luma = np.rint(sub.astype(np.float32) @ LUMA_WEIGHTS).astype(np.uint8)
-        level, sites = centre._SRGB_TO_LINEAR[luma], np.ones(sub.shape[:2], bool)
-        inner, ring = (win.rho <= 0.5), (win.rho >= 1.08) & (win.rho <= 1.22)
-        sign = 1.0 if not ring.any() or not inner.any() or np.median(level[inner]) >= np.median(level[ring]) else -1.0
+        (level, _), sites, sign = centre.luma_score(sub, win.rho), np.ones(sub.shape[:2], bool), 1.0
     else:
         cmap = channel_map(cfa, *image.shape[:2])[y0:y0 + h, x0:x0 + w]
         lin = centre._SRGB_TO_LINEAR[sub]
