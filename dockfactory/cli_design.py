@@ -26,9 +26,12 @@ NOTES = (
     "Predicted for frames in normal light: occlusion and glare add errors the predictor does not model.",
     "P(accept) covers the gated pose criteria (chi-square bound, components independent); the detection "
     "and failure gates are not predicted: --verify renders and judges them.",
-    "The sensor's temporal noise (EMVA preset) is not a term of the model: it enters only through the "
-    "renders of --verify.",
 )
+SENSOR_NOTE = ("The sensor's temporal noise enters as the card's share of the centre variance scaled by the sensor's "
+               "relative noise at mid grey (EMVA preset, or the scene's plain sensor); its fixed patterns, gain and "
+               "exposure are not terms.")
+NO_SENSOR_NOTE = ("The sensor's temporal noise (EMVA preset) is not a term of this card: it enters only through "
+                  "the renders of --verify.")
 
 
 def _jpeg_summary(table: dict) -> str:
@@ -45,9 +48,11 @@ def _card_summary(card) -> str:
     size = (card.size_exponent or {}).get("rggb", 0.0)
     bayer = f"Bayer x{card.cfa_factor['rggb']}" + (f" (10 / b)^{size:g}" if size else "")
     above = "".join(f", JPEG q{q}+ x{_jpeg_summary(t)}" for q, t in sorted((card.jpeg_above or {}).items()))
+    sensor = ("" if not card.sensor_share else
+              f", sensor share {card.sensor_share['none']:g} / {card.sensor_share['rggb']:g} of {card.sensor_reference}'s")
     return (f"{noise}, scale {card.scale_px} px, section offset {list(card.shift_px)} px, "
             f"{bayer}, JPEG q{card.jpeg_min_quality}+ x{_jpeg_summary(card.jpeg_factor)}{above}, "
-            f"white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}); "
+            f"white ring x{card.ring_factor['white']['none']} (Bayer x{card.ring_factor['white']['rggb']}){sensor}; "
             f"fitted on {len(fitted.get('renders', []))} renders of {fitted.get('frames_each', '?')} frames; "
             f"provisional: {', '.join(card.provisional) or 'none'}")
 
@@ -61,7 +66,7 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     spec = load_acceptance(spec_path)
     card = load_design_card(args.card or shipped_design_card())
     designs = designs_of(space, scene)
-    notes = list(NOTES)
+    notes = [*NOTES, SENSOR_NOTE if card.sensor_share else NO_SENSOR_NOTE]
     if spec.estimation.thresholds() and not space.repeatability[0]:
         notes.append("The spec gates repeatability but the space gives no repeatability captures: "
                      "P(accept) covers localization only ([design] repeatability_poses / _captures).")

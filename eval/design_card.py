@@ -16,6 +16,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_noise import CentreNoiseLaw
 from dockfactory.eval.design_predict import NoiseClass
+from dockfactory.eval.design_sensor import preset_variance, sensor_factor
 from dockfactory.eval.design_space import Design, jpeg_quality
 
 CARD_FORMAT = "dockfactory.design_predictor/5"
@@ -43,6 +44,16 @@ class DesignCard:
     law: CentreNoiseLaw | None = None
     size_exponent: dict | None = None
     jpeg_above: dict | None = None
+    sensor_share: dict | None = None
+    sensor_reference: str = ""
+
+    def sensor_factor_of(self, design: Design, variance: float | None) -> float:
+        """The design's centre std over the card's for a sensor of relative temporal variance
+        ``variance`` (eval.design_sensor.camera_variance): 1.0 when the card has no
+        ``sensor_noise`` or ``variance`` is None (the card's reference sensor assumed)."""
+        if not self.sensor_share or variance is None:
+            return 1.0
+        return sensor_factor(self.sensor_share[design.camera.cfa], variance / preset_variance(self.sensor_reference))
 
     def jpeg_of(self, quality: int) -> tuple[dict, str]:
         """({ring: {cfa: factor}}, its key's name) for a JPEG of ``quality``: the table measured at
@@ -55,9 +66,10 @@ class DesignCard:
                 table, name = self.jpeg_above[q], f"jpeg_factor_above.{q}"
         return table, name
 
-    def noise_of(self, design: Design) -> tuple[NoiseClass | None, list[str], str]:
-        """(noise class, provisional factors used, reason) of ``design``: the class None with
-        the reason when the card has no figure for it."""
+    def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
+        """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
+        temporal variance is ``sensor_variance`` (None: the card's reference sensor): the class
+        None with the reason when the card has no figure for it."""
         q = jpeg_quality(design.image_format)
         if q is not None and q < self.jpeg_min_quality:
             return None, [], f"the predictor's card has no JPEG figure below quality {self.jpeg_min_quality}"
@@ -68,6 +80,7 @@ class DesignCard:
             g *= table[design.ring][design.camera.cfa]
             used.append(f"{name}.{design.ring}.{design.camera.cfa}")
         k = (self.size_exponent or {}).get(design.camera.cfa, 0.0)
+        g *= self.sensor_factor_of(design, sensor_variance)
         noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law, k)
         return noise, [u for u in used if u in self.provisional], ""
 
@@ -145,6 +158,26 @@ def _jpeg_above(path, data: dict, min_quality: int) -> dict:
     return out
 
 
+def _sensor_noise(path, data: dict) -> tuple[dict | None, str]:
+    """({cfa: share in [0, 1]}, reference preset) of the card's optional ``sensor_noise``
+    (format /5: ``{"reference": PRESET, "share": {"none": s, "rggb": s}}``); (None, "") without it."""
+    table = data.get("sensor_noise") if data.get("format") == CARD_FORMAT else None
+    if table is None:
+        return None, ""
+    if not isinstance(table, dict) or set(table) != {"reference", "share"}:
+        raise DockfactoryError(f"{path}: sensor_noise: expected a table of reference, share, got {table!r}")
+    ref = table["reference"]
+    try:
+        preset_variance(ref)
+    except ValueError as exc:
+        raise DockfactoryError(f"{path}: sensor_noise.reference: {exc}") from None
+    shares = _factors(path, table, "share", ("none", "rggb"), "sensor_noise.", zero=True)
+    bad = [c for c, v in shares.items() if v > 1.0]
+    if bad:
+        raise DockfactoryError(f"{path}: sensor_noise.share.{bad[0]}: expected a share in [0, 1], got {shares[bad[0]]!r}")
+    return shares, ref
+
+
 def load_design_card(path) -> DesignCard:
     """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
     path = Path(path)
@@ -176,4 +209,4 @@ def load_design_card(path) -> DesignCard:
                       _rings(path, data.get("ring_factor")),
                       _jpeg(path, data), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data),
-                      _size_exponents(path, data), _jpeg_above(path, data, q))
+                      _size_exponents(path, data), _jpeg_above(path, data, q), *_sensor_noise(path, data))

@@ -12,6 +12,7 @@ from dockfactory.core.config import ConfigError
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.eval.design_card import DesignCard
 from dockfactory.eval.design_predict import design_config, predict_design
+from dockfactory.eval.design_sensor import camera_variance
 from dockfactory.eval.design_space import Design, DesignSpace
 from dockfactory.generator.sampler import check_focal_fits
 
@@ -66,9 +67,11 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     RMSE and repeatability per component, the localization and estimation blocks (estimation
     only when the space gives repeatability captures), P(accept) and P(reject)."""
     row = _base_row(design, space)
-    noise, provisional, why = card.noise_of(design)
+    variance = camera_variance(design.camera.preset, scene_cfg.sensor)
+    noise, provisional, why = card.noise_of(design, variance)
     if noise is None:
         return {**row, "status": "not predicted", "reason": why}
+    row["sensor_factor"] = round(card.sensor_factor_of(design, variance), 4)
     prefix = f"{space.source}: design {design.label()}"
     try:
         cfg = design_config(scene_cfg, design, space, max(space.test_frames, space.geometry_frames))

@@ -294,6 +294,9 @@ def main() -> None:
                          "for every disc; default: fitted over SIZE_GRID)")
     ap.add_argument("--bayer-effects", default=",".join(BAYER),
                     help="the Bayer effects the Bayer figures are fitted on, comma-separated (default: %(default)s)")
+    ap.add_argument("--sensor", default=None, metavar="WELLS",
+                    help="results under bench/results/sensor_effects/ with the sensor's noise turned down beside the "
+                         "reference (bench.design.sensor_share): the card's sensor_noise")
     ap.add_argument("--jpeg95", nargs=2, default=None, metavar=("DARK", "WHITE"),
                     help="results under bench/results/sensor_effects/ with JPEG q95 beside q90 on the dark- and "
                          "white-ring scenes: the card's figures above q90")
@@ -309,6 +312,11 @@ def main() -> None:
     print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")
     for r in card["error"]["predicted_over_measured"]:
         print(f"| {r['what']} | {r['scene'].upper()} | {r['x']:.2f} | {r['y']:.2f} | {r['alpha']:.2f} |")
+    if args.sensor:
+        from bench.design.sensor_share import sensor_noise
+        card["sensor_noise"], lines = sensor_noise(RESULTS / args.sensor)
+        card["fitted_on"]["sensor_source"] = f"bench/results/sensor_effects/{args.sensor}"
+        print("\n".join(lines))
     if args.write or args.card_out:
         write_json_atomic(args.card_out or ROOT / "models" / "design_predictor.json", card)
 

@@ -65,6 +65,15 @@ def chain(cfa="none", demosaic="bilinear", wb=(0.0, 0.0), **kw) -> ColourChain:
     return ColourChain(**{**base, **kw})
 
 
+def sensor_with_wells(name: str, wells: float):
+    """Preset ``name`` at 12 bits with ``wells`` times its saturation capacity and 1 / ``wells`` its
+    gain (the same DN at the same exposure-normalised light; shot variance relative to the signal
+    divided by ``wells``, dark noise in electrons kept): the sensor's temporal noise turned down
+    without touching the render, the chain or the ISP."""
+    base = configured_sensor(name, (), 12)
+    return replace(base, saturation_e=base.saturation_e * wells, gain_dn_per_e=base.gain_dn_per_e / wells)
+
+
 def wb_draw(index: int, limit: float) -> tuple[float, float]:
     """The frame's white-balance error of the red and blue gains: uniform in [-limit, limit]."""
     rng = np.random.default_rng([UNIT_SEED, 7, index])
@@ -89,6 +98,11 @@ EFFECTS = {
     "bayer-wb20": (lambda i: chain("RGGB", "bilinear", wb=wb_draw(i, 0.2)), 0.0, None),
     "bayer-sharpen": (lambda i: chain("RGGB", "bilinear", sharpen_amount=0.8), 0.0, None),
     "sampling-rggb": (lambda i: chain(), 0.0, None),
+    "three-chip-imx174": (lambda i: chain(sensor=configured_sensor("imx174", (), 12)), 0.0, None),
+    "bayer-imx174": (lambda i: chain("RGGB", "bilinear", sensor=configured_sensor("imx174", (), 12)), 0.0, None),
+    "three-chip-wells4": (lambda i: chain(sensor=sensor_with_wells(PRESET, 4.0)), 0.0, None),
+    "three-chip-wells100": (lambda i: chain(sensor=sensor_with_wells(PRESET, 100.0)), 0.0, None),
+    "bayer-wells100": (lambda i: chain("RGGB", "bilinear", sensor=sensor_with_wells(PRESET, 100.0)), 0.0, None),
     "bayer-raw": (lambda i: chain("RGGB", "vng"), 0.0, None),
 }
 # Effects whose camera writes its raw mosaic (a 16-bit one-channel frame in DN): the image is what
