@@ -47,6 +47,23 @@ class DesignCard:
     sensor_share: dict | None = None
     sensor_reference: str = ""
 
+    @property
+    def disc_range_px(self) -> tuple[float, float] | None:
+        """(low, high) px: the median disc minor semi-axes of the scenes the card was fitted on
+        (``fitted_on.disc_minor_median_px``), None when the card does not say."""
+        r = self.data.get("fitted_on", {}).get("disc_minor_median_px")
+        ok = isinstance(r, list) and len(r) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)
+        return (float(min(r)), float(max(r))) if ok else None
+
+    def outside_range(self, minor_median_px: float | None) -> str:
+        """"" when a design whose discs' median minor semi-axis is ``minor_median_px`` (px) lies
+        within :attr:`disc_range_px` (or either is unknown), else the line saying its figures are
+        carried beyond the discs they were measured on."""
+        r = self.disc_range_px
+        if r is None or minor_median_px is None or r[0] <= minor_median_px <= r[1]:
+            return ""
+        return f"extrapolated: median disc b {minor_median_px:.1f} px, the card's scenes {r[0]:.1f}-{r[1]:.1f} px"
+
     def sensor_factor_of(self, design: Design, variance: float | None) -> float:
         """The design's centre std over the card's for a sensor of relative temporal variance
         ``variance`` (eval.design_sensor.camera_variance): 1.0 when the card has no

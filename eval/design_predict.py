@@ -51,10 +51,12 @@ class NoiseClass:
 
 @dataclass(frozen=True)
 class Prediction:
-    """``rmse`` and ``repeat`` {component: mm or deg}; ``frames`` pose draws used."""
+    """``rmse`` and ``repeat`` {component: mm or deg}; ``frames`` pose draws used;
+    ``minor_median_px`` the median minor semi-axis (px) of the markers' disc images over them."""
     rmse: dict
     repeat: dict
     frames: int
+    minor_median_px: float | None = None
 
 
 def design_config(scene_cfg, design: Design, space: DesignSpace, frames: int, repeat=(1, 2)):
@@ -167,10 +169,23 @@ def mean_variances(cfg, noise: NoiseClass, max_frames: int):
     return vn, vs, len(frames)
 
 
+def median_minor_px(cfg, max_frames: int) -> float:
+    """The median minor semi-axis (px) of every marker's disc image over the first ``max_frames``
+    test frames of ``cfg`` (square-pixel pinhole at each frame's focal): the disc size a centre-noise
+    figure measured on other scenes is carried to. Errors as :func:`mean_variances`."""
+    markers = static_scene(cfg).markers
+    ma = [m for m in markers if m.section == "A"]
+    mb = [m for m in markers if m.section == "B"]
+    minor = [np.r_[disc_minor_px(ma, f.cam_from_a, f.focal_px)[0], disc_minor_px(mb, f.cam_from_b, f.focal_px)[0]]
+             for f in cameras_of_test_frames(cfg, max_frames, "design")]
+    return float(np.median(np.concatenate(minor)))
+
+
 def predict_design(cfg, noise: NoiseClass, bound_factor: dict, max_frames: int) -> Prediction:
     """Predicted RMSE and repeatability (module docstring) over the first ``max_frames`` test
-    frames of ``cfg`` (a :func:`design_config`); errors as :func:`mean_variances`."""
+    frames of ``cfg`` (a :func:`design_config`), with their discs' :func:`median_minor_px`; errors
+    as :func:`mean_variances`."""
     vn, vs, n = mean_variances(cfg, noise, max_frames)
     rmse = {c: bound_factor[c] * math.sqrt(vn[i] + vs[i]) for i, c in enumerate(COMPONENTS)}
     repeat = {c: bound_factor[c] * math.sqrt(vn[i]) for i, c in enumerate(COMPONENTS)}
-    return Prediction(rmse, repeat, n)
+    return Prediction(rmse, repeat, n, median_minor_px(cfg, max_frames))

@@ -64,7 +64,9 @@ def _block(spec, block: str, figures: dict, dof: int) -> dict:
 def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: DesignCard) -> dict:
     """One design predicted: the base fields, ``status`` ("predicted", made passes / undecided /
     fails by :func:`rank_rows`; "infeasible" / "not predicted" with ``reason``), the predicted
-    RMSE and repeatability per component, the localization and estimation blocks (estimation
+    RMSE and repeatability per component, the median disc minor semi-axis and ``extrapolated`` (the
+    card's line when it lies outside the card's scenes: DesignCard.outside_range, else ""), the
+    localization and estimation blocks (estimation
     only when the space gives repeatability captures), P(accept) and P(reject)."""
     row = _base_row(design, space)
     variance = camera_variance(design.camera.preset, scene_cfg.sensor)
@@ -88,6 +90,7 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())]
     margins = [v["margin"] for v in (*loc.values(), *est.values())]
     return {**row, "status": "predicted", "reason": "", "provisional": provisional,
+            "disc_minor_median_px": round(pred.minor_median_px, 2), "extrapolated": card.outside_range(pred.minor_median_px),
             "predicted_rmse": pred.rmse, "predicted_repeatability": pred.repeat,
             "localization": loc, "estimation": est, "estimation_predicted": bool(poses),
             "p_accept": math.prod(probs) if probs else None, "p_localization": p_loc if loc else None,

@@ -31,6 +31,7 @@ def _cells(r: dict) -> list[str]:
     pred = r.get("predicted_rmse", {})
     flag = "*" if r.get("pareto") else ""
     prov = " (provisional: " + ", ".join(r["provisional"]) + ")" if r.get("provisional") else ""
+    prov += f" ({r['extrapolated']})" if r.get("extrapolated") else ""
     return [_fmt(r.get("rank")) + flag, r["status"], _fmt(r.get("p_accept")), _fmt(r.get("worst_margin")),
             _fmt(pred.get("x")), _fmt(pred.get("y")), _fmt(pred.get("alpha")), _fmt(r["cost"]),
             r["design"] + prov + (f" ({r['reason']})" if r.get("reason") else "")]

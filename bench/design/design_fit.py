@@ -40,7 +40,7 @@ from dockfactory.core.config import load_config  # noqa: E402
 from dockfactory.core.io import write_json_atomic  # noqa: E402
 from dockfactory.eval.design_card import CARD_FORMAT  # noqa: E402
 from dockfactory.eval.design_noise import CentreNoiseLaw  # noqa: E402
-from dockfactory.eval.design_predict import NoiseClass, mean_variances  # noqa: E402
+from dockfactory.eval.design_predict import NoiseClass, mean_variances, median_minor_px  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "sensor_effects"
@@ -252,6 +252,7 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: Centr
     dark = None if ring_dark is None else json.loads((RESULTS / ring_dark).read_text())["datasets"]
     other = ring_and_jpeg_factors(results, sources, dark, scenes, bayer)
     versions = sorted(results)
+    discs = [median_minor_px(load_config(ROOT / "bench" / "configs" / f"sensor_scene_{s}.toml"), 48) for s in scenes]
     jpeg_factor, provisional = jpeg_table(other, jpeg)
     above = {} if q95 is None else {"95": jpeg_above(jpeg_factor, merged(sources[0], q95[0]),
                                                      merged(sources[1], q95[1]), 95)}
@@ -271,6 +272,7 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: Centr
                           "ring_and_jpeg_source": [f"bench/results/sensor_effects/{n}" for n in sources[1:]]
                           + ([f"bench/results/sensor_effects/{ring_dark}"] if ring_dark else [])
                           + [f"bench/results/sensor_effects/{n}" for n in q95 or ()],
+                          "disc_minor_median_px": [round(min(discs), 2), round(max(discs), 2)],
                           "white_ring_scenes": other["white_scenes"], "bayer_effects": list(bayer), "components_checked": list(FIT)},
             "error": {"predicted_over_measured": rows}}
 

@@ -210,3 +210,17 @@ def test_a_design_whose_later_test_frames_cannot_fit_their_markers_is_infeasible
     rows = json.loads((tmp_path / "o" / "design.json").read_text())["designs"]
     assert rows and all(r["status"] == "infeasible" and "cannot fit all markers" in r["reason"] for r in rows)
     assert all(not r["reason"].startswith(str(tmp_path)) for r in rows)
+
+
+def test_a_design_beyond_the_card_s_disc_sizes_says_so_in_every_output(tmp_path, capsys):
+    """16 mm discs at 1.0-1.8 m through 6 mm are inside the card's scenes; 24 mm ones are larger
+    (median b about 11.5 px against at most 10.7): their rows say "extrapolated" in the json and
+    the md table, the others do not."""
+    space = _space(tmp_path, SPACE.replace("markers_per_section = [6, 9]", "markers_per_section = [6]"))
+    assert run_cli(["design", space, "--out", tmp_path / "o"], capsys)[0] == 0
+    rows = json.loads((tmp_path / "o" / "design.json").read_text())["designs"]
+    flagged = {r["marker_diameter_mm"]: bool(r["extrapolated"]) for r in rows}
+    assert flagged == {16.0: False, 24.0: True}
+    assert all(r["disc_minor_median_px"] > 10.7 for r in rows if r["marker_diameter_mm"] == 24.0)
+    md = (tmp_path / "o" / "design.md").read_text()
+    assert md.count("extrapolated: median disc b") == sum(flagged.values()) * 2   # both cameras

@@ -126,3 +126,19 @@ def test_the_share_fit_recovers_a_known_share_and_stays_in_0_1():
     assert fit_share([{"v_ratio": 0.1, "centre_var_ratio": -1.0}]) == 1.0
     assert fit_share([]) == 0.0
     assert sensor_factor(0.0, 0.1) == 1.0 and sensor_factor(1.0, 0.25) == pytest.approx(0.5)
+
+
+def test_a_design_outside_the_card_s_disc_sizes_is_flagged_and_one_inside_is_not(tmp_path):
+    """The card's fitted_on.disc_minor_median_px bounds the designs it predicts without a flag."""
+    card = load_design_card(shipped_design_card())
+    low, high = card.disc_range_px
+    assert 0 < low < high
+    assert card.outside_range(0.5 * (low + high)) == ""
+    line = card.outside_range(high * 1.5)
+    assert line.startswith("extrapolated") and f"{high * 1.5:.1f} px" in line and "\n" not in line
+    assert card.outside_range(low / 2) != "" and card.outside_range(None) == ""
+    data = json.loads(shipped_design_card().read_text())
+    data["fitted_on"].pop("disc_minor_median_px")
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(data))
+    assert load_design_card(path).outside_range(1000.0) == ""   # a card that does not say: no flag
