@@ -155,12 +155,18 @@ def frame_variances(markers, cam_a, cam_b, focal: float, pp, noise: NoiseClass, 
     return (np.diag(prop @ cov_noise[:12, :12] @ prop.T), np.diag(prop @ cov_shift[:12, :12] @ prop.T))
 
 
-def mean_variances(cfg, noise: NoiseClass, max_frames: int):
+def drawn_frames(cfg, max_frames: int) -> tuple[list, list]:
+    """(markers, the first ``max_frames`` test frames' cameras) of ``cfg``: what a prediction
+    averages over, drawn once. ConfigError when a frame cannot fit its markers."""
+    return static_scene(cfg).markers, cameras_of_test_frames(cfg, max_frames, "design")
+
+
+def mean_variances(cfg, noise: NoiseClass, max_frames: int, drawn=None):
     """(noise (6,), offset (6,), frames): :func:`frame_variances` averaged over the first
-    ``max_frames`` test frames of ``cfg`` (each at its camera's pixel aspect). ConfigError / DockfactoryError when a frame cannot be
+    ``max_frames`` test frames of ``cfg`` (each at its camera's pixel aspect; ``drawn``: their
+    :func:`drawn_frames` when already drawn). ConfigError / DockfactoryError when a frame cannot be
     drawn (the markers do not fit the image) or its geometry is degenerate."""
-    markers = static_scene(cfg).markers
-    frames = cameras_of_test_frames(cfg, max_frames, "design")
+    markers, frames = drawn or drawn_frames(cfg, max_frames)
     parts = [frame_variances(markers, f.cam_from_a, f.cam_from_b, f.focal_px, f.principal_point, noise,
                              f.pixel_aspect) for f in frames]
     vn, vs = np.mean(parts, axis=0)
@@ -169,15 +175,16 @@ def mean_variances(cfg, noise: NoiseClass, max_frames: int):
     return vn, vs, len(frames)
 
 
-def median_minor_px(cfg, max_frames: int) -> float:
+def median_minor_px(cfg, max_frames: int, drawn=None) -> float:
     """The median minor semi-axis (px) of every marker's disc image over the first ``max_frames``
-    test frames of ``cfg`` (square-pixel pinhole at each frame's focal): the disc size a centre-noise
-    figure measured on other scenes is carried to. Errors as :func:`mean_variances`."""
-    markers = static_scene(cfg).markers
+    test frames of ``cfg`` (square-pixel pinhole at each frame's focal; ``drawn`` as in
+    :func:`mean_variances`): the disc size a centre-noise figure measured on other scenes is
+    carried to. Errors as :func:`mean_variances`."""
+    markers, frames = drawn or drawn_frames(cfg, max_frames)
     ma = [m for m in markers if m.section == "A"]
     mb = [m for m in markers if m.section == "B"]
     minor = [np.r_[disc_minor_px(ma, f.cam_from_a, f.focal_px)[0], disc_minor_px(mb, f.cam_from_b, f.focal_px)[0]]
-             for f in cameras_of_test_frames(cfg, max_frames, "design")]
+             for f in frames]
     return float(np.median(np.concatenate(minor)))
 
 
@@ -185,7 +192,8 @@ def predict_design(cfg, noise: NoiseClass, bound_factor: dict, max_frames: int) 
     """Predicted RMSE and repeatability (module docstring) over the first ``max_frames`` test
     frames of ``cfg`` (a :func:`design_config`), with their discs' :func:`median_minor_px`; errors
     as :func:`mean_variances`."""
-    vn, vs, n = mean_variances(cfg, noise, max_frames)
+    drawn = drawn_frames(cfg, max_frames)
+    vn, vs, n = mean_variances(cfg, noise, max_frames, drawn)
     rmse = {c: bound_factor[c] * math.sqrt(vn[i] + vs[i]) for i, c in enumerate(COMPONENTS)}
     repeat = {c: bound_factor[c] * math.sqrt(vn[i]) for i, c in enumerate(COMPONENTS)}
-    return Prediction(rmse, repeat, n, median_minor_px(cfg, max_frames))
+    return Prediction(rmse, repeat, n, median_minor_px(cfg, max_frames, drawn))
