@@ -22,12 +22,14 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS
 from dockfactory.solver.camera_models import camera_model as model_named
 from dockfactory.solver.options import GATE_NOISE_FACTOR
-from dockfactory.solver.stats import chi2_logsf
+from dockfactory.solver.stats import chi2_logsf, ncp_for_power
 
 GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms: bench/results/fit_gate/README.md)
 
 PATTERN_P = 0.1        # the class's test needs the residuals' geometry pattern at least this likely
-PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's)
+PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's,
+PATTERN_POWER = 0.9    # unless (None: never) the test would catch a principal point off by PATTERN_OFFSET
+PATTERN_OFFSET = 2.0   # lens-prior half-ranges with at least this probability: _pattern_testable)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
 LEFT_OUT_NEEDS_PATTERN = True   # a camera class with a JPEG keeps a fit with centres left out only
                                 # where the camera-model check can still test PATTERN_MIN_DOF directions
@@ -85,14 +87,36 @@ def camera_misfit(record: dict) -> float | None:
     return p if p is not None and p < GATE_P else None
 
 
+def _pattern_testable(record: dict) -> bool:
+    """Whether the camera-model check of a solved poses ``record`` (its ``model_check``) can tell a
+    noisier camera's residuals from an image geometry's pattern: it tests at least
+    PATTERN_MIN_DOF directions, or fewer that would show a principal point off by PATTERN_OFFSET
+    lens-prior half-ranges (a cropped image) at PATTERN_P with probability PATTERN_POWER (its
+    ``pp_offset_ncp`` times PATTERN_OFFSET^2 at least the noncentrality that takes; the F test's,
+    with the fit's residual degrees of freedom, which needs more than the chi-square's). Why the
+    offset: a principal point within the prior's range is in the pose's marginalised uncertainty;
+    at twice it, 3.5 of the prior's standard deviations, the pose is confidently wrong in the
+    components it moves. Why both: the count says how many combinations of the intrinsics the
+    data determine, the power whether the one a crop moves is among them
+    (bench/results/fit_gate/README.md, "The pattern's power")."""
+    check = record.get("model_check") or {}
+    dof = check.get("dof", 0)
+    if dof >= PATTERN_MIN_DOF:
+        return True
+    ncp = check.get("pp_offset_ncp")
+    dof_res = round(2 * sum(record["n_markers"].values()) - fit_parameters(record))
+    return (PATTERN_POWER is not None and dof >= 1 and ncp is not None and dof_res >= 1
+            and ncp * PATTERN_OFFSET ** 2 >= ncp_for_power(dof, PATTERN_P, PATTERN_POWER, dof_res))
+
+
 def class_test(record: dict, sigma_px: float | None, factor: float) -> dict | None:
     """The fit test of ``record`` at its camera class's noise (``factor`` times ``sigma_px``, the
     card's), with ``camera_class_factor`` and ``pattern_p``, when the residuals pass it and show no
     pattern of the image's geometry (the camera-model check's own p-value at least PATTERN_P over
     at least PATTERN_MIN_DOF directions); else None (no class, no known noise, too few directions
-    to tell a pattern, or a misfit)."""
+    to tell a pattern: :func:`_pattern_testable`, or a misfit)."""
     check = record.get("model_check") or {}
-    if not (factor > 1.0 and sigma_px is not None and check.get("dof", 0) >= PATTERN_MIN_DOF):
+    if not (factor > 1.0 and sigma_px is not None and _pattern_testable(record)):
         return None
     test = fit_test(record, factor * sigma_px)
     if not (test["explains"] and check["p_value"] >= PATTERN_P):

@@ -109,12 +109,15 @@ def model_check_record(check) -> dict:
     it does not estimate were ``marginalised`` into the covariance (:func:`pose_record` adds
     ``pose_variance``, (6,) over POSE_NAMES: what that added to the pose's variances);
     ``known_noise_p_value`` the same test against the known centre noise (None: none known; the
-    goodness-of-fit gate reads it, eval.fit_gate)."""
+    goodness-of-fit gate reads it, eval.fit_gate); ``pp_offset_ncp`` the test's power against a
+    principal point off by the lens prior's half-range (solver.model_error.pp_offset_ncp; None:
+    not computable)."""
     explains = bool(check.explains) if check.dof > 0 else None    # nothing the data determine: not tested
     known = None if check.known_log_p is None else float(math.exp(check.known_log_p))
     return {"explains": explains, "p_value": float(check.p_value), "statistic": float(check.statistic),
             "dof": int(check.dof), "tested": list(check.tested), "warning": check.warning(),
-            "marginalised": bool(np.any(check.added != 0.0)), "known_noise_p_value": known}
+            "marginalised": bool(np.any(check.added != 0.0)), "known_noise_p_value": known,
+            "pp_offset_ncp": None if check.pp_offset_ncp is None else float(check.pp_offset_ncp)}
 
 
 SELF_CALIBRATE = ("frame", "sequence")

@@ -33,7 +33,9 @@ class ModelCheck:
     (p, p) the covariance added to the estimator's parameters (zeros unless marginalised),
     ``theta`` {name: posterior mean} of the unestimated intrinsics' departure, ``known_log_p``
     the log p-value of the same score test with the noise a caller knows (chi-square; None when
-    no known noise was given: :func:`model_check`'s ``known_k2``)."""
+    no known noise was given: :func:`model_check`'s ``known_k2``); ``pp_offset_ncp`` the test's
+    power against a principal point off by the prior's half-range (:func:`pp_offset_ncp`; None when
+    the model estimates the principal point or the prior gives it no range)."""
 
     model: str
     tested: tuple
@@ -44,6 +46,7 @@ class ModelCheck:
     added: np.ndarray
     theta: dict
     known_log_p: float | None = None
+    pp_offset_ncp: float | None = None
 
     @property
     def p_value(self) -> float:
@@ -85,6 +88,42 @@ def _score_test(f_info, score, half, sigma_known: bool, dof_res: int, within_pri
     return t / q, q, f_logsf(t / q, q, dof_res), tested
 
 
+def pp_offset_ncp(f_info, half, names) -> float | None:
+    """The smallest noncentrality, over directions in the image plane, of the score test of
+    :func:`_score_test` against a principal point off by the prior's half-range ``half`` of cx and
+    cy: theta~^T (V L V^T) theta~ over the tested directions (prior-scaled eigenvalues L above 1,
+    eigenvectors V), theta~ = sqrt(3) u the offset in prior-scaled units. Why: the number of
+    tested directions says how many combinations of the unestimated intrinsics the data
+    determine, not whether a shifted principal point (a cropped image) would show in them; this
+    does. None when cx or cy is estimated or has no range; 0 when nothing is tested."""
+    if "cx" not in names or "cy" not in names:
+        return None
+    idx = [names.index("cx"), names.index("cy")]
+    if not np.all(half[idx] > 0):
+        return None
+    d = half / math.sqrt(3.0)
+    lam, vec = np.linalg.eigh(f_info * d[:, None] * d[None, :])
+    keep = lam > 1.0
+    if not np.any(keep):
+        return 0.0
+    tested = (vec[:, keep] * lam[keep]) @ vec[:, keep].T
+    return float(3.0 * np.linalg.eigvalsh(tested[np.ix_(idx, idx)])[0])
+
+
+def _posterior(f_info, score, half, g, marginalise: bool):
+    """(mu, added): the unestimated intrinsics' posterior mean departure under the lens prior
+    (uniform over +-``half``, as a Gaussian of its variance) and the covariance that departure adds
+    to the estimated parameters through ``g`` (d estimate / d theta); zeros unless ``marginalise``."""
+    var = half ** 2 / 3.0
+    on = var > 0
+    post = np.zeros((len(half), len(half)))
+    if np.any(on):
+        post[np.ix_(on, on)] = inverse_spd(np.diag(1.0 / var[on]) + f_info[np.ix_(on, on)])
+    mu = -post @ score
+    added = g @ (post + np.outer(mu, mu)) @ g.T if marginalise else np.zeros((g.shape[0],) * 2)
+    return mu, added
+
+
 def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_params: int, sqrt_w, k2: float,
                 lens: LensPrior, principal_point, sigma_known: bool, known_k2: float | None = None) -> ModelCheck:
     """The :class:`ModelCheck` of a fit of ``blocks`` (:class:`solver.refine.Block`, unweighted)
@@ -123,18 +162,13 @@ def model_check(blocks, poses, intr: Intrinsics, model: IntrinsicsModel, n_param
     res = res - je @ (a_inv @ (je.T @ res))               # orthogonal to J_e (see above)
     score = ju.T @ res / k2
     stat, q, log_p, tested = _score_test(f_info, score, half, sigma_known, res.size - n_params)
-    var = half ** 2 / 3.0
-    on = var > 0
-    post = np.zeros((len(names), len(names)))
-    if np.any(on):
-        post[np.ix_(on, on)] = inverse_spd(np.diag(1.0 / var[on]) + f_info[np.ix_(on, on)])
-    mu = -post @ score
-    added = g @ (post + np.outer(mu, mu)) @ g.T if lens.marginalise else np.zeros((n_params,) * 2)
+    mu, added = _posterior(f_info, score, half, g, lens.marginalise)
     explains = not log_p <= math.log(lens.misfit_alpha)
     known = None if known_k2 is None else _score_test(f_info * (k2 / known_k2), score * (k2 / known_k2), half,
                                                       True, 0, lens.marginalise)[2]
     return ModelCheck(model.name, tuple(n for n, t in zip(names, tested) if t), float(stat), q,
-                      float(log_p), explains, added, dict(zip(names, mu.tolist())), known)
+                      float(log_p), explains, added, dict(zip(names, mu.tolist())), known,
+                      pp_offset_ncp(f_info, half, names))
 
 
 def _marker_indicator(marker_of_point: np.ndarray) -> np.ndarray:

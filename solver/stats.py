@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["chi2_logsf", "f_logsf"]
+__all__ = ["chi2_logsf", "chi2_isf", "f_isf", "f_logsf", "ncx2_sf", "ncf_sf", "ncp_for_power"]
 
 _EPS = 1e-15
 _TINY = 1e-300
@@ -86,6 +86,79 @@ def chi2_logsf(x: float, dof: int) -> float:
     if dof < 1:
         raise ValueError(f"dof must be >= 1, got {dof}")
     return _log_gamma_q(0.5 * dof, 0.5 * max(float(x), 0.0))
+
+
+def chi2_isf(p: float, dof: int) -> float:
+    """x with P(chi2_dof > x) = ``p`` (0 < p < 1), to about 1e-10 relative."""
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"p must be in (0, 1), got {p}")
+    return _bisect_up(lambda x: -chi2_logsf(x, dof), -math.log(p))
+
+
+def _poisson_mixture(ncp: float, term) -> float:
+    """sum_j Poisson(j; ncp / 2) term(j), summed until the weights left are below 1e-14: a
+    noncentral chi-square's (or F's) tail from the central ones of dof + 2 j."""
+    half = 0.5 * float(ncp)
+    if half == 0.0:
+        return term(0)
+    total, left = 0.0, 1.0
+    for j in range(int(half + 40.0 * math.sqrt(half) + 60)):
+        w = math.exp(-half + j * math.log(half) - math.lgamma(j + 1.0))
+        total += w * term(j)
+        left -= w
+        if left < 1e-14 and j > half:
+            break
+    return min(total, 1.0)
+
+
+def ncx2_sf(x: float, dof: int, ncp: float) -> float:
+    """P(X > x) of the noncentral chi-square with ``dof`` degrees of freedom and noncentrality
+    ``ncp`` >= 0 (the power of a chi-square test against a departure whose expected statistic is
+    dof + ncp)."""
+    if ncp < 0:
+        raise ValueError(f"ncp must be >= 0, got {ncp}")
+    return _poisson_mixture(ncp, lambda j: math.exp(chi2_logsf(x, dof + 2 * j)))
+
+
+def ncf_sf(x: float, d1: int, d2: int, ncp: float) -> float:
+    """P(F' > x) of the noncentral F, (chi2_d1(ncp) / d1) / (chi2_d2 / d2): the power of an F test
+    whose noise is estimated from d2 residual degrees of freedom."""
+    if ncp < 0:
+        raise ValueError(f"ncp must be >= 0, got {ncp}")
+    return _poisson_mixture(ncp, lambda j: math.exp(f_logsf(x * d1 / (d1 + 2 * j), d1 + 2 * j, d2)))
+
+
+def _bisect_up(f, target: float, lo: float = 0.0, hi: float = 1.0, rel: float = 1e-10) -> float:
+    """The x where the increasing ``f`` reaches ``target``, by bisection after doubling ``hi``."""
+    while f(hi) < target:
+        lo, hi = hi, 2.0 * hi + 1.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) < target else (lo, mid)
+        if hi - lo <= rel * hi:
+            break
+    return 0.5 * (lo + hi)
+
+
+def f_isf(p: float, d1: int, d2: int) -> float:
+    """x with P(F_{d1, d2} > x) = ``p`` (0 < p < 1)."""
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"p must be in (0, 1), got {p}")
+    return _bisect_up(lambda x: -f_logsf(x, d1, d2), -math.log(p))
+
+
+def ncp_for_power(dof: int, level: float, power: float, dof_res: int | None = None) -> float:
+    """The noncentrality at which a chi-square test of ``dof`` degrees of freedom at ``level``
+    (reject when its p-value is below ``level``) rejects with probability ``power``; with
+    ``dof_res``, the F test of T / dof against (dof, dof_res) (the noise estimated from the
+    residuals), which needs more."""
+    if not 0.0 < power < 1.0:
+        raise ValueError(f"power must be in (0, 1), got {power}")
+    if dof_res is None:
+        crit = chi2_isf(level, dof)
+        return _bisect_up(lambda ncp: ncx2_sf(crit, dof, ncp), power, rel=1e-9)
+    crit = f_isf(level, dof, dof_res)
+    return _bisect_up(lambda ncp: ncf_sf(crit, dof, dof_res, ncp), power, rel=1e-9)
 
 
 def f_logsf(x: float, d1: int, d2: int) -> float:

@@ -60,6 +60,7 @@ def faults(w: int, h: int, layout_other):
             "another layout": (layout_other, lambda uv: uv, (w, h)),
             "stretched 1.5x": (None, lambda uv: c + (uv - c) * np.array([1.5, 1.0]), (w, h)),
             "cropped 160/120 px": (None, lambda uv: uv + np.array([160.0, 120.0]), (w, h)),
+            "cropped 80/60 px": (None, lambda uv: uv + np.array([80.0, 60.0]), (w, h)),
             "mirrored": (None, lambda uv: np.column_stack([w - 1 - uv[:, 0], uv[:, 1]]), (w, h)),
             "rotated 90": (None, lambda uv: np.column_stack([uv[:, 1], w - 1 - uv[:, 0]]), (h, w)),
             "rotated 180": (None, lambda uv: np.column_stack([w - 1 - uv[:, 0], h - 1 - uv[:, 1]]), (w, h)),

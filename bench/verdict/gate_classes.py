@@ -3,7 +3,7 @@ faults let through, on the detections the sensor bench kept.
 
     python -m bench.verdict.gate_classes RESULTS.json DATASET [DATASET ...] --factors 1,2,3.95,7.9
         [--effects bayer-jpeg90,...] [--faults "as is,cropped 160/120 px"] [--frames N] [--out FILE.json]
-        [--class-gate] [--pattern-min-dof N] [--left-out-any]
+        [--class-gate] [--pattern-min-dof N] [--pattern-power P] [--left-out-any]
 
 RESULTS.json is a sensor bench results file with its rows (bench/sensor/sensor_effects.py ``--out``:
 each frame's detections through each camera effect, the refinement told the camera); each DATASET
@@ -30,6 +30,7 @@ import numpy as np
 
 from bench.render.fit_gate import _moved_boxes, _row, faults, other_layout
 from dockfactory.core.io import write_json_atomic
+from dockfactory.eval import fit_gate
 from dockfactory.eval.camera_classes import CAMERA_CLASS_FACTORS, camera_class
 from dockfactory.eval.solve_frames import detection_arrays, docking_options, lens_prior_for, solve_frame
 from dockfactory.measure.images import class_docking_options
@@ -98,16 +99,19 @@ def main(argv=None) -> int:
                     help="measure's solve: the card, the class's second test, section shift and noise prior")
     ap.add_argument("--pattern-min-dof", type=int, default=None,
                     help="try the class's test with this many tested directions at least (eval.fit_gate.PATTERN_MIN_DOF)")
+    ap.add_argument("--pattern-power", type=float, default=None,
+                    help="the power against a principal point off by PATTERN_OFFSET lens-prior half-ranges that lets "
+                         "fewer directions test the pattern (eval.fit_gate.PATTERN_POWER; 0: the count alone, the rule before)")
     ap.add_argument("--left-out-any", action="store_true",
                     help="the gate before: a noisy class's fit with centres left out kept however few directions its "
                          "camera-model check has left (eval.fit_gate.LEFT_OUT_NEEDS_PATTERN off)")
     args = ap.parse_args(argv)
     if args.left_out_any:
-        from dockfactory.eval import fit_gate
         fit_gate.LEFT_OUT_NEEDS_PATTERN = False
     if args.pattern_min_dof is not None:
-        from dockfactory.eval import fit_gate
         fit_gate.PATTERN_MIN_DOF = args.pattern_min_dof
+    if args.pattern_power is not None:
+        fit_gate.PATTERN_POWER = args.pattern_power or None
     if args.class_gate:
         args.factors = "1"
     from dockfactory.core.resources import shipped_weights
@@ -117,7 +121,8 @@ def main(argv=None) -> int:
         args.card = figures.centre_noise_px
     results = json.loads(args.results.read_text())["datasets"]
     opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in map(Dataset.open, args.datasets)}
-    out = {"card_px": args.card, "pattern_min_dof": args.pattern_min_dof, "tables": []}
+    out = {"card_px": args.card, "pattern_min_dof": args.pattern_min_dof, "pattern_power": fit_gate.PATTERN_POWER,
+           "tables": []}
     print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | RMS z X / Y / Z | refused |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
     for key, effects in results.items():

@@ -16,6 +16,7 @@ from dockfactory.eval.fit_gate import MISFIT, fit_test
 from dockfactory.eval.solve_frames import KNOWN_LENS, UNCALIBRATED_LENS, docking_options, solve_frame
 from dockfactory.generator.datasets.reader import Dataset
 from dockfactory.solver.synthetic import default_layout, docking_scene
+from dockfactory.solver.stats import ncp_for_power
 
 SIGMA = 0.05
 
@@ -226,6 +227,34 @@ def test_class_test_needs_a_class_a_noise_and_no_geometry_pattern():
     assert fit_gate.class_test({k: v for k, v in rec.items() if k != "model_check"}, sigma, 7.9) is None
 
 
+def _needed_ncp(dof: int, dof_res: int = 15) -> float:
+    """The pp_offset_ncp at which ``dof`` tested directions catch a principal point off by
+    PATTERN_OFFSET prior half-ranges with PATTERN_POWER by the F test of a fit with ``dof_res``
+    residual degrees of freedom (14 centres, 13 parameters: 15; eval.fit_gate._pattern_testable)."""
+    return ncp_for_power(dof, fit_gate.PATTERN_P, fit_gate.PATTERN_POWER, dof_res) / fit_gate.PATTERN_OFFSET ** 2
+
+
+@pytest.mark.parametrize("dof", [1, 2])
+def test_fewer_directions_tell_a_pattern_when_they_would_see_a_crop(dof):
+    """A frame whose camera-model check tests fewer than PATTERN_MIN_DOF directions gets its class's
+    test when those directions would show a principal point off by twice the lens prior's
+    half-range at the pattern's level with 90 % probability (before: never; a mono JPEG design's
+    honest frame, 2 directions with a power of 0.93 there, was refused and failed the design's
+    localization); with less power, as before, none."""
+    rec = {"n_markers": {"A": 7, "B": 7}, "rmse_px": {"A": 0.1, "B": 0.1}, "camera_model": "pinhole"}
+    sigma = 0.1 / 8.0
+    need = _needed_ncp(dof)
+    seen = {**rec, "model_check": {"dof": dof, "p_value": 0.5, "pp_offset_ncp": 1.01 * need}}
+    got = fit_gate.class_test(seen, sigma, 7.9)
+    assert got is not None and got["explains"] and got["pattern_p"] == 0.5
+    unseen = {**rec, "model_check": {"dof": dof, "p_value": 0.5, "pp_offset_ncp": 0.99 * need}}
+    assert fit_gate.class_test(unseen, sigma, 7.9) is None
+    pattern = {**rec, "model_check": {"dof": dof, "p_value": 0.05, "pp_offset_ncp": 100.0 * need}}
+    assert fit_gate.class_test(pattern, sigma, 7.9) is None             # seen, and it looks like a crop
+    none = {**rec, "model_check": {"dof": 0, "p_value": 1.0, "pp_offset_ncp": 0.0}}
+    assert fit_gate.class_test(none, sigma, 7.9) is None
+
+
 def test_the_run_gate_takes_the_runs_class_factor():
     """A run's frame 8x the card: refused at the card, passed at the run's class (its fit_test the
     class's, the card's ratio under ``card``) unless the run's residuals show a geometry pattern."""
@@ -256,18 +285,21 @@ def test_a_class_section_shift_is_the_larger_of_the_cards_and_the_classs_per_axi
     assert camera_classes.class_section_shift("three-chip", None) is None      # nothing measured: none
 
 
-def _gate_leaving_one_out(class_factor: float, dof_after: int):
+def _gate_leaving_one_out(class_factor: float, dof_after: int, ncp_after: float = 0.0):
     """gate() on a fake solve: 14 centres whose first fit is 20x the card (refused; its camera-model
-    check has 1 direction, so the class's test cannot be made), and whose fit without row 3 is 2x
-    it with ``dof_after`` directions left to test."""
+    check has 1 direction without power against a crop, so the class's test cannot be made), and
+    whose fit without row 3 is 2x it with ``dof_after`` directions left to test, of power
+    ``ncp_after`` against a shifted principal point (eval.fit_gate._pattern_testable)."""
     sigma = 0.01
 
     def record(keep):
         n = int(keep.sum())
         rmse = 0.2 if keep[3] else 0.02
         dof = 1 if keep[3] else dof_after
+        ncp = 0.0 if keep[3] else ncp_after
         return {"ok": True, "n_markers": {"A": 7, "B": n - 7}, "rmse_px": {"A": rmse, "B": rmse},
-                "camera_model": "pinhole", "model_check": {"dof": dof, "p_value": 0.9, "known_noise_p_value": 0.9}}
+                "camera_model": "pinhole", "model_check": {"dof": dof, "p_value": 0.9, "known_noise_p_value": 0.9,
+                                                           "pp_offset_ncp": ncp}}
 
     ids = list(range(14))
     solve = lambda keep: (record(keep), {}, [i if keep[i] else None for i in ids])   # noqa: E731
@@ -287,6 +319,8 @@ def test_a_noisy_class_s_fit_with_centres_left_out_and_too_few_directions_is_ref
     assert kept["ok"] and kept["left_out"] == [3]
     tested, _ = _gate_leaving_one_out(4.5, fit_gate.PATTERN_MIN_DOF)
     assert tested["ok"] and tested["left_out"] == [3]
+    powered, _ = _gate_leaving_one_out(4.5, 1, 100.0 * _needed_ncp(1))
+    assert powered["ok"] is False     # the power is the pattern test's (class_test), not the leave-out path's
 
 
 def test_a_bayer_camera_without_jpeg_keeps_its_fit_with_centres_left_out():

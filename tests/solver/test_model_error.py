@@ -12,7 +12,7 @@ import pytest
 
 from dockfactory.core.geometry import pose_components
 from dockfactory.solver import InvalidSolverInput, solve_docking
-from dockfactory.solver.model_error import marker_bias_covariance
+from dockfactory.solver.model_error import marker_bias_covariance, pp_offset_ncp
 from dockfactory.solver.options import DockingOptions, LensPrior
 from dockfactory.solver.synthetic import default_layout, docking_scene
 
@@ -149,3 +149,40 @@ def test_the_check_is_made_again_against_the_known_noise():
         assert plain.model_check.known_log_p is None
         known = solve_docking(LAYOUT, sc.image_centre, correspondences=(IDS, uv), options=floor).model_check
         assert (known.known_log_p < math.log(1e-6)) if flagged else (known.known_log_p > math.log(1e-3)), known
+
+
+def _prior_scaled(info_scaled: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The information whose prior-scaled form (d F d, d = half / sqrt 3) is ``info_scaled``."""
+    d = half / math.sqrt(3.0)
+    return info_scaled / d[:, None] / d[None, :]
+
+
+NAMES = ("cx", "cy", "k1", "k2", "p1", "p2")
+HALF = np.array([50.0, 50.0, 0.2, 0.1, 2e-3, 2e-3])
+
+
+def test_pp_offset_power_is_the_smallest_over_image_directions():
+    """Prior-scaled eigenvalues 9 (cx) and 4 (cy): a principal point off by the prior's half-range
+    along y gives a statistic of 3 x 4 = 12 more (along x 27); a direction the data do not
+    determine (eigenvalue under 1) adds nothing, whatever its size."""
+    info = _prior_scaled(np.diag([9.0, 4.0, 0.5, 0.2, 0.1, 0.1]), HALF)
+    assert pp_offset_ncp(info, HALF, NAMES) == pytest.approx(12.0, rel=1e-9)
+    weak_y = _prior_scaled(np.diag([9.0, 0.9, 5.0, 0.2, 0.1, 0.1]), HALF)
+    assert pp_offset_ncp(weak_y, HALF, NAMES) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_pp_offset_power_of_one_tested_direction_mixing_cx_and_cy_is_zero():
+    """One tested direction (cx + cy) / sqrt 2 with eigenvalue 50: a shift along cx - cy is not
+    seen (0) though the check counts one tested direction in which cx and cy both load."""
+    v = np.zeros(6)
+    v[:2] = 1.0 / math.sqrt(2.0)
+    info = _prior_scaled(50.0 * np.outer(v, v) + 1e-3 * np.eye(6), HALF)
+    assert pp_offset_ncp(info, HALF, NAMES) == pytest.approx(0.0, abs=1e-2)
+
+
+def test_pp_offset_power_is_none_when_the_principal_point_is_estimated_or_fixed():
+    names = ("k1", "k2", "p1", "p2")
+    assert pp_offset_ncp(np.eye(4), HALF[2:], names) is None
+    fixed = HALF.copy()
+    fixed[:2] = 0.0
+    assert pp_offset_ncp(np.eye(6), fixed, NAMES) is None
