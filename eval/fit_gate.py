@@ -28,8 +28,8 @@ GATE_P = 1e-6          # a frame is refused below this p-value (its false alarms
 
 PATTERN_P = 0.1        # the class's test needs the residuals' geometry pattern at least this likely
 PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: no class test, the card's,
-PATTERN_POWER = 0.9    # unless (None: never) the test would catch a principal point off by PATTERN_OFFSET
-PATTERN_OFFSET = 2.0   # lens-prior half-ranges with at least this probability: _pattern_testable)
+PATTERN_POWER = None   # unless the test would catch a principal point off by PATTERN_OFFSET lens-prior
+PATTERN_OFFSET = 2.0   # half-ranges with at least this probability (None, the default: never; _pattern_testable)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
 LEFT_OUT_NEEDS_PATTERN = True   # a camera class with a JPEG keeps a fit with centres left out only
                                 # where the camera-model check can still test PATTERN_MIN_DOF directions
@@ -91,14 +91,16 @@ def _pattern_testable(record: dict) -> bool:
     """Whether the camera-model check of a solved poses ``record`` (its ``model_check``) can tell a
     noisier camera's residuals from an image geometry's pattern: it tests at least
     PATTERN_MIN_DOF directions, or fewer that would show a principal point off by PATTERN_OFFSET
-    lens-prior half-ranges (a cropped image) at PATTERN_P with probability PATTERN_POWER (its
-    ``pp_offset_ncp`` times PATTERN_OFFSET^2 at least the noncentrality that takes; the F test's,
+    lens-prior half-ranges (a cropped image) at PATTERN_P with probability PATTERN_POWER (None, the
+    default: never; its ``pp_offset_ncp`` times PATTERN_OFFSET^2 at least the noncentrality that takes; the F test's,
     with the fit's residual degrees of freedom, which needs more than the chi-square's). Why the
     offset: a principal point within the prior's range is in the pose's marginalised uncertainty;
     at twice it, 3.5 of the prior's standard deviations, the pose is confidently wrong in the
     components it moves. Why both: the count says how many combinations of the intrinsics the
-    data determine, the power whether the one a crop moves is among them
-    (bench/results/fit_gate/README.md, "The pattern's power")."""
+    data determine, the power whether the one a crop moves is among them. Why off by default: at
+    0.9 and two half-ranges it gave honest frames back and let crops of that size through with a
+    confident wrong pose, a miss its 0.9 allows (bench/results/fit_gate/README.md, "The pattern's
+    power")."""
     check = record.get("model_check") or {}
     dof = check.get("dof", 0)
     if dof >= PATTERN_MIN_DOF:

@@ -101,7 +101,7 @@ def main(argv=None) -> int:
                     help="try the class's test with this many tested directions at least (eval.fit_gate.PATTERN_MIN_DOF)")
     ap.add_argument("--pattern-power", type=float, default=None,
                     help="the power against a principal point off by PATTERN_OFFSET lens-prior half-ranges that lets "
-                         "fewer directions test the pattern (eval.fit_gate.PATTERN_POWER; 0: the count alone, the rule before)")
+                         "fewer directions test the pattern (eval.fit_gate.PATTERN_POWER, off by default; 0: off)")
     ap.add_argument("--left-out-any", action="store_true",
                     help="the gate before: a noisy class's fit with centres left out kept however few directions its "
                          "camera-model check has left (eval.fit_gate.LEFT_OUT_NEEDS_PATTERN off)")
@@ -122,6 +122,7 @@ def main(argv=None) -> int:
     results = json.loads(args.results.read_text())["datasets"]
     opened = {f"{d.config.dataset.name}@{d.version_id}": d for d in map(Dataset.open, args.datasets)}
     out = {"card_px": args.card, "pattern_min_dof": args.pattern_min_dof, "pattern_power": fit_gate.PATTERN_POWER,
+           "pattern_offset": fit_gate.PATTERN_OFFSET if fit_gate.PATTERN_POWER else None,
            "tables": []}
     print("| dataset | effect | factor | fault | frames | ok | left out | ok beyond 3 sigma | RMS z X / Y / Z | refused |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)

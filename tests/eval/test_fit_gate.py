@@ -229,20 +229,22 @@ def test_class_test_needs_a_class_a_noise_and_no_geometry_pattern():
 
 def _needed_ncp(dof: int, dof_res: int = 15) -> float:
     """The pp_offset_ncp at which ``dof`` tested directions catch a principal point off by
-    PATTERN_OFFSET prior half-ranges with PATTERN_POWER by the F test of a fit with ``dof_res``
+    PATTERN_OFFSET prior half-ranges with power 0.9 by the F test of a fit with ``dof_res``
     residual degrees of freedom (14 centres, 13 parameters: 15; eval.fit_gate._pattern_testable)."""
-    return ncp_for_power(dof, fit_gate.PATTERN_P, fit_gate.PATTERN_POWER, dof_res) / fit_gate.PATTERN_OFFSET ** 2
+    return ncp_for_power(dof, fit_gate.PATTERN_P, 0.9, dof_res) / fit_gate.PATTERN_OFFSET ** 2
 
 
 @pytest.mark.parametrize("dof", [1, 2])
-def test_fewer_directions_tell_a_pattern_when_they_would_see_a_crop(dof):
-    """A frame whose camera-model check tests fewer than PATTERN_MIN_DOF directions gets its class's
-    test when those directions would show a principal point off by twice the lens prior's
-    half-range at the pattern's level with 90 % probability (before: never; a mono JPEG design's
-    honest frame, 2 directions with a power of 0.93 there, was refused and failed the design's
-    localization); with less power, as before, none."""
+def test_fewer_directions_tell_a_pattern_when_asked_and_they_would_see_a_crop(dof, monkeypatch):
+    """With PATTERN_POWER set, a frame whose camera-model check tests fewer than PATTERN_MIN_DOF
+    directions gets its class's test when those directions would show a principal point off by
+    PATTERN_OFFSET lens-prior half-ranges at the pattern's level with that probability; with less
+    power, none. Off (the default), none whatever the power: the gate as before."""
     rec = {"n_markers": {"A": 7, "B": 7}, "rmse_px": {"A": 0.1, "B": 0.1}, "camera_model": "pinhole"}
     sigma = 0.1 / 8.0
+    strong = {**rec, "model_check": {"dof": dof, "p_value": 0.5, "pp_offset_ncp": 1e6}}
+    assert fit_gate.PATTERN_POWER is None and fit_gate.class_test(strong, sigma, 7.9) is None
+    monkeypatch.setattr(fit_gate, "PATTERN_POWER", 0.9)
     need = _needed_ncp(dof)
     seen = {**rec, "model_check": {"dof": dof, "p_value": 0.5, "pp_offset_ncp": 1.01 * need}}
     got = fit_gate.class_test(seen, sigma, 7.9)
@@ -306,7 +308,7 @@ def _gate_leaving_one_out(class_factor: float, dof_after: int, ncp_after: float 
     return fit_gate.gate(solve, lambda keep, _ids: record(keep), 14, sigma, class_factor)
 
 
-def test_a_noisy_class_s_fit_with_centres_left_out_and_too_few_directions_is_refused():
+def test_a_noisy_class_s_fit_with_centres_left_out_and_too_few_directions_is_refused(monkeypatch):
     """A camera class noisier than the card whose fit passes only with a centre left out, and whose
     camera-model check then has fewer than PATTERN_MIN_DOF directions: refused in one line that says
     to state the principal point (a crop is not told from that camera's noise: cropped white-ring JPEG
@@ -319,6 +321,7 @@ def test_a_noisy_class_s_fit_with_centres_left_out_and_too_few_directions_is_ref
     assert kept["ok"] and kept["left_out"] == [3]
     tested, _ = _gate_leaving_one_out(4.5, fit_gate.PATTERN_MIN_DOF)
     assert tested["ok"] and tested["left_out"] == [3]
+    monkeypatch.setattr(fit_gate, "PATTERN_POWER", 0.9)
     powered, _ = _gate_leaving_one_out(4.5, 1, 100.0 * _needed_ncp(1))
     assert powered["ok"] is False     # the power is the pattern test's (class_test), not the leave-out path's
 
