@@ -31,9 +31,9 @@ PATTERN_MIN_DOF = 3    # ... over at least this many tested directions (fewer: n
 PATTERN_POWER = None   # unless the test would catch a principal point off by PATTERN_OFFSET lens-prior
 PATTERN_OFFSET = 2.0   # half-ranges with at least this probability (None, the default: never; _pattern_testable)
 MAX_LEFT_OUT = 2       # centres the gate may leave out of one frame
-LEFT_OUT_NEEDS_PATTERN = True   # a camera class with a JPEG keeps a fit with centres left out only
+LEFT_OUT_NEEDS_PATTERN = True   # a camera class noisier than the card keeps a fit with centres left out only
                                 # where the camera-model check can still test PATTERN_MIN_DOF directions
-LEFT_OUT_MIN_FACTOR = CAMERA_CLASS_FACTORS["bayer"]   # ... the classes noisier than a Bayer camera alone
+LEFT_OUT_MIN_FACTOR = CAMERA_CLASS_FACTORS["three-chip"]   # ... the classes above this factor (the card's)
 MISFIT = "misfit"      # the failure category of a frame the gate refuses
 POSE_AND_FOCAL = 13    # the parameters every fit estimates: two poses and the focal length
 
@@ -180,13 +180,14 @@ def gate(solve, refit, n_rows: int, sigma_px: float | None, class_factor: float 
 
 def _untestable(record: dict, class_factor: float) -> bool:
     """Whether a fit the gate reached by leaving centres out cannot be told from a crop: its camera
-    class is noisier than a Bayer camera's (``class_factor`` above LEFT_OUT_MIN_FACTOR: the classes
-    with a JPEG) and its camera-model check has fewer than PATTERN_MIN_DOF directions left to test.
-    Such a camera's honest residuals exceed the card's everywhere, so leaving out the centres that
-    stand out most also absorbs an image geometry's pattern (a principal point off centre), and too
-    few directions remain to see it. Why not a Bayer camera's: on six sensor scenes none of its
-    cropped frames passed this way, while the rule refused its honest ones
-    (bench/results/fit_gate/README.md, "white rings through JPEG cameras", "The rule's classes")."""
+    class is noisier than the card's (``class_factor`` above LEFT_OUT_MIN_FACTOR: Bayer, JPEG or both)
+    and its camera-model check has fewer than PATTERN_MIN_DOF directions left to test. Such a
+    camera's honest residuals exceed the card's everywhere, so leaving out the centres that stand
+    out most also absorbs an image geometry's pattern (a principal point off centre), and too few
+    directions remain to see it. A Bayer camera alone was exempt while none of its frames cropped
+    160 / 120 px passed this way; cropped by half that, on thin discs, they did, with confident wrong
+    poses, and uncalibrated (measure's default) the larger crop too (bench/results/fit_gate/README.md,
+    "The rule's classes", "The leave-out rule for a Bayer camera again")."""
     dof = (record.get("model_check") or {}).get("dof", 0)
     return LEFT_OUT_NEEDS_PATTERN and class_factor > LEFT_OUT_MIN_FACTOR and dof < PATTERN_MIN_DOF
 
