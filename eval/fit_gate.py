@@ -92,8 +92,8 @@ def _pattern_testable(record: dict) -> bool:
     noisier camera's residuals from an image geometry's pattern: it tests at least
     PATTERN_MIN_DOF directions, or fewer that would show a principal point off by PATTERN_OFFSET
     lens-prior half-ranges (a cropped image) at PATTERN_P with probability PATTERN_POWER (None, the
-    default: never; its ``pp_offset_ncp`` times PATTERN_OFFSET^2 at least the noncentrality that takes; the F test's,
-    with the fit's residual degrees of freedom, which needs more than the chi-square's). Why the
+    default: never): its ``pp_offset_ncp`` times PATTERN_OFFSET^2 at least the noncentrality the F
+    test needs at the fit's residual degrees of freedom (more than the chi-square's). Why the
     offset: a principal point within the prior's range is in the pose's marginalised uncertainty;
     at twice it, 3.5 of the prior's standard deviations, the pose is confidently wrong in the
     components it moves. Why both: the count says how many combinations of the intrinsics the

@@ -7,7 +7,9 @@ known, and F-distributed when it is estimated from the residuals. Log space, bec
 distorted lens gives p-values far below the smallest double and candidates are ranked by them.
 
 Regularised incomplete gamma and beta functions by series and Lentz continued fractions
-(Numerical Recipes, 3rd ed., 6.2 and 6.4); relative accuracy about 1e-12.
+(Numerical Recipes, 3rd ed., 6.2 and 6.4); relative accuracy about 1e-12. Their inverses by
+bisection, and the noncentral tails (Poisson mixtures of the central ones): a test's power, which
+the goodness-of-fit gate can ask of the camera-model check (eval.fit_gate).
 """
 from __future__ import annotations
 
