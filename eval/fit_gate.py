@@ -47,6 +47,12 @@ def fit_parameters(record: dict) -> float:
     return POSE_AND_FOCAL - 1 + shared / frames if frames else POSE_AND_FOCAL - 1 + shared
 
 
+def residual_dof(record: dict) -> float:
+    """The residual degrees of freedom of the solve of ``record``: 2 per centre it used less
+    :func:`fit_parameters` (what its fit test and its camera-model check's F test count)."""
+    return 2 * sum(record["n_markers"][s] for s in ("A", "B")) - fit_parameters(record)
+
+
 def _dof(dof: float) -> int | float:
     """An integral count as an int, a run's share of the intrinsics to 3 decimals."""
     return int(dof) if float(dof).is_integer() else round(float(dof), 3)
@@ -59,7 +65,7 @@ def fit_test(record: dict, sigma_px: float | None) -> dict:
     ``GATE_NOISE_FACTOR`` times it)."""
     n = {s: record["n_markers"][s] for s in ("A", "B")}
     rss = sum(record["rmse_px"][s] ** 2 * n[s] for s in n)
-    dof = 2 * sum(n.values()) - fit_parameters(record)
+    dof = residual_dof(record)
     if sigma_px is None or not sigma_px > 0 or dof < 1:
         why = "no known centre noise" if dof > 0 else "no degrees of freedom"
         return {"explains": None, "not_tested": why, "dof": _dof(max(dof, 0))}
@@ -106,7 +112,7 @@ def _pattern_testable(record: dict) -> bool:
     if dof >= PATTERN_MIN_DOF:
         return True
     ncp = check.get("pp_offset_ncp")
-    dof_res = round(2 * sum(record["n_markers"].values()) - fit_parameters(record))
+    dof_res = round(residual_dof(record))
     return (PATTERN_POWER is not None and dof >= 1 and ncp is not None and dof_res >= 1
             and ncp * PATTERN_OFFSET ** 2 >= ncp_for_power(dof, PATTERN_P, PATTERN_POWER, dof_res))
 
