@@ -4,6 +4,8 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from dockfactory.core.layout import DISC_SEGMENTS, RING_SEGMENTS, SECTION_FACETS
+
 
 def mesh_object(name: str, verts, faces, smooth: bool = False, collection=None, material_indices=None):
     """An object of ``verts`` (metres) and ``faces``; ``material_indices``: each face's slot in
@@ -22,7 +24,7 @@ def mesh_object(name: str, verts, faces, smooth: bool = False, collection=None, 
     return obj
 
 
-def tube_x(name, x0, x1, radius, segments=256, caps=True, smooth=True, collection=None):
+def tube_x(name, x0, x1, radius, segments=SECTION_FACETS, caps=True, smooth=True, collection=None):
     """Cylinder along +X from x0 to x1 (metres)."""
     a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([np.zeros_like(a), radius * np.sin(a), radius * np.cos(a)], axis=1)
@@ -38,14 +40,14 @@ def tube_x(name, x0, x1, radius, segments=256, caps=True, smooth=True, collectio
     return obj
 
 
-def disc_z(name, radius, segments=96, collection=None):
+def disc_z(name, radius, segments=DISC_SEGMENTS, collection=None):
     """Flat disc in the local XY plane facing +Z, centred at the origin."""
     a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     verts = np.stack([radius * np.cos(a), radius * np.sin(a), np.zeros_like(a)], axis=1)
     return mesh_object(name, verts, [tuple(range(segments))], collection=collection)
 
 
-def cylinder_z(name, radius, z0, z1, segments=64, smooth=True, collection=None):
+def cylinder_z(name, radius, z0, z1, segments=RING_SEGMENTS, smooth=True, collection=None):
     """Closed cylinder along local Z from z0 to z1."""
     a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([radius * np.cos(a), radius * np.sin(a), np.zeros_like(a)], axis=1)

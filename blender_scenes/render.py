@@ -69,11 +69,13 @@ class BlenderRenderer:
         self.handles = build_scene(static, width, height, threads, exr_path)
         self.device = use_device(self.handles.scene, device)
 
-    def render(self, frame: FrameScene, exr_path: str, regions=()) -> tuple[dict[str, float], list[tuple[str, str | None]]]:
+    def render(self, frame: FrameScene, exr_path: str, regions=(), computed=None) -> tuple[dict[str, float], list[tuple]]:
         """Render ``frame`` into the multilayer EXR ``exr_path``, then its marker ``regions``
         (label-aware sampling, :func:`~dockfactory.blender_scenes.crops.render_crops`) into one
-        cropped EXR each (and a coverage EXR each with ``marker_coverage_samples``); (wall seconds
-        of each phase, the (colour, coverage or None) paths in region order)."""
+        cropped EXR each, and with ``marker_coverage_samples`` each region's coverage: the array
+        ``computed`` (a callable taking the crops' paths) gives for it, rendered into a coverage
+        EXR where it gives None (or where there is no ``computed``). Returns (wall seconds of
+        each phase, (colour path, coverage path or array or None) in region order)."""
         t0 = time.perf_counter()
         self.handles.scene.render.filepath = exr_path
         apply_frame(self.handles, frame)
@@ -82,11 +84,17 @@ class BlenderRenderer:
         t2 = time.perf_counter()
         colour = render_crops(self.handles.scene, frame, regions, exr_path) if regions else []
         t3 = time.perf_counter()
-        cover = (render_coverage(self.handles.scene, frame, regions, exr_path)
-                 if regions and frame.render.marker_coverage_samples else [None] * len(colour))
         timings = {"scene_update": t1 - t0, "cycles": t2 - t1, "marker_crops": t3 - t2}
-        if frame.render.marker_coverage_samples:
-            timings["marker_coverage"] = time.perf_counter() - t3
+        cover = [None] * len(colour)
+        if colour and frame.render.marker_coverage_samples:
+            cover = list(computed(colour)) if computed is not None else cover
+            t4 = time.perf_counter()
+            need = [i for i, c in enumerate(cover) if c is None]
+            paths = render_coverage(self.handles.scene, frame, [regions[i] for i in need], exr_path) if need else []
+            for i, path in zip(need, paths):
+                cover[i] = path
+            timings["marker_coverage_geometry"] = t4 - t3
+            timings["marker_coverage"] = time.perf_counter() - t4
         return timings, list(zip(colour, cover))
 
     def state(self, frame: FrameScene) -> dict:

@@ -10,7 +10,7 @@ import numpy as np
 from dockfactory.blender_scenes import coverage
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
-from dockfactory.core.layout import RING_EXTRA_MM, SECTION_PASS_INDEX
+from dockfactory.core.layout import RING_EXTRA_MM, RING_TOP_MM, SECTION_PASS_INDEX
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -180,7 +180,7 @@ def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float)
     disc.pass_index = m.pass_index
     disc.matrix_basis = _matrix(rot, centre)
     base = meshes.cylinder_z(f"ring_{m.id}", (m.diameter_mm / 2 + RING_EXTRA_MM) * MM,
-                             -base_depth_mm * MM, -0.05 * MM)  # top just below the disc
+                             -base_depth_mm * MM, RING_TOP_MM * MM)  # top just below the disc
     base.data.materials.append(ring_material)
     base.pass_index = SECTION_PASS_INDEX[m.section]
     base.matrix_basis = _matrix(rot, centre)

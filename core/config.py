@@ -215,6 +215,7 @@ class RenderConfig:
     marker_adaptive_min_samples: int = 4  # with that adaptive sampling, every pixel at least this many samples; 0 = Cycles' automatic minimum (most of marker_samples at small thresholds)
     marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
     marker_coverage_threshold: float = 0.005  # > 0: that coverage render with adaptive sampling up to marker_coverage_samples (the markers' edges get them, their insides stop early); 0 = every pixel all of them
+    marker_coverage_source: str = "geometry"  # geometry: that coverage computed from the markers' geometry where it applies and the regions' own samples agree, rendered elsewhere | render: always rendered (docs/rendering.md)
     marker_light_smoothing_px: float = 0.7  # > 0: with the coverage correction, the light noise its samples leave on the marker smoothed over a Gaussian of this sigma (px), its exact-coverage edges kept (docs/rendering.md); 0 = off
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
@@ -235,6 +236,11 @@ class RenderConfig:
         """The coverage render's adaptive threshold the frames are rendered with: 0 without a
         coverage render."""
         return self.marker_coverage_threshold if self.rendered_coverage_samples() else 0.0
+
+    def rendered_coverage_source(self) -> str:
+        """Where the coverage correction's coverage comes from in the frames rendered: ``render``
+        without a coverage correction (nothing to compute)."""
+        return self.marker_coverage_source if self.rendered_coverage_samples() else "render"
 
     def rendered_light_smoothing(self) -> float:
         """The marker's light smoothing the frames are rendered with: 0 without the coverage
@@ -327,7 +333,7 @@ IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0
                     ("render", "marker_adaptive_threshold"): 0.0, ("render", "marker_adaptive_min_samples"): 0,
                     ("render", "light_tree"): "off",
                     ("render", "marker_coverage_samples"): 0, ("render", "marker_coverage_threshold"): 0.0,
-                    ("render", "marker_light_smoothing_px"): 0.0,
+                    ("render", "marker_light_smoothing_px"): 0.0, ("render", "marker_coverage_source"): "render",
                     ("dataset", "license"): "cc-by-4.0", ("markers", "ring"): "dark",
                     ("markers", "form"): "puck", ("camera_units", "calibration"): "",
                     ("camera_units", "pixel_aspect"): [1.0, 1.0],
@@ -340,6 +346,7 @@ IDENTITY_NEUTRAL = {("render", "device"): "cpu", ("render", "marker_samples"): 0
 RENDER_DEVICES = ("cpu", "gpu")
 PART_MATERIALS = ("paint", "file")
 LIGHT_TREE_CHOICES = ("off", "markers", "on")
+COVERAGE_SOURCES = ("geometry", "render")
 
 
 @dataclass(frozen=True)
@@ -373,6 +380,7 @@ class Config:
             d["render"]["marker_coverage_samples"] = self.render.rendered_coverage_samples()
             d["render"]["marker_coverage_threshold"] = self.render.rendered_coverage_threshold()
             d["render"]["marker_light_smoothing_px"] = self.render.rendered_light_smoothing()
+            d["render"]["marker_coverage_source"] = self.render.rendered_coverage_source()
             d["render"]["marker_adaptive_threshold"] = self.render.rendered_adaptive_threshold()
             d["render"]["marker_adaptive_min_samples"] = self.render.rendered_adaptive_min_samples()
         for (table, key), neutral in ([] if full else IDENTITY_NEUTRAL.items()):
@@ -467,6 +475,7 @@ def build_dataclass(cls, data, source: str, table: str | None = None):
 def config_from_dict(data: dict, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config`; errors name ``source``. ``[render] light_tree`` and
     ``marker_coverage_samples`` / ``marker_coverage_threshold`` / ``marker_light_smoothing_px`` /
+    ``marker_coverage_source`` (``render`` without a coverage correction) /
     ``marker_adaptive_threshold`` / ``marker_adaptive_min_samples`` are the ones the frames render
     with (without label-aware sampling ``markers`` is ``off``, the coverage samples and the
     adaptive threshold 0, without those samples the coverage threshold and the smoothing 0, without an adaptive threshold its minimum 0, and the
@@ -477,6 +486,7 @@ def config_from_dict(data: dict, source: str = "<config>") -> Config:
                                  marker_coverage_samples=cfg.render.rendered_coverage_samples(),
                                  marker_coverage_threshold=cfg.render.rendered_coverage_threshold(),
                                  marker_light_smoothing_px=cfg.render.rendered_light_smoothing(),
+                                 marker_coverage_source=cfg.render.rendered_coverage_source(),
                                  marker_adaptive_threshold=cfg.render.rendered_adaptive_threshold(),
                                  marker_adaptive_min_samples=cfg.render.rendered_adaptive_min_samples())
     return dataclasses.replace(cfg, render=render)
@@ -565,7 +575,8 @@ def _check_at_most(source, table, key, value, limit, why: str) -> None:
 
 def _check_marker_coverage(source, rc: "RenderConfig") -> None:
     """[render] marker_coverage_samples: 0 or a sample count (inert without label-aware sampling);
-    marker_coverage_threshold: 0 or an adaptive threshold below 1; marker_light_smoothing_px: 0 or
+    marker_coverage_threshold: 0 or an adaptive threshold below 1; marker_coverage_source: one of
+    :data:`COVERAGE_SOURCES`; marker_light_smoothing_px: 0 or
     a sigma up to :data:`MAX_LIGHT_SMOOTHING_PX`."""
     _check_positive(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, allow_zero=True)
     _check_at_most(source, "render", "marker_coverage_samples", rc.marker_coverage_samples, MAX_SAMPLES,
@@ -574,6 +585,9 @@ def _check_marker_coverage(source, rc: "RenderConfig") -> None:
     if rc.marker_coverage_threshold >= 1.0:
         raise _err(source, "render", "marker_coverage_threshold",
                    f"{rc.marker_coverage_threshold} is not below 1 (a noise threshold: 0.005 is the default, 0 = off)")
+    if rc.marker_coverage_source not in COVERAGE_SOURCES:
+        raise _err(source, "render", "marker_coverage_source",
+                   f"{rc.marker_coverage_source!r} is not one of {', '.join(COVERAGE_SOURCES)}")
     _check_positive(source, "render", "marker_light_smoothing_px", rc.marker_light_smoothing_px, allow_zero=True)
     _check_at_most(source, "render", "marker_light_smoothing_px", rc.marker_light_smoothing_px, MAX_LIGHT_SMOOTHING_PX,
                    "it would reach across a small marker")

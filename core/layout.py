@@ -29,6 +29,10 @@ DEFAULT_LAYOUT_A = ((50.0, -53.0), (100.0, -32.0), (62.0, -7.0), (130.0, 10.0),
 DEFAULT_LAYOUT_B = ((52.0, -42.0), (108.0, -19.0), (68.0, 3.0), (140.0, 29.0),
                     (48.0, 41.0), (96.0, 60.0), (158.0, -56.0))
 RING_EXTRA_MM = 2.5  # the ring around each coloured disc
+RING_TOP_MM = -0.05  # the ring base's top face, this far along the normal from the disc's top face
+# the meshes' polygons (blender_scenes.meshes): a disc, a ring base, a section body about its axis;
+# the coverage computed from the geometry (generator.coverage_geometry) follows the same polygons
+DISC_SEGMENTS, RING_SEGMENTS, SECTION_FACETS = 96, 64, 256
 RING_BASE_DEPTH_MM = 2.5  # the ring base (a puck under the disc) reaches this far below the disc's top face
 BASE_EMBED_MM = 0.05      # how far a marker's base reaches into the section, where it stands highest over it
 # A marker's physical form ([markers] form): a raised puck (the disc on a dark cylinder whose side

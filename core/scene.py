@@ -212,6 +212,9 @@ class RenderSettings:
     # > 0: the light noise the coverage correction leaves on the marker smoothed over a Gaussian of
     # this sigma in px (generator.marker_coverage)
     marker_light_smoothing_px: float = dataclasses.field(default=0.0, metadata={OMIT_IF_DEFAULT: True})
+    # geometry: that coverage computed from the markers' geometry where it applies and the region's
+    # own samples agree, rendered elsewhere (generator.coverage_geometry) | render: always rendered
+    marker_coverage_source: str = dataclasses.field(default="render", metadata={OMIT_IF_DEFAULT: True})
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from dockfactory.core.names import MIN_CHROMA
 from dockfactory.core.scene import FrameScene, StaticScene
 from dockfactory.generator.exr import read_class_coverage, read_passes, read_region, read_rgb, write_compact
 from dockfactory.generator.labels import frame_labels, marker_pinhole_outlines
+from dockfactory.generator.coverage_geometry import geometry_coverages
 from dockfactory.generator.marker_coverage import corrected_region
 from dockfactory.generator.marker_regions import composite, marker_halos
 
@@ -76,15 +77,24 @@ def _file_record(rel: str, data: bytes) -> dict:
     return {"path": rel, "bytes": len(data), "sha256": sha256_bytes(data)}
 
 
-def region_colour(crop_exr, coverage_exr=None, smoothing_px: float = 0.0) -> np.ndarray:
-    """(h, w, 3) float32 linear colour of a marker region's render; with its coverage render,
-    corrected by the exact coverage, the light noise left smoothed over ``smoothing_px``
-    (generator.marker_coverage)."""
-    if coverage_exr is None:
+def region_colour(crop_exr, coverage=None, smoothing_px: float = 0.0) -> np.ndarray:
+    """(h, w, 3) float32 linear colour of a marker region's render; with its coverage (the path
+    of its coverage render, or the (h, w, 2) array computed from the geometry), corrected by that
+    exact coverage, the light noise left smoothed over ``smoothing_px`` (generator.marker_coverage)."""
+    if coverage is None:
         return read_rgb(crop_exr)
     region = read_region(crop_exr)
-    return corrected_region(region.rgb, region.noisy, region.coverage, read_class_coverage(coverage_exr),
-                            smoothing_px)
+    exact = coverage if isinstance(coverage, np.ndarray) else read_class_coverage(coverage)
+    return corrected_region(region.rgb, region.noisy, region.coverage, exact, smoothing_px)
+
+
+def computed_coverage(frame: FrameScene, static: StaticScene, regions, crop_exrs) -> list:
+    """Each marker region's exact coverage computed from the geometry, or None where it must be
+    rendered (generator.coverage_geometry.geometry_coverages, judged by the coverage of the
+    crops' own samples in ``crop_exrs``); all None unless ``marker_coverage_source`` is geometry."""
+    if frame.render.marker_coverage_source != "geometry":
+        return [None] * len(regions)
+    return geometry_coverages(frame, static, regions, [read_region(p).coverage for p in crop_exrs])
 
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,

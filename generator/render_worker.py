@@ -22,7 +22,7 @@ import time
 import traceback
 
 from dockfactory.core.scene import FrameScene, StaticScene, from_dict
-from dockfactory.generator.frame_output import finish_frame
+from dockfactory.generator.frame_output import computed_coverage, finish_frame
 from dockfactory.generator.marker_regions import marker_regions
 
 
@@ -145,7 +145,8 @@ class _Session:
             self.n_rendered += 1
             regions = marker_regions(frame, self.static)
             t0, c0 = time.perf_counter(), time.process_time()
-            timings, crop_paths = self.renderer.render(frame, exr_path, regions)
+            timings, crop_paths = self.renderer.render(frame, exr_path, regions,
+                                                       lambda paths: computed_coverage(frame, self.static, regions, paths))
             render_cpu = time.process_time() - c0
         except Exception as exc:  # reported to the job, which decides to retry or fail
             self.replies.wait()

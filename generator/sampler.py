@@ -460,7 +460,8 @@ def render_settings(render: RenderConfig) -> RenderSettings:
                           light_tree=render.rendered_light_tree(),
                           marker_coverage_samples=render.rendered_coverage_samples(),
                           marker_coverage_threshold=render.rendered_coverage_threshold(),
-                          marker_light_smoothing_px=render.rendered_light_smoothing())
+                          marker_light_smoothing_px=render.rendered_light_smoothing(),
+                          marker_coverage_source=render.rendered_coverage_source())
 
 
 def _single_geometry(cfg: Config, spec: FrameSpec, static: StaticScene, lens: UnitLens):

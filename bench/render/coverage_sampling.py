@@ -1,13 +1,14 @@
 """The coverage render's settings side by side: how close each gets to the converged coverage, and at what cost.
 
     python -m bench.render.coverage_sampling CONFIG [--frames 3] [--truth 1024] \
-        [--setting NAME:SAMPLES:THRESHOLD ...] [--out coverage.json]
+        [--setting NAME:SAMPLES:THRESHOLD ...] [--geometry] [--out coverage.json]
 
 Renders the first ``--frames`` frames of CONFIG (with label-aware sampling) once per setting in
 one render worker each: ``[render] marker_coverage_samples`` = SAMPLES and
 ``marker_coverage_threshold`` = THRESHOLD (0: every pixel every sample), and once more at
 ``--truth`` samples without adaptive sampling (the converged coverage). Everything else is the
-config's, so the crops and their own sampled coverage are the same in every setting. Per setting,
+config's, so the crops and their own sampled coverage are the same in every setting; ``--geometry``
+adds the coverage computed from the markers' geometry (generator.coverage_geometry). Per setting,
 over the marker pixels the truth puts on an edge (coverage of the disc or ring strictly between
 0.001 and 0.999, both classes):
 
@@ -27,6 +28,7 @@ import dataclasses
 import glob
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +38,10 @@ from dockfactory.core.config import load_config
 from dockfactory.core.io import write_json_atomic
 from dockfactory.core.scene import to_dict
 from dockfactory.generator.render_job import worker_init_request
+from dockfactory.generator.coverage_geometry import frame_outlines, region_coverage
 from dockfactory.generator.exr import read_class_coverage
+from dockfactory.generator.marker_regions import marker_regions
+from dockfactory.generator.random_draws import static_scene
 from dockfactory.generator.sampler import frame_plan, sample_frame
 from dockfactory.generator.worker_pool import WorkerProcess
 
@@ -79,7 +84,7 @@ def render_setting(cfg, frames, samples: int, threshold: float, root: Path) -> d
     try:
         for k, frame in enumerate(frames):
             render = dataclasses.replace(frame.render, marker_coverage_samples=samples,
-                                         marker_coverage_threshold=threshold)
+                                         marker_coverage_threshold=threshold, marker_coverage_source="render")
             reply = proc.request({"op": "render", "frame": to_dict(dataclasses.replace(frame, render=render))},
                                  TIMEOUT_S)
             if not reply.get("ok"):
@@ -89,6 +94,21 @@ def render_setting(cfg, frames, samples: int, threshold: float, root: Path) -> d
             got["crop"].append(_scratch_coverage(proc.pid, k, "crop"))
     finally:
         proc.close()
+    return got
+
+
+def geometry_setting(cfg, frames, truth: dict) -> dict:
+    """The coverage computed from the geometry (generator.coverage_geometry) for the regions the
+    worker rendered (the same marker_regions), with the truth run's crops: the rows of
+    :func:`render_setting`; seconds: the computation's per frame."""
+    static = static_scene(cfg)
+    got = {"cov": [], "crop": truth["crop"], "seconds": []}
+    for frame in frames:
+        t0 = time.perf_counter()
+        outlines = frame_outlines(frame, static)
+        got["cov"].append([region_coverage(outlines, r, frame.render.filter_width_px)
+                           for r in marker_regions(frame, static)])
+        got["seconds"].append(time.perf_counter() - t0)
     return got
 
 
@@ -118,6 +138,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--truth", type=int, default=1024)
     ap.add_argument("--setting", action="append", type=parse_setting, default=None)
+    ap.add_argument("--geometry", action="store_true",
+                    help="a row for the coverage computed from the geometry (no render)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     settings = args.setting or [("fixed128", 128, 0.0), ("default", 128, 0.005), ("adaptive256", 256, 0.005)]
@@ -128,6 +150,8 @@ def main(argv=None) -> int:
         rows = {name: {"samples": n, "threshold": thr,
                        **compare(render_setting(cfg, frames, n, thr, Path(tmp) / name), truth)}
                 for name, n, thr in settings}
+    if args.geometry:
+        rows["geometry"] = {"samples": 0, "threshold": 0.0, **compare(geometry_setting(cfg, frames, truth), truth)}
     print(f"{'setting':12s} {'samples':>7s} {'thresh':>7s} {'edge px':>8s} {'rms':>8s} {'sampled':>8s} {'cov s':>6s}")
     for name, r in rows.items():
         print(f"{name:12s} {r['samples']:7d} {r['threshold']:7.3f} {r['edge_px']:8d} {r['rms']:8.5f} "

@@ -25,7 +25,8 @@ CONFIG = {
                "marker_adaptive_threshold": 0.0,
                "frame_timeout_s": TIMEOUT_S},
 }
-NAMES = ("crops", "coverage", "coverage_denoised", "coverage_adaptive", "coverage_smoothed", "converged")
+NAMES = ("crops", "coverage", "coverage_denoised", "coverage_adaptive", "coverage_smoothed", "coverage_geometry",
+         "converged")
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +37,7 @@ def rendered(tmp_path_factory):
                 "coverage_denoised": {"marker_coverage_samples": 128, "marker_denoise": "fast"},
                 "coverage_adaptive": {"marker_coverage_samples": 128, "marker_coverage_threshold": 0.005},
                 "coverage_smoothed": {"marker_coverage_samples": 128, "marker_light_smoothing_px": 0.7},
+                "coverage_geometry": {"marker_coverage_samples": 128, "marker_coverage_source": "geometry"},
                 "converged": {"marker_samples": 0, "samples": 128, "denoise": "off", "light_tree": "on"}}
     root = tmp_path_factory.mktemp("cov") / "ds"
     proc = start_worker(cfg, root, TIMEOUT_S)
@@ -67,12 +69,12 @@ def _marker_errors(root, name):
     return np.array(rows)
 
 
-@pytest.mark.parametrize("name", ["coverage", "coverage_denoised", "coverage_adaptive"])
+@pytest.mark.parametrize("name", ["coverage", "coverage_denoised", "coverage_adaptive", "coverage_geometry"])
 def test_the_correction_takes_most_of_the_edge_noise_out(rendered, name):
     """Summed over the whole markers (6 in this frame), the edge pixels' squared error falls under
     0.6x the uncorrected crops' (measured 0.28x; without the denoiser, or with it and the correction
     on the colour before it, or with the coverage rendered adaptively: its samples spent at the
-    edges, each pixel's coverage the mean of its own samples)."""
+    edges, each pixel's coverage the mean of its own samples, or computed from the geometry)."""
     rows = _marker_errors(rendered, name)
     assert len(rows) >= 5
     assert rows[:, 1].sum() < 0.6 * rows[:, 0].sum(), rows
