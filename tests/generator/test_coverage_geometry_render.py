@@ -15,7 +15,7 @@ def _config(form):
         "dataset": {"name": "coverage-geometry-check", "seed": 11, "frames": 2},
         "conditions": {"normal": 1, "low_light": 0, "occlusion": 0, "glare": 0},
         "image": {"width": 480, "height": 360},
-        "camera": {"focal_px": [900.0, 1000.0], "distance_mm": [1000.0, 1100.0], "margin_px": 8.0},
+        "camera": {"focal_px": [600.0, 660.0], "distance_mm": [1000.0, 1100.0], "margin_px": 8.0},
         "markers": {"form": form}}, "coverage-geometry-check")
 
 
