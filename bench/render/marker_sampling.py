@@ -51,10 +51,11 @@ def detections(root: Path, weights: str | None) -> dict:
 
 
 def render_seconds(root: Path) -> dict:
-    """Median wall seconds per frame: Cycles (frame + crops, with their coverage renders) and the
-    whole frame."""
+    """Median wall seconds per frame: Cycles (frame + crops, with their coverage rendered or
+    computed from the geometry) and the whole frame."""
     rows = [json.loads(line) for line in (root / "logs" / "timings.jsonl").read_text().splitlines() if line.strip()]
-    crops = [r.get("marker_crops", 0.0) + r.get("marker_coverage", 0.0) for r in rows]
+    crops = [r.get("marker_crops", 0.0) + r.get("marker_coverage", 0.0) + r.get("marker_coverage_geometry", 0.0)
+             for r in rows]
     cyc = [r["cycles"] + c for r, c in zip(rows, crops)]
     return {"frames": len(rows), "cycles_s": float(np.median(cyc)), "total_s": float(np.median([r["total"] for r in rows])),
             "crops_s": float(np.median(crops))}
@@ -77,9 +78,17 @@ def measure(root: Path, weights: str | None) -> dict:
             "marker_adaptive_threshold": ds.config.render.marker_adaptive_threshold,
             "marker_adaptive_min_samples": ds.config.render.marker_adaptive_min_samples,
             "marker_coverage_samples": ds.config.render.marker_coverage_samples,
+            "marker_coverage_source": ds.config.render.marker_coverage_source,
             "sampling_pattern": ds.config.render.sampling_pattern,
             "rows": rows, "centres": centres, "timing": render_seconds(root),
             "true": {fid: ds.labels[fid]["pose_b_in_d"] for fid in ds.frames("test")}}
+
+
+def _coverage_source(entry: dict) -> str:
+    """How a dataset's coverage correction got its coverage: rendered at its samples, or from the
+    geometry (where the geometry did not apply, rendered at them)."""
+    n = entry["marker_coverage_samples"]
+    return f"from the geometry (else {n})" if entry.get("marker_coverage_source") == "geometry" else f"{n}"
 
 
 def centre_stats(errs: np.ndarray) -> dict:
@@ -153,7 +162,7 @@ def table(results: dict) -> list[str]:
                 + (f", adaptive {e['marker_adaptive_threshold']:g}" if e["marker_adaptive_threshold"] else "") \
                 + (f" from {e['marker_adaptive_min_samples']}" if e.get("marker_adaptive_min_samples") else "") \
                 + (f", {e['sampling_pattern']}" if e["sampling_pattern"] != "tabulated_sobol" else "") \
-                + (f", coverage {e['marker_coverage_samples']}" if e.get("marker_coverage_samples") else "")
+                + (f", coverage {_coverage_source(e)}" if e.get("marker_coverage_samples") else "")
             lines.append(
                 f"| {scene} | {e['name']}@{e['version']} | {what} | {e['timing']['cycles_s']:.2f} | "
                 f"{e['timing']['cycles_s'] / base['timing']['cycles_s']:.2f} | {c['median_px']:.4f} / {c['rms_px']:.4f} | "
@@ -223,7 +232,7 @@ def run_scene(dirs: list[str], weights: str | None, boot: int, any_reference: bo
     for m, d in zip(measured, dirs):
         entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise",
                                    "marker_adaptive_threshold", "marker_adaptive_min_samples", "marker_coverage_samples",
-                                   "sampling_pattern", "timing")}
+                                   "marker_coverage_source", "sampling_pattern", "timing")}
         entry["name"] = Path(d).name
         entry["cmp"] = compare(ref, m, boot)
         out.append(entry)
