@@ -94,7 +94,7 @@ def computed_coverage(frame: FrameScene, static: StaticScene, regions, crop_exrs
     crops' own samples in ``crop_exrs``); all None unless ``marker_coverage_source`` is geometry."""
     if frame.render.marker_coverage_source != "geometry":
         return [None] * len(regions)
-    return geometry_coverages(frame, static, regions, [read_region(p).coverage for p in crop_exrs])
+    return geometry_coverages(frame, static, regions, [read_class_coverage(p) for p in crop_exrs])
 
 
 def finish_frame(frame: FrameScene, static: StaticScene, exr_path, root, keep_exr: bool,
