@@ -10,7 +10,7 @@ import numpy as np
 from dockfactory.blender_scenes import coverage
 from dockfactory.blender_scenes import materials as mats
 from dockfactory.blender_scenes import meshes
-from dockfactory.core.layout import RING_EXTRA_MM, RING_TOP_MM, SECTION_PASS_INDEX
+from dockfactory.core.layout import RING_EXTRA_MM, RING_TOP_MM, SECTION_PASS_INDEX, marker_basis
 from dockfactory.core.scene import (
     CLUTTER_KINDS,
     CLUTTER_SLOTS,
@@ -40,14 +40,6 @@ class SceneHandles:
     floor: object = None
     wall: object = None
     world: object = None
-
-
-def _basis_from_normal(n):
-    """Rotation (3, 3) whose +Z is the unit normal ``n``."""
-    n = np.asarray(n, dtype=float)
-    x = np.cross([1.0, 0.0, 0.0], n) if abs(n[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], n)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(n, x), n], axis=1)
 
 
 def _matrix(rotation, translation_m):
@@ -173,7 +165,7 @@ def _build_marker(m, disc_material, ring_material, b_root, base_depth_mm: float)
     """A marker's disc and the ring base under it, reaching ``base_depth_mm`` below the disc's top
     face (a puck, or a flat plate: core.layout.base_depth_mm); B's markers are parented to ``b_root``.
     Returns (disc, ring base)."""
-    rot = _basis_from_normal(m.normal)
+    rot = marker_basis(m.normal)
     centre = np.array(m.center_mm) * MM
     disc = meshes.disc_z(f"marker_{m.id}", m.diameter_mm / 2 * MM)
     disc.data.materials.append(disc_material)

@@ -158,12 +158,19 @@ def layout_problems(markers, min_spacing_factor: float = 1.5,
     return problems
 
 
+def marker_basis(normal) -> np.ndarray:
+    """(3, 3) rotation whose columns are the marker's x, y and its unit ``normal`` (+Z): the frame
+    its meshes are built in (blender_scenes.scene_builder) and its outline drawn in."""
+    n = np.asarray(normal, dtype=np.float64)
+    x = np.cross([1.0, 0.0, 0.0], n) if abs(n[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], n)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(n, x), n], axis=1)
+
+
 def marker_outline(marker: Marker, n: int = OUTLINE_POINTS) -> np.ndarray:
     """Edge of the coloured disc (n, 3) mm in the marker's section frame."""
-    normal = np.asarray(marker.normal)
-    x = np.cross([1.0, 0.0, 0.0], normal) if abs(normal[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], normal)
-    x /= np.linalg.norm(x)
-    y = np.cross(normal, x)
+    basis = marker_basis(marker.normal)
+    x, y = basis[:, 0], basis[:, 1]
     a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
     r = marker.diameter_mm / 2.0
     return np.asarray(marker.center_mm) + r * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)

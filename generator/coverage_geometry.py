@@ -21,7 +21,7 @@ import numpy as np
 from dockfactory.core.cv import cv2
 from dockfactory.core.geometry import project_points
 from dockfactory.core.layout import (DISC_SEGMENTS, RING_EXTRA_MM, RING_SEGMENTS, RING_TOP_MM, SECTION_FACETS,
-                                     Marker)
+                                     Marker, marker_basis)
 from dockfactory.core.scene import FrameScene, StaticScene
 
 BLACKMAN_HARRIS = (0.35875, 0.48829, 0.14128, 0.01168)
@@ -44,25 +44,20 @@ def filter_cdf(u: np.ndarray, width_px: float) -> np.ndarray:
             - a3 * np.sin(3 * tau) / (6 * np.pi)) / a0
 
 
+def filter_density(t: np.ndarray) -> np.ndarray:
+    """The Blackman-Harris window (unnormalised) at ``t`` in [-1, 1] of its support."""
+    tau = np.pi * (np.asarray(t, dtype=np.float64) + 1.0)
+    a0, a1, a2, a3 = BLACKMAN_HARRIS
+    return a0 - a1 * np.cos(tau) + a2 * np.cos(2 * tau) - a3 * np.cos(3 * tau)
+
+
 @functools.lru_cache(maxsize=8)
 def filter_quadrature(width_px: float, n: int = QUADRATURE_NODES) -> tuple[np.ndarray, np.ndarray]:
     """(offsets (n,), weights (n,) summing to 1): Gauss-Legendre on the filter's support, each
     weight times the filter's density there (the y integral of a pixel's share)."""
     x, w = np.polynomial.legendre.leggauss(n)
-    t = (x + 1.0) / 2.0
-    a0, a1, a2, a3 = BLACKMAN_HARRIS
-    tau = 2.0 * np.pi * t
-    density = a0 - a1 * np.cos(tau) + a2 * np.cos(2 * tau) - a3 * np.cos(3 * tau)
-    weights = w * density
+    weights = w * filter_density(x)
     return x * width_px, weights / weights.sum()
-
-
-def _basis(normal) -> np.ndarray:
-    """(3, 3) columns x, y, n: the marker's mesh frame (scene_builder._basis_from_normal)."""
-    n = np.asarray(normal, dtype=np.float64)
-    x = np.cross([1.0, 0.0, 0.0], n) if abs(n[0]) < 0.9 else np.cross([0.0, 1.0, 0.0], n)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(n, x), n], axis=1)
 
 
 def _circle(marker: Marker, radius_mm: float, segments: int, depth_mm: float) -> np.ndarray:
@@ -70,7 +65,7 @@ def _circle(marker: Marker, radius_mm: float, segments: int, depth_mm: float) ->
     along the marker's normal from its centre (negative: below the disc's top face)."""
     a = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     local = np.stack([radius_mm * np.cos(a), radius_mm * np.sin(a), np.full_like(a, depth_mm)], axis=1)
-    return np.asarray(marker.center_mm) + local @ _basis(marker.normal).T
+    return np.asarray(marker.center_mm) + local @ marker_basis(marker.normal).T
 
 
 def _down_to_cylinder(top: np.ndarray, normal, radius_mm: float, limit_mm: float) -> np.ndarray:
