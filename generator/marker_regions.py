@@ -25,10 +25,12 @@ from dockfactory.core.geometry import project_points
 from dockfactory.core.layout import RING_BASE_DEPTH_MM, RING_EXTRA_MM, Marker, marker_outline
 from dockfactory.core.scene import FrameScene, StaticScene
 
-HALO_RADII = 1.4        # the halo's radius in disc radii (the refinement reads out to 1.3), at least the ring's
+HALO_RADII = 1.3        # the halo's radius in disc radii (what the refinement reads), at least the ring's
 HALO_PX = 1             # the crop's full weight reaches this far beyond the halo's outline
 FEATHER_PX = 3          # then falls linearly to 0 over this many pixels
-REGION_MARGIN_PX = HALO_PX + FEATHER_PX + 2   # around each halo: the blend and the pixel filter's reach
+# around each halo: the blend's reach, no more (a border render's pixel draws its filter's samples
+# beyond the border as a whole frame's does: its edge pixels are the whole frame's)
+REGION_MARGIN_PX = HALO_PX + FEATHER_PX
 # A crop render's fixed cost (scene sync, kernel set-up, EXR write and read) in pixel-samples:
 # about 0.1 s of 2-core wall time at about 1.2 us per pixel-sample (docs/rendering.md).
 CROP_OVERHEAD_PIXEL_SAMPLES = 100_000

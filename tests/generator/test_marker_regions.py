@@ -166,19 +166,24 @@ def test_composite_takes_the_crop_on_the_halos_keeps_the_frame_elsewhere_and_ref
 
 
 def test_each_region_holds_the_whole_blend_of_its_markers(frames):
-    """The weight reaches 0 at least 2 px inside every region's border that is not the canvas's,
-    so no marker's blend is cut by its rectangle and no region blends another's markers."""
+    """Every pixel any marker's blend reaches (weight > 0 over the whole canvas) lies in a region,
+    so no blend is cut by its rectangle, though the rectangles end where the feather does."""
     cfg, fs = frames
     static = static_scene(cfg)
     for f in fs:
         halos = marker_halos(f, static)
         _, _, wc, hc = f.camera.canvas()
+        whole = halo_weights(halos, Region(0, 0, wc, hc))
+        covered = np.zeros_like(whole, dtype=bool)
         for r in marker_regions(f, static):
-            w = halo_weights(halos, r)
-            assert w.max() == 1.0
-            for edge, at_canvas in ((w[:, :2], r.x0 == 0), (w[:, -2:], r.x1 == wc), (w[:2], r.y0 == 0),
-                                    (w[-2:], r.y1 == hc)):
-                assert at_canvas or np.all(edge == 0)
+            assert halo_weights(halos, r).max() == 1.0
+            covered[r.y0:r.y1, r.x0:r.x1] = True
+        assert whole.max() == 1.0 and np.all(whole[~covered] == 0)
+        inner = covered
+        for _ in range(2):   # the regions' last two pixels; the canvas's own edge is no region's edge
+            padded = np.pad(inner, 1, constant_values=True)
+            inner = inner & padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:]
+        assert whole[covered & ~inner].max() > 0   # the feather reaches them: no spare margin
 
 
 def test_off_renders_no_region(frames):

@@ -89,7 +89,10 @@ def _exr(root, name):
 def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(setup, rendered):
     """Pixel for pixel (the kept EXR, half floats): where the blend is 1 the crops equal a whole
     frame rendered at the crops' samples without the denoiser and with the light tree (so the
-    border lands on the right pixels, and the crops were rendered with the tree), and wherever the blend is 0 the frame is the one rendered without crops."""
+    border lands on the right pixels, and the crops were rendered with the tree); across the
+    feather, out to the rectangle's own edge pixels, the blend of those two frames (to half-float
+    rounding: a border render's edge pixels are the whole frame's, so the rectangle needs no margin
+    beyond the feather); and wherever the blend is 0 the frame is the one rendered without crops."""
     cfg, frames = setup
     root, _ = rendered
     crops, plain, uniform = (_exr(root, n).rgb for n in ("crops", "plain", "uniform"))
@@ -103,6 +106,12 @@ def test_region_interiors_are_the_uniform_render_and_the_rest_is_the_plain_one(s
         assert inner.sum() > 100
         assert np.array_equal(crops[r.y0:r.y1, r.x0:r.x1][inner], uniform[r.y0:r.y1, r.x0:r.x1][inner])
         assert not np.array_equal(crops[r.y0:r.y1, r.x0:r.x1][inner], plain[r.y0:r.y1, r.x0:r.x1][inner])
+        feather = (w > 0) & (w < 1)
+        ys, xs = np.nonzero(feather)   # the feather reaches within a pixel of the rectangle's edge
+        assert min(ys.min(), xs.min(), w.shape[0] - 1 - ys.max(), w.shape[1] - 1 - xs.max()) <= 1
+        p, u = plain[r.y0:r.y1, r.x0:r.x1][feather], uniform[r.y0:r.y1, r.x0:r.x1][feather]
+        want = p + w[feather][:, None] * (u - p)
+        np.testing.assert_allclose(crops[r.y0:r.y1, r.x0:r.x1][feather], want, rtol=3e-3, atol=1e-4)
         covered[r.y0:r.y1, r.x0:r.x1] = w > 0
     assert np.array_equal(crops[~covered], plain[~covered])
 
