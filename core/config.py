@@ -209,7 +209,7 @@ class RenderConfig:
     denoise_prefilter: str = "none"  # none | fast | accurate: OIDN prefiltering of albedo/normal
     sampling_pattern: str = "tabulated_sobol"  # tabulated_sobol | blue_noise (Cycles' pixel sample pattern)
     post_filter: str = "off"         # off | median3 | median5: median of the linear render, before the lens
-    marker_samples: int = 32         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
+    marker_samples: int = 40         # > 0: label-aware sampling, the marker regions rendered again at this many samples (docs/rendering.md); 0 = off
     marker_denoise: str = "fast"     # off | fast | balanced | high: the denoiser of those marker regions (docs/rendering.md)
     marker_adaptive_threshold: float = 0.02  # > 0: those regions with adaptive sampling up to marker_samples (noise threshold: the markers' edges get them all, flat paint stops early; docs/rendering.md); 0 = every pixel marker_samples
     marker_adaptive_min_samples: int = 4  # with that adaptive sampling, every pixel at least this many samples; 0 = Cycles' automatic minimum (most of marker_samples at small thresholds)

@@ -29,7 +29,7 @@ from dockfactory.generator.sampler import frame_plan, render_settings, sample_fr
 
 
 def _cfg(**render):
-    return config_from_dict({"dataset": {"frames": 12, "seed": 7}, "render": {"marker_samples": 32, **render}})
+    return config_from_dict({"dataset": {"frames": 12, "seed": 7}, "render": {"marker_samples": 40, **render}})
 
 
 @pytest.fixture(scope="module")
@@ -204,8 +204,8 @@ def test_render_settings_leave_the_key_out_while_off():
 
 def test_the_key_is_in_the_identity_only_when_on():
     plain = config_from_dict({"dataset": {"frames": 12, "seed": 7}})
-    assert plain.render.marker_samples == 32                          # on by default
-    assert identity(_cfg(marker_samples=32)) == identity(plain)
+    assert plain.render.marker_samples == 40                          # on by default
+    assert identity(_cfg(marker_samples=40)) == identity(plain)
     assert "marker_samples" not in _cfg(marker_samples=0).to_dict()["render"]   # ids of before the key
     assert identity(_cfg(marker_samples=0)) != identity(plain)
     assert identity(_cfg(marker_samples=32)) != identity(_cfg(marker_samples=64))
@@ -251,7 +251,7 @@ def test_a_stored_identity_without_the_key_reads_back_off():
     back, it is off, not today's default; a written config states it, so it reads back too."""
     off = _cfg(marker_samples=0)
     stored = json.loads(off.canonical_json())
-    assert config_from_dict(stored).render.marker_samples == 32        # a config file's reading
+    assert config_from_dict(stored).render.marker_samples == 40        # a config file's reading
     assert config_from_identity(stored) == off                         # a stored identity's
     assert config_from_identity(json.loads(_cfg().canonical_json())) == _cfg()
     assert off.resolved_dict()["render"]["marker_samples"] == 0

@@ -46,7 +46,7 @@ def test_the_default_device_keeps_every_config_hash():
             assert _vid(cfg) != before, name
             cfg = _before_flat(cfg)
         if name in SAMPLING_BY_DEFAULT:
-            assert cfg.render.marker_samples == 32 and _vid(cfg) != before, name
+            assert cfg.render.marker_samples == 40 and _vid(cfg) != before, name
             cfg = _before_sampling(cfg)
         assert cfg.render.device == "cpu" and _vid(cfg) == before, name
         assert "device" not in cfg.to_dict()["render"] and cfg.to_dict(full=True)["render"]["device"] == "cpu"
