@@ -95,9 +95,10 @@ def marker_halos(frame: FrameScene, static: StaticScene) -> list[np.ndarray]:
     return out
 
 
-def marker_boxes(frame: FrameScene, static: StaticScene, margin_px: float = REGION_MARGIN_PX) -> list[Region]:
-    """Every marker halo's bounding rectangle grown by ``margin_px``, pixel-aligned and clipped to
-    the canvas (halos wholly outside it have none), in layout order."""
+def marker_boxes(frame: FrameScene, static: StaticScene, margin_px: float | None = None) -> list[Region]:
+    """Every marker halo's bounding rectangle grown by ``margin_px`` (None: REGION_MARGIN_PX),
+    pixel-aligned and clipped to the canvas (halos wholly outside it have none), in layout order."""
+    margin_px = REGION_MARGIN_PX if margin_px is None else margin_px
     _, _, wc, hc = frame.camera.canvas()
     out = []
     for uv in marker_halos(frame, static):

@@ -32,7 +32,8 @@ from dockfactory.generator.sampler import frame_plan, sample_frame
 
 @contextmanager
 def _constants(halo_radii: float, margin_px: float):
-    """The module's halo radius and margin replaced for the block (restored after)."""
+    """The module's halo radius and margin replaced for the block (restored after): the worker's
+    own planner (marker_regions) reads both at call time."""
     old = mr.HALO_RADII, mr.REGION_MARGIN_PX
     mr.HALO_RADII, mr.REGION_MARGIN_PX = halo_radii, margin_px
     try:
@@ -46,9 +47,7 @@ def plan_pixels(frames, static) -> dict:
     crops = pixels = blended = full = 0
     for f in frames:
         halos = mr.marker_halos(f, static)
-        boxes = mr.merge_boxes(mr.marker_boxes(f, static, mr.REGION_MARGIN_PX),
-                               mr.CROP_OVERHEAD_PIXEL_SAMPLES / max(f.render.marker_samples, 1))
-        for r in boxes:
+        for r in mr.marker_regions(f, static):
             w = mr.halo_weights(halos, r)
             crops, pixels = crops + 1, pixels + r.area
             blended, full = blended + int((w > 0).sum()), full + int((w >= 1).sum())
