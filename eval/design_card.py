@@ -46,6 +46,7 @@ class DesignCard:
     jpeg_above: dict | None = None
     sensor_share: dict | None = None
     sensor_reference: str = ""
+    no_pose: dict | None = None
 
     @property
     def disc_range_px(self) -> tuple[float, float] | None:
@@ -82,6 +83,20 @@ class DesignCard:
             if quality >= q:
                 table, name = self.jpeg_above[q], f"jpeg_factor_above.{q}"
         return table, name
+
+    def no_pose_rate_of(self, design: Design) -> tuple[float, str]:
+        """(share of honest frames without a pose, the card's key) for ``design``'s camera class
+        and image format (``no_pose_rate``: "png", or "jpegQ" at the highest Q at or below the
+        design's quality, a JPEG's refusals growing as its quality falls); (0.0, "") when the card
+        has no such table: frames without a pose are then not predicted."""
+        if not self.no_pose:
+            return 0.0, ""
+        q = jpeg_quality(design.image_format)
+        key = "png" if q is None else max((k for k in self.no_pose if k != "png" and int(k[4:]) <= q),
+                                          key=lambda k: int(k[4:]), default="")
+        if not key:
+            return 0.0, ""
+        return self.no_pose[key][design.camera.cfa], f"no_pose_rate.{key}.{design.camera.cfa}"
 
     def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
@@ -195,6 +210,28 @@ def _sensor_noise(path, data: dict) -> tuple[dict | None, str]:
     return shares, ref
 
 
+def _no_pose(path, data: dict) -> dict | None:
+    """{"png" | "jpegQ": {cfa: share of honest frames without a pose, in [0, 1)}} of the card's
+    optional ``no_pose_rate`` (written by bench/design/no_pose_rates.py); None without it."""
+    table = data.get("no_pose_rate")
+    if table is None:
+        return None
+    if not isinstance(table, dict) or not table:
+        raise DockfactoryError(f"{path}: no_pose_rate: expected a table of png / jpegQ, got {table!r}")
+    out = {}
+    for key, rates in table.items():
+        if key != "png":
+            try:
+                jpeg_quality(key)
+            except ValueError:
+                raise DockfactoryError(f"{path}: no_pose_rate.{key}: expected 'png' or 'jpegQ' (Q in 1-100)") from None
+        out[key] = _factors(path, table, key, ("none", "rggb"), "no_pose_rate.", zero=True)
+        bad = [c for c, v in out[key].items() if v >= 1.0]
+        if bad:
+            raise DockfactoryError(f"{path}: no_pose_rate.{key}.{bad[0]}: expected a share in [0, 1), got {out[key][bad[0]]!r}")
+    return out
+
+
 def load_design_card(path) -> DesignCard:
     """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
     path = Path(path)
@@ -226,4 +263,5 @@ def load_design_card(path) -> DesignCard:
                       _rings(path, data.get("ring_factor")),
                       _jpeg(path, data), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data),
-                      _size_exponents(path, data), _jpeg_above(path, data, q), *_sensor_noise(path, data))
+                      _size_exponents(path, data), _jpeg_above(path, data, q), *_sensor_noise(path, data),
+                      _no_pose(path, data))

@@ -16,7 +16,7 @@ from dockfactory.eval.design_sensor import camera_variance
 from dockfactory.eval.design_space import Design, DesignSpace
 from dockfactory.generator.sampler import check_focal_fits
 
-__all__ = ["pass_probability", "reject_probability", "design_row", "rank_rows", "design_id"]
+__all__ = ["pass_probability", "reject_probability", "design_row", "rank_rows", "design_id", "all_posed_probability"]
 
 
 def pass_probability(rmse: float, threshold: float, dof: int, confidence: float, statistic: str = "rmse") -> float:
@@ -30,6 +30,22 @@ def reject_probability(rmse: float, threshold: float, dof: int, confidence: floa
     """P(the guarded rule proves a criterion in ``statistic`` fails) (as :func:`pass_probability`);
     0.0 for rmse 0."""
     return gate_statistic(statistic).reject_probability(rmse, threshold, dof, confidence)
+
+
+def all_posed_probability(rate: float, frames: int) -> float:
+    """P(each of ``frames`` frames gets a pose) when an honest frame goes without one (refused by
+    the fit gate, or unsolved) with probability ``rate``, independently. A block with a frame
+    without a pose has no value and fails (eval.acceptance), so this multiplies the block's P(pass)
+    and its complement is a way to fail."""
+    return (1.0 - rate) ** frames
+
+
+def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int) -> dict:
+    """The card's share of honest frames without a pose for ``design`` and what it does to the
+    user's ``test_frames`` test frames and ``captures`` repeatability captures."""
+    rate, key = card.no_pose_rate_of(design)
+    return {"rate_per_frame": rate, "card_key": key, "p_all_test_posed": all_posed_probability(rate, test_frames),
+            "p_all_captures_posed": all_posed_probability(rate, captures)}
 
 
 def design_id(design: Design) -> str:
@@ -67,7 +83,8 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     RMSE and repeatability per component, the median disc minor semi-axis and ``extrapolated`` (the
     card's line when it lies outside the card's scenes: DesignCard.outside_range, else ""), the
     localization and estimation blocks (estimation
-    only when the space gives repeatability captures), P(accept) and P(reject)."""
+    only when the space gives repeatability captures), ``no_pose`` (:func:`_no_pose`: frames the
+    camera class leaves without a pose, each failing its block), P(accept) and P(reject)."""
     row = _base_row(design, space)
     variance = camera_variance(design.camera.preset, scene_cfg.sensor)
     noise, provisional, why = card.noise_of(design, variance)
@@ -85,14 +102,16 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     loc = _block(spec, "localization", pred.rmse, space.test_frames)
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
-    p_loc = math.prod(v["probability"] for v in loc.values())
-    probs = [v["probability"] for v in (*loc.values(), *est.values())]
-    rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())]
+    nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0)
+    posed = [nopose["p_all_test_posed"]] * bool(loc) + [nopose["p_all_captures_posed"]] * bool(est)
+    p_loc = math.prod(v["probability"] for v in loc.values()) * nopose["p_all_test_posed"]
+    probs = [v["probability"] for v in (*loc.values(), *est.values())] + posed
+    rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())] + [1.0 - p for p in posed]
     margins = [v["margin"] for v in (*loc.values(), *est.values())]
     return {**row, "status": "predicted", "reason": "", "provisional": provisional,
             "disc_minor_median_px": round(pred.minor_median_px, 2), "extrapolated": card.outside_range(pred.minor_median_px),
             "predicted_rmse": pred.rmse, "predicted_repeatability": pred.repeat,
-            "localization": loc, "estimation": est, "estimation_predicted": bool(poses),
+            "localization": loc, "estimation": est, "estimation_predicted": bool(poses), "no_pose": nopose,
             "p_accept": math.prod(probs) if probs else None, "p_localization": p_loc if loc else None,
             "p_reject": 1.0 - math.prod(1.0 - p for p in rejects) if rejects else None,
             "worst_margin": max(margins) if margins else None, "geometry_frames": pred.frames}

@@ -27,11 +27,21 @@ def _fmt(v, digits: int = 3) -> str:
     return str(v)
 
 
+def _no_pose_note(no_pose: dict) -> str:
+    """" (P every test frame posed q: r % of frames without a pose)" when the card gives the
+    design's camera class a share of frames without a pose, else ""."""
+    rate = no_pose.get("rate_per_frame") or 0.0
+    if rate <= 0:
+        return ""
+    return f" (P every test frame posed {no_pose['p_all_test_posed']:.2f}: {100 * rate:.1f} % of frames without a pose)"
+
+
 def _cells(r: dict) -> list[str]:
     pred = r.get("predicted_rmse", {})
     flag = "*" if r.get("pareto") else ""
     prov = " (provisional: " + ", ".join(r["provisional"]) + ")" if r.get("provisional") else ""
     prov += f" ({r['extrapolated']})" if r.get("extrapolated") else ""
+    prov += _no_pose_note(r.get("no_pose") or {})
     return [_fmt(r.get("rank")) + flag, r["status"], _fmt(r.get("p_accept")), _fmt(r.get("worst_margin")),
             _fmt(pred.get("x")), _fmt(pred.get("y")), _fmt(pred.get("alpha")), _fmt(r["cost"]),
             r["design"] + prov + (f" ({r['reason']})" if r.get("reason") else "")]

@@ -29,11 +29,13 @@ COMPS = ("x", "y", "alpha")
 
 
 def _predicted(row: dict, min_p: float) -> str:
-    """pass / fail / undecided of the localization block alone (what the renders decide)."""
+    """pass / fail / undecided of the localization block alone (what the renders decide), with
+    P(every test frame posed) of the row's ``no_pose`` (1 for a design.json written before it)."""
     loc = row["localization"].values()
-    if math.prod(v["probability"] for v in loc) >= min_p:
+    posed = (row.get("no_pose") or {}).get("p_all_test_posed", 1.0)
+    if math.prod(v["probability"] for v in loc) * posed >= min_p:
         return "pass"
-    if 1 - math.prod(1 - v["reject_probability"] for v in loc) >= min_p:
+    if 1 - posed * math.prod(1 - v["reject_probability"] for v in loc) >= min_p:
         return "fail"
     return "undecided"
 
