@@ -94,7 +94,7 @@ class DesignCard:
         q = jpeg_quality(design.image_format)
         key = "png" if q is None else max((k for k in self.no_pose if k != "png" and int(k[4:]) <= q),
                                           key=lambda k: int(k[4:]), default="")
-        if not key:
+        if key not in self.no_pose:
             return 0.0, ""
         return self.no_pose[key][design.camera.cfa], f"no_pose_rate.{key}.{design.camera.cfa}"
 

@@ -30,6 +30,8 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "held-out 16": ("verify_48_luma.json", ("design_verify_quick_48", "design_verify_wide_48")),
     "blind 1 (12)": ("confirm_12_luma.json", ("design_confirm_quick", "design_confirm_wide", "design_confirm_wide2")),
     "blind 3 (12)": ("confirm3_12.json", ("design_confirm3_quick", "design_confirm3_wide", "design_confirm3_wide3")),
+    "blind 4 (12)": ("confirm4_12.json", ("design_confirm4_quick", "design_confirm4_quick2", "design_confirm4_wide")),
+    "blind 5 (12)": ("confirm5_12.json", ("design_confirm5_quick", "design_confirm5_wide", "design_confirm5_wide2")),
 }
 COMPS = ("x", "y", "alpha")
 

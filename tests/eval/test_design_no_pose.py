@@ -46,7 +46,9 @@ def test_the_card_gives_the_rate_of_the_highest_quality_at_or_below_the_design_s
 
 def test_without_the_table_no_frame_is_predicted_without_a_pose(tmp_path):
     assert _card(tmp_path, None).no_pose_rate_of(_design("rggb", "jpeg90")) == (0.0, "")
-    assert _card(tmp_path, {"jpeg95": {"none": 0.1, "rggb": 0.1}}).no_pose_rate_of(_design("none", "jpeg90")) == (0.0, "")
+    only95 = _card(tmp_path, {"jpeg95": {"none": 0.1, "rggb": 0.1}})
+    assert only95.no_pose_rate_of(_design("none", "jpeg90")) == (0.0, "")
+    assert only95.no_pose_rate_of(_design("rggb", "png")) == (0.0, "")
 
 
 @pytest.mark.parametrize("table, needle", [
