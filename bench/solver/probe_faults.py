@@ -13,7 +13,7 @@ they are and after each fault:
 - ``stretched`` (width x1.5), ``cropped`` (the right 320 and bottom 240 px cut: the principal
   point 160 / 120 px off the image centre);
 - ``other-layout``: the layout of another scene (radius 450 mm and 30 mm markers, or 300 / 20 for
-  a dataset of the former).
+  a dataset of radius 450 mm: the markers on another radius, not only another size).
 
 Per fault: images, ok, ok beyond U (|error| > expanded U on any of X, Y, Z, alpha), tracebacks
 and exit statuses. The target: 0 tracebacks, 0 ok beyond U.
@@ -48,9 +48,9 @@ FAULTS = {
 
 
 def other_layout(ds, path: Path) -> Path:
-    """A layout file of the dataset's patterns on another scene's section and marker size."""
+    """A layout file of the dataset's patterns on another scene's section radius and marker size."""
     mine = (ds.config.sections.radius_mm, ds.config.markers.diameter_mm)
-    radius, diameter = (300.0, 20.0) if mine == (450.0, 30.0) else (450.0, 30.0)
+    radius, diameter = (300.0, 20.0) if mine[0] == 450.0 else (450.0, 30.0)   # another radius: the markers elsewhere
     cfg = ds.config
     cfg = replace(cfg, sections=replace(cfg.sections, radius_mm=radius), markers=replace(cfg.markers, diameter_mm=diameter))
     write_json_atomic(path, layout_record(cfg))
