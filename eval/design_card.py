@@ -16,6 +16,7 @@ from dockfactory.core.errors import DockfactoryError
 from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.design_noise import CentreNoiseLaw
 from dockfactory.eval.design_predict import NoiseClass
+from dockfactory.eval.design_refusals import GateFigures
 from dockfactory.eval.design_sensor import preset_variance, sensor_factor
 from dockfactory.eval.design_space import Design, jpeg_quality
 
@@ -47,6 +48,7 @@ class DesignCard:
     sensor_share: dict | None = None
     sensor_reference: str = ""
     no_pose: dict | None = None
+    no_pose_gate: GateFigures | None = None
 
     @property
     def disc_range_px(self) -> tuple[float, float] | None:
@@ -232,6 +234,27 @@ def _no_pose(path, data: dict) -> dict | None:
     return out
 
 
+def _no_pose_simulation(path, data: dict) -> GateFigures | None:
+    """The gate's figures and the noise factor of the card's optional ``no_pose_simulation``
+    ({"noise_factor", "centre_noise_px", "core_px" (or null), "section_shift_px" ([x, y] or null)}:
+    eval.design_refusals); None without it."""
+    t = data.get("no_pose_simulation")
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        raise DockfactoryError(f"{path}: no_pose_simulation: expected a table, got {t!r}")
+    where = "no_pose_simulation."
+    core = t.get("core_px")
+    shift = t.get("section_shift_px")
+    if shift is not None and not (isinstance(shift, list) and len(shift) == 2):
+        raise DockfactoryError(f"{path}: {where}section_shift_px: expected [x, y] px or null, got {shift!r}")
+    return GateFigures(_positive(path, where + "centre_noise_px", t.get("centre_noise_px")),
+                       None if core is None else _positive(path, where + "core_px", core),
+                       None if shift is None else tuple(_positive(path, f"{where}section_shift_px[{i}]", v, zero=True)
+                                                        for i, v in enumerate(shift)),
+                       _positive(path, where + "noise_factor", t.get("noise_factor")))
+
+
 def load_design_card(path) -> DesignCard:
     """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
     path = Path(path)
@@ -264,4 +287,4 @@ def load_design_card(path) -> DesignCard:
                       _jpeg(path, data), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data),
                       _size_exponents(path, data), _jpeg_above(path, data, q), *_sensor_noise(path, data),
-                      _no_pose(path, data))
+                      _no_pose(path, data), _no_pose_simulation(path, data))

@@ -12,6 +12,7 @@ from dockfactory.core.config import ConfigError
 from dockfactory.core.errors import DockfactoryError
 from dockfactory.eval.design_card import DesignCard
 from dockfactory.eval.design_predict import design_config, predict_design
+from dockfactory.eval.design_refusals import simulated_no_pose
 from dockfactory.eval.design_sensor import camera_variance
 from dockfactory.eval.design_space import Design, DesignSpace
 from dockfactory.generator.sampler import check_focal_fits
@@ -40,11 +41,19 @@ def all_posed_probability(rate: float, frames: int) -> float:
     return (1.0 - rate) ** frames
 
 
-def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int) -> dict:
-    """The card's share of honest frames without a pose for ``design`` and what it does to the
-    user's ``test_frames`` test frames and ``captures`` repeatability captures."""
-    rate, key = card.no_pose_rate_of(design)
-    return {"rate_per_frame": rate, "card_key": key, "p_all_test_posed": all_posed_probability(rate, test_frames),
+def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int, simulate=None) -> dict:
+    """The share of honest frames without a pose for ``design`` and what it does to the user's
+    ``test_frames`` test frames and ``captures`` repeatability captures: with the card's
+    ``no_pose_simulation``, ``simulate()`` (the design's frames through the gate:
+    eval.design_refusals.simulated_no_pose), else the card's table per class and format."""
+    if card.no_pose_gate is not None and simulate is not None:
+        sim = simulate()
+        rate, key = sim["rate"], "no_pose_simulation"
+        extra = {"simulated": sim["simulated"], "refused": sim["refused"], "reasons": sim["reasons"]}
+    else:
+        (rate, key), extra = card.no_pose_rate_of(design), {}
+    return {"rate_per_frame": rate, "card_key": key, **extra,
+            "p_all_test_posed": all_posed_probability(rate, test_frames),
             "p_all_captures_posed": all_posed_probability(rate, captures)}
 
 
@@ -102,7 +111,8 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     loc = _block(spec, "localization", pred.rmse, space.test_frames)
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
-    nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0)
+    nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0,
+                      lambda: simulated_no_pose(cfg, design, noise, card.no_pose_gate, space.geometry_frames, space.seed))
     posed = [nopose["p_all_test_posed"]] * bool(loc) + [nopose["p_all_captures_posed"]] * bool(est)
     p_loc = math.prod(v["probability"] for v in loc.values()) * nopose["p_all_test_posed"]
     probs = [v["probability"] for v in (*loc.values(), *est.values())] + posed

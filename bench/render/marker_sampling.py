@@ -7,6 +7,8 @@ Each ``--scene`` names its datasets: the first (REF) is the converged reference 
 ``marker_samples = 256`` on every crop pixel, no denoiser, no coverage correction: refused
 otherwise, unless ``--any-reference``), the others the candidates; all of one scene must be renders of the same
 config but for ``[render]`` (the same frames, poses and cameras; checked on the labels' poses).
+``DIR+DIR2`` pools renders of other frames (another seed) as one dataset, each in the same place
+of every argument of its scene: the frames of both, the timing of the first.
 Every dataset's test frames go through the shipped detector with its refinement (``dockfactory
 detect``, cached beside the dataset as ``detections_bench.json``) and the paper's pinhole solver
 with the weights' noise card. Printed per dataset, with ratios to the reference of the same scene
@@ -221,9 +223,23 @@ def check_reference(root: str, any_reference: bool = False) -> None:
                          "(docs/rendering.md, \"The converged reference\"; --any-reference to compare anyway)")
 
 
+def measure_pooled(spec: str, weights: str | None) -> dict:
+    """:func:`measure` of ``spec``, one dataset or several joined by "+" (renders of other frames,
+    pooled: each frame id prefixed by its dataset's place, the version joined by "+", the
+    settings and timing the first's)."""
+    parts = [measure(Path(d), weights) for d in spec.split("+")]
+    if len(parts) == 1:
+        return parts[0]
+    out = {**parts[0], "version": "+".join(p["version"] for p in parts)}
+    for key in ("rows", "centres", "true"):
+        out[key] = {f"{i}/{fid}": v for i, p in enumerate(parts) for fid, v in p[key].items()}
+    return out
+
+
 def run_scene(dirs: list[str], weights: str | None, boot: int, any_reference: bool = False) -> list[dict]:
-    check_reference(dirs[0], any_reference)
-    measured = [measure(Path(d), weights) for d in dirs]
+    for ref in dirs[0].split("+"):
+        check_reference(ref, any_reference)
+    measured = [measure_pooled(d, weights) for d in dirs]
     ref = measured[0]
     for m, d in zip(measured[1:], dirs[1:]):
         if m["true"] != ref["true"]:
@@ -233,7 +249,7 @@ def run_scene(dirs: list[str], weights: str | None, boot: int, any_reference: bo
         entry = {k: m[k] for k in ("version", "marker_samples", "samples", "denoise", "marker_denoise",
                                    "marker_adaptive_threshold", "marker_adaptive_min_samples", "marker_coverage_samples",
                                    "marker_coverage_source", "sampling_pattern", "timing")}
-        entry["name"] = Path(d).name
+        entry["name"] = "+".join(Path(x).name for x in d.split("+"))
         entry["cmp"] = compare(ref, m, boot)
         out.append(entry)
     return out

@@ -6,8 +6,9 @@ over the reference's RMSE, their correlation, the ratio d alone would give if un
 
     python -m bench.render.pose_gap REFERENCE CANDIDATE [--out FILE.json]
 
-Both are renders of the same config and frames (bench/render/marker_sampling.py's scenes); their
-detections are cached beside them as that bench caches them.
+Both are renders of the same config and frames (bench/render/marker_sampling.py's scenes), each one
+dataset or several pooled as ``DIR+DIR2`` (that bench's ``measure_pooled``); their detections are
+cached beside them as that bench caches them.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.render.marker_sampling import measure
+from bench.render.marker_sampling import measure_pooled
 from dockfactory.core.io import write_json_atomic
 
 COMPS = ("x", "y", "alpha")
@@ -50,11 +51,11 @@ def pose_gap(ref: dict, cand: dict, top: int = 6) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("reference", type=Path)
-    ap.add_argument("candidate", type=Path)
+    ap.add_argument("reference")
+    ap.add_argument("candidate")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
-    gap = pose_gap(measure(args.reference, None), measure(args.candidate, None))
+    gap = pose_gap(measure_pooled(args.reference, None), measure_pooled(args.candidate, None))
     for c in COMPS:
         g = gap[c]
         print(f"{c}: ratio {g['rmse_cand'] / g['rmse_ref']:.2f}, rms d / rmse ref {g['d_over_ref']:.2f}, "
