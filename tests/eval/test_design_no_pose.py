@@ -4,7 +4,6 @@ be posed; the card's table is read by format and quality, checked in one line, a
 the class bench's rows."""
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -13,9 +12,9 @@ import pytest
 from bench.design.no_pose_rates import card_table, effect_class, pooled_rates
 from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.resources import resolve_config, shipped_design_card
+from design_cards import card_with
+from dockfactory.core.resources import resolve_config
 from dockfactory.eval.acceptance import load_acceptance
-from dockfactory.eval.design_card import load_design_card
 from dockfactory.eval.design_rank import all_posed_probability, design_row
 from dockfactory.eval.design_space import Camera, Design, DesignSpace, Lens
 
@@ -23,13 +22,7 @@ RATES = {"png": {"none": 0.0, "rggb": 0.002}, "jpeg90": {"none": 0.03, "rggb": 0
 
 
 def _card(tmp_path, table):
-    data = json.loads(shipped_design_card().read_text())
-    data.pop("no_pose_rate", None)
-    if table is not None:
-        data["no_pose_rate"] = table
-    path = tmp_path / f"card{len(list(tmp_path.iterdir()))}.json"
-    path.write_text(json.dumps(data))
-    return load_design_card(path)
+    return card_with(tmp_path, "no_pose_rate", table)
 
 
 def _design(cfa: str, fmt: str) -> Design:

@@ -5,15 +5,14 @@ not; the same space draws the same frames; the card's section is checked in one 
 row folds the simulated share into P(accept)."""
 from __future__ import annotations
 
-import json
 
 import pytest
 
 from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
-from dockfactory.core.resources import resolve_config, shipped_design_card
+from design_cards import card_with
+from dockfactory.core.resources import resolve_config
 from dockfactory.eval.acceptance import load_acceptance
-from dockfactory.eval.design_card import load_design_card
 from dockfactory.eval.design_predict import NoiseClass, design_config
 from dockfactory.eval.design_rank import all_posed_probability, design_row
 from dockfactory.eval.design_refusals import GateFigures, design_camera_class, simulated_no_pose
@@ -80,13 +79,7 @@ def test_the_same_space_draws_the_same_frames():
 
 
 def _card(tmp_path, sim):
-    data = json.loads(shipped_design_card().read_text())
-    data.pop("no_pose_simulation", None)
-    if sim is not None:
-        data["no_pose_simulation"] = sim
-    path = tmp_path / f"card{len(list(tmp_path.iterdir()))}.json"
-    path.write_text(json.dumps(data))
-    return load_design_card(path)
+    return card_with(tmp_path, "no_pose_simulation", sim)
 
 
 @pytest.mark.parametrize("sim, needle", [
