@@ -28,6 +28,11 @@ NO_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, com
                 "frame left without a pose at the card's share for its camera class and image format, measured on "
                 "the sensor bench's scenes: a design's own geometry can refuse more. The detection gates are not "
                 "predicted: --verify renders and judges them.")
+SIM_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, components independent) and every test "
+                 "frame and capture getting a pose (a frame without one fails its block and the failure gate), each "
+                 "frame left without a pose at the share of the design's own drawn frames its predicted centres "
+                 "(with the card's tail per camera class) leave refused by the solver's gate. The detection gates "
+                 "are not predicted: --verify renders and judges them.")
 NO_NO_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, components independent); frames "
                    "without a pose, the detection and failure gates are not predicted: --verify renders and judges them.")
 SENSOR_NOTE = ("The sensor's temporal noise enters as the card's share of the centre variance scaled by the sensor's "
@@ -69,7 +74,8 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     spec = load_acceptance(spec_path)
     card = load_design_card(args.card or shipped_design_card())
     designs = designs_of(space, scene)
-    notes = [*NOTES, NO_POSE_NOTE if card.no_pose else NO_NO_POSE_NOTE, SENSOR_NOTE if card.sensor_share else NO_SENSOR_NOTE]
+    pose_note = SIM_POSE_NOTE if card.no_pose_gate else NO_POSE_NOTE if card.no_pose else NO_NO_POSE_NOTE
+    notes = [*NOTES, pose_note, SENSOR_NOTE if card.sensor_share else NO_SENSOR_NOTE]
     if spec.estimation.thresholds() and not space.repeatability[0]:
         notes.append("The spec gates repeatability but the space gives no repeatability captures: "
                      "P(accept) covers localization only ([design] repeatability_poses / _captures).")

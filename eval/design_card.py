@@ -49,6 +49,7 @@ class DesignCard:
     sensor_reference: str = ""
     no_pose: dict | None = None
     no_pose_gate: GateFigures | None = None
+    no_pose_tail: dict | None = None
 
     @property
     def disc_range_px(self) -> tuple[float, float] | None:
@@ -99,6 +100,17 @@ class DesignCard:
         if key not in self.no_pose:
             return 0.0, ""
         return self.no_pose[key][design.camera.cfa], f"no_pose_rate.{key}.{design.camera.cfa}"
+
+    def tail_of(self, design: Design) -> tuple[float, float] | None:
+        """(eps, m) of the centres' tail ``no_pose_simulation.tail`` gives ``design``'s camera class
+        and image format ("png", or "jpegQ" at the highest Q at or below the design's quality, as
+        :meth:`no_pose_rate_of`); None when the card has none for it (Gaussian centres)."""
+        if not self.no_pose_tail:
+            return None
+        q = jpeg_quality(design.image_format)
+        key = "png" if q is None else max((k for k in self.no_pose_tail if k != "png" and int(k[4:]) <= q),
+                                          key=lambda k: int(k[4:]), default="")
+        return self.no_pose_tail.get(key, {}).get(design.camera.cfa)
 
     def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
@@ -234,13 +246,37 @@ def _no_pose(path, data: dict) -> dict | None:
     return out
 
 
-def _no_pose_simulation(path, data: dict) -> GateFigures | None:
-    """The gate's figures and the noise factor of the card's optional ``no_pose_simulation``
-    ({"noise_factor", "centre_noise_px", "core_px" (or null), "section_shift_px" ([x, y] or null)}:
-    eval.design_refusals); None without it."""
-    t = data.get("no_pose_simulation")
+def _tail_table(path, t) -> dict | None:
+    """{"png" | "jpegQ": {cfa: (eps, m)}} of ``no_pose_simulation.tail`` (eps in [0, 1), m >= 1;
+    a cfa may be left out); None without it."""
     if t is None:
         return None
+    where = "no_pose_simulation.tail"
+    if not isinstance(t, dict):
+        raise DockfactoryError(f"{path}: {where}: expected a table of png / jpegQ, got {t!r}")
+    out = {}
+    for key, by_cfa in t.items():
+        if key != "png" and not (key.startswith("jpeg") and key[4:].isdigit() and 1 <= int(key[4:]) <= 100):
+            raise DockfactoryError(f"{path}: {where}.{key}: expected 'png' or 'jpegQ' (Q in 1-100)")
+        if not isinstance(by_cfa, dict) or not set(by_cfa) <= {"none", "rggb"}:
+            raise DockfactoryError(f"{path}: {where}.{key}: expected a table of none / rggb, got {by_cfa!r}")
+        out[key] = {}
+        for cfa, v in by_cfa.items():
+            ok = isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+            if not (ok and 0 <= v[0] < 1 and math.isfinite(v[1]) and v[1] >= 1):
+                raise DockfactoryError(f"{path}: {where}.{key}.{cfa}: expected [eps in [0, 1), m >= 1], got {v!r}")
+            out[key][cfa] = (float(v[0]), float(v[1]))
+    return out
+
+
+def _no_pose_simulation(path, data: dict) -> tuple[GateFigures | None, dict | None]:
+    """The gate's figures with the noise factor, and the centres' tail table, of the card's optional
+    ``no_pose_simulation`` ({"noise_factor", "centre_noise_px", "core_px" (or null),
+    "section_shift_px" ([x, y] or null), "tail" (optional: :func:`_tail_table`)}:
+    eval.design_refusals); (None, None) without it."""
+    t = data.get("no_pose_simulation")
+    if t is None:
+        return None, None
     if not isinstance(t, dict):
         raise DockfactoryError(f"{path}: no_pose_simulation: expected a table, got {t!r}")
     where = "no_pose_simulation."
@@ -248,11 +284,12 @@ def _no_pose_simulation(path, data: dict) -> GateFigures | None:
     shift = t.get("section_shift_px")
     if shift is not None and not (isinstance(shift, list) and len(shift) == 2):
         raise DockfactoryError(f"{path}: {where}section_shift_px: expected [x, y] px or null, got {shift!r}")
-    return GateFigures(_positive(path, where + "centre_noise_px", t.get("centre_noise_px")),
+    gate = GateFigures(_positive(path, where + "centre_noise_px", t.get("centre_noise_px")),
                        None if core is None else _positive(path, where + "core_px", core),
                        None if shift is None else tuple(_positive(path, f"{where}section_shift_px[{i}]", v, zero=True)
                                                         for i, v in enumerate(shift)),
                        _positive(path, where + "noise_factor", t.get("noise_factor")))
+    return gate, _tail_table(path, t.get("tail"))
 
 
 def load_design_card(path) -> DesignCard:
@@ -287,4 +324,4 @@ def load_design_card(path) -> DesignCard:
                       _jpeg(path, data), q,
                       _factors(path, data, "bound_factor", COMPONENTS), tuple(prov), data, _law(path, data),
                       _size_exponents(path, data), _jpeg_above(path, data, q), *_sensor_noise(path, data),
-                      _no_pose(path, data), _no_pose_simulation(path, data))
+                      _no_pose(path, data), *_no_pose_simulation(path, data))

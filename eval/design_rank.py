@@ -112,7 +112,8 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
     nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0,
-                      lambda: simulated_no_pose(cfg, design, noise, card.no_pose_gate, space.geometry_frames, space.seed))
+                      lambda: simulated_no_pose(cfg, design, noise, card.no_pose_gate, space.geometry_frames, space.seed,
+                                                card.tail_of(design)))
     posed = [nopose["p_all_test_posed"]] * bool(loc) + [nopose["p_all_captures_posed"]] * bool(est)
     p_loc = math.prod(v["probability"] for v in loc.values()) * nopose["p_all_test_posed"]
     probs = [v["probability"] for v in (*loc.values(), *est.values())] + posed

@@ -5,8 +5,10 @@ Each drawn test frame's marker centroids (the discs' projected outlines, as a de
 them) get the design's predicted centre noise (the disc model's shapes and law, the class's size
 factors and section offset, times the card's ``noise_factor``) and go through the solve and gate of
 a rendered frame's detections (eval.solve_frames.solve_frame) with the camera class's options and
-the gate's card figures. A class the gate tests at the card's own noise (three-chip PNG) is not
-simulated: its honest frames are not refused.
+the gate's card figures. With a ``tail`` (eps, m) a centre's noise is m times the rest's with
+probability eps, its RMS kept at the prediction's: the centres' heavy tail (measured on the sensor
+bench: bench/design/centre_tails.py). A class the gate tests at the card's own noise (three-chip
+PNG) is not simulated: its honest frames are not refused.
 
 Why and how: docs/design.md, "Ranking designs".
 """
@@ -25,7 +27,7 @@ from dockfactory.eval.solve_frames import class_options, docking_options, lens_p
 from dockfactory.solver.eccentricity import eccentricity_offsets
 from dockfactory.solver.synthetic import project
 
-__all__ = ["GateFigures", "design_camera_class", "simulated_no_pose"]
+__all__ = ["GateFigures", "design_camera_class", "simulated_no_pose", "tail_scales"]
 
 
 @dataclass(frozen=True)
@@ -55,13 +57,25 @@ def _section_draw(markers, cam, focal: float, pp, noise: NoiseClass, factor: flo
     return centroids, np.linalg.cholesky((factor * noise.scale_px) ** 2 * ratio[:, None, None] * shapes)
 
 
-def _noisy_centres(sections, noise: NoiseClass, factor: float, rng: np.random.Generator):
-    """(class ids (n,), centres (n, 2)): each section's centroids with their noise and one common
-    offset per section (the class's section shift), as detection arrays without boxes."""
+def tail_scales(n: int, tail: tuple[float, float] | None, rng: np.random.Generator) -> np.ndarray:
+    """(n,) factors on n centres' noise: m / c with probability eps, else 1 / c, c = sqrt(1 - eps +
+    eps m^2) so that their RMS is 1 (a contaminated normal of the same variance); ones without a
+    ``tail`` (eps, m)."""
+    if tail is None:
+        return np.ones(n)
+    eps, m = tail
+    return np.where(rng.random(n) < eps, m, 1.0) / np.sqrt(1.0 - eps + eps * m * m)
+
+
+def _noisy_centres(sections, noise: NoiseClass, factor: float, tail, rng: np.random.Generator):
+    """(class ids (n,), centres (n, 2)): each section's centroids with their noise (its ``tail``:
+    :func:`tail_scales`) and one common offset per section (the class's section shift), as
+    detection arrays without boxes."""
     ids, pts = [], []
     for k, (centroids, chol) in enumerate(sections):
         offset = rng.normal(size=2) * np.asarray(noise.shift_px) * factor
-        pts.append(centroids + np.einsum("nij,nj->ni", chol, rng.normal(size=centroids.shape)) + offset)
+        e = np.einsum("nij,nj->ni", chol, rng.normal(size=centroids.shape))
+        pts.append(centroids + tail_scales(len(centroids), tail, rng)[:, None] * e + offset)
         ids.append(np.full(len(centroids), k))
     return np.concatenate(ids), np.vstack(pts)
 
@@ -72,11 +86,12 @@ def _seed(design: Design, seed: int) -> int:
 
 
 def simulated_no_pose(cfg, design: Design, noise: NoiseClass, gate: GateFigures, frames: int,
-                      seed: int) -> dict:
+                      seed: int, tail: tuple[float, float] | None = None) -> dict:
     """{"camera_class", "simulated" (frames drawn), "refused" (frames without a pose), "rate" (their
     share), "reasons" (first words of each refusal -> count)} of ``design`` (its dataset config
     ``cfg``: eval.design_predict.design_config) over its first ``frames`` test frames, each drawn
-    once (module docstring). A class the gate tests at the card's noise: nothing simulated, rate 0.
+    once (module docstring), the centres with ``tail`` (:func:`tail_scales`; None: Gaussian). A
+    class the gate tests at the card's noise: nothing simulated, rate 0.
     ConfigError / DockfactoryError as eval.design_predict.drawn_frames."""
     cls = design_camera_class(design)
     out = {"camera_class": cls, "simulated": 0, "refused": 0, "rate": 0.0, "reasons": {}}
@@ -91,7 +106,7 @@ def simulated_no_pose(cfg, design: Design, noise: NoiseClass, gate: GateFigures,
     for f in cams:
         drawn = [_section_draw(ms, cam, f.focal_px, f.principal_point, noise, gate.noise_factor, f.pixel_aspect)
                  for ms, cam in zip(sections, (f.cam_from_a, f.cam_from_b))]
-        cls_ids, uv = _noisy_centres(drawn, noise, gate.noise_factor, rng)
+        cls_ids, uv = _noisy_centres(drawn, noise, gate.noise_factor, tail, rng)
         record, _ = solve_frame(markers, pp, (cls_ids, uv, None, None), None, "pinhole", options, class_factor)
         out["simulated"] += 1
         if not record.get("ok"):

@@ -224,3 +224,20 @@ def test_a_design_beyond_the_card_s_disc_sizes_says_so_in_every_output(tmp_path,
     assert all(r["disc_minor_median_px"] > 10.7 for r in rows if r["marker_diameter_mm"] == 24.0)
     md = (tmp_path / "o" / "design.md").read_text()
     assert md.count("extrapolated: median disc b") == sum(flagged.values()) * 2   # both cameras
+
+
+def test_a_card_that_simulates_refusals_says_so_and_counts_them_per_design(tmp_path, capsys):
+    """The committed tail card (the shipped card with ``no_pose_simulation``): every Bayer design's row
+    gives its simulated frames and refusals and the share they make, the monochrome PNG designs none
+    simulated; the answer's notes say how frames without a pose were predicted."""
+    space = _space(tmp_path, SPACE.replace("markers_per_section = [6, 9]", "markers_per_section = [6]")
+                   .replace("test_frames = 30", "test_frames = 30\ngeometry_frames = 8"))
+    card = Path(__file__).resolve().parents[2] / "bench" / "results" / "design" / "card_nopose_tail.json"
+    assert run_cli(["design", space, "--card", card, "--out", tmp_path / "o"], capsys)[0] == 0
+    doc = json.loads((tmp_path / "o" / "design.json").read_text())
+    for r in doc["designs"]:
+        nopose = r["no_pose"]
+        assert nopose["card_key"] == "no_pose_simulation"
+        assert nopose["simulated"] == (8 if r["cfa"] == "rggb" else 0)
+        assert nopose["rate_per_frame"] == (nopose["refused"] / 8 if r["cfa"] == "rggb" else 0.0)
+    assert any("its predicted centres" in n for n in doc["notes"])

@@ -6,8 +6,10 @@ row folds the simulated share into P(accept)."""
 from __future__ import annotations
 
 
+import numpy as np
 import pytest
 
+from bench.design.centre_tails import card_tail, mixture_fit
 from dockfactory.core.config import load_config
 from dockfactory.core.errors import DockfactoryError
 from design_cards import card_with
@@ -15,7 +17,7 @@ from dockfactory.core.resources import resolve_config
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.design_predict import NoiseClass, design_config
 from dockfactory.eval.design_rank import all_posed_probability, design_row
-from dockfactory.eval.design_refusals import GateFigures, design_camera_class, simulated_no_pose
+from dockfactory.eval.design_refusals import GateFigures, design_camera_class, simulated_no_pose, tail_scales
 from dockfactory.eval.design_space import Camera, Design, DesignSpace, Lens
 
 CARD_NOISE = 0.0125
@@ -110,3 +112,59 @@ def test_a_design_row_folds_the_simulated_share_into_its_chances(tmp_path):
     assert nopose["refused"] > 0 and nopose["rate_per_frame"] == nopose["refused"] / FRAMES
     q = all_posed_probability(nopose["rate_per_frame"], FRAMES)
     assert sim["p_accept"] == pytest.approx(plain["p_accept"] * q, rel=1e-12)
+
+
+def test_a_tail_keeps_the_noise_rms_and_puts_eps_of_it_m_times_out():
+    rng = np.random.default_rng(1)
+    s = tail_scales(200_000, (0.2, 5.0), rng)
+    assert np.sqrt(np.mean(s ** 2)) == pytest.approx(1.0, rel=0.01)
+    assert np.mean(s > 1.0) == pytest.approx(0.2, abs=0.005)
+    assert set(np.round(np.unique(s) * np.sqrt(0.8 + 0.2 * 25), 9)) == {1.0, 5.0}
+    assert np.all(tail_scales(5, None, rng) == 1.0)
+
+
+def test_at_the_same_rms_a_tailed_draw_is_refused_less_than_a_gaussian_one():
+    """The same JPEG design at 30x the card's noise RMS: Gaussian centres are refused on most frames;
+    with three in ten centres 40 times the rest's noise (the same RMS: a core 22 times smaller) the
+    solver sets the outliers aside and the core passes: the gate sees the tail's core, not its RMS,
+    so the tail's shape, not only its RMS, decides a design's refusals."""
+    d = _design("none", "jpeg90")
+    cfg = _cfg(d)
+    gauss = simulated_no_pose(cfg, d, _noise(30 * CARD_NOISE), GATE, FRAMES, 0)
+    tailed = simulated_no_pose(cfg, d, _noise(30 * CARD_NOISE), GATE, FRAMES, 0, (0.3, 40.0))
+    assert gauss["refused"] >= FRAMES - 2 and tailed["refused"] <= gauss["refused"] - 3
+
+
+@pytest.mark.parametrize("tail, needle", [
+    ({"jpeg90": {"none": [1.0, 3.0]}}, "no_pose_simulation.tail.jpeg90.none: expected [eps in [0, 1), m >= 1]"),
+    ({"jpeg90": {"none": [0.1, 0.5]}}, "no_pose_simulation.tail.jpeg90.none: expected [eps in [0, 1), m >= 1]"),
+    ({"tiff": {"none": [0.1, 3.0]}}, "no_pose_simulation.tail.tiff: expected 'png' or 'jpegQ'"),
+    ({"png": {"mono": [0.1, 3.0]}}, "no_pose_simulation.tail.png: expected a table of none / rggb"),
+    ([0.1], "no_pose_simulation.tail: expected a table of png / jpegQ"),
+])
+def test_a_bad_tail_table_is_one_line(tmp_path, tail, needle):
+    with pytest.raises(DockfactoryError) as exc:
+        _card(tmp_path, {**SIM, "tail": tail})
+    assert needle in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("cfa, fmt, tail", [("none", "png", None), ("rggb", "png", (0.13, 9.2)),
+                                            ("none", "jpeg93", (0.23, 5.8)), ("rggb", "jpeg100", (0.28, 3.7))])
+def test_the_card_gives_the_tail_of_the_highest_quality_at_or_below_the_design_s(tmp_path, cfa, fmt, tail):
+    table = {"png": {"rggb": [0.13, 9.2]}, "jpeg90": {"none": [0.23, 5.8], "rggb": [0.28, 3.3]},
+             "jpeg95": {"none": [0.23, 6.5], "rggb": [0.28, 3.7]}}
+    assert _card(tmp_path, {**SIM, "tail": table}).tail_of(_design(cfa, fmt)) == tail
+    assert _card(tmp_path, SIM).tail_of(_design(cfa, fmt)) is None
+
+
+def test_the_tail_fit_recovers_a_contaminated_normal_and_finds_none_in_a_gaussian():
+    rng = np.random.default_rng(3)
+    n = 4_000
+    z = rng.normal(size=n) * np.where(rng.random(n) < 0.15, 6.0, 1.0)
+    z = (z - np.median(z)) / (1.4826 * np.median(np.abs(z - np.median(z))))
+    fit = mixture_fit(z)
+    assert fit["eps"] == pytest.approx(0.15, rel=0.25) and fit["m"] == pytest.approx(6.0, rel=0.2)
+    plain = mixture_fit(rng.normal(size=n))
+    assert plain["eps"] <= 0.01 and plain["nll_gain"] < 10
+    assert card_tail({"bayer-jpeg95": fit, "three-chip": plain}) == {"jpeg95": {"rggb": [fit["eps"], fit["m"]]},
+                                                                      "png": {"none": [plain["eps"], plain["m"]]}}
