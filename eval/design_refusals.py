@@ -34,8 +34,8 @@ __all__ = ["GateFigures", "design_camera_class", "simulated_no_pose", "tail_scal
 class GateFigures:
     """What the gate of a rendered design's solve knows: the detector's noise card (centre noise
     and robust core px per axis, section shift (x, y) px; detector.noise_card), and the factor on
-    the design's predicted centre noise the simulation draws with (fitted on rendered designs:
-    bench/results/design/README.md)."""
+    the design's predicted centre noise the simulation draws with (1: the prediction as it is;
+    what other factors gave on the rendered designs: bench/results/design/README.md)."""
     centre_noise_px: float
     core_px: float | None
     section_shift_px: tuple[float, float] | None
