@@ -94,9 +94,7 @@ class DesignCard:
         has no such table: frames without a pose are then not predicted."""
         if not self.no_pose:
             return 0.0, ""
-        q = jpeg_quality(design.image_format)
-        key = "png" if q is None else max((k for k in self.no_pose if k != "png" and int(k[4:]) <= q),
-                                          key=lambda k: int(k[4:]), default="")
+        key = _format_key(self.no_pose, design)
         if key not in self.no_pose:
             return 0.0, ""
         return self.no_pose[key][design.camera.cfa], f"no_pose_rate.{key}.{design.camera.cfa}"
@@ -107,10 +105,7 @@ class DesignCard:
         :meth:`no_pose_rate_of`); None when the card has none for it (Gaussian centres)."""
         if not self.no_pose_tail:
             return None
-        q = jpeg_quality(design.image_format)
-        key = "png" if q is None else max((k for k in self.no_pose_tail if k != "png" and int(k[4:]) <= q),
-                                          key=lambda k: int(k[4:]), default="")
-        return self.no_pose_tail.get(key, {}).get(design.camera.cfa)
+        return self.no_pose_tail.get(_format_key(self.no_pose_tail, design), {}).get(design.camera.cfa)
 
     def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
@@ -129,6 +124,15 @@ class DesignCard:
         g *= self.sensor_factor_of(design, sensor_variance)
         noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law, k)
         return noise, [u for u in used if u in self.provisional], ""
+
+
+def _format_key(table: dict, design: Design) -> str:
+    """The key of a table by image format ("png" | "jpegQ") that holds ``design``: "png", or the
+    "jpegQ" of the highest Q at or below the design's quality (a JPEG's figures grow as its
+    quality falls); "" when there is none."""
+    q = jpeg_quality(design.image_format)
+    return "png" if q is None else max((k for k in table if k != "png" and int(k[4:]) <= q),
+                                       key=lambda k: int(k[4:]), default="")
 
 
 def _positive(path, key, value, zero: bool = False) -> float:
@@ -234,16 +238,21 @@ def _no_pose(path, data: dict) -> dict | None:
         raise DockfactoryError(f"{path}: no_pose_rate: expected a table of png / jpegQ, got {table!r}")
     out = {}
     for key, rates in table.items():
-        if key != "png":
-            try:
-                jpeg_quality(key)
-            except ValueError:
-                raise DockfactoryError(f"{path}: no_pose_rate.{key}: expected 'png' or 'jpegQ' (Q in 1-100)") from None
+        _check_format_key(path, "no_pose_rate", key)
         out[key] = _factors(path, table, key, ("none", "rggb"), "no_pose_rate.", zero=True)
         bad = [c for c, v in out[key].items() if v >= 1.0]
         if bad:
             raise DockfactoryError(f"{path}: no_pose_rate.{key}.{bad[0]}: expected a share in [0, 1), got {out[key][bad[0]]!r}")
     return out
+
+
+def _check_format_key(path, where: str, key: str) -> None:
+    """DockfactoryError (one line) unless ``key`` is "png" or "jpegQ" with Q in 1-100."""
+    if key != "png":
+        try:
+            jpeg_quality(key)
+        except ValueError:
+            raise DockfactoryError(f"{path}: {where}.{key}: expected 'png' or 'jpegQ' (Q in 1-100)") from None
 
 
 def _tail_table(path, t) -> dict | None:
@@ -256,8 +265,7 @@ def _tail_table(path, t) -> dict | None:
         raise DockfactoryError(f"{path}: {where}: expected a table of png / jpegQ, got {t!r}")
     out = {}
     for key, by_cfa in t.items():
-        if key != "png" and not (key.startswith("jpeg") and key[4:].isdigit() and 1 <= int(key[4:]) <= 100):
-            raise DockfactoryError(f"{path}: {where}.{key}: expected 'png' or 'jpegQ' (Q in 1-100)")
+        _check_format_key(path, where, key)
         if not isinstance(by_cfa, dict) or not set(by_cfa) <= {"none", "rggb"}:
             raise DockfactoryError(f"{path}: {where}.{key}: expected a table of none / rggb, got {by_cfa!r}")
         out[key] = {}
