@@ -216,7 +216,7 @@ class RenderConfig:
     marker_coverage_samples: int = 128  # > 0: those regions' antialiasing noise taken out by their exact coverage, rendered at this many samples (docs/rendering.md); 0 = off
     marker_coverage_threshold: float = 0.005  # > 0: that coverage render with adaptive sampling up to marker_coverage_samples (the markers' edges get them, their insides stop early); 0 = every pixel all of them
     marker_coverage_source: str = "geometry"  # geometry: that coverage computed from the markers' geometry where it applies and the regions' own samples agree, rendered elsewhere | render: always rendered (docs/rendering.md)
-    marker_light_smoothing_px: float = 0.7  # > 0: with the coverage correction, the light noise its samples leave on the marker smoothed over a Gaussian of this sigma (px), its exact-coverage edges kept (docs/rendering.md); 0 = off
+    marker_light_smoothing_px: float = 1.0  # > 0: with the coverage correction, the light noise its samples leave on the marker smoothed over a Gaussian of this sigma (px), its exact-coverage edges kept (docs/rendering.md); 0 = off
     light_tree: str = "markers"      # off | markers | on: Cycles' light tree in the marker regions only, or everywhere (docs/rendering.md)
     keep_exr: bool = False          # keep a compressed EXR (linear RGB, depth, index) per frame
     frame_timeout_s: float = 300.0  # a frame over this is a hung worker

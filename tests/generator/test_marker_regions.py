@@ -343,11 +343,11 @@ def test_a_coverage_threshold_out_of_range_is_refused_in_one_line(value):
 
 
 def test_the_light_smoothing_is_stored_only_where_the_coverage_correction_uses_it():
-    """``marker_light_smoothing_px`` (default 0.7) is in the identity and the frames' render
+    """``marker_light_smoothing_px`` (default 1.0) is in the identity and the frames' render
     settings beside a coverage correction; without one (no coverage samples, or no crops) it reads
     back 0 and leaves the key out: the identity and label bytes of the configs before it."""
-    assert _cfg().render.marker_light_smoothing_px == 0.7
-    assert _cfg().to_dict()["render"]["marker_light_smoothing_px"] == 0.7
+    assert _cfg().render.marker_light_smoothing_px == 1.0
+    assert _cfg().to_dict()["render"]["marker_light_smoothing_px"] == 1.0
     assert identity(_cfg(marker_light_smoothing_px=0.0)) != identity(_cfg())
     for off in (_cfg(marker_coverage_samples=0), _cfg(marker_samples=0)):
         assert off.render.marker_light_smoothing_px == 0.0
