@@ -32,6 +32,7 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "blind 3 (12)": ("confirm3_12.json", ("design_confirm3_quick", "design_confirm3_wide", "design_confirm3_wide3")),
     "blind 4 (12)": ("confirm4_12.json", ("design_confirm4_quick", "design_confirm4_quick2", "design_confirm4_wide")),
     "blind 5 (12)": ("confirm5_12.json", ("design_confirm5_quick", "design_confirm5_wide", "design_confirm5_wide2")),
+    "blind 6 (12)": ("confirm6_12.json", ("design_confirm6_quick", "design_confirm6_quick2", "design_confirm6_wide")),
 }
 COMPS = ("x", "y", "alpha")
 
