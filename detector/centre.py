@@ -375,11 +375,17 @@ def _usable(s: np.ndarray, pur: np.ndarray, rho: np.ndarray, fg: float, bg: floa
 # in the whole edge band the renders' denoiser reshapes; a narrower band trades BlueB's offset for RedA's.
 FIT_BAND_IN_PX = 2.5   # the fit uses the pixels from this far inside the first ellipse's edge ...
 FIT_BAND_OUT_PX = 1.0  # ... to this far outside it (the ring is 2.5 mm wide: 2.5-3 px here, < 1 px across flat discs)
+# ... and not beyond this scale of the first ellipse: a 2.5 mm ring around a disc up to 50 mm wide
+# reaches at least 1.1 of its radius, so the band's pixels are disc, edge or ring, never the paint
+RING_SCALE_LIMIT = 1.1
 FIT_MAX_SHIFT_PX = 0.5  # a fitted centre farther than this from the coverage centroid is refused
 FIT_ITERATIONS = 8     # Levenberg-Marquardt steps at most (it stops earlier below 0.002 px)
 
 
 LOGISTIC_TO_GAUSSIAN = 1.702   # the logistic edge of scale s is close to a Gaussian step of std 1.702 s
+# x s^2 (s the logistic's scale): a blurred shaded disc's edge profile carries -v (grad f . n) K(d),
+# v K(d) the blur's tail moment, v = 4 ln 2 s^2 where it matters (at the edge, for a logistic kernel)
+BLURRED_SHADING = 4 * math.log(2)
 # A disc whose fitted minor semi-axis is under this many edge widths (Gaussian std) is refitted with
 # its disc level's gradient along the major axis only: across a thin blurred disc that gradient and
 # a shift of the centre along the minor axis change the score nearly alike (checked on two scenes:
@@ -407,31 +413,54 @@ def edge_fit(win: _Window | None) -> EdgeFit | None:
     """The disc in the window ``win``, by least squares (:class:`EdgeFit`); None when there is
     nothing to fit or the fit is refused.
 
-    Model of the score at pixel x (px): ``b + (f(x) - b) / (1 + exp(d(x) / sigma))`` with
-    d(x) the signed distance (px, > 0 outside) to the ellipse {x: (x - c)^T M (x - c) = 1} to first
-    order (Sampson: ``(q - 1) / (2 |M (x - c)|)``), sigma the edge width (blur of the optics and
-    the pixel filter), f(x) = f0 + f1 x + f2 y the disc level (shading across the disc) and b the
-    ring level. Parameters: c (2), M (3), log sigma, f0, f1, f2, b; Levenberg-Marquardt from the
-    coverage ellipse, over the usable pixels in a band around its edge. A disc thinner than
-    ``THIN_DISC_EDGE_WIDTHS`` edge widths is refitted with the shading along its major axis only
-    (:func:`_refit_shading_along_major`)."""
+    Model of the score at pixel x (px): ``b + (f(x) - b) L(d) - v (grad f . n) K(d)`` with L the
+    logistic step ``1 / (1 + exp(d / sigma))`` and K = -dL/dd, d(x) the signed distance (px, > 0
+    outside) to the ellipse {x: (x - c)^T M (x - c) = 1} to first order (Sampson: ``(q - 1) /
+    (2 |M (x - c)|)``) and n its outward normal, sigma the edge width (blur of the optics and the
+    pixel filter), f(x) = f0 + f1 x + f2 y the disc level (shading across the disc) and b the ring
+    level. The last term is what the blur does to a shaded disc (the product of the level and the
+    step blurred, to first order; v = ``BLURRED_SHADING`` sigma^2): without it a shading g per px
+    moved the edges, and so the centre, by about -v g / (f - b) toward the dark side. Parameters:
+    c (2), M (3), log sigma, f0, f1, f2, b; Levenberg-Marquardt from the coverage ellipse, over the
+    usable pixels in a band around its edge that ends at ``RING_SCALE_LIMIT`` of that ellipse
+    (where that leaves no accepted fit, the band without that end). Why the end: across a disc seen
+    obliquely the ring is under a pixel wide, and the paint beyond it, whose score is not the ring's
+    level, entered the band's outer pixels on the thin sides and pulled the edge there: a centre
+    offset fixed per marker that biased the pose (bench/results/centre_pattern/README.md). A disc
+    thinner than ``THIN_DISC_EDGE_WIDTHS`` edge widths is refitted with the shading along its major
+    axis only (:func:`_refit_shading_along_major`)."""
     if win is None:
         return None
     m0 = _inverse_2x2(4 * win.cov)             # uniform ellipse: covariance = M^-1 / 4
     dx, dy = win.xs - win.centre[0], win.ys - win.centre[1]
     d0, _ = _sampson(dx, dy, m0[0, 0], m0[0, 1], m0[1, 1])
+    q0 = m0[0, 0] * dx * dx + 2 * m0[0, 1] * dx * dy + m0[1, 1] * dy * dy
     band = (d0 > -FIT_BAND_IN_PX) & (d0 < FIT_BAND_OUT_PX) & _usable(win.s, win.pur, win.rho, win.fg, win.bg)
+    p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
+    p = _fit_in_band(win, m0, dx, dy, band & (q0 < RING_SCALE_LIMIT ** 2), p0)
+    if p is None:
+        p = _fit_in_band(win, m0, dx, dy, band, p0)
+    if p is None:
+        return None
+    return EdgeFit(centre=win.centre + p[:2], edge_px=_edge_px(p), minor_px=_minor_px(p))
+
+
+def _fit_in_band(win: _Window, m0: np.ndarray, dx: np.ndarray, dy: np.ndarray, band: np.ndarray,
+                 start: np.ndarray) -> np.ndarray | None:
+    """Parameters of :func:`edge_fit`'s model fitted from ``start`` to the window's pixels in
+    ``band`` (h, w) bool (``dx``, ``dy``: px from the coverage centroid; ``m0`` the coverage
+    ellipse), a thin disc refitted with its shading along the major axis; None under 20 pixels or
+    when refused."""
     if band.sum() < 20:
         return None
     x, y, s = dx[band], dy[band], win.s[band].astype(np.float64)
-    p0 = np.array([0.0, 0.0, m0[0, 0], m0[0, 1], m0[1, 1], np.log(0.2), win.fg, 0.0, 0.0, win.bg])
-    p = _levenberg_marquardt(p0, x, y, s)
+    p = _levenberg_marquardt(start, x, y, s)
     if p is None or not _fit_accepted(p, m0, win):
         return None
     if _minor_px(p) < THIN_DISC_EDGE_WIDTHS * _edge_px(p):
         q = _refit_shading_along_major(p, x, y, s)
         p = q if q is not None and _fit_accepted(q, m0, win) else p
-    return EdgeFit(centre=win.centre + p[:2], edge_px=_edge_px(p), minor_px=_minor_px(p))
+    return p
 
 
 def _edge_px(p: np.ndarray) -> float:
@@ -496,12 +525,14 @@ def _edge_residual(p: np.ndarray, x: np.ndarray, y: np.ndarray, s: np.ndarray):
     sigma = np.exp(np.clip(p[5], -3.0, 2.0))       # 0.05-7.4 px
     phi = 1.0 / (1.0 + np.exp(np.clip(d / sigma, -60.0, 60.0)))    # 1 inside, 0 outside
     level = p[6] + p[7] * x + p[8] * y - p[9]
-    return s - (p[9] + level * phi), (ex, ey, d, gx, gy, gn, sigma, phi, level)
+    blur = -BLURRED_SHADING * sigma * phi * (1 - phi) / gn     # x the level's gradient along g
+    return (s - (p[9] + level * phi + blur * (p[7] * gx + p[8] * gy)),
+            (ex, ey, d, gx, gy, gn, sigma, phi, level, blur))
 
 
 def _edge_jacobian(p: np.ndarray, x: np.ndarray, y: np.ndarray, aux) -> np.ndarray:
     """(10, n) derivatives of the model (exact, the Sampson distance's normaliser included)."""
-    ex, ey, d, gx, gy, gn, sigma, phi, level = aux
+    ex, ey, d, gx, gy, gn, sigma, phi, level, blur = aux
     k = -level * phi * (1 - phi) / (sigma * gn)     # (d model / d d) / |g|
     dh = d / gn
     hx = (p[2] * gx + p[3] * gy) * dh               # d (M g)_x / |g|, d (M g)_y / |g|
@@ -513,7 +544,7 @@ def _edge_jacobian(p: np.ndarray, x: np.ndarray, y: np.ndarray, aux) -> np.ndarr
     j[3] = k * (ex * ey - d * (gx * ey + gy * ex))
     j[4] = k * ey * (0.5 * ey - d * gy)
     j[5] = -k * gn * d if -3.0 < p[5] < 2.0 else 0.0  # d / d log sigma (0 where clipped)
-    j[6], j[7], j[8] = phi, phi * x, phi * y
+    j[6], j[7], j[8] = phi, phi * x + blur * gx, phi * y + blur * gy
     j[9] = 1 - phi
     return j
 

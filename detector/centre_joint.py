@@ -16,11 +16,6 @@ from dockfactory.core.camera_chain.cfa import channel_map
 import dockfactory.detector.centre as centre
 from dockfactory.detector.centre import CLASS_CHANNEL
 
-# The fit's band ends where the ring may: at this scale of the first ellipse (a 2.5 mm ring around
-# a disc up to 50 mm wide reaches at least 1.1 of its radius). Across a thin disc the ring is under
-# a pixel and the paint beyond it, bright in every raw channel (unlike the three-chip score, where
-# paint and ring read alike), would enter the band's outer pixel.
-RING_SCALE_LIMIT = 1.1
 MIN_CHANNEL_CNR = 2.0   # another channel joins the fit when |disc - ring| is at least this many noise sigmas
 RING_FLOOR_PERCENTILE = 10.0   # the ring's level within an annulus that may hold paint (ring_floor)
 RING_FLOOR_MIN_SAMPLES = 5      # fewer annulus samples than this: no floor (a percentile of a handful is one sample)
@@ -139,9 +134,10 @@ def fit_disc_joint(image: np.ndarray, win, class_id: int, cfa: str, reweight: bo
 def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = True):
     """(parameters, the fit's ``SiteSamples`` with the weights of its last fit) of
     :func:`fit_disc_joint`, the centre at parameters[:2] px from ``win.centre``; None as there.
-    The band ends at ``RING_SCALE_LIMIT`` of the first ellipse; where that leaves no accepted fit
-    (too few samples of a small disc, a first ellipse smaller than the disc) the band as it was
-    without that end is fitted instead."""
+    The band ends at ``centre.RING_SCALE_LIMIT`` of the first ellipse (across a thin disc the ring
+    is under a pixel and the paint beyond it, bright in every raw channel, would enter its outer
+    pixel); where that leaves no accepted fit (too few samples of a small disc, a first ellipse
+    smaller than the disc) the band as it was without that end is fitted instead."""
     m0 = centre._inverse_2x2(4 * win.cov)
     ex, ey = win.xs - win.centre[0], win.ys - win.centre[1]
     d0, _ = centre._sampson(ex, ey, m0[0, 0], m0[0, 1], m0[1, 1])
@@ -156,7 +152,7 @@ def joint_fit(image: np.ndarray, win, class_id: int, cfa: str, reweight: bool = 
     c, sign, lv = ref
     band = ((d0 > -centre.FIT_BAND_IN_PX) & (d0 < centre.FIT_BAND_OUT_PX)
             & centre._usable(sign * lin[..., c], win.pur, win.rho, lv[0], lv[1]))
-    fitted = _fit_band(site_samples(lin, cmap, win, ref, band & (q0 < RING_SCALE_LIMIT ** 2)), m0, win, reweight)
+    fitted = _fit_band(site_samples(lin, cmap, win, ref, band & (q0 < centre.RING_SCALE_LIMIT ** 2)), m0, win, reweight)
     return fitted if fitted is not None else _fit_band(site_samples(lin, cmap, win, ref, band), m0, win, reweight)
 
 
