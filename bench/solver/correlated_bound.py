@@ -16,7 +16,7 @@ Inputs: the acceptance run's folder (``detections.json``, ``poses.json``, ``eval
 ``bench/paper/paper.sh accept_s`` writes them). Centres: refined detections at score >= 0.25 matched
 within 3 px to a marker at least 99 % visible; frames of one condition (default normal).
 
-Run: python -m bench.solver.correlated_bound DATASET RUN_DIR [--measure-split train] [--eval-split test]
+Run: python -m bench.solver.correlated_bound DATASET[+DATASET] RUN_DIR[+RUN_DIR] [--measure-split train] [--eval-split test]
      [--condition normal]
 """
 from __future__ import annotations
@@ -58,21 +58,23 @@ def whitened_errors(label: dict, dets: list[dict]) -> dict:
     return out
 
 
-def measured_moments(root: Path, frames: dict, split: str, condition: str) -> tuple[np.ndarray, int]:
+def measured_moments(roots: list[Path], frames: list[dict], split: str, condition: str) -> tuple[np.ndarray, int]:
     """(28, 28) second moments of the whitened errors over (marker id, axis), pairwise over the
-    frames where both are present, normalised to a mean diagonal of 1; the frame count."""
+    frames where both are present, pooled over the datasets ``roots`` (each with its detections'
+    ``frames``), normalised to a mean diagonal of 1; the frame count."""
     total, count, n = np.zeros((28, 28)), np.zeros((28, 28)), 0
-    for fid, dets in sorted(frames.items()):
-        label = json.loads((root / "labels" / f"{fid}.json").read_text())
-        if label["spec"]["split"] != split or label["spec"]["condition"] != condition:
-            continue
-        v = np.full(28, np.nan)
-        for k, w in whitened_errors(label, dets).items():
-            v[2 * SLOT[k]:2 * SLOT[k] + 2] = w
-        ok = ~np.isnan(v)
-        total += np.outer(np.where(ok, v, 0), np.where(ok, v, 0))
-        count += np.outer(ok, ok)
-        n += 1
+    for root, by_frame in zip(roots, frames):
+        for fid, dets in sorted(by_frame.items()):
+            label = json.loads((root / "labels" / f"{fid}.json").read_text())
+            if label["spec"]["split"] != split or label["spec"]["condition"] != condition:
+                continue
+            v = np.full(28, np.nan)
+            for k, w in whitened_errors(label, dets).items():
+                v[2 * SLOT[k]:2 * SLOT[k] + 2] = w
+            ok = ~np.isnan(v)
+            total += np.outer(np.where(ok, v, 0), np.where(ok, v, 0))
+            count += np.outer(ok, ok)
+            n += 1
     m = total / np.maximum(count, 1)
     return m / np.diag(m).mean(), n
 
@@ -103,31 +105,43 @@ def frame_stds(label: dict, ids: list[str], moments: np.ndarray) -> tuple[np.nda
     return tuple(np.sqrt(np.diag(prop @ c[:12, :12] @ prop.T)) for c in (a_inv, sandwich, bound))
 
 
+def frame_rows(roots: list[Path], runs: list[Path], moments: np.ndarray, split: str, condition: str) -> np.ndarray:
+    """(frames, 6, 5): per solved frame of ``split`` and ``condition`` of every run and pose
+    component, its error, the run's bound, and the independent, structured-fit and structured
+    bound stds at unit scale (:func:`frame_stds`)."""
+    stats = []
+    for root, run in zip(roots, runs):
+        poses = json.loads((run / "poses.json").read_text())["frames"]
+        for r in csv.DictReader((run / "eval" / "frames.csv").open()):
+            if r["split"] != split or r["condition"] != condition or r["ok"] != "True":
+                continue
+            label = json.loads((root / "labels" / f"{r['frame_id']}.json").read_text())
+            ind, fit, bound = frame_stds(label, poses[r["frame_id"]]["marker_ids"], moments)
+            stats.append([[float(r[f"err_{c}"]), float(r[f"crb_{c}"]), ind[k], fit[k], bound[k]]
+                          for k, c in enumerate(POSE)])
+    return np.asarray(stats)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("dataset", type=Path)
-    ap.add_argument("run", type=Path, help="acceptance run folder (detections.json, poses.json, eval/frames.csv)")
+    ap.add_argument("dataset", help="dataset folder, or several joined by + (pooled)")
+    ap.add_argument("run", help="acceptance run folder (detections.json, poses.json, eval/frames.csv); "
+                                "several joined by +, one per dataset")
     ap.add_argument("--measure-split", default="train")
     ap.add_argument("--eval-split", default="test")
     ap.add_argument("--condition", default="normal")
     args = ap.parse_args()
-    dets = json.loads((args.run / "detections.json").read_text())["frames"]
-    poses = json.loads((args.run / "poses.json").read_text())["frames"]
-    moments, n = measured_moments(args.dataset, dets, args.measure_split, args.condition)
-    rows = [r for r in csv.DictReader((args.run / "eval" / "frames.csv").open())
-            if r["split"] == args.eval_split and r["condition"] == args.condition and r["ok"] == "True"]
-    if not n or not rows:
+    roots, runs = [Path(p) for p in args.dataset.split("+")], [Path(p) for p in args.run.split("+")]
+    if len(roots) != len(runs):
+        raise SystemExit(f"{len(roots)} datasets and {len(runs)} runs: give one run per dataset")
+    dets = [json.loads((run / "detections.json").read_text())["frames"] for run in runs]
+    moments, n = measured_moments(roots, dets, args.measure_split, args.condition)
+    s = frame_rows(roots, runs, moments, args.eval_split, args.condition)
+    if not n or not len(s):
         raise SystemExit(f"{args.run}: no {args.condition} frames of split {args.measure_split!r} or {args.eval_split!r}")
-    stats = []
-    for r in rows:
-        label = json.loads((args.dataset / "labels" / f"{r['frame_id']}.json").read_text())
-        ind, fit, bound = frame_stds(label, poses[r["frame_id"]]["marker_ids"], moments)
-        stats.append([[float(r[f"err_{c}"]), float(r[f"crb_{c}"]), ind[k], fit[k], bound[k]]
-                      for k, c in enumerate(POSE)])
-    s = np.asarray(stats)
     rms = np.sqrt((s ** 2).mean(axis=0))  # (6, 5); columns 2-4 at unit scale: rescale to the run's
     print(f"structure measured on {n} {args.measure_split} {args.condition} frames; "
-          f"{len(rows)} {args.eval_split} {args.condition} frames")
+          f"{len(s)} {args.eval_split} {args.condition} frames")
     print("bound: the run's (independent centres); fit: the solver's weighted fit under the measured structure;")
     print("bound*: the Cramer-Rao bound under the measured structure. Ratios: RMSE / each.")
     print(f"{'':6s} {'RMSE':>8s} {'bound':>8s} {'ratio':>6s} {'fit':>8s} {'ratio':>6s} {'bound*':>8s} {'ratio':>6s}")
