@@ -79,12 +79,14 @@ def _far_refined(monkeypatch=None) -> tuple[int, int]:
 def test_a_hidden_chord_is_rarely_a_refined_centre_far_off(monkeypatch):
     """Discs with a chord hidden, most of their centres 1-5 px off (85 of 90): without the symmetry
     term 75 of them are returned refined (as the refinement did before it, like the renders' 7.5 px
-    at quality 1.0); with it 10 (at most 12 allowed). What is left: a narrow cap (more than half
-    the disc hidden) looks like a whole disc seen at a slant, symmetric about its own centre: no
+    at quality 1.0); with it 13 (at most 14 allowed; 11 with the edge fit's band not ended at the
+    ring, 10 before either change to the edge fit: the end, which takes the paint's pull off every
+    whole oblique disc, lets two more hidden caps through). What is left: a narrow cap (more than
+    half the disc hidden) looks like a whole disc seen at a slant, symmetric about its own centre: no
     test on its shape alone tells it apart (the solver's comparison of each box with the pose's
     prediction is what can)."""
     far, off = _far_refined()
-    assert off >= 80 and far <= 12
+    assert off >= 80 and far <= 14
     monkeypatch.setattr(centre, "symmetry_quality", lambda a: 1.0)
     before, _ = _far_refined()
     assert before >= 60
