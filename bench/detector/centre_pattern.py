@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from bench.marker_match import nearest_marker
 
+from dockfactory.core.geometry import project_points
 from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.pose_metrics import pose_error
 from dockfactory.eval.solve_frames import solve_dataset
@@ -58,12 +59,9 @@ def axis_frame(label: dict, marker: dict) -> tuple[np.ndarray, np.ndarray]:
     """(seam, across) unit vectors in the image at the marker: the image direction of the D
     frame's +x axis (the section axis) at the marker's centre, turned toward the other section
     (A's markers look to +x, B's to -x), and its perpendicular."""
-    k, t = np.asarray(label["camera"]["K"]), np.asarray(label["camera"]["cam_from_d"])
-    def proj(p):
-        q = k @ (t[:3, :3] @ p + t[:3, 3])
-        return q[:2] / q[2]
     c = np.asarray(marker["center_d_mm"], dtype=float)
-    u = proj(c + np.array([1.0, 0.0, 0.0])) - proj(c)
+    uv, _ = project_points(label["camera"]["K"], label["camera"]["cam_from_d"], np.stack([c, c + [1.0, 0.0, 0.0]]))
+    u = uv[1] - uv[0]
     u /= np.linalg.norm(u)
     seam = u if marker["section"] == "A" else -u
     return seam, np.array([-seam[1], seam[0]])

@@ -18,7 +18,6 @@ Run: python -m bench.solver.bound_ratio [NAME=]RUN[+RUN...] ... [--json OUT]
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 from pathlib import Path
 
@@ -28,27 +27,13 @@ from dockfactory.core.io import write_json_atomic
 from dockfactory.eval.acceptance import COMPONENTS
 from dockfactory.eval.evaluate import bound_ratios
 from dockfactory.eval.pose_metrics import error_stats
-
-
-def _float_row(row: dict) -> dict:
-    out = {}
-    for k, v in row.items():
-        try:
-            out[k] = float(v) if v not in ("", None) else None
-        except ValueError:
-            out[k] = v
-    return out
+from dockfactory.eval.report.document import read_rows
 
 
 def solved_test_rows(run: Path) -> list[dict]:
-    """The solved test frames of one run's ``eval/frames.csv`` (numbers as floats, blanks None).
-    Raises FileNotFoundError naming the file when the run has not been evaluated."""
-    path = run / "eval" / "frames.csv"
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no per-frame table (run `dockfactory run` or `evaluate` first)")
-    with path.open(newline="") as fh:
-        rows = [_float_row(r) for r in csv.DictReader(fh)]
-    return [r for r in rows if r["split"] == "test" and r["ok"] in ("True", "true", 1.0)]
+    """The solved test frames of one run's ``eval/frames.csv``, typed by the report's reader
+    (eval.report.document.read_rows: DatasetError naming the file, line and column on bad input)."""
+    return [r for r in read_rows(run / "eval") if r["split"] == "test" and r["ok"]]
 
 
 def group_ratios(runs: list[Path]) -> dict:
