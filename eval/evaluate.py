@@ -23,6 +23,7 @@ from dockfactory.eval.gate_statistic import gate_statistic
 from dockfactory.eval.camera_models_eval import camera_models_block
 from dockfactory.eval.model_check import model_check_block
 from dockfactory.eval.centre_noise import centre_noise_block, used_sigma
+from dockfactory.eval.centre_structure import measure_structure, structured_frame_bound
 from dockfactory.eval.centre_noise_disc import (
     disc_noise_block,
     disc_scales,
@@ -88,7 +89,8 @@ def evaluated_frames(ds: Dataset) -> list:
 
 
 def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, source="poses",
-                   sigma_by_condition: dict | None = None, disc: dict | None = None) -> list[dict]:
+                   sigma_by_condition: dict | None = None, disc: dict | None = None,
+                   structure: dict | None = None) -> list[dict]:
     """One row per frame: the ``population`` (FrameSpecs, default :func:`evaluated_frames`) first,
     then any other frame of the dataset the poses file holds (another split). A planned frame
     without a label or without a pose is a failed row with its reason; a pose for a frame the
@@ -97,7 +99,10 @@ def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, s
     ``sigma_by_condition`` when given, else ``sigma_px``; its ``sigma_px`` column says which.
     With ``disc`` (:func:`eval.centre_noise_disc.disc_scales`: "value", "by_condition") the
     bound ``crb_*`` is that of the disc noise model at the condition's scale (``sigma_disc_px``:
-    the per-axis noise it assumed), else the isotropic one."""
+    the per-axis noise it assumed), else the isotropic one. With ``disc`` and a measured
+    ``structure`` (eval.centre_structure.measure_structure) a solved row also has the bound under
+    that structure (``crb_structured_*``) and the weighted fit's expected std under it
+    (``fit_structured_*``), at the same scale."""
     population = evaluated_frames(ds) if population is None else population
     planned = {s.frame_id for s in population}
     order = [s.frame_id for s in population] + [f for f in poses["frames"] if f not in planned]
@@ -129,6 +134,7 @@ def per_frame_rows(ds: Dataset, poses: dict, sigma_px: float, population=None, s
             sigma = (sigma_by_condition or {}).get(row["condition"], sigma_px)
             scale = disc["by_condition"].get(row["condition"], disc["value"]) if disc else None
             row.update(_solved_fields(rec, lab, sigma, f"{source}: frames.{fid}.covariance", scale))
+            row.update(_structured_fields(lab, rec.get("marker_ids"), structure, scale))
         rows.append(row)
     return rows
 
@@ -158,6 +164,14 @@ def _solved_fields(rec: dict, lab: dict, sigma_px: float, where: str, disc_scale
     return out
 
 
+def _structured_fields(lab: dict, marker_ids, structure: dict | None, scale_px: float | None) -> dict:
+    """``crb_structured_*`` and ``fit_structured_*`` of a solved frame (None each where the
+    structure, the disc scale or the frame's geometry does not give them)."""
+    b = structured_frame_bound(lab, marker_ids, structure, scale_px) if structure and scale_px else None
+    return {f"{k}_structured_{c}": (b[name][c] if b else None)
+            for k, name in (("crb", "bound"), ("fit", "fit")) for c in COMPONENTS}
+
+
 def localization_block(rows: list[dict]) -> dict:
     ok = [r for r in rows if r["ok"]]
     out = {"n_frames": len(rows), "n_solved": len(ok)}
@@ -172,6 +186,9 @@ def localization_block(rows: list[dict]) -> dict:
     out["crb"] = bound_ratios(ok, out["overall"], "crb")
     if any(r.get("sigma_disc_px") is not None for r in ok):
         out["crb_isotropic"] = bound_ratios(ok, out["overall"], "crb_iso")
+    if any(r.get("crb_structured_x") is not None for r in ok):
+        out["crb_structured"] = bound_ratios(ok, out["overall"], "crb_structured")
+        out["fit_structured"] = bound_ratios(ok, out["overall"], "fit_structured")
     out["calibration"] = calibration_block(ok)
     return out
 
@@ -297,17 +314,19 @@ def _evaluate(ds: Dataset, poses_path, spec: AcceptanceSpec, detections_path, mi
     used = used_sigma(noise, oracle_sigma_px, poses.get("oracle_sigma_px"))
     sigma = used["value"]
     disc = disc_noise_block(ds, poses, detections, min_score) if detections is not None else None
+    structure = measure_structure(ds, detections, min_score) if disc else None
     # the population is the plan: a frame without a pose (failed, absent from the poses file or
     # from the dataset) is a failure with its reason, never silently dropped
     rows = per_frame_rows(ds, poses, sigma, source=str(poses_path), sigma_by_condition=used["by_condition"],
-                          disc=disc_scales(disc))
+                          disc=disc_scales(disc), structure=structure)
     test = [r for r in rows if r["split"] == "test"]
     rep = [r for r in rows if r["split"] == "repeat"]
     metrics = {"format": METRICS_FORMAT, "dataset": {"root": str(ds.root), "version_id": ds.version_id,
                                                       "name": ds.identity["name"]},
                "poses": {"source": poses.get("source"), "path": str(poses_path)},
                "centre_noise_px": sigma, "centre_noise": {**(noise or {}), "used": used,
-                                                           **({"disc_model": disc} if disc else {})},
+                                                           **({"disc_model": disc} if disc else {}),
+                                                           **({"structure": structure} if structure else {})},
                "centre_error": {c: {"median_px": s["median_radial_px"], "n": s["n"]}
                                 for c, s in ((noise or {}).get("by_condition") or {}).items()},
                "localization": localization_block(test), "estimation": estimation_block(rep),
@@ -393,7 +412,8 @@ CSV_FIELDS = (["frame_id", "split", "condition", "pose_index", "ok", "category",
                "focal_true", "focal_est", "focal_err_pct", "visible_a", "visible_b", "rmse_px_a", "rmse_px_b"]
               + [f"{k}_{c}" for k in ("true", "est", "err", "crb") for c in COMPONENTS] + ["sigma_px"]
               + [f"{k}_{c}" for k in ("std", "z") for c in COMPONENTS]
-              + [f"crb_iso_{c}" for c in COMPONENTS] + ["sigma_disc_px"])
+              + [f"crb_iso_{c}" for c in COMPONENTS] + ["sigma_disc_px"]
+              + [f"{k}_structured_{c}" for k in ("crb", "fit") for c in COMPONENTS])
 
 
 def json_safe(obj):

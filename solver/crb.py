@@ -38,8 +38,8 @@ from dockfactory.solver.refine import (
     stack_blocks,
 )
 
-__all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "crb_sequence", "DockingBound",
-           "SequenceBound", "POSE_NAMES"]
+__all__ = ["crb_pnpf", "crb_joint", "crb_d_from_b", "crb_d_from_b_structured", "crb_sequence",
+           "DockingBound", "SequenceBound", "POSE_NAMES"]
 
 
 def _check_transform(name, value):
@@ -275,6 +275,65 @@ def crb_d_from_b(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, pr
     cov6 = prop @ cov12 @ prop.T
     std = dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist()))
     return DockingBound(cov6, std, problem, intr_std)
+
+
+def _whitener(covariance, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(Sigma, L^-1), L the Cholesky factor of a checked (n, n) covariance (InvalidSolverInput else)."""
+    sigma = np.asarray(covariance, dtype=np.float64)
+    if sigma.shape != (n, n) or not np.all(np.isfinite(sigma)) or not np.allclose(sigma, sigma.T):
+        raise InvalidSolverInput(f"covariance: expected a finite symmetric ({n}, {n}) matrix, got shape {sigma.shape}")
+    try:
+        return sigma, np.linalg.inv(np.linalg.cholesky(sigma))
+    except np.linalg.LinAlgError:
+        raise InvalidSolverInput("covariance: not positive definite") from None
+
+
+def crb_d_from_b_structured(points_a, cam_from_a, points_b, cam_from_b, focal_px: float, principal_point,
+                            covariance, weight_shapes) -> tuple[DockingBound, DockingBound]:
+    """The joint pinhole problem's bound on ``d_from_b`` when the centres' errors are correlated,
+    and what a fit weighted as if they were not achieves under them.
+
+    Parameters
+    ----------
+    points_a, cam_from_a, points_b, cam_from_b, focal_px, principal_point
+        As :func:`crb_d_from_b` (mm, (4, 4), px).
+    covariance : (2N, 2N) px^2, N = Na + Nb
+        The centres' joint error covariance, rows interleaved (u, v) per point, A's points first.
+    weight_shapes : (N, 2, 2)
+        The per-point covariances the fit weights by (C_i^-1; any common scale).
+
+    Returns
+    -------
+    (DockingBound, DockingBound)
+        The Cramer-Rao bound under ``covariance`` ((J^T Sigma^-1 J)^-1), and the weighted fit's
+        covariance under it (the sandwich A^-1 J^T W Sigma W J A^-1, A = J^T W J): at least the
+        bound, equal to it when ``covariance`` is block-diagonal and proportional to the weights.
+
+    Raises
+    ------
+    InvalidSolverInput
+        A covariance not (2N, 2N), not symmetric positive definite, or bad points or poses.
+    DegenerateGeometry
+        Points behind a camera, or a singular information.
+    """
+    ca, cb = _check_transform("cam_from_a", cam_from_a), _check_transform("cam_from_b", cam_from_b)
+    jac = _joint_jac(points_a, ca, points_b, cb, focal_px, principal_point)
+    n = jac.shape[0]
+    sigma, sigma_inv = _whitener(covariance, n)
+    whitened = sigma_inv @ jac
+    bound = inverse_spd(whitened.T @ whitened)
+    weights = np.linalg.inv(as_point_covariances("weight_shapes", weight_shapes, n // 2))
+    wj = np.einsum("nab,nbp->nap", weights, jac.reshape(-1, 2, jac.shape[1])).reshape(n, -1)
+    a_inv = inverse_spd(jac.T @ wj)
+    fit = a_inv @ wj.T @ sigma @ wj @ a_inv
+    if not (np.all(np.isfinite(bound)) and np.all(np.isfinite(a_inv))):
+        raise DegenerateGeometry("Fisher information is singular: the parameters are not observable from these points")
+    prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
+    out = []
+    for cov in (bound, fit):
+        cov6 = prop @ cov[:12, :12] @ prop.T
+        out.append(DockingBound(cov6, dict(zip(POSE_NAMES, np.sqrt(np.diag(cov6)).tolist())), "joint"))
+    return out[0], out[1]
 
 
 def _independent(points_a, ca, points_b, cb, focal_px, principal_point, sigma_px, known,

@@ -30,6 +30,7 @@ import numpy as np
 from bench.marker_match import nearest_marker
 
 from dockfactory.eval.centre_noise_disc import label_noise_shapes
+from dockfactory.eval.centre_structure import sqrt_spd
 from dockfactory.solver.crb import _joint_jac
 from dockfactory.solver.refine import d_from_b_jacobian
 
@@ -37,11 +38,6 @@ IDS = [f"{s}{i}" for s in "AB" for i in range(7)]
 SLOT = {k: i for i, k in enumerate(IDS)}
 POSE = ("x", "y", "z", "alpha", "beta", "gamma")
 MATCH_PX = 3.0
-
-
-def sqrt_spd(t: np.ndarray) -> np.ndarray:
-    w, v = np.linalg.eigh(t)
-    return (v * np.sqrt(w)) @ v.T
 
 
 def whitened_errors(label: dict, dets: list[dict]) -> dict:

@@ -354,6 +354,8 @@ def git_describe() -> str:
 # are S; ("list", S) a list of S.
 _STATS = {k: "num?" for k in summary_fields() if k != "n"} | {"n": "int"}   # eval.pose_metrics.error_stats
 _COMPS = {c: _STATS for c in COMPONENTS}
+_RATIOS = ("map", {"bound_rms": "num?", "measured_rmse": "num?", "ratio": "num?", "ratio_low?": "num?",
+                   "ratio_high?": "num?"})
 METRICS_SCHEMA = {
     "dataset": {"root": "str", "version_id": "str", "name": "str"},
     "poses": {"source": "str?", "path": "str"},
@@ -361,8 +363,7 @@ METRICS_SCHEMA = {
     "centre_noise?": CENTRE_NOISE_SCHEMA,
     "localization": {"n_frames": "int", "n_solved": "int", "overall": _COMPS, "by_condition": ("map", _COMPS),
                      "focal_err_pct": _STATS, "reprojection_rmse_px": {"A": _STATS, "B": _STATS},
-                     "crb": ("map", {"bound_rms": "num?", "measured_rmse": "num?", "ratio": "num?",
-                                     "ratio_low?": "num?", "ratio_high?": "num?"}),
+                     "crb": _RATIOS, "crb_structured?": _RATIOS, "fit_structured?": _RATIOS,
                      "calibration?": CALIBRATION_SCHEMA},
     "estimation": {"n_frames": "int", "n_solved": "int",
                    "per_pose": ("list", {"pose": "str", "captures": "int"} | {c: "num?" for c in COMPONENTS}),
@@ -887,6 +888,7 @@ def write_summary(out_html, metrics: dict, verdict: str, provenance: dict, sign:
                "localization_rmse": {c: loc["overall"][c]["rmse"] for c in COMPONENTS},
                "estimation_spread": {c: est["pooled"][c]["rmse"] for c in COMPONENTS},
                "crb_ratio": {c: v["ratio"] for c, v in loc["crb"].items()},
+               "crb_structured_ratio": {c: v["ratio"] for c, v in (loc.get("crb_structured") or {}).items()},
                "centre_noise_used": (metrics.get("centre_noise") or {}).get("used"),
                "covariance_calibration": (loc.get("calibration") or {}).get("overall"),
                "decision_rule": acc.get("decision_rule"), "confidence": acc.get("confidence"), **(sign or {})}

@@ -38,3 +38,26 @@ def test_older_metrics_without_the_interval_still_read():
     old = {c: {"bound_rms": 1.0, "measured_rmse": 0.5, "ratio": 0.5} for c in COMPONENTS}
     assert _ratio_text(old["x"]) == "0.5"
     assert "below 0.9" in _ratio_note(old, None)
+
+
+def _ratios(rmse: float, n: int, bound: float, prefix: str) -> dict:
+    rows = [{f"{prefix}_{c}": bound for c in COMPONENTS} for _ in range(n)]
+    return bound_ratios(rows, {c: {"rmse": rmse, "n": n} for c in COMPONENTS}, prefix)
+
+
+def test_with_the_measured_structure_the_notes_read_against_it():
+    """Below the independent bound but not below the bound under the measured structure is the
+    centres' dependence, not a finding; below that one too is; above the fit's expected RMSE under
+    it is the solver's shortfall."""
+    crb = _crb(0.7, 400)
+    explained = {"crb_structured": _ratios(0.7, 400, 0.7, "crb_structured"),
+                 "fit_structured": _ratios(0.7, 400, 0.75, "fit_structured")}
+    note = _ratio_note(crb, None, explained)
+    assert "x, y, alpha below 0.9 of the bound of independent centres but not of the bound under" in note
+    assert "smaller than any unbiased solver's" not in note and "does not reach" not in note
+    low = {"crb_structured": _ratios(0.7, 400, 1.0, "crb_structured"),
+           "fit_structured": _ratios(0.7, 400, 1.0, "fit_structured")}
+    assert "x, y, alpha below 0.9 of the bound under the centres' measured structure" in _ratio_note(crb, None, low)
+    high = {"crb_structured": _ratios(0.7, 400, 0.4, "crb_structured"),
+            "fit_structured": _ratios(0.7, 400, 0.5, "fit_structured")}
+    assert "x, y, alpha above 1.3 of the fit's expected RMSE" in _ratio_note(crb, None, high)
