@@ -21,7 +21,7 @@ from dockfactory.measure.images import Frame, self_calibrate_sequence
 from dockfactory.measure.selfcal import WindowCalibration
 from dockfactory.solver.synthetic import IMAGE_SIZE, docking_run
 
-CARD = 0.0174
+CARD = 0.0098
 BAYER_JPEG = "bayer-jpeg"
 LAYOUT = build_layout(DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, 450.0, 30.0)
 FAR = dict(radius_mm=450.0, distance_range=(2000.0, 2500.0), focal_range=(2000.0, 3600.0))

@@ -132,7 +132,7 @@ def test_a_docking_run_carries_its_classes_section_shift_and_factor(tmp_path_fac
     assert all(r["camera_class"] == "bayer-jpeg" for r in poses["frames"].values())
 
 
-CARD = 0.0174   # a card like the shipped ones (test_fit_gate.SHIPPED_CARD)
+CARD = 0.0098   # a card like the shipped ones (test_fit_gate.SHIPPED_CARD)
 FAR = dict(radius_mm=450.0, distance_range=(2000.0, 2500.0), focal_range=(2000.0, 3600.0))
 FAR_LAYOUT = build_layout(DEFAULT_LAYOUT_A, DEFAULT_LAYOUT_B, 450.0, 30.0)
 
