@@ -104,10 +104,14 @@ def test_the_structure_is_measured_where_the_verdict_does_not_look(painted_sourc
     assert st["source"] == "none" and "fewer than 5" in st["reason"] and "folds" not in st
 
 
-def test_an_identity_structure_gives_evaluates_bound(painted_source):
+@pytest.mark.parametrize("aspect", [1.0, 1.08])
+def test_an_identity_structure_gives_evaluates_bound(painted_source, aspect):
+    """Also for non-square pixels (K's fy = aspect fx): both bound in the square-pixel pinhole at fx."""
     ds = Dataset.open(painted_source)
     for fid in ds.frames(("test",)):
-        label = ds.labels[fid]
+        label = json.loads(json.dumps(ds.labels[fid]))
+        f, (cx, cy) = label["camera"]["focal_px"], label["camera"]["principal_point"]
+        label["camera"]["K"] = [[f, 0.0, cx], [0.0, aspect * f, cy], [0.0, 0.0, 1.0]]
         ids = [m["id"] for m in label["markers"] if m.get("visibility") == 2]
         fold = {"ids": sorted(ids), "moments": np.eye(2 * len(ids)).tolist()}
         got = cs.structured_frame_bound(label, ids, {"source": "t", "folds": [fold]}, 0.02)
