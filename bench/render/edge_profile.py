@@ -2,7 +2,7 @@
 axis, per side, one render of the same frames against another (default against the converged
 reference).
 
-    python -m bench.render.edge_profile DEF[+DEF] REF[+REF] [--markers A6,B5,B6,B2]
+    python -m bench.render.edge_profile DEF[+DEF] REF[+REF] [--markers A6,B5,B6,B2] [--exr]
 
 DEF and REF: datasets of the same config but their render settings (the same scenes and cameras,
 frame for frame). For each fully visible marker of the list in each test frame: the detector's
@@ -11,6 +11,9 @@ them) of both renders in a window around it, each pixel placed by the label's ex
 (solver.disc_noise.disc_ellipses): its signed distance (px) outside the true edge along the minor
 axis, on the side toward the image's top (+1) or bottom (-1), for pixels within 0.35 of the
 semi-major axis of the minor axis line; the score normalised by the reference's median disc score.
+With ``--exr`` the score is taken from the kept EXR instead (the render's linear radiance before the
+camera chain: the same score on it), which separates what the render adds from what the sensor's
+chain (noise, clipping, encoding) does to it.
 Printed per marker and side: the reference's profile, and the mean per-frame difference DEF - REF
 (x 1000) with its standard error over the frames, in 0.25 px bins from 2 px inside to 3 px outside.
 A difference of opposite sign on the two sides of the edge moves the fitted edge there, and so the
@@ -25,7 +28,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from dockfactory.core.names import CLASS_CHANNELS
 from dockfactory.detector.centre import colour_score
+from dockfactory.generator.exr import read_compact
 from dockfactory.solver.disc_noise import disc_ellipses
 
 BINS = np.arange(-2.0, 3.01, 0.25)   # px outside the true edge along the minor axis
@@ -43,6 +48,20 @@ def marker_geometry(label: dict, marker: dict) -> tuple[float, float, np.ndarray
     return float(np.sqrt(w[0])), float(np.sqrt(w[1])), u_min, v[:, 1]
 
 
+def linear_score(rgb: np.ndarray, class_id: int) -> np.ndarray:
+    """colour_score's definition on linear radiance (h, w, 3): the class channel minus the mean of the others."""
+    c = CLASS_CHANNELS[class_id]
+    o1, o2 = (rgb[..., k] for k in range(3) if k != c)
+    return rgb[..., c] - 0.5 * (o1 + o2)
+
+
+def read_image(root: Path, frame_id: str, exr: bool) -> np.ndarray:
+    """The frame's stored 8-bit RGB image, or its kept EXR's linear RGB (float64)."""
+    if exr:
+        return read_compact(root / "exr" / f"{frame_id}.exr").rgb.astype(np.float64)
+    return cv2.imread(str(root / "images" / f"{frame_id}.png"))[..., ::-1]
+
+
 def marker_profile(img_def: np.ndarray, img_ref: np.ndarray, label: dict, marker: dict) -> dict | None:
     """{(side, bin): (mean reference score, mean difference)} of one marker in one frame (normalised
     by the reference's median disc score); None near the image's border."""
@@ -51,8 +70,9 @@ def marker_profile(img_def: np.ndarray, img_ref: np.ndarray, label: dict, marker
     x0, x1, y0, y1 = int(cx - a - 6), int(cx + a + 7), int(cy - a - 6), int(cy + a + 7)
     if x0 < 0 or y0 < 0 or x1 > img_def.shape[1] or y1 > img_def.shape[0]:
         return None
-    sd = colour_score(img_def[y0:y1, x0:x1], marker["class_id"])
-    sr = colour_score(img_ref[y0:y1, x0:x1], marker["class_id"])
+    score = colour_score if img_def.dtype == np.uint8 else linear_score
+    sd = score(img_def[y0:y1, x0:x1], marker["class_id"])
+    sr = score(img_ref[y0:y1, x0:x1], marker["class_id"])
     ys, xs = np.mgrid[y0:y1, x0:x1]
     e = np.stack([xs - cx, ys - cy], -1)
     t, u = e @ u_min, e @ u_maj
@@ -68,7 +88,7 @@ def marker_profile(img_def: np.ndarray, img_ref: np.ndarray, label: dict, marker
     return out
 
 
-def profiles(pairs: list[tuple[Path, Path]], ids: list[str]) -> dict:
+def profiles(pairs: list[tuple[Path, Path]], ids: list[str], exr: bool = False) -> dict:
     """{(marker id, side, bin): [(reference, difference) per frame]} over the test frames of every pair."""
     acc: dict = {}
     for d, r in pairs:
@@ -76,8 +96,7 @@ def profiles(pairs: list[tuple[Path, Path]], ids: list[str]) -> dict:
             label = json.loads(path.read_text())
             if label["spec"]["split"] != "test" or not (r / "labels" / path.name).exists():
                 continue
-            img_d = cv2.imread(str(d / "images" / f"{path.stem}.png"))[..., ::-1]
-            img_r = cv2.imread(str(r / "images" / f"{path.stem}.png"))[..., ::-1]
+            img_d, img_r = read_image(d, path.stem, exr), read_image(r, path.stem, exr)
             for m in label["markers"]:
                 if m["id"] in ids and m.get("visible_fraction", 0.0) >= 0.99:
                     for (side, j), v in (marker_profile(img_d, img_r, label, m) or {}).items():
@@ -90,10 +109,11 @@ def main() -> int:
     ap.add_argument("default", help="dataset folder(s), joined by +")
     ap.add_argument("reference", help="the same frames rendered otherwise, joined by + in the same order")
     ap.add_argument("--markers", default="A6,B5,B6,B2")
+    ap.add_argument("--exr", action="store_true", help="the kept EXR's linear radiance, not the stored image")
     args = ap.parse_args()
     pairs = list(zip(map(Path, args.default.split("+")), map(Path, args.reference.split("+"))))
     ids = args.markers.split(",")
-    acc = profiles(pairs, ids)
+    acc = profiles(pairs, ids, args.exr)
     print("| marker | side | row | " + " | ".join(f"{v:+.2f}" for v in BINS[:-1]) + " |")
     print("|" + " --- |" * (len(BINS) + 2))
     for mid in ids:
