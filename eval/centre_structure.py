@@ -75,12 +75,12 @@ def structure_moments(samples: list[dict[str, np.ndarray]], ids: list[str]) -> t
     MIN_PAIR_FRAMES frames is left out (diagonal 1, off-diagonal 0)."""
     mean, var, count = _pairwise(samples, ids)
     kept = count >= MIN_PAIR_FRAMES
+    kept_off = kept & ~np.eye(len(kept), dtype=bool)
     diag = np.where(np.diag(kept), np.diag(mean), np.nan)
     diag = np.where(np.isnan(diag), np.nanmean(diag) if np.any(~np.isnan(diag)) else 1.0, diag)
-    off = np.where(kept & ~np.eye(len(diag), dtype=bool), mean, 0.0)
-    spread = float((var * (kept & ~np.eye(len(diag), dtype=bool))).sum())
-    shrink = float(np.clip(spread / max(float((off ** 2).sum()), 1e-300), 0.0, 1.0))
-    for lam in np.concatenate([[shrink], np.linspace(shrink, 1.0, 21)[1:]]):
+    off = np.where(kept_off, mean, 0.0)
+    shrink = float(np.clip((var * kept_off).sum() / max(float((off ** 2).sum()), 1e-300), 0.0, 1.0))
+    for lam in np.linspace(shrink, 1.0, 21):
         m = np.diag(diag) + (1.0 - lam) * off
         m /= np.diag(m).mean()
         if np.linalg.eigvalsh(m).min() > PD_FLOOR:

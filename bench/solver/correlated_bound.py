@@ -29,14 +29,13 @@ from pathlib import Path
 import numpy as np
 from bench.marker_match import nearest_marker
 
+from dockfactory.core.names import COMPONENTS
 from dockfactory.eval.centre_noise_disc import label_noise_shapes
-from dockfactory.eval.centre_structure import sqrt_spd
-from dockfactory.solver.crb import _joint_jac
-from dockfactory.solver.refine import d_from_b_jacobian
+from dockfactory.eval.centre_structure import sqrt_spd, structured_frame_bound
+from dockfactory.eval.evaluate import frame_bound
 
 IDS = [f"{s}{i}" for s in "AB" for i in range(7)]
 SLOT = {k: i for i, k in enumerate(IDS)}
-POSE = ("x", "y", "z", "alpha", "beta", "gamma")
 MATCH_PX = 3.0
 
 
@@ -75,30 +74,13 @@ def measured_moments(roots: list[Path], frames: list[dict], split: str, conditio
     return m / np.diag(m).mean(), n
 
 
-def frame_stds(label: dict, ids: list[str], moments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def frame_stds(label: dict, ids: list[str], moments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(independent bound, the weighted fit's std under the measured structure, the bound under
-    it) of the 6 pose components, in the model's relative units (unit scale)."""
-    by = {m["id"]: m for m in label["markers"]}
-    order = [i for i in ids if i in by and i.startswith("A")] + [i for i in ids if i in by and i.startswith("B")]
-    pa, pb = ([by[i]["center_section_mm"] for i in order if i.startswith(s)] for s in "AB")
-    ca = np.asarray(label["camera"]["cam_from_d"])
-    cb = ca @ np.asarray(label["d_from_b"])
-    jac = _joint_jac(np.asarray(pa), ca, np.asarray(pb), cb, label["camera"]["focal_px"],
-                     label["camera"]["principal_point"])
-    shapes = label_noise_shapes(label, [by[i] for i in order])
-    roots = [sqrt_spd(t) for t in shapes]
-    n = len(order)
-    weight, sigma = np.zeros((2 * n, 2 * n)), np.zeros((2 * n, 2 * n))
-    for a in range(n):
-        weight[2 * a:2 * a + 2, 2 * a:2 * a + 2] = np.linalg.inv(shapes[a])
-        for b in range(n):
-            sa, sb = 2 * SLOT[order[a]], 2 * SLOT[order[b]]
-            sigma[2 * a:2 * a + 2, 2 * b:2 * b + 2] = roots[a] @ moments[sa:sa + 2, sb:sb + 2] @ roots[b]
-    a_inv = np.linalg.inv(jac.T @ weight @ jac)
-    sandwich = a_inv @ jac.T @ weight @ sigma @ weight @ jac @ a_inv
-    bound = np.linalg.inv(jac.T @ np.linalg.solve(sigma, jac))
-    prop = d_from_b_jacobian(ca[:3, :3], ca[:3, 3], cb[:3, :3], cb[:3, 3])
-    return tuple(np.sqrt(np.diag(prop @ c[:12, :12] @ prop.T)) for c in (a_inv, sandwich, bound))
+    it) of the 6 pose components, in the model's relative units (unit scale): evaluate's own
+    bound (eval.evaluate.frame_bound) and eval.centre_structure.structured_frame_bound."""
+    ind = frame_bound(label, ids, 1.0, disc_scale_px=1.0)
+    got = structured_frame_bound(label, ids, {"folds": [{"ids": IDS, "moments": moments}]}, 1.0)
+    return tuple(np.array([d[c] for c in COMPONENTS]) for d in (ind, got["fit"], got["bound"]))
 
 
 def frame_rows(roots: list[Path], runs: list[Path], moments: np.ndarray, split: str, condition: str) -> np.ndarray:
@@ -114,7 +96,7 @@ def frame_rows(roots: list[Path], runs: list[Path], moments: np.ndarray, split: 
             label = json.loads((root / "labels" / f"{r['frame_id']}.json").read_text())
             ind, fit, bound = frame_stds(label, poses[r["frame_id"]]["marker_ids"], moments)
             stats.append([[float(r[f"err_{c}"]), float(r[f"crb_{c}"]), ind[k], fit[k], bound[k]]
-                          for k, c in enumerate(POSE)])
+                          for k, c in enumerate(COMPONENTS)])
     return np.asarray(stats)
 
 
@@ -141,7 +123,7 @@ def main() -> int:
     print("bound: the run's (independent centres); fit: the solver's weighted fit under the measured structure;")
     print("bound*: the Cramer-Rao bound under the measured structure. Ratios: RMSE / each.")
     print(f"{'':6s} {'RMSE':>8s} {'bound':>8s} {'ratio':>6s} {'fit':>8s} {'ratio':>6s} {'bound*':>8s} {'ratio':>6s}")
-    for k, c in enumerate(POSE):
+    for k, c in enumerate(COMPONENTS):
         fit, bound = (rms[k, 1] * rms[k, j] / rms[k, 2] for j in (3, 4))
         print(f"{c:6s} {rms[k, 0]:8.4f} {rms[k, 1]:8.4f} {rms[k, 0] / rms[k, 1]:6.3f} {fit:8.4f} "
               f"{rms[k, 0] / fit:6.3f} {bound:8.4f} {rms[k, 0] / bound:6.3f}")
