@@ -79,7 +79,7 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     if spec.estimation.thresholds() and not space.repeatability[0]:
         notes.append("The spec gates repeatability but the space gives no repeatability captures: "
                      "P(accept) covers localization only ([design] repeatability_poses / _captures).")
-    rows = rank_rows([design_row(d, space, scene, spec, card) for d in designs], args.min_probability)
+    rows = rank_rows([design_row(d, space, scene, spec, card, args.min_probability) for d in designs], args.min_probability)
     result = {"format": "dockfactory.design/1", "space": space.source, "scene": str(space.scene),
               "spec": str(spec_path), "decision_rule": spec.decision_rule, "confidence": spec.confidence,
               "test_frames": space.test_frames, "repeatability": list(space.repeatability),

@@ -41,12 +41,17 @@ def all_posed_probability(rate: float, frames: int) -> float:
     return (1.0 - rate) ** frames
 
 
-def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int, simulate=None) -> dict:
+def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int, simulate=None,
+             settled: bool = False) -> dict:
     """The share of honest frames without a pose for ``design`` and what it does to the user's
     ``test_frames`` test frames and ``captures`` repeatability captures: with the card's
     ``no_pose_simulation``, ``simulate()`` (the design's frames through the gate:
-    eval.design_refusals.simulated_no_pose), else the card's table per class and format."""
-    if card.no_pose_gate is not None and simulate is not None:
+    eval.design_refusals.simulated_no_pose), else the card's table per class and format.
+    ``settled``: the design fails on its predicted pose errors alone, and frames without a pose can
+    only add to that, so the simulation (seconds a design) is skipped: rate 0, said in ``card_key``."""
+    if card.no_pose_gate is not None and settled:
+        rate, key, extra = 0.0, "not simulated: the design fails on its predicted pose errors", {}
+    elif card.no_pose_gate is not None and simulate is not None:
         sim = simulate()
         rate, key = sim["rate"], "no_pose_simulation"
         extra = {"simulated": sim["simulated"], "refused": sim["refused"], "reasons": sim["reasons"]}
@@ -86,14 +91,17 @@ def _block(spec, block: str, figures: dict, dof: int) -> dict:
     return out
 
 
-def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: DesignCard) -> dict:
+def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: DesignCard,
+               fails_at: float | None = None) -> dict:
     """One design predicted: the base fields, ``status`` ("predicted", made passes / undecided /
     fails by :func:`rank_rows`; "infeasible" / "not predicted" with ``reason``), the predicted
     RMSE and repeatability per component, the median disc minor semi-axis and ``extrapolated`` (the
     card's line when it lies outside the card's scenes: DesignCard.outside_range, else ""), the
     localization and estimation blocks (estimation
     only when the space gives repeatability captures), ``no_pose`` (:func:`_no_pose`: frames the
-    camera class leaves without a pose, each failing its block), P(accept) and P(reject)."""
+    camera class leaves without a pose, each failing its block), P(accept) and P(reject).
+    ``fails_at``: the P(reject) at which the answer calls a design failing (its min probability);
+    a design its predicted pose errors already fail at it is not simulated (:func:`_no_pose`)."""
     row = _base_row(design, space)
     variance = camera_variance(design.camera.preset, scene_cfg.sensor)
     noise, provisional, why = card.noise_of(design, variance)
@@ -111,13 +119,15 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     loc = _block(spec, "localization", pred.rmse, space.test_frames)
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
+    rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())]
+    settled = fails_at is not None and bool(rejects) and 1.0 - math.prod(1.0 - p for p in rejects) >= fails_at
     nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0,
                       lambda: simulated_no_pose(cfg, design, noise, card.no_pose_gate, space.geometry_frames, space.seed,
-                                                card.tail_of(design)))
+                                                card.tail_of(design)), settled)
     posed = [nopose["p_all_test_posed"]] * bool(loc) + [nopose["p_all_captures_posed"]] * bool(est)
     p_loc = math.prod(v["probability"] for v in loc.values()) * nopose["p_all_test_posed"]
     probs = [v["probability"] for v in (*loc.values(), *est.values())] + posed
-    rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())] + [1.0 - p for p in posed]
+    rejects += [1.0 - p for p in posed]
     margins = [v["margin"] for v in (*loc.values(), *est.values())]
     return {**row, "status": "predicted", "reason": "", "provisional": provisional,
             "disc_minor_median_px": round(pred.minor_median_px, 2), "extrapolated": card.outside_range(pred.minor_median_px),

@@ -34,6 +34,11 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "blind 5 (12)": ("confirm5_12.json", ("design_confirm5_quick", "design_confirm5_wide", "design_confirm5_wide2")),
     "blind 6 (12)": ("confirm6_12.json", ("design_confirm6_quick", "design_confirm6_quick2", "design_confirm6_wide")),
 }
+# The sixth set's renders judged again with today's refinement and camera classes (not in "all": the
+# same designs as "blind 6"; the set a card is chosen on before the next blind set).
+REJUDGED = {
+    "blind 6 re-judged (12)": ("confirm6_classes.json", SETS["blind 6 (12)"][1]),
+}
 COMPS = ("x", "y", "alpha")
 
 
@@ -75,6 +80,9 @@ def compare(cards: dict, work: Path) -> dict:
                           predictions(path, spaces, work / name / set_name.split()[0]))
             sets[set_name] = summary(rows)
             every += rows
+        for set_name, (records, spaces) in REJUDGED.items():
+            sets[set_name] = summary(judged(json.loads((RESULTS / records).read_text())["records"],
+                                            predictions(path, spaces, work / name / "rejudged")))
         out[name] = {"sets": sets, "all": summary(every),
                      "disagree": [r for r in every if r["predicted"] != r["rendered"]]}
     return out

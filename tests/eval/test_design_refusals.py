@@ -6,6 +6,8 @@ row folds the simulated share into P(accept)."""
 from __future__ import annotations
 
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -112,6 +114,23 @@ def test_a_design_row_folds_the_simulated_share_into_its_chances(tmp_path):
     assert nopose["refused"] > 0 and nopose["rate_per_frame"] == nopose["refused"] / FRAMES
     q = all_posed_probability(nopose["rate_per_frame"], FRAMES)
     assert sim["p_accept"] == pytest.approx(plain["p_accept"] * q, rel=1e-12)
+
+
+def test_a_design_its_pose_errors_already_fail_is_not_simulated(tmp_path):
+    """Frames without a pose can only add to a failing design's failure, so the answer skips their
+    simulation (seconds a design) where the predicted pose errors alone reach ``fails_at``: the colour
+    JPEG q90 design (P(reject) 0.58 on 8 frames of the cell spec) is not simulated at 0.5 and keeps
+    the plain card's P(accept) and P(reject); the monochrome JPEG q95 design (P(reject) 2e-7) is."""
+    spec = load_acceptance(Path(__file__).resolve().parents[2] / "configs" / "designs" / "cell_acceptance.toml")
+    scene = load_config(resolve_config("quick"))
+    card = _card(tmp_path, {**SIM, "noise_factor": 3.0})
+    plain_card = _card(tmp_path, None)
+    failing, plain = (design_row(_design("rggb", "jpeg90"), _space(), scene, spec, c, 0.5) for c in (card, plain_card))
+    assert plain["p_reject"] >= 0.5
+    assert failing["no_pose"]["card_key"].startswith("not simulated") and "simulated" not in failing["no_pose"]
+    assert (failing["p_accept"], failing["p_reject"]) == (plain["p_accept"], plain["p_reject"])
+    open_ = design_row(_design("none", "jpeg95"), _space(), scene, spec, card, 0.5)
+    assert open_["no_pose"]["card_key"] == "no_pose_simulation" and open_["no_pose"]["simulated"] == FRAMES
 
 
 def test_a_tail_keeps_the_noise_rms_and_puts_eps_of_it_m_times_out():
