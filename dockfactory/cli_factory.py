@@ -19,6 +19,7 @@ from dockfactory.generator.datasets.card import write_card
 from dockfactory.generator.datasets.dvc_links import outside_note
 from dockfactory.generator.exports import FORMATS, check_export_formats
 from dockfactory.generator.label_overlay import draw_overlay
+from dockfactory.generator.reference_render import REFERENCE_SAMPLES, reference_overrides
 from dockfactory.generator.render_job import JobOptions, print_summary, run_render
 from dockfactory.generator.sampler import check_focal_fits, frame_plan
 
@@ -37,7 +38,8 @@ def load_checked(path, sets=()):
 
 
 def cmd_render(args) -> int:
-    cfg, text = load_checked(args.config, args.sets)
+    sets = reference_overrides(args.reference, args.sets) if args.reference is not None else args.sets
+    cfg, text = load_checked(args.config, sets)
     frame_ids = tuple(args.frames.split(",")) if args.frames else None
     opts = JobOptions(workers=args.workers, shard=args.shard, frame_ids=frame_ids,
                       retries=args.retries, recycle_after=args.recycle_after,
@@ -211,6 +213,9 @@ def add_subcommands(sub) -> None:
     r.add_argument("--ray-address", default=None,
                    help="Ray cluster address (default: start a local Ray instance)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
+    r.add_argument("--reference", type=int_at_least(1), nargs="?", const=REFERENCE_SAMPLES, default=None, metavar="N",
+                   help="render the converged reference for measuring: every marker crop pixel at N samples "
+                        f"(default {REFERENCE_SAMPLES}), no denoiser or coverage correction there")
     add_set_flag(r)
     r.set_defaults(func=cmd_render)
 

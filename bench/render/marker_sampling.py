@@ -37,6 +37,7 @@ from dockfactory.eval.centre_noise import used_centre_errors
 from dockfactory.eval.evaluate import per_frame_rows
 from dockfactory.eval.solve_frames import solve_dataset
 from dockfactory.generator.datasets.reader import Dataset
+from dockfactory.generator.reference_render import MIN_REFERENCE_SAMPLES
 
 POSE = ("x", "y", "alpha")
 MIN_SCORE = 0.25
@@ -194,17 +195,14 @@ def sample_fit(entries: list[dict]) -> dict | None:
             "samples_for_1p2x_ref": need}
 
 
-CONVERGED_MIN_SAMPLES = 128   # a reference's crops take at least this many samples on every pixel
-
-
 def reference_problems(render) -> list[str]:
     """What keeps a dataset's ``[render]`` table (``render``) from being a converged reference at
-    the markers: fewer than CONVERGED_MIN_SAMPLES crop samples, adaptive sampling (its threshold stops
+    the markers: fewer than MIN_REFERENCE_SAMPLES crop samples, adaptive sampling (its threshold stops
     pixels early: a reference about 1.2x worse in median), a denoiser or the coverage correction at
     the markers (docs/rendering.md, "The converged reference"). Empty when it is one."""
     out = []
-    if render.marker_samples < CONVERGED_MIN_SAMPLES:
-        out.append(f"marker_samples = {render.marker_samples} (at least {CONVERGED_MIN_SAMPLES})")
+    if render.marker_samples < MIN_REFERENCE_SAMPLES:
+        out.append(f"marker_samples = {render.marker_samples} (at least {MIN_REFERENCE_SAMPLES})")
     if render.marker_adaptive_threshold > 0:
         out.append(f"marker_adaptive_threshold = {render.marker_adaptive_threshold} (0: every pixel every sample)")
     if render.marker_denoise != "off":
