@@ -11,6 +11,7 @@ from dockfactory.core.user_files import check_regular_file
 WEIGHTS_NAME = "yolov5n_se_rings_markers.pt"   # the default detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
 DESIGN_CARD_NAME = "design_predictor.json"   # the design predictor's card (bench/design/design_fit.py)
+DESIGN_REFUSALS_NAME = "design_refusals.json"   # the figures of design --refusals (eval.design_card.with_refusals)
 
 
 def _shipped(package: str, name: str) -> Path:
@@ -45,6 +46,11 @@ def shipped_weights() -> Path:
 def shipped_design_card() -> Path:
     """Path of the design predictor's card (eval.design_card)."""
     return _shipped("dockfactory.models", DESIGN_CARD_NAME)
+
+
+def shipped_design_refusals() -> Path:
+    """Path of the figures ``dockfactory design --refusals`` simulates frames without a pose with."""
+    return _shipped("dockfactory.models", DESIGN_REFUSALS_NAME)
 
 
 def resolve_design_space(arg: str | Path) -> Path:

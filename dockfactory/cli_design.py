@@ -15,9 +15,10 @@ from dockfactory.core.resources import (
     resolve_config,
     resolve_design_space,
     shipped_design_card,
+    shipped_design_refusals,
 )
 from dockfactory.eval.acceptance import load_acceptance
-from dockfactory.eval.design_card import load_design_card
+from dockfactory.eval.design_card import load_design_card, with_refusals
 from dockfactory.eval.design_rank import design_id, design_row, rank_rows
 from dockfactory.eval.design_report import table_lines, write_design_outputs
 from dockfactory.eval.design_space import designs_of, load_design_space
@@ -73,6 +74,8 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     spec_path = space.spec or default_acceptance()
     spec = load_acceptance(spec_path)
     card = load_design_card(args.card or shipped_design_card())
+    if args.refusals:
+        card = with_refusals(card, shipped_design_refusals())
     designs = designs_of(space, scene)
     pose_note = SIM_POSE_NOTE if card.no_pose_gate else NO_POSE_NOTE if card.no_pose else NO_NO_POSE_NOTE
     notes = [*NOTES, pose_note, SENSOR_NOTE if card.sensor_share else NO_SENSOR_NOTE]
@@ -115,6 +118,9 @@ def add_subcommand(sub) -> None:
     p.add_argument("--min-probability", type=float_in(0.0, 1.0, low_open=True), default=0.9,
                    help="P(accept) a passing design needs (default 0.9)")
     p.add_argument("--card", help="a predictor card (default: the shipped models/design_predictor.json)")
+    p.add_argument("--refusals", action="store_true",
+                   help="also predict the frames the solver's gate leaves without a pose, each design's drawn "
+                        "frames simulated through it (models/design_refusals.json; seconds a Bayer or JPEG design)")
     p.add_argument("--verify", type=positive_int, default=0, metavar="K",
                    help="render and judge the top K designs (dockfactory run each; minutes per design)")
     p.add_argument("--verify-frames", type=positive_int, default=24,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from dockfactory.core.errors import DockfactoryError
@@ -21,13 +21,14 @@ from dockfactory.eval.design_sensor import preset_variance, sensor_factor
 from dockfactory.eval.design_space import Design, jpeg_quality
 
 CARD_FORMAT = "dockfactory.design_predictor/5"
+REFUSALS_FORMAT = "dockfactory.design_refusals/1"
 RING_JPEG_FORMAT = "dockfactory.design_predictor/4"  # no size exponent per camera class: 0 for every class
 CFA_JPEG_FORMAT = "dockfactory.design_predictor/3"   # one JPEG factor per camera class, whatever the ring
 NO_LAW_FORMAT = "dockfactory.design_predictor/2"     # no centre_noise: the centres' noise is the solver's weights
 OLD_FORMATS = ("dockfactory.design_predictor/1",)   # fitted under an earlier centre-noise model: refit
 LAW_KEYS = ("minor_exponent", "floor", "ring_coefficient", "ring_exponent")
 
-__all__ = ["DesignCard", "load_design_card", "CARD_FORMAT"]
+__all__ = ["DesignCard", "load_design_card", "with_refusals", "CARD_FORMAT", "REFUSALS_FORMAT"]
 
 
 @dataclass(frozen=True)
@@ -300,15 +301,40 @@ def _no_pose_simulation(path, data: dict) -> tuple[GateFigures | None, dict | No
     return gate, _tail_table(path, t.get("tail"))
 
 
-def load_design_card(path) -> DesignCard:
-    """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
-    path = Path(path)
+def _read_json(path: Path, what: str) -> dict:
+    """The JSON object of ``path``; DockfactoryError (one line) when it cannot be read or parsed."""
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        raise DockfactoryError(f"{path}: cannot read the predictor card: {exc.strerror}") from None
+        raise DockfactoryError(f"{path}: cannot read the {what}: {exc.strerror}") from None
     except ValueError as exc:
         raise DockfactoryError(f"{path}: not valid JSON: {exc}") from None
+    return data
+
+
+def with_refusals(card: DesignCard, path) -> DesignCard:
+    """``card`` with the simulated frames without a pose of the figures file ``path`` ({"format":
+    REFUSALS_FORMAT, "no_pose_simulation": as a card's}: models/design_refusals.json), unless the
+    card has its own section (then ``card`` as it is). Why a file of its own: the simulation costs
+    seconds a Bayer or JPEG design, so the answer runs it only when asked (design --refusals), and
+    its figures (the gate's card, the centres' tails) are measured apart from the card's noise fit.
+    DockfactoryError (one line naming the file and key)."""
+    if card.no_pose_gate is not None:
+        return card
+    path = Path(path)
+    data = _read_json(path, "refusal figures")
+    if not isinstance(data, dict) or data.get("format") != REFUSALS_FORMAT:
+        raise DockfactoryError(f"{path}: format: expected {REFUSALS_FORMAT!r}")
+    if data.get("no_pose_simulation") is None:
+        raise DockfactoryError(f"{path}: no_pose_simulation: missing")
+    gate, tail = _no_pose_simulation(path, data)
+    return replace(card, no_pose_gate=gate, no_pose_tail=tail)
+
+
+def load_design_card(path) -> DesignCard:
+    """Read and check a predictor card; DockfactoryError (one line naming the file and key)."""
+    path = Path(path)
+    data = _read_json(path, "predictor card")
     fmt = data.get("format") if isinstance(data, dict) else None
     if fmt in OLD_FORMATS:
         raise DockfactoryError(f"{path}: format {fmt!r}: fitted under the previous centre-noise model; refit it "

@@ -241,3 +241,21 @@ def test_a_card_that_simulates_refusals_says_so_and_counts_them_per_design(tmp_p
         assert nopose["simulated"] == (8 if r["cfa"] == "rggb" else 0)
         assert nopose["rate_per_frame"] == (nopose["refused"] / 8 if r["cfa"] == "rggb" else 0.0)
     assert any("its predicted centres" in n for n in doc["notes"])
+
+
+def test_refusals_simulates_with_the_shipped_figures_and_only_when_asked(tmp_path, capsys):
+    """``--refusals`` adds the shipped refusal figures (models/design_refusals.json) to the shipped
+    card: every Bayer design not already failing on its pose errors is simulated over its drawn
+    frames and its notes say so; without the flag nothing is simulated and the RMSE predicted is
+    the same to the digit."""
+    space = _space(tmp_path, SPACE.replace("markers_per_section = [6, 9]", "markers_per_section = [6]")
+                   .replace("test_frames = 30", "test_frames = 30\ngeometry_frames = 8"))
+    assert run_cli(["design", space, "--refusals", "--out", tmp_path / "r"], capsys)[0] == 0
+    assert run_cli(["design", space, "--out", tmp_path / "p"], capsys)[0] == 0
+    sim, plain = (json.loads((tmp_path / o / "design.json").read_text()) for o in ("r", "p"))
+    bayer = [r for r in sim["designs"] if r["cfa"] == "rggb" and r["status"] != "fails"]
+    assert bayer and all(r["no_pose"]["simulated"] == 8 for r in bayer)
+    assert all("simulated" not in r["no_pose"] for r in plain["designs"])
+    assert {r["id"]: r["predicted_rmse"] for r in sim["designs"]} == {r["id"]: r["predicted_rmse"] for r in plain["designs"]}
+    assert any("its predicted centres" in n for n in sim["notes"])
+    assert not any("its predicted centres" in n for n in plain["notes"])

@@ -6,6 +6,7 @@ row folds the simulated share into P(accept)."""
 from __future__ import annotations
 
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from design_cards import card_with
 from dockfactory.core.resources import resolve_config
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.design_predict import NoiseClass, design_config
+from dockfactory.eval.design_card import with_refusals
 from dockfactory.eval.design_rank import all_posed_probability, design_row
 from dockfactory.eval.design_refusals import GateFigures, design_camera_class, simulated_no_pose, tail_scales
 from dockfactory.eval.design_space import Camera, Design, DesignSpace, Lens
@@ -187,3 +189,36 @@ def test_the_tail_fit_recovers_a_contaminated_normal_and_finds_none_in_a_gaussia
     assert plain["eps"] <= 0.01 and plain["nll_gain"] < 10
     assert card_tail({"bayer-jpeg95": fit, "three-chip": plain}) == {"jpeg95": {"rggb": [fit["eps"], fit["m"]]},
                                                                       "png": {"none": [plain["eps"], plain["m"]]}}
+
+
+def _refusals_file(tmp_path, data) -> Path:
+    path = tmp_path / "refusals.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_the_shipped_refusal_figures_load_onto_a_card_without_its_own(tmp_path):
+    """The shipped figures give the shipped card a gate at the shipped noise card's figures and a tail
+    per class and format; a card with its own section keeps it (the file does not override it)."""
+    from dockfactory.core.resources import shipped_design_refusals
+    shipped = json.loads(shipped_design_refusals().read_text())["no_pose_simulation"]
+    card = with_refusals(_card(tmp_path, None), shipped_design_refusals())
+    assert card.no_pose_gate == GateFigures(shipped["centre_noise_px"], shipped["core_px"],
+                                            tuple(shipped["section_shift_px"]), shipped["noise_factor"])
+    assert card.no_pose_tail["jpeg90"]["rggb"] == tuple(shipped["tail"]["jpeg90"]["rggb"])
+    own = _card(tmp_path, SIM)
+    assert with_refusals(own, shipped_design_refusals()) is own
+
+
+@pytest.mark.parametrize("data, needle", [
+    ({"format": "dockfactory.design_predictor/5", "no_pose_simulation": SIM}, "format: expected 'dockfactory.design_refusals/1'"),
+    ({"format": "dockfactory.design_refusals/1"}, "no_pose_simulation: missing"),
+    ({"format": "dockfactory.design_refusals/1", "no_pose_simulation": {**SIM, "core_px": 0}},
+     "no_pose_simulation.core_px: expected a positive number"),
+    ([1, 2], "format: expected 'dockfactory.design_refusals/1'"),
+])
+def test_a_bad_refusals_file_is_one_line_naming_it(tmp_path, data, needle):
+    path = _refusals_file(tmp_path, data)
+    with pytest.raises(DockfactoryError) as exc:
+        with_refusals(_card(tmp_path, None), path)
+    assert str(exc.value).startswith(str(path)) and needle in str(exc.value) and "\n" not in str(exc.value)
