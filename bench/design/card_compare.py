@@ -33,6 +33,7 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "blind 4 (12)": ("confirm4_12.json", ("design_confirm4_quick", "design_confirm4_quick2", "design_confirm4_wide")),
     "blind 5 (12)": ("confirm5_12.json", ("design_confirm5_quick", "design_confirm5_wide", "design_confirm5_wide2")),
     "blind 6 (12)": ("confirm6_12.json", ("design_confirm6_quick", "design_confirm6_quick2", "design_confirm6_wide")),
+    "blind 7 (12)": ("confirm7_12.json", ("design_confirm7_quick", "design_confirm7_quick2", "design_confirm7_wide")),
 }
 # The sixth set's renders judged again with today's refinement and camera classes (not in "all": the
 # same designs as "blind 6"; the set a card is chosen on before the next blind set).
