@@ -4,7 +4,7 @@
 # last epoch's checkpoint, ablate --record takes finished runs from results/paper/), so the whole
 # script can be run again after any interruption.
 #
-#   sh bench/paper/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]
+#   sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]
 #
 # Cost on the 2-core machine of 2026-12-01: render ~5.3 s/frame (3,200 frames, ~4.7 h; ~2.8 s/frame on an
 # AVX-512 machine, re-rendered there on 2026-12-01 and checked by `publish`); YOLOv5s
@@ -14,13 +14,18 @@ DF=${DF:-.venv/bin/dockfactory}
 PY=${PY:-.venv/bin/python}
 DATA=${DATA:-out/paper}          # the dataset (large: kept out of git; its manifest is published)
 RUNS=${RUNS:-out/paper_runs}     # checkpoints and weights of every training run
-RES=results/paper
+RES=${RES:-results/paper}   # the figures (another folder for a re-measure: results/paper is the published release's)
 # budget of every run: 8 epochs x 2,160 train frames x 2 crops / batch 16 = 2,160 SGD steps, about
 # the shipped n + SE recipe's 2,100 (70 epochs of the 239-frame detector.toml set)
 TRAIN="--epochs 8 --batch 16 --crops-per-frame 2 --input-scale 0.5 --threads 2 --quiet"
 
 render() {
     $DF render configs/paper.toml --out "$DATA" --workers 1
+}
+
+render_sampled() {  # the paper's frames with today's label-aware sampling (the published release pins it off;
+                    # re-measure): DATA=out/paper_sampled RES=results/paper_sampled, then accept_s
+    $DF render configs/paper.toml --out "$DATA" --workers 2 --set render.marker_samples=40
 }
 
 publish() {  # the first render publishes its manifest; a re-render (later, or on another CPU) is
@@ -84,6 +89,7 @@ summary() {
 
 case "${1:-all}" in
     render) render ;;
+    render_sampled) render_sampled ;;
     publish) publish ;;
     train) train_s; train_n ;;
     train_s) train_s ;;
@@ -96,5 +102,5 @@ case "${1:-all}" in
     accept_n) accept_n ;;
     summary) summary ;;
     all) render; publish; train_s; train_n; ship_s; accept_s; accept_n; table1; summary ;;
-    *) echo "usage: sh bench/paper/paper.sh [render|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]" >&2; exit 2 ;;
+    *) echo "usage: sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]" >&2; exit 2 ;;
 esac
