@@ -29,8 +29,11 @@ def _fmt(v, digits: int = 3) -> str:
 
 def _no_pose_note(no_pose: dict) -> str:
     """" (P every test frame posed q: r % of frames without a pose)" when the card gives the
-    design's camera class a share of frames without a pose, else ""."""
+    design's camera class a share of frames without a pose; that they were not simulated when the
+    design fails on its pose errors alone (eval.design_rank); else ""."""
     rate = no_pose.get("rate_per_frame") or 0.0
+    if str(no_pose.get("card_key", "")).startswith("not simulated"):
+        return " (frames without a pose not simulated: it fails on its pose errors alone)"
     if rate <= 0:
         return ""
     return f" (P every test frame posed {no_pose['p_all_test_posed']:.2f}: {100 * rate:.1f} % of frames without a pose)"

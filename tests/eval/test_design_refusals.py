@@ -21,6 +21,7 @@ from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.design_predict import NoiseClass, design_config
 from dockfactory.eval.design_card import with_refusals
 from dockfactory.eval.design_rank import all_posed_probability, design_row
+from dockfactory.eval.design_report import _no_pose_note
 from dockfactory.eval.design_refusals import GateFigures, design_camera_class, simulated_no_pose, tail_scales
 from dockfactory.eval.design_space import Camera, Design, DesignSpace, Lens
 
@@ -131,6 +132,7 @@ def test_a_design_its_pose_errors_already_fail_is_not_simulated(tmp_path):
     assert plain["p_reject"] >= 0.5
     assert failing["no_pose"]["card_key"].startswith("not simulated") and "simulated" not in failing["no_pose"]
     assert (failing["p_accept"], failing["p_reject"]) == (plain["p_accept"], plain["p_reject"])
+    assert "not simulated: it fails on its pose errors alone" in _no_pose_note(failing["no_pose"])
     open_ = design_row(_design("none", "jpeg95"), _space(), scene, spec, card, 0.5)
     assert open_["no_pose"]["card_key"] == "no_pose_simulation" and open_["no_pose"]["simulated"] == FRAMES
 
