@@ -32,8 +32,9 @@ NO_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, com
 SIM_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, components independent) and every test "
                  "frame and capture getting a pose (a frame without one fails its block and the failure gate), each "
                  "frame left without a pose at the share of the design's own drawn frames its predicted centres "
-                 "(with the card's tail per camera class) leave refused by the solver's gate. The detection gates "
-                 "are not predicted: --verify renders and judges them.")
+                 "(with the card's tail per camera class) leave refused by the solver's gate (not simulated for a "
+                 "design its pose errors already fail). The detection gates are not predicted: --verify renders "
+                 "and judges them.")
 NO_NO_POSE_NOTE = ("P(accept) covers the gated pose criteria (chi-square bound, components independent); frames "
                    "without a pose, the detection and failure gates are not predicted: --verify renders and judges them.")
 SENSOR_NOTE = ("The sensor's temporal noise enters as the card's share of the centre variance scaled by the sensor's "
