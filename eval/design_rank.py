@@ -48,9 +48,10 @@ def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int, 
     ``no_pose_simulation``, ``simulate()`` (the design's frames through the gate:
     eval.design_refusals.simulated_no_pose), else the card's table per class and format.
     ``settled``: the design fails on its predicted pose errors alone, and frames without a pose can
-    only add to that, so the simulation (seconds a design) is skipped: rate 0, said in ``card_key``."""
+    only add to that, so the simulation (seconds a design) is skipped: rate 0, ``skipped`` True, said
+    in ``card_key``."""
     if card.no_pose_gate is not None and settled:
-        rate, key, extra = 0.0, "not simulated: the design fails on its predicted pose errors", {}
+        rate, key, extra = 0.0, "not simulated: the design fails on its predicted pose errors", {"skipped": True}
     elif card.no_pose_gate is not None and simulate is not None:
         sim = simulate()
         rate, key = sim["rate"], "no_pose_simulation"
@@ -60,6 +61,12 @@ def _no_pose(card: DesignCard, design: Design, test_frames: int, captures: int, 
     return {"rate_per_frame": rate, "card_key": key, **extra,
             "p_all_test_posed": all_posed_probability(rate, test_frames),
             "p_all_captures_posed": all_posed_probability(rate, captures)}
+
+
+def _any_of(probabilities: list[float]) -> float:
+    """P(at least one of independent events of ``probabilities``): the rule rejects a design when
+    any gated criterion or block is proven failing."""
+    return 1.0 - math.prod(1.0 - p for p in probabilities)
 
 
 def design_id(design: Design) -> str:
@@ -120,7 +127,7 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
     poses, captures = space.repeatability
     est = _block(spec, "estimation", pred.repeat, poses * (captures - 1)) if poses else {}
     rejects = [v["reject_probability"] for v in (*loc.values(), *est.values())]
-    settled = fails_at is not None and bool(rejects) and 1.0 - math.prod(1.0 - p for p in rejects) >= fails_at
+    settled = fails_at is not None and bool(rejects) and _any_of(rejects) >= fails_at
     nopose = _no_pose(card, design, space.test_frames if loc else 0, poses * captures if est else 0,
                       lambda: simulated_no_pose(cfg, design, noise, card.no_pose_gate, space.geometry_frames, space.seed,
                                                 card.tail_of(design)), settled)
@@ -134,7 +141,7 @@ def design_row(design: Design, space: DesignSpace, scene_cfg, spec, card: Design
             "predicted_rmse": pred.rmse, "predicted_repeatability": pred.repeat,
             "localization": loc, "estimation": est, "estimation_predicted": bool(poses), "no_pose": nopose,
             "p_accept": math.prod(probs) if probs else None, "p_localization": p_loc if loc else None,
-            "p_reject": 1.0 - math.prod(1.0 - p for p in rejects) if rejects else None,
+            "p_reject": _any_of(rejects) if rejects else None,
             "worst_margin": max(margins) if margins else None, "geometry_frames": pred.frames}
 
 

@@ -32,7 +32,7 @@ def _no_pose_note(no_pose: dict) -> str:
     design's camera class a share of frames without a pose; that they were not simulated when the
     design fails on its pose errors alone (eval.design_rank); else ""."""
     rate = no_pose.get("rate_per_frame") or 0.0
-    if str(no_pose.get("card_key", "")).startswith("not simulated"):
+    if no_pose.get("skipped"):
         return " (frames without a pose not simulated: it fails on its pose errors alone)"
     if rate <= 0:
         return ""

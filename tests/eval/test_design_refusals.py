@@ -131,6 +131,7 @@ def test_a_design_its_pose_errors_already_fail_is_not_simulated(tmp_path):
     failing, plain = (design_row(_design("rggb", "jpeg90"), _space(), scene, spec, c, 0.5) for c in (card, plain_card))
     assert plain["p_reject"] >= 0.5
     assert failing["no_pose"]["card_key"].startswith("not simulated") and "simulated" not in failing["no_pose"]
+    assert failing["no_pose"]["skipped"] is True and "skipped" not in plain["no_pose"]
     assert (failing["p_accept"], failing["p_reject"]) == (plain["p_accept"], plain["p_reject"])
     assert "not simulated: it fails on its pose errors alone" in _no_pose_note(failing["no_pose"])
     open_ = design_row(_design("none", "jpeg95"), _space(), scene, spec, card, 0.5)
