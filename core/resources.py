@@ -11,7 +11,7 @@ from dockfactory.core.user_files import check_regular_file
 WEIGHTS_NAME = "yolov5n_se_rings_markers.pt"   # the default detector (model card: models/README.md)
 ACCEPTANCE_NAME = "acceptance.toml"
 DESIGN_CARD_NAME = "design_predictor.json"   # the design predictor's card (bench/design/design_fit.py)
-DESIGN_REFUSALS_NAME = "design_refusals.json"   # the figures of design --refusals (eval.design_card.with_refusals)
+DESIGN_REFUSALS_NAME = "design_refusals.json"   # the figures design simulates refusals with (eval.design_card.with_refusals)
 
 
 def _shipped(package: str, name: str) -> Path:
@@ -49,7 +49,7 @@ def shipped_design_card() -> Path:
 
 
 def shipped_design_refusals() -> Path:
-    """Path of the figures ``dockfactory design --refusals`` simulates frames without a pose with."""
+    """Path of the figures ``dockfactory design`` simulates frames without a pose with (unless --no-refusals)."""
     return _shipped("dockfactory.models", DESIGN_REFUSALS_NAME)
 
 

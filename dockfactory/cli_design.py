@@ -3,12 +3,14 @@
 ``--verify K`` the top K rendered and judged beside their predictions (design_verify)."""
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
 from dockfactory.cli_args import float_in, output_path, positive_int
 from dockfactory.core.io import check_output_folder
 from dockfactory.core.config import load_config
+from dockfactory.design_jobs import default_jobs, design_rows
 from dockfactory.design_verify import comparison_lines, verify_designs
 from dockfactory.core.resources import (
     default_acceptance,
@@ -19,7 +21,7 @@ from dockfactory.core.resources import (
 )
 from dockfactory.eval.acceptance import load_acceptance
 from dockfactory.eval.design_card import load_design_card, with_refusals
-from dockfactory.eval.design_rank import design_id, design_row, rank_rows
+from dockfactory.eval.design_rank import design_id, rank_rows
 from dockfactory.eval.design_report import table_lines, write_design_outputs
 from dockfactory.eval.design_space import designs_of, load_design_space
 
@@ -83,7 +85,8 @@ def design_answer(args) -> tuple[dict, dict, object, object, Path]:
     if spec.estimation.thresholds() and not space.repeatability[0]:
         notes.append("The spec gates repeatability but the space gives no repeatability captures: "
                      "P(accept) covers localization only ([design] repeatability_poses / _captures).")
-    rows = rank_rows([design_row(d, space, scene, spec, card, args.min_probability) for d in designs], args.min_probability)
+    rows = rank_rows(design_rows(designs, space, scene, spec, card, args.min_probability, args.jobs or default_jobs()),
+                     args.min_probability)
     result = {"format": "dockfactory.design/1", "space": space.source, "scene": str(space.scene),
               "spec": str(spec_path), "decision_rule": spec.decision_rule, "confidence": spec.confidence,
               "test_frames": space.test_frames, "repeatability": list(space.repeatability),
@@ -119,9 +122,12 @@ def add_subcommand(sub) -> None:
     p.add_argument("--min-probability", type=float_in(0.0, 1.0, low_open=True), default=0.9,
                    help="P(accept) a passing design needs (default 0.9)")
     p.add_argument("--card", help="a predictor card (default: the shipped models/design_predictor.json)")
-    p.add_argument("--refusals", action="store_true",
-                   help="also predict the frames the solver's gate leaves without a pose, each design's drawn "
-                        "frames simulated through it (models/design_refusals.json; seconds a Bayer or JPEG design)")
+    p.add_argument("--refusals", action=argparse.BooleanOptionalAction, default=True,
+                   help="predict the frames the solver's gate leaves without a pose, each design's drawn frames "
+                        "simulated through it (models/design_refusals.json; the default; --no-refusals: not "
+                        "predicted, a design's P(accept) then covers its pose errors alone)")
+    p.add_argument("--jobs", type=positive_int, default=None,
+                   help="processes predicting the designs (default: one per core; the answer is the same for any)")
     p.add_argument("--verify", type=positive_int, default=0, metavar="K",
                    help="render and judge the top K designs (dockfactory run each; minutes per design)")
     p.add_argument("--verify-frames", type=positive_int, default=24,

@@ -315,9 +315,9 @@ def _read_json(path: Path, what: str) -> dict:
 def with_refusals(card: DesignCard, path) -> DesignCard:
     """``card`` with the simulated frames without a pose of the figures file ``path`` ({"format":
     REFUSALS_FORMAT, "no_pose_simulation": as a card's}: models/design_refusals.json), unless the
-    card has its own section (then ``card`` as it is). Why a file of its own: the simulation costs
-    seconds a Bayer or JPEG design, so the answer runs it only when asked (design --refusals), and
-    its figures (the gate's card, the centres' tails) are measured apart from the card's noise fit.
+    card has its own section (then ``card`` as it is). Why a file of its own: its figures (the gate's
+    card, the centres' tails) are measured apart from the card's noise fit, and the answer adds them to
+    any card unless told not to (design --no-refusals).
     DockfactoryError (one line naming the file and key)."""
     if card.no_pose_gate is not None:
         return card

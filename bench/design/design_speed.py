@@ -2,7 +2,9 @@
 (none infeasible): the whole process, import and outputs included, each run timed by the wall
 clock. Target (issue 48): 200 designs in under 60 s on 2 cores.
 
-Run: python -m bench.design.design_speed [--runs 3] [--card CARD.json]   # another predictor card
+Run: python -m bench.design.design_speed [--runs 3] [--card CARD.json] [--jobs N] [--no-refusals]
+(--card: another predictor card; --jobs: the command's processes, default its own, one per core;
+--no-refusals: without the frames the gate refuses simulated)
 """
 from __future__ import annotations
 
@@ -55,8 +57,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--card", default=None, help="a predictor card (default: the shipped one)")
+    ap.add_argument("--jobs", type=int, default=None, help="the command's --jobs (default: its own)")
+    ap.add_argument("--no-refusals", action="store_true", help="pass --no-refusals")
     args = ap.parse_args()
     card = ["--card", str(Path(args.card).resolve())] if args.card else []
+    card += (["--jobs", str(args.jobs)] if args.jobs else []) + (["--no-refusals"] if args.no_refusals else [])
     with tempfile.TemporaryDirectory() as tmp:
         space = Path(tmp) / "space.toml"
         space.write_text(space_text())
@@ -68,7 +73,8 @@ def main() -> None:
             times.append(time.monotonic() - t0)
         rows = json.loads((Path(tmp) / "o0" / "design.json").read_text())["designs"]
     predicted = sum(r["status"] in ("passes", "undecided", "fails") for r in rows)
-    print(f"{len(rows)} designs, {predicted} predicted; wall time per run: "
+    simulated = sum(bool(r.get("no_pose", {}).get("simulated")) for r in rows)
+    print(f"{len(rows)} designs, {predicted} predicted, {simulated} with frames simulated; wall time per run: "
           + ", ".join(f"{t:.1f} s" for t in times) + f" (median {sorted(times)[len(times) // 2]:.1f} s)")
 
 

@@ -24,7 +24,8 @@ render() {
 }
 
 render_sampled() {  # the paper's frames with today's label-aware sampling (the published release pins it off;
-                    # re-measure): DATA=out/paper_sampled RES=results/paper_sampled, then accept_s
+                    # re-measure): DATA=out/paper_sampled RES=results/paper_sampled RUNS=out/paper_sampled_runs,
+                    # then accept_s and summary with the same three
     $DF render configs/paper.toml --out "$DATA" --workers 2 --set render.marker_samples=40
 }
 

@@ -3,6 +3,8 @@ the answer deterministic, and a design's config what its renders would use."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -243,15 +245,15 @@ def test_a_card_that_simulates_refusals_says_so_and_counts_them_per_design(tmp_p
     assert any("its predicted centres" in n for n in doc["notes"])
 
 
-def test_refusals_simulates_with_the_shipped_figures_and_only_when_asked(tmp_path, capsys):
-    """``--refusals`` adds the shipped refusal figures (models/design_refusals.json) to the shipped
-    card: every Bayer design not already failing on its pose errors is simulated over its drawn
-    frames and its notes say so; without the flag nothing is simulated and the RMSE predicted is
-    the same to the digit."""
+def test_refusals_are_simulated_by_default_with_the_shipped_figures_and_not_with_no_refusals(tmp_path, capsys):
+    """The answer adds the shipped refusal figures (models/design_refusals.json) to the shipped card
+    by default: every Bayer design not already failing on its pose errors is simulated over its drawn
+    frames and its notes say so; with ``--no-refusals`` nothing is simulated and the RMSE predicted
+    is the same to the digit."""
     space = _space(tmp_path, SPACE.replace("markers_per_section = [6, 9]", "markers_per_section = [6]")
                    .replace("test_frames = 30", "test_frames = 30\ngeometry_frames = 8"))
-    assert run_cli(["design", space, "--refusals", "--out", tmp_path / "r"], capsys)[0] == 0
-    assert run_cli(["design", space, "--out", tmp_path / "p"], capsys)[0] == 0
+    assert run_cli(["design", space, "--out", tmp_path / "r"], capsys)[0] == 0
+    assert run_cli(["design", space, "--no-refusals", "--out", tmp_path / "p"], capsys)[0] == 0
     sim, plain = (json.loads((tmp_path / o / "design.json").read_text()) for o in ("r", "p"))
     bayer = [r for r in sim["designs"] if r["cfa"] == "rggb" and r["status"] != "fails"]
     assert bayer and all(r["no_pose"]["simulated"] == 8 for r in bayer)
@@ -259,3 +261,19 @@ def test_refusals_simulates_with_the_shipped_figures_and_only_when_asked(tmp_pat
     assert {r["id"]: r["predicted_rmse"] for r in sim["designs"]} == {r["id"]: r["predicted_rmse"] for r in plain["designs"]}
     assert any("its predicted centres" in n for n in sim["notes"])
     assert not any("its predicted centres" in n for n in plain["notes"])
+
+
+def test_the_answer_is_the_same_to_the_digit_over_two_processes(tmp_path, capsys):
+    """``--jobs 2`` (the command's own process, which forks its workers) answers exactly as one
+    process does: the same rows in the same order, the simulated refusals included (each design's
+    draws are seeded by its label, not by the worker that made them)."""
+    space = _space(tmp_path, SPACE.replace("test_frames = 30", "test_frames = 30\ngeometry_frames = 6"))
+    assert run_cli(["design", space, "--jobs", "1", "--out", tmp_path / "one"], capsys)[0] == 0
+    done = subprocess.run([sys.executable, "-m", "dockfactory", "design", str(space), "--jobs", "2",
+                           "--out", str(tmp_path / "two")], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    one, two = (json.loads((tmp_path / o / "design.json").read_text()) for o in ("one", "two"))
+    one.pop("seconds"), two.pop("seconds")
+    assert any(r["no_pose"].get("refused") for r in one["designs"]) or any(
+        r["no_pose"].get("simulated") for r in one["designs"])
+    assert one == two
