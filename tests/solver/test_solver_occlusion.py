@@ -19,7 +19,7 @@ import pytest
 from dockfactory.core.config import load_config
 from dockfactory.core.resources import shipped_config
 from dockfactory.eval.solve_frames import KNOWN_LENS, docking_options
-from dockfactory.solver import InvalidSolverInput, solve_docking
+from dockfactory.solver import InvalidSolverInput, solve_docking, suspects
 from dockfactory.solver.options import DockingOptions
 
 KEYS = ("x_mm", "y_mm", "alpha_deg")
@@ -55,3 +55,47 @@ def test_occlusion_options_are_checked():
     for name, value in (("occlusion_bias", -0.1), ("occlusion_margin_px", float("nan"))):
         with pytest.raises(InvalidSolverInput, match=name):
             DockingOptions(**{name: value})
+
+
+def _solved(repo_root, fid, shrink_px=0.0):
+    """solve_docking of the frame with every detected box ``shrink_px`` shorter on each axis (half a
+    side each way), as a camera chain that shrinks every refined box alike gives them."""
+    doc, (cls, uv, boxes, flags) = _frame(repo_root, fid)
+    boxes = boxes + np.array([0.5, 0.5, -0.5, -0.5]) * shrink_px
+    markers = load_config(shipped_config("paper")).markers_layout()
+    return doc, solve_docking(markers, doc["principal_point"], detections=(cls, uv), boxes=boxes, refined=flags,
+                              options=docking_options(doc["centre_noise_px"], KNOWN_LENS))
+
+
+@pytest.mark.parametrize("fid", ["001920", "000680"])
+def test_boxes_all_short_alike_hide_nothing_and_the_hidden_disc_is_still_seen(repo_root, fid, monkeypatch):
+    """Every box 1.5 or 2.5 px short (what JPEG, a Bayer mosaic or a white ring does to refined boxes:
+    0.5-1.5 px, against the 1 px of box noise the rule allows): the pose, its reported stds and the
+    points kept are those of the frame as detected, and the partly hidden marker's z stays within 2.
+    With the frame's shortfall not taken (the rule before), 2.5 px short makes fully visible discs
+    look hidden: points left out and the reported stds more than doubled."""
+    doc, plain = _solved(repo_root, fid)
+    for shrink in (1.5, 2.5):
+        _, short = _solved(repo_root, fid, shrink)
+        assert list(short.inliers) == list(plain.inliers)
+        for k in KEYS:
+            assert getattr(short, k) == pytest.approx(getattr(plain, k), abs=1e-9)
+            assert short.std[k] == pytest.approx(plain.std[k], rel=1e-9)
+            assert abs(getattr(short, k) - doc["pose_b_in_d"][k]) / short.std[k] <= 2.0
+    monkeypatch.setattr(suspects, "SHORTFALL_FROM_FRAME", False)
+    _, before = _solved(repo_root, fid, 2.5)
+    assert sum(before.inliers) < sum(plain.inliers)
+    assert max(before.std[k] / plain.std[k] for k in KEYS) > 2.0
+
+
+def test_the_frame_shortfall_is_the_median_cut_floored_at_zero_from_five_boxes():
+    """frame_shortfall: the per-axis median of (outline - box) extents over the frame's boxes, never
+    negative (boxes longer than their outlines change nothing), and zero below SHORTFALL_MIN_BOXES."""
+    def pairs(cuts):
+        out = [(j, np.array([0.0, 0.0, 20.0 - cu, 10.0 - cv]), np.array([0.0, 0.0, 20.0, 10.0]))
+               for j, (cu, cv) in enumerate(cuts)]
+        return {"A": out[:len(out) // 2], "B": out[len(out) // 2:]}
+    cuts = [(1.0, 0.5), (1.2, 0.6), (1.4, 0.7), (6.0, 4.0), (1.3, 0.4)]
+    assert np.allclose(suspects.frame_shortfall(pairs(cuts)), [1.3, 0.6])
+    assert np.allclose(suspects.frame_shortfall(pairs([(-0.5, -0.3)] * 5)), [0.0, 0.0])
+    assert np.allclose(suspects.frame_shortfall(pairs(cuts[:suspects.SHORTFALL_MIN_BOXES - 1])), [0.0, 0.0])
