@@ -133,12 +133,12 @@ def occlusion_variances(fit: JointFit, points: SectionPoints, pp, boxes, bias: f
     of its outline).
 
     A box shorter than the outline ``fit`` predicts for its marker, less the frame's shortfall
-    (:func:`frame_shortfall`), by ``cut`` px along an axis sees only part of the disc: the centre of the visible part's box is cut / 2 off the disc's
-    centre along that axis, and a centre refined on the visible edge (the occluder's edge taken
-    for the disc's) is about as far off. The variance added is (``bias`` x max(0, cut -
-    ``margin_px``))^2 per axis: ``margin_px`` is the box noise of fully visible markers (both
-    constants measured: results/README.md, "Measurements behind the code's constants";
-    bench/occlusion_constants.py). The cut is a difference of extents, so the pose error the
+    (:func:`frame_shortfall`), by ``cut`` px along an axis sees only part of the disc: the centre
+    of the visible part's box is cut / 2 off the disc's centre along that axis, and a centre
+    refined on the visible edge (the occluder's edge taken for the disc's) is about as far off.
+    The variance added is (``bias`` x max(0, cut - ``margin_px``))^2 per axis: ``margin_px`` is the
+    box noise of fully visible markers (both constants measured: results/README.md, "Measurements
+    behind the code's constants"; bench/occlusion_constants.py). The cut is a difference of extents, so the pose error the
     partly hidden centre itself puts into ``fit`` hardly moves it."""
     if boxes is None or bias <= 0:
         return None
