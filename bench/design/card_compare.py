@@ -35,10 +35,12 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "blind 6 (12)": ("confirm6_12.json", ("design_confirm6_quick", "design_confirm6_quick2", "design_confirm6_wide")),
     "blind 7 (12)": ("confirm7_12.json", ("design_confirm7_quick", "design_confirm7_quick2", "design_confirm7_wide")),
 }
-# The sixth set's renders judged again with today's refinement and camera classes (not in "all": the
-# same designs as "blind 6"; the set a card is chosen on before the next blind set).
+# Sets' renders judged again with a later refinement, camera classes or solver (not in "all": the
+# same designs as their blind sets; the sets a card is chosen on before the next blind set).
 REJUDGED = {
     "blind 6 re-judged (12)": ("confirm6_classes.json", SETS["blind 6 (12)"][1]),
+    # the sixth and seventh sets' renders solved and judged again at the boxes' shortfall
+    "blind 6-7 at the shortfall (24)": ("confirm67_shortfall.json", SETS["blind 6 (12)"][1] + SETS["blind 7 (12)"][1]),
 }
 COMPS = ("x", "y", "alpha")
 
@@ -83,7 +85,7 @@ def compare(cards: dict, work: Path) -> dict:
             every += rows
         for set_name, (records, spaces) in REJUDGED.items():
             sets[set_name] = summary(judged(json.loads((RESULTS / records).read_text())["records"],
-                                            predictions(path, spaces, work / name / "rejudged")))
+                                            predictions(path, spaces, work / name / set_name.replace(" ", "_"))))
         out[name] = {"sets": sets, "all": summary(every),
                      "disagree": [r for r in every if r["predicted"] != r["rendered"]]}
     return out

@@ -165,22 +165,30 @@ def ring_and_jpeg_factors(results: dict, sources=SOURCES, ring_dark: dict | None
     # a Bayer + JPEG camera's white ring over its dark one, where the white bench has it
     bj = [(measured(as_scene, s, "bayer-jpeg90"), measured(dark, s, "bayer-jpeg90")) for s in rings
           if "bayer-jpeg90" in as_scene[f"sensor-scene-{s}@"]]
+    # and over its own PNG twin (the white ring's Bayer camera without the JPEG)
+    bw = [(measured(as_scene, s, "bayer-jpeg90"), measured(as_scene, s, bayer[0])) for s in rings
+          if "bayer-jpeg90" in as_scene[f"sensor-scene-{s}@"]]
     jpeg_dark = [(measured(jpeg_src, s, "three-chip-jpeg90"), measured(jpeg_src, s, "three-chip")) for s in scenes
                  if any(k.startswith(f"sensor-scene-{s}@") for k in jpeg_src)]
     return {"ring_white": {c: geo_factor(v) for c, v in ring.items()},
             "jpeg_dark": geo_factor(jpeg_dark), "jpeg_white": geo_factor(jpeg_white),
-            "bayer_jpeg_white_over_dark": geo_factor(bj) if bj else None, "white_scenes": rings}
+            "bayer_jpeg_white_over_dark": geo_factor(bj) if bj else None,
+            "bayer_jpeg_white_over_png": geo_factor(bw) if bw else None, "white_scenes": rings}
 
 
-def jpeg_table(other: dict, jpeg_rggb: float) -> tuple[dict, list[str]]:
+def jpeg_table(other: dict, jpeg_rggb: float, own_twin: bool = False) -> tuple[dict, list[str]]:
     """(the card's ``jpeg_factor`` per ring and camera class, the provisional factors). The Bayer
     camera's white-ring figure: measured where the white bench has a Bayer + JPEG camera (its
     white over dark ratio times the dark JPEG factor, over the white ring's Bayer factor, which the
-    card multiplies with it); else its dark-ring one times the white ring's JPEG factor over the
-    dark ring's on the three-chip camera (provisional). At least 1: a JPEG adds noise, it takes
-    none away."""
+    card multiplies with it; with ``own_twin``, its RMSE over its own PNG twin's, as the
+    three-chip camera's: for white renders measured beside a dark bench other than the one the
+    dark JPEG factor comes from, where the first would mix two benches' JPEG); else its dark-ring
+    one times the white ring's JPEG factor over the dark ring's on the three-chip camera
+    (provisional). At least 1: a JPEG adds noise, it takes none away."""
     measured_ratio = other.get("bayer_jpeg_white_over_dark")
-    if measured_ratio is not None:
+    if own_twin and other.get("bayer_jpeg_white_over_png") is not None:
+        white_rggb, prov = max(1.0, other["bayer_jpeg_white_over_png"]), []
+    elif measured_ratio is not None:
         white_rggb, prov = max(1.0, measured_ratio * jpeg_rggb / other["ring_white"]["rggb"]), []
     else:
         white_rggb, prov = max(1.0, jpeg_rggb * other["jpeg_white"] / other["jpeg_dark"]), ["jpeg_factor.white.rggb"]
@@ -232,13 +240,15 @@ def bayer_part(results: dict, scenes, p: np.ndarray, law: CentreNoiseLaw, size_e
 
 
 def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: CentreNoiseLaw = LAW,
-        size_exponent: float | None = None, bayer=BAYER, q95: tuple[str, str] | None = None) -> dict:
+        size_exponent: float | None = None, bayer=BAYER, q95: tuple[str, str] | None = None,
+        own_twin: bool = False) -> dict:
     """The card (models/design_predictor.json's content) fitted on ``sources`` (SOURCES' order)
     over the sensor scenes ``scenes`` (each in ``sources[0]``) with the centres' noise ``law``;
     ``ring_dark``: the dark-ring results beside the white ones (:func:`ring_and_jpeg_factors`;
     None: ``sources[0]``); ``size_exponent``: the Bayer camera's (None: fitted, :func:`size_fit`);
     ``bayer``: the Bayer effects its Bayer figures are fitted on; ``q95``: the dark- and white-ring
-    results holding JPEG q95 beside q90 (:func:`jpeg_above`; None: no figure above q90)."""
+    results holding JPEG q95 beside q90 (:func:`jpeg_above`; None: no figure above q90);
+    ``own_twin``: the white ring's Bayer JPEG figure over its own PNG twin (:func:`jpeg_table`)."""
     results = json.loads((RESULTS / sources[0]).read_text())["datasets"]
     bases = {s: basis(s, law) for s in scenes}
     tc = {s: measured(results, s, "three-chip") for s in scenes}
@@ -253,7 +263,7 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: Centr
     other = ring_and_jpeg_factors(results, sources, dark, scenes, bayer)
     versions = sorted(results)
     discs = [median_minor_px(load_config(ROOT / "bench" / "configs" / f"sensor_scene_{s}.toml"), 48) for s in scenes]
-    jpeg_factor, provisional = jpeg_table(other, jpeg)
+    jpeg_factor, provisional = jpeg_table(other, jpeg, own_twin)
     above = {} if q95 is None else {"95": jpeg_above(jpeg_factor, merged(sources[0], q95[0]),
                                                      merged(sources[1], q95[1]), 95)}
     return {"format": CARD_FORMAT, "scale_px": round(float(p[0]), 5),
@@ -273,7 +283,8 @@ def fit(sources=SOURCES, scenes=SCENES, ring_dark: str | None = None, law: Centr
                           + ([f"bench/results/sensor_effects/{ring_dark}"] if ring_dark else [])
                           + [f"bench/results/sensor_effects/{n}" for n in q95 or ()],
                           "disc_minor_median_px": [round(min(discs), 2), round(max(discs), 2)],
-                          "white_ring_scenes": other["white_scenes"], "bayer_effects": list(bayer), "components_checked": list(FIT)},
+                          "white_ring_scenes": other["white_scenes"], "bayer_effects": list(bayer), "components_checked": list(FIT),
+                          **({"white_bayer_jpeg": "over its own PNG twin"} if own_twin else {})},
             "error": {"predicted_over_measured": rows}}
 
 
@@ -302,10 +313,13 @@ def main() -> None:
     ap.add_argument("--jpeg95", nargs=2, default=None, metavar=("DARK", "WHITE"),
                     help="results under bench/results/sensor_effects/ with JPEG q95 beside q90 on the dark- and "
                          "white-ring scenes: the card's figures above q90")
+    ap.add_argument("--white-jpeg-own-twin", action="store_true",
+                    help="the white ring's Bayer JPEG factor as its RMSE over its own PNG twin's (with --ring-dark "
+                         "from another bench than SAMPLING; default: through the dark ring's JPEG factor)")
     args = ap.parse_args()
     law = LAW if args.law is None else CentreNoiseLaw(*(float(v) for v in args.law.split(",")))
     card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark, law, args.bayer_size,
-               tuple(args.bayer_effects.split(",")), args.jpeg95)
+               tuple(args.bayer_effects.split(",")), args.jpeg95, args.white_jpeg_own_twin)
     print(f"scale {card['scale_px']} px, offset {card['shift_px']} px, "
           f"rggb x{card['cfa_factor']['rggb']} size exponent {card['cfa_size_exponent']['rggb']}, "
           f"jpeg x{card['jpeg_factor']} (provisional: {card['provisional']}), white ring x{card['ring_factor']['white']}")
