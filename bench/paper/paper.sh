@@ -65,8 +65,10 @@ ship_s() {  # the paper's detector in fp16 beside the shipped n + SE (exits 1 if
 }
 
 accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run with one detector
-    name=$1 weights=$2 work="$RUNS/accept_$1"
+    name=$1 work="$RUNS/accept_$1"
     mkdir -p "$work" "$RES/$name"
+    cp "$2" "$work/weights.pt"   # a copy: the noise card is written beside it, never over a shipped card
+    weights="$work/weights.pt"
     $DF noise-card "$DATA" --weights "$weights" --threads 2 --quiet
     $PY -m bench.detector.detector_bench "$DATA" --weights "$weights" --threads 2 --train-batches 0 \
         --out "$RES/$name/detector.json"
