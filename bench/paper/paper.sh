@@ -4,7 +4,7 @@
 # last epoch's checkpoint, ablate --record takes finished runs from results/paper/), so the whole
 # script can be run again after any interruption.
 #
-#   sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]
+#   sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|remeasure|all]
 #
 # Cost on the 2-core machine of 2026-12-01: render ~5.3 s/frame (3,200 frames, ~4.7 h; ~2.8 s/frame on an
 # AVX-512 machine, re-rendered there on 2026-12-01 and checked by `publish`); YOLOv5s
@@ -84,10 +84,16 @@ accept_one() {  # NAME WEIGHTS: detector figures and the full acceptance run wit
 accept_s() { accept_one s_se models/yolov5s_se_markers.pt; }   # the shipped file (after ship_s)
 accept_n() { accept_one n_se "$RUNS/n/se_seed0/weights.pt"; }
 
-summary() {
-    $PY -m bench.paper.paper_results --dataset "$DATA" --out "$RES" --table1 "$RES/table1" --published "$RES/manifest.json" \
-        --detector "s_se=$RES/s_se:$RES/s_se/detector.json:models/yolov5s_se_markers.pt" \
-        --detector "n_se=$RES/n_se:$RES/n_se/detector.json:$RUNS/n/se_seed0/weights.pt"
+summary() {  # the detectors whose acceptance run finished (a re-measure may have only s_se)
+    dets=""
+    [ -f "$RES/s_se/detector.json" ] && dets="$dets --detector s_se=$RES/s_se:$RES/s_se/detector.json:models/yolov5s_se_markers.pt"
+    [ -f "$RES/n_se/detector.json" ] && dets="$dets --detector n_se=$RES/n_se:$RES/n_se/detector.json:$RUNS/n/se_seed0/weights.pt"
+    # shellcheck disable=SC2086   # $dets: words on purpose (paths without spaces)
+    $PY -m bench.paper.paper_results --dataset "$DATA" --out "$RES" --table1 "$RES/table1" --published "$RES/manifest.json" $dets
+}
+
+remeasure() {  # the paper at today's sampling, end to end and resumable: DATA, RES, RUNS as render_sampled says
+    render_sampled; publish; accept_s; summary
 }
 
 case "${1:-all}" in
@@ -104,6 +110,7 @@ case "${1:-all}" in
     accept_s) accept_s ;;
     accept_n) accept_n ;;
     summary) summary ;;
+    remeasure) remeasure ;;
     all) render; publish; train_s; train_n; ship_s; accept_s; accept_n; table1; summary ;;
-    *) echo "usage: sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|all]" >&2; exit 2 ;;
+    *) echo "usage: sh bench/paper/paper.sh [render|render_sampled|publish|train|train_s|train_n|ship_s|accept|accept_s|accept_n|table1|table1_collect|summary|remeasure|all]" >&2; exit 2 ;;
 esac
