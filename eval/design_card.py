@@ -111,18 +111,24 @@ class DesignCard:
     def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
         temporal variance is ``sensor_variance`` (None: the card's reference sensor): the class
-        None with the reason when the card has no figure for it."""
+        None with the reason when the card has no figure for it. A JPEG's part of the variance
+        (J^2 - 1 of the reference sensor's, J the card's JPEG factor) does not follow the sensor:
+        the encoding's centre error is the same with the sensor's noise at a third or a hundredth
+        (bench/results/design/README.md); only the PNG part scales by the sensor's factor."""
         q = jpeg_quality(design.image_format)
         if q is not None and q < self.jpeg_min_quality:
             return None, [], f"the predictor's card has no JPEG figure below quality {self.jpeg_min_quality}"
         g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring][design.camera.cfa]
         used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}.{design.camera.cfa}"]
+        png = self.sensor_factor_of(design, sensor_variance)
+        camera = png
         if q is not None:
             table, name = self.jpeg_of(q)
-            g *= table[design.ring][design.camera.cfa]
+            jpeg = table[design.ring][design.camera.cfa]
+            camera = math.sqrt(jpeg * jpeg - 1.0 + png * png)
             used.append(f"{name}.{design.ring}.{design.camera.cfa}")
         k = (self.size_exponent or {}).get(design.camera.cfa, 0.0)
-        g *= self.sensor_factor_of(design, sensor_variance)
+        g *= camera
         noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law, k)
         return noise, [u for u in used if u in self.provisional], ""
 

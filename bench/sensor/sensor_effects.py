@@ -100,6 +100,8 @@ EFFECTS = {
     "sampling-rggb": (lambda i: chain(), 0.0, None),
     "three-chip-imx174": (lambda i: chain(sensor=configured_sensor("imx174", (), 12)), 0.0, None),
     "bayer-imx174": (lambda i: chain("RGGB", "bilinear", sensor=configured_sensor("imx174", (), 12)), 0.0, None),
+    "three-chip-imx174-jpeg90": (lambda i: chain(sensor=configured_sensor("imx174", (), 12)), 0.0, (90, "420")),
+    "three-chip-wells100-jpeg90": (lambda i: chain(sensor=sensor_with_wells(PRESET, 100.0)), 0.0, (90, "420")),
     "three-chip-wells4": (lambda i: chain(sensor=sensor_with_wells(PRESET, 4.0)), 0.0, None),
     "three-chip-wells100": (lambda i: chain(sensor=sensor_with_wells(PRESET, 100.0)), 0.0, None),
     "bayer-wells100": (lambda i: chain("RGGB", "bilinear", sensor=sensor_with_wells(PRESET, 100.0)), 0.0, None),

@@ -99,6 +99,25 @@ def test_a_design_s_centre_noise_scales_by_its_sensor_s_factor(tmp_path, cfa):
     assert with_term.noise_of(d)[0].scale_px == without.noise_of(d)[0].scale_px   # no variance: the reference
 
 
+@pytest.mark.parametrize("cfa, fmt", [("none", "jpeg90"), ("rggb", "jpeg95")])
+def test_a_jpeg_design_s_encoding_noise_does_not_follow_the_sensor(tmp_path, cfa, fmt):
+    """A JPEG design's variance is the reference sensor's J^2 - 1 for the encoding plus its own
+    sensor's PNG part: for an IMX174 camera the scale over the same card without sensor_noise is
+    sqrt(J^2 - 1 + f^2) / J (f the PNG factor, below 0.95), within 1 % of 1 for the card's J."""
+    share = {"none": 0.3, "rggb": 0.2}
+    with_term = load_design_card(_card(tmp_path, {"reference": "imx273", "share": share}))
+    without = load_design_card(_card(tmp_path / "..", None))
+    v174, v273 = preset_variance("imx174"), preset_variance("imx273")
+    d = replace(_design(cfa, "imx174"), image_format=fmt)
+    jpeg = with_term.jpeg_of(int(fmt[4:]))[0]["dark"][cfa]
+    f = math.sqrt(1 - share[cfa] + share[cfa] * v174 / v273)
+    got = with_term.noise_of(d, v174)[0].scale_px / without.noise_of(d, v174)[0].scale_px
+    assert got == pytest.approx(math.sqrt(jpeg ** 2 - 1 + f ** 2) / jpeg, rel=1e-12)
+    assert f < 0.95 and 0.99 < got < 1.0
+    ref = replace(_design(cfa, "imx273"), image_format=fmt)
+    assert with_term.noise_of(ref, v273)[0].scale_px == pytest.approx(without.noise_of(ref)[0].scale_px, rel=1e-12)
+
+
 def test_the_shipped_card_has_a_sensor_term():
     card = load_design_card(shipped_design_card())
     assert card.sensor_reference == "imx273"
