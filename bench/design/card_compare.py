@@ -34,6 +34,7 @@ SETS = {   # name: (records file under RESULTS, the design spaces under bench/co
     "blind 5 (12)": ("confirm5_12.json", ("design_confirm5_quick", "design_confirm5_wide", "design_confirm5_wide2")),
     "blind 6 (12)": ("confirm6_12.json", ("design_confirm6_quick", "design_confirm6_quick2", "design_confirm6_wide")),
     "blind 7 (12)": ("confirm7_12.json", ("design_confirm7_quick", "design_confirm7_quick2", "design_confirm7_wide")),
+    "blind 8 (12)": ("confirm8_12.json", ("design_confirm8_quick", "design_confirm8_quick2", "design_confirm8_wide")),
 }
 # Sets' renders judged again with a later refinement, camera classes or solver (not in "all": the
 # same designs as their blind sets; the sets a card is chosen on before the next blind set).

@@ -316,6 +316,9 @@ def main() -> None:
     ap.add_argument("--white-jpeg-own-twin", action="store_true",
                     help="the white ring's Bayer JPEG factor as its RMSE over its own PNG twin's (with --ring-dark "
                          "from another bench than SAMPLING; default: through the dark ring's JPEG factor)")
+    ap.add_argument("--provisional", default="", metavar="NAME,NAME",
+                    help="factors to mark provisional beside those the fit marks (a blind set missed them: "
+                         "every design that uses one says so), comma-separated, e.g. ring_factor.white.none")
     args = ap.parse_args()
     law = LAW if args.law is None else CentreNoiseLaw(*(float(v) for v in args.law.split(",")))
     card = fit(tuple(args.sources), tuple(args.scenes.split(",")), args.ring_dark, law, args.bayer_size,
@@ -328,6 +331,7 @@ def main() -> None:
     print("| what | scene | X | Y | alpha (predicted / measured) |\n| --- | --- | --- | --- | --- |")
     for r in card["error"]["predicted_over_measured"]:
         print(f"| {r['what']} | {r['scene'].upper()} | {r['x']:.2f} | {r['y']:.2f} | {r['alpha']:.2f} |")
+    card["provisional"] += [n for n in args.provisional.split(",") if n and n not in card["provisional"]]
     if args.sensor:
         from bench.design.sensor_share import sensor_noise
         card["sensor_noise"], lines = sensor_noise(RESULTS / args.sensor)

@@ -15,7 +15,8 @@ from dockfactory.core.resources import shipped_design_card
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED_FIT = ["--scenes", "a,b,d", "--sources", "joint_abd_48.json", "shortfall/white_abd_48.json", "joint_abd_48.json",
                "--ring-dark", "shortfall/dark_abd_48.json", "--jpeg95", "jpeg95_abd_48.json",
-               "shortfall/white95_abd_48.json", "--sensor", "sensor_wells_abd_48.json", "--white-jpeg-own-twin"]
+               "shortfall/white95_abd_48.json", "--sensor", "sensor_wells_abd_48.json",
+               "--provisional", "ring_factor.white.none,ring_factor.white.rggb", "--white-jpeg-own-twin"]
 
 
 def _fit(args, out: Path) -> dict:
@@ -31,6 +32,7 @@ def test_the_shipped_card_is_its_fit_of_the_committed_inputs(tmp_path):
     dark ring's JPEG factor of another bench), and they are larger: the option is what the card uses."""
     shipped = json.loads(shipped_design_card().read_text())
     assert _fit(SHIPPED_FIT, tmp_path / "card.json") == shipped
+    assert shipped["provisional"] == ["ring_factor.white.none", "ring_factor.white.rggb"]
     mixed = _fit(SHIPPED_FIT[:-1], tmp_path / "mixed.json")
     differ = {k for k in shipped if mixed.get(k) != shipped[k]}
     assert differ == {"jpeg_factor", "jpeg_factor_above", "fitted_on"}
