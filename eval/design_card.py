@@ -72,10 +72,18 @@ class DesignCard:
     def sensor_factor_of(self, design: Design, variance: float | None) -> float:
         """The design's centre std over the card's for a sensor of relative temporal variance
         ``variance`` (eval.design_sensor.camera_variance): 1.0 when the card has no
-        ``sensor_noise`` or ``variance`` is None (the card's reference sensor assumed)."""
+        ``sensor_noise`` or ``variance`` is None (the card's reference sensor assumed). Behind a
+        JPEG of the card's factor J only the PNG part of the variance follows the sensor (the
+        encoding's centre error is the same with the sensor's noise at a third or a hundredth:
+        bench/results/design/README.md): sqrt(J^2 - 1 + f^2) / J, f the PNG design's factor."""
         if not self.sensor_share or variance is None:
             return 1.0
-        return sensor_factor(self.sensor_share[design.camera.cfa], variance / preset_variance(self.sensor_reference))
+        f = sensor_factor(self.sensor_share[design.camera.cfa], variance / preset_variance(self.sensor_reference))
+        q = jpeg_quality(design.image_format)
+        if q is None or q < self.jpeg_min_quality:
+            return f
+        j = self.jpeg_of(q)[0][design.ring][design.camera.cfa]
+        return math.sqrt(j * j - 1.0 + f * f) / j
 
     def jpeg_of(self, quality: int) -> tuple[dict, str]:
         """({ring: {cfa: factor}}, its key's name) for a JPEG of ``quality``: the table measured at
@@ -111,24 +119,18 @@ class DesignCard:
     def noise_of(self, design: Design, sensor_variance: float | None = None) -> tuple[NoiseClass | None, list[str], str]:
         """(noise class, provisional factors used, reason) of ``design`` whose sensor's relative
         temporal variance is ``sensor_variance`` (None: the card's reference sensor): the class
-        None with the reason when the card has no figure for it. A JPEG's part of the variance
-        (J^2 - 1 of the reference sensor's, J the card's JPEG factor) does not follow the sensor:
-        the encoding's centre error is the same with the sensor's noise at a third or a hundredth
-        (bench/results/design/README.md); only the PNG part scales by the sensor's factor."""
+        None with the reason when the card has no figure for it."""
         q = jpeg_quality(design.image_format)
         if q is not None and q < self.jpeg_min_quality:
             return None, [], f"the predictor's card has no JPEG figure below quality {self.jpeg_min_quality}"
         g = self.cfa_factor[design.camera.cfa] * self.ring_factor[design.ring][design.camera.cfa]
         used = [f"cfa_factor.{design.camera.cfa}", f"ring_factor.{design.ring}.{design.camera.cfa}"]
-        png = self.sensor_factor_of(design, sensor_variance)
-        camera = png
         if q is not None:
             table, name = self.jpeg_of(q)
-            jpeg = table[design.ring][design.camera.cfa]
-            camera = math.sqrt(jpeg * jpeg - 1.0 + png * png)
+            g *= table[design.ring][design.camera.cfa]
             used.append(f"{name}.{design.ring}.{design.camera.cfa}")
         k = (self.size_exponent or {}).get(design.camera.cfa, 0.0)
-        g *= camera
+        g *= self.sensor_factor_of(design, sensor_variance)
         noise = NoiseClass(self.scale_px * g, (self.shift_px[0] * g, self.shift_px[1] * g), self.law, k)
         return noise, [u for u in used if u in self.provisional], ""
 

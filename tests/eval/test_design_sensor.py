@@ -114,6 +114,7 @@ def test_a_jpeg_design_s_encoding_noise_does_not_follow_the_sensor(tmp_path, cfa
     got = with_term.noise_of(d, v174)[0].scale_px / without.noise_of(d, v174)[0].scale_px
     assert got == pytest.approx(math.sqrt(jpeg ** 2 - 1 + f ** 2) / jpeg, rel=1e-12)
     assert f < 0.95 and 0.99 < got < 1.0
+    assert with_term.sensor_factor_of(d, v174) == pytest.approx(got, rel=1e-12)   # what the answer reports
     ref = replace(_design(cfa, "imx273"), image_format=fmt)
     assert with_term.noise_of(ref, v273)[0].scale_px == pytest.approx(without.noise_of(ref)[0].scale_px, rel=1e-12)
 
